@@ -1,0 +1,51 @@
+/* DeformKit: sparse Cholesky (CHOLMOD) and symmetric eigenproblems (ARPACK).
+ *
+ * dk_cholesky wraps one CHOLMOD context (no global state): analyze once, factorize
+ * numerically as often as the values change (same pattern), solve many right-hand sides at
+ * once. CHOLMOD's printing is switched off; its failures come back as dk_status codes.
+ */
+#ifndef DK_CHOLESKY_H
+#define DK_CHOLESKY_H
+
+#include "dk_sparse.h"
+#include "dk_status.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct dk_cholesky dk_cholesky;
+
+/** Symbolic analysis (fill-reducing ordering) of the symmetric matrix `a` (both triangles
+ *  stored; the upper one is read). `*out` is a new factor object without numeric values. */
+dk_status dk_cholesky_analyze(const dk_sparse *a, dk_cholesky **out, dk_error *err);
+
+/** Numeric factorization of `a`, which must have the pattern given to analyze. Fails with
+ *  DK_ERR_NOT_POSITIVE_DEFINITE naming the column where positivity was lost. */
+dk_status dk_cholesky_factorize(dk_cholesky *chol, const dk_sparse *a, dk_error *err);
+
+/** Solves A X = B for `nrhs` right-hand sides stored column-major (n x nrhs) in `b`,
+ *  writing `x` (may alias `b`). Workspace is kept in the object, so repeated solves with the
+ *  same nrhs do not allocate. Not thread-safe on the same object. */
+dk_status dk_cholesky_solve(dk_cholesky *chol, const double *b, int nrhs, double *x,
+                            dk_error *err);
+
+/** Matrix dimension. */
+dk_index dk_cholesky_size(const dk_cholesky *chol);
+
+/** How many numeric factorizations this object has done since analyze (to verify reuse). */
+int dk_cholesky_factorization_count(const dk_cholesky *chol);
+
+/** How many symbolic analyses this object has done (1 after analyze). */
+int dk_cholesky_analysis_count(const dk_cholesky *chol);
+
+/** Bytes held by the factor (for memory reports). */
+size_t dk_cholesky_memory(const dk_cholesky *chol);
+
+/** Frees; NULL allowed. */
+void dk_cholesky_free(dk_cholesky *chol);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

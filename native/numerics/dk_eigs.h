@@ -1,0 +1,48 @@
+/* DeformKit: the k smallest eigenpairs of L x = lambda M x with ARPACK.
+ *
+ * L symmetric positive semidefinite (sparse), M diagonal positive. Shift-invert mode (ARPACK
+ * mode 3, B = M) with dk_cholesky solving (L - sigma M) y = M x. Eigenvectors are returned
+ * M-orthonormal (x_i^T M x_j = delta_ij), sorted by increasing eigenvalue.
+ *
+ * Many eigenpairs: when k exceeds `band_size`, the spectrum is computed band by band with a
+ * new shift per band (Vallet and Levy 2008, "Spectral geometry processing with manifold
+ * harmonics"), each band a small ARPACK run, so hundreds of eigenpairs stay practical.
+ *
+ * ARPACK keeps internal SAVE variables: calls are not reentrant across threads. Callers that
+ * may run concurrently (the Python module) serialise eigen computations themselves.
+ */
+#ifndef DK_EIGS_H
+#define DK_EIGS_H
+
+#include "dk_sparse.h"
+#include "dk_status.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/** Options; zero-initialise then set what you need (dk_eigs_options_default fills defaults). */
+typedef struct dk_eigs_options {
+    double tolerance;    /**< ARPACK relative tolerance (default 1e-10)                   */
+    int max_iterations;  /**< ARPACK restarts per band (default 1000)                      */
+    int band_size;       /**< eigenpairs per band (default 50); k <= band_size: one band   */
+    dk_progress_fn progress; /**< may be NULL                                             */
+    void *progress_user;
+} dk_eigs_options;
+
+/** Fills the defaults. */
+void dk_eigs_options_default(dk_eigs_options *opt);
+
+/** Computes the `k` smallest eigenpairs. `eigenvalues` has k entries, `eigenvectors` is
+ *  n x k column-major (eigenvector j at eigenvectors + j*n). `*n_converged` (may be NULL) gets
+ *  how many pairs converged; when fewer than k did, the call fails with
+ *  DK_ERR_NO_CONVERGENCE saying how many, and the converged ones are in the outputs.
+ *  `mass` must be positive everywhere (an error names the first vertex where it is not). */
+dk_status dk_eigs_smallest(const dk_sparse *l, const double *mass, int k,
+                           const dk_eigs_options *opt, double *eigenvalues,
+                           double *eigenvectors, int *n_converged, dk_error *err);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

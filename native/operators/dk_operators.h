@@ -1,0 +1,114 @@
+/* DeformKit: discrete differential operators and geometric queries on a dk_mesh.
+ *
+ * Sign convention for every Laplacian here: L is symmetric POSITIVE SEMIDEFINITE,
+ *     L_ij = -w_ij (i != j, i~j),   L_ii = sum_j w_ij,
+ * so (L x)_i = sum_j w_ij (x_i - x_j) and x^T L x = sum_edges w_ij |x_i - x_j|^2 >= 0
+ * (for non-negative weights). The "mean curvature normal" of the slides is -M^-1 L x.
+ */
+#ifndef DK_OPERATORS_H
+#define DK_OPERATORS_H
+
+#include "dk_mesh.h"
+#include "dk_sparse.h"
+#include "dk_status.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* ---------------------------------------------------------------- Laplacians ----------- */
+
+/** Uniform (graph) Laplacian: w_ij = 1 for every edge. n x n, PSD as above. The normalised
+ *  "umbrella" operator of the slides is D^-1 L with D = diag(L). */
+dk_status dk_laplacian_uniform(const dk_mesh *mesh, dk_sparse **out, dk_error *err);
+
+/** Cotangent weights of every edge at the given positions (n_vertices x 3; pass
+ *  mesh->positions for the rest shape): w_e = (cot alpha + cot beta) / 2 over the (one or
+ *  two, or more on non-manifold edges) opposite angles. A triangle whose area is below
+ *  1e-14 * (its longest edge)^2 contributes 0 to its three edges instead of an infinite
+ *  cotangent, so the result is always finite. Weights may be negative (obtuse angles);
+ *  clamping is the caller's choice. `weights` has n_edges entries. */
+void dk_cotangent_weights(const dk_mesh *mesh, const double *positions, double *weights);
+
+/** Cotangent Laplacian from dk_cotangent_weights at the rest positions. Symmetric, rows sum
+ *  to 0, PSD on Delaunay meshes; finite on degenerate triangles (see above). */
+dk_status dk_laplacian_cotangent(const dk_mesh *mesh, dk_sparse **out, dk_error *err);
+
+/** Laplacian from arbitrary per-edge weights (n_edges entries), same sign convention. */
+dk_status dk_laplacian_from_edge_weights(const dk_mesh *mesh, const double *weights,
+                                         dk_sparse **out, dk_error *err);
+
+/* ---------------------------------------------------------------- mass matrices -------- */
+
+/** Lumped mass matrix kinds (diagonal, one entry per vertex). */
+typedef enum dk_mass_kind {
+    DK_MASS_BARYCENTRIC = 0, /**< a third of each incident triangle's area                  */
+    DK_MASS_VORONOI = 1      /**< mixed Voronoi area (Meyer et al. 2003): Voronoi region for
+                                  non-obtuse triangles, area/2 at the obtuse corner and area/4
+                                  at the others                                              */
+} dk_mass_kind;
+
+/** Writes the lumped mass of every vertex (n_vertices) into `mass`. Isolated vertices and
+ *  vertices only on degenerate triangles get 0. */
+dk_status dk_mass_matrix(const dk_mesh *mesh, dk_mass_kind kind, double *mass, dk_error *err);
+
+/* ---------------------------------------------------------------- geodesics ------------ */
+
+/** Exact shortest paths along mesh edges (Dijkstra, binary heap) from the `n_sources`
+ *  vertices `sources`; `distance` (n_vertices) gets INFINITY for unreachable vertices. */
+dk_status dk_geodesic_dijkstra(const dk_mesh *mesh, const dk_index *sources, dk_index n_sources,
+                               double *distance, dk_error *err);
+
+/** Edge-hop (breadth-first) distance from the sources; -1 for unreachable vertices. */
+dk_status dk_hop_distance(const dk_mesh *mesh, const dk_index *sources, dk_index n_sources,
+                          dk_index *hops, dk_error *err);
+
+/** The heat method (Crane, Weischedel, Wardetzky 2013) with its two factorizations kept, so
+ *  that every call after dk_heat_create costs two back-substitutions. */
+typedef struct dk_heat_geodesic dk_heat_geodesic;
+
+/** Precomputes the heat method: t = time_factor * h^2 with h the mean edge length
+ *  (time_factor <= 0 selects the paper's default, 1). Factors M + tL and L + eps M.
+ *  Boundary condition: the average of Neumann and Dirichlet solutions on meshes with a
+ *  boundary, as the paper recommends. */
+dk_status dk_heat_create(const dk_mesh *mesh, double time_factor, dk_heat_geodesic **out,
+                         dk_error *err);
+
+/** Approximate geodesic distance from the source vertices; shifted so that the smallest
+ *  value over the sources of each component is 0. Vertices in components without a source
+ *  get INFINITY. */
+dk_status dk_heat_distance(dk_heat_geodesic *heat, const dk_index *sources, dk_index n_sources,
+                           double *distance, dk_error *err);
+
+/** Frees; NULL allowed. */
+void dk_heat_free(dk_heat_geodesic *heat);
+
+/* ---------------------------------------------------------------- nearest neighbours --- */
+
+/** A static k-d tree over a copy of n points in R^3. */
+typedef struct dk_kdtree dk_kdtree;
+
+/** Builds the tree (O(n log n)). */
+dk_status dk_kdtree_create(const double *points, dk_index n, dk_kdtree **out, dk_error *err);
+
+/** For each of `n_queries` points, the indices of its k nearest tree points sorted by
+ *  increasing distance (ties by index), and their squared distances (either output may be
+ *  NULL). k must be in [1, n]. Read-only on the tree: safe from several threads. */
+dk_status dk_kdtree_knn(const dk_kdtree *tree, const double *queries, dk_index n_queries,
+                        dk_index k, dk_index *indices, double *sq_distances, dk_error *err);
+
+/** Frees; NULL allowed. */
+void dk_kdtree_free(dk_kdtree *tree);
+
+/* ---------------------------------------------------------------- rotations ------------ */
+
+/** The rotation R (det R = +1) closest to the 3x3 matrix A in the Frobenius norm, i.e. the
+ *  maximiser of trace(R^T A); both row-major. Robust for rank-deficient and reflected A
+ *  (always returns a proper rotation; for A = 0 returns the identity). Allocation-free and
+ *  fast enough to call per vertex per ARAP iteration. Returns trace(R^T A). */
+double dk_closest_rotation(const double a[9], double r[9]);
+
+#ifdef __cplusplus
+}
+#endif
+#endif
