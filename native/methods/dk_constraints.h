@@ -1,0 +1,73 @@
+/* DeformKit: the constraint description shared by every deformation method.
+ *
+ * Each vertex is FREE, FIXED (stays at its rest position) or belongs to exactly one HANDLE
+ * group (moves to a target given at solve time). A region of interest (ROI) may restrict the
+ * solve: vertices outside it are treated as fixed. Per-vertex handle weights in (0, 1] make a
+ * handle soft where a method supports it (weight 1 = fully attached, as Blender's hook
+ * weights); per-vertex stiffness (> 0, default 1) scales a method's regulariser where it
+ * supports it.
+ *
+ * Overlaps are refused, not resolved silently: a vertex in two handles, or in a handle and the
+ * fixed set, is a DK_ERR_INVALID_ARGUMENT naming the vertex and both groups.
+ */
+#ifndef DK_CONSTRAINTS_H
+#define DK_CONSTRAINTS_H
+
+#include "dk_mesh.h"
+#include "dk_status.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+enum { DK_VERTEX_FREE = -1, DK_VERTEX_FIXED = -2 };
+
+/** Caller-side description (borrowed pointers, nothing owned). */
+typedef struct dk_constraint_desc {
+    dk_index n_handles;
+    const dk_index *handle_sizes;     /**< n_handles                                        */
+    const dk_index *handle_vertices;  /**< concatenated, sum(handle_sizes)                  */
+    const double *handle_weights;     /**< same length, in (0, 1]; NULL = all 1             */
+    dk_index n_fixed;
+    const dk_index *fixed_vertices;   /**< n_fixed                                          */
+    dk_index n_roi;                   /**< 0 = the whole mesh is the region of interest     */
+    const dk_index *roi_vertices;     /**< n_roi                                            */
+    const double *stiffness;          /**< n_vertices, > 0; NULL = all 1                    */
+} dk_constraint_desc;
+
+/** Validated, owned constraints of one bind. */
+typedef struct dk_constraints {
+    dk_index n_vertices;
+    dk_index n_handles;
+    dk_index n_handle_vertices;       /**< total over handles                               */
+    dk_index *handle_start;           /**< n_handles + 1 offsets into handle_vertices       */
+    dk_index *handle_vertices;        /**< concatenated, in the caller's order              */
+    double *handle_weights;           /**< per handle vertex, in (0, 1]                     */
+    dk_index *role;                   /**< n_vertices: handle id >= 0, or FREE / FIXED      */
+    dk_index n_free;                  /**< vertices with role FREE                          */
+    dk_index *free_index;             /**< n_vertices: position among free vertices or -1   */
+    dk_index *free_vertices;          /**< n_free: the inverse map                          */
+    double *stiffness;                /**< n_vertices                                       */
+} dk_constraints;
+
+/** Validates `desc` against the mesh (indices in range, no overlaps, weights in (0,1],
+ *  stiffness finite and > 0, no empty handle, at least one handle vertex) and builds the
+ *  owned form. Vertices outside a non-empty ROI become FIXED. */
+dk_status dk_constraints_create(const dk_mesh *mesh, const dk_constraint_desc *desc,
+                                dk_constraints **out, dk_error *err);
+
+/** Frees; NULL allowed. */
+void dk_constraints_free(dk_constraints *c);
+
+/** Expands solve-time handle targets into per-handle-vertex target positions.
+ *  mode 0: `targets` holds n_handle_vertices x 3 positions (concatenated in handle order).
+ *  mode 1: `targets` holds n_handles 4x4 row-major affine transforms applied to the rest
+ *          positions of each handle's vertices (bottom row must be 0 0 0 1).
+ *  Checks finiteness (naming the handle and vertex). `out` is n_handle_vertices x 3. */
+dk_status dk_constraints_targets(const dk_constraints *c, const double *rest_positions,
+                                 const double *targets, int mode, double *out, dk_error *err);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,103 @@
+/* DeformKit CPython module: shared helpers for the binding files.
+ *
+ * Built against the Limited API of Python 3.11 (Py_LIMITED_API=0x030B0000): no numpy C API,
+ * no CPython internals. Inputs are read through the buffer protocol (numpy arrays,
+ * memoryviews of Blender's foreach_get data, array.array, bytes) or, as a convenience,
+ * nested Python sequences. Outputs are numpy arrays when numpy can be imported (created by
+ * calling numpy.frombuffer on a bytearray the module filled), else memoryviews.
+ *
+ * One binding file per idea (py_mesh.c, py_operators.c, py_arap.c, ...); each exports
+ * `int dk_py_init_<name>(PyObject *module)` which module.c calls; it returns 0 or -1 with an
+ * exception set.
+ */
+#ifndef DK_PY_H
+#define DK_PY_H
+
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <stdint.h>
+
+#include "dk_mesh.h"
+#include "dk_status.h"
+
+/* ------------------------------------------------------------------ errors ------------- */
+
+/** Raises the Python exception matching `err->status` with the C message:
+ *  DK_ERR_INDEX -> IndexError (a subclass of LookupError, message names the index);
+ *  INVALID_ARGUMENT, NONFINITE, DEGENERATE, TOPOLOGY -> ValueError;
+ *  OUT_OF_MEMORY -> MemoryError; CANCELLED -> KeyboardInterrupt-free RuntimeError;
+ *  NOT_POSITIVE_DEFINITE, NO_CONVERGENCE, NUMERIC, INTERNAL -> RuntimeError.
+ *  `context` (may be NULL) is prefixed ("ARAP.solve: ..."). Returns NULL for convenience. */
+PyObject *dk_py_raise(const dk_error *err, const char *context);
+
+/* ------------------------------------------------------------------ inputs ------------- */
+
+/** A contiguous double matrix read from any buffer or nested sequence. */
+typedef struct dk_py_doubles {
+    double *data;      /**< rows x cols, row-major; owned (PyMem_Malloc), free with _release */
+    Py_ssize_t rows, cols;
+} dk_py_doubles;
+
+/** Reads `obj` as a float32/float64 (or integer) array of shape (rows, cols), converting to
+ *  double. `cols` > 0 demands that many columns (a flat buffer of rows*cols is accepted and
+ *  reshaped); cols == 0 accepts a 1-D array (cols set to 1). `rows` >= 0 demands that many
+ *  rows, -1 accepts any. Non-finite values are NOT rejected here (callers name the vertex).
+ *  `name` is used in messages ("vertices must have 3 columns, got 2"). Returns 0 or -1 with
+ *  TypeError/ValueError set. */
+int dk_py_read_doubles(PyObject *obj, Py_ssize_t rows, Py_ssize_t cols, const char *name,
+                       dk_py_doubles *out);
+
+/** A contiguous index array read from any int32/int64 (or other integer) buffer or sequence. */
+typedef struct dk_py_indices {
+    dk_index *data;    /**< rows x cols, row-major; owned, free with _release              */
+    Py_ssize_t rows, cols;
+} dk_py_indices;
+
+/** Same contract as dk_py_read_doubles for integer data. Values outside int32 raise
+ *  OverflowError naming the position; floats raise TypeError. */
+int dk_py_read_indices(PyObject *obj, Py_ssize_t rows, Py_ssize_t cols, const char *name,
+                       dk_py_indices *out);
+
+void dk_py_doubles_release(dk_py_doubles *a);
+void dk_py_indices_release(dk_py_indices *a);
+
+/* ------------------------------------------------------------------ outputs ------------ */
+
+/** A new writable array of doubles with the given shape (ndim 1 or 2; shape[1] ignored for
+ *  ndim 1). `*data` receives the pointer to fill (row-major, valid while the result lives).
+ *  Returns a numpy.ndarray when numpy is importable, else a memoryview; NULL on error. */
+PyObject *dk_py_new_doubles(int ndim, Py_ssize_t rows, Py_ssize_t cols, double **data);
+
+/** Same for int32 indices. */
+PyObject *dk_py_new_indices(int ndim, Py_ssize_t rows, Py_ssize_t cols, dk_index **data);
+
+/** Same for int64 (counts that may exceed int32). */
+PyObject *dk_py_new_int64(int ndim, Py_ssize_t rows, Py_ssize_t cols, int64_t **data);
+
+/* ------------------------------------------------------------------ the Mesh type ------- */
+
+/** Returns the dk_mesh wrapped by a deformkit.Mesh, or NULL with TypeError set (naming
+ *  `argname`) if `obj` is not a Mesh. The Mesh object must be kept alive (held with a
+ *  reference) by whoever keeps the pointer. */
+const dk_mesh *dk_py_mesh_get(PyObject *module, PyObject *obj, const char *argname);
+
+/** The deformkit.Mesh type object (borrowed), from the module state. */
+PyObject *dk_py_mesh_type(PyObject *module);
+
+/* ------------------------------------------------------------------ module state ------- */
+
+/** Per-module state (no C globals): the Mesh type, the lock that serialises ARPACK calls
+ *  (ARPACK is not reentrant) and a cached numpy.frombuffer (or None). */
+typedef struct dk_py_state {
+    PyObject *mesh_type;
+    PyThread_type_lock arpack_lock;
+    PyObject *numpy_frombuffer; /* None if numpy is missing */
+} dk_py_state;
+
+dk_py_state *dk_py_get_state(PyObject *module);
+
+/* Registration hooks, one per binding file (called by module.c in this order). */
+int dk_py_init_mesh(PyObject *module);
+int dk_py_init_operators(PyObject *module);
+
+#endif
