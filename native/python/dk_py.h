@@ -90,14 +90,27 @@ PyObject *dk_py_mesh_type(PyObject *module);
  *  (ARPACK is not reentrant) and a cached numpy.frombuffer (or None). */
 typedef struct dk_py_state {
     PyObject *mesh_type;
+    PyObject *solve_result_type;
     PyThread_type_lock arpack_lock;
     PyObject *numpy_frombuffer; /* None if numpy is missing */
 } dk_py_state;
 
 dk_py_state *dk_py_get_state(PyObject *module);
 
-/* Registration hooks, one per binding file (called by module.c in this order). */
+/* ------------------------------------------------------------------ solve results ------ */
+
+/** A new deformkit.SolveResult (a struct sequence, also usable as a tuple) with the fields
+ *  positions (n x 3 array), energy (float), iterations (int), converged (bool). Steals the
+ *  reference to `positions`. Every method's solve() returns one. */
+PyObject *dk_py_new_solve_result(PyObject *module, PyObject *positions, double energy,
+                                 int iterations, int converged);
+
+/* Registration hooks, one per binding file (called by module.c in this order). A method's
+ * binding file adds its hook here and one line to module.c. */
 int dk_py_init_mesh(PyObject *module);
 int dk_py_init_operators(PyObject *module);
+int dk_py_init_arap(PyObject *module);
+int dk_py_init_laplacian_edit(PyObject *module);
+int dk_py_init_falloff(PyObject *module);
 
 #endif
