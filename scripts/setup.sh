@@ -1,0 +1,52 @@
+#!/usr/bin/env bash
+# Sets up a Debian machine for DeformKit and builds it. Safe to run again and again: installs
+# only the Debian packages that are missing (apt-get update first, then apt-get install -y),
+# then configures and builds with CMake into build/ (Release) and, with --asan, into
+# build-asan/ (AddressSanitizer + UndefinedBehaviorSanitizer, C library and C tests only).
+#
+# usage: scripts/setup.sh [--asan] [--bench] [--no-build]
+#   --asan      also build the sanitized configuration
+#   --bench     also install what the benchmarks need (g++, CGAL, Eigen, scipy)
+#   --no-build  only install packages
+set -euo pipefail
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+asan=0; bench=0; build=1
+for arg in "$@"; do
+  case "$arg" in
+    --asan) asan=1 ;;
+    --bench) bench=1 ;;
+    --no-build) build=0 ;;
+    *) echo "setup.sh: unknown option $arg" >&2; exit 2 ;;
+  esac
+done
+
+packages=(cmake make gcc pkg-config libsuitesparse-dev libarpack2-dev liblapacke-dev
+          libopenblas-dev python3-dev python3-numpy python3-scipy python3-pytest blender xvfb
+          xauth zip)
+if [ "$bench" = 1 ]; then packages+=(g++ libcgal-dev libeigen3-dev); fi
+
+missing=()
+for p in "${packages[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$p")
+  fi
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "setup: installing ${missing[*]}" >&2
+  sudo_cmd=()
+  if [ "$(id -u)" != 0 ]; then sudo_cmd=(sudo); fi
+  "${sudo_cmd[@]}" apt-get update
+  DEBIAN_FRONTEND=noninteractive "${sudo_cmd[@]}" apt-get install -y "${missing[@]}"
+else
+  echo "setup: all Debian packages present" >&2
+fi
+
+[ "$build" = 1 ] || exit 0
+jobs="$(nproc 2>/dev/null || echo 2)"
+cmake -S "$here" -B "$here/build" -DCMAKE_BUILD_TYPE=Release >/dev/null
+cmake --build "$here/build" -j"$jobs"
+if [ "$asan" = 1 ]; then
+  cmake -S "$here" -B "$here/build-asan" -DCMAKE_BUILD_TYPE=Debug -DDK_SANITIZE=ON >/dev/null
+  cmake --build "$here/build-asan" -j"$jobs"
+fi
+if [ "$asan" = 1 ]; then echo "setup: built build/ and build-asan/" >&2; else echo "setup: built build/" >&2; fi
