@@ -42,6 +42,21 @@ int dk_cholesky_analysis_count(const dk_cholesky *chol);
 /** Bytes held by the factor (for memory reports). */
 size_t dk_cholesky_memory(const dk_cholesky *chol);
 
+/** Like dk_cholesky_analyze, for symmetric INDEFINITE nonsingular matrices (the shifted
+ *  operators L - sigma M of the band-by-band eigensolver): simplicial LDL' without pivoting
+ *  (CHOLMOD has no pivoting), so it is only as stable as the matrix allows. Factorize then
+ *  fails with DK_ERR_NOT_POSITIVE_DEFINITE only on a zero or NaN pivot (singular matrix).
+ *  Slower than the supernodal LL' of dk_cholesky_analyze; use that one for SPD matrices. */
+dk_status dk_cholesky_analyze_indefinite(const dk_sparse *a, dk_cholesky **out,
+                                         dk_error *err);
+
+/** Inertia after a successful factorization: `*count` gets the number of negative pivots
+ *  of D in LDL' (objects from dk_cholesky_analyze_indefinite), which by Sylvester's law of
+ *  inertia is the number of negative eigenvalues of the matrix (for L - sigma M with M
+ *  positive definite: the number of eigenvalues of L x = lambda M x below sigma).
+ *  Always 0 for an LL' factor (the matrix is positive definite). */
+dk_status dk_cholesky_negative_pivots(const dk_cholesky *chol, dk_index *count, dk_error *err);
+
 /** Frees; NULL allowed. */
 void dk_cholesky_free(dk_cholesky *chol);
 

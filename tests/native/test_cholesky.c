@@ -1,0 +1,485 @@
+/* Tests of the CHOLMOD wrapper (dk_cholesky.h): dense LAPACK reference solves, not positive
+ * definite detection, refactorization reuse, several right-hand sides, big-matrix residuals,
+ * LDL' inertia, argument checking. */
+#define _POSIX_C_SOURCE 199309L /* clock_gettime */
+#include <lapacke.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "dk_cholesky.h"
+#include "dk_test.h"
+
+/* The armadillo case needs the mesh reader and the cotangent Laplacian (core, operators). */
+#ifdef HAVE_DK_IO
+#include "dk_io.h"
+#include "dk_operators.h"
+#endif
+
+#if defined(__SANITIZE_ADDRESS__)
+#define SANITIZED 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define SANITIZED 1
+#endif
+#endif
+#ifndef SANITIZED
+#define SANITIZED 0
+#endif
+
+/* ------------------------------------------------------------------ test-local helpers -- */
+
+static uint64_t rng_state = 88172645463325252ull;
+static double rnd(void) /* uniform in [-1, 1) */
+{
+    rng_state ^= rng_state << 13;
+    rng_state ^= rng_state >> 7;
+    rng_state ^= rng_state << 17;
+    return (double)(rng_state >> 11) / 9007199254740992.0 * 2.0 - 1.0;
+}
+
+static double now(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
+
+/* A CSC matrix owned by the test (independent of the core's dk_sparse functions). */
+static dk_sparse *csc_new(dk_index n, int64_t nnz)
+{
+    dk_sparse *a = calloc(1, sizeof *a);
+    if (!a) return NULL;
+    a->n_rows = a->n_cols = n;
+    a->col_start = calloc((size_t)n + 1, sizeof(dk_index));
+    a->row_index = malloc((size_t)(nnz ? nnz : 1) * sizeof(dk_index));
+    a->values = malloc((size_t)(nnz ? nnz : 1) * sizeof(double));
+    if (!a->col_start || !a->row_index || !a->values) {
+        free(a->col_start); free(a->row_index); free(a->values); free(a);
+        return NULL;
+    }
+    return a;
+}
+
+static void csc_free(dk_sparse *a)
+{
+    if (!a) return;
+    free(a->col_start); free(a->row_index); free(a->values); free(a);
+}
+
+/* CSC of the non-zeros of a dense column-major n x n matrix. */
+static dk_sparse *csc_from_dense(const double *d, dk_index n)
+{
+    int64_t nnz = 0;
+    for (int64_t k = 0; k < (int64_t)n * n; k++) nnz += d[k] != 0.0;
+    dk_sparse *a = csc_new(n, nnz);
+    if (!a) return NULL;
+    dk_index p = 0;
+    for (dk_index j = 0; j < n; j++) {
+        a->col_start[j] = p;
+        for (dk_index i = 0; i < n; i++)
+            if (d[(size_t)j * n + i] != 0.0) {
+                a->row_index[p] = i;
+                a->values[p++] = d[(size_t)j * n + i];
+            }
+    }
+    a->col_start[n] = p;
+    return a;
+}
+
+/* y = A x with both triangles stored. */
+static void csc_matvec(const dk_sparse *a, const double *x, double *y)
+{
+    memset(y, 0, (size_t)a->n_rows * sizeof(double));
+    for (dk_index j = 0; j < a->n_cols; j++)
+        for (dk_index p = a->col_start[j]; p < a->col_start[j + 1]; p++)
+            y[a->row_index[p]] += a->values[p] * x[j];
+}
+
+/* Graph Laplacian of an nx x ny x nz grid (7-point stencil; nz = 1 gives the 2D 5-point
+ * one) plus `diag[i]` on the diagonal: symmetric, both triangles, rows sorted. */
+static dk_sparse *grid_laplacian(int nx, int ny, int nz, const double *diag)
+{
+    const dk_index n = (dk_index)nx * ny * nz;
+    dk_sparse *a = csc_new(n, (int64_t)n * 7);
+    if (!a) return NULL;
+    dk_index p = 0;
+    for (int z = 0; z < nz; z++)
+        for (int y = 0; y < ny; y++)
+            for (int x = 0; x < nx; x++) {
+                const dk_index j = (dk_index)((z * ny + y) * nx + x);
+                a->col_start[j] = p;
+                dk_index nb[6];
+                int m = 0;
+                /* in ascending index order */
+                if (z > 0) nb[m++] = j - nx * ny;
+                if (y > 0) nb[m++] = j - nx;
+                if (x > 0) nb[m++] = j - 1;
+                const int below = m;
+                if (x < nx - 1) nb[m++] = j + 1;
+                if (y < ny - 1) nb[m++] = j + nx;
+                if (z < nz - 1) nb[m++] = j + nx * ny;
+                for (int k = 0; k < below; k++) { a->row_index[p] = nb[k]; a->values[p++] = -1.0; }
+                a->row_index[p] = j;
+                a->values[p++] = (double)m + (diag ? diag[j] : 0.0);
+                for (int k = below; k < m; k++) { a->row_index[p] = nb[k]; a->values[p++] = -1.0; }
+            }
+    a->col_start[n] = p;
+    return a;
+}
+
+/* ||A x - b||_2 / ||b||_2 for column `c` of multi-RHS arrays. */
+static double rel_residual(const dk_sparse *a, const double *x, const double *b)
+{
+    const dk_index n = a->n_rows;
+    double *r = malloc((size_t)n * sizeof(double));
+    if (!r) return INFINITY;
+    csc_matvec(a, x, r);
+    double num = 0, den = 0;
+    for (dk_index i = 0; i < n; i++) {
+        num += (r[i] - b[i]) * (r[i] - b[i]);
+        den += b[i] * b[i];
+    }
+    free(r);
+    return sqrt(num) / sqrt(den);
+}
+
+/* A random sparse SPD matrix (dense column-major storage): random symmetric sparse
+ * off-diagonals, diagonal = row sum of |off-diagonals| + 0.5 (strictly diagonally dominant). */
+static void random_spd_dense(double *d, int n, double density)
+{
+    memset(d, 0, sizeof(double) * (size_t)n * n);
+    for (int j = 0; j < n; j++)
+        for (int i = j + 1; i < n; i++)
+            if (fabs(rnd()) < density) {
+                const double v = rnd();
+                d[(size_t)j * n + i] = v;
+                d[(size_t)i * n + j] = v;
+            }
+    for (int i = 0; i < n; i++) {
+        double s = 0;
+        for (int j = 0; j < n; j++) s += fabs(d[(size_t)j * n + i]);
+        d[(size_t)i * n + i] = s + 0.5 + 0.5 * fabs(rnd());
+    }
+}
+
+/* -------------------------------------------------------------------------- the tests -- */
+
+static void test_small_against_lapack(void)
+{
+    enum { N = 40, NRHS = 3 };
+    double *d = malloc(sizeof(double) * N * N), *f = malloc(sizeof(double) * N * N);
+    double b[N * NRHS], xr[N * NRHS], x[N * NRHS];
+    CHECK(d && f);
+    if (!d || !f) { free(d); free(f); return; }
+    random_spd_dense(d, N, 0.15);
+    memcpy(f, d, sizeof(double) * N * N);
+    for (int k = 0; k < N * NRHS; k++) b[k] = rnd();
+    memcpy(xr, b, sizeof b);
+    CHECK(LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', N, f, N) == 0);
+    CHECK(LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', N, NRHS, f, N, xr, N) == 0);
+
+    dk_sparse *a = csc_from_dense(d, N);
+    CHECK(a != NULL);
+    dk_error err = {0};
+    dk_cholesky *ch = NULL;
+    CHECK(dk_cholesky_analyze(a, &ch, &err) == DK_OK);
+    CHECK(ch && dk_cholesky_size(ch) == N);
+    CHECK(dk_cholesky_analysis_count(ch) == 1 && dk_cholesky_factorization_count(ch) == 0);
+    /* solving before any factorization is refused */
+    CHECK(dk_cholesky_solve(ch, b, 1, x, &err) == DK_ERR_INVALID_ARGUMENT);
+    CHECK_MSG(dk_cholesky_factorize(ch, a, &err) == DK_OK, "%s", err.message);
+    CHECK(dk_cholesky_solve(ch, b, NRHS, x, &err) == DK_OK);
+    double maxdiff = 0, maxref = 0;
+    for (int k = 0; k < N * NRHS; k++) {
+        maxdiff = fmax(maxdiff, fabs(x[k] - xr[k]));
+        maxref = fmax(maxref, fabs(xr[k]));
+    }
+    CHECK_MSG(maxdiff <= 1e-12 * maxref, "max diff %g (max |x| %g)", maxdiff, maxref);
+    CHECK(dk_cholesky_memory(ch) > sizeof(double) * N);
+    dk_cholesky_free(ch);
+    csc_free(a);
+    free(d);
+    free(f);
+}
+
+static void test_not_positive_definite(void)
+{
+    /* 1D Laplacian plus identity, with column 7 made negative and decoupled: Cholesky must
+     * fail there and the message must name the column. */
+    enum { N = 12 };
+    double d[N * N] = {0};
+    for (int i = 0; i < N; i++) {
+        d[i * N + i] = 3.0;
+        if (i + 1 < N && i != 6 && i != 7) { d[i * N + i + 1] = -1; d[(i + 1) * N + i] = -1; }
+    }
+    d[7 * N + 7] = -2.0;
+    dk_sparse *a = csc_from_dense(d, N);
+    dk_error err = {0};
+    dk_cholesky *ch = NULL;
+    CHECK(dk_cholesky_analyze(a, &ch, &err) == DK_OK);
+    dk_status st = dk_cholesky_factorize(ch, a, &err);
+    CHECK(st == DK_ERR_NOT_POSITIVE_DEFINITE);
+    CHECK(err.status == DK_ERR_NOT_POSITIVE_DEFINITE);
+    CHECK_MSG(strstr(err.message, "not positive definite") != NULL, "%s", err.message);
+    CHECK_MSG(strstr(err.message, "column 7)") != NULL, "%s", err.message);
+    double b[N], x[N];
+    for (int i = 0; i < N; i++) b[i] = 1.0;
+    /* no solve after a failed factorization */
+    CHECK(dk_cholesky_solve(ch, b, 1, x, &err) == DK_ERR_INVALID_ARGUMENT);
+
+    /* the same object recovers with positive values on the same pattern */
+    a->values[a->col_start[7]] = 2.0;
+    err = (dk_error){0};
+    CHECK_MSG(dk_cholesky_factorize(ch, a, &err) == DK_OK, "%s", err.message);
+    CHECK(dk_cholesky_solve(ch, b, 1, x, &err) == DK_OK);
+    CHECK(rel_residual(a, x, b) < 1e-14);
+    CHECK(dk_cholesky_analysis_count(ch) == 1 && dk_cholesky_factorization_count(ch) == 2);
+    dk_cholesky_free(ch);
+
+    /* negative definite from the start: the first pivot column is named */
+    for (int p = 0; p < a->col_start[N]; p++) a->values[p] = -a->values[p];
+    CHECK(dk_cholesky_analyze(a, &ch, &err) == DK_OK);
+    CHECK(dk_cholesky_factorize(ch, a, &err) == DK_ERR_NOT_POSITIVE_DEFINITE);
+    CHECK(strstr(err.message, "matrix column") != NULL);
+    dk_cholesky_free(ch);
+    csc_free(a);
+}
+
+static void test_refactorize_and_multi_rhs(void)
+{
+    const int nx = 30, ny = 20;
+    const dk_index n = nx * ny;
+    double *diag = malloc(sizeof(double) * n);
+    double *b = malloc(sizeof(double) * n * 4), *x = malloc(sizeof(double) * n * 4);
+    double *x1 = malloc(sizeof(double) * n);
+    CHECK(diag && b && x && x1);
+    if (!diag || !b || !x || !x1) { free(diag); free(b); free(x); free(x1); return; }
+    for (dk_index i = 0; i < n; i++) diag[i] = 0.01;
+    dk_sparse *a = grid_laplacian(nx, ny, 1, diag);
+    dk_error err = {0};
+    dk_cholesky *ch = NULL;
+    CHECK(dk_cholesky_analyze(a, &ch, &err) == DK_OK);
+    CHECK(dk_cholesky_factorize(ch, a, &err) == DK_OK);
+    for (dk_index k = 0; k < n * 4; k++) b[k] = rnd();
+
+    /* 3 right-hand sides at once == 3 single solves, each with a tiny residual */
+    CHECK(dk_cholesky_solve(ch, b, 3, x, &err) == DK_OK);
+    for (int c = 0; c < 3; c++) {
+        CHECK(rel_residual(a, x + (size_t)c * n, b + (size_t)c * n) < 1e-12);
+        CHECK(dk_cholesky_solve(ch, b + (size_t)c * n, 1, x1, &err) == DK_OK);
+        double md = 0;
+        for (dk_index i = 0; i < n; i++) md = fmax(md, fabs(x1[i] - x[(size_t)c * n + i]));
+        CHECK_MSG(md < 1e-12, "multi vs single RHS differ by %g", md);
+    }
+    /* 4 then 3 again (workspace re-shaped both ways) */
+    CHECK(dk_cholesky_solve(ch, b, 4, x, &err) == DK_OK);
+    CHECK(rel_residual(a, x + 3 * (size_t)n, b + 3 * (size_t)n) < 1e-12);
+    /* x aliasing b */
+    double *bb = malloc(sizeof(double) * n * 3);
+    CHECK(bb != NULL);
+    if (bb) {
+        memcpy(bb, b, sizeof(double) * n * 3);
+        CHECK(dk_cholesky_solve(ch, bb, 3, bb, &err) == DK_OK);
+        for (int c = 0; c < 3; c++)
+            CHECK(rel_residual(a, bb + (size_t)c * n, b + (size_t)c * n) < 1e-12);
+        free(bb);
+    }
+
+    /* new values, same pattern: a stiffer diagonal and scaled off-diagonals */
+    for (dk_index j = 0; j < n; j++)
+        for (dk_index p = a->col_start[j]; p < a->col_start[j + 1]; p++)
+            a->values[p] = a->row_index[p] == j ? a->values[p] * 2.0 + (double)(j % 7)
+                                                : a->values[p] * 1.5;
+    CHECK(dk_cholesky_factorize(ch, a, &err) == DK_OK);
+    CHECK(dk_cholesky_analysis_count(ch) == 1);
+    CHECK(dk_cholesky_factorization_count(ch) == 2);
+    CHECK(dk_cholesky_solve(ch, b, 3, x, &err) == DK_OK);
+    for (int c = 0; c < 3; c++)
+        CHECK(rel_residual(a, x + (size_t)c * n, b + (size_t)c * n) < 1e-12);
+
+    /* a different pattern is refused (would otherwise factor garbage) */
+    dk_sparse *other = grid_laplacian(ny, nx, 1, diag);
+    CHECK(dk_cholesky_factorize(ch, other, &err) == DK_ERR_INVALID_ARGUMENT);
+    CHECK(strstr(err.message, "pattern") != NULL);
+    dk_sparse *small = grid_laplacian(5, 5, 1, diag);
+    CHECK(dk_cholesky_factorize(ch, small, &err) == DK_ERR_INVALID_ARGUMENT);
+    csc_free(other);
+    csc_free(small);
+    dk_cholesky_free(ch);
+    csc_free(a);
+    free(diag); free(b); free(x); free(x1);
+}
+
+static void test_bad_arguments(void)
+{
+    dk_error err = {0};
+    dk_cholesky *ch = (dk_cholesky *)&err; /* must be reset to NULL on failure */
+    CHECK(dk_cholesky_analyze(NULL, &ch, &err) == DK_ERR_INVALID_ARGUMENT);
+    CHECK(ch == NULL);
+    double d[9] = {2, -1, 0, -1, 2, -1, 0, -1, 2};
+    dk_sparse *a = csc_from_dense(d, 3);
+    a->n_rows = 2;
+    CHECK(dk_cholesky_analyze(a, &ch, &err) == DK_ERR_INVALID_ARGUMENT);
+    a->n_rows = 3;
+    a->row_index[1] = 7; /* out of range */
+    CHECK(dk_cholesky_analyze(a, &ch, &err) == DK_ERR_INDEX);
+    a->row_index[1] = 1;
+    a->values[4] = NAN;
+    CHECK(dk_cholesky_analyze(a, &ch, &err) == DK_ERR_NONFINITE);
+    a->values[4] = 2;
+    const dk_index r0 = a->row_index[0];
+    a->row_index[0] = a->row_index[1];
+    a->row_index[1] = r0; /* unsorted column */
+    CHECK(dk_cholesky_analyze(a, &ch, &err) == DK_ERR_INVALID_ARGUMENT);
+    a->row_index[1] = a->row_index[0];
+    a->row_index[0] = r0;
+    CHECK(dk_cholesky_analyze(a, &ch, &err) == DK_OK);
+    CHECK(dk_cholesky_factorize(ch, a, &err) == DK_OK);
+    double b[3] = {1, 2, 3}, x[3];
+    CHECK(dk_cholesky_solve(ch, b, 0, x, &err) == DK_ERR_INVALID_ARGUMENT);
+    CHECK(dk_cholesky_solve(ch, NULL, 1, x, &err) == DK_ERR_INVALID_ARGUMENT);
+    CHECK(dk_cholesky_factorize(NULL, a, &err) == DK_ERR_INVALID_ARGUMENT);
+    /* a NaN in a later factorization is caught before CHOLMOD sees it */
+    a->values[0] = INFINITY;
+    CHECK(dk_cholesky_factorize(ch, a, &err) == DK_ERR_NONFINITE);
+    CHECK(dk_cholesky_solve(ch, b, 1, x, &err) == DK_ERR_INVALID_ARGUMENT);
+    dk_cholesky_free(ch);
+    dk_cholesky_free(NULL);
+    csc_free(a);
+}
+
+static void test_indefinite_inertia(void)
+{
+    /* L - sigma I for a 2D grid Laplacian: LDL' solves accurately and the negative pivots
+     * count the eigenvalues below sigma (compared with a dense LAPACK eigen solve). */
+    const int nx = 12, ny = 9;
+    const dk_index n = nx * ny;
+    const double sigma = 1.2345;
+    double *diag = malloc(sizeof(double) * n), *dense = calloc((size_t)n * n, sizeof(double));
+    double *w = malloc(sizeof(double) * n), *b = malloc(sizeof(double) * n * 2);
+    double *x = malloc(sizeof(double) * n * 2);
+    CHECK(diag && dense && w && b && x);
+    if (!diag || !dense || !w || !b || !x) goto done;
+    for (dk_index i = 0; i < n; i++) diag[i] = -sigma;
+    dk_sparse *a = grid_laplacian(nx, ny, 1, diag);
+    for (dk_index j = 0; j < n; j++)
+        for (dk_index p = a->col_start[j]; p < a->col_start[j + 1]; p++)
+            dense[(size_t)j * n + a->row_index[p]] = a->values[p];
+    CHECK(LAPACKE_dsyev(LAPACK_COL_MAJOR, 'N', 'U', n, dense, n, w) == 0);
+    dk_index expected = 0;
+    for (dk_index i = 0; i < n; i++) expected += w[i] < 0;
+    CHECK(expected > 3 && expected < n - 3);
+
+    dk_error err = {0};
+    dk_cholesky *ch = NULL, *spd = NULL;
+    CHECK(dk_cholesky_analyze_indefinite(a, &ch, &err) == DK_OK);
+    CHECK_MSG(dk_cholesky_factorize(ch, a, &err) == DK_OK, "%s", err.message);
+    dk_index neg = -1;
+    CHECK(dk_cholesky_negative_pivots(ch, &neg, &err) == DK_OK);
+    CHECK_MSG(neg == expected, "negative pivots %d, eigenvalues below sigma %d", (int)neg,
+              (int)expected);
+    for (dk_index k = 0; k < 2 * n; k++) b[k] = rnd();
+    CHECK(dk_cholesky_solve(ch, b, 2, x, &err) == DK_OK);
+    CHECK(rel_residual(a, x, b) < 1e-10);
+    CHECK(rel_residual(a, x + n, b + n) < 1e-10);
+    /* the SPD wrapper refuses the same matrix */
+    CHECK(dk_cholesky_analyze(a, &spd, &err) == DK_OK);
+    CHECK(dk_cholesky_factorize(spd, a, &err) == DK_ERR_NOT_POSITIVE_DEFINITE);
+    /* an SPD factor has no negative pivots */
+    for (dk_index j = 0; j < n; j++)
+        for (dk_index p = a->col_start[j]; p < a->col_start[j + 1]; p++)
+            if (a->row_index[p] == j) a->values[p] += sigma + 0.5;
+    CHECK(dk_cholesky_factorize(spd, a, &err) == DK_OK);
+    CHECK(dk_cholesky_negative_pivots(spd, &neg, &err) == DK_OK && neg == 0);
+    CHECK(dk_cholesky_factorize(ch, a, &err) == DK_OK);
+    CHECK(dk_cholesky_negative_pivots(ch, &neg, &err) == DK_OK && neg == 0);
+    dk_cholesky_free(spd);
+    dk_cholesky_free(ch);
+    csc_free(a);
+done:
+    free(diag); free(dense); free(w); free(b); free(x);
+}
+
+/* A big constrained Laplacian: L + diag(1e3 on every 97th vertex, 1e-8 * mean diag
+ * elsewhere); random right-hand sides must have relative residual below 1e-10. */
+static void check_big_constrained(dk_sparse *l, const char *name)
+{
+    const dk_index n = l->n_rows;
+    double mean = 0;
+    for (dk_index j = 0; j < n; j++)
+        for (dk_index p = l->col_start[j]; p < l->col_start[j + 1]; p++)
+            if (l->row_index[p] == j) mean += l->values[p] / n;
+    for (dk_index j = 0; j < n; j++)
+        for (dk_index p = l->col_start[j]; p < l->col_start[j + 1]; p++)
+            if (l->row_index[p] == j) l->values[p] += (j % 97 == 0) ? 1e3 : 1e-8 * mean;
+    double *b = malloc(sizeof(double) * n * 3), *x = malloc(sizeof(double) * n * 3);
+    CHECK(b && x);
+    if (b && x) {
+        for (dk_index k = 0; k < 3 * n; k++) b[k] = rnd();
+        dk_error err = {0};
+        dk_cholesky *ch = NULL;
+        const double t0 = now();
+        CHECK(dk_cholesky_analyze(l, &ch, &err) == DK_OK);
+        const double t1 = now();
+        CHECK_MSG(dk_cholesky_factorize(ch, l, &err) == DK_OK, "%s", err.message);
+        const double t2 = now();
+        CHECK(dk_cholesky_solve(ch, b, 3, x, &err) == DK_OK);
+        const double t3 = now();
+        double worst = 0;
+        for (int c = 0; c < 3; c++)
+            worst = fmax(worst, rel_residual(l, x + (size_t)c * n, b + (size_t)c * n));
+        CHECK_MSG(worst < 1e-10, "%s: relative residual %g", name, worst);
+        printf("%s: n=%d analyze %.3f s, factorize %.3f s, 3-RHS solve %.2f ms, residual %.2e, "
+               "memory %.1f MB\n", name, (int)n, t1 - t0, t2 - t1, 1e3 * (t3 - t2), worst,
+               (double)dk_cholesky_memory(ch) / 1048576.0);
+        dk_cholesky_free(ch);
+    }
+    free(b);
+    free(x);
+}
+
+static void test_big_grid(void)
+{
+    /* 3D grids fill in much more than surface meshes: a hard case for the supernodal code */
+    dk_sparse *l = SANITIZED ? grid_laplacian(14, 14, 14, NULL) : grid_laplacian(30, 30, 30, NULL);
+    CHECK(l != NULL);
+    if (l) check_big_constrained(l, "3D grid Laplacian");
+    csc_free(l);
+    l = SANITIZED ? grid_laplacian(60, 60, 1, NULL) : grid_laplacian(200, 200, 1, NULL);
+    if (l) check_big_constrained(l, "2D grid Laplacian");
+    csc_free(l);
+}
+
+static void test_armadillo(void)
+{
+#ifdef HAVE_DK_IO
+    const char *path = DK_SHARED_DIR "/meshes/armadillo.obj";
+    FILE *f = fopen(path, "rb");
+    if (!f) {
+        printf("note: %s missing, armadillo case skipped\n", path);
+        return;
+    }
+    fclose(f);
+    dk_error err = {0};
+    dk_mesh *mesh = NULL;
+    dk_sparse *l = NULL;
+    if (dk_mesh_read(path, &mesh, &err) != DK_OK) {
+        CHECK_MSG(0, "reading %s: %s", path, err.message);
+        return;
+    }
+    CHECK_MSG(dk_laplacian_cotangent(mesh, &l, &err) == DK_OK, "%s", err.message);
+    if (l) check_big_constrained(l, "armadillo cotangent Laplacian");
+    dk_sparse_free(l);
+    dk_mesh_free(mesh);
+#else
+    printf("note: dk_io.h / operators not available yet, armadillo case skipped\n");
+#endif
+}
+
+DK_TEST_MAIN(test_small_against_lapack, test_not_positive_definite,
+             test_refactorize_and_multi_rhs, test_bad_arguments, test_indefinite_inertia,
+             test_big_grid, test_armadillo)
