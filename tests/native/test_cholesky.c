@@ -249,6 +249,36 @@ static void test_not_positive_definite(void)
     csc_free(a);
 }
 
+static void test_not_positive_definite_supernodal(void)
+{
+    /* A 3D grid has enough fill for CHOLMOD's supernodal path: an indefinite shift must be
+     * reported there too, and the object must recover on the next factorization. */
+    const int m = SANITIZED ? 16 : 24;
+    const dk_index n = m * m * m;
+    double *diag = malloc(sizeof(double) * n), *b = malloc(sizeof(double) * n);
+    double *x = malloc(sizeof(double) * n);
+    CHECK(diag && b && x);
+    if (diag && b && x) {
+        for (dk_index i = 0; i < n; i++) { diag[i] = -0.5; b[i] = rnd(); }
+        dk_sparse *a = grid_laplacian(m, m, m, diag);
+        dk_error err = {0};
+        dk_cholesky *ch = NULL;
+        CHECK(dk_cholesky_analyze(a, &ch, &err) == DK_OK);
+        CHECK(dk_cholesky_factorize(ch, a, &err) == DK_ERR_NOT_POSITIVE_DEFINITE);
+        CHECK_MSG(strstr(err.message, "not positive definite") != NULL, "%s", err.message);
+        CHECK(dk_cholesky_solve(ch, b, 1, x, &err) == DK_ERR_INVALID_ARGUMENT);
+        for (dk_index j = 0; j < n; j++)
+            for (dk_index p = a->col_start[j]; p < a->col_start[j + 1]; p++)
+                if (a->row_index[p] == j) a->values[p] += 0.75;
+        CHECK_MSG(dk_cholesky_factorize(ch, a, &err) == DK_OK, "%s", err.message);
+        CHECK(dk_cholesky_solve(ch, b, 1, x, &err) == DK_OK);
+        CHECK(rel_residual(a, x, b) < 1e-12);
+        dk_cholesky_free(ch);
+        csc_free(a);
+    }
+    free(diag); free(b); free(x);
+}
+
 static void test_refactorize_and_multi_rhs(void)
 {
     const int nx = 30, ny = 20;
@@ -481,5 +511,6 @@ static void test_armadillo(void)
 }
 
 DK_TEST_MAIN(test_small_against_lapack, test_not_positive_definite,
+             test_not_positive_definite_supernodal,
              test_refactorize_and_multi_rhs, test_bad_arguments, test_indefinite_inertia,
              test_big_grid, test_armadillo)
