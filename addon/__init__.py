@@ -1,0 +1,39 @@
+"""DeformKit: detail-preserving mesh deformation (ARAP, Laplacian editing, falloff) as
+modifier-stack entries. The numerics live in the native `deformkit` module; this package only
+maps Blender data to it. See docs/addon.md."""
+
+bl_info = {
+    "name": "DeformKit",
+    "author": "DeformKit developers",
+    "version": (0, 1, 0),
+    "blender": (3, 4, 0),
+    "location": "Properties > Modifiers > DeformKit; 3D View > Object > Add DeformKit Deformer",
+    "description": "Detail-preserving mesh deformation: ARAP, Laplacian editing, falloff",
+    "category": "Mesh",
+}
+
+if "bpy" in locals():  # script reload
+    import importlib
+    for _m in (methods, native, properties, geonodes, solver, handlers, pc2, bake,  # noqa: F821
+               operators, ui):  # noqa: F821
+        importlib.reload(_m)
+
+import bpy  # noqa: E402
+
+from . import methods, native, properties, geonodes, solver, handlers, pc2, bake  # noqa: E402
+from . import operators, ui  # noqa: E402
+
+_modules = (properties, operators, ui, handlers)
+
+
+def register():
+    native.load()
+    if native.module is None:
+        print("DeformKit:", native.error)
+    for m in _modules:
+        m.register()
+
+
+def unregister():
+    for m in reversed(_modules):
+        m.unregister()

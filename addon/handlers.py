@@ -1,0 +1,105 @@
+"""Persistent handlers: re-solve when inputs change, on frame change; reset on load/undo.
+
+- Re-entrancy guarded (our attribute writes trigger another depsgraph update, which re-enters
+  here; the guard plus "inputs unchanged -> skip" in solver.solve means it never loops).
+- Vertex groups are re-read only when the deformed object's geometry was updated by someone
+  else than us (weight paint, edit mode exit, group assignment), since that read is O(n).
+- No bpy references are kept: objects are looked up by name each time.
+"""
+
+import bpy
+from bpy.app.handlers import persistent
+
+from . import solver
+
+_busy = [False]
+_self_written = set()
+enabled = [True]   # tests and the benchmark may switch automatic solving off
+
+
+def note_self_write(obj_name):
+    _self_written.add(obj_name)
+
+
+def _deformed_objects(scene):
+    for obj in scene.objects:
+        if obj.type == "MESH":
+            dks = getattr(obj, "deformkit", None)
+            if dks is not None and len(dks.deformers):
+                yield obj
+
+
+def _run(scene, depsgraph):
+    if _busy[0] or not enabled[0]:
+        return
+    _busy[0] = True
+    try:
+        ours = set(_self_written)
+        _self_written.clear()
+        geometry = set()
+        if depsgraph is not None:
+            for u in depsgraph.updates:
+                if u.is_updated_geometry:
+                    idd = u.id
+                    if isinstance(idd, bpy.types.Object):
+                        geometry.add(idd.name)
+                    elif isinstance(idd, bpy.types.Mesh):
+                        geometry.add(("mesh", idd.name))
+        for obj in _deformed_objects(scene):
+            if obj.mode == "EDIT":
+                continue
+            changed = (obj.name in geometry or ("mesh", obj.data.name) in geometry)
+            check = changed and obj.name not in ours
+            solver.evaluate_object(obj, depsgraph, check_groups=check)
+    except Exception as ex:  # a handler must never raise
+        print("DeformKit handler error: %s: %s" % (type(ex).__name__, ex))
+    finally:
+        _busy[0] = False
+
+
+@persistent
+def on_depsgraph_update(scene, depsgraph=None):
+    _run(scene, depsgraph)
+
+
+@persistent
+def on_frame_change(scene, depsgraph=None):
+    _run(scene, depsgraph)
+
+
+@persistent
+def on_load(*_args):
+    solver.clear_cache()
+    _self_written.clear()
+
+
+@persistent
+def on_undo(*_args):
+    solver.mark_all_dirty()
+    _self_written.clear()
+
+
+_HANDLERS = (
+    (bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),
+    (bpy.app.handlers.frame_change_post, on_frame_change),
+    (bpy.app.handlers.load_post, on_load),
+    (bpy.app.handlers.undo_post, on_undo),
+    (bpy.app.handlers.redo_post, on_undo),
+)
+
+
+def register():
+    for lst, fn in _HANDLERS:
+        # remove stale copies (re-registration during development reloads the module)
+        for old in [f for f in lst if getattr(f, "__name__", "") == fn.__name__
+                    and getattr(f, "__module__", "") == fn.__module__]:
+            lst.remove(old)
+        lst.append(fn)
+
+
+def unregister():
+    for lst, fn in _HANDLERS:
+        for old in [f for f in lst if getattr(f, "__name__", "") == fn.__name__
+                    and getattr(f, "__module__", "") == fn.__module__]:
+            lst.remove(old)
+    solver.clear_cache()

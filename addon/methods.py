@@ -1,0 +1,154 @@
+"""The data-driven method registry.
+
+Adding a deformation method to the add-on = one native class in `deformkit` + one `Method`
+entry here (its options become properties and a panel automatically; `draw` is optional).
+
+Each option maps to a keyword of the native constructor (`kw`), or is consumed by the add-on
+(`kw=None`, e.g. how weight paint is turned into per-vertex stiffness).
+"""
+
+from dataclasses import dataclass, field
+from typing import Any, Callable, Optional
+
+
+@dataclass
+class Option:
+    name: str                    # property name (and constructor keyword unless kw given)
+    type: str                    # 'ENUM' | 'INT' | 'FLOAT' | 'BOOL'
+    default: Any
+    label: str = ""
+    description: str = ""
+    items: tuple = ()            # ENUM: ((id, label, description), ...)
+    min: Optional[float] = None
+    max: Optional[float] = None
+    kw: Optional[str] = "same"   # constructor keyword; "same" = name; None = add-on only
+    bind_time: bool = True       # True: a change re-binds; False: used at solve time only
+
+    @property
+    def keyword(self):
+        return self.name if self.kw == "same" else self.kw
+
+
+@dataclass
+class Method:
+    id: str                      # enum identifier, stored in files: never rename
+    label: str                   # shown in the UI and used as the modifier name
+    native_class: str            # attribute of the `deformkit` module
+    description: str
+    options: list = field(default_factory=list)
+    # which vertex-group maps the method consumes: 'stiffness' (the material group's weights
+    # become the per-vertex `stiffness` keyword) and/or 'handle_weights' (soft handles).
+    maps: tuple = ()
+    # solve keywords that make a frame's result depend only on that frame (cold start)
+    cold_solve: dict = field(default_factory=dict)
+    # solve keywords for interactive updates
+    warm_solve: dict = field(default_factory=dict)
+    icon: str = "MOD_MESHDEFORM"
+    draw: Optional[Callable] = None  # draw(layout, options_pointer) replaces the generic one
+
+
+def _e(*ids):
+    return tuple((i, i.replace("_", " ").title(), "") for i in ids)
+
+
+METHODS = [
+    Method(
+        id="ARAP",
+        label="ARAP",
+        native_class="ARAP",
+        description="As-rigid-as-possible: keeps local shape, bends and twists naturally",
+        icon="MOD_SIMPLEDEFORM",
+        maps=("stiffness",),
+        cold_solve={"warm_start": False},
+        warm_solve={"warm_start": True},
+        options=[
+            Option("energy", "ENUM", "spokes", "Energy", "Spokes (classic) or spokes and rims",
+                   items=_e("spokes", "spokes_and_rims")),
+            Option("weights", "ENUM", "cotangent", "Weights", "Edge weights of the energy",
+                   items=_e("cotangent", "clamped_cotangent", "uniform")),
+            Option("max_iterations", "INT", 100, "Max Iterations",
+                   "Local/global iterations per solve", min=1, max=100000),
+            Option("tolerance", "FLOAT", 1e-6, "Tolerance", "Relative energy change to stop at",
+                   min=0.0, max=1.0),
+            Option("acceleration", "ENUM", "anderson", "Acceleration",
+                   "Anderson acceleration of the local/global iterations",
+                   items=_e("anderson", "none")),
+            Option("stiffness_scale", "FLOAT", 10.0, "Material Stiffness",
+                   "Stiffness where the material group's weight is 1 (weight 0 gives 1)",
+                   min=0.001, max=1e6, kw=None),
+        ],
+    ),
+    Method(
+        id="LAPLACIAN",
+        label="Laplacian Edit",
+        native_class="LaplacianEdit",
+        description="Laplacian surface editing: one linear solve per update",
+        icon="MOD_SMOOTH",
+        options=[
+            Option("weights", "ENUM", "cotangent", "Weights", "Laplacian weights",
+                   items=_e("cotangent", "uniform")),
+            Option("detail", "ENUM", "local_frame", "Detail",
+                   "How surface detail is carried along",
+                   items=_e("fixed", "membrane", "local_frame")),
+            Option("constraints", "ENUM", "hard", "Constraints", "Hard or least-squares handles",
+                   items=_e("hard", "soft")),
+            Option("constraint_weight", "FLOAT", 1.0, "Constraint Weight",
+                   "Weight of soft constraints", min=0.0, max=1e6),
+            Option("tikhonov", "FLOAT", 0.0, "Regularization", "Tikhonov regularization",
+                   min=0.0, max=1e6),
+        ],
+    ),
+    Method(
+        id="FALLOFF",
+        label="Falloff",
+        native_class="Falloff",
+        description="Attenuated handle displacement by distance from the handle",
+        icon="SMOOTHCURVE",
+        maps=("handle_weights",),
+        options=[
+            Option("distance", "ENUM", "hops", "Distance", "How distance to a handle is measured",
+                   items=_e("hops", "euclidean", "geodesic")),
+            Option("range", "FLOAT", 10.0, "Range", "Falloff range (hops or scene units)",
+                   min=0.0, max=1e9),
+            Option("k", "FLOAT", 0.0, "Shape", "Falloff shape exponent", min=-100.0, max=100.0),
+        ],
+    ),
+]
+
+BY_ID = {m.id: m for m in METHODS}
+
+
+def get(method_id):
+    return BY_ID[method_id]
+
+
+def enum_items():
+    return [(m.id, m.label, m.description, m.icon, i) for i, m in enumerate(METHODS)]
+
+
+def options_attr(method_id):
+    """Name of the PointerProperty on a deformer holding this method's options."""
+    return "options_" + method_id.lower()
+
+
+def constructor_kwargs(method, opts):
+    """Constructor keywords from an options PropertyGroup (only the ones mapped to the API)."""
+    kw = {}
+    for o in method.options:
+        if o.keyword is not None and o.bind_time:
+            kw[o.keyword] = getattr(opts, o.name)
+    return kw
+
+
+def solve_kwargs(method, opts, cold):
+    kw = dict(method.cold_solve if cold else method.warm_solve)
+    for o in method.options:
+        if o.keyword is not None and not o.bind_time:
+            kw[o.keyword] = getattr(opts, o.name)
+    return kw
+
+
+def signature(method, opts):
+    """Bind-time settings as a hashable tuple (a change re-binds)."""
+    return (method.id,) + tuple(
+        (o.name, getattr(opts, o.name)) for o in method.options if o.bind_time)

@@ -1,0 +1,50 @@
+"""Finds the native `deformkit` module.
+
+Order: a `deformkit` package inside the add-on folder (how packaged add-ons ship it), then
+`deformkit` on sys.path (development: PYTHONPATH=build/python). If the add-on folder itself is
+installed under the name `deformkit`, the absolute import would find the add-on, so a module
+without `Mesh` is rejected.
+"""
+
+import importlib
+import sys
+
+module = None
+error = ""
+
+
+def load():
+    global module, error
+    if module is not None:
+        return module
+    errors = []
+    pkg = __package__
+    candidates = [pkg + ".deformkit"] if pkg else []
+    candidates.append("deformkit")
+    for name in candidates:
+        try:
+            m = importlib.import_module(name)
+        except ImportError as e:
+            errors.append("%s: %s" % (name, e))
+            continue
+        if hasattr(m, "Mesh"):
+            module = m
+            error = ""
+            return m
+        errors.append("%s: found but has no Mesh (not the native module)" % name)
+    error = ("DeformKit native module not found (%s); install the packaged add-on zip or put "
+             "build/python on PYTHONPATH (python %d.%d)" % ("; ".join(errors), *sys.version_info[:2]))
+    return None
+
+
+def get():
+    """The module, or raises RuntimeError with a clear message."""
+    m = load()
+    if m is None:
+        raise RuntimeError(error)
+    return m
+
+
+def has_class(name):
+    m = load()
+    return m is not None and hasattr(m, name)

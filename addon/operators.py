@@ -1,0 +1,415 @@
+"""Operators (bpy.ops.deformkit.*). Each has a synchronous execute() that works under
+blender -b and from scripts; errors are reported with the native message, never raised."""
+
+import time
+
+import bmesh
+import bpy
+import numpy as np
+from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
+
+from . import bake, geonodes, methods, native, properties, solver
+
+
+def _get_object(op, context):
+    name = getattr(op, "object_name", "")
+    obj = bpy.data.objects.get(name) if name else context.object
+    if obj is None:
+        raise solver.DeformKitError("no active object" if not name else
+                                    "object '%s' not found" % name)
+    if obj.type != "MESH":
+        raise solver.DeformKitError("DeformKit deforms mesh objects; '%s' is a %s"
+                                    % (obj.name, obj.type.lower()))
+    return obj
+
+
+def _get_deformer(op, context, obj):
+    dks = obj.deformkit
+    if len(dks.deformers) == 0:
+        raise solver.DeformKitError("'%s' has no DeformKit deformer: add one first" % obj.name)
+    i = op.deformer_index if op.deformer_index >= 0 else dks.active_index
+    if not 0 <= i < len(dks.deformers):
+        raise solver.DeformKitError("no deformer at index %d" % i)
+    return dks.deformers[i]
+
+
+class _Base:
+    object_name: StringProperty(name="Object", description="Object (default: the active one)",
+                                options={"SKIP_SAVE"})
+    deformer_index: IntProperty(name="Deformer", default=-1, options={"SKIP_SAVE"},
+                                description="Deformer index (-1: the active one)")
+
+    def execute(self, context):
+        try:
+            return self.run(context) or {"FINISHED"}
+        except solver.DeformKitError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+
+
+class DEFORMKIT_OT_add_deformer(_Base, bpy.types.Operator):
+    """Add a DeformKit deformer (an owned Geometry Nodes modifier) to the object"""
+    bl_idname = "deformkit.add_deformer"
+    bl_label = "Add DeformKit Deformer"
+    bl_options = {"REGISTER", "UNDO"}
+    method: EnumProperty(name="Method", items=methods.enum_items())
+
+    def run(self, context):
+        obj = _get_object(self, context)
+        if len(obj.data.polygons) == 0:
+            raise solver.DeformKitError("mesh '%s' has no faces: DeformKit needs a surface"
+                                        % obj.data.name)
+        d = properties.new_deformer(obj, self.method)
+        geonodes.ensure_modifier(obj, d)
+        solver.set_status(d, "not bound: add handles, then Bind", False)
+        if not native.has_class(methods.get(self.method).native_class):
+            self.report({"WARNING"}, "the native module lacks deformkit.%s: %s"
+                        % (methods.get(self.method).native_class, native.error or "old build"))
+
+
+class DEFORMKIT_OT_remove_deformer(_Base, bpy.types.Operator):
+    """Remove the deformer, its modifier and its offset attribute"""
+    bl_idname = "deformkit.remove_deformer"
+    bl_label = "Remove DeformKit Deformer"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def run(self, context):
+        obj = _get_object(self, context)
+        d = _get_deformer(self, context, obj)
+        remove_deformer(obj, d)
+
+
+def remove_deformer(obj, d):
+    mod = geonodes.find_modifier(obj, d)
+    if mod is not None:
+        obj.modifiers.remove(mod)
+    geonodes.remove_attribute(obj.data, d.attribute_name)
+    solver.drop(obj.name, d.uid)
+    dks = obj.deformkit
+    i = list(dks.deformers).index(d)
+    dks.deformers.remove(i)
+    dks.active_index = min(max(0, dks.active_index), max(0, len(dks.deformers) - 1))
+
+
+class DEFORMKIT_OT_move_deformer(_Base, bpy.types.Operator):
+    """Move the active deformer (and its modifier) up or down"""
+    bl_idname = "deformkit.move_deformer"
+    bl_label = "Move DeformKit Deformer"
+    bl_options = {"REGISTER", "UNDO"}
+    direction: EnumProperty(items=(("UP", "Up", ""), ("DOWN", "Down", "")))
+
+    def run(self, context):
+        obj = _get_object(self, context)
+        d = _get_deformer(self, context, obj)
+        dks = obj.deformkit
+        i = list(dks.deformers).index(d)
+        j = i - 1 if self.direction == "UP" else i + 1
+        if not 0 <= j < len(dks.deformers):
+            return {"CANCELLED"}
+        other = dks.deformers[j]
+        m1, m2 = geonodes.find_modifier(obj, d), geonodes.find_modifier(obj, other)
+        dks.deformers.move(i, j)
+        dks.active_index = j
+        if m1 is not None and m2 is not None:
+            k = list(obj.modifiers).index(m2)
+            with context.temp_override(object=obj):
+                bpy.ops.object.modifier_move_to_index(modifier=m1.name, index=k)
+
+
+class DEFORMKIT_OT_add_handle(_Base, bpy.types.Operator):
+    """Add an empty handle entry (choose its vertex group and target)"""
+    bl_idname = "deformkit.add_handle"
+    bl_label = "Add Handle"
+    bl_options = {"REGISTER", "UNDO"}
+    vertex_group: StringProperty(name="Vertex Group")
+    target: StringProperty(name="Target Object")
+    subtarget: StringProperty(name="Bone")
+
+    def run(self, context):
+        obj = _get_object(self, context)
+        d = _get_deformer(self, context, obj)
+        h = d.handles.add()
+        h.name = self.vertex_group or "Handle %d" % len(d.handles)
+        h.vertex_group = self.vertex_group
+        if self.target:
+            t = bpy.data.objects.get(self.target)
+            if t is None:
+                raise solver.DeformKitError("target object '%s' not found" % self.target)
+            h.target = t
+        h.subtarget = self.subtarget
+        d.active_handle = len(d.handles) - 1
+        if d.bound and h.target is not None:
+            solver.set_bind_matrix(obj, h)
+
+
+class DEFORMKIT_OT_add_handle_from_selection(_Base, bpy.types.Operator):
+    """Make a vertex group from the selected vertices, an empty at their centre, and a handle
+    entry targeting it (like Hook to New Object)"""
+    bl_idname = "deformkit.add_handle_from_selection"
+    bl_label = "Add Handle from Selection"
+    bl_options = {"REGISTER", "UNDO"}
+    method: EnumProperty(name="Method (new deformer)", items=methods.enum_items(),
+                         description="Method of the deformer created if the object has none")
+
+    def run(self, context):
+        obj = _get_object(self, context)
+        if obj.mode != "EDIT":
+            raise solver.DeformKitError("select the handle's vertices in Edit Mode first")
+        bm = bmesh.from_edit_mesh(obj.data)
+        sel = [v.index for v in bm.verts if v.select]
+        if not sel:
+            raise solver.DeformKitError("no vertices selected")
+        co = np.array([tuple(v.co) for v in bm.verts if v.select])
+        centre_local = co.mean(axis=0)
+        bpy.ops.object.mode_set(mode="OBJECT")
+        try:
+            dks = obj.deformkit
+            if len(dks.deformers) == 0:
+                d = properties.new_deformer(obj, self.method)
+                geonodes.ensure_modifier(obj, d)
+            else:
+                d = _get_deformer(self, context, obj)
+            n = len(d.handles) + 1
+            base = "DK Handle"
+            name = "%s %d" % (base, n)
+            while obj.vertex_groups.get(name) is not None or bpy.data.objects.get(name):
+                n += 1
+                name = "%s %d" % (base, n)
+            vg = obj.vertex_groups.new(name=name)
+            vg.add(sel, 1.0, "REPLACE")
+            from mathutils import Vector
+            empty = bpy.data.objects.new(name, None)
+            empty.empty_display_type = "SPHERE"
+            ext = co.max(axis=0) - co.min(axis=0)
+            size = float(max(ext.max() * 0.6, obj.dimensions.length * 0.03, 0.01))
+            empty.empty_display_size = size / max(max(obj.scale), 1e-9)
+            colls = obj.users_collection or (context.scene.collection,)
+            colls[0].objects.link(empty)
+            empty.matrix_world = obj.matrix_world.copy()
+            empty.location = obj.matrix_world @ Vector(centre_local)
+            h = d.handles.add()
+            h.name = name
+            h.vertex_group = name
+            h.target = empty
+            d.active_handle = len(d.handles) - 1
+            if d.bound:
+                context.view_layer.update()
+                solver.set_bind_matrix(obj, h)
+        finally:
+            bpy.ops.object.mode_set(mode="EDIT")
+        self.report({"INFO"}, "handle '%s': %d vertices" % (name, len(sel)))
+
+
+class DEFORMKIT_OT_remove_handle(_Base, bpy.types.Operator):
+    """Remove the active handle (its vertex group and target are kept)"""
+    bl_idname = "deformkit.remove_handle"
+    bl_label = "Remove Handle"
+    bl_options = {"REGISTER", "UNDO"}
+    handle_index: IntProperty(default=-1, options={"SKIP_SAVE"})
+
+    def run(self, context):
+        obj = _get_object(self, context)
+        d = _get_deformer(self, context, obj)
+        i = self.handle_index if self.handle_index >= 0 else d.active_handle
+        if not 0 <= i < len(d.handles):
+            raise solver.DeformKitError("no handle at index %d" % i)
+        d.handles.remove(i)
+        d.active_handle = min(d.active_handle, max(0, len(d.handles) - 1))
+
+
+class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
+    """Bind: precompute the solver for the current mesh, groups and target placement"""
+    bl_idname = "deformkit.bind"
+    bl_label = "Bind"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def run(self, context):
+        obj = _get_object(self, context)
+        d = _get_deformer(self, context, obj)
+        t0 = time.perf_counter()
+        try:
+            e = solver.bind(obj, d, context.evaluated_depsgraph_get())
+        except solver.DeformKitError as ex:
+            solver.set_status(d, str(ex), True)
+            raise
+        ms = (time.perf_counter() - t0) * 1000
+        self.report({"INFO"}, "%s bound: %d vertices, %d handles (%.0f ms)"
+                    % (d.name, e.n_vertices, len(d.handles), ms))
+
+
+class DEFORMKIT_OT_unbind(_Base, bpy.types.Operator):
+    """Unbind: drop the solver state and show the rest shape"""
+    bl_idname = "deformkit.unbind"
+    bl_label = "Unbind"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def run(self, context):
+        obj = _get_object(self, context)
+        d = _get_deformer(self, context, obj)
+        solver.unbind(obj, d)
+
+
+class DEFORMKIT_OT_apply(_Base, bpy.types.Operator):
+    """Bake the deformer's current result into the mesh or into a new shape key"""
+    bl_idname = "deformkit.apply"
+    bl_label = "Apply DeformKit Deformer"
+    bl_options = {"REGISTER", "UNDO"}
+    mode: EnumProperty(name="Into", items=(
+        ("MESH", "Mesh", "Write the result into the mesh and remove the deformer"),
+        ("SHAPE_KEY", "New Shape Key", "Store the result as a new shape key")))
+    keep: BoolProperty(name="Keep Deformer", default=False,
+                       description="Keep the deformer after applying as a shape key")
+
+    def run(self, context):
+        obj = _get_object(self, context)
+        d = _get_deformer(self, context, obj)
+        if obj.mode == "EDIT":
+            raise solver.DeformKitError("leave Edit Mode to apply")
+        me = obj.data
+        if self.mode == "MESH" and me.shape_keys is not None:
+            raise solver.DeformKitError("mesh '%s' has shape keys: apply as a new shape key "
+                                        "instead" % me.name)
+        pos = solver.deformed_positions(obj, d, context.evaluated_depsgraph_get(), cold=False)
+        flat = np.ascontiguousarray(pos, dtype=np.float32).ravel()
+        mod = geonodes.find_modifier(obj, d)
+        first = mod is None or list(obj.modifiers).index(mod) == 0
+        name = d.name
+        if self.mode == "MESH":
+            me.vertices.foreach_set("co", flat)
+            me.update()
+            remove_deformer(obj, d)
+        else:
+            if me.shape_keys is None:
+                obj.shape_key_add(name="Basis", from_mix=False)
+            sk = obj.shape_key_add(name=name, from_mix=False)
+            sk.data.foreach_set("co", flat)
+            sk.value = 1.0
+            me.update()
+            if not self.keep:
+                remove_deformer(obj, d)
+        if not first:
+            self.report({"WARNING"}, "applied '%s', which was not first in the modifier stack"
+                        % name)
+        else:
+            self.report({"INFO"}, "applied '%s'" % name)
+
+
+class DEFORMKIT_OT_bake(_Base, bpy.types.Operator):
+    """Bake a frame range to a PC2 point cache (+ Mesh Cache modifier) or to shape keys, so
+    renders need neither the add-on nor its handlers. Esc cancels in the UI"""
+    bl_idname = "deformkit.bake"
+    bl_label = "Bake DeformKit Animation"
+    bl_options = {"REGISTER", "UNDO"}
+    mode: EnumProperty(name="Bake To", items=(
+        ("PC2", "Point Cache", "PC2 file next to the .blend, read by a Mesh Cache modifier"),
+        ("SHAPE_KEYS", "Shape Keys", "One shape key per frame (short ranges)")))
+    frame_start: IntProperty(name="Start", default=-1, description="-1: the scene's start")
+    frame_end: IntProperty(name="End", default=-1, description="-1: the scene's end")
+    filepath: StringProperty(name="File", subtype="FILE_PATH",
+                             description="PC2 path (default: //<object>_<deformer>.pc2)")
+
+    def _range(self, context):
+        s = self.frame_start if self.frame_start >= 0 else context.scene.frame_start
+        e = self.frame_end if self.frame_end >= 0 else context.scene.frame_end
+        return s, e
+
+    def run(self, context):
+        obj = _get_object(self, context)
+        d = _get_deformer(self, context, obj)
+        s, e = self._range(context)
+        wm = context.window_manager
+        wm.progress_begin(0, e - s + 1)
+        try:
+            def prog(i, n, f):
+                wm.progress_update(i)
+            if self.mode == "PC2":
+                path = bake.resolve_path(self.filepath, obj, d)
+                bake.bake_pc2(context, obj, d, s, e, path, prog)
+                bake.add_mesh_cache(obj, d, path, s)
+                self.report({"INFO"}, "baked frames %d-%d to %s" % (s, e, path))
+            else:
+                n = bake.bake_shape_keys(context, obj, d, s, e, prog)
+                self.report({"INFO"}, "baked %d frames to shape keys" % n)
+        finally:
+            wm.progress_end()
+
+    # ---- modal version for the UI: one frame per timer tick, Esc cancels
+    def invoke(self, context, event):
+        if bpy.app.background or self.mode != "PC2":
+            return self.execute(context)
+        try:
+            obj = _get_object(self, context)
+            d = _get_deformer(self, context, obj)
+            s, e = self._range(context)
+            self._path = bake.resolve_path(self.filepath, obj, d)
+            self._fb = bake.FrameBaker(context, obj, d, s, e)
+            from . import pc2
+            self._tmp = self._path + ".part"
+            self._w = pc2.Writer(self._tmp, len(obj.data.vertices), start=s)
+        except solver.DeformKitError as ex:
+            self.report({"ERROR"}, str(ex))
+            return {"CANCELLED"}
+        self._start = s
+        self._obj, self._uid = obj.name, d.uid
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(0.001, window=context.window)
+        wm.progress_begin(0, len(self._fb.frames))
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def _end(self, context, ok, msg):
+        import os
+        wm = context.window_manager
+        wm.event_timer_remove(self._timer)
+        wm.progress_end()
+        self._fb.finish()
+        self._w.close()
+        if context.area:
+            context.area.header_text_set(None)
+        context.workspace.status_text_set(None)
+        if ok:
+            os.replace(self._tmp, self._path)
+            obj = bpy.data.objects.get(self._obj)
+            d = next((x for x in obj.deformkit.deformers if x.uid == self._uid), None)
+            bake.add_mesh_cache(obj, d, self._path, self._start)
+            self.report({"INFO"}, msg)
+            return {"FINISHED"}
+        if os.path.exists(self._tmp):
+            os.remove(self._tmp)
+        self.report({"WARNING"} if msg == "bake cancelled" else {"ERROR"}, msg)
+        return {"CANCELLED"}
+
+    def modal(self, context, event):
+        if event.type == "ESC":
+            return self._end(context, False, "bake cancelled")
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        try:
+            f, pos = self._fb.step()
+            self._w.add(np.asarray(pos, dtype=np.float32))
+        except solver.DeformKitError as ex:
+            return self._end(context, False, str(ex))
+        n = len(self._fb.frames)
+        context.window_manager.progress_update(self._fb.i)
+        context.workspace.status_text_set("DeformKit bake: frame %d (%d/%d), Esc to cancel"
+                                          % (f, self._fb.i, n))
+        if self._fb.done:
+            return self._end(context, True, "baked %d frames to %s" % (n, self._path))
+        return {"RUNNING_MODAL"}
+
+
+CLASSES = [
+    DEFORMKIT_OT_add_deformer, DEFORMKIT_OT_remove_deformer, DEFORMKIT_OT_move_deformer,
+    DEFORMKIT_OT_add_handle, DEFORMKIT_OT_add_handle_from_selection, DEFORMKIT_OT_remove_handle,
+    DEFORMKIT_OT_bind, DEFORMKIT_OT_unbind, DEFORMKIT_OT_apply, DEFORMKIT_OT_bake,
+]
+
+
+def register():
+    for c in CLASSES:
+        bpy.utils.register_class(c)
+
+
+def unregister():
+    for c in reversed(CLASSES):
+        bpy.utils.unregister_class(c)

@@ -1,0 +1,148 @@
+"""Settings stored in the .blend: Object.deformkit -> deformers -> handles (+ method options).
+
+Only names and values are stored (vertex-group names, a target object pointer, matrices);
+solver state lives in solver.py and is rebuilt on demand.
+"""
+
+import uuid
+
+import bpy
+from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty,
+                       FloatVectorProperty, IntProperty, PointerProperty, StringProperty)
+
+from . import methods
+
+IDENTITY16 = (1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+
+
+def _touch(self, context):
+    """Any settings change: mark solver inputs dirty (the handler re-checks and re-solves)."""
+    from . import solver
+    solver.mark_settings_changed()
+
+
+class DeformKitHandle(bpy.types.PropertyGroup):
+    # name (from PropertyGroup) is the label shown in the list
+    vertex_group: StringProperty(name="Vertex Group", description="Vertices moved by this handle",
+                                 update=_touch)
+    target: PointerProperty(name="Target", type=bpy.types.Object, update=_touch,
+                            description="Object (or armature) whose motion since bind moves the "
+                                        "handle's vertices, like a Hook")
+    subtarget: StringProperty(name="Bone", description="Bone of an armature target", update=_touch)
+    use_weights: BoolProperty(name="Soft (use weights)", default=False, update=_touch,
+                              description="Use the vertex group's weights as soft-handle weights "
+                                          "(methods that support it)")
+    bind_matrix: FloatVectorProperty(name="Bind Matrix", size=16, default=IDENTITY16,
+                                     description="inverse(target world) @ object world at bind")
+    is_bound: BoolProperty(name="Bound", default=False)
+
+
+def _make_options_group(method):
+    ann = {}
+    for o in method.options:
+        common = dict(name=o.label or o.name, description=o.description, update=_touch)
+        if o.type == "ENUM":
+            ann[o.name] = EnumProperty(items=list(o.items), default=o.default, **common)
+        elif o.type == "INT":
+            kw = {}
+            if o.min is not None:
+                kw["min"] = int(o.min)
+            if o.max is not None:
+                kw["max"] = int(o.max)
+            ann[o.name] = IntProperty(default=o.default, **kw, **common)
+        elif o.type == "FLOAT":
+            kw = {}
+            if o.min is not None:
+                kw["min"] = o.min
+            if o.max is not None:
+                kw["max"] = o.max
+            prec = 7 if abs(o.default) and abs(o.default) < 1e-3 else 3
+            ann[o.name] = FloatProperty(default=o.default, precision=prec, **kw, **common)
+        elif o.type == "BOOL":
+            ann[o.name] = BoolProperty(default=o.default, **common)
+        else:
+            raise ValueError("unknown option type %r" % o.type)
+    return type("DeformKitOptions_" + method.id, (bpy.types.PropertyGroup,),
+                {"__annotations__": ann})
+
+
+OPTION_CLASSES = [_make_options_group(m) for m in methods.METHODS]
+
+
+def _new_uid():
+    return uuid.uuid4().hex[:10]
+
+
+_deformer_ann = {
+    "uid": StringProperty(name="UID", description="Stable id: attribute and cache key"),
+    "method": EnumProperty(name="Method", items=methods.enum_items(), update=_touch),
+    "roi_group": StringProperty(name="Region", update=_touch,
+                                description="Vertex group: only these vertices move (empty: all)"),
+    "fixed_group": StringProperty(name="Fixed", update=_touch,
+                                  description="Vertex group: these vertices stay at rest"),
+    "material_group": StringProperty(name="Material", update=_touch,
+                                     description="Weight-painted vertex group: per-vertex "
+                                                 "stiffness (methods that support it)"),
+    "handles": CollectionProperty(type=DeformKitHandle),
+    "active_handle": IntProperty(name="Active Handle", default=0),
+    "bound": BoolProperty(name="Bound", default=False),
+    "bind_n_vertices": IntProperty(name="Vertices at Bind", default=0),
+    "bind_n_faces": IntProperty(name="Faces at Bind", default=0),
+    "status": StringProperty(name="Status"),
+    "status_is_error": BoolProperty(default=False),
+    "last_solve_ms": FloatProperty(name="Last Solve (ms)", default=0.0),
+    "show_expanded": BoolProperty(default=True),
+}
+for _m, _cls in zip(methods.METHODS, OPTION_CLASSES):
+    _deformer_ann[methods.options_attr(_m.id)] = PointerProperty(type=_cls)
+
+DeformKitDeformer = type("DeformKitDeformer", (bpy.types.PropertyGroup,),
+                         {"__annotations__": _deformer_ann})
+
+
+def _deformer_attribute(self):
+    return "dk_%s_offset" % self.uid
+
+
+def _deformer_options(self):
+    return getattr(self, methods.options_attr(self.method))
+
+
+DeformKitDeformer.attribute_name = property(_deformer_attribute)
+DeformKitDeformer.options = property(_deformer_options)
+
+
+class DeformKitObject(bpy.types.PropertyGroup):
+    deformers: CollectionProperty(type=DeformKitDeformer)
+    active_index: IntProperty(name="Active Deformer", default=0)
+
+
+CLASSES = OPTION_CLASSES + [DeformKitHandle, DeformKitDeformer, DeformKitObject]
+
+
+def new_deformer(obj, method_id):
+    dks = obj.deformkit
+    d = dks.deformers.add()
+    d.uid = _new_uid()
+    d.method = method_id
+    label = methods.get(method_id).label
+    names = {x.name for x in dks.deformers}
+    name, i = "DeformKit " + label, 1
+    while name in names:
+        i += 1
+        name = "DeformKit %s.%03d" % (label, i)
+    d.name = name
+    dks.active_index = len(dks.deformers) - 1
+    return d
+
+
+def register():
+    for c in CLASSES:
+        bpy.utils.register_class(c)
+    bpy.types.Object.deformkit = PointerProperty(type=DeformKitObject)
+
+
+def unregister():
+    del bpy.types.Object.deformkit
+    for c in reversed(CLASSES):
+        bpy.utils.unregister_class(c)

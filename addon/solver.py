@@ -1,0 +1,418 @@
+"""Bridges Blender data and the native solvers; no numerics here.
+
+Blender -> arrays: vertex groups become index arrays (and weight arrays), handle targets become
+4x4 transforms in the deformed object's space, exactly like a Hook modifier:
+    T = inverse(object world) @ target world @ bind_matrix,
+    bind_matrix = inverse(target world at bind) @ object world at bind.
+Arrays -> Blender: offset = solved - rest is written into the deformer's point attribute, read by
+its Geometry Nodes modifier. The base mesh positions are never written here.
+
+Solver state (native objects) is cached by (object name, deformer uid) and holds no bpy
+references; it is rebuilt on demand (after file load, undo, settings or group changes).
+"""
+
+import time
+
+import bpy
+import numpy as np
+from mathutils import Matrix
+
+from . import geonodes, methods, native
+
+
+class DeformKitError(Exception):
+    """A setup problem or a native failure, with a message for the user."""
+
+
+NATIVE_ERRORS = (ValueError, IndexError, TypeError, RuntimeError, MemoryError, OverflowError)
+
+_cache = {}            # (object name, deformer uid) -> _Entry
+runtime = {}           # (object name, deformer uid) -> dict(ms=..., iterations=..., converged=...)
+_settings_serial = [0]
+
+
+class _Entry:
+    __slots__ = ("native", "dkmesh", "rest", "n_vertices", "n_faces", "settings", "groups",
+                 "last_inputs", "method_id", "verified")
+
+
+def mark_settings_changed():
+    _settings_serial[0] += 1
+
+
+def clear_cache():
+    _cache.clear()
+    runtime.clear()
+
+
+def mark_all_dirty():
+    """After undo/redo: the attribute may hold an older result; re-check everything."""
+    for e in _cache.values():
+        e.last_inputs = None
+        e.verified = False
+
+
+def drop(obj_name, uid):
+    _cache.pop((obj_name, uid), None)
+    runtime.pop((obj_name, uid), None)
+
+
+# ------------------------------------------------------------------ reading Blender data ----
+
+def check_object(obj):
+    if obj is None:
+        raise DeformKitError("no active object")
+    if obj.type != "MESH":
+        raise DeformKitError("DeformKit deforms mesh objects; '%s' is a %s"
+                             % (obj.name, obj.type.lower()))
+    me = obj.data
+    if len(me.vertices) == 0:
+        raise DeformKitError("mesh '%s' has no vertices" % me.name)
+    if len(me.polygons) == 0:
+        raise DeformKitError("mesh '%s' has no faces: DeformKit needs a surface" % me.name)
+    if obj.mode == "EDIT":
+        raise DeformKitError("'%s' is in Edit Mode: leave it to bind or solve" % obj.name)
+
+
+def rest_positions(me):
+    co = np.empty(len(me.vertices) * 3, dtype=np.float32)
+    me.vertices.foreach_get("co", co)
+    return co.reshape(-1, 3).astype(np.float64)
+
+
+def triangles(me):
+    me.calc_loop_triangles()
+    tri = np.empty(len(me.loop_triangles) * 3, dtype=np.int32)
+    me.loop_triangles.foreach_get("vertices", tri)
+    return tri.reshape(-1, 3)
+
+
+def read_groups(obj, names):
+    """{group name: (indices int32, weights float64)} for the existing groups in `names`;
+    members are vertices with weight > 0. One pass over the vertices."""
+    by_index = {}
+    for n in names:
+        vg = obj.vertex_groups.get(n)
+        if vg is not None:
+            by_index[vg.index] = n
+    idx = {n: [] for n in by_index.values()}
+    wts = {n: [] for n in by_index.values()}
+    if by_index:
+        for v in obj.data.vertices:
+            for g in v.groups:
+                n = by_index.get(g.group)
+                if n is not None and g.weight > 0.0:
+                    idx[n].append(v.index)
+                    wts[n].append(g.weight)
+    return {n: (np.array(idx[n], dtype=np.int32), np.array(wts[n], dtype=np.float64))
+            for n in idx}
+
+
+def target_world(h, depsgraph=None):
+    """World matrix of a handle's target (object, or bone of an armature); raises if missing."""
+    t = h.target
+    if t is None:
+        raise DeformKitError("handle '%s' has no target: pick an object or bone" % h.name)
+    if not t.users_scene:
+        raise DeformKitError("handle '%s': target '%s' was deleted" % (h.name, t.name))
+    te = t.evaluated_get(depsgraph) if depsgraph is not None else t
+    if h.subtarget:
+        if t.type != "ARMATURE":
+            raise DeformKitError("handle '%s': bone '%s' set but target '%s' is not an armature"
+                                 % (h.name, h.subtarget, t.name))
+        pb = te.pose.bones.get(h.subtarget)
+        if pb is None:
+            raise DeformKitError("handle '%s': bone '%s' not found in '%s'"
+                                 % (h.name, h.subtarget, t.name))
+        return te.matrix_world @ pb.matrix
+    return te.matrix_world.copy()
+
+
+def _flat(m):
+    return [m[r][c] for r in range(4) for c in range(4)]
+
+
+def _mat(v):
+    return Matrix((v[0:4], v[4:8], v[8:12], v[12:16]))
+
+
+def set_bind_matrix(obj, h, depsgraph=None):
+    tw = target_world(h, depsgraph)
+    try:
+        inv = tw.inverted()
+    except ValueError:
+        raise DeformKitError("handle '%s': target '%s' has a singular transform (zero scale?)"
+                             % (h.name, h.target.name))
+    ow = obj.evaluated_get(depsgraph).matrix_world if depsgraph is not None else obj.matrix_world
+    h.bind_matrix = _flat(inv @ ow)
+    h.is_bound = True
+
+
+def transforms(obj, d, depsgraph=None):
+    """n_handles x 4 x 4 transforms (object space) of the rest pose."""
+    ow = obj.evaluated_get(depsgraph).matrix_world if depsgraph is not None else obj.matrix_world
+    try:
+        owi = ow.inverted()
+    except ValueError:
+        raise DeformKitError("'%s' has a singular transform (zero scale?)" % obj.name)
+    out = np.empty((len(d.handles), 4, 4), dtype=np.float64)
+    for i, h in enumerate(d.handles):
+        tw = target_world(h, depsgraph)
+        if not h.is_bound:
+            set_bind_matrix(obj, h, depsgraph)
+        out[i] = np.array(owi @ tw @ _mat(h.bind_matrix))
+    return out
+
+
+def _settings_key(d):
+    m = methods.get(d.method)
+    return (methods.signature(m, d.options), d.roi_group, d.fixed_group, d.material_group,
+            tuple((h.vertex_group, h.use_weights) for h in d.handles))
+
+
+def collect(obj, d):
+    """Validated constraint arrays from the deformer's vertex groups (raises DeformKitError)."""
+    check_object(obj)
+    m = methods.get(d.method)
+    if len(d.handles) == 0:
+        raise DeformKitError("no handles: add one (Add Handle from Selection in Edit Mode)")
+    names = set()
+    for h in d.handles:
+        if not h.vertex_group:
+            raise DeformKitError("handle '%s' has no vertex group" % h.name)
+        if obj.vertex_groups.get(h.vertex_group) is None:
+            raise DeformKitError("handle '%s': vertex group '%s' does not exist"
+                                 % (h.name, h.vertex_group))
+        names.add(h.vertex_group)
+        target_world(h)  # raises for a missing/deleted target or bone
+    for label, g in (("region", d.roi_group), ("fixed", d.fixed_group),
+                     ("material", d.material_group)):
+        if g:
+            if obj.vertex_groups.get(g) is None:
+                raise DeformKitError("%s vertex group '%s' does not exist" % (label, g))
+            names.add(g)
+    groups = read_groups(obj, names)
+    handles, weights = [], []
+    seen = {}
+    for h in d.handles:
+        idx, w = groups[h.vertex_group]
+        if len(idx) == 0:
+            raise DeformKitError("handle '%s': vertex group '%s' is empty"
+                                 % (h.name, h.vertex_group))
+        if h.vertex_group in seen:
+            raise DeformKitError("handles '%s' and '%s' use the same vertex group '%s'"
+                                 % (seen[h.vertex_group], h.name, h.vertex_group))
+        seen[h.vertex_group] = h.name
+        handles.append(idx)
+        weights.append(w if h.use_weights else np.ones(len(idx)))
+    fixed = roi = stiffness = None
+    if d.fixed_group:
+        fixed = groups[d.fixed_group][0]
+        if len(fixed) == 0:
+            raise DeformKitError("fixed vertex group '%s' is empty" % d.fixed_group)
+        for h, idx in zip(d.handles, handles):
+            both = np.intersect1d(idx, fixed)
+            if len(both):
+                raise DeformKitError("handle '%s' overlaps the fixed group '%s' in %d vertices "
+                                     "(first: vertex %d): remove them from one group"
+                                     % (h.name, d.fixed_group, len(both), both[0]))
+    if d.roi_group:
+        roi = groups[d.roi_group][0]
+        if len(roi) == 0:
+            raise DeformKitError("region vertex group '%s' is empty" % d.roi_group)
+    kw = dict(handles=handles, fixed=fixed, roi=roi)
+    if "stiffness" in m.maps and d.material_group:
+        idx, w = groups[d.material_group]
+        s = np.ones(len(obj.data.vertices))
+        s[idx] = 1.0 + (d.options.stiffness_scale - 1.0) * w
+        kw["stiffness"] = s
+    if "handle_weights" in m.maps and any(h.use_weights for h in d.handles):
+        kw["handle_weights"] = weights
+    key = b"".join(np.ascontiguousarray(a).tobytes() for a in handles) + b"|" + b"|".join(
+        b"" if x is None else np.ascontiguousarray(x).tobytes()
+        for x in (fixed, roi, kw.get("stiffness")))
+    key += b"|" + b"".join(w.tobytes() for w in kw.get("handle_weights", []))
+    return kw, key
+
+
+# ------------------------------------------------------------------ binding and solving ----
+
+def _native_call(what, fn, *a, **kw):
+    try:
+        return fn(*a, **kw)
+    except DeformKitError:
+        raise
+    except NATIVE_ERRORS as e:
+        raise DeformKitError("%s: %s" % (what, e)) from e
+
+
+def _build(obj, d, kw, groups_key, entry=None):
+    m = methods.get(d.method)
+    dk = native.load()
+    if dk is None:
+        raise DeformKitError(native.error)
+    cls = getattr(dk, m.native_class, None)
+    if cls is None:
+        raise DeformKitError("this build of the native module has no deformkit.%s (%s)"
+                             % (m.native_class, m.label))
+    me = obj.data
+    settings = _settings_key(d)
+    # Only the constraint groups changed: the native rebind is the fast path.
+    if (entry is not None and entry.method_id == d.method and entry.settings == settings
+            and hasattr(entry.native, "rebind") and set(kw) <= {"handles", "fixed", "roi"}):
+        try:
+            entry.native.rebind(handles=kw["handles"], fixed=kw["fixed"], roi=kw["roi"])
+            entry.groups = groups_key
+            entry.verified = True
+            entry.last_inputs = None
+            return entry
+        except NATIVE_ERRORS:
+            pass  # fall back to a full bind, which reports the error properly
+    rest = rest_positions(me)
+    tri = triangles(me)
+    dkmesh = _native_call("mesh", dk.Mesh, rest, tri)
+    args = dict(kw)
+    args.update(methods.constructor_kwargs(m, d.options))
+    if args.get("fixed") is None:
+        args.pop("fixed", None)
+    if args.get("roi") is None:
+        args.pop("roi", None)
+    nat = _native_call(m.label + " bind", cls, dkmesh, **args)
+    e = _Entry()
+    e.native, e.dkmesh, e.rest = nat, dkmesh, rest
+    e.n_vertices, e.n_faces = len(me.vertices), len(me.polygons)
+    e.settings, e.groups, e.last_inputs, e.method_id = settings, groups_key, None, d.method
+    e.verified = True
+    _cache[(obj.name, d.uid)] = e
+    return e
+
+
+def bind(obj, d, depsgraph=None):
+    """Explicit bind: the targets' current placement becomes the rest pose of the handles."""
+    check_object(obj)
+    kw, key = collect(obj, d)
+    for h in d.handles:
+        set_bind_matrix(obj, h, depsgraph)
+    drop(obj.name, d.uid)
+    e = _build(obj, d, kw, key)
+    d.bind_n_vertices = e.n_vertices
+    d.bind_n_faces = e.n_faces
+    d.bound = True
+    geonodes.ensure_modifier(obj, d)
+    geonodes.ensure_attribute(obj.data, d.attribute_name)
+    solve(obj, d, depsgraph, force=True)
+    set_status(d, "bound: %d vertices, %d handles" % (e.n_vertices, len(d.handles)), False)
+    return e
+
+
+def unbind(obj, d):
+    drop(obj.name, d.uid)
+    d.bound = False
+    for h in d.handles:
+        h.is_bound = False
+    a = obj.data.attributes.get(d.attribute_name)
+    if a is not None:
+        a.data.foreach_set("vector", np.zeros(len(a.data) * 3, dtype=np.float32))
+        obj.data.update_tag()
+    set_status(d, "not bound", False)
+
+
+def set_status(d, msg, is_error):
+    if d.status != msg:
+        d.status = msg
+    if d.status_is_error != is_error:
+        d.status_is_error = is_error
+
+
+def _entry_for(obj, d, check_groups):
+    me = obj.data
+    n, f = len(me.vertices), len(me.polygons)
+    if n != d.bind_n_vertices:
+        raise DeformKitError("mesh changed from %d to %d vertices: bind again"
+                             % (d.bind_n_vertices, n))
+    if f != d.bind_n_faces:
+        raise DeformKitError("mesh changed from %d to %d faces: bind again" % (d.bind_n_faces, f))
+    e = _cache.get((obj.name, d.uid))
+    settings = _settings_key(d)
+    same = e is not None and e.method_id == d.method and e.settings == settings
+    if same and e.verified and not check_groups:
+        return e
+    kw, key = collect(obj, d)
+    if same and e.groups == key:
+        if np.array_equal(rest_positions(me), e.rest):
+            e.verified = True
+            return e
+        e = None  # rest shape edited (same topology): full rebuild
+    return _build(obj, d, kw, key, e)
+
+
+def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_groups=False):
+    """Solves `d` for the targets' current placement. Returns the n x 3 positions, or None when
+    nothing changed since the last solve (unless `force`). Raises DeformKitError."""
+    if not d.bound:
+        raise DeformKitError("not bound: press Bind")
+    check_object(obj)
+    e = _entry_for(obj, d, check_groups)
+    T = transforms(obj, d, depsgraph)
+    inputs = T.tobytes()
+    if not force and e.last_inputs == inputs:
+        return None
+    m = methods.get(d.method)
+    t0 = time.perf_counter()
+    res = _native_call(m.label + " solve", e.native.solve, transforms=T,
+                       **methods.solve_kwargs(m, d.options, cold))
+    ms = (time.perf_counter() - t0) * 1000.0
+    pos = np.asarray(res.positions, dtype=np.float64).reshape(-1, 3)
+    runtime[(obj.name, d.uid)] = dict(ms=ms, iterations=int(res.iterations),
+                                      converged=bool(res.converged), energy=float(res.energy))
+    if write:
+        write_offset(obj, d, pos - e.rest)
+        e.last_inputs = inputs
+    return pos
+
+
+def write_offset(obj, d, offset):
+    me = obj.data
+    a = geonodes.ensure_attribute(me, d.attribute_name)
+    a.data.foreach_set("vector", np.ascontiguousarray(offset, dtype=np.float32).ravel())
+    me.update_tag()
+    from . import handlers
+    handlers.note_self_write(obj.name)
+
+
+def zero_offset(obj, d):
+    me = obj.data
+    a = me.attributes.get(d.attribute_name)
+    if a is not None and len(a.data) == len(me.vertices):
+        a.data.foreach_set("vector", np.zeros(len(me.vertices) * 3, dtype=np.float32))
+        me.update_tag()
+        from . import handlers
+        handlers.note_self_write(obj.name)
+
+
+def deformed_positions(obj, d, depsgraph=None, cold=True):
+    """rest + factor * (solved - rest) for the current frame (what the modifier shows)."""
+    pos = solve(obj, d, depsgraph, cold=cold, write=False, force=True)
+    e = _cache[(obj.name, d.uid)]
+    f = geonodes.factor(obj, d)
+    return e.rest + f * (pos - e.rest)
+
+
+def evaluate_object(obj, depsgraph=None, check_groups=False):
+    """Handler entry: solves every bound deformer of `obj` whose inputs changed; errors go to
+    the deformer's status (and its offset is zeroed), never raised."""
+    for d in obj.deformkit.deformers:
+        if not d.bound:
+            continue
+        try:
+            if solve(obj, d, depsgraph, check_groups=check_groups) is not None:
+                if d.status_is_error or not d.status.startswith("bound"):
+                    set_status(d, "bound: %d vertices, %d handles"
+                               % (len(obj.data.vertices), len(d.handles)), False)
+        except DeformKitError as ex:
+            if d.status != str(ex):
+                zero_offset(obj, d)
+                drop(obj.name, d.uid)
+            set_status(d, str(ex), True)
+        except Exception as ex:  # never let a handler raise
+            set_status(d, "internal error: %s: %s" % (type(ex).__name__, ex), True)
