@@ -1,0 +1,28 @@
+"""DeformKit: mesh deformation solvers (ARAP, Laplacian editing, falloff) for Blender.
+
+The numerical work lives in the native extension ``deformkit._native`` (C11, CPython Limited
+API 3.11, so one binary serves every Python >= 3.11, including Blender's). This package
+re-exports everything public from it:
+
+* ``Mesh`` (validated triangle mesh with topology), ``Mesh.from_polygons``,
+  ``load_mesh_file`` / ``read_mesh`` for .obj/.off/.ply files;
+* operators: ``uniform_laplacian``, ``cotangent_laplacian``, ``cotangent_weights``,
+  ``mass_matrix``, ``geodesic_distance`` / ``HeatGeodesic``, ``laplacian_eigenpairs``,
+  ``knn`` / ``KDTree``, ``closest_rotation``;
+* deformation methods, one class each (``ARAP``, ``LaplacianEdit``, ``Falloff``) whose
+  ``solve`` returns a ``SolveResult``.
+
+Inputs are any buffer (numpy arrays, memoryviews, array.array) of float32/float64 or
+int32/int64, or nested sequences; outputs are numpy arrays when numpy is importable.
+See docs/python-api.md for the full contract.
+"""
+
+from . import _native
+
+__version__ = "0.1.0"
+
+__all__ = sorted(name for name in dir(_native) if not name.startswith("_"))
+
+globals().update({name: getattr(_native, name) for name in __all__})
+
+__all__.append("__version__")

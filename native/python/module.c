@@ -1,0 +1,170 @@
+/* DeformKit CPython module: deformkit._native.
+ *
+ * Multi-phase initialisation with per-module state (dk_py_state): no C globals, so the module
+ * may be loaded in several interpreters. The exec step creates the state (ARPACK lock,
+ * SolveResult type, cached numpy.frombuffer) and then calls each binding file's
+ * dk_py_init_<name> hook in a fixed order. Method hooks live in files written separately;
+ * weak defaults here keep the module building and importable before those files exist.
+ */
+#include "dk_py.h"
+
+/* ------------------------------------------------------------------ default hooks ------- */
+/* Each is overridden by the strong definition in its binding file when that file is linked. */
+
+__attribute__((weak)) int dk_py_init_mesh(PyObject *module)
+{
+    (void)module;
+    return 0;
+}
+
+__attribute__((weak)) int dk_py_init_operators(PyObject *module)
+{
+    (void)module;
+    return 0;
+}
+
+__attribute__((weak)) int dk_py_init_arap(PyObject *module)
+{
+    (void)module;
+    return 0;
+}
+
+__attribute__((weak)) int dk_py_init_laplacian_edit(PyObject *module)
+{
+    (void)module;
+    return 0;
+}
+
+__attribute__((weak)) int dk_py_init_falloff(PyObject *module)
+{
+    (void)module;
+    return 0;
+}
+
+/* ------------------------------------------------------------------ SolveResult --------- */
+
+static int init_solve_result(PyObject *module, dk_py_state *st)
+{
+    /* Built on the stack: CPython copies what it keeps (names are string literals). */
+    PyStructSequence_Field fields[] = {
+        {"positions", "n x 3 float64 array of deformed vertex positions"},
+        {"energy", "the method's energy at those positions (float)"},
+        {"iterations", "iterations used (1 for direct methods)"},
+        {"converged", "True when the method met its tolerance"},
+        {NULL, NULL},
+    };
+    PyStructSequence_Desc desc = {
+        "deformkit.SolveResult",
+        "SolveResult(positions, energy, iterations, converged)\n\n"
+        "What every deformation method's solve() returns; also usable as a 4-tuple.",
+        fields,
+        4,
+    };
+    PyTypeObject *type = PyStructSequence_NewType(&desc);
+    if (!type)
+        return -1;
+    st->solve_result_type = (PyObject *)type;
+    Py_INCREF((PyObject *)type);
+    if (PyModule_AddObject(module, "SolveResult", (PyObject *)type) < 0) {
+        Py_DECREF(type);
+        return -1;
+    }
+    return 0;
+}
+
+/* ------------------------------------------------------------------ module lifecycle ---- */
+
+static int module_exec(PyObject *module)
+{
+    dk_py_state *st = dk_py_get_state(module);
+    PyObject *numpy;
+
+    if (!st) {
+        PyErr_SetString(PyExc_SystemError, "deformkit: module state missing");
+        return -1;
+    }
+    st->arpack_lock = PyThread_allocate_lock();
+    if (!st->arpack_lock) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    numpy = PyImport_ImportModule("numpy");
+    if (numpy) {
+        st->numpy_frombuffer = PyObject_GetAttrString(numpy, "frombuffer");
+        Py_DECREF(numpy);
+        if (!st->numpy_frombuffer)
+            return -1;
+    } else {
+        if (!PyErr_ExceptionMatches(PyExc_ImportError))
+            return -1;
+        PyErr_Clear();
+        st->numpy_frombuffer = Py_NewRef(Py_None);
+    }
+    if (init_solve_result(module, st) < 0)
+        return -1;
+    if (dk_py_init_mesh(module) < 0 || dk_py_init_operators(module) < 0 ||
+        dk_py_init_arap(module) < 0 || dk_py_init_laplacian_edit(module) < 0 ||
+        dk_py_init_falloff(module) < 0)
+        return -1;
+    return 0;
+}
+
+static int module_traverse(PyObject *module, visitproc visit, void *arg)
+{
+    dk_py_state *st = dk_py_get_state(module);
+    if (st) {
+        Py_VISIT(st->mesh_type);
+        Py_VISIT(st->solve_result_type);
+        Py_VISIT(st->numpy_frombuffer);
+    }
+    return 0;
+}
+
+static int module_clear(PyObject *module)
+{
+    dk_py_state *st = dk_py_get_state(module);
+    if (st) {
+        Py_CLEAR(st->mesh_type);
+        Py_CLEAR(st->solve_result_type);
+        Py_CLEAR(st->numpy_frombuffer);
+    }
+    return 0;
+}
+
+static void module_free(void *module)
+{
+    dk_py_state *st = dk_py_get_state((PyObject *)module);
+    module_clear((PyObject *)module);
+    if (st && st->arpack_lock) {
+        PyThread_free_lock(st->arpack_lock);
+        st->arpack_lock = NULL;
+    }
+}
+
+static PyModuleDef_Slot module_slots[] = {
+    {Py_mod_exec, (void *)module_exec},
+    {0, NULL},
+};
+
+PyDoc_STRVAR(module_doc,
+             "deformkit._native: the native half of DeformKit.\n\n"
+             "Mesh construction and topology, discrete operators (Laplacians, mass matrices,\n"
+             "geodesics, eigenpairs, nearest neighbours, rotation fitting) and one class per\n"
+             "deformation method. Import the `deformkit` package rather than this module.");
+
+static struct PyModuleDef module_def = {
+    PyModuleDef_HEAD_INIT,
+    "deformkit._native",
+    module_doc,
+    (Py_ssize_t)sizeof(dk_py_state),
+    NULL,
+    module_slots,
+    module_traverse,
+    module_clear,
+    module_free,
+};
+
+PyMODINIT_FUNC PyInit__native(void)
+{
+    return PyModuleDef_Init(&module_def);
+}
