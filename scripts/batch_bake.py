@@ -1,0 +1,175 @@
+"""Headless DeformKit bake: solves every frame of a range and writes a PC2 point cache.
+
+  blender -b scene.blend --python-exit-code 1 --python scripts/batch_bake.py -- \
+      --object NAME [--deformer NAME] --frames A-B --out FILE.pc2 [--save]
+  blender -b --python-exit-code 1 --python scripts/batch_bake.py -- --join a.pc2 b.pc2 --out all.pc2
+  python3 scripts/batch_bake.py --join a.pc2 b.pc2 --out all.pc2      (join needs no Blender)
+
+Each frame is solved from a cold start, so a frame's result depends only on that frame's inputs:
+ranges baked on different machines and joined equal one bake of the whole range. If the
+deformer is not bound, it is bound at the scene's start frame (the same on every machine).
+--save adds a Mesh Cache modifier reading the cache (in place of the deformer's modifier) and
+saves the .blend. Progress lines go to stderr; any failure exits non-zero.
+"""
+
+import argparse
+import importlib.util
+import os
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+
+
+def log(msg):
+    sys.stderr.write("batch_bake: %s\n" % msg)
+    sys.stderr.flush()
+
+
+def fail(msg):
+    log("error: " + msg)
+    sys.exit(1)
+
+
+def parse(argv):
+    argv = argv[argv.index("--") + 1:] if "--" in argv else argv[1:]
+    p = argparse.ArgumentParser(prog="batch_bake.py", description=__doc__.split("\n")[0])
+    p.add_argument("--object", help="name of the deformed mesh object")
+    p.add_argument("--deformer", help="deformer name (default: the object's active deformer)")
+    p.add_argument("--frames", help="frame range A-B (inclusive); default: the scene's range")
+    p.add_argument("--out", required=True, help="output .pc2 file")
+    p.add_argument("--join", nargs="+", metavar="PC2", help="join these caches into --out")
+    p.add_argument("--save", action="store_true",
+                   help="add a Mesh Cache modifier reading --out and save the .blend")
+    return p.parse_args(argv)
+
+
+def load_pc2_module():
+    """addon/pc2.py without importing the add-on package (no bpy needed)."""
+    spec = importlib.util.spec_from_file_location("deformkit_pc2", os.path.join(ROOT, "addon", "pc2.py"))
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def do_join(args):
+    pc2 = load_pc2_module()
+    for p in args.join:
+        if not os.path.isfile(p):
+            fail("no such cache: %s" % p)
+    try:
+        info = pc2.join(args.join, args.out)
+    except (pc2.PC2Error, OSError) as e:
+        fail(str(e))
+    log("joined %d caches into %s: %d points, frames %g-%g"
+        % (len(args.join), args.out, info["points"], info["start"],
+           info["start"] + (info["samples"] - 1) * info["rate"]))
+
+
+def ensure_addon():
+    import bpy
+    if hasattr(bpy.types.Object, "deformkit") and hasattr(bpy.ops, "deformkit"):
+        for name in ("addon", "deformkit", "bl_ext.user_default.deformkit"):
+            m = sys.modules.get(name)
+            if m is not None and hasattr(m, "solver"):
+                return m
+    import addon_utils
+    for name in ("deformkit",):
+        try:
+            mod = addon_utils.enable(name, default_set=False)
+            if mod is not None and hasattr(mod, "solver"):
+                return mod
+        except Exception:
+            pass
+    if ROOT not in sys.path:
+        sys.path.insert(0, ROOT)
+    import addon
+    addon.register()
+    return addon
+
+
+def parse_frames(text, scene):
+    if not text:
+        return scene.frame_start, scene.frame_end
+    try:
+        a, b = text.split("-") if "-" in text[1:] else (text, text)
+        a, b = int(a), int(b)
+    except ValueError:
+        fail("--frames must look like A-B, got %r" % text)
+    if b < a:
+        fail("empty frame range %d-%d" % (a, b))
+    return a, b
+
+
+def do_bake(args):
+    import bpy
+    if not args.object:
+        fail("--object NAME is required (or --join)")
+    ext = ensure_addon()
+    solver, bake = ext.solver, ext.bake
+    if ext.native.load() is None:
+        fail(ext.native.error)
+    scene = bpy.context.scene
+    obj = bpy.data.objects.get(args.object)
+    if obj is None:
+        fail("no object named %r in %s" % (args.object, bpy.data.filepath or "the scene"))
+    if obj.type != "MESH":
+        fail("%r is a %s, not a mesh" % (obj.name, obj.type.lower()))
+    dks = obj.deformkit
+    if len(dks.deformers) == 0:
+        fail("%r has no DeformKit deformer" % obj.name)
+    if args.deformer:
+        d = dks.deformers.get(args.deformer)
+        if d is None:
+            fail("%r has no deformer %r (has: %s)" % (obj.name, args.deformer,
+                                                    ", ".join(x.name for x in dks.deformers)))
+    else:
+        d = dks.deformers[min(dks.active_index, len(dks.deformers) - 1)]
+    a, b = parse_frames(args.frames, scene)
+    try:
+        if not d.bound:
+            log("'%s' is not bound: binding at the scene start frame %d" % (d.name, scene.frame_start))
+            scene.frame_set(scene.frame_start)
+            solver.bind(obj, d, bpy.context.evaluated_depsgraph_get())
+        t_start = time.perf_counter()
+        last = [t_start]
+        n = b - a + 1
+
+        def progress(i, total, frame):
+            now = time.perf_counter()
+            log("frame %d (%d/%d, %d%%) %.1f ms" % (frame, i, total, 100 * i // total,
+                                                    (now - last[0]) * 1000))
+            last[0] = now
+
+        out = os.path.abspath(args.out)
+        bake.bake_pc2(bpy.context, obj, d, a, b, out, progress)
+        log("wrote %s: %d frames x %d vertices in %.2f s"
+            % (out, n, len(obj.data.vertices), time.perf_counter() - t_start))
+        if args.save:
+            if not bpy.data.filepath:
+                fail("--save needs a .blend file")
+            bake.add_mesh_cache(obj, d, out, a)
+            bpy.ops.wm.save_mainfile()
+            log("added a Mesh Cache modifier and saved %s" % bpy.data.filepath)
+    except solver.DeformKitError as e:
+        fail(str(e))
+
+
+def main():
+    args = parse(sys.argv)
+    try:
+        if args.join:
+            do_join(args)
+        else:
+            do_bake(args)
+    except SystemExit:
+        raise
+    except Exception as e:  # anything unexpected: non-zero exit with the message
+        import traceback
+        traceback.print_exc()
+        fail("%s: %s" % (type(e).__name__, e))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,247 @@
+"""Each method end to end on a small mesh: the add-on's evaluated result (GN modifier reading
+the offset attribute written by the handler) equals the direct Python API result; weight maps
+(ARAP stiffness from the material group, soft handle weights) reach the native call."""
+import math
+import sys
+import os
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import _setup as S  # noqa: E402
+import bpy  # noqa: E402
+import numpy as np  # noqa: E402
+from mathutils import Euler, Matrix  # noqa: E402
+
+R = S.Results("test_addon_methods")
+TOL = 2e-5  # float32 attribute storage
+
+
+def direct(obj, d, kw_extra, T_list):
+    """Same constraints through the Python API, solved in the same sequence (identity at bind,
+    then each transform): returns the last positions."""
+    m = S.methods.get(d.method)
+    cls = getattr(S.dk, m.native_class)
+    rest = S.solver.rest_positions(obj.data)
+    tri = S.solver.triangles(obj.data)
+    mesh = S.dk.Mesh(rest, tri)
+    kw = S.methods.constructor_kwargs(m, d.options)
+    kw.update(kw_extra)
+    meth = cls(mesh, **kw)
+    skw = S.methods.solve_kwargs(m, d.options, cold=False)
+    out = None
+    for T in [np.eye(4)[None]] + T_list:
+        out = np.asarray(meth.solve(transforms=np.asarray(T), **skw).positions)
+    return out
+
+
+def one_method(mid):
+    S.reset_scene()
+    obj, d, e, fixed, handle = S.grid_setup(mid)
+    bind_world = e.matrix_world.copy()
+    bpy.ops.deformkit.bind()
+    R.check("%s bind status" % mid, d.bound and not d.status_is_error, d.status)
+    rest = S.rest_positions(obj)
+    p0 = S.evaluated_positions(obj)
+    R.check("%s at bind = rest" % mid, np.abs(p0 - rest).max() < TOL, np.abs(p0 - rest).max())
+    Ts = []
+    for loc, rot in (((1.0, 0.0, 0.4), (0, 0, 0)), ((1.1, 0.2, 0.3), (0.3, 0.0, 0.5))):
+        e.location = loc
+        e.rotation_euler = Euler(rot)
+        bpy.context.view_layer.update()
+        T = np.array(e.matrix_world @ bind_world.inverted())[None]
+        Ts.append(T)
+        got = S.evaluated_positions(obj)
+        want = direct(obj, d, dict(handles=[handle], fixed=fixed), list(Ts))
+        err = np.abs(got - want).max()
+        moved = np.abs(want - rest).max()
+        R.check("%s %s: add-on = API (max diff %.2e, moved %.2f)" % (mid, loc, err, moved),
+                err < TOL and moved > 0.1, "diff %g moved %g" % (err, moved))
+    hv = got[handle]
+    want_h = (np.c_[rest[handle], np.ones(len(handle))] @ Ts[-1][0].T)[:, :3]
+    R.check("%s handle vertices follow the target like a Hook" % mid,
+            np.abs(hv - want_h).max() < 1e-4, np.abs(hv - want_h).max())
+    R.check("%s fixed vertices stay" % mid, np.abs(got[fixed] - rest[fixed]).max() < 1e-5)
+    R.check("%s base mesh untouched" % mid, np.abs(S.rest_positions(obj) - rest).max() == 0)
+    # Factor of the GN modifier scales the offset (keyframable modifier input)
+    mod = S.geonodes.find_modifier(obj, d)
+    mod[S.geonodes.factor_key()] = 0.5
+    obj.update_tag()
+    half = S.evaluated_positions(obj)
+    R.check("%s factor 0.5 halves the offset" % mid,
+            np.abs(half - (rest + 0.5 * (got - rest))).max() < TOL)
+    mod[S.geonodes.factor_key()] = 1.0
+    obj.update_tag()
+    # object transform: moving the deformed object together with the target changes nothing
+    e.parent = obj
+    e.matrix_parent_inverse = obj.matrix_world.inverted()
+    bpy.context.view_layer.update()
+    before = S.evaluated_positions(obj)
+    obj.location = (3.0, -1.0, 2.0)
+    bpy.context.view_layer.update()
+    after = S.evaluated_positions(obj)
+    R.check("%s moving object and (child) target together keeps the shape" % mid,
+            np.abs(after - before).max() < 1e-4, np.abs(after - before).max())
+    return obj, d
+
+
+def test_methods():
+    for m in S.methods.METHODS:
+        if not S.native.has_class(m.native_class):
+            print("SKIP %s: deformkit.%s not in this build" % (m.id, m.native_class))
+            continue
+        one_method(m.id)
+
+
+def test_registry_drives_ui():
+    # every method has an options group with one property per registry option
+    for m in S.methods.METHODS:
+        S.reset_scene()
+        obj = S.make_grid()
+        bpy.ops.deformkit.add_deformer(method=m.id)
+        d = obj.deformkit.deformers[-1]
+        opts = getattr(d, S.methods.options_attr(m.id))
+        R.check("%s options exist" % m.id, all(hasattr(opts, o.name) for o in m.options))
+        mod = S.geonodes.find_modifier(obj, d)
+        R.check("%s modifier named after the method" % m.id,
+                mod is not None and m.label in mod.name, [x.name for x in obj.modifiers])
+
+
+def test_stiffness_map():
+    if not S.native.has_class("ARAP"):
+        print("SKIP stiffness: no ARAP")
+        return
+    S.reset_scene()
+    obj, d, e, fixed, handle = S.grid_setup("ARAP")
+    nx, ny = 12, 6
+    mid = [j * nx + i for j in range(ny) for i in range(4, 8)]
+    w = [0.25 + 0.75 * (i % 2) for i in range(len(mid))]
+    S.group(obj, "stiff", mid, w)
+    d.material_group = "stiff"
+    d.options_arap.stiffness_scale = 20.0
+    bind_world = e.matrix_world.copy()
+    bpy.ops.deformkit.bind()
+    e.location = (1.0, 0.0, 0.5)
+    bpy.context.view_layer.update()
+    got = S.evaluated_positions(obj)
+    s = np.ones(len(obj.data.vertices))
+    s[mid] = 1.0 + 19.0 * np.array(w)
+    T = np.array(e.matrix_world @ bind_world.inverted())[None]
+    want = direct(obj, d, dict(handles=[handle], fixed=fixed, stiffness=s), [T])
+    R.check("ARAP stiffness from weight paint = API", np.abs(got - want).max() < TOL,
+            np.abs(got - want).max())
+
+
+def test_soft_handles():
+    m = S.methods.get("FALLOFF")
+    if not S.native.has_class(m.native_class):
+        print("SKIP soft handles: no Falloff")
+        return
+    S.reset_scene()
+    obj, d, e, fixed, handle = S.grid_setup("FALLOFF")
+    w = np.linspace(0.2, 1.0, len(handle))
+    S.group(obj, "tip", handle, w)
+    d.handles[0].use_weights = True
+    bind_world = e.matrix_world.copy()
+    try:
+        bpy.ops.deformkit.bind()
+    except RuntimeError as ex:
+        R.check("Falloff soft handles bind", False, ex)
+        return
+    e.location = (1.0, 0.0, 0.5)
+    bpy.context.view_layer.update()
+    got = S.evaluated_positions(obj)
+    T = np.array(e.matrix_world @ bind_world.inverted())[None]
+    want = direct(obj, d, dict(handles=[handle], fixed=fixed, handle_weights=[w]), [T])
+    R.check("Falloff soft handle weights = API", np.abs(got - want).max() < TOL,
+            np.abs(got - want).max())
+
+
+def test_bone_target():
+    if not S.native.has_class("ARAP"):
+        return
+    S.reset_scene()
+    obj, d, e, fixed, handle = S.grid_setup("ARAP")
+    arm = bpy.data.armatures.new("Rig")
+    ao = bpy.data.objects.new("Rig", arm)
+    bpy.context.scene.collection.objects.link(ao)
+    bpy.context.view_layer.objects.active = ao
+    bpy.ops.object.mode_set(mode="EDIT")
+    b = arm.edit_bones.new("tipbone")
+    b.head, b.tail = (1.0, 0, 0), (1.0, 0, 0.3)
+    bpy.ops.object.mode_set(mode="OBJECT")
+    bpy.context.view_layer.objects.active = obj
+    h = d.handles[0]
+    h.target = ao
+    h.subtarget = "tipbone"
+    bpy.ops.deformkit.bind()
+    pb = ao.pose.bones["tipbone"]
+    bind_world = ao.matrix_world @ pb.matrix
+    pb.location = (0.0, 0.3, 0.0)   # bone-local y = along the bone = world +z
+    bpy.context.view_layer.update()
+    got = S.evaluated_positions(obj)
+    rest = S.rest_positions(obj)
+    T = np.array(ao.matrix_world @ pb.matrix @ bind_world.inverted())
+    want_h = (np.c_[rest[handle], np.ones(len(handle))] @ T.T)[:, :3]
+    R.check("bone target moves the handle like a Hook", np.abs(got[handle] - want_h).max() < 1e-4,
+            np.abs(got[handle] - want_h).max())
+    R.check("bone moved up", abs((got[handle] - rest[handle])[:, 2].mean() - 0.3) < 1e-4)
+
+
+def test_auto_rebind_on_group_change():
+    if not S.native.has_class("ARAP"):
+        return
+    S.reset_scene()
+    obj, d, e, fixed, handle = S.grid_setup("ARAP")
+    bind_world = e.matrix_world.copy()
+    bpy.ops.deformkit.bind()
+    e.location = (1.0, 0.0, 0.4)
+    bpy.context.view_layer.update()
+    # shrink the fixed group (membership change): re-bound automatically
+    vg = obj.vertex_groups["fixed"]
+    vg.remove([int(i) for i in fixed[1::2]])
+    obj.data.update()
+    bpy.context.view_layer.update()
+    got = S.evaluated_positions(obj)
+    T = np.array(e.matrix_world @ bind_world.inverted())[None]
+    want = direct(obj, d, dict(handles=[handle], fixed=fixed[0::2]), [T])
+    R.check("group membership change re-binds automatically", np.abs(got - want).max() < TOL,
+            np.abs(got - want).max())
+    # switching the fixed group by name also re-binds
+    S.group(obj, "fixed2", fixed)
+    d.fixed_group = "fixed2"
+    bpy.context.view_layer.update()
+    got = S.evaluated_positions(obj)
+    want = direct(obj, d, dict(handles=[handle], fixed=fixed), [T])
+    R.check("changing the fixed group re-binds", np.abs(got - want).max() < TOL,
+            np.abs(got - want).max())
+
+
+def test_skip_when_unchanged():
+    if not S.native.has_class("ARAP"):
+        return
+    S.reset_scene()
+    obj, d, e, fixed, handle = S.grid_setup("ARAP")
+    bpy.ops.deformkit.bind()
+    e.location = (1.0, 0.0, 0.3)
+    bpy.context.view_layer.update()
+    calls = []
+    orig = S.solver._cache[(obj.name, d.uid)].native
+    class Spy:
+        def __getattr__(self, k):
+            return getattr(orig, k)
+        def solve(self, *a, **k):
+            calls.append(1)
+            return orig.solve(*a, **k)
+    S.solver._cache[(obj.name, d.uid)].native = Spy()
+    for _ in range(5):
+        bpy.context.view_layer.update()
+        S.evaluated_positions(obj)
+    R.check("no re-solve when nothing changed", len(calls) == 0, len(calls))
+    e.location.z += 0.1
+    bpy.context.view_layer.update()
+    S.evaluated_positions(obj)
+    R.check("exactly one solve per handle move", len(calls) == 1, len(calls))
+
+
+for t in (test_registry_drives_ui, test_methods, test_stiffness_map, test_soft_handles,
+          test_bone_target, test_auto_rebind_on_group_change, test_skip_when_unchanged):
+    R.run(t)
+R.finish()
