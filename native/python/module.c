@@ -8,6 +8,8 @@
  */
 #include "dk_py.h"
 
+#include <string.h>
+
 /* ------------------------------------------------------------------ default hooks ------- */
 /* Each is overridden by the strong definition in its binding file when that file is linked. */
 
@@ -71,6 +73,86 @@ static int init_solve_result(PyObject *module, dk_py_state *st)
     }
     return 0;
 }
+
+/* ------------------------------------------------------------------ test helpers -------- */
+/* Private (underscore) functions exposing the buffer readers so that tests can check every
+ * input path directly: they read `obj` and return what the native side saw, as a new array. */
+
+PyDoc_STRVAR(read_doubles_doc,
+             "_read_doubles(obj, rows=-1, cols=0) -> float64 array (rows x cols, or 1-D)\n\n"
+             "Test helper: reads obj with dk_py_read_doubles and returns a copy.");
+
+static PyObject *py_read_doubles(PyObject *module, PyObject *args, PyObject *kwargs)
+{
+    static char *kwlist[] = {"obj", "rows", "cols", NULL};
+    PyObject *obj, *result;
+    Py_ssize_t rows = -1, cols = 0;
+    dk_py_doubles a;
+    double *dst;
+
+    (void)module;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|nn:_read_doubles", kwlist, &obj, &rows,
+                                     &cols))
+        return NULL;
+    if (dk_py_read_doubles(obj, rows, cols, "obj", &a) < 0)
+        return NULL;
+    result = dk_py_new_doubles(cols == 0 ? 1 : 2, a.rows, a.cols, &dst);
+    if (result && a.rows * a.cols > 0)
+        memcpy(dst, a.data, sizeof(double) * (size_t)(a.rows * a.cols));
+    dk_py_doubles_release(&a);
+    return result;
+}
+
+PyDoc_STRVAR(read_indices_doc,
+             "_read_indices(obj, rows=-1, cols=0) -> int32 array (rows x cols, or 1-D)\n\n"
+             "Test helper: reads obj with dk_py_read_indices and returns a copy.");
+
+static PyObject *py_read_indices(PyObject *module, PyObject *args, PyObject *kwargs)
+{
+    static char *kwlist[] = {"obj", "rows", "cols", NULL};
+    PyObject *obj, *result;
+    Py_ssize_t rows = -1, cols = 0;
+    dk_py_indices a;
+    dk_index *dst;
+
+    (void)module;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|nn:_read_indices", kwlist, &obj, &rows,
+                                     &cols))
+        return NULL;
+    if (dk_py_read_indices(obj, rows, cols, "obj", &a) < 0)
+        return NULL;
+    result = dk_py_new_indices(cols == 0 ? 1 : 2, a.rows, a.cols, &dst);
+    if (result && a.rows * a.cols > 0)
+        memcpy(dst, a.data, sizeof(dk_index) * (size_t)(a.rows * a.cols));
+    dk_py_indices_release(&a);
+    return result;
+}
+
+PyDoc_STRVAR(raise_status_doc,
+             "_raise_status(status, message, context=None)\n\n"
+             "Test helper: raises what dk_py_raise raises for a dk_status code.");
+
+static PyObject *py_raise_status(PyObject *module, PyObject *args)
+{
+    int status;
+    const char *message, *context = NULL;
+    dk_error err;
+
+    (void)module;
+    if (!PyArg_ParseTuple(args, "is|z:_raise_status", &status, &message, &context))
+        return NULL;
+    dk_error_set(&err, (dk_status)status, "%s", message);
+    return dk_py_raise(&err, context);
+}
+
+static PyMethodDef module_methods[] = {
+    {"_read_doubles", (PyCFunction)(void (*)(void))py_read_doubles,
+     METH_VARARGS | METH_KEYWORDS, read_doubles_doc},
+    {"_read_indices", (PyCFunction)(void (*)(void))py_read_indices,
+     METH_VARARGS | METH_KEYWORDS, read_indices_doc},
+    {"_raise_status", py_raise_status, METH_VARARGS, raise_status_doc},
+    {NULL, NULL, 0, NULL},
+};
 
 /* ------------------------------------------------------------------ module lifecycle ---- */
 
@@ -157,7 +239,7 @@ static struct PyModuleDef module_def = {
     "deformkit._native",
     module_doc,
     (Py_ssize_t)sizeof(dk_py_state),
-    NULL,
+    module_methods,
     module_slots,
     module_traverse,
     module_clear,
