@@ -13,7 +13,10 @@ from . import bake, geonodes, methods, native, properties, solver
 
 def _get_object(op, context):
     name = getattr(op, "object_name", "")
-    obj = bpy.data.objects.get(name) if name else context.object
+    if name:
+        obj = bpy.data.objects.get(name)
+    else:
+        obj = getattr(context, "object", None) or context.view_layer.objects.active
     if obj is None:
         raise solver.DeformKitError("no active object" if not name else
                                     "object '%s' not found" % name)
