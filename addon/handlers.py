@@ -29,7 +29,7 @@ def _deformed_objects(scene):
                 yield obj
 
 
-def _run(scene, depsgraph):
+def _run(scene, depsgraph, cold=False):
     if _busy[0] or not enabled[0]:
         return
     _busy[0] = True
@@ -50,7 +50,7 @@ def _run(scene, depsgraph):
                 continue
             changed = (obj.name in geometry or ("mesh", obj.data.name) in geometry)
             check = changed and obj.name not in ours
-            solver.evaluate_object(obj, depsgraph, check_groups=check)
+            solver.evaluate_object(obj, depsgraph, check_groups=check, cold=cold)
     except Exception as ex:  # a handler must never raise
         print("DeformKit handler error: %s: %s" % (type(ex).__name__, ex))
     finally:
@@ -64,7 +64,8 @@ def on_depsgraph_update(scene, depsgraph=None):
 
 @persistent
 def on_frame_change(scene, depsgraph=None):
-    _run(scene, depsgraph)
+    # cold solves: a frame shows exactly what a bake or a render farm chunk computes for it
+    _run(scene, depsgraph, cold=True)
 
 
 @persistent

@@ -398,14 +398,14 @@ def deformed_positions(obj, d, depsgraph=None, cold=True):
     return e.rest + f * (pos - e.rest)
 
 
-def evaluate_object(obj, depsgraph=None, check_groups=False):
+def evaluate_object(obj, depsgraph=None, check_groups=False, cold=False):
     """Handler entry: solves every bound deformer of `obj` whose inputs changed; errors go to
     the deformer's status (and its offset is zeroed), never raised."""
     for d in obj.deformkit.deformers:
         if not d.bound:
             continue
         try:
-            if solve(obj, d, depsgraph, check_groups=check_groups) is not None:
+            if solve(obj, d, depsgraph, cold=cold, check_groups=check_groups) is not None:
                 if d.status_is_error or not d.status.startswith("bound"):
                     set_status(d, "bound: %d vertices, %d handles"
                                % (len(obj.data.vertices), len(d.handles)), False)

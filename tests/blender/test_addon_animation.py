@@ -1,0 +1,173 @@
+"""Animation: keyframed handle targets re-solve per frame (compared with direct solves); bake to
+PC2 (operator and headless batch), chunked bakes joined equal one bake, the Mesh Cache modifier
+plays the cache back; bake to shape keys; batch failures exit non-zero."""
+import os
+import subprocess
+import sys
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import _setup as S  # noqa: E402
+import bpy  # noqa: E402
+import numpy as np  # noqa: E402
+from mathutils import Euler  # noqa: E402
+from addon import pc2  # noqa: E402
+
+R = S.Results("test_addon_animation")
+TOL = 2e-5
+MID = next((m.id for m in S.methods.METHODS if S.native.has_class(m.native_class)), "ARAP")
+BLEND = os.path.join(S.OUTPUT, "anim.blend")
+BATCH = os.path.join(S.ROOT, "scripts", "batch_bake.py")
+FRAMES = (1, 4, 10, 13, 20)
+
+
+def build():
+    S.reset_scene()
+    obj, d, e, fixed, handle = S.grid_setup(MID)
+    sc = bpy.context.scene
+    sc.frame_start, sc.frame_end = 1, 20
+    sc.frame_set(1)
+    bpy.ops.deformkit.bind()
+    for f, loc, rot in ((1, (1, 0, 0), (0, 0, 0)), (10, (1.0, 0.2, 0.5), (0.4, 0, 0)),
+                        (20, (0.9, -0.1, 0.2), (0, 0.3, 0.6))):
+        e.location, e.rotation_euler = loc, Euler(rot)
+        e.keyframe_insert("location", frame=f)
+        e.keyframe_insert("rotation_euler", frame=f)
+    mod = S.geonodes.find_modifier(obj, d)
+    key = S.geonodes.factor_path(mod)
+    mod[S.geonodes.factor_key()] = 1.0
+    mod.keyframe_insert(key, frame=1)
+    mod[S.geonodes.factor_key()] = 0.5
+    mod.keyframe_insert(key, frame=20)
+    sc.frame_set(1)
+    return obj, d, e, fixed, handle
+
+
+def direct_cold(obj, d, e, fixed, handle, bind_world):
+    m = S.methods.get(d.method)
+    mesh = S.dk.Mesh(S.rest_positions(obj), S.solver.triangles(obj.data))
+    meth = getattr(S.dk, m.native_class)(mesh, handles=[handle], fixed=fixed,
+                                        **S.methods.constructor_kwargs(m, d.options))
+    T = np.array(e.matrix_world @ bind_world.inverted())[None]
+    return np.asarray(meth.solve(transforms=T, **S.methods.solve_kwargs(m, d.options, True)).positions)
+
+
+def test_playback():
+    obj, d, e, fixed, handle = build()
+    bind_world = S.empty  # placeholder to keep names short
+    sc = bpy.context.scene
+    sc.frame_set(1)
+    bind_world = e.matrix_world.copy()  # the target at frame 1 = at bind
+    rest = S.rest_positions(obj)
+    for f in FRAMES:
+        sc.frame_set(f)
+        got = S.evaluated_positions(obj)
+        fac = S.geonodes.factor(obj, d)
+        want = direct_cold(obj, d, e, fixed, handle, bind_world)
+        want = rest + fac * (want - rest)
+        R.check("frame %d (factor %.2f): playback = direct solve" % (f, fac),
+                np.abs(got - want).max() < TOL, np.abs(got - want).max())
+    bpy.ops.wm.save_as_mainfile(filepath=BLEND)
+
+
+def run_batch(*args, blend=BLEND):
+    cmd = [bpy.app.binary_path, "-b", "--factory-startup"]
+    if blend:
+        cmd.append(blend)
+    cmd += ["--python-exit-code", "1", "--python", BATCH, "--"] + list(args)
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    return r
+
+
+def test_chunked_bake_equals_single():
+    out = {k: os.path.join(S.OUTPUT, "anim_%s.pc2" % k) for k in ("all", "a", "b", "joined")}
+    for p in out.values():
+        if os.path.exists(p):
+            os.remove(p)
+    r = run_batch("--object", "Grid", "--frames", "1-20", "--out", out["all"])
+    R.check("single batch bake exits 0", r.returncode == 0, r.stderr[-1500:])
+    R.check("progress lines on stderr", "frame 20 (20/20, 100%)" in r.stderr, r.stderr[-500:])
+    r1 = run_batch("--object", "Grid", "--frames", "1-8", "--out", out["a"])
+    r2 = run_batch("--object", "Grid", "--frames", "9-20", "--out", out["b"])
+    R.check("chunk bakes exit 0", r1.returncode == 0 and r2.returncode == 0, r1.stderr[-800:] + r2.stderr[-800:])
+    r3 = run_batch("--join", out["b"], out["a"], "--out", out["joined"], blend=None)
+    R.check("join exits 0", r3.returncode == 0, r3.stderr[-800:])
+    h1, f1 = pc2.read(out["all"])
+    h2, f2 = pc2.read(out["joined"])
+    R.check("joined header = single header", h1 == h2, (h1, h2))
+    diff = max(float(np.abs(np.array(a) - np.array(b)).max()) for a, b in zip(f1, f2))
+    R.check("chunked bake equals single bake (max diff %g)" % diff, len(f1) == len(f2) == 20 and diff == 0.0)
+    # the cache holds what playback shows
+    bpy.ops.wm.open_mainfile(filepath=BLEND)
+    obj = bpy.data.objects["Grid"]
+    for f in (4, 13, 20):
+        bpy.context.scene.frame_set(f)
+        got = S.evaluated_positions(obj)
+        cache = np.array(f1[f - 1]).reshape(-1, 3)
+        R.check("cache frame %d = playback" % f, np.abs(got - cache).max() < TOL, np.abs(got - cache).max())
+    # a gap is refused
+    r4 = run_batch("--join", out["all"], out["b"], "--out", out["joined"], blend=None)
+    R.check("join refuses overlapping chunks", r4.returncode != 0 and "overlap" in r4.stderr, r4.stderr[-300:])
+    # plain python3 can join too (no Blender needed)
+    if os.path.exists("/usr/bin/python3"):
+        r5 = subprocess.run(["/usr/bin/python3", BATCH, "--join", out["a"], out["b"], "--out", out["joined"]],
+                            capture_output=True, text=True)
+        R.check("join under plain python3", r5.returncode == 0, r5.stderr[-300:])
+
+
+def test_batch_failures():
+    r = run_batch("--object", "Nope", "--frames", "1-3", "--out", os.path.join(S.OUTPUT, "x.pc2"))
+    R.check("unknown object: non-zero exit + message", r.returncode != 0 and "no object named" in r.stderr, r.stderr[-300:])
+    r = run_batch("--object", "Tip", "--frames", "1-3", "--out", os.path.join(S.OUTPUT, "x.pc2"))
+    R.check("non-mesh object: non-zero exit", r.returncode != 0 and "not a mesh" in r.stderr, r.stderr[-300:])
+    r = run_batch("--object", "Grid", "--frames", "5-1", "--out", os.path.join(S.OUTPUT, "x.pc2"))
+    R.check("empty range: non-zero exit", r.returncode != 0, r.stderr[-300:])
+
+
+def test_mesh_cache_modifier():
+    bpy.ops.wm.open_mainfile(filepath=BLEND)
+    obj = bpy.data.objects["Grid"]
+    bpy.context.view_layer.objects.active = obj
+    sc = bpy.context.scene
+    want = {}
+    for f in (3, 12, 20):
+        sc.frame_set(f)
+        want[f] = S.evaluated_positions(obj)
+    path = os.path.join(S.OUTPUT, "anim_op.pc2")
+    bpy.ops.deformkit.bake(mode="PC2", frame_start=2, frame_end=20, filepath=path)
+    mc = [m for m in obj.modifiers if m.type == "MESH_CACHE"]
+    R.check("operator bake adds a Mesh Cache modifier", len(mc) == 1)
+    gn = S.geonodes.find_modifier(obj, obj.deformkit.deformers[0])
+    R.check("GN modifier hidden after bake", not gn.show_viewport and not gn.show_render)
+    S.handlers.enabled[0] = False  # playback from the cache alone
+    for f in (3, 12, 20):
+        sc.frame_set(f)
+        got = S.evaluated_positions(obj)
+        R.check("Mesh Cache plays frame %d" % f, np.abs(got - want[f]).max() < TOL, np.abs(got - want[f]).max())
+    S.handlers.enabled[0] = True
+    h = pc2.read_header(path)
+    R.check("operator cache header", h["samples"] == 19 and h["start"] == 2.0, h)
+
+
+def test_shape_key_bake():
+    bpy.ops.wm.open_mainfile(filepath=BLEND)
+    obj = bpy.data.objects["Grid"]
+    bpy.context.view_layer.objects.active = obj
+    sc = bpy.context.scene
+    want = {}
+    for f in (5, 6):
+        sc.frame_set(f)
+        want[f] = S.evaluated_positions(obj)
+    bpy.ops.deformkit.bake(mode="SHAPE_KEYS", frame_start=4, frame_end=7)
+    kb = obj.data.shape_keys.key_blocks
+    R.check("4 frame shape keys + basis", len(kb) == 5, [k.name for k in kb])
+    S.handlers.enabled[0] = False
+    for f in (5, 6):
+        sc.frame_set(f)
+        got = S.evaluated_positions(obj)
+        R.check("shape keys play frame %d" % f, np.abs(got - want[f]).max() < 1e-4, np.abs(got - want[f]).max())
+    S.handlers.enabled[0] = True
+
+
+for t in (test_playback, test_chunked_bake_equals_single, test_batch_failures, test_mesh_cache_modifier,
+          test_shape_key_bake):
+    R.run(t)
+R.finish()
