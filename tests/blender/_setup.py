@@ -131,3 +131,34 @@ def grid_setup(method="ARAP", nx=12, ny=6, handle_at=None):
     d.fixed_group = "fixed"
     bpy.ops.deformkit.add_handle(vertex_group="tip", target=e.name)
     return obj, d, e, np.array(fixed), np.array(handle)
+
+
+def run_in_ui(fn, results, delay=1.0):
+    """For tests that need a window (undo, screenshots): run under
+    `xvfb-run -a blender --factory-startup --python FILE`. Calls fn() from a timer with a
+    window/area context, then quits with the results' exit code."""
+    def _tick():
+        code = 1
+        try:
+            wm = bpy.context.window_manager
+            win = wm.windows[0]
+            area = max(win.screen.areas, key=lambda a: a.width * a.height)
+            with bpy.context.temp_override(window=win, area=area, screen=win.screen):
+                fn()
+        except Exception:
+            results.failed += 1
+            traceback.print_exc()
+        finally:
+            print("%s: %d passed, %d failed" % (results.name, results.passed, results.failed))
+            code = 1 if (results.failed or results.passed == 0) else 0
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(code)
+    bpy.app.timers.register(_tick, first_interval=delay)
+
+
+def ui_context():
+    """(window, largest area) for temp_override inside run_in_ui callbacks after a file load."""
+    win = bpy.context.window_manager.windows[0]
+    area = max(win.screen.areas, key=lambda a: a.width * a.height)
+    return dict(window=win, area=area, screen=win.screen)

@@ -1,0 +1,122 @@
+"""Screenshot of the Modifiers tab with a DeformKit deformer, drawn with no Python errors.
+
+  python3 tests/blender/screenshot_ui.py [BUILD_PYTHON_DIR]
+runs `xvfb-run -a blender --factory-startup --python <this file>`, which saves
+tests/blender/output/modifiers_tab.png (the whole window; the biggest area shows the
+Modifiers tab), and fails if Blender
+printed any Python error (a panel that fails to draw prints a traceback, not an exception).
+"""
+import os
+import subprocess
+import sys
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+OUT = os.path.join(HERE, "output")
+PNG = os.path.join(OUT, "modifiers_tab.png")
+
+try:
+    import bpy  # noqa: F401
+    IN_BLENDER = True
+except ImportError:
+    IN_BLENDER = False
+
+
+def launch():
+    env = dict(os.environ)
+    if len(sys.argv) > 1:
+        env["PYTHONPATH"] = sys.argv[1]
+    os.makedirs(OUT, exist_ok=True)
+    for p in (PNG,):
+        if os.path.exists(p):
+            os.remove(p)
+    cmd = ["xvfb-run", "-a", "-s", "-screen 0 1600x1000x24", "blender", "--factory-startup",
+           "--python", os.path.abspath(__file__)]
+    r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
+    log = r.stdout + r.stderr
+    with open(os.path.join(OUT, "screenshot_ui.log"), "w") as f:
+        f.write(log)
+    bad = [ln for ln in log.splitlines()
+           if "Traceback" in ln or "Error: Python" in ln or "Error" in ln and "rna_uiItem" in ln
+           or ln.startswith(("AttributeError", "TypeError", "KeyError", "NameError", "ValueError",
+                             "RuntimeError"))]
+    ok = r.returncode == 0 and os.path.exists(PNG) and not bad
+    print(log[-3000:])
+    for ln in bad:
+        print("PYTHON ERROR IN CONSOLE:", ln)
+    print("screenshot_ui: %d passed, %d failed (%s)" % (int(ok), int(not ok), PNG))
+    sys.exit(0 if ok else 1)
+
+
+def in_blender():
+    sys.path.insert(0, HERE)
+    import _setup as S
+    import bpy
+    R = S.Results("screenshot_ui")
+    MID = next((m.id for m in S.methods.METHODS if S.native.has_class(m.native_class)), "ARAP")
+
+    def setup():
+        S.reset_scene()
+        with bpy.context.temp_override(**S.ui_context()):
+            obj, d, e, fixed, handle = S.grid_setup(MID)
+            S.group(obj, "tip2", [5, 6, 17, 18])
+            e2 = S.empty("Tip 2", (0.0, -0.4, 0.0))
+            bpy.ops.deformkit.add_handle(vertex_group="tip2", target=e2.name)
+            d.handles[0].name = "Tip"
+            d.handles[1].name = "Middle"
+            obj.vertex_groups.new(name="stiff")
+            d.material_group = "stiff"
+            bpy.ops.deformkit.bind()
+            e.location.z += 0.4
+            bpy.context.view_layer.update()
+            # a second deformer in the list, showing an error status
+            bpy.ops.deformkit.add_deformer(method=S.methods.METHODS[-1].id)
+            d2 = obj.deformkit.deformers[1]
+            try:
+                bpy.ops.deformkit.bind()
+            except RuntimeError:
+                pass
+            obj.deformkit.active_index = 0
+            S.geonodes.find_modifier(obj, d).show_expanded = False
+            S.geonodes.find_modifier(obj, d2).show_expanded = False
+            win = bpy.context.window_manager.windows[0]
+            # turn the biggest area into a Properties editor on the Modifiers tab
+            area = max(win.screen.areas, key=lambda a: a.width * a.height)
+            area.type = "PROPERTIES"
+            R.check("deformer bound", d.bound and not d.status_is_error, d.status)
+
+    def shoot():
+        try:
+            win = bpy.context.window_manager.windows[0]
+            area = max(win.screen.areas, key=lambda a: a.width * a.height)
+            area.spaces.active.context = "MODIFIER"
+            with bpy.context.temp_override(window=win, area=area, screen=win.screen):
+                bpy.ops.wm.redraw_timer(type="DRAW_WIN_SWAP", iterations=2)
+            # (screen.screenshot_area gives a 1x1 image under Xvfb; the window shot works)
+            with bpy.context.temp_override(window=win, screen=win.screen):
+                bpy.ops.screen.screenshot(filepath=PNG)
+            R.check("screenshot saved", os.path.exists(PNG))
+        except Exception:
+            import traceback
+            traceback.print_exc()
+            R.failed += 1
+        print("%s: %d passed, %d failed" % (R.name, R.passed, R.failed))
+        sys.stdout.flush()
+        os._exit(1 if R.failed or not R.passed else 0)
+
+    def first():
+        try:
+            setup()
+        except Exception:
+            import traceback
+            traceback.print_exc()
+            R.failed += 1
+        bpy.app.timers.register(shoot, first_interval=1.5)
+        return None
+
+    bpy.app.timers.register(first, first_interval=1.0)
+
+
+if IN_BLENDER:
+    in_blender()
+else:
+    launch()
