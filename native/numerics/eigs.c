@@ -1,0 +1,855 @@
+/* DeformKit: smallest eigenpairs of L x = lambda M x with ARPACK (see dk_eigs.h).
+ *
+ * One band: ARPACK dsaupd in shift-invert mode 3 with bmat = 'G' (B = M), which = "LM":
+ * OP = (L - sigma M)^-1 M, whose eigenvalues nu = 1 / (lambda - sigma) are largest in
+ * magnitude for the lambda nearest sigma. The linear solves use dk_cholesky.
+ *
+ * First shift. L is PSD with eigenvalue 0 (constants), so sigma must be negative for
+ * L - sigma M to be positive definite. The generalized spectrum lies in [0, lmax] with
+ * lmax <= 2 max_i L_ii / m_i (Gershgorin) and mean eigenvalue trace(M^-1 L) / n, of the order
+ * of 1/h^2 (h the edge length); the first non-zero eigenvalue is of the order of
+ * 1/diameter^2, i.e. about 1/n of the mean on a mesh of n vertices. sigma = -1e-6 * mean
+ * is then far below lambda_1 for meshes up to ~1e5-1e6 vertices (so the wanted nu are well
+ * separated and the constant mode converges immediately), while the condition number of
+ * L - sigma M, about lmax / |sigma| ~ 1e6, costs at most ~6 digits in directions of the
+ * near-null space, which the Rayleigh quotients computed afterwards do not inherit.
+ *
+ * Many eigenpairs (Vallet and Levy 2008): when k > band_size, later bands use a shift
+ * sigma_b placed beyond the last accepted eigenvalue lambda_top, so that the window of the
+ * nev eigenvalues nearest sigma_b reaches back below lambda_top (overlap). L - sigma_b M is
+ * then indefinite: it is factored as LDL' (dk_cholesky_analyze_indefinite, symbolic analysis
+ * shared by all bands), whose negative pivots count the eigenvalues below sigma_b (Sylvester's
+ * law of inertia). Merging a band:
+ *  - results below lambda_top - zeta are known already and dropped (zeta: cluster tolerance);
+ *  - results within zeta of lambda_top (a cluster possibly cut by the previous band's edge)
+ *    are M-projected against the accepted vectors of that cluster; directions with an
+ *    M-norm^2 above 1/2 after projection are new (the rest duplicates), and a Rayleigh-Ritz
+ *    step on the union re-M-orthogonalises the cluster;
+ *  - results above lambda_top + zeta are new.
+ * Before accepting a band, the count of eigenvalues below sigma_b must equal the inertia of
+ * the factor: a skipped or duplicated eigenvalue fails the check and the band is retried with
+ * a larger Krylov space and another start vector. The window must also reach below lambda_top
+ * (else the shift is moved down and the band redone). At the end one more LDL' factorization
+ * at a shift in a spectral gap just above the k-th eigenvalue certifies that no eigenvalue
+ * below it was missed (single-band runs included), and the k vectors are M-orthonormalised
+ * (Cholesky QR) as a whole.
+ *
+ * ARPACK's Fortran SAVE variables make these calls non-reentrant (see the header); ARPACK's
+ * random start vector (another SAVEd state) is avoided by passing our own deterministic
+ * start vector, so results are reproducible.
+ */
+#include "dk_eigs.h"
+
+#include <arpack.h>
+#include <cblas.h>
+#include <lapacke.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "dk_cholesky.h"
+
+#define DEFAULT_TOLERANCE 1e-10
+#define DEFAULT_MAX_ITERATIONS 1000
+#define DEFAULT_BAND_SIZE 50
+#define MIN_BAND_SIZE 16
+
+void dk_eigs_options_default(dk_eigs_options *opt)
+{
+    if (!opt) return;
+    memset(opt, 0, sizeof *opt);
+    opt->tolerance = DEFAULT_TOLERANCE;
+    opt->max_iterations = DEFAULT_MAX_ITERATIONS;
+    opt->band_size = DEFAULT_BAND_SIZE;
+}
+
+/* ------------------------------------------------------------------ working context ---- */
+
+typedef struct eig_ctx {
+    const dk_sparse *l;
+    const double *mass;
+    dk_index n;
+    double tol;
+    int max_iterations;
+    dk_sparse shifted;      /* upper triangle of L - sigma M, diagonal always stored */
+    dk_index *diag_pos;     /* position of (j, j) in `shifted`                        */
+    double *l_diag;         /* L_jj                                                   */
+    dk_cholesky *spd;       /* LL' for sigma < 0                                      */
+    dk_cholesky *ldl;       /* LDL' for interior shifts                               */
+    uint64_t seed;
+    /* ARPACK workspace, sized for the largest ncv used so far */
+    double *resid, *v, *workd, *workl, *z, *d;
+    a_int *select;
+    int ws_ncv, ws_nev;
+} eig_ctx;
+
+static void ctx_free(eig_ctx *c)
+{
+    free(c->shifted.col_start);
+    free(c->shifted.row_index);
+    free(c->shifted.values);
+    free(c->diag_pos);
+    free(c->l_diag);
+    dk_cholesky_free(c->spd);
+    dk_cholesky_free(c->ldl);
+    free(c->resid); free(c->v); free(c->workd); free(c->workl); free(c->z); free(c->d);
+    free(c->select);
+}
+
+/* Builds the upper-triangular pattern of L with every diagonal entry present. */
+static dk_status ctx_build_shifted(eig_ctx *c, dk_error *err)
+{
+    const dk_sparse *l = c->l;
+    const dk_index n = c->n;
+    int64_t cnt = 0;
+    for (dk_index j = 0; j < n; j++) {
+        int has_diag = 0;
+        for (dk_index p = l->col_start[j]; p < l->col_start[j + 1]; p++) {
+            if (l->row_index[p] < j) cnt++;
+            else if (l->row_index[p] == j) has_diag = 1;
+        }
+        (void)has_diag;
+        cnt++; /* the diagonal */
+    }
+    if (cnt > INT32_MAX)
+        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: matrix too large (%lld entries)",
+                            (long long)cnt);
+    dk_sparse *s = &c->shifted;
+    s->n_rows = s->n_cols = n;
+    s->col_start = malloc(((size_t)n + 1) * sizeof(dk_index));
+    s->row_index = malloc((size_t)cnt * sizeof(dk_index));
+    s->values = malloc((size_t)cnt * sizeof(double));
+    c->diag_pos = malloc((size_t)n * sizeof(dk_index));
+    c->l_diag = malloc((size_t)n * sizeof(double));
+    if (!s->col_start || !s->row_index || !s->values || !c->diag_pos || !c->l_diag)
+        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: out of memory");
+    dk_index q = 0;
+    for (dk_index j = 0; j < n; j++) {
+        s->col_start[j] = q;
+        c->l_diag[j] = 0.0;
+        for (dk_index p = l->col_start[j]; p < l->col_start[j + 1]; p++) {
+            const dk_index i = l->row_index[p];
+            if (i < j) {
+                s->row_index[q] = i;
+                s->values[q++] = l->values[p];
+            } else if (i == j) {
+                c->l_diag[j] = l->values[p];
+            }
+        }
+        c->diag_pos[j] = q;
+        s->row_index[q] = j;
+        s->values[q++] = c->l_diag[j];
+    }
+    s->col_start[n] = q;
+    return DK_OK;
+}
+
+static void ctx_set_shift(eig_ctx *c, double sigma)
+{
+    for (dk_index j = 0; j < c->n; j++)
+        c->shifted.values[c->diag_pos[j]] = c->l_diag[j] - sigma * c->mass[j];
+}
+
+/* Factors L - sigma M: LL' (must be PD) or LDL' (`*neg` gets the inertia). */
+static dk_status ctx_factor(eig_ctx *c, double sigma, int indefinite, dk_index *neg,
+                            dk_error *err)
+{
+    ctx_set_shift(c, sigma);
+    dk_cholesky **obj = indefinite ? &c->ldl : &c->spd;
+    dk_status st;
+    if (!*obj) {
+        st = indefinite ? dk_cholesky_analyze_indefinite(&c->shifted, obj, err)
+                        : dk_cholesky_analyze(&c->shifted, obj, err);
+        if (st != DK_OK) return st;
+    }
+    st = dk_cholesky_factorize(*obj, &c->shifted, err);
+    if (st != DK_OK) {
+        if (st == DK_ERR_NOT_POSITIVE_DEFINITE && !indefinite)
+            return dk_error_prefix(err, "eigs: L - sigma M with sigma = %g < 0 (is L positive "
+                                   "semidefinite?)", sigma);
+        return dk_error_prefix(err, "eigs: factorizing L - sigma M at sigma = %g", sigma);
+    }
+    if (neg) {
+        *neg = 0;
+        st = dk_cholesky_negative_pivots(*obj, neg, err);
+    }
+    return st;
+}
+
+/* y = L x (both triangles of L stored). */
+static void l_matvec(const dk_sparse *l, const double *x, double *y)
+{
+    memset(y, 0, (size_t)l->n_rows * sizeof(double));
+    for (dk_index j = 0; j < l->n_cols; j++) {
+        const double xj = x[j];
+        for (dk_index p = l->col_start[j]; p < l->col_start[j + 1]; p++)
+            y[l->row_index[p]] += l->values[p] * xj;
+    }
+}
+
+static double m_dot(const double *mass, const double *x, const double *y, dk_index n)
+{
+    double s = 0.0;
+    for (dk_index i = 0; i < n; i++) s += mass[i] * x[i] * y[i];
+    return s;
+}
+
+static double next_random(uint64_t *s) /* xorshift64, uniform in [-1, 1) */
+{
+    *s ^= *s << 13;
+    *s ^= *s >> 7;
+    *s ^= *s << 17;
+    return (double)(*s >> 11) / 9007199254740992.0 * 2.0 - 1.0;
+}
+
+/* ---------------------------------------------------------------- one ARPACK run -------- */
+
+static dk_status ensure_workspace(eig_ctx *c, int nev, int ncv, dk_error *err)
+{
+    const size_t n = (size_t)c->n;
+    if (ncv > c->ws_ncv) {
+        free(c->v); free(c->workl); free(c->select);
+        c->v = malloc(n * (size_t)ncv * sizeof(double));
+        c->workl = malloc((size_t)ncv * ((size_t)ncv + 8) * sizeof(double));
+        c->select = calloc((size_t)ncv, sizeof(a_int));
+        c->ws_ncv = ncv;
+        if (!c->v || !c->workl || !c->select) {
+            c->ws_ncv = 0;
+            return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: out of memory (Krylov basis "
+                                "%zu x %d)", n, ncv);
+        }
+    }
+    if (nev > c->ws_nev) {
+        free(c->z); free(c->d);
+        c->z = malloc(n * (size_t)nev * sizeof(double));
+        c->d = malloc((size_t)nev * sizeof(double));
+        c->ws_nev = nev;
+        if (!c->z || !c->d) {
+            c->ws_nev = 0;
+            return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: out of memory");
+        }
+    }
+    if (!c->resid) {
+        c->resid = malloc(n * sizeof(double));
+        c->workd = malloc(3 * n * sizeof(double));
+        if (!c->resid || !c->workd)
+            return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: out of memory");
+    }
+    return DK_OK;
+}
+
+/* The `nev` eigenpairs nearest `sigma`, with the factorization of L - sigma M in `chol`.
+ * On return c->d[0..*nconv-1] holds the eigenvalues (Rayleigh quotients) ascending and
+ * c->z the matching M-orthonormal eigenvectors (column-major n x nconv). Fails with
+ * DK_ERR_NO_CONVERGENCE (the converged pairs still in c->d, c->z) or DK_ERR_NUMERIC. */
+static void deflate(const double *mass, const double *basis, int nb, dk_index n, double *y)
+{
+    for (int pass = 0; pass < 2; pass++)
+        for (int a = 0; a < nb; a++) {
+            const double *x = basis + (size_t)a * n;
+            const double t = m_dot(mass, x, y, n);
+            for (dk_index i = 0; i < n; i++) y[i] -= t * x[i];
+        }
+}
+
+static dk_status arpack_run(eig_ctx *c, dk_cholesky *chol, double sigma, int nev, int ncv,
+                            const double *defl, int ndefl, int *nconv, double *scratch,
+                            dk_error *err)
+{
+    *nconv = 0;
+    dk_status st = ensure_workspace(c, nev, ncv, err);
+    if (st != DK_OK) return st;
+    const a_int n = c->n;
+    for (a_int i = 0; i < n; i++) c->resid[i] = next_random(&c->seed);
+    /* Deflation: OP is replaced by P OP with P = I - X X^T M, the M-orthogonal projector off
+     * the already found eigenvectors X, so that copies of a multiple eigenvalue that the
+     * first run missed (Lanczos finds one vector per eigenspace, others only by rounding)
+     * become the dominant ones. */
+    if (ndefl > 0) deflate(c->mass, defl, ndefl, n, c->resid);
+    a_int iparam[11] = {0}, ipntr[14] = {0};
+    iparam[0] = 1;                 /* exact shifts */
+    iparam[2] = c->max_iterations; /* restarts */
+    iparam[6] = 3;                 /* shift-invert mode */
+    const a_int lworkl = (a_int)ncv * (ncv + 8);
+    a_int ido = 0, info = 1;       /* info = 1: resid holds our start vector */
+    const double *mass = c->mass;
+    for (;;) {
+        dsaupd_c(&ido, "G", n, "LM", nev, c->tol, c->resid, ncv, c->v, n, iparam, ipntr,
+                 c->workd, c->workl, lworkl, &info);
+        if (ido == -1 || ido == 1) {
+            double *x = c->workd + ipntr[0] - 1, *y = c->workd + ipntr[1] - 1;
+            if (ido == -1) {
+                for (a_int i = 0; i < n; i++) scratch[i] = mass[i] * x[i];
+            } else {
+                memcpy(scratch, c->workd + ipntr[2] - 1, (size_t)n * sizeof(double));
+            }
+            st = dk_cholesky_solve(chol, scratch, 1, y, err);
+            if (st != DK_OK) return dk_error_prefix(err, "eigs");
+            if (ndefl > 0) deflate(c->mass, defl, ndefl, n, y);
+        } else if (ido == 2) {
+            double *x = c->workd + ipntr[0] - 1, *y = c->workd + ipntr[1] - 1;
+            for (a_int i = 0; i < n; i++) y[i] = mass[i] * x[i];
+        } else {
+            break;
+        }
+    }
+    if (info < 0)
+        return dk_error_set(err, DK_ERR_NUMERIC, "eigs: ARPACK dsaupd failed with info %d "
+                            "(n %d, nev %d, ncv %d)", (int)info, (int)n, nev, ncv);
+    if (info == 3)
+        return dk_error_set(err, DK_ERR_NO_CONVERGENCE, "eigs: ARPACK could not apply shifts "
+                            "(nev %d, ncv %d)", nev, ncv);
+    const int max_it_hit = info == 1;
+    const int converged = (int)iparam[4];
+    if (converged > 0) {
+        a_int info2 = 0;
+        dseupd_c(1, "A", c->select, c->d, c->z, n, sigma, "G", n, "LM", nev, c->tol, c->resid,
+                 ncv, c->v, n, iparam, ipntr, c->workd, c->workl, lworkl, &info2);
+        if (info2 != 0)
+            return dk_error_set(err, DK_ERR_NUMERIC, "eigs: ARPACK dseupd failed with info %d",
+                                (int)info2);
+    }
+    const int got = converged < nev ? converged : nev;
+    /* Rayleigh quotients (accurate to the square of the vector error), then sort. */
+    for (int j = 0; j < got; j++) {
+        double *x = c->z + (size_t)j * n;
+        const double xm = m_dot(mass, x, x, n);
+        l_matvec(c->l, x, scratch);
+        double xl = 0.0;
+        for (a_int i = 0; i < n; i++) xl += x[i] * scratch[i];
+        const double inv = 1.0 / sqrt(xm);
+        for (a_int i = 0; i < n; i++) x[i] *= inv;
+        c->d[j] = xl / xm;
+    }
+    for (int j = 1; j < got; j++) { /* insertion sort with column swaps: nev is small */
+        for (int i = j; i > 0 && c->d[i] < c->d[i - 1]; i--) {
+            const double t = c->d[i]; c->d[i] = c->d[i - 1]; c->d[i - 1] = t;
+            double *a = c->z + (size_t)i * n, *b = c->z + (size_t)(i - 1) * n;
+            for (a_int r = 0; r < n; r++) { const double u = a[r]; a[r] = b[r]; b[r] = u; }
+        }
+    }
+    *nconv = got;
+    if (max_it_hit || got < nev)
+        return dk_error_set(err, DK_ERR_NO_CONVERGENCE, "eigs: ARPACK converged %d of %d "
+                            "eigenpairs near sigma = %g in %d restarts", got, nev, sigma,
+                            c->max_iterations);
+    return DK_OK;
+}
+
+/* ------------------------------------------------------------------ accepted store ------ */
+
+typedef struct store {
+    double *val;  /* ascending */
+    double *vec;  /* n x cap */
+    int m, cap;
+} store;
+
+static int count_below(const double *v, int m, double t)
+{
+    int c = 0;
+    for (int i = 0; i < m; i++) c += v[i] < t;
+    return c;
+}
+
+/* Merges band results (bd: nb pairs, ascending) above lambda_top - zeta into the
+ * store (see the file comment). With `commit` = 0 only counts: `*n_below` gets how many
+ * eigenvalues below `sigma` the merged store would hold. */
+static dk_status merge_band(eig_ctx *c, store *s, const store *bd, double zeta,
+                            double sigma, int commit, int *n_below, dk_error *err)
+{
+    const int nb = bd->m;
+    const dk_index n = c->n;
+    const double top = s->val[s->m - 1];
+    int p0 = s->m; /* first accepted in the top cluster */
+    while (p0 > 0 && s->val[p0 - 1] >= top - zeta) p0--;
+    const int p = s->m - p0;
+    int j0 = 0, j1 = 0; /* zone candidates [j0, j1) */
+    while (j0 < nb && bd->val[j0] < top - zeta) j0++;
+    j1 = j0;
+    while (j1 < nb && bd->val[j1] <= top + zeta) j1++;
+    const int q = j1 - j0;
+    dk_status st = DK_OK;
+    double *pm = NULL, *zz = NULL, *g = NULL, *gw = NULL, *sv = NULL, *ls = NULL, *h = NULL;
+    double *hw = NULL;
+    int r = 0;
+    if (q > 0) {
+        /* Z = Y - C (C^T M Y), G = Z^T M Z, new directions: eigenvalues of G above 1/2 */
+        pm = malloc((size_t)(p ? p : 1) * q * sizeof(double));
+        zz = malloc((size_t)n * q * sizeof(double));
+        g = malloc((size_t)q * q * sizeof(double));
+        gw = malloc((size_t)q * sizeof(double));
+        if (!pm || !zz || !g || !gw) { st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: out of memory"); goto done; }
+        memcpy(zz, bd->vec + (size_t)j0 * n, (size_t)n * q * sizeof(double));
+        for (int pass = 0; pass < 2; pass++) /* twice: classical Gram-Schmidt's loss of orthogonality */
+            for (int b = 0; b < q; b++) {
+                double *y = zz + (size_t)b * n;
+                for (int a = 0; a < p; a++) {
+                    const double *x = s->vec + (size_t)(p0 + a) * n;
+                    const double t = m_dot(c->mass, x, y, n);
+                    for (dk_index i = 0; i < n; i++) y[i] -= t * x[i];
+                }
+            }
+        for (int a = 0; a < q; a++)
+            for (int b = 0; b <= a; b++)
+                g[(size_t)a * q + b] = g[(size_t)b * q + a] =
+                    m_dot(c->mass, zz + (size_t)a * n, zz + (size_t)b * n, n);
+        if (LAPACKE_dsyev(LAPACK_COL_MAJOR, 'V', 'U', q, g, q, gw) != 0) {
+            st = dk_error_set(err, DK_ERR_NUMERIC, "eigs: LAPACK dsyev failed (band merge)");
+            goto done;
+        }
+        for (int a = 0; a < q; a++) r += gw[a] > 0.5;
+    }
+    if (!commit) {
+        int below = count_below(s->val, p0, sigma) + p + r;
+        for (int j = j1; j < nb; j++) below += bd->val[j] < sigma;
+        *n_below = below;
+        goto done;
+    }
+    if (s->m - p + (p + r) + (nb - j1) > s->cap) {
+        st = dk_error_set(err, DK_ERR_INTERNAL, "eigs: accepted store overflow");
+        goto done;
+    }
+    if (r > 0) {
+        /* S = [C, new directions], M-orthonormal; Rayleigh-Ritz with H = S^T L S. */
+        const int w = p + r;
+        sv = malloc((size_t)n * w * sizeof(double));
+        ls = malloc((size_t)n * sizeof(double));
+        h = malloc((size_t)w * w * sizeof(double));
+        hw = malloc((size_t)w * sizeof(double));
+        if (!sv || !ls || !h || !hw) { st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: out of memory"); goto done; }
+        memcpy(sv, s->vec + (size_t)p0 * n, (size_t)n * p * sizeof(double));
+        int col = p;
+        for (int a = 0; a < q; a++) {
+            if (gw[a] <= 0.5) continue;
+            double *x = sv + (size_t)col * n;
+            memset(x, 0, (size_t)n * sizeof(double));
+            for (int b = 0; b < q; b++) {
+                const double coef = g[(size_t)a * q + b];
+                const double *y = zz + (size_t)b * n;
+                for (dk_index i = 0; i < n; i++) x[i] += coef * y[i];
+            }
+            for (int pass = 0; pass < 2; pass++)
+                for (int b = 0; b < col; b++) {
+                    const double *y = sv + (size_t)b * n;
+                    const double t = m_dot(c->mass, y, x, n);
+                    for (dk_index i = 0; i < n; i++) x[i] -= t * y[i];
+                }
+            const double nm = sqrt(m_dot(c->mass, x, x, n));
+            for (dk_index i = 0; i < n; i++) x[i] /= nm;
+            col++;
+        }
+        for (int a = 0; a < w; a++) {
+            l_matvec(c->l, sv + (size_t)a * n, ls);
+            for (int b = 0; b <= a; b++) {
+                double t = 0.0;
+                const double *y = sv + (size_t)b * n;
+                for (dk_index i = 0; i < n; i++) t += y[i] * ls[i];
+                h[(size_t)a * w + b] = h[(size_t)b * w + a] = t;
+            }
+        }
+        if (LAPACKE_dsyev(LAPACK_COL_MAJOR, 'V', 'U', w, h, w, hw) != 0) {
+            st = dk_error_set(err, DK_ERR_NUMERIC, "eigs: LAPACK dsyev failed (Rayleigh-Ritz)");
+            goto done;
+        }
+        for (int a = 0; a < w; a++) {
+            double *x = s->vec + (size_t)(p0 + a) * n;
+            memset(x, 0, (size_t)n * sizeof(double));
+            for (int b = 0; b < w; b++) {
+                const double coef = h[(size_t)a * w + b];
+                const double *y = sv + (size_t)b * n;
+                for (dk_index i = 0; i < n; i++) x[i] += coef * y[i];
+            }
+            s->val[p0 + a] = hw[a];
+        }
+        s->m = p0 + w;
+    }
+    for (int j = j1; j < nb; j++) {
+        memcpy(s->vec + (size_t)s->m * n, bd->vec + (size_t)j * n, (size_t)n * sizeof(double));
+        s->val[s->m++] = bd->val[j];
+    }
+done:
+    free(pm); free(zz); free(g); free(gw); free(sv); free(ls); free(h); free(hw);
+    return st;
+}
+
+/* M-orthonormalises the k columns of x (Cholesky QR on M^(1/2) X) when they are not already
+ * orthonormal to 1e-12. */
+static dk_status m_orthonormalise(const double *mass, dk_index n, int k, double *x,
+                                  dk_error *err)
+{
+    double *g = malloc((size_t)k * k * sizeof(double));
+    double *sq = malloc((size_t)n * sizeof(double));
+    if (!g || !sq) {
+        free(g); free(sq);
+        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: out of memory");
+    }
+    for (dk_index i = 0; i < n; i++) sq[i] = sqrt(mass[i]);
+    for (int j = 0; j < k; j++)
+        for (dk_index i = 0; i < n; i++) x[(size_t)j * n + i] *= sq[i];
+    cblas_dsyrk(CblasColMajor, CblasUpper, CblasTrans, k, n, 1.0, x, n, 0.0, g, k);
+    double off = 0.0;
+    for (int j = 0; j < k; j++)
+        for (int i = 0; i <= j; i++) off = fmax(off, fabs(g[(size_t)j * k + i] - (i == j)));
+    dk_status st = DK_OK;
+    if (off > 1e-12) {
+        if (LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'U', k, g, k) != 0)
+            st = dk_error_set(err, DK_ERR_INTERNAL, "eigs: eigenvectors are linearly dependent "
+                              "(a duplicate slipped through)");
+        else
+            cblas_dtrsm(CblasColMajor, CblasRight, CblasUpper, CblasNoTrans, CblasNonUnit, n, k,
+                        1.0, g, k, x, n);
+    }
+    for (int j = 0; j < k; j++)
+        for (dk_index i = 0; i < n; i++) x[(size_t)j * n + i] /= sq[i];
+    free(g);
+    free(sq);
+    return st;
+}
+
+/* Local mean spacing of the top accepted eigenvalues. */
+static double spacing(const store *s, int window)
+{
+    const int m = s->m;
+    const int q = m - 1 < window ? m - 1 : window;
+    double d = q > 0 ? (s->val[m - 1] - s->val[m - 1 - q]) / q : 0.0;
+    const double avg = s->val[m - 1] / m;
+    if (!(d > 0.25 * avg)) d = fmax(d, avg);
+    return d;
+}
+
+/* ------------------------------------------------------------------ entry point --------- */
+
+static dk_status check_inputs(const dk_sparse *l, const double *mass, int k,
+                              const double *eigenvalues, const double *eigenvectors,
+                              dk_error *err)
+{
+    if (!l || !l->col_start || !mass || !eigenvalues || !eigenvectors)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "eigs: NULL argument");
+    if (l->n_rows != l->n_cols)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "eigs: L must be square, got %d x %d",
+                            (int)l->n_rows, (int)l->n_cols);
+    const dk_index n = l->n_rows;
+    if (n < 2)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "eigs: L is %d x %d, need n >= 2",
+                            (int)n, (int)n);
+    if (k < 1 || k >= n)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "eigs: k is %d, must be in [1, %d] (n - 1)", k, (int)n - 1);
+    for (dk_index i = 0; i < n; i++)
+        if (!(mass[i] > 0.0) || !isfinite(mass[i]))
+            return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                                "eigs: mass of vertex %d is %g, must be positive and finite",
+                                (int)i, mass[i]);
+    for (dk_index j = 0; j < n; j++)
+        for (dk_index p = l->col_start[j]; p < l->col_start[j + 1]; p++) {
+            const dk_index i = l->row_index[p];
+            if (i < 0 || i >= n)
+                return dk_error_set(err, DK_ERR_INDEX,
+                                    "eigs: L column %d has row %d, out of range [0, %d)", (int)j,
+                                    (int)i, (int)n);
+            if (!isfinite(l->values[p]))
+                return dk_error_set(err, DK_ERR_NONFINITE, "eigs: L(%d, %d) is not finite",
+                                    (int)i, (int)j);
+        }
+    return DK_OK;
+}
+
+static int ncv_for(int nev, dk_index n, int attempt)
+{
+    int ncv = 2 * nev + 1;
+    if (ncv < 20) ncv = 20;
+    if (attempt > 0) ncv = 3 * nev + 10;
+    if (ncv > n) ncv = (int)n;
+    return ncv;
+}
+
+/* Appends pair j of the last ARPACK run (c->d, c->z) to `s`, keeping it sorted. */
+static void store_insert(store *s, const eig_ctx *c, int j)
+{
+    const size_t n = (size_t)c->n;
+    int at = s->m;
+    while (at > 0 && s->val[at - 1] > c->d[j]) at--;
+    memmove(s->vec + (size_t)(at + 1) * n, s->vec + (size_t)at * n,
+            (size_t)(s->m - at) * n * sizeof(double));
+    memmove(s->val + at + 1, s->val + at, (size_t)(s->m - at) * sizeof(double));
+    memcpy(s->vec + (size_t)at * n, c->z + (size_t)j * n, n * sizeof(double));
+    s->val[at] = c->d[j];
+    s->m++;
+}
+
+/* One ARPACK run around sigma; the converged pairs replace the contents of `bd`. */
+static dk_status run_band(eig_ctx *c, dk_cholesky *chol, double sigma, int nev, int ncv,
+                          store *bd, double *scratch, dk_error *err)
+{
+    int got = 0;
+    dk_status st = arpack_run(c, chol, sigma, nev, ncv, NULL, 0, &got, scratch, err);
+    bd->m = 0;
+    for (int j = 0; j < got && bd->m < bd->cap; j++) store_insert(bd, c, j);
+    return st;
+}
+
+/* Looks for eigenpairs that the run which filled `bd` missed (inertia said so): an ARPACK
+ * run deflated against bd's vectors asks for `want` more pairs near sigma and those with an
+ * eigenvalue in (lo, hi) are inserted. `*added` gets how many. */
+static dk_status find_missing(eig_ctx *c, dk_cholesky *chol, double sigma, int want,
+                              store *bd, double lo, double hi, int *added, double *scratch,
+                              dk_error *err)
+{
+    *added = 0;
+    if (want > bd->cap - bd->m) want = bd->cap - bd->m;
+    if (want > c->n - 1 - bd->m) want = (int)c->n - 1 - bd->m;
+    if (want < 1) return DK_OK;
+    int got = 0;
+    const int ncv = ncv_for(want, c->n - bd->m, 0);
+    if (ncv <= want) return DK_OK;
+    dk_status st = arpack_run(c, chol, sigma, want, ncv, bd->vec, bd->m, &got, scratch, err);
+    if (st != DK_OK && st != DK_ERR_NO_CONVERGENCE) return st;
+    for (int j = 0; j < got; j++)
+        if (c->d[j] > lo && c->d[j] < hi && bd->m < bd->cap) {
+            store_insert(bd, c, j);
+            (*added)++;
+        }
+    return DK_OK;
+}
+
+/* Index j >= 1 (searching down from `from`) with val[j] - val[j-1] > gap_tol, or 0. */
+static int gap_below(const double *val, int from, double gap_tol)
+{
+    int j = from;
+    while (j > 0 && !(val[j] - val[j - 1] > gap_tol)) j--;
+    return j;
+}
+
+/* Certifies a band: tau is put in the highest spectral gap (wider than gap_tol) of the
+ * band's results `bd`, and an LDL' factorization of L - tau M counts the eigenvalues below
+ * tau (inertia); the accepted pairs `s` merged with the band must hold exactly that many
+ * below tau. Missing ones (copies of a multiple eigenvalue) are searched by deflated runs
+ * around sigma (the band's shift, factor `chol`, refactored first when it is the LDL' one
+ * that tau used). `*j_out` gets how many of bd's pairs lie below tau (those are certified),
+ * or 0 when tau cannot be put above the accepted ones plus `min_above` (no progress).
+ * With `strict` = 0 a band without any gap is accepted uncertified (all of it). */
+static dk_status certify_band(eig_ctx *c, dk_cholesky *chol, double sigma, const store *s,
+                              store *bd, double zeta, double gap_tol, double min_above,
+                              int *j_out, double *scratch, dk_error *err)
+{
+    *j_out = 0;
+    double lo_win = INFINITY, hi_win = -INFINITY;
+    for (int i = 0; i < bd->m; i++) {
+        lo_win = fmin(lo_win, bd->val[i]);
+        hi_win = fmax(hi_win, bd->val[i]);
+    }
+    const double radius = fmax(fabs(sigma - lo_win), fabs(hi_win - sigma));
+    for (int rep = 0;; rep++) {
+        const int j = gap_below(bd->val, bd->m - 1, gap_tol);
+        if (j <= 0 || !(bd->val[j - 1] > min_above)) return DK_OK; /* no progress possible */
+        const double tau = 0.5 * (bd->val[j] + bd->val[j - 1]);
+        dk_index neg = 0;
+        dk_status st = ctx_factor(c, tau, 1, &neg, err);
+        if (st != DK_OK) return st;
+        int below = 0;
+        if (s->m > 0) {
+            st = merge_band(c, (store *)s, bd, zeta, tau, 0, &below, err);
+            if (st != DK_OK) return st;
+        } else {
+            below = j;
+        }
+        if (below == neg) {
+            *j_out = j;
+            return DK_OK;
+        }
+        if (below > neg || rep >= 2)
+            return dk_error_set(err, DK_ERR_NO_CONVERGENCE,
+                                "eigs: inertia check failed: %d eigenvalues below %g, %d found",
+                                (int)neg, tau, below);
+        if (chol == c->ldl) {
+            st = ctx_factor(c, sigma, 1, NULL, err);
+            if (st != DK_OK) return st;
+        }
+        int added = 0;
+        st = find_missing(c, chol, sigma, (int)neg - below + 2, bd, sigma - radius * 1.0000001,
+                          tau, &added, scratch, err);
+        if (st != DK_OK) return st;
+        if (added == 0)
+            return dk_error_set(err, DK_ERR_NO_CONVERGENCE,
+                                "eigs: inertia says %d eigenvalues below %g but only %d were "
+                                "found, also with deflation", (int)neg, tau, below);
+    }
+}
+
+dk_status dk_eigs_smallest(const dk_sparse *l, const double *mass, int k,
+                           const dk_eigs_options *opt, double *eigenvalues,
+                           double *eigenvectors, int *n_converged, dk_error *err)
+{
+    if (n_converged) *n_converged = 0;
+    dk_status st = check_inputs(l, mass, k, eigenvalues, eigenvectors, err);
+    if (st != DK_OK) return st;
+    dk_eigs_options o;
+    dk_eigs_options_default(&o);
+    if (opt) {
+        if (opt->tolerance > 0) o.tolerance = opt->tolerance;
+        if (opt->max_iterations > 0) o.max_iterations = opt->max_iterations;
+        if (opt->band_size > 0) o.band_size = opt->band_size;
+        o.progress = opt->progress;
+        o.progress_user = opt->progress_user;
+    }
+    if (o.band_size < MIN_BAND_SIZE) o.band_size = MIN_BAND_SIZE;
+
+    const dk_index n = l->n_rows;
+    eig_ctx c;
+    memset(&c, 0, sizeof c);
+    c.l = l;
+    c.mass = mass;
+    c.n = n;
+    c.tol = o.tolerance;
+    c.max_iterations = o.max_iterations;
+    c.seed = 0x9E3779B97F4A7C15ull;
+    store s = {0}, bd = {0};
+    double *scratch = NULL;
+    st = ctx_build_shifted(&c, err);
+    if (st != DK_OK) goto done;
+
+    /* spectrum scale: mean eigenvalue trace(M^-1 L) / n */
+    double mean = 0.0;
+    for (dk_index i = 0; i < n; i++) mean += c.l_diag[i] / mass[i];
+    mean /= n;
+    if (!(mean > 0.0)) {
+        st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "eigs: L has no positive diagonal "
+                          "(trace(M^-1 L) = %g): not a Laplacian", mean * n);
+        goto done;
+    }
+    const double sigma0 = -1e-6 * mean;
+
+    const int single = k <= o.band_size;
+    const int nev0 = single ? (k + 1 < n ? k + 1 : k) : o.band_size;
+    /* room for bands grown up to twice band_size (big clusters) plus deflated extras */
+    bd.cap = (nev0 > 2 * o.band_size ? nev0 : 2 * o.band_size) + 32;
+    if (bd.cap > n) bd.cap = (int)n;
+    s.cap = k + bd.cap;
+    if (s.cap > n) s.cap = (int)n;
+    s.val = malloc((size_t)s.cap * sizeof(double));
+    s.vec = malloc((size_t)n * s.cap * sizeof(double));
+    bd.val = malloc((size_t)bd.cap * sizeof(double));
+    bd.vec = malloc((size_t)n * bd.cap * sizeof(double));
+    scratch = malloc((size_t)n * sizeof(double));
+    if (!s.val || !s.vec || !bd.val || !bd.vec || !scratch) {
+        st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: out of memory (%d vectors of %d)",
+                          s.cap + bd.cap, (int)n);
+        goto done;
+    }
+
+    /* ---- band 0: the smallest, with the positive definite shift */
+    st = ctx_factor(&c, sigma0, 0, NULL, err);
+    if (st != DK_OK) goto done;
+    for (int attempt = 0;; attempt++) {
+        st = run_band(&c, c.spd, sigma0, nev0, ncv_for(nev0, n, attempt), &bd, scratch, err);
+        if (st == DK_ERR_NO_CONVERGENCE && attempt == 0) continue;
+        break;
+    }
+    if (st == DK_OK) {
+        int j = 0;
+        st = certify_band(&c, c.spd, sigma0, &s, &bd, 0.0,
+                          1e-6 * fmax(bd.m ? bd.val[bd.m - 1] : 0.0, 1e-6 * mean), -INFINITY,
+                          &j, scratch, err);
+        /* band mode keeps only the certified part; the next band overlaps the rest */
+        if (st == DK_OK && !single && j > 0) bd.m = j;
+    }
+    memcpy(s.val, bd.val, (size_t)bd.m * sizeof(double));
+    memcpy(s.vec, bd.vec, (size_t)n * bd.m * sizeof(double));
+    s.m = bd.m;
+    if (st != DK_OK) goto partial;
+    if (o.progress && o.progress(o.progress_user, fmin(1.0, (double)s.m / k))) {
+        st = dk_error_set(err, DK_ERR_CANCELLED, "eigs: cancelled after %d of %d eigenpairs",
+                          s.m < k ? s.m : k, k);
+        goto partial;
+    }
+
+    /* ---- later bands around interior shifts */
+    for (int band = 1; s.m < k; band++) {
+        const int need = k - s.m;
+        int nev = o.band_size;
+        const int ov = nev / 5 > 3 ? nev / 5 : 3;
+        if (need + ov + 4 < nev) nev = need + ov + 4;
+        if (nev < 2 * ov + 4) nev = 2 * ov + 4;
+        if (nev > o.band_size) nev = o.band_size;
+        if (nev > n - 1) nev = (int)n - 1;
+        const double top = s.val[s.m - 1];
+        const double delta = spacing(&s, nev / 2);
+        const double zeta = 0.1 * delta + 100.0 * c.tol * fabs(top);
+        double sigma = top + fmax(1.0, 0.5 * nev - ov) * delta;
+        int accepted = 0;
+        for (int attempt = 0; attempt < 6 && !accepted; attempt++) {
+            st = ctx_factor(&c, sigma, 1, NULL, err);
+            if (st != DK_OK) goto partial;
+            st = run_band(&c, c.ldl, sigma, nev, ncv_for(nev, n, attempt > 0), &bd, scratch,
+                          err);
+            if (st == DK_ERR_NO_CONVERGENCE && attempt < 5) continue;
+            if (st != DK_OK) goto partial;
+            int j = 0;
+            if (bd.val[0] < top - zeta) {
+                st = certify_band(&c, c.ldl, sigma, &s, &bd, zeta,
+                                  1e-6 * fmax(bd.val[bd.m - 1], 1e-6 * mean), top + zeta, &j,
+                                  scratch, err);
+                if (st != DK_OK && st != DK_ERR_NO_CONVERGENCE) goto partial;
+            }
+            if (j == 0 || st != DK_OK) {
+                /* The window does not reach back below lambda_top, holds no spectral gap
+                 * above it (a dense cluster), or failed its inertia check: move the shift
+                 * down next to lambda_top and widen the band, which must hold the whole
+                 * cluster plus the overlap. */
+                if (bd.val[0] >= top - zeta) sigma -= (bd.val[0] - top) + ov * delta;
+                if (sigma <= top) sigma = top + 0.5 * delta;
+                nev += nev / 2;
+                if (nev > bd.cap - 8) nev = bd.cap - 8;
+                if (nev > n - 1) nev = (int)n - 1;
+                if (st == DK_OK)
+                    st = dk_error_set(err, DK_ERR_NO_CONVERGENCE, "eigs: band %d near lambda "
+                                      "%g found no certifiable new eigenvalue", band, top);
+                continue;
+            }
+            bd.m = j; /* keep the certified pairs, below tau */
+            int below = 0;
+            st = merge_band(&c, &s, &bd, zeta, 0.0, 1, &below, err);
+            if (st != DK_OK) goto partial;
+            accepted = 1;
+        }
+        if (!accepted) {
+            if (st == DK_OK)
+                st = dk_error_set(err, DK_ERR_INTERNAL, "eigs: band %d not accepted", band);
+            goto partial;
+        }
+        if (o.progress && o.progress(o.progress_user, fmin(1.0, (double)s.m / k))) {
+            st = dk_error_set(err, DK_ERR_CANCELLED, "eigs: cancelled after %d of %d eigenpairs",
+                              s.m < k ? s.m : k, k);
+            goto partial;
+        }
+    }
+    memcpy(eigenvalues, s.val, (size_t)k * sizeof(double));
+    memcpy(eigenvectors, s.vec, (size_t)n * k * sizeof(double));
+    if (!single) {
+        st = m_orthonormalise(mass, n, k, eigenvectors, err);
+        if (st != DK_OK) goto done;
+    }
+    if (n_converged) *n_converged = k;
+    goto done;
+
+partial: {
+        /* Hand back what there is: the accepted pairs, ascending. */
+        const int m = s.m < k ? s.m : k;
+        if (m > 0) {
+            memcpy(eigenvalues, s.val, (size_t)m * sizeof(double));
+            memcpy(eigenvectors, s.vec, (size_t)n * m * sizeof(double));
+        }
+        if (n_converged) *n_converged = m;
+        if (st == DK_ERR_NO_CONVERGENCE)
+            dk_error_prefix(err, "%d of %d eigenpairs converged", m, k);
+    }
+done:
+    free(scratch);
+    free(s.val);
+    free(s.vec);
+    free(bd.val);
+    free(bd.vec);
+    ctx_free(&c);
+    return st;
+}
