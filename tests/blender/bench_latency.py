@@ -1,0 +1,149 @@
+"""Per-drag latency inside Blender: handle moved -> evaluated mesh updated, for DeformKit ARAP
+and Laplacian editing against Blender's built-in Laplacian Deform modifier (+ a Hook moving its
+anchors) on the same mesh, anchors and drag, in the same run.
+
+  PYTHONPATH=build/python blender -b --factory-startup --python-exit-code 1 \
+      --python tests/blender/bench_latency.py -- [--scenario PATH] [--steps N] [--json OUT]
+
+Default scenario: ../shared/scenarios/armadillo-wave.json (43k vertices). The drag moves the
+handle target along the scenario's translation in N steps; each step's time covers the depsgraph
+update that runs the add-on's handler (solve + attribute write) and the re-evaluation of the
+modifier stack that shows it (two updates for DeformKit, one for the built-in modifier).
+"""
+import argparse
+import json
+import os
+import statistics
+import sys
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import _setup as S  # noqa: E402
+import bpy  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def args():
+    a = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+    p = argparse.ArgumentParser()
+    p.add_argument("--scenario", default=os.path.join(S.ROOT, "..", "shared", "scenarios",
+                                                      "armadillo-wave.json"))
+    p.add_argument("--steps", type=int, default=20)
+    p.add_argument("--json", default=os.path.join(S.OUTPUT, "bench_latency.json"))
+    p.add_argument("--methods", default="ARAP,LAPLACIAN")
+    return p.parse_args(a)
+
+
+def load_obj(path):
+    vs, fs = [], []
+    with open(path) as f:
+        for ln in f:
+            if ln.startswith("v "):
+                vs.append(tuple(map(float, ln.split()[1:4])))
+            elif ln.startswith("f "):
+                fs.append(tuple(int(t.split("/")[0]) - 1 for t in ln.split()[1:]))
+    return vs, fs
+
+
+def make_object(name, vs, fs, fixed, handle):
+    me = bpy.data.meshes.new(name)
+    me.from_pydata(vs, [], fs)
+    me.update()
+    obj = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(obj)
+    S.group(obj, "fixed", fixed)
+    S.group(obj, "handle", handle)
+    S.group(obj, "anchors", list(fixed) + list(handle))
+    bpy.context.view_layer.objects.active = obj
+    centre = np.asarray(vs)[handle].mean(axis=0)
+    e = S.empty(name + " target", tuple(centre))
+    return obj, e
+
+
+def drag(obj, e, steps, translate, n_updates, check_idx, rest):
+    start = np.array(e.location)
+    times = []
+    dg = bpy.context.evaluated_depsgraph_get()
+    for i in range(1, steps + 1):
+        e.location = tuple(start + np.asarray(translate) * i / steps)
+        t0 = time.perf_counter()
+        for _ in range(n_updates):
+            dg.update()
+        ev = obj.evaluated_get(dg)
+        v = ev.data.vertices[check_idx].co  # the evaluated mesh is there
+        times.append((time.perf_counter() - t0) * 1000.0)
+    got = np.array(v)
+    want = rest[check_idx] + np.asarray(translate)
+    err = float(np.abs(got - want).max())
+    return times, err
+
+
+def main():
+    a = args()
+    with open(a.scenario) as f:
+        sc = json.load(f)
+    mesh_path = os.path.normpath(os.path.join(os.path.dirname(a.scenario), sc["mesh"]))
+    vs, fs = load_obj(mesh_path)
+    fixed = sc["fixed"]
+    handle = sc["handles"][0]["vertices"]
+    translate = sc["handles"][0]["translate"]
+    rest = np.asarray(vs)
+    results = {"mesh": os.path.basename(mesh_path), "vertices": len(vs), "faces": len(fs),
+               "fixed": len(fixed), "handle": len(handle), "steps": a.steps,
+               "blender": bpy.app.version_string}
+    S.reset_scene()
+    for mid in a.methods.split(","):
+        m = S.methods.get(mid)
+        if not S.native.has_class(m.native_class):
+            print("skip %s: no deformkit.%s" % (mid, m.native_class))
+            continue
+        obj, e = make_object("DK_" + mid, vs, fs, fixed, handle)
+        bpy.ops.deformkit.add_deformer(method=mid)
+        d = obj.deformkit.deformers[0]
+        d.fixed_group = "fixed"
+        bpy.ops.deformkit.add_handle(vertex_group="handle", target=e.name)
+        t0 = time.perf_counter()
+        bpy.ops.deformkit.bind()
+        bind_ms = (time.perf_counter() - t0) * 1000
+        times, err = drag(obj, e, a.steps, translate, 2, handle[0], rest)
+        solve = S.solver.runtime.get((obj.name, d.uid), {})
+        results[mid] = dict(bind_ms=bind_ms, drag_ms_median=statistics.median(times),
+                            drag_ms_max=max(times), drag_ms_all=times,
+                            last_solve_ms=solve.get("ms"), iterations=solve.get("iterations"),
+                            handle_error=err)
+        obj.hide_viewport = True
+        S.handlers.enabled[0] = False  # keep the next measurements free of this object
+        print("%s: bind %.0f ms, drag median %.1f ms (max %.1f), last solve %.1f ms, %s it"
+              % (mid, bind_ms, statistics.median(times), max(times), solve.get("ms", -1),
+                 solve.get("iterations")))
+        bpy.data.objects.remove(obj)
+        bpy.data.objects.remove(e)
+        S.handlers.enabled[0] = True
+    # built-in: Hook (handle vertices to the target) then Laplacian Deform (anchors)
+    S.handlers.enabled[0] = False
+    obj, e = make_object("Builtin", vs, fs, fixed, handle)
+    hook = obj.modifiers.new("Hook", "HOOK")
+    hook.object = e
+    hook.vertex_group = "handle"
+    hook.center = e.location
+    hook.matrix_inverse = e.matrix_world.inverted()
+    lap = obj.modifiers.new("LaplacianDeform", "LAPLACIANDEFORM")
+    lap.vertex_group = "anchors"
+    lap.iterations = 1
+    t0 = time.perf_counter()
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        bpy.ops.object.laplaciandeform_bind(modifier=lap.name)
+    bpy.context.evaluated_depsgraph_get().update()
+    bind_ms = (time.perf_counter() - t0) * 1000
+    times, err = drag(obj, e, a.steps, translate, 1, handle[0], rest)
+    results["BUILTIN_LAPLACIAN_DEFORM"] = dict(bind_ms=bind_ms, drag_ms_median=statistics.median(times),
+                                               drag_ms_max=max(times), drag_ms_all=times,
+                                               handle_error=err, is_bound=lap.is_bind)
+    print("built-in Laplacian Deform: bind %.0f ms, drag median %.1f ms (max %.1f), bound %s"
+          % (bind_ms, statistics.median(times), max(times), lap.is_bind))
+    with open(a.json, "w") as f:
+        json.dump(results, f, indent=1)
+    print("bench_latency: wrote %s" % a.json)
+
+
+main()
