@@ -1,0 +1,109 @@
+/* DeformKit: attenuated handle displacement ("falloff", lecture slides 5-7).
+ *
+ * The handle's displacement is propagated to nearby vertices, attenuated by
+ *     S(i) = 1 - (i / (n + 1))^(k + 1)        for k >= 0   (k = 0: linear; k > 0: "rigid")
+ *     S(i) = (1 - i / (n + 1))^(1 - k)        for k < 0    ("elastic")
+ * with i the distance of the vertex from the handle and n the range; vertices with i > n are
+ * not affected (S = 0 there, as in the slides: the range is "the vertices within n edges").
+ *
+ * Distances (the slides leave the units of i and n to the distance kind):
+ *   HOPS       edge hops (dk_hop_distance); i and n are counted in edges.
+ *   EUCLIDEAN  straight-line distance to the nearest handle vertex of the group (k-d tree);
+ *   GEODESIC   heat-method distance (dk_heat_distance);
+ *   DIJKSTRA   shortest path along edges (dk_geodesic_dijkstra).
+ *   For the three metric kinds `range` is a length and the formula is applied in units of
+ *   the mesh's mean edge length h ("one hop"): i = d / h, n = range / h, so that
+ *   S(d) = 1 - (d / (range + h))^(k+1) etc. This keeps the slides' "+1" meaningful and the
+ *   profile independent of the model's scale.
+ *
+ * Which displacement is attenuated (the slides have one seed vertex; with a handle group of
+ * several vertices there is a choice). Per handle group g:
+ *   targets (mode 0): vertex v moves by S(d_g(v)) * D_g(l), where D_g(l) = w_l (c_l - p_l)
+ *     is the (weighted) displacement of l, v's nearest vertex of group g. "Nearest" is in
+ *     the chosen distance, except for GEODESIC where the heat method yields distances only:
+ *     l is then the nearest vertex along edges (Dijkstra) and d the heat distance. Ties are
+ *     broken by the lower position in the handle list.
+ *   transforms (mode 1): vertex v moves by S(d_g(v)) * (T_g p_v - p_v), i.e. the transform
+ *     is blended into the identity by S (p' = p + S (T p - p)), the natural generalisation
+ *     (for a pure translation both modes agree).
+ *   Several groups: their displacements are summed (each group's influence is its own
+ *   falloff; overlapping ranges add up, as stacked Blender hooks do).
+ * Handle vertices move by w (c - p) (per-vertex handle weight w in (0,1], as Blender's hook
+ * weights); they receive no falloff from other groups. Fixed vertices and vertices outside
+ * the region of interest stay at rest. Vertices unreachable from a group (another
+ * component) are not affected by it. A mesh where every vertex is constrained is accepted
+ * (the result is the handle targets).
+ *
+ * It is a direct method: iterations = 1, converged = 1, and the reported energy is the sum
+ * over all vertices of the squared displacement |p'_v - p_v|^2.
+ */
+#ifndef DK_FALLOFF_H
+#define DK_FALLOFF_H
+
+#include "dk_constraints.h"
+#include "dk_mesh.h"
+#include "dk_status.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/** Distance used for the attenuation. */
+typedef enum dk_falloff_distance {
+    DK_FALLOFF_HOPS = 0,
+    DK_FALLOFF_EUCLIDEAN = 1,
+    DK_FALLOFF_GEODESIC = 2, /**< heat method                                              */
+    DK_FALLOFF_DIJKSTRA = 3  /**< exact shortest paths along edges                         */
+} dk_falloff_distance;
+
+/** Options; fill with dk_falloff_default_options. */
+typedef struct dk_falloff_options {
+    dk_falloff_distance distance; /**< default HOPS                                         */
+    double range;                 /**< n: > 0 (hops: edges; else a length). Default 0, which
+                                       means 10 hops, or 10 mean edge lengths              */
+    double k;                     /**< exponent parameter, finite; default 0 (linear)      */
+    double heat_time_factor;      /**< GEODESIC: dk_heat_create's factor (<= 0: default)    */
+} dk_falloff_options;
+
+typedef struct dk_falloff dk_falloff;
+
+/** Writes the defaults into `options`. */
+void dk_falloff_default_options(dk_falloff_options *options);
+
+/** The profile S(i) for distance i >= 0 and range n >= 0 (both in hop units), exponent k:
+ *  the formula above, 0 for i > n or a non-finite i. */
+double dk_falloff_profile(double i, double n, double k);
+
+/** Computes the distances from every handle group and the weights S. `mesh` is borrowed and
+ *  must outlive the object; `options` may be NULL (defaults). Refuses invalid options
+ *  (naming them) and invalid constraints (dk_constraints_create's messages). */
+dk_status dk_falloff_bind(const dk_mesh *mesh, const dk_constraint_desc *desc,
+                          const dk_falloff_options *options, dk_falloff **out, dk_error *err);
+
+/** New constraints, same mesh and options (the heat-method factorization is reused). On
+ *  failure the object keeps its previous constraints. */
+dk_status dk_falloff_rebind(dk_falloff *f, const dk_constraint_desc *desc, dk_error *err);
+
+/** Deformed positions (n x 3) for handle targets (mode 0: one position per handle vertex;
+ *  mode 1: one 4x4 row-major affine transform per handle). `energy` (may be NULL) gets the
+ *  sum of squared displacements. Allocation-free. */
+dk_status dk_falloff_solve(dk_falloff *f, const double *targets, int mode, double *positions,
+                           double *energy, dk_error *err);
+
+/** The distance (in the chosen kind's units; INFINITY when unreachable) and weight S of
+ *  vertex v from handle group g, as computed at bind; for tests. Out-of-range arguments
+ *  give INFINITY and 0. */
+void dk_falloff_vertex_weight(const dk_falloff *f, dk_index g, dk_index v, double *distance,
+                              double *weight);
+
+/** Number of handle vertices / handles of the current constraints. */
+dk_index dk_falloff_n_handle_vertices(const dk_falloff *f);
+dk_index dk_falloff_n_handles(const dk_falloff *f);
+
+/** Frees; NULL allowed. */
+void dk_falloff_free(dk_falloff *f);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,464 @@
+/* DeformKit: attenuated handle displacement. See dk_falloff.h for what is computed. Per
+ * handle group g the bind stores, for every vertex, its distance from g, its nearest vertex
+ * of g (position in the concatenated handle list) and its weight S; a solve is one pass. */
+#include "dk_falloff.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "dk_operators.h"
+
+typedef struct falloff_state {
+    dk_constraints *con;
+    double *dist;    /* n_handles x n: distance (INFINITY = unreachable)               */
+    double *weight;  /* n_handles x n: S, 0 where unaffected                           */
+    dk_index *label; /* n_handles x n: nearest handle-vertex position, -1 if none      */
+    double *targets; /* n_handle_vertices x 3                                         */
+    dk_index *hpos;  /* n: position of a handle vertex in the handle list, or -1       */
+} falloff_state;
+
+struct dk_falloff {
+    const dk_mesh *mesh;
+    dk_falloff_options opt;
+    double unit;     /* 1 for hops, the mean edge length otherwise                    */
+    dk_heat_geodesic *heat;
+    falloff_state st;
+};
+
+static void state_free(falloff_state *s)
+{
+    dk_constraints_free(s->con);
+    free(s->dist);
+    free(s->weight);
+    free(s->label);
+    free(s->targets);
+    free(s->hpos);
+    memset(s, 0, sizeof *s);
+}
+
+void dk_falloff_default_options(dk_falloff_options *o)
+{
+    if (!o)
+        return;
+    o->distance = DK_FALLOFF_HOPS;
+    o->range = 0.0;
+    o->k = 0.0;
+    o->heat_time_factor = 0.0;
+}
+
+double dk_falloff_profile(double i, double n, double k)
+{
+    double t;
+    if (!isfinite(i) || i > n)
+        return 0.0;
+    if (i < 0.0)
+        i = 0.0;
+    t = i / (n + 1.0);
+    if (k >= 0.0)
+        return 1.0 - pow(t, k + 1.0);
+    return pow(1.0 - t, 1.0 - k);
+}
+
+/* ------------------------------------------------------------------ labelled search ----- */
+/* Multi-source Dijkstra along edges (unit weights for hops) that records, for each vertex,
+ * the source it is nearest to; ties by the lower source position. Keys are (distance,
+ * label) pairs in a binary heap with lazy deletion. */
+
+typedef struct heap_item {
+    double d;
+    dk_index label, v;
+} heap_item;
+
+static int item_less(const heap_item *a, const heap_item *b)
+{
+    return a->d < b->d || (a->d == b->d && a->label < b->label);
+}
+
+static void heap_push(heap_item *h, int64_t *size, heap_item it)
+{
+    int64_t i = (*size)++;
+    while (i > 0) {
+        int64_t p = (i - 1) / 2;
+        if (!item_less(&it, &h[p]))
+            break;
+        h[i] = h[p];
+        i = p;
+    }
+    h[i] = it;
+}
+
+static heap_item heap_pop(heap_item *h, int64_t *size)
+{
+    heap_item top = h[0], last = h[--(*size)];
+    int64_t i = 0;
+    for (;;) {
+        int64_t c = 2 * i + 1;
+        if (c >= *size)
+            break;
+        if (c + 1 < *size && item_less(&h[c + 1], &h[c]))
+            c++;
+        if (!item_less(&h[c], &last))
+            break;
+        h[i] = h[c];
+        i = c;
+    }
+    h[i] = last;
+    return top;
+}
+
+static dk_status labelled_search(const dk_mesh *m, const dk_index *sources, dk_index n_sources,
+                                 dk_index first_label, int unit_weights, double *dist,
+                                 dk_index *label, dk_error *err)
+{
+    const dk_index n = m->n_vertices;
+    /* every push follows a strict improvement of (d, label) at a vertex: at most one per
+     * directed edge relaxation plus the sources */
+    const int64_t cap = (int64_t)m->ring_start[n] + n_sources + 1;
+    heap_item *h = malloc(sizeof(heap_item) * (size_t)cap);
+    int64_t size = 0;
+    if (!h)
+        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "Falloff: out of memory (search heap)");
+    for (dk_index i = 0; i < n; i++) {
+        dist[i] = INFINITY;
+        label[i] = -1;
+    }
+    for (dk_index s = 0; s < n_sources; s++) {
+        heap_item it = {0.0, first_label + s, sources[s]};
+        dist[it.v] = 0.0;
+        label[it.v] = it.label;
+        heap_push(h, &size, it);
+    }
+    while (size > 0) {
+        heap_item it = heap_pop(h, &size);
+        if (it.d != dist[it.v] || it.label != label[it.v])
+            continue;
+        for (dk_index k = m->ring_start[it.v]; k < m->ring_start[it.v + 1]; k++) {
+            const dk_index j = m->ring_index[k];
+            double w = 1.0;
+            heap_item nx;
+            if (!unit_weights) {
+                const double *a = m->positions + 3 * it.v, *b = m->positions + 3 * j;
+                w = sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) +
+                         (a[2] - b[2]) * (a[2] - b[2]));
+            }
+            nx.d = it.d + w;
+            nx.label = it.label;
+            nx.v = j;
+            if (nx.d < dist[j] || (nx.d == dist[j] && nx.label < label[j])) {
+                dist[j] = nx.d;
+                label[j] = nx.label;
+                if (size >= cap) { /* cannot happen (see cap); refuse rather than overflow */
+                    free(h);
+                    return dk_error_set(err, DK_ERR_INTERNAL, "Falloff: search heap overflow");
+                }
+                heap_push(h, &size, nx);
+            }
+        }
+    }
+    free(h);
+    return DK_OK;
+}
+
+/* ------------------------------------------------------------------ bind ---------------- */
+
+static dk_status group_distances(dk_falloff *f, falloff_state *s, dk_index g, double *dist,
+                                 dk_index *label, dk_index *scratch_i, double *scratch_d,
+                                 dk_error *err)
+{
+    const dk_mesh *m = f->mesh;
+    const dk_index n = m->n_vertices;
+    const dk_index b = s->con->handle_start[g], e = s->con->handle_start[g + 1];
+    const dk_index *src = s->con->handle_vertices + b;
+    dk_status st;
+
+    switch (f->opt.distance) {
+    case DK_FALLOFF_HOPS:
+        st = labelled_search(m, src, e - b, b, 1, scratch_d, label, err);
+        if (st != DK_OK)
+            return st;
+        st = dk_hop_distance(m, src, e - b, scratch_i, err);
+        if (st != DK_OK)
+            return dk_error_prefix(err, "Falloff hop distance");
+        for (dk_index v = 0; v < n; v++)
+            dist[v] = scratch_i[v] < 0 ? INFINITY : (double)scratch_i[v];
+        return DK_OK;
+    case DK_FALLOFF_DIJKSTRA:
+    case DK_FALLOFF_GEODESIC:
+        st = labelled_search(m, src, e - b, b, 0, scratch_d, label, err);
+        if (st != DK_OK)
+            return st;
+        if (f->opt.distance == DK_FALLOFF_DIJKSTRA)
+            st = dk_geodesic_dijkstra(m, src, e - b, dist, err);
+        else
+            st = dk_heat_distance(f->heat, src, e - b, dist, err);
+        if (st != DK_OK)
+            return dk_error_prefix(err, "Falloff geodesic distance");
+        return DK_OK;
+    case DK_FALLOFF_EUCLIDEAN: {
+        dk_kdtree *tree = NULL;
+        double *pts = malloc(sizeof(double) * 3 * (size_t)(e - b));
+        if (!pts)
+            return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "Falloff: out of memory (points)");
+        for (dk_index k = b; k < e; k++)
+            memcpy(pts + 3 * (k - b), m->positions + 3 * s->con->handle_vertices[k],
+                   sizeof(double) * 3);
+        st = dk_kdtree_create(pts, e - b, &tree, err);
+        free(pts);
+        if (st != DK_OK)
+            return dk_error_prefix(err, "Falloff k-d tree");
+        st = dk_kdtree_knn(tree, m->positions, n, 1, scratch_i, dist, err);
+        dk_kdtree_free(tree);
+        if (st != DK_OK)
+            return dk_error_prefix(err, "Falloff nearest handle vertex");
+        for (dk_index v = 0; v < n; v++) {
+            dist[v] = sqrt(dist[v]);
+            label[v] = b + scratch_i[v];
+        }
+        return DK_OK;
+    }
+    }
+    return dk_error_set(err, DK_ERR_INTERNAL, "Falloff: unknown distance kind");
+}
+
+static dk_status build_state(dk_falloff *f, const dk_constraint_desc *desc, falloff_state *s,
+                             dk_error *err)
+{
+    const dk_mesh *m = f->mesh;
+    const dk_index n = m->n_vertices;
+    dk_index *scratch_i = NULL;
+    double *scratch_d = NULL;
+    size_t gn;
+    dk_status st;
+
+    memset(s, 0, sizeof *s);
+    if (!desc)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "Falloff: constraints are NULL");
+    st = dk_constraints_create(m, desc, &s->con, err);
+    if (st != DK_OK)
+        return dk_error_prefix(err, "Falloff");
+    gn = (size_t)s->con->n_handles * (size_t)n;
+    s->dist = malloc(sizeof(double) * gn);
+    s->weight = malloc(sizeof(double) * gn);
+    s->label = malloc(sizeof(dk_index) * gn);
+    s->targets = malloc(sizeof(double) * 3 * ((size_t)s->con->n_handle_vertices + 1));
+    s->hpos = malloc(sizeof(dk_index) * ((size_t)n + 1));
+    scratch_i = malloc(sizeof(dk_index) * ((size_t)n + 1));
+    scratch_d = malloc(sizeof(double) * ((size_t)n + 1));
+    if (!s->dist || !s->weight || !s->label || !s->targets || !s->hpos || !scratch_i ||
+        !scratch_d) {
+        st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "Falloff: out of memory (weights)");
+        goto done;
+    }
+    for (dk_index v = 0; v < n; v++)
+        s->hpos[v] = -1;
+    for (dk_index k = 0; k < s->con->n_handle_vertices; k++)
+        s->hpos[s->con->handle_vertices[k]] = k;
+    for (dk_index g = 0; g < s->con->n_handles; g++) {
+        double *dist = s->dist + (size_t)g * n, *w = s->weight + (size_t)g * n;
+        st = group_distances(f, s, g, dist, s->label + (size_t)g * n, scratch_i, scratch_d,
+                             err);
+        if (st != DK_OK)
+            goto done;
+        for (dk_index v = 0; v < n; v++)
+            w[v] = s->con->role[v] == DK_VERTEX_FREE
+                       ? dk_falloff_profile(dist[v] / f->unit, f->opt.range / f->unit,
+                                            f->opt.k)
+                       : 0.0;
+    }
+    st = DK_OK;
+done:
+    free(scratch_i);
+    free(scratch_d);
+    if (st != DK_OK)
+        state_free(s);
+    return st;
+}
+
+dk_status dk_falloff_bind(const dk_mesh *mesh, const dk_constraint_desc *desc,
+                          const dk_falloff_options *options, dk_falloff **out, dk_error *err)
+{
+    dk_falloff *f;
+    dk_status st;
+
+    if (!out)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "Falloff bind: out is NULL");
+    *out = NULL;
+    if (!mesh || !desc)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "Falloff bind: mesh or constraints are NULL");
+    f = calloc(1, sizeof *f);
+    if (!f)
+        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "Falloff bind: out of memory");
+    f->mesh = mesh;
+    if (options)
+        f->opt = *options;
+    else
+        dk_falloff_default_options(&f->opt);
+    if (f->opt.distance != DK_FALLOFF_HOPS && f->opt.distance != DK_FALLOFF_EUCLIDEAN &&
+        f->opt.distance != DK_FALLOFF_GEODESIC && f->opt.distance != DK_FALLOFF_DIJKSTRA) {
+        st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                          "Falloff bind: unknown distance kind %d (hops = 0, euclidean = 1, "
+                          "geodesic = 2, dijkstra = 3)", (int)f->opt.distance);
+        goto fail;
+    }
+    if (!(isfinite(f->opt.range) && f->opt.range >= 0.0)) {
+        st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                          "Falloff bind: range must be finite and > 0 (0 = default), got %g",
+                          f->opt.range);
+        goto fail;
+    }
+    if (!isfinite(f->opt.k)) {
+        st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "Falloff bind: k must be finite, got %g",
+                          f->opt.k);
+        goto fail;
+    }
+    f->unit = 1.0;
+    if (f->opt.distance != DK_FALLOFF_HOPS) {
+        if (!(mesh->mean_edge_length > 0.0)) {
+            st = dk_error_set(err, DK_ERR_DEGENERATE,
+                              "Falloff bind: metric distances need edges of non-zero length "
+                              "(the mesh's mean edge length is %g)", mesh->mean_edge_length);
+            goto fail;
+        }
+        f->unit = mesh->mean_edge_length;
+    }
+    if (f->opt.range == 0.0)
+        f->opt.range = 10.0 * f->unit;
+    if (f->opt.distance == DK_FALLOFF_GEODESIC) {
+        if (mesh->n_faces == 0) {
+            st = dk_error_set(err, DK_ERR_DEGENERATE,
+                              "Falloff bind: geodesic (heat) distance needs triangles");
+            goto fail;
+        }
+        st = dk_heat_create(mesh, f->opt.heat_time_factor, &f->heat, err);
+        if (st != DK_OK) {
+            dk_error_prefix(err, "Falloff bind");
+            goto fail;
+        }
+    }
+    st = build_state(f, desc, &f->st, err);
+    if (st != DK_OK)
+        goto fail;
+    *out = f;
+    return DK_OK;
+fail:
+    dk_falloff_free(f);
+    return st;
+}
+
+dk_status dk_falloff_rebind(dk_falloff *f, const dk_constraint_desc *desc, dk_error *err)
+{
+    falloff_state s;
+    dk_status st;
+    if (!f)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "Falloff rebind: object is NULL");
+    st = build_state(f, desc, &s, err);
+    if (st != DK_OK)
+        return st;
+    state_free(&f->st);
+    f->st = s;
+    return DK_OK;
+}
+
+/* ------------------------------------------------------------------ solve --------------- */
+
+dk_status dk_falloff_solve(dk_falloff *f, const double *targets, int mode, double *positions,
+                           double *energy, dk_error *err)
+{
+    const dk_mesh *m;
+    const falloff_state *s;
+    dk_index n;
+    double e = 0.0;
+    dk_status st;
+
+    if (!f || !targets || !positions)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "Falloff solve: NULL object, targets or positions");
+    if (mode != 0 && mode != 1)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "Falloff solve: mode must be 0 (positions) or 1 (transforms), got %d",
+                            mode);
+    m = f->mesh;
+    s = &f->st;
+    n = m->n_vertices;
+    /* validates (finiteness, affine bottom row) and expands to per-vertex targets */
+    st = dk_constraints_targets(s->con, m->positions, targets, mode, s->targets, err);
+    if (st != DK_OK)
+        return dk_error_prefix(err, "Falloff solve");
+    for (dk_index v = 0; v < n; v++) {
+        const double *p = m->positions + 3 * v;
+        const dk_index role = s->con->role[v];
+        double dsp[3] = {0.0, 0.0, 0.0};
+        if (role >= 0) {
+            /* a handle vertex: its own (weighted) displacement */
+            const dk_index k = s->hpos[v];
+            if (k >= 0)
+                for (int d = 0; d < 3; d++)
+                    dsp[d] = s->con->handle_weights[k] * (s->targets[3 * k + d] - p[d]);
+        } else if (role == DK_VERTEX_FREE) {
+            for (dk_index g = 0; g < s->con->n_handles; g++) {
+                const double w = s->weight[(size_t)g * n + v];
+                if (w == 0.0)
+                    continue;
+                if (mode == 0) {
+                    const dk_index l = s->label[(size_t)g * n + v];
+                    const double *pl;
+                    if (l < 0)
+                        continue;
+                    pl = m->positions + 3 * s->con->handle_vertices[l];
+                    for (int d = 0; d < 3; d++)
+                        dsp[d] += w * s->con->handle_weights[l] * (s->targets[3 * l + d] - pl[d]);
+                } else {
+                    const double *t = targets + 16 * (size_t)g;
+                    for (int d = 0; d < 3; d++)
+                        dsp[d] += w * (t[4 * d] * p[0] + t[4 * d + 1] * p[1] +
+                                       t[4 * d + 2] * p[2] + t[4 * d + 3] - p[d]);
+                }
+            }
+        }
+        for (int d = 0; d < 3; d++) {
+            positions[3 * v + d] = p[d] + dsp[d];
+            e += dsp[d] * dsp[d];
+        }
+    }
+    if (energy)
+        *energy = e;
+    return DK_OK;
+}
+
+/* ------------------------------------------------------------------ accessors ----------- */
+
+void dk_falloff_vertex_weight(const dk_falloff *f, dk_index g, dk_index v, double *distance,
+                              double *weight)
+{
+    double d = INFINITY, w = 0.0;
+    if (f && f->st.con && g >= 0 && g < f->st.con->n_handles && v >= 0 &&
+        v < f->mesh->n_vertices) {
+        d = f->st.dist[(size_t)g * f->mesh->n_vertices + v];
+        w = f->st.weight[(size_t)g * f->mesh->n_vertices + v];
+    }
+    if (distance)
+        *distance = d;
+    if (weight)
+        *weight = w;
+}
+
+dk_index dk_falloff_n_handle_vertices(const dk_falloff *f)
+{
+    return f && f->st.con ? f->st.con->n_handle_vertices : 0;
+}
+
+dk_index dk_falloff_n_handles(const dk_falloff *f)
+{
+    return f && f->st.con ? f->st.con->n_handles : 0;
+}
+
+void dk_falloff_free(dk_falloff *f)
+{
+    if (!f)
+        return;
+    state_free(&f->st);
+    dk_heat_free(f->heat);
+    free(f);
+}

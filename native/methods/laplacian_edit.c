@@ -1,0 +1,839 @@
+/* DeformKit: Laplacian editing / least-squares meshes. See dk_laplacian_edit.h for what is
+ * computed; this file keeps the per-bind operator (A in CSR, diagonal entry first) and a
+ * per-constraint-set "system" (maps, normal-equations matrix, factor, buffers) that rebind
+ * replaces atomically. */
+#include "dk_laplacian_edit.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "dk_cholesky.h"
+#include "dk_operators.h"
+#include "dk_sparse.h"
+
+/* One constraint set: everything that changes on rebind. */
+typedef struct le_system {
+    dk_constraints *con;
+    dk_index n_unknowns;
+    dk_index *unknown_index; /* n: position among unknowns, or -1 (eliminated)          */
+    dk_index *unknowns;      /* n_unknowns: the vertices                                 */
+    dk_index *target_of;     /* n: handle-vertex position (into targets) or -1 (rest)    */
+    double *soft_w2;         /* n: (lambda w)^2 of a soft row, 0 when none               */
+    dk_index n_soft;
+    dk_sparse *normal;       /* n_unknowns^2 normal-equations matrix                     */
+    dk_cholesky *chol;
+    double *targets;         /* n_handle_vertices x 3, row-major: last expanded targets  */
+    double *rhs;             /* n_unknowns x 3, column-major                             */
+} le_system;
+
+struct dk_laplacian_edit {
+    const dk_mesh *mesh;
+    dk_laplacian_edit_options opt;
+    dk_index n;
+    /* A: row i holds a_col/a_val[a_start[i] .. a_start[i+1]-1], the diagonal first. */
+    dk_index *a_start, *a_col;
+    double *a_val;
+    double *delta_rest;  /* n x 3 column-major: A x0                                      */
+    double *rest;        /* n x 3 column-major copy of the rest positions                 */
+    dk_index *frame_nb;  /* n: neighbour defining the tangent, -1 = no rest frame          */
+    double *frame_coef;  /* n x 3 row-major: rest delta in the rest frame (n, u, n x u)     */
+    dk_index n_fallback, n_degenerate_frames;
+    le_system sys;
+    int analysis_count, factorization_count;
+    /* solve buffers */
+    double *x;           /* n x 3 column-major current positions                           */
+    double *delta;       /* n x 3 column-major delta of the last solve                     */
+    double *r;           /* n: residual of one coordinate                                  */
+    double *normals;     /* n x 3 row-major (local frames)                                 */
+    double *prev;        /* n x 3 column-major previous iterate (local frames)             */
+};
+
+/* ------------------------------------------------------------------ small helpers ------- */
+
+static void system_free(le_system *s)
+{
+    dk_constraints_free(s->con);
+    free(s->unknown_index);
+    free(s->unknowns);
+    free(s->target_of);
+    free(s->soft_w2);
+    dk_sparse_free(s->normal);
+    dk_cholesky_free(s->chol);
+    free(s->targets);
+    free(s->rhs);
+    memset(s, 0, sizeof *s);
+}
+
+static dk_status oom(dk_error *err, const char *what)
+{
+    return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "LaplacianEdit: out of memory (%s)", what);
+}
+
+void dk_laplacian_edit_default_options(dk_laplacian_edit_options *o)
+{
+    if (!o)
+        return;
+    o->weights = DK_LE_WEIGHTS_COTANGENT;
+    o->detail = DK_LE_DETAIL_FIXED;
+    o->constraints = DK_LE_CONSTRAINTS_HARD;
+    o->constraint_weight = 1.0;
+    o->tikhonov = 0.0;
+    o->local_frame_iterations = 1;
+    o->local_frame_tolerance = 1e-6;
+}
+
+static dk_status check_options(const dk_laplacian_edit_options *o, dk_error *err)
+{
+    if (o->weights != DK_LE_WEIGHTS_UNIFORM && o->weights != DK_LE_WEIGHTS_COTANGENT)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "LaplacianEdit: unknown weights %d (uniform = 0, cotangent = 1)",
+                            (int)o->weights);
+    if (o->detail != DK_LE_DETAIL_FIXED && o->detail != DK_LE_DETAIL_MEMBRANE &&
+        o->detail != DK_LE_DETAIL_LOCAL_FRAME)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "LaplacianEdit: unknown detail mode %d (fixed = 0, membrane = 1, "
+                            "local_frame = 2)", (int)o->detail);
+    if (o->constraints != DK_LE_CONSTRAINTS_HARD && o->constraints != DK_LE_CONSTRAINTS_SOFT)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "LaplacianEdit: unknown constraint mode %d (hard = 0, soft = 1)",
+                            (int)o->constraints);
+    if (!(isfinite(o->constraint_weight) && o->constraint_weight > 0.0))
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "LaplacianEdit: constraint_weight must be finite and > 0, got %g",
+                            o->constraint_weight);
+    if (!(isfinite(o->tikhonov) && o->tikhonov >= 0.0))
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "LaplacianEdit: tikhonov must be finite and >= 0, got %g",
+                            o->tikhonov);
+    if (o->local_frame_iterations < 0 || o->local_frame_iterations > 1000)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "LaplacianEdit: local_frame_iterations must be in [0, 1000], got %d",
+                            o->local_frame_iterations);
+    if (!(isfinite(o->local_frame_tolerance) && o->local_frame_tolerance >= 0.0))
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "LaplacianEdit: local_frame_tolerance must be finite and >= 0, "
+                            "got %g", o->local_frame_tolerance);
+    return DK_OK;
+}
+
+/* ------------------------------------------------------------------ the operator -------- */
+
+static dk_status build_operator(dk_laplacian_edit *le, dk_error *err)
+{
+    const dk_mesh *m = le->mesh;
+    const dk_index n = m->n_vertices;
+    double *w = NULL;
+    int64_t nnz = (int64_t)m->ring_start[n] + n;
+
+    le->a_start = malloc(sizeof(dk_index) * ((size_t)n + 1));
+    le->a_col = malloc(sizeof(dk_index) * (size_t)nnz);
+    le->a_val = malloc(sizeof(double) * (size_t)nnz);
+    if (!le->a_start || !le->a_col || !le->a_val)
+        return oom(err, "operator");
+    if (le->opt.weights == DK_LE_WEIGHTS_COTANGENT) {
+        w = malloc(sizeof(double) * ((size_t)m->n_edges + 1));
+        if (!w)
+            return oom(err, "cotangent weights");
+        dk_cotangent_weights(m, m->positions, w);
+    }
+    for (dk_index i = 0; i < n; i++) {
+        const dk_index b = m->ring_start[i], e = m->ring_start[i + 1], deg = e - b;
+        const dk_index o = b + i;
+        int uniform = (w == NULL);
+        double sum = 0.0;
+        le->a_start[i] = o;
+        le->a_col[o] = i;
+        le->a_val[o] = 1.0;
+        if (!uniform) {
+            for (dk_index k = b; k < e; k++)
+                sum += w[m->ring_edge[k]];
+            if (!(isfinite(sum) && sum > 1e-12 * (double)deg)) {
+                uniform = 1;
+                if (deg > 0)
+                    le->n_fallback++;
+            }
+        }
+        for (dk_index k = b; k < e; k++) {
+            le->a_col[o + 1 + (k - b)] = m->ring_index[k];
+            le->a_val[o + 1 + (k - b)] =
+                uniform ? -1.0 / (double)deg : -w[m->ring_edge[k]] / sum;
+        }
+    }
+    le->a_start[n] = (dk_index)nnz;
+    free(w);
+    return DK_OK;
+}
+
+/* y = A x for one coordinate (column of n). */
+static void apply_a(const dk_laplacian_edit *le, const double *x, double *y)
+{
+    for (dk_index i = 0; i < le->n; i++) {
+        double s = 0.0;
+        for (dk_index k = le->a_start[i]; k < le->a_start[i + 1]; k++)
+            s += le->a_val[k] * x[le->a_col[k]];
+        y[i] = s;
+    }
+}
+
+/* ------------------------------------------------------------------ local frames -------- */
+
+/* Area-weighted vertex normals (unnormalised: sums of face cross products) of the
+ * column-major positions x into le->normals (row-major). */
+static void vertex_normals(const dk_laplacian_edit *le, const double *x, double *nrm)
+{
+    const dk_mesh *m = le->mesh;
+    const dk_index n = le->n;
+    memset(nrm, 0, sizeof(double) * 3 * (size_t)n);
+    for (dk_index f = 0; f < m->n_faces; f++) {
+        const dk_index *t = m->faces + 3 * f;
+        double a[3], b[3], c[3];
+        for (int d = 0; d < 3; d++) {
+            a[d] = x[d * n + t[1]] - x[d * n + t[0]];
+            b[d] = x[d * n + t[2]] - x[d * n + t[0]];
+        }
+        c[0] = a[1] * b[2] - a[2] * b[1];
+        c[1] = a[2] * b[0] - a[0] * b[2];
+        c[2] = a[0] * b[1] - a[1] * b[0];
+        for (int k = 0; k < 3; k++)
+            for (int d = 0; d < 3; d++)
+                nrm[3 * t[k] + d] += c[d];
+    }
+}
+
+/* Frame (nh, u, bt) at vertex i from the raw normal and the edge to neighbour j; returns 0
+ * when degenerate. */
+static int make_frame(const dk_laplacian_edit *le, const double *x, dk_index i, dk_index j,
+                      const double *nraw, double nh[3], double u[3], double bt[3])
+{
+    const dk_index n = le->n;
+    double e[3], el2 = 0.0, nl = 0.0, dot = 0.0, ul = 0.0;
+    for (int d = 0; d < 3; d++) {
+        e[d] = x[d * n + j] - x[d * n + i];
+        el2 += e[d] * e[d];
+        nl += nraw[d] * nraw[d];
+    }
+    nl = sqrt(nl);
+    if (!(el2 > 0.0) || !(nl > 1e-14 * el2) || !isfinite(nl))
+        return 0;
+    for (int d = 0; d < 3; d++) {
+        nh[d] = nraw[d] / nl;
+        dot += e[d] * nh[d];
+    }
+    for (int d = 0; d < 3; d++) {
+        u[d] = e[d] - dot * nh[d];
+        ul += u[d] * u[d];
+    }
+    ul = sqrt(ul);
+    if (!(ul > 1e-8 * sqrt(el2)))
+        return 0;
+    for (int d = 0; d < 3; d++)
+        u[d] /= ul;
+    bt[0] = nh[1] * u[2] - nh[2] * u[1];
+    bt[1] = nh[2] * u[0] - nh[0] * u[2];
+    bt[2] = nh[0] * u[1] - nh[1] * u[0];
+    return 1;
+}
+
+static dk_status build_rest_frames(dk_laplacian_edit *le, dk_error *err)
+{
+    const dk_mesh *m = le->mesh;
+    const dk_index n = le->n;
+    le->frame_nb = malloc(sizeof(dk_index) * (size_t)n);
+    le->frame_coef = malloc(sizeof(double) * 3 * (size_t)n);
+    if (!le->frame_nb || !le->frame_coef)
+        return oom(err, "local frames");
+    vertex_normals(le, le->rest, le->normals);
+    for (dk_index i = 0; i < n; i++) {
+        const double *nraw = le->normals + 3 * i;
+        double nl = sqrt(nraw[0] * nraw[0] + nraw[1] * nraw[1] + nraw[2] * nraw[2]);
+        double best = INFINITY, nh[3], u[3], bt[3];
+        dk_index bestj = -1;
+        le->frame_nb[i] = -1;
+        le->frame_coef[3 * i] = le->frame_coef[3 * i + 1] = le->frame_coef[3 * i + 2] = 0.0;
+        if (!(nl > 0.0))
+            continue;
+        /* the neighbour whose edge is most orthogonal to the normal */
+        for (dk_index k = m->ring_start[i]; k < m->ring_start[i + 1]; k++) {
+            dk_index j = m->ring_index[k];
+            double e[3], el = 0.0, dot = 0.0;
+            for (int d = 0; d < 3; d++) {
+                e[d] = le->rest[d * n + j] - le->rest[d * n + i];
+                el += e[d] * e[d];
+                dot += e[d] * nraw[d];
+            }
+            el = sqrt(el);
+            if (el > 0.0 && fabs(dot) / (el * nl) < best) {
+                best = fabs(dot) / (el * nl);
+                bestj = j;
+            }
+        }
+        if (bestj < 0 || !make_frame(le, le->rest, i, bestj, nraw, nh, u, bt))
+            continue;
+        le->frame_nb[i] = bestj;
+        for (int d = 0; d < 3; d++) {
+            const double dl = le->delta_rest[d * n + i];
+            le->frame_coef[3 * i] += dl * nh[d];
+            le->frame_coef[3 * i + 1] += dl * u[d];
+            le->frame_coef[3 * i + 2] += dl * bt[d];
+        }
+    }
+    for (dk_index i = 0; i < n; i++)
+        if (le->frame_nb[i] < 0 && le->mesh->ring_start[i + 1] > le->mesh->ring_start[i])
+            le->n_degenerate_frames++;
+    return DK_OK;
+}
+
+/* delta := rest frame coordinates rotated into the frames of the positions le->x. */
+static void rotate_deltas(dk_laplacian_edit *le)
+{
+    const dk_index n = le->n;
+    vertex_normals(le, le->x, le->normals);
+    for (dk_index i = 0; i < n; i++) {
+        double nh[3], u[3], bt[3];
+        const double *c = le->frame_coef + 3 * i;
+        if (le->frame_nb[i] < 0 ||
+            !make_frame(le, le->x, i, le->frame_nb[i], le->normals + 3 * i, nh, u, bt)) {
+            for (int d = 0; d < 3; d++)
+                le->delta[d * n + i] = le->delta_rest[d * n + i];
+            continue;
+        }
+        for (int d = 0; d < 3; d++)
+            le->delta[d * n + i] = c[0] * nh[d] + c[1] * u[d] + c[2] * bt[d];
+    }
+}
+
+/* ------------------------------------------------------------------ the system ---------- */
+
+static dk_status build_system(dk_laplacian_edit *le, const dk_constraint_desc *desc,
+                              le_system *s, dk_error *err)
+{
+    const dk_mesh *m = le->mesh;
+    const dk_index n = le->n;
+    const int soft = le->opt.constraints == DK_LE_CONSTRAINTS_SOFT;
+    const double lambda = le->opt.constraint_weight, mu2 = le->opt.tikhonov * le->opt.tikhonov;
+    unsigned char *in_roi = NULL, *pinned = NULL;
+    dk_index *rows = NULL, *cols = NULL;
+    double *vals = NULL;
+    int64_t nt = 0, cap = 0;
+    dk_status st;
+
+    memset(s, 0, sizeof *s);
+    if (!desc)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "LaplacianEdit: constraints are NULL");
+    st = dk_constraints_create(m, desc, &s->con, err);
+    if (st != DK_OK)
+        return dk_error_prefix(err, "LaplacianEdit");
+    s->unknown_index = malloc(sizeof(dk_index) * (size_t)n);
+    s->unknowns = malloc(sizeof(dk_index) * (size_t)n + 1);
+    s->target_of = malloc(sizeof(dk_index) * (size_t)n);
+    s->soft_w2 = calloc((size_t)n + 1, sizeof(double));
+    s->targets = malloc(sizeof(double) * 3 * ((size_t)s->con->n_handle_vertices + 1));
+    in_roi = malloc((size_t)n + 1);
+    if (!s->unknown_index || !s->unknowns || !s->target_of || !s->soft_w2 || !s->targets ||
+        !in_roi) {
+        st = oom(err, "constraint maps");
+        goto fail;
+    }
+    memset(in_roi, desc->n_roi > 0 ? 0 : 1, (size_t)n);
+    for (dk_index k = 0; k < desc->n_roi; k++)
+        in_roi[desc->roi_vertices[k]] = 1;
+    for (dk_index i = 0; i < n; i++)
+        s->target_of[i] = -1;
+    for (dk_index k = 0; k < s->con->n_handle_vertices; k++) {
+        const dk_index v = s->con->handle_vertices[k];
+        s->target_of[v] = k;
+        for (int d = 0; d < 3; d++)
+            s->targets[3 * k + d] = m->positions[3 * v + d];
+    }
+    for (dk_index i = 0; i < n; i++) {
+        const dk_index role = s->con->role[i];
+        int unknown;
+        double w2 = 0.0;
+        if (role >= 0) {
+            const double hw = s->con->handle_weights[s->target_of[i]];
+            unknown = soft || hw < 1.0;
+            if (unknown)
+                w2 = (lambda * hw) * (lambda * hw);
+        } else if (role == DK_VERTEX_FIXED) {
+            unknown = soft && in_roi[i];
+            if (unknown)
+                w2 = lambda * lambda;
+        } else {
+            unknown = 1;
+        }
+        s->soft_w2[i] = w2;
+        if (w2 > 0.0)
+            s->n_soft++;
+        s->unknown_index[i] = unknown ? s->n_unknowns : -1;
+        if (unknown)
+            s->unknowns[s->n_unknowns++] = i;
+    }
+    if (s->n_unknowns == 0) {
+        st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                          "LaplacianEdit: no free vertices: every vertex is a handle, fixed "
+                          "or outside the region of interest");
+        goto fail;
+    }
+    /* Singular-system check: every component holding an unknown must be pinned by an
+     * eliminated vertex, a soft row or an isolated vertex (its row A_ii = 1 pins it). */
+    if (mu2 == 0.0) {
+        const dk_index nc = m->report.n_components > 0 ? m->report.n_components : 1;
+        pinned = calloc((size_t)nc, 1);
+        if (!pinned) {
+            st = oom(err, "component check");
+            goto fail;
+        }
+        for (dk_index i = 0; i < n; i++)
+            if (s->unknown_index[i] < 0 || s->soft_w2[i] > 0.0 ||
+                m->ring_start[i + 1] == m->ring_start[i])
+                pinned[m->component[i]] = 1;
+        for (dk_index i = 0; i < n; i++)
+            if (s->unknown_index[i] >= 0 && !pinned[m->component[i]]) {
+                st = dk_error_set(err, DK_ERR_DEGENERATE,
+                                  "LaplacianEdit: connected component %d (vertex %d) has no "
+                                  "handle or fixed vertex, so its position is undetermined; "
+                                  "constrain a vertex there, exclude it from the region of "
+                                  "interest or use tikhonov > 0",
+                                  (int)m->component[i], (int)i);
+                goto fail;
+            }
+    }
+    /* Normal equations: sum over rows r of a_r a_r^T on unknown columns, plus diagonals. */
+    for (dk_index r = 0; r < n; r++) {
+        int64_t c = 0;
+        for (dk_index k = le->a_start[r]; k < le->a_start[r + 1]; k++)
+            c += s->unknown_index[le->a_col[k]] >= 0;
+        cap += c * c;
+    }
+    cap += s->n_unknowns;
+    rows = malloc(sizeof(dk_index) * (size_t)cap);
+    cols = malloc(sizeof(dk_index) * (size_t)cap);
+    vals = malloc(sizeof(double) * (size_t)cap);
+    if (!rows || !cols || !vals) {
+        st = oom(err, "normal equations");
+        goto fail;
+    }
+    for (dk_index r = 0; r < n; r++)
+        for (dk_index k = le->a_start[r]; k < le->a_start[r + 1]; k++) {
+            const dk_index uk = s->unknown_index[le->a_col[k]];
+            if (uk < 0)
+                continue;
+            for (dk_index l = le->a_start[r]; l < le->a_start[r + 1]; l++) {
+                const dk_index ul = s->unknown_index[le->a_col[l]];
+                if (ul < 0)
+                    continue;
+                rows[nt] = uk;
+                cols[nt] = ul;
+                vals[nt] = le->a_val[k] * le->a_val[l];
+                nt++;
+            }
+        }
+    for (dk_index u = 0; u < s->n_unknowns; u++) {
+        rows[nt] = cols[nt] = u;
+        vals[nt] = s->soft_w2[s->unknowns[u]] + mu2;
+        nt++;
+    }
+    st = dk_sparse_from_triplets(s->n_unknowns, s->n_unknowns, nt, rows, cols, vals,
+                                 &s->normal, err);
+    if (st != DK_OK) {
+        dk_error_prefix(err, "LaplacianEdit normal equations");
+        goto fail;
+    }
+    s->rhs = malloc(sizeof(double) * 3 * (size_t)s->n_unknowns);
+    if (!s->rhs) {
+        st = oom(err, "right-hand sides");
+        goto fail;
+    }
+    free(rows);
+    free(cols);
+    free(vals);
+    free(in_roi);
+    free(pinned);
+    return DK_OK;
+fail:
+    free(rows);
+    free(cols);
+    free(vals);
+    free(in_roi);
+    free(pinned);
+    system_free(s);
+    return st;
+}
+
+static int same_pattern(const dk_sparse *a, const dk_sparse *b)
+{
+    if (a->n_rows != b->n_rows || a->n_cols != b->n_cols)
+        return 0;
+    if (memcmp(a->col_start, b->col_start, sizeof(dk_index) * ((size_t)a->n_cols + 1)) != 0)
+        return 0;
+    return memcmp(a->row_index, b->row_index,
+                  sizeof(dk_index) * (size_t)a->col_start[a->n_cols]) == 0;
+}
+
+static dk_status factor_new(dk_laplacian_edit *le, le_system *s, dk_error *err)
+{
+    dk_status st = dk_cholesky_analyze(s->normal, &s->chol, err);
+    if (st == DK_OK) {
+        le->analysis_count++;
+        st = dk_cholesky_factorize(s->chol, s->normal, err);
+        if (st == DK_OK)
+            le->factorization_count++;
+    }
+    if (st != DK_OK)
+        dk_error_prefix(err, "LaplacianEdit factorization");
+    return st;
+}
+
+/* ------------------------------------------------------------------ bind / rebind ------- */
+
+dk_status dk_laplacian_edit_bind(const dk_mesh *mesh, const dk_constraint_desc *desc,
+                                 const dk_laplacian_edit_options *options,
+                                 dk_laplacian_edit **out, dk_error *err)
+{
+    dk_laplacian_edit *le;
+    dk_status st;
+    dk_index n;
+
+    if (!out)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "LaplacianEdit bind: out is NULL");
+    *out = NULL;
+    if (!mesh || !desc)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "LaplacianEdit bind: mesh or constraints are NULL");
+    if (mesh->n_faces == 0)
+        return dk_error_set(err, DK_ERR_DEGENERATE,
+                            "LaplacianEdit bind: the mesh has no triangles");
+    if (!(mesh->bbox_diagonal > 0.0))
+        return dk_error_set(err, DK_ERR_DEGENERATE,
+                            "LaplacianEdit bind: the mesh's bounding box is a point (all %d "
+                            "vertices coincide)", (int)mesh->n_vertices);
+    le = calloc(1, sizeof *le);
+    if (!le)
+        return oom(err, "object");
+    le->mesh = mesh;
+    n = le->n = mesh->n_vertices;
+    if (options)
+        le->opt = *options;
+    else
+        dk_laplacian_edit_default_options(&le->opt);
+    st = check_options(&le->opt, err);
+    if (st != DK_OK)
+        goto fail;
+    le->rest = malloc(sizeof(double) * 3 * (size_t)n);
+    le->delta_rest = malloc(sizeof(double) * 3 * (size_t)n);
+    le->x = malloc(sizeof(double) * 3 * (size_t)n);
+    le->delta = malloc(sizeof(double) * 3 * (size_t)n);
+    le->r = malloc(sizeof(double) * (size_t)n);
+    le->normals = malloc(sizeof(double) * 3 * (size_t)n);
+    le->prev = malloc(sizeof(double) * 3 * (size_t)n);
+    if (!le->rest || !le->delta_rest || !le->x || !le->delta || !le->r || !le->normals ||
+        !le->prev) {
+        st = oom(err, "buffers");
+        goto fail;
+    }
+    for (dk_index i = 0; i < n; i++)
+        for (int d = 0; d < 3; d++)
+            le->rest[d * n + i] = mesh->positions[3 * i + d];
+    st = build_operator(le, err);
+    if (st != DK_OK)
+        goto fail;
+    for (int d = 0; d < 3; d++)
+        apply_a(le, le->rest + (size_t)d * n, le->delta_rest + (size_t)d * n);
+    if (le->opt.detail == DK_LE_DETAIL_LOCAL_FRAME) {
+        st = build_rest_frames(le, err);
+        if (st != DK_OK)
+            goto fail;
+    }
+    if (le->opt.detail == DK_LE_DETAIL_MEMBRANE)
+        memset(le->delta, 0, sizeof(double) * 3 * (size_t)n);
+    else
+        memcpy(le->delta, le->delta_rest, sizeof(double) * 3 * (size_t)n);
+    st = build_system(le, desc, &le->sys, err);
+    if (st != DK_OK)
+        goto fail;
+    st = factor_new(le, &le->sys, err);
+    if (st != DK_OK)
+        goto fail;
+    *out = le;
+    return DK_OK;
+fail:
+    dk_laplacian_edit_free(le);
+    return st;
+}
+
+dk_status dk_laplacian_edit_rebind(dk_laplacian_edit *le, const dk_constraint_desc *desc,
+                                   dk_error *err)
+{
+    le_system s;
+    dk_status st;
+
+    if (!le)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "LaplacianEdit rebind: object is NULL");
+    st = build_system(le, desc, &s, err);
+    if (st != DK_OK)
+        return st;
+    if (le->sys.chol && s.n_unknowns == le->sys.n_unknowns &&
+        memcmp(s.unknown_index, le->sys.unknown_index, sizeof(dk_index) * (size_t)le->n) == 0 &&
+        same_pattern(s.normal, le->sys.normal)) {
+        /* same unknowns: keep the symbolic analysis (and the factor if values agree) */
+        const int64_t nnz = dk_sparse_nnz(s.normal);
+        s.chol = le->sys.chol;
+        le->sys.chol = NULL;
+        if (memcmp(s.normal->values, le->sys.normal->values, sizeof(double) * (size_t)nnz)) {
+            st = dk_cholesky_factorize(s.chol, s.normal, err);
+            if (st != DK_OK) {
+                /* restore the previous factor so the object stays usable */
+                dk_error restore_err;
+                dk_error_clear(&restore_err);
+                le->sys.chol = s.chol;
+                s.chol = NULL;
+                if (dk_cholesky_factorize(le->sys.chol, le->sys.normal, &restore_err) != DK_OK) {
+                    dk_cholesky_free(le->sys.chol);
+                    le->sys.chol = NULL;
+                }
+                system_free(&s);
+                return dk_error_prefix(err, "LaplacianEdit rebind factorization");
+            }
+            le->factorization_count++;
+        }
+    } else {
+        st = factor_new(le, &s, err);
+        if (st != DK_OK) {
+            system_free(&s);
+            return st;
+        }
+    }
+    system_free(&le->sys);
+    le->sys = s;
+    if (le->opt.detail == DK_LE_DETAIL_MEMBRANE)
+        memset(le->delta, 0, sizeof(double) * 3 * (size_t)le->n);
+    else
+        memcpy(le->delta, le->delta_rest, sizeof(double) * 3 * (size_t)le->n);
+    return DK_OK;
+}
+
+/* ------------------------------------------------------------------ energy -------------- */
+
+/* E(x) for positions with element (i, d) at x[i * si + d * sd]. */
+static double energy_of(const dk_laplacian_edit *le, const double *x, size_t si, size_t sd)
+{
+    const dk_index n = le->n;
+    const le_system *s = &le->sys;
+    const double mu2 = le->opt.tikhonov * le->opt.tikhonov;
+    double e = 0.0;
+    for (dk_index i = 0; i < n; i++)
+        for (int d = 0; d < 3; d++) {
+            double v = -le->delta[(size_t)d * n + i];
+            for (dk_index k = le->a_start[i]; k < le->a_start[i + 1]; k++)
+                v += le->a_val[k] * x[(size_t)le->a_col[k] * si + d * sd];
+            e += v * v;
+        }
+    for (dk_index i = 0; i < n; i++) {
+        const int unknown = s->unknown_index[i] >= 0;
+        if (s->soft_w2[i] > 0.0) {
+            const dk_index t = s->target_of[i];
+            for (int d = 0; d < 3; d++) {
+                const double c = t >= 0 ? s->targets[3 * t + d] : le->rest[(size_t)d * n + i];
+                const double v = x[(size_t)i * si + d * sd] - c;
+                e += s->soft_w2[i] * v * v;
+            }
+        }
+        if (unknown && mu2 > 0.0)
+            for (int d = 0; d < 3; d++) {
+                const double v = x[(size_t)i * si + d * sd] - le->rest[(size_t)d * n + i];
+                e += mu2 * v * v;
+            }
+    }
+    return e;
+}
+
+dk_status dk_laplacian_edit_energy(const dk_laplacian_edit *le, const double *positions,
+                                   double *energy, dk_error *err)
+{
+    if (!le || !positions || !energy)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "LaplacianEdit energy: NULL argument");
+    *energy = energy_of(le, positions, 3, 1);
+    return DK_OK;
+}
+
+/* ------------------------------------------------------------------ solve --------------- */
+
+/* One linear solve with the current le->delta; writes the unknowns into le->x (whose
+ * eliminated entries already hold their values). */
+static dk_status linear_solve(dk_laplacian_edit *le, dk_error *err)
+{
+    const dk_index n = le->n;
+    le_system *s = &le->sys;
+    const dk_index nu = s->n_unknowns;
+    const double mu2 = le->opt.tikhonov * le->opt.tikhonov;
+    dk_status st;
+
+    for (int d = 0; d < 3; d++) {
+        const double *x = le->x + (size_t)d * n, *delta = le->delta + (size_t)d * n;
+        double *rhs = s->rhs + (size_t)d * nu;
+        for (dk_index i = 0; i < n; i++) {
+            double v = delta[i];
+            for (dk_index k = le->a_start[i]; k < le->a_start[i + 1]; k++) {
+                const dk_index j = le->a_col[k];
+                if (s->unknown_index[j] < 0)
+                    v -= le->a_val[k] * x[j];
+            }
+            le->r[i] = v;
+        }
+        for (dk_index u = 0; u < nu; u++) {
+            const dk_index i = s->unknowns[u];
+            double v = mu2 * le->rest[(size_t)d * n + i];
+            if (s->soft_w2[i] > 0.0) {
+                const dk_index t = s->target_of[i];
+                v += s->soft_w2[i] *
+                     (t >= 0 ? s->targets[3 * t + d] : le->rest[(size_t)d * n + i]);
+            }
+            rhs[u] = v;
+        }
+        for (dk_index i = 0; i < n; i++) {
+            const double ri = le->r[i];
+            if (ri == 0.0)
+                continue;
+            for (dk_index k = le->a_start[i]; k < le->a_start[i + 1]; k++) {
+                const dk_index u = s->unknown_index[le->a_col[k]];
+                if (u >= 0)
+                    rhs[u] += le->a_val[k] * ri;
+            }
+        }
+    }
+    st = dk_cholesky_solve(s->chol, s->rhs, 3, s->rhs, err);
+    if (st != DK_OK)
+        return dk_error_prefix(err, "LaplacianEdit solve");
+    for (int d = 0; d < 3; d++)
+        for (dk_index u = 0; u < nu; u++)
+            le->x[(size_t)d * n + s->unknowns[u]] = s->rhs[(size_t)d * nu + u];
+    return DK_OK;
+}
+
+dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const double *targets, int mode,
+                                  double *positions, dk_laplacian_edit_info *info,
+                                  dk_error *err)
+{
+    le_system *s;
+    dk_index n;
+    dk_status st;
+    int iterations = 0, converged = 1;
+    double last_change = 0.0;
+
+    if (!le || !targets || !positions)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "LaplacianEdit solve: NULL object, targets or positions");
+    if (mode != 0 && mode != 1)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "LaplacianEdit solve: mode must be 0 (positions) or 1 (transforms), "
+                            "got %d", mode);
+    s = &le->sys;
+    if (!s->chol)
+        return dk_error_set(err, DK_ERR_INTERNAL,
+                            "LaplacianEdit solve: no factorization (a failed rebind could not "
+                            "restore it); rebind first");
+    n = le->n;
+    st = dk_constraints_targets(s->con, le->mesh->positions, targets, mode, s->targets, err);
+    if (st != DK_OK)
+        return dk_error_prefix(err, "LaplacianEdit solve");
+    for (dk_index i = 0; i < n; i++) {
+        const dk_index t = s->target_of[i];
+        for (int d = 0; d < 3; d++)
+            le->x[(size_t)d * n + i] = (s->unknown_index[i] < 0 && t >= 0)
+                                           ? s->targets[3 * t + d]
+                                           : le->rest[(size_t)d * n + i];
+    }
+    if (le->opt.detail == DK_LE_DETAIL_MEMBRANE)
+        memset(le->delta, 0, sizeof(double) * 3 * (size_t)n);
+    else
+        memcpy(le->delta, le->delta_rest, sizeof(double) * 3 * (size_t)n);
+    st = linear_solve(le, err);
+    if (st != DK_OK)
+        return st;
+    iterations = 1;
+    if (le->opt.detail == DK_LE_DETAIL_LOCAL_FRAME) {
+        const double scale = le->mesh->bbox_diagonal;
+        converged = le->opt.local_frame_iterations == 0;
+        for (int it = 0; it < le->opt.local_frame_iterations; it++) {
+            memcpy(le->prev, le->x, sizeof(double) * 3 * (size_t)n);
+            rotate_deltas(le);
+            st = linear_solve(le, err);
+            if (st != DK_OK)
+                return st;
+            iterations++;
+            last_change = 0.0;
+            for (dk_index i = 0; i < n; i++) {
+                double d2 = 0.0;
+                for (int d = 0; d < 3; d++) {
+                    const double v = le->x[(size_t)d * n + i] - le->prev[(size_t)d * n + i];
+                    d2 += v * v;
+                }
+                if (d2 > last_change)
+                    last_change = d2;
+            }
+            last_change = sqrt(last_change) / scale;
+            converged = last_change <= le->opt.local_frame_tolerance;
+            if (converged)
+                break;
+        }
+    }
+    for (dk_index i = 0; i < n; i++)
+        for (int d = 0; d < 3; d++)
+            positions[3 * i + d] = le->x[(size_t)d * n + i];
+    if (info) {
+        info->energy = energy_of(le, le->x, 1, (size_t)n);
+        info->iterations = iterations;
+        info->converged = converged;
+        info->last_change = last_change;
+    }
+    return DK_OK;
+}
+
+/* ------------------------------------------------------------------ accessors ----------- */
+
+dk_index dk_laplacian_edit_n_handle_vertices(const dk_laplacian_edit *le)
+{
+    return le && le->sys.con ? le->sys.con->n_handle_vertices : 0;
+}
+
+dk_index dk_laplacian_edit_n_handles(const dk_laplacian_edit *le)
+{
+    return le && le->sys.con ? le->sys.con->n_handles : 0;
+}
+
+void dk_laplacian_edit_get_stats(const dk_laplacian_edit *le, dk_laplacian_edit_stats *st)
+{
+    if (!st)
+        return;
+    memset(st, 0, sizeof *st);
+    if (!le)
+        return;
+    st->n_unknowns = le->sys.n_unknowns;
+    st->n_soft_rows = le->sys.n_soft;
+    st->n_cotangent_fallback = le->n_fallback;
+    st->n_degenerate_frames = le->n_degenerate_frames;
+    st->analysis_count = le->analysis_count;
+    st->factorization_count = le->factorization_count;
+}
+
+void dk_laplacian_edit_free(dk_laplacian_edit *le)
+{
+    if (!le)
+        return;
+    system_free(&le->sys);
+    free(le->a_start);
+    free(le->a_col);
+    free(le->a_val);
+    free(le->delta_rest);
+    free(le->rest);
+    free(le->frame_nb);
+    free(le->frame_coef);
+    free(le->x);
+    free(le->delta);
+    free(le->r);
+    free(le->normals);
+    free(le->prev);
+    free(le);
+}
