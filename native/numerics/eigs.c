@@ -831,6 +831,7 @@ dk_status dk_eigs_smallest(const dk_sparse *l, const double *mass, int k,
         if (st != DK_OK) goto done;
     }
     if (n_converged) *n_converged = k;
+    dk_error_clear(err); /* drop messages of retried attempts */
     goto done;
 
 partial: {
