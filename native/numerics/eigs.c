@@ -14,25 +14,31 @@
  * L - sigma M, about lmax / |sigma| ~ 1e6, costs at most ~6 digits in directions of the
  * near-null space, which the Rayleigh quotients computed afterwards do not inherit.
  *
+ * Certification (every band, the single band included). Lanczos finds one vector per
+ * eigenspace from its start vector; further copies of a multiple eigenvalue only appear through
+ * rounding, and can be missed. So after each run tau is put in the highest spectral gap
+ * (relative width > 1e-6) of the run's results and L - tau M is factored as LDL'
+ * (dk_cholesky_analyze_indefinite; one symbolic analysis shared by every shift): by
+ * Sylvester's law of inertia its negative pivots count the eigenvalues below tau exactly.
+ * When the accepted pairs fall short, an ARPACK run around the same shift with OP deflated
+ * against the pairs already found (P OP, P the M-orthogonal projector off them) returns the
+ * missing copies; a surplus (a duplicate) is an error. Pairs above tau are dropped (the next
+ * band finds them again), so everything accepted is certified complete below its tau.
+ *
  * Many eigenpairs (Vallet and Levy 2008): when k > band_size, later bands use a shift
- * sigma_b placed beyond the last accepted eigenvalue lambda_top, so that the window of the
- * nev eigenvalues nearest sigma_b reaches back below lambda_top (overlap). L - sigma_b M is
- * then indefinite: it is factored as LDL' (dk_cholesky_analyze_indefinite, symbolic analysis
- * shared by all bands), whose negative pivots count the eigenvalues below sigma_b (Sylvester's
- * law of inertia). Merging a band:
- *  - results below lambda_top - zeta are known already and dropped (zeta: cluster tolerance);
- *  - results within zeta of lambda_top (a cluster possibly cut by the previous band's edge)
- *    are M-projected against the accepted vectors of that cluster; directions with an
- *    M-norm^2 above 1/2 after projection are new (the rest duplicates), and a Rayleigh-Ritz
- *    step on the union re-M-orthogonalises the cluster;
+ * sigma_b placed beyond the last accepted eigenvalue lambda_top, from the local spacing delta
+ * of the accepted ones, so that the window of the nev eigenvalues nearest sigma_b reaches
+ * back about nev/5 eigenvalues below lambda_top (overlap). L - sigma_b M is indefinite and
+ * factored as LDL'. The window must reach below lambda_top and hold a gap above it, else the
+ * shift is moved down and the band widened by half (a cluster larger than the band) and
+ * redone. Merging a certified band:
+ *  - results below lambda_top - zeta (zeta = delta / 10) are known already: dropped;
+ *  - results within zeta of lambda_top are M-projected against the accepted vectors of that
+ *    cluster; directions with an M-norm^2 above 1/2 after projection are new (the rest
+ *    duplicates), and a Rayleigh-Ritz step on the union re-M-orthogonalises the cluster;
  *  - results above lambda_top + zeta are new.
- * Before accepting a band, the count of eigenvalues below sigma_b must equal the inertia of
- * the factor: a skipped or duplicated eigenvalue fails the check and the band is retried with
- * a larger Krylov space and another start vector. The window must also reach below lambda_top
- * (else the shift is moved down and the band redone). At the end one more LDL' factorization
- * at a shift in a spectral gap just above the k-th eigenvalue certifies that no eigenvalue
- * below it was missed (single-band runs included), and the k vectors are M-orthonormalised
- * (Cholesky QR) as a whole.
+ * At the end the k vectors are M-orthonormalised together (Cholesky QR), which removes the
+ * small cross-band inner products left by the per-band accuracy.
  *
  * ARPACK's Fortran SAVE variables make these calls non-reentrant (see the header); ARPACK's
  * random start vector (another SAVEd state) is avoided by passing our own deterministic
@@ -406,7 +412,7 @@ static dk_status merge_band(eig_ctx *c, store *s, const store *bd, double zeta,
         *n_below = below;
         goto done;
     }
-    if (s->m - p + (p + r) + (nb - j1) > s->cap) {
+    if (s->m + r > s->cap) {
         st = dk_error_set(err, DK_ERR_INTERNAL, "eigs: accepted store overflow");
         goto done;
     }
@@ -464,7 +470,8 @@ static dk_status merge_band(eig_ctx *c, store *s, const store *bd, double zeta,
         }
         s->m = p0 + w;
     }
-    for (int j = j1; j < nb; j++) {
+    /* new pairs beyond the store's room are not needed (the store holds k + margin) */
+    for (int j = j1; j < nb && s->m < s->cap; j++) {
         memcpy(s->vec + (size_t)s->m * n, bd->vec + (size_t)j * n, (size_t)n * sizeof(double));
         s->val[s->m++] = bd->val[j];
     }
@@ -725,7 +732,8 @@ dk_status dk_eigs_smallest(const dk_sparse *l, const double *mass, int k,
     /* room for bands grown up to twice band_size (big clusters) plus deflated extras */
     bd.cap = (nev0 > 2 * o.band_size ? nev0 : 2 * o.band_size) + 32;
     if (bd.cap > n) bd.cap = (int)n;
-    s.cap = k + bd.cap;
+    /* accepted pairs: bands stop adding new ones once k are there (plus a cluster's RR) */
+    s.cap = single ? bd.cap : (k + 16 > bd.cap ? k + 16 : bd.cap);
     if (s.cap > n) s.cap = (int)n;
     s.val = malloc((size_t)s.cap * sizeof(double));
     s.vec = malloc((size_t)n * s.cap * sizeof(double));
