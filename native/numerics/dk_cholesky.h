@@ -3,6 +3,10 @@
  * dk_cholesky wraps one CHOLMOD context (no global state): analyze once, factorize
  * numerically as often as the values change (same pattern), solve many right-hand sides at
  * once. CHOLMOD's printing is switched off; its failures come back as dk_status codes.
+ * Ordering AMD; simplicial or supernodal LL' chosen by CHOLMOD from the flops per factor entry
+ * (switch at 100: simplicial on surface meshes up to ~10^5 vertices, where it is 2-3x
+ * faster; supernodal beyond). Armadillo (43k vertices, 2 cores): analyze 0.03 s, factorize
+ * 0.04 s, 3-RHS solve ~3.5 ms.
  */
 #ifndef DK_CHOLESKY_H
 #define DK_CHOLESKY_H

@@ -8,6 +8,13 @@
  * new shift per band (Vallet and Levy 2008, "Spectral geometry processing with manifold
  * harmonics"), each band a small ARPACK run, so hundreds of eigenpairs stay practical.
  *
+ * Completeness: every band is certified by the inertia of an LDL' factorization of
+ * L - tau M (tau in a spectral gap at the band's top: Sylvester's law counts the eigenvalues
+ * below tau), and copies of multiple eigenvalues that Lanczos missed are recovered by a
+ * deflated run, so no eigenvalue below the k-th is skipped or duplicated. Results are
+ * deterministic (fixed start vectors). Measured on the 43k-vertex armadillo (2 cores):
+ * 50 pairs ~1.0-1.3 s, 300 pairs ~7-8.5 s with the default band_size.
+ *
  * ARPACK keeps internal SAVE variables: calls are not reentrant across threads. Callers that
  * may run concurrently (the Python module) serialise eigen computations themselves.
  */
@@ -25,7 +32,8 @@ extern "C" {
 typedef struct dk_eigs_options {
     double tolerance;    /**< ARPACK relative tolerance (default 1e-10)                   */
     int max_iterations;  /**< ARPACK restarts per band (default 1000)                      */
-    int band_size;       /**< eigenpairs per band (default 50); k <= band_size: one band   */
+    int band_size;       /**< eigenpairs per band (default 50; values below 16 are raised
+                              to 16); k <= band_size: one band                            */
     dk_progress_fn progress; /**< may be NULL                                             */
     void *progress_user;
 } dk_eigs_options;
