@@ -404,6 +404,9 @@ def evaluate_object(obj, depsgraph=None, check_groups=False, cold=False):
     for d in obj.deformkit.deformers:
         if not d.bound:
             continue
+        mod = geonodes.find_modifier(obj, d)
+        if mod is None or not (mod.show_viewport or mod.show_render):
+            continue  # nothing would show it (e.g. replaced by a baked cache)
         try:
             if solve(obj, d, depsgraph, cold=cold, check_groups=check_groups) is not None:
                 if d.status_is_error or not d.status.startswith("bound"):

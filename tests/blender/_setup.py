@@ -134,27 +134,38 @@ def grid_setup(method="ARAP", nx=12, ny=6, handle_at=None):
 
 
 def run_in_ui(fn, results, delay=1.0):
-    """For tests that need a window (undo, screenshots): run under
-    `xvfb-run -a blender --factory-startup --python FILE`. Calls fn() from a timer with a
-    window/area context, then quits with the results' exit code."""
+    """For tests that need a window (undo, modal operators, screenshots): run under
+    `xvfb-run -a blender --factory-startup [--enable-event-simulate] --python FILE`.
+    Calls fn() from a timer with a window/area context; if fn is a generator, each value it
+    yields is a delay in seconds before it is resumed (so modal operators can run in between).
+    Quits with the results' exit code."""
+    import types
+    state = {"gen": None}
+
+    def _quit():
+        print("%s: %d passed, %d failed" % (results.name, results.passed, results.failed))
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(1 if (results.failed or results.passed == 0) else 0)
+
     def _tick():
-        code = 1
         try:
-            wm = bpy.context.window_manager
-            win = wm.windows[0]
-            area = max(win.screen.areas, key=lambda a: a.width * a.height)
-            with bpy.context.temp_override(window=win, area=area, screen=win.screen):
-                fn()
+            ctx = ui_context()
+            with bpy.context.temp_override(**ctx):
+                if state["gen"] is None:
+                    r = fn()
+                    if not isinstance(r, types.GeneratorType):
+                        _quit()
+                    state["gen"] = r
+                try:
+                    return float(next(state["gen"]))
+                except StopIteration:
+                    _quit()
         except Exception:
             results.failed += 1
             traceback.print_exc()
-        finally:
-            print("%s: %d passed, %d failed" % (results.name, results.passed, results.failed))
-            code = 1 if (results.failed or results.passed == 0) else 0
-            sys.stdout.flush()
-            sys.stderr.flush()
-            os._exit(code)
-    bpy.app.timers.register(_tick, first_interval=delay)
+            _quit()
+    bpy.app.timers.register(_tick, first_interval=delay, persistent=True)
 
 
 def ui_context():

@@ -32,8 +32,8 @@ run() {  # run NAME COMMAND...
 }
 for t in "$here"/test_addon_*.py; do
   name="$(basename "$t" .py)"
-  if [ "$name" = test_addon_undo ]; then
-    run "$name" xvfb-run -a blender --factory-startup --python "$t"
+  if [ "$name" = test_addon_undo ] || [ "$name" = test_addon_modal ]; then
+    run "$name" xvfb-run -a blender --factory-startup --enable-event-simulate --python "$t"
   else
     run "$name" blender -b --factory-startup --python-exit-code 1 --python "$t"
   fi

@@ -1,0 +1,71 @@
+"""The bake operator's UI path (needs a window: run under
+`xvfb-run -a blender --factory-startup --enable-event-simulate --python FILE`): invoked from the
+UI it bakes frame by frame from a timer (progress in the status bar), and Esc cancels it,
+leaving no partial file and no Mesh Cache modifier."""
+import os
+import sys
+import time
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import _setup as S  # noqa: E402
+import bpy  # noqa: E402
+from addon import pc2  # noqa: E402
+
+R = S.Results("test_addon_modal")
+MID = next((m.id for m in S.methods.METHODS if S.native.has_class(m.native_class)), "ARAP")
+OUT = os.path.join(S.OUTPUT, "modal.pc2")
+
+
+def scene():
+    S.reset_scene()
+    with bpy.context.temp_override(**S.ui_context()):
+        obj, d, e, fixed, handle = S.grid_setup(MID)
+        bpy.context.scene.frame_set(1)
+        bpy.ops.deformkit.bind()
+        e.keyframe_insert("location", frame=1)
+        e.location.z += 0.5
+        e.keyframe_insert("location", frame=60)
+        bpy.context.scene.frame_set(1)
+    return obj
+
+
+def main():
+    for p in (OUT, OUT + ".part"):
+        if os.path.exists(p):
+            os.remove(p)
+    scene()
+    with bpy.context.temp_override(**S.ui_context()):
+        r = bpy.ops.deformkit.bake("INVOKE_DEFAULT", mode="PC2", frame_start=1, frame_end=30,
+                                   filepath=OUT)
+    R.check("invoke starts a modal bake", r == {"RUNNING_MODAL"}, r)
+    R.check("UI stays responsive (operator returned before the bake ended)", not os.path.exists(OUT))
+    t0 = time.time()
+    while not os.path.exists(OUT) and time.time() - t0 < 60:
+        yield 0.1
+    R.check("modal bake finished", os.path.exists(OUT))
+    if os.path.exists(OUT):
+        R.check("30 frames in the cache", pc2.read_header(OUT)["samples"] == 30)
+    obj = bpy.data.objects["Grid"]
+    R.check("Mesh Cache modifier added", any(m.type == "MESH_CACHE" for m in obj.modifiers))
+    R.check("frame restored", bpy.context.scene.frame_current == 1)
+    R.check("handlers re-enabled", S.handlers.enabled[0])
+
+    os.remove(OUT)
+    scene()
+    with bpy.context.temp_override(**S.ui_context()):
+        r = bpy.ops.deformkit.bake("INVOKE_DEFAULT", mode="PC2", frame_start=1, frame_end=5000,
+                                   filepath=OUT)
+    yield 0.3
+    win = bpy.context.window_manager.windows[0]
+    win.event_simulate(type="ESC", value="PRESS")
+    win.event_simulate(type="ESC", value="RELEASE")
+    yield 0.5
+    obj = bpy.data.objects["Grid"]
+    R.check("Esc cancels: no cache file", not os.path.exists(OUT) and not os.path.exists(OUT + ".part"))
+    R.check("Esc cancels: no Mesh Cache modifier", not any(m.type == "MESH_CACHE" for m in obj.modifiers))
+    R.check("Esc cancels: frame restored, handlers on",
+            bpy.context.scene.frame_current == 1 and S.handlers.enabled[0], bpy.context.scene.frame_current)
+    gn = S.geonodes.find_modifier(obj, obj.deformkit.deformers[0])
+    R.check("Esc cancels: DeformKit modifier still shown", gn.show_viewport)
+
+
+S.run_in_ui(main, R)
