@@ -515,14 +515,14 @@ static dk_status m_orthonormalise(const double *mass, dk_index n, int k, double 
 }
 
 /* Local mean spacing of the top accepted eigenvalues. */
-static double spacing(const store *s, int window)
+static double spacing(const store *s, int window, double floor)
 {
     const int m = s->m;
     const int q = m - 1 < window ? m - 1 : window;
     double d = q > 0 ? (s->val[m - 1] - s->val[m - 1 - q]) / q : 0.0;
     const double avg = s->val[m - 1] / m;
     if (!(d > 0.25 * avg)) d = fmax(d, avg);
-    return d;
+    return fmax(d, floor);
 }
 
 /* ------------------------------------------------------------------ entry point --------- */
@@ -635,7 +635,7 @@ static int gap_below(const double *val, int from, double gap_tol)
  * around sigma (the band's shift, factor `chol`, refactored first when it is the LDL' one
  * that tau used). `*j_out` gets how many of bd's pairs lie below tau (those are certified),
  * or 0 when tau cannot be put above the accepted ones plus `min_above` (no progress).
- * With `strict` = 0 a band without any gap is accepted uncertified (all of it). */
+ * Without a gap in the window, tau goes just above the window's top. */
 static dk_status certify_band(eig_ctx *c, dk_cholesky *chol, double sigma, const store *s,
                               store *bd, double zeta, double gap_tol, double min_above,
                               int *j_out, double *scratch, dk_error *err)
@@ -648,15 +648,28 @@ static dk_status certify_band(eig_ctx *c, dk_cholesky *chol, double sigma, const
     }
     const double radius = fmax(fabs(sigma - lo_win), fabs(hi_win - sigma));
     for (int rep = 0;; rep++) {
-        const int j = gap_below(bd->val, bd->m - 1, gap_tol);
-        if (j <= 0 || !(bd->val[j - 1] > min_above)) return DK_OK; /* no progress possible */
-        const double tau = 0.5 * (bd->val[j] + bd->val[j - 1]);
+        int j = gap_below(bd->val, bd->m - 1, gap_tol);
+        double tau;
+        if (j > 0 && bd->val[j - 1] > min_above) {
+            tau = 0.5 * (bd->val[j] + bd->val[j - 1]);
+        } else {
+            /* No gap above the accepted ones inside the window (one cluster, or the top of
+             * the spectrum): certify the whole window with tau just above its top; an
+             * eigenvalue in between shows up as missing and is searched for. */
+            j = bd->m;
+            if (!(bd->val[j - 1] > min_above)) return DK_OK; /* no progress possible */
+            tau = hi_win + fmax(gap_tol, 1e-8 * fabs(hi_win));
+        }
         dk_index neg = 0;
         dk_status st = ctx_factor(c, tau, 1, &neg, err);
         if (st != DK_OK) return st;
         int below = 0;
         if (s->m > 0) {
+            /* count with the band's pairs below tau only (those above are dropped) */
+            const int m_full = bd->m;
+            bd->m = j;
             st = merge_band(c, (store *)s, bd, zeta, tau, 0, &below, err);
+            bd->m = m_full;
             if (st != DK_OK) return st;
         } else {
             below = j;
@@ -782,22 +795,25 @@ dk_status dk_eigs_smallest(const dk_sparse *l, const double *mass, int k,
         if (nev > o.band_size) nev = o.band_size;
         if (nev > n - 1) nev = (int)n - 1;
         const double top = s.val[s.m - 1];
-        const double delta = spacing(&s, nev / 2);
+        /* floor: the mean spacing of the whole spectrum (Weyl), for a degenerate start */
+        const double delta = spacing(&s, nev / 2, mean / n);
         const double zeta = 0.1 * delta + 100.0 * c.tol * fabs(top);
         double sigma = top + fmax(1.0, 0.5 * nev - ov) * delta;
         int accepted = 0;
-        for (int attempt = 0; attempt < 6 && !accepted; attempt++) {
+        for (int attempt = 0; attempt < 8 && !accepted; attempt++) {
             st = ctx_factor(&c, sigma, 1, NULL, err);
             if (st != DK_OK) goto partial;
             st = run_band(&c, c.ldl, sigma, nev, ncv_for(nev, n, attempt > 0), &bd, scratch,
                           err);
-            if (st == DK_ERR_NO_CONVERGENCE && attempt < 5) continue;
+            if (st == DK_ERR_NO_CONVERGENCE && attempt < 7) continue;
             if (st != DK_OK) goto partial;
             int j = 0;
             if (bd.val[0] < top - zeta) {
-                st = certify_band(&c, c.ldl, sigma, &s, &bd, zeta,
-                                  1e-6 * fmax(bd.val[bd.m - 1], 1e-6 * mean), top + zeta, &j,
-                                  scratch, err);
+                /* progress: tau must lie above an eigenvalue distinct from lambda_top by
+                 * more than the accuracy (duplicates of lambda_top agree to ~1e-10) */
+                const double gap_tol = 1e-6 * fmax(bd.val[bd.m - 1], 1e-6 * mean);
+                st = certify_band(&c, c.ldl, sigma, &s, &bd, zeta, gap_tol,
+                                  top + 1e-3 * gap_tol, &j, scratch, err);
                 if (st != DK_OK && st != DK_ERR_NO_CONVERGENCE) goto partial;
             }
             if (j == 0 || st != DK_OK) {
@@ -805,7 +821,16 @@ dk_status dk_eigs_smallest(const dk_sparse *l, const double *mass, int k,
                  * above it (a dense cluster), or failed its inertia check: move the shift
                  * down next to lambda_top and widen the band, which must hold the whole
                  * cluster plus the overlap. */
-                if (bd.val[0] >= top - zeta) sigma -= (bd.val[0] - top) + ov * delta;
+                const double lo_win = bd.val[0], hi_win = bd.val[bd.m - 1];
+                if (lo_win < top - zeta && hi_win <= top + 1e-9 * fmax(fabs(top), mean)) {
+                    /* Nothing above lambda_top within the window's radius: a wide spectral
+                     * gap (or the top of the spectrum). Jump the shift over the empty part;
+                     * the next window then holds eigenvalues on both sides of the gap. */
+                    sigma += fmax(sigma - lo_win, hi_win - sigma);
+                    st = DK_OK;
+                    continue;
+                }
+                if (lo_win >= top - zeta) sigma -= (lo_win - top) + ov * delta;
                 if (sigma <= top) sigma = top + 0.5 * delta;
                 nev += nev / 2;
                 if (nev > bd.cap - 8) nev = bd.cap - 8;
@@ -817,8 +842,17 @@ dk_status dk_eigs_smallest(const dk_sparse *l, const double *mass, int k,
             }
             bd.m = j; /* keep the certified pairs, below tau */
             int below = 0;
+            const int m_before = s.m;
             st = merge_band(&c, &s, &bd, zeta, 0.0, 1, &below, err);
             if (st != DK_OK) goto partial;
+            if (s.m == m_before) { /* nothing new (cannot happen with a certified band) */
+                nev += nev / 2;
+                if (nev > bd.cap - 8) nev = bd.cap - 8;
+                if (nev > n - 1) nev = (int)n - 1;
+                st = dk_error_set(err, DK_ERR_NO_CONVERGENCE, "eigs: band %d near lambda %g "
+                                  "added no eigenvalue", band, top);
+                continue;
+            }
             accepted = 1;
         }
         if (!accepted) {

@@ -434,6 +434,14 @@ static void test_against_dense(void)
     CHECK(problem_make(3, 1.0, 0.1, &p));
     if (p.l) check_against_dense(&p, 150, 30, "bumpy sphere, bands of 30");
     problem_free(&p);
+    /* the whole spectrum (k = n - 1) in bands: big degenerate clusters, a wide spectral gap
+     * (64 -> 86) that bands must jump, and the top of the spectrum */
+    CHECK(problem_make(2, 1.0, 0.0, &p));
+    if (p.l) check_against_dense(&p, p.n - 1, 16, "round sphere, whole spectrum in bands");
+    problem_free(&p);
+    CHECK(problem_make(1, 1.0, 0.0, &p));
+    if (p.l) check_against_dense(&p, p.n - 1, 16, "icosahedron level 1, whole spectrum");
+    problem_free(&p);
 }
 
 static void test_two_components(void)
