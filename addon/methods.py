@@ -84,6 +84,7 @@ METHODS = [
         native_class="LaplacianEdit",
         description="Laplacian surface editing: one linear solve per update",
         icon="MOD_SMOOTH",
+        maps=("handle_weights",),
         options=[
             Option("weights", "ENUM", "cotangent", "Weights", "Laplacian weights",
                    items=_e("cotangent", "uniform")),
@@ -93,9 +94,12 @@ METHODS = [
             Option("constraints", "ENUM", "hard", "Constraints", "Hard or least-squares handles",
                    items=_e("hard", "soft")),
             Option("constraint_weight", "FLOAT", 1.0, "Constraint Weight",
-                   "Weight of soft constraints", min=0.0, max=1e6),
+                   "Weight of soft constraints (and of handle vertices with weight < 1)",
+                   min=1e-6, max=1e6),
             Option("tikhonov", "FLOAT", 0.0, "Regularization", "Tikhonov regularization",
                    min=0.0, max=1e6),
+            Option("local_frame_iterations", "INT", 1, "Frame Iterations",
+                   "Local frame: frame updates after the first solve", min=0, max=1000),
         ],
     ),
     Method(
@@ -108,8 +112,9 @@ METHODS = [
         options=[
             Option("distance", "ENUM", "hops", "Distance", "How distance to a handle is measured",
                    items=_e("hops", "euclidean", "geodesic")),
-            Option("range", "FLOAT", 10.0, "Range", "Falloff range (hops or scene units)",
-                   min=0.0, max=1e9),
+            Option("range", "FLOAT", 0.0, "Range",
+                   "Falloff range: edges for hops, else a length (0: 10 hops or 10 mean edge "
+                   "lengths)", min=0.0, max=1e9),
             Option("k", "FLOAT", 0.0, "Shape", "Falloff shape exponent", min=-100.0, max=100.0),
         ],
     ),

@@ -205,7 +205,16 @@ def collect(obj, d):
         seen[h.vertex_group] = h.name
         handles.append(idx)
         weights.append(w if h.use_weights else np.ones(len(idx)))
-    fixed = roi = stiffness = None
+    if len(handles) > 1:
+        allh = np.concatenate(handles)
+        u, c = np.unique(allh, return_counts=True)
+        if (c > 1).any():
+            v = int(u[c > 1][0])
+            owners = [h.name for h, idx in zip(d.handles, handles) if v in idx]
+            raise DeformKitError("handles '%s' and '%s' share %d vertices (first: vertex %d): "
+                                 "a vertex can follow one handle only"
+                                 % (owners[0], owners[1], int((c > 1).sum()), v))
+    fixed = roi = None
     if d.fixed_group:
         fixed = groups[d.fixed_group][0]
         if len(fixed) == 0:

@@ -69,6 +69,13 @@ def test_overlap_fixed():
     expect_error("handle overlapping fixed", bpy.ops.deformkit.bind, "overlaps the fixed group")
 
 
+def test_handles_overlap():
+    obj, d, e, fixed, handle = fresh()
+    S.group(obj, "tip2", [int(handle[0]), int(handle[0]) - 3])
+    bpy.ops.deformkit.add_handle(vertex_group="tip2", target=e.name)
+    expect_error("two handles sharing a vertex", bpy.ops.deformkit.bind, "share 1 vertices")
+
+
 def test_deleted_target_after_bind():
     obj, d, e, fixed, handle = fresh()
     bpy.ops.deformkit.bind()
@@ -182,7 +189,7 @@ def test_add_handle_from_selection():
                  bpy.ops.deformkit.add_handle_from_selection, "Edit Mode")
 
 
-for t in (test_no_handles, test_missing_group, test_empty_group, test_no_target, test_overlap_fixed,
+for t in (test_no_handles, test_missing_group, test_empty_group, test_no_target, test_overlap_fixed, test_handles_overlap,
           test_deleted_target_after_bind, test_non_mesh, test_no_faces, test_topology_change,
           test_edit_mode_is_skipped, test_no_deformer, test_add_handle_from_selection):
     R.run(t)
