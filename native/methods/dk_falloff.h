@@ -21,11 +21,13 @@
  *   targets (mode 0): vertex v moves by S(d_g(v)) * D_g(l), where D_g(l) = w_l (c_l - p_l)
  *     is the (weighted) displacement of l, v's nearest vertex of group g. "Nearest" is in
  *     the chosen distance, except for GEODESIC where the heat method yields distances only:
- *     l is then the nearest vertex along edges (Dijkstra) and d the heat distance. Ties are
- *     broken by the lower position in the handle list.
- *   transforms (mode 1): vertex v moves by S(d_g(v)) * (T_g p_v - p_v), i.e. the transform
- *     is blended into the identity by S (p' = p + S (T p - p)), the natural generalisation
- *     (for a pure translation both modes agree).
+ *     l is then the nearest vertex along edges (Dijkstra) and d the heat distance. Ties in
+ *     the distance (frequent with hops) go to the handle vertex closer in straight line,
+ *     then to the lower position in the handle list.
+ *   transforms (mode 1): vertex v moves by S(d_g(v)) * w_l * (T_g p_v - p_v), i.e. the
+ *     transform is blended into the identity by S (p' = p + S (T p - p)), the natural
+ *     generalisation; w_l is the handle weight of the same nearest vertex l, so that for a
+ *     pure translation both modes agree exactly.
  *   Several groups: their displacements are summed (each group's influence is its own
  *   falloff; overlapping ranges add up, as stacked Blender hooks do).
  * Handle vertices move by w (c - p) (per-vertex handle weight w in (0,1], as Blender's hook

@@ -62,109 +62,133 @@ double dk_falloff_profile(double i, double n, double k)
 
 /* ------------------------------------------------------------------ labelled search ----- */
 /* Multi-source Dijkstra along edges (unit weights for hops) that records, for each vertex,
- * the source it is nearest to; ties by the lower source position. Keys are (distance,
- * label) pairs in a binary heap with lazy deletion. */
+ * the source it is nearest to. Ties in the distance (frequent with hops) go to the source
+ * that is closer in straight line, then to the lower position in the handle list. Keys are
+ * (distance, straight-line distance, label) triples in a growable binary heap with lazy
+ * deletion. */
 
 typedef struct heap_item {
-    double d;
+    double d, e;
     dk_index label, v;
 } heap_item;
 
+typedef struct heap {
+    heap_item *h;
+    int64_t size, cap;
+} heap;
+
 static int item_less(const heap_item *a, const heap_item *b)
 {
-    return a->d < b->d || (a->d == b->d && a->label < b->label);
+    if (a->d != b->d)
+        return a->d < b->d;
+    if (a->e != b->e)
+        return a->e < b->e;
+    return a->label < b->label;
 }
 
-static void heap_push(heap_item *h, int64_t *size, heap_item it)
+static int heap_push(heap *hp, heap_item it)
 {
-    int64_t i = (*size)++;
+    int64_t i;
+    if (hp->size == hp->cap) {
+        int64_t nc = hp->cap ? 2 * hp->cap : 64;
+        heap_item *nh = realloc(hp->h, sizeof(heap_item) * (size_t)nc);
+        if (!nh)
+            return -1;
+        hp->h = nh;
+        hp->cap = nc;
+    }
+    i = hp->size++;
     while (i > 0) {
         int64_t p = (i - 1) / 2;
-        if (!item_less(&it, &h[p]))
+        if (!item_less(&it, &hp->h[p]))
             break;
-        h[i] = h[p];
+        hp->h[i] = hp->h[p];
         i = p;
     }
-    h[i] = it;
+    hp->h[i] = it;
+    return 0;
 }
 
-static heap_item heap_pop(heap_item *h, int64_t *size)
+static heap_item heap_pop(heap *hp)
 {
-    heap_item top = h[0], last = h[--(*size)];
+    heap_item top = hp->h[0], last = hp->h[--hp->size];
     int64_t i = 0;
     for (;;) {
         int64_t c = 2 * i + 1;
-        if (c >= *size)
+        if (c >= hp->size)
             break;
-        if (c + 1 < *size && item_less(&h[c + 1], &h[c]))
+        if (c + 1 < hp->size && item_less(&hp->h[c + 1], &hp->h[c]))
             c++;
-        if (!item_less(&h[c], &last))
+        if (!item_less(&hp->h[c], &last))
             break;
-        h[i] = h[c];
+        hp->h[i] = hp->h[c];
         i = c;
     }
-    h[i] = last;
+    hp->h[i] = last;
     return top;
 }
 
+static double dist3(const double *a, const double *b)
+{
+    return sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) +
+                (a[2] - b[2]) * (a[2] - b[2]));
+}
+
+/* `label` gets first_label + the position in `sources`; `dist` and `eu` are scratch. */
 static dk_status labelled_search(const dk_mesh *m, const dk_index *sources, dk_index n_sources,
                                  dk_index first_label, int unit_weights, double *dist,
-                                 dk_index *label, dk_error *err)
+                                 double *eu, dk_index *label, dk_error *err)
 {
     const dk_index n = m->n_vertices;
-    /* every push follows a strict improvement of (d, label) at a vertex: at most one per
-     * directed edge relaxation plus the sources */
-    const int64_t cap = (int64_t)m->ring_start[n] + n_sources + 1;
-    heap_item *h = malloc(sizeof(heap_item) * (size_t)cap);
-    int64_t size = 0;
-    if (!h)
-        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "Falloff: out of memory (search heap)");
+    heap hp = {NULL, 0, 0};
     for (dk_index i = 0; i < n; i++) {
-        dist[i] = INFINITY;
+        dist[i] = eu[i] = INFINITY;
         label[i] = -1;
     }
     for (dk_index s = 0; s < n_sources; s++) {
-        heap_item it = {0.0, first_label + s, sources[s]};
-        dist[it.v] = 0.0;
+        heap_item it = {0.0, 0.0, first_label + s, sources[s]};
+        if (label[it.v] >= 0)
+            continue;
+        dist[it.v] = eu[it.v] = 0.0;
         label[it.v] = it.label;
-        heap_push(h, &size, it);
+        if (heap_push(&hp, it) < 0)
+            goto oom;
     }
-    while (size > 0) {
-        heap_item it = heap_pop(h, &size);
-        if (it.d != dist[it.v] || it.label != label[it.v])
+    while (hp.size > 0) {
+        heap_item it = heap_pop(&hp);
+        const double *ps = m->positions + 3 * sources[it.label - first_label];
+        if (it.d != dist[it.v] || it.e != eu[it.v] || it.label != label[it.v])
             continue;
         for (dk_index k = m->ring_start[it.v]; k < m->ring_start[it.v + 1]; k++) {
             const dk_index j = m->ring_index[k];
-            double w = 1.0;
             heap_item nx;
-            if (!unit_weights) {
-                const double *a = m->positions + 3 * it.v, *b = m->positions + 3 * j;
-                w = sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) +
-                         (a[2] - b[2]) * (a[2] - b[2]));
-            }
-            nx.d = it.d + w;
+            nx.d = it.d + (unit_weights ? 1.0
+                                        : dist3(m->positions + 3 * it.v, m->positions + 3 * j));
+            nx.e = dist3(ps, m->positions + 3 * j);
             nx.label = it.label;
             nx.v = j;
-            if (nx.d < dist[j] || (nx.d == dist[j] && nx.label < label[j])) {
+            if (nx.d < dist[j] ||
+                (nx.d == dist[j] && (nx.e < eu[j] || (nx.e == eu[j] && nx.label < label[j])))) {
                 dist[j] = nx.d;
+                eu[j] = nx.e;
                 label[j] = nx.label;
-                if (size >= cap) { /* cannot happen (see cap); refuse rather than overflow */
-                    free(h);
-                    return dk_error_set(err, DK_ERR_INTERNAL, "Falloff: search heap overflow");
-                }
-                heap_push(h, &size, nx);
+                if (heap_push(&hp, nx) < 0)
+                    goto oom;
             }
         }
     }
-    free(h);
+    free(hp.h);
     return DK_OK;
+oom:
+    free(hp.h);
+    return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "Falloff: out of memory (search heap)");
 }
 
 /* ------------------------------------------------------------------ bind ---------------- */
 
 static dk_status group_distances(dk_falloff *f, falloff_state *s, dk_index g, double *dist,
                                  dk_index *label, dk_index *scratch_i, double *scratch_d,
-                                 dk_error *err)
+                                 double *scratch_e, dk_error *err)
 {
     const dk_mesh *m = f->mesh;
     const dk_index n = m->n_vertices;
@@ -174,7 +198,7 @@ static dk_status group_distances(dk_falloff *f, falloff_state *s, dk_index g, do
 
     switch (f->opt.distance) {
     case DK_FALLOFF_HOPS:
-        st = labelled_search(m, src, e - b, b, 1, scratch_d, label, err);
+        st = labelled_search(m, src, e - b, b, 1, scratch_d, scratch_e, label, err);
         if (st != DK_OK)
             return st;
         st = dk_hop_distance(m, src, e - b, scratch_i, err);
@@ -185,7 +209,7 @@ static dk_status group_distances(dk_falloff *f, falloff_state *s, dk_index g, do
         return DK_OK;
     case DK_FALLOFF_DIJKSTRA:
     case DK_FALLOFF_GEODESIC:
-        st = labelled_search(m, src, e - b, b, 0, scratch_d, label, err);
+        st = labelled_search(m, src, e - b, b, 0, scratch_d, scratch_e, label, err);
         if (st != DK_OK)
             return st;
         if (f->opt.distance == DK_FALLOFF_DIJKSTRA)
@@ -227,7 +251,7 @@ static dk_status build_state(dk_falloff *f, const dk_constraint_desc *desc, fall
     const dk_mesh *m = f->mesh;
     const dk_index n = m->n_vertices;
     dk_index *scratch_i = NULL;
-    double *scratch_d = NULL;
+    double *scratch_d = NULL, *scratch_e = NULL;
     size_t gn;
     dk_status st;
 
@@ -245,8 +269,9 @@ static dk_status build_state(dk_falloff *f, const dk_constraint_desc *desc, fall
     s->hpos = malloc(sizeof(dk_index) * ((size_t)n + 1));
     scratch_i = malloc(sizeof(dk_index) * ((size_t)n + 1));
     scratch_d = malloc(sizeof(double) * ((size_t)n + 1));
+    scratch_e = malloc(sizeof(double) * ((size_t)n + 1));
     if (!s->dist || !s->weight || !s->label || !s->targets || !s->hpos || !scratch_i ||
-        !scratch_d) {
+        !scratch_d || !scratch_e) {
         st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "Falloff: out of memory (weights)");
         goto done;
     }
@@ -257,7 +282,7 @@ static dk_status build_state(dk_falloff *f, const dk_constraint_desc *desc, fall
     for (dk_index g = 0; g < s->con->n_handles; g++) {
         double *dist = s->dist + (size_t)g * n, *w = s->weight + (size_t)g * n;
         st = group_distances(f, s, g, dist, s->label + (size_t)g * n, scratch_i, scratch_d,
-                             err);
+                             scratch_e, err);
         if (st != DK_OK)
             goto done;
         for (dk_index v = 0; v < n; v++)
@@ -270,6 +295,7 @@ static dk_status build_state(dk_falloff *f, const dk_constraint_desc *desc, fall
 done:
     free(scratch_i);
     free(scratch_d);
+    free(scratch_e);
     if (st != DK_OK)
         state_free(s);
     return st;
@@ -411,8 +437,10 @@ dk_status dk_falloff_solve(dk_falloff *f, const double *targets, int mode, doubl
                         dsp[d] += w * s->con->handle_weights[l] * (s->targets[3 * l + d] - pl[d]);
                 } else {
                     const double *t = targets + 16 * (size_t)g;
+                    const dk_index l = s->label[(size_t)g * n + v];
+                    const double ww = w * (l >= 0 ? s->con->handle_weights[l] : 1.0);
                     for (int d = 0; d < 3; d++)
-                        dsp[d] += w * (t[4 * d] * p[0] + t[4 * d + 1] * p[1] +
+                        dsp[d] += ww * (t[4 * d] * p[0] + t[4 * d + 1] * p[1] +
                                        t[4 * d + 2] * p[2] + t[4 * d + 3] - p[d]);
                 }
             }
