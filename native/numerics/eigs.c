@@ -110,13 +110,9 @@ static dk_status ctx_build_shifted(eig_ctx *c, dk_error *err)
     const dk_index n = c->n;
     int64_t cnt = 0;
     for (dk_index j = 0; j < n; j++) {
-        int has_diag = 0;
-        for (dk_index p = l->col_start[j]; p < l->col_start[j + 1]; p++) {
-            if (l->row_index[p] < j) cnt++;
-            else if (l->row_index[p] == j) has_diag = 1;
-        }
-        (void)has_diag;
-        cnt++; /* the diagonal */
+        for (dk_index p = l->col_start[j]; p < l->col_start[j + 1]; p++)
+            cnt += l->row_index[p] < j;
+        cnt++; /* the diagonal, stored even where L has none (an isolated vertex) */
     }
     if (cnt > INT32_MAX)
         return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: matrix too large (%lld entries)",
@@ -376,18 +372,19 @@ static dk_status merge_band(eig_ctx *c, store *s, const store *bd, double zeta,
     while (j1 < nb && bd->val[j1] <= top + zeta) j1++;
     const int q = j1 - j0;
     dk_status st = DK_OK;
-    double *pm = NULL, *zz = NULL, *g = NULL, *gw = NULL, *sv = NULL, *ls = NULL, *h = NULL;
-    double *hw = NULL;
+    double *zz = NULL, *g = NULL, *gw = NULL, *sv = NULL, *ls = NULL, *h = NULL, *hw = NULL;
     int r = 0;
     if (q > 0) {
         /* Z = Y - C (C^T M Y), G = Z^T M Z, new directions: eigenvalues of G above 1/2 */
-        pm = malloc((size_t)(p ? p : 1) * q * sizeof(double));
         zz = malloc((size_t)n * q * sizeof(double));
         g = malloc((size_t)q * q * sizeof(double));
         gw = malloc((size_t)q * sizeof(double));
-        if (!pm || !zz || !g || !gw) { st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: out of memory"); goto done; }
+        if (!zz || !g || !gw) {
+            st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: out of memory (band merge)");
+            goto done;
+        }
         memcpy(zz, bd->vec + (size_t)j0 * n, (size_t)n * q * sizeof(double));
-        for (int pass = 0; pass < 2; pass++) /* twice: classical Gram-Schmidt's loss of orthogonality */
+        for (int pass = 0; pass < 2; pass++) /* twice: Gram-Schmidt loses orthogonality */
             for (int b = 0; b < q; b++) {
                 double *y = zz + (size_t)b * n;
                 for (int a = 0; a < p; a++) {
@@ -423,7 +420,10 @@ static dk_status merge_band(eig_ctx *c, store *s, const store *bd, double zeta,
         ls = malloc((size_t)n * sizeof(double));
         h = malloc((size_t)w * w * sizeof(double));
         hw = malloc((size_t)w * sizeof(double));
-        if (!sv || !ls || !h || !hw) { st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: out of memory"); goto done; }
+        if (!sv || !ls || !h || !hw) {
+            st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: out of memory (Rayleigh-Ritz)");
+            goto done;
+        }
         memcpy(sv, s->vec + (size_t)p0 * n, (size_t)n * p * sizeof(double));
         int col = p;
         for (int a = 0; a < q; a++) {
@@ -476,7 +476,7 @@ static dk_status merge_band(eig_ctx *c, store *s, const store *bd, double zeta,
         s->val[s->m++] = bd->val[j];
     }
 done:
-    free(pm); free(zz); free(g); free(gw); free(sv); free(ls); free(h); free(hw);
+    free(zz); free(g); free(gw); free(sv); free(ls); free(h); free(hw);
     return st;
 }
 
