@@ -302,7 +302,6 @@ static dk_status arpack_run(eig_ctx *c, dk_cholesky *chol, double sigma, int nev
     if (info == 3)
         return dk_error_set(err, DK_ERR_NO_CONVERGENCE, "eigs: ARPACK could not apply shifts "
                             "(nev %d, ncv %d)", nev, ncv);
-    const int max_it_hit = info == 1;
     const int converged = (int)iparam[4];
     if (converged > 0) {
         a_int info2 = 0;
@@ -332,7 +331,8 @@ static dk_status arpack_run(eig_ctx *c, dk_cholesky *chol, double sigma, int nev
         }
     }
     *nconv = got;
-    if (max_it_hit || got < nev)
+    /* info = 1 (restart limit) with every wanted pair converged is a success */
+    if (got < nev)
         return dk_error_set(err, DK_ERR_NO_CONVERGENCE, "eigs: ARPACK converged %d of %d "
                             "eigenpairs near sigma = %g in %d restarts", got, nev, sigma,
                             c->max_iterations);
