@@ -123,7 +123,8 @@ static int icosphere(int level, double r, double bump, tmesh *out)
         double *p = m.pos + 3 * v;
         const double len = sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
         const double u[3] = {p[0] / len, p[1] / len, p[2] / len};
-        const double rr = r * (1.0 + bump * (sin(3.0 * u[0] + 1.0) * cos(2.0 * u[1]) + u[2] * u[2] * u[0]));
+        const double f = sin(3.0 * u[0] + 1.0) * cos(2.0 * u[1]) + u[2] * u[2] * u[0];
+        const double rr = r * (1.0 + bump * f);
         for (int d = 0; d < 3; d++) p[d] = rr * u[d];
     }
     free(tri2); free(em.head); free(em.next); free(em.other); free(em.mid);
@@ -477,6 +478,34 @@ static void test_two_components(void)
     tmesh_free(&b);
 }
 
+static void test_isolated_vertex(void)
+{
+    /* A vertex in no triangle: L has an empty column (no diagonal entry), the mass is given
+     * by the caller; eigenvalue 0 is then double (constants, and the isolated vertex). */
+    problem p;
+    memset(&p, 0, sizeof p);
+    CHECK(icosphere(2, 1.0, 0.1, &p.mesh));
+    if (!p.mesh.pos) return;
+    double *grown = realloc(p.mesh.pos, sizeof(double) * 3 * (size_t)(p.mesh.nv + 1));
+    CHECK(grown != NULL);
+    if (!grown) { tmesh_free(&p.mesh); return; }
+    p.mesh.pos = grown;
+    p.mesh.pos[3 * p.mesh.nv] = 5.0;
+    p.mesh.pos[3 * p.mesh.nv + 1] = p.mesh.pos[3 * p.mesh.nv + 2] = 0.0;
+    p.mesh.nv++;
+    p.n = p.mesh.nv;
+    p.mass = malloc(sizeof(double) * (size_t)p.n);
+    if (p.mass) p.l = cotan_laplacian(&p.mesh, p.mass);
+    CHECK(p.l != NULL);
+    if (p.l) {
+        CHECK(p.l->col_start[p.n] == p.l->col_start[p.n - 1]); /* empty last column */
+        p.mass[p.n - 1] = 0.01;
+        check_against_dense(&p, 12, 50, "sphere + isolated vertex");
+        check_against_dense(&p, 60, 16, "sphere + isolated vertex, bands");
+    }
+    problem_free(&p);
+}
+
 static void test_bands_equal_single(void)
 {
     /* k = 120 with bands of 30 vs one band of 120, on a ~2.5k-vertex mesh */
@@ -562,6 +591,13 @@ static void test_progress_and_cancel(void)
     problem_free(&p);
 }
 
+/* dk_eigs_smallest with default options */
+static dk_status eigs0(const dk_sparse *l, const double *mass, int k, double *val, double *vec,
+                       int *conv, dk_error *err)
+{
+    return dk_eigs_smallest(l, mass, k, NULL, val, vec, conv, err);
+}
+
 static void test_bad_input(void)
 {
     problem p;
@@ -571,33 +607,33 @@ static void test_bad_input(void)
     if (vec) {
         dk_error err = {0};
         int conv = 7;
-        CHECK(dk_eigs_smallest(p.l, p.mass, 0, NULL, val, vec, &conv, &err) == DK_ERR_INVALID_ARGUMENT);
+        CHECK(eigs0(p.l, p.mass, 0, val, vec, &conv, &err) == DK_ERR_INVALID_ARGUMENT);
         CHECK(conv == 0);
         CHECK(strstr(err.message, "k is 0") != NULL);
-        CHECK(dk_eigs_smallest(p.l, p.mass, -3, NULL, val, vec, NULL, &err) == DK_ERR_INVALID_ARGUMENT);
-        CHECK(dk_eigs_smallest(p.l, p.mass, p.n, NULL, val, vec, NULL, &err) == DK_ERR_INVALID_ARGUMENT);
-        CHECK(dk_eigs_smallest(NULL, p.mass, 3, NULL, val, vec, NULL, &err) == DK_ERR_INVALID_ARGUMENT);
-        CHECK(dk_eigs_smallest(p.l, p.mass, 3, NULL, NULL, vec, NULL, &err) == DK_ERR_INVALID_ARGUMENT);
+        CHECK(eigs0(p.l, p.mass, -3, val, vec, NULL, &err) == DK_ERR_INVALID_ARGUMENT);
+        CHECK(eigs0(p.l, p.mass, p.n, val, vec, NULL, &err) == DK_ERR_INVALID_ARGUMENT);
+        CHECK(eigs0(NULL, p.mass, 3, val, vec, NULL, &err) == DK_ERR_INVALID_ARGUMENT);
+        CHECK(eigs0(p.l, p.mass, 3, NULL, vec, NULL, &err) == DK_ERR_INVALID_ARGUMENT);
         const double keep = p.mass[5];
         p.mass[5] = 0.0;
-        CHECK(dk_eigs_smallest(p.l, p.mass, 3, NULL, val, vec, NULL, &err) == DK_ERR_INVALID_ARGUMENT);
+        CHECK(eigs0(p.l, p.mass, 3, val, vec, NULL, &err) == DK_ERR_INVALID_ARGUMENT);
         CHECK_MSG(strstr(err.message, "vertex 5") != NULL, "%s", err.message);
         p.mass[5] = -1.0;
-        CHECK(dk_eigs_smallest(p.l, p.mass, 3, NULL, val, vec, NULL, &err) == DK_ERR_INVALID_ARGUMENT);
+        CHECK(eigs0(p.l, p.mass, 3, val, vec, NULL, &err) == DK_ERR_INVALID_ARGUMENT);
         p.mass[5] = keep;
         const double lv = p.l->values[3];
         p.l->values[3] = NAN;
-        CHECK(dk_eigs_smallest(p.l, p.mass, 3, NULL, val, vec, NULL, &err) == DK_ERR_NONFINITE);
+        CHECK(eigs0(p.l, p.mass, 3, val, vec, NULL, &err) == DK_ERR_NONFINITE);
         p.l->values[3] = lv;
         /* k = n - 1 (the largest allowed) works on this small mesh (42 vertices) */
-        CHECK_MSG(dk_eigs_smallest(p.l, p.mass, p.n - 1, NULL, val, vec, &conv, &err) == DK_OK,
+        CHECK_MSG(eigs0(p.l, p.mass, p.n - 1, val, vec, &conv, &err) == DK_OK,
                   "%s", err.message);
         CHECK(conv == p.n - 1);
         /* an indefinite "Laplacian" is refused by the positive definite first shift */
         for (dk_index j = 0; j < p.l->n_cols; j++)
             for (dk_index q = p.l->col_start[j]; q < p.l->col_start[j + 1]; q++)
                 if (p.l->row_index[q] == j) p.l->values[q] -= 10.0;
-        dk_status st = dk_eigs_smallest(p.l, p.mass, 3, NULL, val, vec, NULL, &err);
+        dk_status st = eigs0(p.l, p.mass, 3, val, vec, NULL, &err);
         CHECK(st == DK_ERR_NOT_POSITIVE_DEFINITE || st == DK_ERR_INVALID_ARGUMENT);
     }
     free(vec);
@@ -640,6 +676,6 @@ static void test_no_convergence(void)
     problem_free(&p);
 }
 
-DK_TEST_MAIN(test_sphere_harmonics, test_against_dense, test_two_components,
+DK_TEST_MAIN(test_sphere_harmonics, test_against_dense, test_two_components, test_isolated_vertex,
              test_bands_equal_single,
              test_progress_and_cancel, test_bad_input, test_no_convergence)
