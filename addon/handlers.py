@@ -45,12 +45,20 @@ def _run(scene, depsgraph, cold=False):
                         geometry.add(idd.name)
                     elif isinstance(idd, bpy.types.Mesh):
                         geometry.add(("mesh", idd.name))
+        any_deformed = False
         for obj in _deformed_objects(scene):
+            any_deformed = True
             if obj.mode == "EDIT":
                 continue
             changed = (obj.name in geometry or ("mesh", obj.data.name) in geometry)
             check = changed and obj.name not in ours
             solver.evaluate_object(obj, depsgraph, check_groups=check, cold=cold)
+        if cold and depsgraph is not None and any_deformed:
+            # Frame change: this depsgraph (the viewport's or a render's) may have been
+            # evaluated before the offsets were written (here, or by the handler call of
+            # another depsgraph for the same frame); re-evaluate what is tagged so this frame
+            # shows this frame's solve. A no-op when nothing is tagged.
+            depsgraph.update()
     except Exception as ex:  # a handler must never raise
         print("DeformKit handler error: %s: %s" % (type(ex).__name__, ex))
     finally:

@@ -375,16 +375,21 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
     runtime[(obj.name, d.uid)] = dict(ms=ms, iterations=int(res.iterations),
                                       converged=bool(res.converged), energy=float(res.energy))
     if write:
-        write_offset(obj, d, pos - e.rest)
+        write_offset(obj, d, pos - e.rest, retime=cold)
         e.last_inputs = inputs
     return pos
 
 
-def write_offset(obj, d, offset):
+def write_offset(obj, d, offset, retime=False):
     me = obj.data
     a = geonodes.ensure_attribute(me, d.attribute_name)
     a.data.foreach_set("vector", np.ascontiguousarray(offset, dtype=np.float32).ravel())
     me.update_tag()
+    if retime:
+        # Frame change: a depsgraph re-evaluated after this tag (a render's, see handlers.py)
+        # re-copies the object from the original, whose animated values (the modifier's
+        # Factor) are not flushed there; re-run the object's animation with it.
+        obj.update_tag(refresh={"TIME"})
     from . import handlers
     handlers.note_self_write(obj.name)
 
