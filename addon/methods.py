@@ -111,7 +111,7 @@ METHODS = [
         maps=("handle_weights",),
         options=[
             Option("distance", "ENUM", "hops", "Distance", "How distance to a handle is measured",
-                   items=_e("hops", "euclidean", "geodesic")),
+                   items=_e("hops", "euclidean", "geodesic", "dijkstra")),
             Option("range", "FLOAT", 0.0, "Range",
                    "Falloff range: edges for hops, else a length (0: 10 hops or 10 mean edge "
                    "lengths)", min=0.0, max=1e9),

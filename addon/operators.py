@@ -230,11 +230,15 @@ class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
         obj = _get_object(self, context)
         d = _get_deformer(self, context, obj)
         t0 = time.perf_counter()
+        wm = context.window_manager
+        wm.progress_begin(0, 1)  # a busy cursor while the factorizations run
         try:
             e = solver.bind(obj, d, context.evaluated_depsgraph_get())
         except solver.DeformKitError as ex:
             solver.set_status(d, str(ex), True)
             raise
+        finally:
+            wm.progress_end()
         ms = (time.perf_counter() - t0) * 1000
         self.report({"INFO"}, "%s bound: %d vertices, %d handles (%.0f ms)"
                     % (d.name, e.n_vertices, len(d.handles), ms))
