@@ -25,6 +25,11 @@ typedef struct le_system {
     dk_cholesky *chol;
     double *targets;         /* n_handle_vertices x 3, row-major: last expanded targets  */
     double *rhs;             /* n_unknowns x 3, column-major                             */
+    /* Affine basis for solves from transforms (NULL when not precomputed): the unknowns are
+     * x_d = g0_d + sum_{h,a} T_h[d][a] G_{h,a}, columns g0_x, g0_y, g0_z, then G_{h,a} for
+     * a = 0..3 (x, y, z, 1 of the rest positions of handle h). n_unknowns x (3 + 4 H). */
+    double *basis;
+    unsigned char *row_active; /* n: the row of A has an unknown column                  */
 } le_system;
 
 struct dk_laplacian_edit {
@@ -51,6 +56,18 @@ struct dk_laplacian_edit {
 
 /* ------------------------------------------------------------------ small helpers ------- */
 
+static void mark_active_rows(const dk_laplacian_edit *le, le_system *s);
+static dk_status build_basis(dk_laplacian_edit *le, le_system *s, dk_error *err);
+
+/* The affine basis only speeds up solves from transforms: when it cannot be built (out of
+ * memory) the solves fall back to back-substitution, so the failure is not an error. */
+static void try_build_basis(dk_laplacian_edit *le, le_system *s)
+{
+    dk_error ignored;
+    dk_error_clear(&ignored);
+    (void)build_basis(le, s, &ignored);
+}
+
 static void system_free(le_system *s)
 {
     dk_constraints_free(s->con);
@@ -62,6 +79,8 @@ static void system_free(le_system *s)
     dk_cholesky_free(s->chol);
     free(s->targets);
     free(s->rhs);
+    free(s->basis);
+    free(s->row_active);
     memset(s, 0, sizeof *s);
 }
 
@@ -328,10 +347,11 @@ static dk_status build_system(dk_laplacian_edit *le, const dk_constraint_desc *d
     s->unknowns = malloc(sizeof(dk_index) * (size_t)n + 1);
     s->target_of = malloc(sizeof(dk_index) * (size_t)n);
     s->soft_w2 = calloc((size_t)n + 1, sizeof(double));
+    s->row_active = malloc((size_t)n + 1);
     s->targets = malloc(sizeof(double) * 3 * ((size_t)s->con->n_handle_vertices + 1));
     in_roi = malloc((size_t)n + 1);
     if (!s->unknown_index || !s->unknowns || !s->target_of || !s->soft_w2 || !s->targets ||
-        !in_roi) {
+        !s->row_active || !in_roi) {
         st = oom(err, "constraint maps");
         goto fail;
     }
@@ -445,6 +465,7 @@ static dk_status build_system(dk_laplacian_edit *le, const dk_constraint_desc *d
         st = oom(err, "right-hand sides");
         goto fail;
     }
+    mark_active_rows(le, s);
     free(rows);
     free(cols);
     free(vals);
@@ -555,6 +576,11 @@ dk_status dk_laplacian_edit_bind(const dk_mesh *mesh, const dk_constraint_desc *
     st = factor_new(le, &le->sys, err);
     if (st != DK_OK)
         goto fail;
+    try_build_basis(le, &le->sys);
+    if (le->opt.detail == DK_LE_DETAIL_MEMBRANE)
+        memset(le->delta, 0, sizeof(double) * 3 * (size_t)n);
+    else
+        memcpy(le->delta, le->delta_rest, sizeof(double) * 3 * (size_t)n);
     *out = le;
     return DK_OK;
 fail:
@@ -604,6 +630,7 @@ dk_status dk_laplacian_edit_rebind(dk_laplacian_edit *le, const dk_constraint_de
             return st;
         }
     }
+    try_build_basis(le, &s);
     system_free(&le->sys);
     le->sys = s;
     if (le->opt.detail == DK_LE_DETAIL_MEMBRANE)
@@ -621,14 +648,19 @@ static double energy_of(const dk_laplacian_edit *le, const double *x, size_t si,
     const dk_index n = le->n;
     const le_system *s = &le->sys;
     const double mu2 = le->opt.tikhonov * le->opt.tikhonov;
+    const double *d0 = le->delta, *d1 = le->delta + n, *d2 = le->delta + 2 * (size_t)n;
     double e = 0.0;
-    for (dk_index i = 0; i < n; i++)
-        for (int d = 0; d < 3; d++) {
-            double v = -le->delta[(size_t)d * n + i];
-            for (dk_index k = le->a_start[i]; k < le->a_start[i + 1]; k++)
-                v += le->a_val[k] * x[(size_t)le->a_col[k] * si + d * sd];
-            e += v * v;
+    for (dk_index i = 0; i < n; i++) {
+        double v0 = -d0[i], v1 = -d1[i], v2 = -d2[i];
+        for (dk_index k = le->a_start[i]; k < le->a_start[i + 1]; k++) {
+            const double a = le->a_val[k];
+            const double *xj = x + (size_t)le->a_col[k] * si;
+            v0 += a * xj[0];
+            v1 += a * xj[sd];
+            v2 += a * xj[2 * sd];
         }
+        e += v0 * v0 + v1 * v1 + v2 * v2;
+    }
     for (dk_index i = 0; i < n; i++) {
         const int unknown = s->unknown_index[i] >= 0;
         if (s->soft_w2[i] > 0.0) {
@@ -660,6 +692,67 @@ dk_status dk_laplacian_edit_energy(const dk_laplacian_edit *le, const double *po
 
 /* ------------------------------------------------------------------ solve --------------- */
 
+/* Right-hand sides of the normal equations for three columns at once:
+ *   rhs = A_u^T (delta - A_e x_e) + S c + mu^2 x0_u
+ * where x_e are the eliminated values in le->x (column-major), c the soft targets. */
+static void assemble_rhs(const dk_laplacian_edit *le, const le_system *s, double *rhs)
+{
+    const dk_index n = le->n;
+    const dk_index nu = s->n_unknowns;
+    const double mu2 = le->opt.tikhonov * le->opt.tikhonov;
+    const double *x0 = le->x, *x1 = le->x + n, *x2 = le->x + 2 * (size_t)n;
+    const double *d0 = le->delta, *d1 = le->delta + n, *d2 = le->delta + 2 * (size_t)n;
+    double *r0 = rhs, *r1 = rhs + nu, *r2 = rhs + 2 * (size_t)nu;
+
+    for (dk_index u = 0; u < nu; u++) {
+        const dk_index i = s->unknowns[u];
+        double c0 = mu2 * le->rest[i], c1 = mu2 * le->rest[n + i],
+               c2 = mu2 * le->rest[2 * (size_t)n + i];
+        if (s->soft_w2[i] > 0.0) {
+            const dk_index t = s->target_of[i];
+            const double w = s->soft_w2[i];
+            if (t >= 0) {
+                c0 += w * s->targets[3 * t];
+                c1 += w * s->targets[3 * t + 1];
+                c2 += w * s->targets[3 * t + 2];
+            } else {
+                c0 += w * le->rest[i];
+                c1 += w * le->rest[n + i];
+                c2 += w * le->rest[2 * (size_t)n + i];
+            }
+        }
+        r0[u] = c0;
+        r1[u] = c1;
+        r2[u] = c2;
+    }
+    for (dk_index i = 0; i < n; i++) {
+        double v0, v1, v2;
+        if (!s->row_active[i])
+            continue;
+        v0 = d0[i];
+        v1 = d1[i];
+        v2 = d2[i];
+        for (dk_index k = le->a_start[i]; k < le->a_start[i + 1]; k++) {
+            const dk_index j = le->a_col[k];
+            if (s->unknown_index[j] < 0) {
+                const double a = le->a_val[k];
+                v0 -= a * x0[j];
+                v1 -= a * x1[j];
+                v2 -= a * x2[j];
+            }
+        }
+        for (dk_index k = le->a_start[i]; k < le->a_start[i + 1]; k++) {
+            const dk_index u = s->unknown_index[le->a_col[k]];
+            if (u >= 0) {
+                const double a = le->a_val[k];
+                r0[u] += a * v0;
+                r1[u] += a * v1;
+                r2[u] += a * v2;
+            }
+        }
+    }
+}
+
 /* One linear solve with the current le->delta; writes the unknowns into le->x (whose
  * eliminated entries already hold their values). */
 static dk_status linear_solve(dk_laplacian_edit *le, dk_error *err)
@@ -667,48 +760,109 @@ static dk_status linear_solve(dk_laplacian_edit *le, dk_error *err)
     const dk_index n = le->n;
     le_system *s = &le->sys;
     const dk_index nu = s->n_unknowns;
-    const double mu2 = le->opt.tikhonov * le->opt.tikhonov;
     dk_status st;
 
-    for (int d = 0; d < 3; d++) {
-        const double *x = le->x + (size_t)d * n, *delta = le->delta + (size_t)d * n;
-        double *rhs = s->rhs + (size_t)d * nu;
-        for (dk_index i = 0; i < n; i++) {
-            double v = delta[i];
-            for (dk_index k = le->a_start[i]; k < le->a_start[i + 1]; k++) {
-                const dk_index j = le->a_col[k];
-                if (s->unknown_index[j] < 0)
-                    v -= le->a_val[k] * x[j];
-            }
-            le->r[i] = v;
-        }
-        for (dk_index u = 0; u < nu; u++) {
-            const dk_index i = s->unknowns[u];
-            double v = mu2 * le->rest[(size_t)d * n + i];
-            if (s->soft_w2[i] > 0.0) {
-                const dk_index t = s->target_of[i];
-                v += s->soft_w2[i] *
-                     (t >= 0 ? s->targets[3 * t + d] : le->rest[(size_t)d * n + i]);
-            }
-            rhs[u] = v;
-        }
-        for (dk_index i = 0; i < n; i++) {
-            const double ri = le->r[i];
-            if (ri == 0.0)
-                continue;
-            for (dk_index k = le->a_start[i]; k < le->a_start[i + 1]; k++) {
-                const dk_index u = s->unknown_index[le->a_col[k]];
-                if (u >= 0)
-                    rhs[u] += le->a_val[k] * ri;
-            }
-        }
-    }
+    assemble_rhs(le, s, s->rhs);
     st = dk_cholesky_solve(s->chol, s->rhs, 3, s->rhs, err);
     if (st != DK_OK)
         return dk_error_prefix(err, "LaplacianEdit solve");
     for (int d = 0; d < 3; d++)
         for (dk_index u = 0; u < nu; u++)
             le->x[(size_t)d * n + s->unknowns[u]] = s->rhs[(size_t)d * nu + u];
+    return DK_OK;
+}
+
+/* Marks the rows that have at least one unknown column (the others do not touch the
+ * right-hand side). */
+static void mark_active_rows(const dk_laplacian_edit *le, le_system *s)
+{
+    for (dk_index i = 0; i < le->n; i++) {
+        unsigned char a = 0;
+        for (dk_index k = le->a_start[i]; k < le->a_start[i + 1] && !a; k++)
+            a = s->unknown_index[le->a_col[k]] >= 0;
+        s->row_active[i] = a;
+    }
+}
+
+/* Largest number of handles for which the affine basis is precomputed (4 columns each). */
+enum { LE_MAX_BASIS_HANDLES = 16 };
+
+/* Precomputes the affine basis (see le_system.basis): the solution is affine in the entries
+ * of the handle transforms because the eliminated/soft handle values are T_h [p; 1]. One
+ * multi-RHS solve of 3 + 4 H columns. Uses le->x and le->delta as scratch (rest deltas, or
+ * zero for the membrane). Skipped (basis NULL) for more than LE_MAX_BASIS_HANDLES handles. */
+static dk_status build_basis(dk_laplacian_edit *le, le_system *s, dk_error *err)
+{
+    const dk_index n = le->n;
+    const dk_index nu = s->n_unknowns, H = s->con->n_handles;
+    const size_t ncol = 3 + 4 * (size_t)H;
+    double *r = NULL;
+    dk_status st;
+
+    free(s->basis);
+    s->basis = NULL;
+    if (H > LE_MAX_BASIS_HANDLES)
+        return DK_OK;
+    s->basis = malloc(sizeof(double) * (size_t)nu * ncol);
+    r = malloc(sizeof(double) * (size_t)n);
+    if (!s->basis || !r) {
+        free(r);
+        free(s->basis);
+        s->basis = NULL;
+        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "LaplacianEdit: out of memory (basis)");
+    }
+    /* g0: handle values zero, fixed at rest, soft handle targets zero */
+    for (dk_index i = 0; i < n; i++)
+        for (int d = 0; d < 3; d++)
+            le->x[(size_t)d * n + i] = s->con->role[i] >= 0 ? 0.0 : le->rest[(size_t)d * n + i];
+    for (dk_index k = 0; k < 3 * s->con->n_handle_vertices; k++)
+        s->targets[k] = 0.0;
+    if (le->opt.detail == DK_LE_DETAIL_MEMBRANE)
+        memset(le->delta, 0, sizeof(double) * 3 * (size_t)n);
+    else
+        memcpy(le->delta, le->delta_rest, sizeof(double) * 3 * (size_t)n);
+    assemble_rhs(le, s, s->basis);
+    /* G_{h,a}: the map from P_a (x, y, z, 1 of the rest handle positions) to the rhs */
+    for (dk_index h = 0; h < H; h++)
+        for (int a = 0; a < 4; a++) {
+            double *col = s->basis + (size_t)nu * (3 + 4 * (size_t)h + (size_t)a);
+            memset(col, 0, sizeof(double) * (size_t)nu);
+            for (dk_index i = 0; i < n; i++) {
+                double v = 0.0;
+                if (!s->row_active[i])
+                    continue;
+                for (dk_index k = le->a_start[i]; k < le->a_start[i + 1]; k++) {
+                    const dk_index j = le->a_col[k];
+                    if (s->unknown_index[j] < 0 && s->con->role[j] == h)
+                        v -= le->a_val[k] * (a < 3 ? le->rest[(size_t)a * n + j] : 1.0);
+                }
+                r[i] = v;
+            }
+            for (dk_index i = 0; i < n; i++) {
+                if (!s->row_active[i] || r[i] == 0.0)
+                    continue;
+                for (dk_index k = le->a_start[i]; k < le->a_start[i + 1]; k++) {
+                    const dk_index u = s->unknown_index[le->a_col[k]];
+                    if (u >= 0)
+                        col[u] += le->a_val[k] * r[i];
+                }
+            }
+            for (dk_index u = 0; u < nu; u++) {
+                const dk_index i = s->unknowns[u];
+                if (s->soft_w2[i] > 0.0 && s->con->role[i] == h)
+                    col[u] += s->soft_w2[i] * (a < 3 ? le->rest[(size_t)a * n + i] : 1.0);
+            }
+        }
+    free(r);
+    for (dk_index k = 0; k < s->con->n_handle_vertices; k++)
+        for (int d = 0; d < 3; d++)
+            s->targets[3 * k + d] = le->rest[(size_t)d * n + s->con->handle_vertices[k]];
+    st = dk_cholesky_solve(s->chol, s->basis, (int)ncol, s->basis, err);
+    if (st != DK_OK) {
+        free(s->basis);
+        s->basis = NULL;
+        return dk_error_prefix(err, "LaplacianEdit basis");
+    }
     return DK_OK;
 }
 
@@ -749,9 +903,29 @@ dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const double *targets, 
         memset(le->delta, 0, sizeof(double) * 3 * (size_t)n);
     else
         memcpy(le->delta, le->delta_rest, sizeof(double) * 3 * (size_t)n);
-    st = linear_solve(le, err);
-    if (st != DK_OK)
-        return st;
+    if (mode == 1 && s->basis) {
+        /* affine in the transforms: combine the precomputed basis (no back-substitution) */
+        const dk_index nu = s->n_unknowns;
+        for (int d = 0; d < 3; d++) {
+            double *xd = s->rhs + (size_t)d * nu;
+            memcpy(xd, s->basis + (size_t)d * nu, sizeof(double) * (size_t)nu);
+            for (dk_index h = 0; h < s->con->n_handles; h++)
+                for (int a = 0; a < 4; a++) {
+                    const double c = targets[16 * (size_t)h + 4 * (size_t)d + (size_t)a];
+                    const double *g = s->basis + (size_t)nu * (3 + 4 * (size_t)h + (size_t)a);
+                    if (c == 0.0)
+                        continue;
+                    for (dk_index u = 0; u < nu; u++)
+                        xd[u] += c * g[u];
+                }
+            for (dk_index u = 0; u < nu; u++)
+                le->x[(size_t)d * n + s->unknowns[u]] = xd[u];
+        }
+    } else {
+        st = linear_solve(le, err);
+        if (st != DK_OK)
+            return st;
+    }
     iterations = 1;
     if (le->opt.detail == DK_LE_DETAIL_LOCAL_FRAME) {
         const double scale = le->mesh->bbox_diagonal;

@@ -943,6 +943,78 @@ static void test_local_frame_convergence(void)
     grid_setup_free(&s);
 }
 
-DK_TEST_MAIN(test_zero_drag_returns_rest, test_hard_constraints_and_energy,
+
+/* Solves from transforms use a precomputed affine basis instead of a back-substitution;
+ * they must agree with solves from the equivalent per-vertex targets in every mode. */
+static void test_transforms_match_targets(void)
+{
+    grid_setup s;
+    if (!grid_setup_make(&s, 14, 8, 0.02)) {
+        CHECK(0);
+        return;
+    }
+    const dk_index n = s.m->n_vertices;
+    dk_index sizes[2] = {s.n_handle / 2, s.n_handle - s.n_handle / 2};
+    double *hw = malloc(sizeof(double) * (size_t)s.n_handle);
+    double *t = malloc(sizeof(double) * 3 * (size_t)s.n_handle);
+    double *x = malloc(sizeof(double) * 3 * (size_t)n), *y = malloc(sizeof(double) * 3 * (size_t)n);
+    double T[32], c[3] = {0.5, 0.0, 0.0};
+    if (!hw || !t || !x || !y)
+        abort();
+    rotation_about(1, -0.7, c, T);
+    rotation_about(0, 0.4, c, T + 16);
+    T[3] += 0.1;
+    T[16 + 7] -= 0.2;
+    for (dk_index k = 0; k < s.n_handle; k++) {
+        const double *T_ = k < sizes[0] ? T : T + 16;
+        const double *p = s.m->positions + 3 * s.handle[k];
+        for (int d = 0; d < 3; d++)
+            t[3 * k + d] = T_[4 * d] * p[0] + T_[4 * d + 1] * p[1] + T_[4 * d + 2] * p[2] +
+                           T_[4 * d + 3];
+        hw[k] = k % 3 ? 1.0 : 0.6;
+    }
+    for (int variant = 0; variant < 5; variant++) {
+        dk_laplacian_edit_options o;
+        dk_laplacian_edit *le = NULL;
+        dk_laplacian_edit_info i1, i2;
+        dk_constraint_desc d = s.desc;
+        dk_error e;
+        dk_error_clear(&e);
+        dk_laplacian_edit_default_options(&o);
+        d.n_handles = 2;
+        d.handle_sizes = sizes;
+        if (variant == 1)
+            o.detail = DK_LE_DETAIL_MEMBRANE;
+        if (variant == 2) {
+            o.constraints = DK_LE_CONSTRAINTS_SOFT;
+            o.constraint_weight = 2.0;
+        }
+        if (variant == 3) {
+            d.handle_weights = hw;
+            o.tikhonov = 0.3;
+        }
+        if (variant == 4) {
+            o.detail = DK_LE_DETAIL_LOCAL_FRAME;
+            o.local_frame_iterations = 3;
+        }
+        if (dk_laplacian_edit_bind(s.m, &d, &o, &le, &e) != DK_OK) {
+            CHECK_MSG(0, "%s", e.message);
+            continue;
+        }
+        CHECK(dk_laplacian_edit_solve(le, T, 1, x, &i1, &e) == DK_OK);
+        CHECK(dk_laplacian_edit_solve(le, t, 0, y, &i2, &e) == DK_OK);
+        CHECK_MSG(max_abs_diff(x, y, 3 * (size_t)n) < 1e-11, "variant %d: %g", variant,
+                  max_abs_diff(x, y, 3 * (size_t)n));
+        CHECK_NEAR(i1.energy, i2.energy, 1e-10 * fmax(1.0, i2.energy));
+        dk_laplacian_edit_free(le);
+    }
+    free(hw);
+    free(t);
+    free(x);
+    free(y);
+    grid_setup_free(&s);
+}
+
+DK_TEST_MAIN(test_transforms_match_targets, test_zero_drag_returns_rest, test_hard_constraints_and_energy,
              test_soft_tikhonov_membrane, test_handle_weights_and_rebind, test_bad_input,
              test_bumpy_plane_bend, test_bar_twist, test_local_frame_convergence)
