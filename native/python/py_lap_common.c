@@ -112,7 +112,24 @@ int dk_py_lap_read_constraints(PyObject *handles, PyObject *fixed, PyObject *roi
         }
     }
     if (handle_weights && handle_weights != Py_None) {
-        PyObject *wl = PySequence_Tuple(handle_weights);
+        PyObject *wl = NULL;
+        if (ng == 1) {
+            /* one group: a flat per-vertex array is accepted as well as [array] */
+            PyObject *first = PySequence_Check(handle_weights) && PySequence_Size(handle_weights) > 0
+                                  ? PySequence_GetItem(handle_weights, 0)
+                                  : NULL;
+            PyErr_Clear();
+            if (first && (PyFloat_Check(first) || PyLong_Check(first)) &&
+                PySequence_Size(handle_weights) == total && total > 1)
+                wl = PyTuple_Pack(1, handle_weights);
+            else if (!first && PyObject_HasAttrString(handle_weights, "ndim"))
+                wl = PyTuple_Pack(1, handle_weights);
+            Py_XDECREF(first);
+            if (!wl && PyErr_Occurred())
+                goto fail;
+        }
+        if (!wl)
+            wl = PySequence_Tuple(handle_weights);
         Py_ssize_t at = 0;
         if (!wl)
             goto fail;
