@@ -1,0 +1,251 @@
+/* DeformKit: validation of the shared constraint description and expansion of solve-time
+ * handle targets. See dk_constraints.h for the contract.
+ *
+ * Choices the header leaves open, stated here:
+ *  - a vertex listed twice in the SAME handle is refused like any other overlap (its target
+ *    would be ambiguous); a vertex listed twice in the fixed set or the ROI is harmless and
+ *    accepted;
+ *  - the ROI only turns FREE vertices into FIXED ones: a handle vertex outside the ROI stays
+ *    a handle (it is constrained either way, and dropping its target silently would be
+ *    worse than honouring it);
+ *  - having no free vertex is not an error here (some methods accept it); methods that need
+ *    unknowns refuse it themselves. */
+#include "dk_constraints.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+void dk_constraints_free(dk_constraints *c)
+{
+    if (!c)
+        return;
+    free(c->handle_start);
+    free(c->handle_vertices);
+    free(c->handle_weights);
+    free(c->role);
+    free(c->free_index);
+    free(c->free_vertices);
+    free(c->stiffness);
+    free(c);
+}
+
+static dk_status oom(dk_error *err, const char *what)
+{
+    return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "constraints: out of memory (%s)", what);
+}
+
+dk_status dk_constraints_create(const dk_mesh *mesh, const dk_constraint_desc *desc,
+                                dk_constraints **out, dk_error *err)
+{
+    if (out)
+        *out = NULL;
+    if (!mesh || !desc || !out)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "constraints: mesh, description and output must not be NULL");
+    const dk_index n = mesh->n_vertices;
+    if (desc->n_handles < 0 || desc->n_fixed < 0 || desc->n_roi < 0)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "constraints: negative count (handles %d, fixed %d, roi %d)",
+                            (int)desc->n_handles, (int)desc->n_fixed, (int)desc->n_roi);
+    if (desc->n_handles == 0)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "constraints: at least one handle group is required");
+    if (!desc->handle_sizes || !desc->handle_vertices)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "constraints: handle sizes and vertices must not be NULL");
+    if (desc->n_fixed > 0 && !desc->fixed_vertices)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "constraints: %d fixed vertices announced but the list is NULL",
+                            (int)desc->n_fixed);
+    if (desc->n_roi > 0 && !desc->roi_vertices)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "constraints: %d ROI vertices announced but the list is NULL",
+                            (int)desc->n_roi);
+
+    /* Sizes: none empty, total fits the index type. */
+    int64_t total = 0;
+    for (dk_index h = 0; h < desc->n_handles; h++) {
+        if (desc->handle_sizes[h] <= 0)
+            return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                                "constraints: handle %d is empty (size %d)", (int)h,
+                                (int)desc->handle_sizes[h]);
+        total += desc->handle_sizes[h];
+        if (total > INT32_MAX)
+            return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                                "constraints: too many handle vertices");
+    }
+
+    /* Ranges, naming the list and position. */
+    {
+        int64_t k = 0;
+        for (dk_index h = 0; h < desc->n_handles; h++)
+            for (dk_index j = 0; j < desc->handle_sizes[h]; j++, k++) {
+                dk_index v = desc->handle_vertices[k];
+                if (v < 0 || v >= n)
+                    return dk_error_set(err, DK_ERR_INDEX,
+                                        "constraints: handle %d vertex %d is %d, out of range "
+                                        "[0, %d)", (int)h, (int)j, (int)v, (int)n);
+                if (desc->handle_weights) {
+                    double w = desc->handle_weights[k];
+                    if (!(isfinite(w) && w > 0.0 && w <= 1.0))
+                        return dk_error_set(err, isfinite(w) ? DK_ERR_INVALID_ARGUMENT
+                                                             : DK_ERR_NONFINITE,
+                                            "constraints: handle %d vertex %d weight is %g, "
+                                            "outside (0, 1]", (int)h, (int)v, w);
+                }
+            }
+    }
+    for (dk_index k = 0; k < desc->n_fixed; k++) {
+        dk_index v = desc->fixed_vertices[k];
+        if (v < 0 || v >= n)
+            return dk_error_set(err, DK_ERR_INDEX,
+                                "constraints: fixed vertex %d is %d, out of range [0, %d)",
+                                (int)k, (int)v, (int)n);
+    }
+    for (dk_index k = 0; k < desc->n_roi; k++) {
+        dk_index v = desc->roi_vertices[k];
+        if (v < 0 || v >= n)
+            return dk_error_set(err, DK_ERR_INDEX,
+                                "constraints: ROI vertex %d is %d, out of range [0, %d)",
+                                (int)k, (int)v, (int)n);
+    }
+    if (desc->stiffness)
+        for (dk_index v = 0; v < n; v++) {
+            double s = desc->stiffness[v];
+            if (!(isfinite(s) && s > 0.0))
+                return dk_error_set(err, isfinite(s) ? DK_ERR_INVALID_ARGUMENT
+                                                     : DK_ERR_NONFINITE,
+                                    "constraints: stiffness of vertex %d is %g, must be finite "
+                                    "and > 0", (int)v, s);
+        }
+
+    dk_constraints *c = calloc(1, sizeof *c);
+    if (!c)
+        return oom(err, "object");
+    c->n_vertices = n;
+    c->n_handles = desc->n_handles;
+    c->n_handle_vertices = (dk_index)total;
+    c->handle_start = malloc(((size_t)c->n_handles + 1) * sizeof *c->handle_start);
+    c->handle_vertices = malloc((size_t)total * sizeof *c->handle_vertices);
+    c->handle_weights = malloc((size_t)total * sizeof *c->handle_weights);
+    c->role = malloc(((size_t)n + 1) * sizeof *c->role);
+    c->free_index = malloc(((size_t)n + 1) * sizeof *c->free_index);
+    c->stiffness = malloc(((size_t)n + 1) * sizeof *c->stiffness);
+    if (!c->handle_start || !c->handle_vertices || !c->handle_weights || !c->role ||
+        !c->free_index || !c->stiffness) {
+        dk_constraints_free(c);
+        return oom(err, "arrays");
+    }
+    for (dk_index v = 0; v < n; v++) {
+        c->role[v] = DK_VERTEX_FREE;
+        c->stiffness[v] = desc->stiffness ? desc->stiffness[v] : 1.0;
+    }
+    c->handle_start[0] = 0;
+    for (dk_index h = 0, k = 0; h < c->n_handles; h++) {
+        for (dk_index j = 0; j < desc->handle_sizes[h]; j++, k++) {
+            dk_index v = desc->handle_vertices[k];
+            if (c->role[v] >= 0) {
+                dk_index other = c->role[v];
+                dk_constraints_free(c);
+                if (other == h)
+                    return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                                        "constraints: vertex %d appears twice in handle %d",
+                                        (int)v, (int)h);
+                return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                                    "constraints: vertex %d is both in handle %d and in handle "
+                                    "%d", (int)v, (int)other, (int)h);
+            }
+            c->role[v] = h;
+            c->handle_vertices[k] = v;
+            c->handle_weights[k] = desc->handle_weights ? desc->handle_weights[k] : 1.0;
+        }
+        c->handle_start[h + 1] = c->handle_start[h] + desc->handle_sizes[h];
+    }
+    for (dk_index k = 0; k < desc->n_fixed; k++) {
+        dk_index v = desc->fixed_vertices[k];
+        if (c->role[v] >= 0) {
+            dk_index h = c->role[v];
+            dk_constraints_free(c);
+            return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                                "constraints: vertex %d is both in handle %d and in the fixed "
+                                "set", (int)v, (int)h);
+        }
+        c->role[v] = DK_VERTEX_FIXED;
+    }
+    if (desc->n_roi > 0) {
+        /* Mark ROI membership in free_index temporarily. */
+        for (dk_index v = 0; v < n; v++)
+            c->free_index[v] = 0;
+        for (dk_index k = 0; k < desc->n_roi; k++)
+            c->free_index[desc->roi_vertices[k]] = 1;
+        for (dk_index v = 0; v < n; v++)
+            if (!c->free_index[v] && c->role[v] == DK_VERTEX_FREE)
+                c->role[v] = DK_VERTEX_FIXED;
+    }
+    dk_index nf = 0;
+    for (dk_index v = 0; v < n; v++)
+        c->free_index[v] = c->role[v] == DK_VERTEX_FREE ? nf++ : -1;
+    c->n_free = nf;
+    c->free_vertices = malloc(((size_t)nf + 1) * sizeof *c->free_vertices);
+    if (!c->free_vertices) {
+        dk_constraints_free(c);
+        return oom(err, "free vertex map");
+    }
+    for (dk_index v = 0; v < n; v++)
+        if (c->free_index[v] >= 0)
+            c->free_vertices[c->free_index[v]] = v;
+    *out = c;
+    return DK_OK;
+}
+
+dk_status dk_constraints_targets(const dk_constraints *c, const double *rest_positions,
+                                 const double *targets, int mode, double *out, dk_error *err)
+{
+    if (!c || !rest_positions || !targets || !out)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "constraint targets: NULL argument");
+    if (mode != 0 && mode != 1)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "constraint targets: unknown mode %d (0 = positions, "
+                            "1 = 4x4 transforms)", mode);
+    for (dk_index h = 0; h < c->n_handles; h++) {
+        const double *t = targets + 16 * (size_t)h;
+        if (mode == 1) {
+            for (int e = 0; e < 16; e++)
+                if (!isfinite(t[e]))
+                    return dk_error_set(err, DK_ERR_NONFINITE,
+                                        "constraint targets: handle %d transform entry "
+                                        "(%d, %d) is not finite", (int)h, e / 4, e % 4);
+            if (t[12] != 0.0 || t[13] != 0.0 || t[14] != 0.0 || t[15] != 1.0)
+                return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                                    "constraint targets: handle %d transform bottom row is "
+                                    "(%g, %g, %g, %g), must be (0, 0, 0, 1)", (int)h, t[12],
+                                    t[13], t[14], t[15]);
+        }
+        for (dk_index k = c->handle_start[h]; k < c->handle_start[h + 1]; k++) {
+            dk_index v = c->handle_vertices[k];
+            double *o = out + 3 * (size_t)k;
+            if (mode == 0) {
+                const double *p = targets + 3 * (size_t)k;
+                if (!(isfinite(p[0]) && isfinite(p[1]) && isfinite(p[2])))
+                    return dk_error_set(err, DK_ERR_NONFINITE,
+                                        "constraint targets: handle %d vertex %d (target row "
+                                        "%d) is not finite", (int)h, (int)v, (int)k);
+                o[0] = p[0];
+                o[1] = p[1];
+                o[2] = p[2];
+            } else {
+                const double *r = rest_positions + 3 * (size_t)v;
+                for (int d = 0; d < 3; d++)
+                    o[d] = t[4 * d] * r[0] + t[4 * d + 1] * r[1] + t[4 * d + 2] * r[2] +
+                           t[4 * d + 3];
+                if (!(isfinite(o[0]) && isfinite(o[1]) && isfinite(o[2])))
+                    return dk_error_set(err, DK_ERR_NONFINITE,
+                                        "constraint targets: handle %d vertex %d transformed "
+                                        "position is not finite (overflow)", (int)h, (int)v);
+            }
+        }
+    }
+    return DK_OK;
+}
