@@ -1,0 +1,931 @@
+/* DeformKit: As-Rigid-As-Possible deformation. See dk_arap.h for the energy, weights and
+ * constraints; docs/methods/arap.md for the choices and measurements.
+ *
+ * Layout. The bind builds the cells once: for vertex i, terms cell_start[i] ..
+ * cell_start[i+1]-1, each an edge (ta, tb) with a base weight tw and its rest vector
+ * te = p_a - p_b. Everything that depends on the constraints lives in an arap_system (the
+ * validated constraints, the unknown map, the reduced matrix and its factor, the
+ * per-iteration buffers) that rebind replaces atomically.
+ *
+ * One iteration from positions x with rotations R (optimal for x) and energy E:
+ *   g = G(x): solve A g = rhs(R)                      (global step, 3 right-hand sides)
+ *   candidate = g, or the Anderson mix of the last m (x, g) pairs
+ *   R', E' = local step and energy at the candidate  (one pass over the cells)
+ *   if accelerated and E' > E: candidate = g (plain step, E' <= E is guaranteed), history
+ *   is cleared; stop when E - E' <= tolerance * E.
+ */
+#include "dk_arap.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "dk_cholesky.h"
+#include "dk_operators.h"
+#include "dk_sparse.h"
+
+#define MAX_ANDERSON_DEPTH 20
+
+typedef struct arap_system {
+    dk_constraints *con;
+    dk_index nu;          /* unknowns: free vertices and soft handle vertices            */
+    dk_index *unk;        /* n: unknown index or -1 (eliminated)                         */
+    dk_index *unknowns;   /* nu: the vertices                                            */
+    dk_index *target_of;  /* n: row into the expanded targets, or -1                     */
+    double *soft_k;       /* n: penalty k_v of a soft handle vertex, 0 otherwise         */
+    double *tws;          /* n_terms: stiffness x base weight                            */
+    double escale;        /* sum over terms of tws |te|^2: the energy's natural scale    */
+    double lambda;        /* mean diagonal of the ARAP part of A                         */
+    dk_sparse a;          /* reduced matrix (both triangles), arrays owned               */
+    dk_cholesky *chol;
+    /* per-solve / per-iteration buffers, N = 3 nu, column-major n x 3 layouts */
+    double *rhs_const, *rhs, *xu, *gu, *fu, *gprev, *fprev, *dg, *df;
+    double *targets;      /* n_handle_vertices x 3: last expanded targets                */
+    int have_targets;
+} arap_system;
+
+struct dk_arap {
+    const dk_mesh *mesh;
+    dk_arap_options opt;
+    dk_index n;
+    int64_t n_terms;
+    dk_index *cell_start, *ta, *tb;
+    double *tw, *te;
+    arap_system sys;
+    double *x;            /* n x 3 row-major current positions                           */
+    double *rot;          /* n x 9 rotations                                             */
+    double *prev;         /* n x 3 previous solution (warm start)                        */
+    int have_prev;
+    int analysis_count, factorization_count;
+};
+
+static dk_status oom(dk_error *err, const char *what)
+{
+    return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ARAP: out of memory (%s)", what);
+}
+
+void dk_arap_default_options(dk_arap_options *o)
+{
+    if (!o)
+        return;
+    o->energy = DK_ARAP_SPOKES;
+    o->weights = DK_ARAP_WEIGHTS_CLAMPED_COTANGENT;
+    o->max_iterations = 100;
+    o->tolerance = 1e-6;
+    o->acceleration = DK_ARAP_ACCEL_ANDERSON;
+    o->anderson_depth = 5;
+    o->on_iteration = NULL;
+    o->user = NULL;
+}
+
+static dk_status check_options(const dk_arap_options *o, dk_error *err)
+{
+    if (o->energy != DK_ARAP_SPOKES && o->energy != DK_ARAP_SPOKES_AND_RIMS)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP: unknown energy %d (spokes = 0, spokes_and_rims = 1)",
+                            (int)o->energy);
+    if (o->weights != DK_ARAP_WEIGHTS_COTANGENT &&
+        o->weights != DK_ARAP_WEIGHTS_CLAMPED_COTANGENT && o->weights != DK_ARAP_WEIGHTS_UNIFORM)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP: unknown weights %d (cotangent = 0, clamped_cotangent = 1, "
+                            "uniform = 2)", (int)o->weights);
+    if (o->max_iterations < 1)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP: max_iterations is %d, must be >= 1", o->max_iterations);
+    if (!(isfinite(o->tolerance) && o->tolerance >= 0.0))
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP: tolerance is %g, must be finite and >= 0", o->tolerance);
+    if (o->acceleration != DK_ARAP_ACCEL_NONE && o->acceleration != DK_ARAP_ACCEL_ANDERSON)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP: unknown acceleration %d (none = 0, anderson = 1)",
+                            (int)o->acceleration);
+    if (o->anderson_depth < 1 || o->anderson_depth > MAX_ANDERSON_DEPTH)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP: anderson_depth is %d, must be in [1, %d]", o->anderson_depth,
+                            MAX_ANDERSON_DEPTH);
+    return DK_OK;
+}
+
+/* ------------------------------------------------------------------ cells -------------- */
+
+typedef struct raw_term {
+    dk_index a, b;
+    double w;
+} raw_term;
+
+/* cot(angle at corner p0 of triangle p0 p1 p2) / 2, 0 for a degenerate triangle. */
+static double half_cot(const double *p0, const double *p1, const double *p2, double longest2)
+{
+    double u[3] = {p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]};
+    double v[3] = {p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]};
+    double c[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
+                   u[0] * v[1] - u[1] * v[0]};
+    double twice_area = sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+    if (!(0.5 * twice_area >= 1e-14 * longest2))
+        return 0.0;
+    return 0.5 * (u[0] * v[0] + u[1] * v[1] + u[2] * v[2]) / twice_area;
+}
+
+static double dist2(const double *p, const double *q)
+{
+    double d0 = p[0] - q[0], d1 = p[1] - q[1], d2 = p[2] - q[2];
+    return d0 * d0 + d1 * d1 + d2 * d2;
+}
+
+static int term_less(const raw_term *x, const raw_term *y)
+{
+    return x->a < y->a || (x->a == y->a && x->b < y->b);
+}
+
+static dk_status build_cells(dk_arap *ar, dk_error *err)
+{
+    const dk_mesh *m = ar->mesh;
+    const dk_index n = m->n_vertices, nf = m->n_faces;
+    const int rims = ar->opt.energy == DK_ARAP_SPOKES_AND_RIMS;
+    const int per_corner = rims ? 3 : 2;
+    const double *p = m->positions;
+    dk_status st = DK_OK;
+    dk_index *start = calloc((size_t)n + 1, sizeof *start);
+    dk_index *fill = malloc(((size_t)n + 1) * sizeof *fill);
+    raw_term *raw = malloc(((size_t)nf * 3 * per_corner + 1) * sizeof *raw);
+    if (!start || !fill || !raw) {
+        st = oom(err, "cells");
+        goto done;
+    }
+    for (dk_index f = 0; f < nf; f++)
+        for (int k = 0; k < 3; k++)
+            start[m->faces[3 * f + k] + 1] += per_corner;
+    for (dk_index v = 0; v < n; v++)
+        start[v + 1] += start[v];
+    memcpy(fill, start, (size_t)n * sizeof *fill);
+    for (dk_index f = 0; f < nf; f++) {
+        const dk_index *t = m->faces + 3 * f;
+        double l0 = dist2(p + 3 * t[1], p + 3 * t[2]), l1 = dist2(p + 3 * t[2], p + 3 * t[0]),
+               l2 = dist2(p + 3 * t[0], p + 3 * t[1]);
+        double longest2 = fmax(l0, fmax(l1, l2));
+        double h[3]; /* h[k]: half weight of the edge opposite corner k */
+        for (int k = 0; k < 3; k++)
+            h[k] = ar->opt.weights == DK_ARAP_WEIGHTS_UNIFORM
+                       ? 0.5
+                       : half_cot(p + 3 * t[k], p + 3 * t[(k + 1) % 3], p + 3 * t[(k + 2) % 3],
+                                  longest2);
+        for (int k = 0; k < 3; k++) {
+            dk_index i = t[k];
+            for (int e = 0; e < 3; e++) {
+                if (!rims && e == k)
+                    continue; /* the edge opposite i is a rim */
+                dk_index a = t[(e + 1) % 3], b = t[(e + 2) % 3];
+                raw_term r = {a < b ? a : b, a < b ? b : a, h[e]};
+                raw[fill[i]++] = r;
+            }
+        }
+    }
+    /* Sort each cell by edge, merge duplicates, detect non-manifold spokes, clamp. */
+    int64_t out = 0;
+    for (dk_index i = 0; i < n; i++) {
+        raw_term *c = raw + start[i];
+        dk_index len = start[i + 1] - start[i];
+        for (dk_index s = 1; s < len; s++) {
+            raw_term key = c[s];
+            dk_index j = s - 1;
+            while (j >= 0 && term_less(&key, &c[j])) {
+                c[j + 1] = c[j];
+                j--;
+            }
+            c[j + 1] = key;
+        }
+        dk_index new_start = (dk_index)out;
+        for (dk_index s = 0; s < len;) {
+            raw_term merged = c[s];
+            dk_index e = s + 1;
+            while (e < len && c[e].a == merged.a && c[e].b == merged.b)
+                merged.w += c[e++].w;
+            if ((merged.a == i || merged.b == i) && e - s > 2) {
+                st = dk_error_set(err, DK_ERR_TOPOLOGY,
+                                  "ARAP: edge (%d, %d) is non-manifold (%d incident "
+                                  "triangles)", (int)merged.a, (int)merged.b, (int)(e - s));
+                goto done;
+            }
+            if (ar->opt.weights == DK_ARAP_WEIGHTS_CLAMPED_COTANGENT && merged.w < 0.0)
+                merged.w = 0.0;
+            raw[out++] = merged; /* out <= start[i] + s: never overwrites unread terms */
+            s = e;
+        }
+        start[i] = new_start;
+    }
+    start[n] = (dk_index)out;
+    ar->n_terms = out;
+    ar->cell_start = start;
+    start = NULL;
+    ar->ta = malloc(((size_t)out + 1) * sizeof *ar->ta);
+    ar->tb = malloc(((size_t)out + 1) * sizeof *ar->tb);
+    ar->tw = malloc(((size_t)out + 1) * sizeof *ar->tw);
+    ar->te = malloc(((size_t)out * 3 + 1) * sizeof *ar->te);
+    if (!ar->ta || !ar->tb || !ar->tw || !ar->te) {
+        st = oom(err, "cell terms");
+        goto done;
+    }
+    for (int64_t t = 0; t < out; t++) {
+        ar->ta[t] = raw[t].a;
+        ar->tb[t] = raw[t].b;
+        ar->tw[t] = raw[t].w;
+        for (int d = 0; d < 3; d++)
+            ar->te[3 * t + d] = p[3 * raw[t].a + d] - p[3 * raw[t].b + d];
+    }
+done:
+    free(start);
+    free(fill);
+    free(raw);
+    return st;
+}
+
+/* ------------------------------------------------------------------ system ------------- */
+
+static void sparse_release(dk_sparse *a)
+{
+    free(a->col_start);
+    free(a->row_index);
+    free(a->values);
+    memset(a, 0, sizeof *a);
+}
+
+static void system_free(arap_system *s)
+{
+    dk_constraints_free(s->con);
+    free(s->unk);
+    free(s->unknowns);
+    free(s->target_of);
+    free(s->soft_k);
+    free(s->tws);
+    sparse_release(&s->a);
+    dk_cholesky_free(s->chol);
+    free(s->rhs_const);
+    free(s->rhs);
+    free(s->xu);
+    free(s->gu);
+    free(s->fu);
+    free(s->gprev);
+    free(s->fprev);
+    free(s->dg);
+    free(s->df);
+    free(s->targets);
+    memset(s, 0, sizeof *s);
+}
+
+static dk_index uf_find(dk_index *parent, dk_index v)
+{
+    while (parent[v] != v) {
+        parent[v] = parent[parent[v]];
+        v = parent[v];
+    }
+    return v;
+}
+
+/* Every connected component (and isolated vertex) holding an unknown must hold an anchor:
+ * an eliminated vertex or a soft handle vertex. */
+static dk_status check_components(const dk_arap *ar, const arap_system *s, dk_error *err)
+{
+    const dk_mesh *m = ar->mesh;
+    const dk_index n = ar->n;
+    dk_index *parent = malloc(((size_t)n + 1) * sizeof *parent);
+    unsigned char *anchored = calloc((size_t)n + 1, 1);
+    if (!parent || !anchored) {
+        free(parent);
+        free(anchored);
+        return oom(err, "component check");
+    }
+    for (dk_index v = 0; v < n; v++)
+        parent[v] = v;
+    for (dk_index f = 0; f < m->n_faces; f++)
+        for (int k = 1; k < 3; k++) {
+            dk_index a = uf_find(parent, m->faces[3 * f]);
+            dk_index b = uf_find(parent, m->faces[3 * f + k]);
+            if (a != b)
+                parent[a < b ? b : a] = a < b ? a : b;
+        }
+    for (dk_index v = 0; v < n; v++)
+        if (s->unk[v] < 0 || s->soft_k[v] > 0.0)
+            anchored[uf_find(parent, v)] = 1;
+    dk_status st = DK_OK;
+    for (dk_index v = 0; v < n && st == DK_OK; v++)
+        if (s->unk[v] >= 0 && !anchored[uf_find(parent, v)])
+            st = dk_error_set(err, DK_ERR_DEGENERATE,
+                              "ARAP: the connected component of vertex %d has free vertices "
+                              "but no handle or fixed vertex, so its position is undetermined",
+                              (int)v);
+    free(parent);
+    free(anchored);
+    return st;
+}
+
+typedef struct entry {
+    dk_index row;
+    double val;
+} entry;
+
+/* Assembles the reduced matrix A (unknowns x unknowns, both triangles, every diagonal
+ * present, explicit zeros kept so that the pattern depends only on the unknown set). */
+static dk_status assemble(const dk_arap *ar, arap_system *s, dk_error *err)
+{
+    const dk_index nu = s->nu;
+    dk_index *count = calloc((size_t)nu + 1, sizeof *count);
+    if (!count)
+        return oom(err, "matrix assembly");
+    for (int64_t t = 0; t < ar->n_terms; t++) {
+        dk_index ua = s->unk[ar->ta[t]], ub = s->unk[ar->tb[t]];
+        if (ua >= 0)
+            count[ua + 1] += 1 + (ub >= 0);
+        if (ub >= 0)
+            count[ub + 1] += 1 + (ua >= 0);
+    }
+    for (dk_index u = 0; u < nu; u++)
+        count[u + 1] += count[u] + 1; /* + the diagonal */
+    int64_t total = count[nu];
+    entry *ent = malloc(((size_t)total + 1) * sizeof *ent);
+    dk_index *fill = malloc(((size_t)nu + 1) * sizeof *fill);
+    if (!ent || !fill) {
+        free(count);
+        free(ent);
+        free(fill);
+        return oom(err, "matrix assembly");
+    }
+    for (dk_index u = 0; u < nu; u++) {
+        fill[u] = count[u] + 1;
+        ent[count[u]].row = u;
+        ent[count[u]].val = s->soft_k[s->unknowns[u]];
+    }
+    double diag_sum = 0.0;
+    for (int64_t t = 0; t < ar->n_terms; t++) {
+        dk_index ua = s->unk[ar->ta[t]], ub = s->unk[ar->tb[t]];
+        double w = s->tws[t];
+        diag_sum += 2.0 * w;
+        if (ua >= 0) {
+            ent[fill[ua]++] = (entry){ua, w};
+            if (ub >= 0)
+                ent[fill[ua]++] = (entry){ub, -w};
+        }
+        if (ub >= 0) {
+            ent[fill[ub]++] = (entry){ub, w};
+            if (ua >= 0)
+                ent[fill[ub]++] = (entry){ua, -w};
+        }
+    }
+    free(fill);
+    /* Sort and merge each column in place. */
+    int64_t nnz = 0;
+    for (dk_index u = 0; u < nu; u++) {
+        entry *c = ent + count[u];
+        dk_index len = count[u + 1] - count[u];
+        for (dk_index i = 1; i < len; i++) {
+            entry key = c[i];
+            dk_index j = i - 1;
+            while (j >= 0 && c[j].row > key.row) {
+                c[j + 1] = c[j];
+                j--;
+            }
+            c[j + 1] = key;
+        }
+        int64_t col_start = nnz;
+        for (dk_index i = 0; i < len;) {
+            entry e = c[i++];
+            while (i < len && c[i].row == e.row)
+                e.val += c[i++].val;
+            ent[nnz++] = e;
+        }
+        count[u] = (dk_index)col_start;
+    }
+    count[nu] = (dk_index)nnz;
+    s->a.n_rows = s->a.n_cols = nu;
+    s->a.col_start = count;
+    s->a.row_index = malloc(((size_t)nnz + 1) * sizeof *s->a.row_index);
+    s->a.values = malloc(((size_t)nnz + 1) * sizeof *s->a.values);
+    if (!s->a.row_index || !s->a.values) {
+        free(ent);
+        sparse_release(&s->a);
+        return oom(err, "reduced matrix");
+    }
+    for (int64_t k = 0; k < nnz; k++) {
+        s->a.row_index[k] = ent[k].row;
+        s->a.values[k] = ent[k].val;
+    }
+    free(ent);
+    (void)diag_sum;
+    return DK_OK;
+}
+
+static int same_unknowns(const arap_system *x, const arap_system *y, dk_index n)
+{
+    if (!x->unk || x->nu != y->nu)
+        return 0;
+    return memcmp(x->unk, y->unk, (size_t)n * sizeof *x->unk) == 0;
+}
+
+/* Builds a complete system for `desc`; `old` (may be NULL) lends its symbolic analysis when
+ * the unknown set is the same (it is then moved into the new system). */
+static dk_status system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_system *old,
+                              arap_system *s, dk_error *err)
+{
+    const dk_index n = ar->n;
+    memset(s, 0, sizeof *s);
+    dk_status st = dk_constraints_create(ar->mesh, desc, &s->con, err);
+    if (st != DK_OK)
+        return dk_error_prefix(err, "ARAP");
+    const dk_constraints *c = s->con;
+    s->unk = malloc(((size_t)n + 1) * sizeof *s->unk);
+    s->target_of = malloc(((size_t)n + 1) * sizeof *s->target_of);
+    s->soft_k = calloc((size_t)n + 1, sizeof *s->soft_k);
+    s->tws = malloc(((size_t)ar->n_terms + 1) * sizeof *s->tws);
+    s->targets = malloc(((size_t)c->n_handle_vertices * 3 + 1) * sizeof *s->targets);
+    if (!s->unk || !s->target_of || !s->soft_k || !s->tws || !s->targets) {
+        system_free(s);
+        return oom(err, "constraint system");
+    }
+    for (dk_index v = 0; v < n; v++)
+        s->target_of[v] = -1;
+    for (dk_index k = 0; k < c->n_handle_vertices; k++)
+        s->target_of[c->handle_vertices[k]] = k;
+    /* Weights with stiffness, the ARAP diagonal, then the soft penalties. */
+    double diag = 0.0, escale = 0.0;
+    for (dk_index i = 0; i < n; i++)
+        for (dk_index t = ar->cell_start[i]; t < ar->cell_start[i + 1]; t++) {
+            s->tws[t] = c->stiffness[i] * ar->tw[t];
+            diag += 2.0 * s->tws[t];
+            const double *e = ar->te + 3 * t;
+            escale += s->tws[t] * (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
+        }
+    s->lambda = n > 0 ? diag / n : 0.0;
+    s->escale = escale;
+    dk_index nu = 0;
+    for (dk_index v = 0; v < n; v++) {
+        int soft = 0;
+        if (c->role[v] >= 0) {
+            double w = c->handle_weights[s->target_of[v]];
+            if (w < 1.0) {
+                soft = 1;
+                s->soft_k[v] = s->lambda * w / (1.0 - w);
+            }
+        }
+        s->unk[v] = (c->role[v] == DK_VERTEX_FREE || soft) ? nu++ : -1;
+    }
+    s->nu = nu;
+    if (nu == 0) {
+        system_free(s);
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP: no free vertex: every vertex is fixed, outside the ROI or "
+                            "a hard handle, so there is nothing to solve");
+    }
+    s->unknowns = malloc((size_t)nu * sizeof *s->unknowns);
+    size_t N = 3 * (size_t)nu, m = (size_t)ar->opt.anderson_depth;
+    int accel = ar->opt.acceleration == DK_ARAP_ACCEL_ANDERSON;
+    s->rhs_const = malloc(N * sizeof(double));
+    s->rhs = malloc(N * sizeof(double));
+    s->xu = malloc(N * sizeof(double));
+    s->gu = malloc(N * sizeof(double));
+    if (accel) {
+        s->fu = malloc(N * sizeof(double));
+        s->gprev = malloc(N * sizeof(double));
+        s->fprev = malloc(N * sizeof(double));
+        s->dg = malloc(N * m * sizeof(double));
+        s->df = malloc(N * m * sizeof(double));
+    }
+    if (!s->unknowns || !s->rhs_const || !s->rhs || !s->xu || !s->gu ||
+        (accel && (!s->fu || !s->gprev || !s->fprev || !s->dg || !s->df))) {
+        system_free(s);
+        return oom(err, "solve buffers");
+    }
+    for (dk_index v = 0; v < n; v++)
+        if (s->unk[v] >= 0)
+            s->unknowns[s->unk[v]] = v;
+    st = check_components(ar, s, err);
+    if (st == DK_OK)
+        st = assemble(ar, s, err);
+    if (st != DK_OK) {
+        system_free(s);
+        return st;
+    }
+    int reused = 0;
+    if (old && old->chol && same_unknowns(old, s, n)) {
+        s->chol = old->chol; /* same pattern: keep the symbolic analysis */
+        old->chol = NULL;
+        reused = 1;
+    } else {
+        st = dk_cholesky_analyze(&s->a, &s->chol, err);
+        if (st != DK_OK) {
+            system_free(s);
+            return dk_error_prefix(err, "ARAP: analysis of the reduced matrix");
+        }
+        ar->analysis_count++;
+    }
+    st = dk_cholesky_factorize(s->chol, &s->a, err);
+    if (st == DK_OK) {
+        ar->factorization_count++;
+        return DK_OK;
+    }
+    if (reused) { /* give the analysis back, with the old values */
+        old->chol = s->chol;
+        s->chol = NULL;
+        dk_error ignored = {0};
+        if (dk_cholesky_factorize(old->chol, &old->a, &ignored) != DK_OK) {
+            dk_cholesky_free(old->chol);
+            old->chol = NULL;
+        }
+    }
+    system_free(s);
+    if (st == DK_ERR_NOT_POSITIVE_DEFINITE) {
+        dk_error_prefix(err, "ARAP: the reduced matrix is not positive definite (degenerate "
+                             "triangles or negative cotangent weights; try "
+                             "weights=clamped_cotangent)");
+        if (err)
+            err->status = DK_ERR_DEGENERATE;
+        return DK_ERR_DEGENERATE;
+    }
+    return dk_error_prefix(err, "ARAP: factorization");
+}
+
+/* ------------------------------------------------------------------ bind / free -------- */
+
+void dk_arap_free(dk_arap *ar)
+{
+    if (!ar)
+        return;
+    system_free(&ar->sys);
+    free(ar->cell_start);
+    free(ar->ta);
+    free(ar->tb);
+    free(ar->tw);
+    free(ar->te);
+    free(ar->x);
+    free(ar->rot);
+    free(ar->prev);
+    free(ar);
+}
+
+dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraints,
+                       const dk_arap_options *options, dk_arap **out, dk_error *err)
+{
+    if (out)
+        *out = NULL;
+    if (!mesh || !constraints || !out)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP bind: mesh, constraints and output must not be NULL");
+    dk_arap_options opt;
+    if (options)
+        opt = *options;
+    else
+        dk_arap_default_options(&opt);
+    dk_status st = check_options(&opt, err);
+    if (st != DK_OK)
+        return st;
+    if (mesh->n_faces == 0)
+        return dk_error_set(err, DK_ERR_TOPOLOGY, "ARAP bind: the mesh has no triangle");
+    dk_arap *ar = calloc(1, sizeof *ar);
+    if (!ar)
+        return oom(err, "object");
+    ar->mesh = mesh;
+    ar->opt = opt;
+    ar->n = mesh->n_vertices;
+    ar->x = malloc(((size_t)ar->n * 3 + 1) * sizeof *ar->x);
+    ar->rot = malloc(((size_t)ar->n * 9 + 1) * sizeof *ar->rot);
+    ar->prev = malloc(((size_t)ar->n * 3 + 1) * sizeof *ar->prev);
+    if (!ar->x || !ar->rot || !ar->prev) {
+        dk_arap_free(ar);
+        return oom(err, "positions");
+    }
+    st = build_cells(ar, err);
+    if (st == DK_OK)
+        st = system_build(ar, constraints, NULL, &ar->sys, err);
+    if (st != DK_OK) {
+        dk_arap_free(ar);
+        return st;
+    }
+    *out = ar;
+    return DK_OK;
+}
+
+dk_status dk_arap_rebind(dk_arap *ar, const dk_constraint_desc *constraints, dk_error *err)
+{
+    if (!ar || !constraints)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP rebind: object and constraints must not be NULL");
+    arap_system s;
+    dk_status st = system_build(ar, constraints, &ar->sys, &s, err);
+    if (st != DK_OK)
+        return st;
+    system_free(&ar->sys);
+    ar->sys = s;
+    return DK_OK;
+}
+
+/* ------------------------------------------------------------------ iteration ---------- */
+
+/* Local step and energy at positions x: rotations into rot (may be NULL: then only the
+ * energy), returns E(x) including soft penalties (when targets are known). */
+static double local_energy(const dk_arap *ar, const arap_system *s, const double *x,
+                           double *rot)
+{
+    double energy = 0.0;
+    for (dk_index i = 0; i < ar->n; i++) {
+        dk_index t0 = ar->cell_start[i], t1 = ar->cell_start[i + 1];
+        double a[9] = {0}, r[9];
+        for (dk_index t = t0; t < t1; t++) {
+            const double *pa = x + 3 * ar->ta[t], *pb = x + 3 * ar->tb[t];
+            const double *e = ar->te + 3 * t;
+            double w = ar->tw[t];
+            double d0 = w * (pa[0] - pb[0]), d1 = w * (pa[1] - pb[1]), d2 = w * (pa[2] - pb[2]);
+            a[0] += d0 * e[0]; a[1] += d0 * e[1]; a[2] += d0 * e[2];
+            a[3] += d1 * e[0]; a[4] += d1 * e[1]; a[5] += d1 * e[2];
+            a[6] += d2 * e[0]; a[7] += d2 * e[1]; a[8] += d2 * e[2];
+        }
+        dk_closest_rotation(a, r);
+        double ce = 0.0;
+        for (dk_index t = t0; t < t1; t++) {
+            const double *pa = x + 3 * ar->ta[t], *pb = x + 3 * ar->tb[t];
+            const double *e = ar->te + 3 * t;
+            double q0 = pa[0] - pb[0] - (r[0] * e[0] + r[1] * e[1] + r[2] * e[2]);
+            double q1 = pa[1] - pb[1] - (r[3] * e[0] + r[4] * e[1] + r[5] * e[2]);
+            double q2 = pa[2] - pb[2] - (r[6] * e[0] + r[7] * e[1] + r[8] * e[2]);
+            ce += s->tws[t] * (q0 * q0 + q1 * q1 + q2 * q2);
+        }
+        energy += ce;
+        if (rot)
+            memcpy(rot + 9 * (size_t)i, r, sizeof r);
+    }
+    if (s->have_targets)
+        for (dk_index u = 0; u < s->nu; u++) {
+            dk_index v = s->unknowns[u];
+            if (s->soft_k[v] > 0.0)
+                energy += s->soft_k[v] * dist2(x + 3 * v, s->targets + 3 * s->target_of[v]);
+        }
+    return energy;
+}
+
+/* rhs = rhs_const + the rotated rest edges; rot NULL = identities. */
+static void build_rhs(const dk_arap *ar, arap_system *s, const double *rot)
+{
+    const dk_index nu = s->nu;
+    memcpy(s->rhs, s->rhs_const, 3 * (size_t)nu * sizeof(double));
+    static const double id[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    for (dk_index i = 0; i < ar->n; i++) {
+        const double *r = rot ? rot + 9 * (size_t)i : id;
+        for (dk_index t = ar->cell_start[i]; t < ar->cell_start[i + 1]; t++) {
+            dk_index ua = s->unk[ar->ta[t]], ub = s->unk[ar->tb[t]];
+            if (ua < 0 && ub < 0)
+                continue;
+            const double *e = ar->te + 3 * t;
+            double w = s->tws[t];
+            double q0 = w * (r[0] * e[0] + r[1] * e[1] + r[2] * e[2]);
+            double q1 = w * (r[3] * e[0] + r[4] * e[1] + r[5] * e[2]);
+            double q2 = w * (r[6] * e[0] + r[7] * e[1] + r[8] * e[2]);
+            if (ua >= 0) {
+                s->rhs[ua] += q0;
+                s->rhs[nu + ua] += q1;
+                s->rhs[2 * (size_t)nu + ua] += q2;
+            }
+            if (ub >= 0) {
+                s->rhs[ub] -= q0;
+                s->rhs[nu + ub] -= q1;
+                s->rhs[2 * (size_t)nu + ub] -= q2;
+            }
+        }
+    }
+}
+
+/* Constant part of the right-hand side: couplings to eliminated vertices at positions x,
+ * and the soft targets. */
+static void build_rhs_const(const dk_arap *ar, arap_system *s, const double *x)
+{
+    const dk_index nu = s->nu;
+    memset(s->rhs_const, 0, 3 * (size_t)nu * sizeof(double));
+    for (int64_t t = 0; t < ar->n_terms; t++) {
+        dk_index a = ar->ta[t], b = ar->tb[t];
+        dk_index ua = s->unk[a], ub = s->unk[b];
+        if ((ua >= 0) == (ub >= 0))
+            continue;
+        dk_index u = ua >= 0 ? ua : ub, known = ua >= 0 ? b : a;
+        for (int d = 0; d < 3; d++)
+            s->rhs_const[(size_t)d * nu + u] += s->tws[t] * x[3 * known + d];
+    }
+    for (dk_index u = 0; u < nu; u++) {
+        dk_index v = s->unknowns[u];
+        if (s->soft_k[v] > 0.0)
+            for (int d = 0; d < 3; d++)
+                s->rhs_const[(size_t)d * nu + u] +=
+                    s->soft_k[v] * s->targets[3 * s->target_of[v] + d];
+    }
+}
+
+static void scatter(const arap_system *s, const double *xu, double *x)
+{
+    const dk_index nu = s->nu;
+    for (dk_index u = 0; u < nu; u++)
+        for (int d = 0; d < 3; d++)
+            x[3 * s->unknowns[u] + d] = xu[(size_t)d * nu + u];
+}
+
+static void gather(const arap_system *s, const double *x, double *xu)
+{
+    const dk_index nu = s->nu;
+    for (dk_index u = 0; u < nu; u++)
+        for (int d = 0; d < 3; d++)
+            xu[(size_t)d * nu + u] = x[3 * s->unknowns[u] + d];
+}
+
+static double dot(const double *a, const double *b, size_t n)
+{
+    double s = 0.0;
+    for (size_t k = 0; k < n; k++)
+        s += a[k] * b[k];
+    return s;
+}
+
+/* Solves the m x m SPD system g theta = h in place (Cholesky, regularised); 0 on success. */
+static int small_spd_solve(double *g, double *h, int m)
+{
+    double tr = 0.0;
+    for (int i = 0; i < m; i++)
+        tr += g[i * m + i];
+    if (!(tr > 0.0) || !isfinite(tr))
+        return -1;
+    for (int i = 0; i < m; i++)
+        g[i * m + i] += 1e-10 * tr / m;
+    for (int j = 0; j < m; j++) {
+        double d = g[j * m + j];
+        for (int k = 0; k < j; k++)
+            d -= g[j * m + k] * g[j * m + k];
+        if (!(d > 0.0))
+            return -1;
+        d = sqrt(d);
+        g[j * m + j] = d;
+        for (int i = j + 1; i < m; i++) {
+            double v = g[i * m + j];
+            for (int k = 0; k < j; k++)
+                v -= g[i * m + k] * g[j * m + k];
+            g[i * m + j] = v / d;
+        }
+    }
+    for (int i = 0; i < m; i++) {
+        double v = h[i];
+        for (int k = 0; k < i; k++)
+            v -= g[i * m + k] * h[k];
+        h[i] = v / g[i * m + i];
+    }
+    for (int i = m - 1; i >= 0; i--) {
+        double v = h[i];
+        for (int k = i + 1; k < m; k++)
+            v -= g[k * m + i] * h[k];
+        h[i] = v / g[i * m + i];
+    }
+    for (int i = 0; i < m; i++)
+        if (!isfinite(h[i]))
+            return -1;
+    return 0;
+}
+
+dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_start,
+                        int max_iterations, double *positions, dk_arap_info *info,
+                        dk_error *err)
+{
+    if (info)
+        memset(info, 0, sizeof *info);
+    if (!ar || !targets || !positions)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP solve: object, targets and positions must not be NULL");
+    arap_system *s = &ar->sys;
+    const dk_constraints *c = s->con;
+    const dk_index n = ar->n, nu = s->nu;
+    const size_t N = 3 * (size_t)nu;
+    const double *rest = ar->mesh->positions;
+    dk_status st = dk_constraints_targets(c, rest, targets, mode, s->targets, err);
+    if (st != DK_OK) {
+        s->have_targets = 0;
+        return dk_error_prefix(err, "ARAP solve");
+    }
+    s->have_targets = 1;
+    const int maxit = max_iterations > 0 ? max_iterations : ar->opt.max_iterations;
+    const int accel = ar->opt.acceleration == DK_ARAP_ACCEL_ANDERSON;
+    const int depth = ar->opt.anderson_depth;
+
+    /* Eliminated vertices: hard targets or rest; unknowns: previous solution or rest. */
+    const int warm = warm_start && ar->have_prev;
+    memcpy(ar->x, warm ? ar->prev : rest, 3 * (size_t)n * sizeof(double));
+    for (dk_index v = 0; v < n; v++)
+        if (s->unk[v] < 0)
+            for (int d = 0; d < 3; d++)
+                ar->x[3 * v + d] =
+                    s->target_of[v] >= 0 ? s->targets[3 * s->target_of[v] + d] : rest[3 * v + d];
+    build_rhs_const(ar, s, ar->x);
+    if (!warm) { /* initial guess: global step with identity rotations */
+        build_rhs(ar, s, NULL);
+        st = dk_cholesky_solve(s->chol, s->rhs, 3, s->gu, err);
+        if (st != DK_OK)
+            return dk_error_prefix(err, "ARAP solve");
+        scatter(s, s->gu, ar->x);
+    }
+    double energy = local_energy(ar, s, ar->x, ar->rot);
+    if (ar->opt.on_iteration && ar->opt.on_iteration(ar->opt.user, 0, energy))
+        return dk_error_set(err, DK_ERR_CANCELLED, "ARAP solve: cancelled by the observer");
+    const double tiny = 1e-26 * s->escale;
+    int it = 0, converged = energy <= tiny, rejected = 0;
+    int hist = 0, head = 0, have_prev_pair = 0;
+    gather(s, ar->x, s->xu);
+    while (!converged && it < maxit) {
+        it++;
+        build_rhs(ar, s, ar->rot);
+        st = dk_cholesky_solve(s->chol, s->rhs, 3, s->gu, err);
+        if (st != DK_OK)
+            return dk_error_prefix(err, "ARAP solve");
+        int used_accel = 0;
+        if (accel) {
+            for (size_t k = 0; k < N; k++)
+                s->fu[k] = s->gu[k] - s->xu[k];
+            if (have_prev_pair) {
+                double *dgc = s->dg + (size_t)head * N, *dfc = s->df + (size_t)head * N;
+                for (size_t k = 0; k < N; k++) {
+                    dgc[k] = s->gu[k] - s->gprev[k];
+                    dfc[k] = s->fu[k] - s->fprev[k];
+                }
+                head = (head + 1) % depth;
+                if (hist < depth)
+                    hist++;
+            }
+            memcpy(s->gprev, s->gu, N * sizeof(double));
+            memcpy(s->fprev, s->fu, N * sizeof(double));
+            have_prev_pair = 1;
+            if (hist > 0) {
+                double g[MAX_ANDERSON_DEPTH * MAX_ANDERSON_DEPTH], h[MAX_ANDERSON_DEPTH];
+                for (int i = 0; i < hist; i++) {
+                    const double *di = s->df + (size_t)i * N;
+                    h[i] = dot(di, s->fu, N);
+                    for (int j = 0; j <= i; j++)
+                        g[i * hist + j] = g[j * hist + i] = dot(di, s->df + (size_t)j * N, N);
+                }
+                if (small_spd_solve(g, h, hist) == 0) {
+                    memcpy(s->xu, s->gu, N * sizeof(double));
+                    for (int i = 0; i < hist; i++) {
+                        const double *dgi = s->dg + (size_t)i * N;
+                        for (size_t k = 0; k < N; k++)
+                            s->xu[k] -= h[i] * dgi[k];
+                    }
+                    used_accel = 1;
+                }
+            }
+        }
+        double e_new;
+        if (used_accel) {
+            scatter(s, s->xu, ar->x);
+            e_new = local_energy(ar, s, ar->x, ar->rot);
+            if (!(e_new <= energy)) { /* safeguard: plain step, forget the history */
+                rejected++;
+                hist = 0;
+                head = 0;
+                used_accel = 0;
+            }
+        }
+        if (!used_accel) {
+            memcpy(s->xu, s->gu, N * sizeof(double));
+            scatter(s, s->xu, ar->x);
+            e_new = local_energy(ar, s, ar->x, ar->rot);
+        }
+        converged = e_new <= tiny || (energy - e_new) <= ar->opt.tolerance * energy;
+        energy = e_new;
+        if (ar->opt.on_iteration && ar->opt.on_iteration(ar->opt.user, it, energy))
+            return dk_error_set(err, DK_ERR_CANCELLED, "ARAP solve: cancelled by the observer");
+    }
+    memcpy(positions, ar->x, 3 * (size_t)n * sizeof(double));
+    memcpy(ar->prev, ar->x, 3 * (size_t)n * sizeof(double));
+    ar->have_prev = 1;
+    if (info) {
+        info->energy = energy;
+        info->iterations = it;
+        info->converged = converged;
+        info->rejected = rejected;
+    }
+    return DK_OK;
+}
+
+double dk_arap_energy(const dk_arap *ar, const double *positions)
+{
+    if (!ar || !positions)
+        return NAN;
+    return local_energy(ar, &ar->sys, positions, NULL);
+}
+
+const dk_constraints *dk_arap_constraints(const dk_arap *ar)
+{
+    return ar ? ar->sys.con : NULL;
+}
+
+dk_index dk_arap_n_unknowns(const dk_arap *ar)
+{
+    return ar ? ar->sys.nu : 0;
+}
+
+int dk_arap_analysis_count(const dk_arap *ar)
+{
+    return ar ? ar->analysis_count : 0;
+}
+
+int dk_arap_factorization_count(const dk_arap *ar)
+{
+    return ar ? ar->factorization_count : 0;
+}

@@ -1,0 +1,130 @@
+/* DeformKit: As-Rigid-As-Possible surface deformation (Sorkine & Alexa 2007), with the
+ * spokes-and-rims variant (Chao et al. 2010), per-vertex stiffness, soft handles and
+ * Anderson acceleration (Peng et al. 2018). See docs/methods/arap.md.
+ *
+ * Energy. Every vertex i owns a cell: a list of weighted rest edges (a, b, w), and
+ *     E(p') = sum_i s_i sum_{(a,b,w) in cell i} w ||(p'_a - p'_b) - R_i (p_a - p_b)||^2
+ *           + sum_{soft handle vertices v} k_v ||p'_v - t_v||^2
+ * with R_i the rotation minimising cell i's term (so E is a function of positions only),
+ * s_i the per-vertex stiffness and k_v = lambda * w_v / (1 - w_v) for a handle weight
+ * w_v < 1, lambda = mean diagonal entry of the ARAP matrix (puts the penalty in the units of
+ * the ARAP energy).
+ *   spokes:          cell i = the edges (i, j) of its one-ring, w = w_ij
+ *   spokes_and_rims: cell i = every edge of every triangle incident to i, each with its
+ *                    triangle's half weight cot(opposite angle) / 2 (the same edge appearing
+ *                    in two incident triangles gets the sum of both halves)
+ * Weights: per triangle edge a half weight h = cot(opposite angle) / 2 (cotangent; 0 for a
+ * triangle with area < 1e-14 * longest edge^2) or 1/2 (uniform); each cell's entries for the
+ * same edge are summed (so a spoke weighs w_ij = (cot alpha + cot beta) / 2), and the
+ * clamped kind replaces every summed weight w by max(w, 0). DEFAULT: clamped cotangent, since
+ * a negative weight makes its cell's term concave in that edge: the local/global iteration is
+ * then no longer guaranteed to decrease the energy and the global matrix can lose positive
+ * definiteness on poor (non-Delaunay) meshes; on Delaunay meshes both kinds are identical.
+ *
+ * Constraints: fixed vertices, vertices outside the ROI and handle vertices of weight 1 are
+ * eliminated exactly; handle vertices of weight < 1 are unknowns pulled by the penalty above.
+ * Global step: A x_u = rhs with A = the ARAP matrix restricted to the unknowns (+ soft
+ * penalties on its diagonal), factored (CHOLMOD) once per bind / rebind, 3 right-hand sides
+ * per iteration.
+ */
+#ifndef DK_ARAP_H
+#define DK_ARAP_H
+
+#include "dk_constraints.h"
+#include "dk_mesh.h"
+#include "dk_status.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef enum dk_arap_energy_kind {
+    DK_ARAP_SPOKES = 0,
+    DK_ARAP_SPOKES_AND_RIMS = 1
+} dk_arap_energy_kind;
+
+typedef enum dk_arap_weight_kind {
+    DK_ARAP_WEIGHTS_COTANGENT = 0,         /**< raw cotangent weights, may be negative   */
+    DK_ARAP_WEIGHTS_CLAMPED_COTANGENT = 1, /**< max(w, 0): the default                   */
+    DK_ARAP_WEIGHTS_UNIFORM = 2            /**< 1 per spoke                              */
+} dk_arap_weight_kind;
+
+typedef enum dk_arap_acceleration {
+    DK_ARAP_ACCEL_NONE = 0,
+    DK_ARAP_ACCEL_ANDERSON = 1
+} dk_arap_acceleration;
+
+/** Per-iteration observer: called after every iteration (and once with iteration 0 for the
+ *  initial guess) with the energy of the accepted iterate. Returning non-zero stops the
+ *  solve with DK_ERR_CANCELLED. Must not call back into the same object. */
+typedef int (*dk_arap_iteration_fn)(void *user, int iteration, double energy);
+
+typedef struct dk_arap_options {
+    dk_arap_energy_kind energy;        /**< default DK_ARAP_SPOKES                        */
+    dk_arap_weight_kind weights;       /**< default DK_ARAP_WEIGHTS_CLAMPED_COTANGENT     */
+    int max_iterations;                /**< >= 1, default 100                             */
+    double tolerance;                  /**< stop when (E_prev - E) <= tolerance * E_prev;
+                                            >= 0, default 1e-6                            */
+    dk_arap_acceleration acceleration; /**< default DK_ARAP_ACCEL_ANDERSON                */
+    int anderson_depth;                /**< 1..20, default 5                              */
+    dk_arap_iteration_fn on_iteration; /**< optional, NULL by default                     */
+    void *user;                        /**< passed to on_iteration                        */
+} dk_arap_options;
+
+/** Result of one solve. */
+typedef struct dk_arap_info {
+    double energy;      /**< E of the returned positions (with their optimal rotations) */
+    int iterations;     /**< local/global iterations done                                */
+    int converged;      /**< 1 if the relative energy change fell below the tolerance    */
+    int rejected;       /**< accelerated steps rejected by the safeguard                 */
+} dk_arap_info;
+
+typedef struct dk_arap dk_arap;
+
+/** Fills the defaults above. */
+void dk_arap_default_options(dk_arap_options *options);
+
+/** Binds: validates the constraints (dk_constraints_create), builds the cells, assembles the
+ *  reduced matrix and factors it. Refuses (naming the vertex or edge): non-manifold edges
+ *  (DK_ERR_TOPOLOGY), no unknown vertex (DK_ERR_INVALID_ARGUMENT "no free vertex"), a
+ *  connected component or isolated vertex with unknowns but no eliminated vertex
+ *  (DK_ERR_DEGENERATE, "component"), a reduced matrix that is not positive definite
+ *  (DK_ERR_DEGENERATE: degenerate triangles or negative cotangent weights). `options` may be
+ *  NULL (defaults). The mesh must outlive the object. */
+dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraints,
+                       const dk_arap_options *options, dk_arap **out, dk_error *err);
+
+/** Replaces the constraints. The cells are kept; the reduced matrix is reassembled and
+ *  refactored, reusing the symbolic analysis when the set of unknown vertices is unchanged
+ *  (for example only the handle groups, their weights or the stiffness changed). On failure
+ *  the object keeps its previous constraints. The previous solution stays as warm start. */
+dk_status dk_arap_rebind(dk_arap *arap, const dk_constraint_desc *constraints, dk_error *err);
+
+/** Solves for the handle targets (`mode` 0: n_handle_vertices x 3 positions; 1: one 4x4
+ *  row-major transform per handle, see dk_constraints_targets). `warm_start` non-zero starts
+ *  from the previous solution when there is one (else, and on cold starts, from the global
+ *  step with all rotations = identity, i.e. naive Laplacian editing). `max_iterations` > 0
+ *  overrides the option for this call. Writes `positions` (n_vertices x 3, row-major) and
+ *  `info` (may be NULL). Allocation-free. */
+dk_status dk_arap_solve(dk_arap *arap, const double *targets, int mode, int warm_start,
+                        int max_iterations, double *positions, dk_arap_info *info,
+                        dk_error *err);
+
+/** The ARAP energy E of arbitrary positions (n_vertices x 3) with their optimal rotations,
+ *  including the soft-handle penalties for the targets of the last solve (none before the
+ *  first solve). Independent of the solver state otherwise. Returns NaN on NULL input. */
+double dk_arap_energy(const dk_arap *arap, const double *positions);
+
+/** Accessors. */
+const dk_constraints *dk_arap_constraints(const dk_arap *arap);
+dk_index dk_arap_n_unknowns(const dk_arap *arap);
+int dk_arap_analysis_count(const dk_arap *arap);      /**< symbolic analyses since bind   */
+int dk_arap_factorization_count(const dk_arap *arap); /**< numeric factorizations         */
+
+/** Frees; NULL allowed. */
+void dk_arap_free(dk_arap *arap);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

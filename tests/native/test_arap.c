@@ -1,0 +1,677 @@
+/* Tests of ARAP deformation (native/methods/arap.c) on generated meshes: zero drag, rigid
+ * motions reproduced with zero energy, exact hard constraints, energy never increasing per
+ * iteration (plain and Anderson), plain and accelerated reaching the same minimum, reported
+ * energy = energy of the returned positions = an independent evaluation written here (with
+ * its own cotangents and LAPACK SVD rotations), the weight clamping rule, stiffness, soft
+ * handles, warm start, rebind reuse, bumpy plane bend / bar twist edge-length preservation,
+ * and refused inputs. */
+#include <lapacke.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "dk_arap.h"
+#include "dk_test.h"
+#include "dk_test_meshes.h"
+
+/* ------------------------------------------------------------------ helpers ------------ */
+
+typedef struct history {
+    int count;
+    double e[4096];
+} history;
+
+static int record(void *user, int iteration, double energy)
+{
+    history *h = user;
+    if (iteration < 4096) {
+        h->e[iteration] = energy;
+        h->count = iteration + 1;
+    }
+    return 0;
+}
+
+static double rms_edge_change(const dk_mesh *m, const double *x)
+{
+    double s = 0.0;
+    int64_t k = 0;
+    for (dk_index f = 0; f < m->n_faces; f++)
+        for (int c = 0; c < 3; c++) {
+            dk_index a = m->faces[3 * f + c], b = m->faces[3 * f + (c + 1) % 3];
+            double l0 = 0, l1 = 0;
+            for (int d = 0; d < 3; d++) {
+                double u = m->positions[3 * a + d] - m->positions[3 * b + d];
+                double v = x[3 * a + d] - x[3 * b + d];
+                l0 += u * u;
+                l1 += v * v;
+            }
+            double r = (sqrt(l1) - sqrt(l0)) / sqrt(l0);
+            s += r * r;
+            k++;
+        }
+    return sqrt(s / (double)k);
+}
+
+/* Independent spokes energy: edge weights (cot a + cot b)/2 from atan2 angles summed over
+ * the triangles, optionally clamped, one-rings from the faces, rotations from LAPACK SVD. */
+static double reference_spokes_energy(const dk_mesh *m, const double *x, int clamp)
+{
+    const dk_index n = m->n_vertices;
+    double *w = calloc((size_t)n * n, sizeof *w); /* dense: small meshes only */
+    if (!w)
+        return NAN;
+    const double *p = m->positions;
+    for (dk_index f = 0; f < m->n_faces; f++)
+        for (int c = 0; c < 3; c++) {
+            dk_index i = m->faces[3 * f + c], j = m->faces[3 * f + (c + 1) % 3],
+                     k = m->faces[3 * f + (c + 2) % 3];
+            double u[3], v[3], cr[3];
+            for (int d = 0; d < 3; d++) {
+                u[d] = p[3 * i + d] - p[3 * k + d];
+                v[d] = p[3 * j + d] - p[3 * k + d];
+            }
+            cr[0] = u[1] * v[2] - u[2] * v[1];
+            cr[1] = u[2] * v[0] - u[0] * v[2];
+            cr[2] = u[0] * v[1] - u[1] * v[0];
+            double angle = atan2(sqrt(cr[0] * cr[0] + cr[1] * cr[1] + cr[2] * cr[2]),
+                                 u[0] * v[0] + u[1] * v[1] + u[2] * v[2]);
+            double half = 0.5 / tan(angle);
+            w[(size_t)i * n + j] += half;
+            w[(size_t)j * n + i] += half;
+        }
+    double energy = 0.0;
+    for (dk_index i = 0; i < n; i++) {
+        double s[9] = {0};
+        for (dk_index j = 0; j < n; j++) {
+            double wij = w[(size_t)i * n + j];
+            if (clamp && wij < 0)
+                wij = 0;
+            for (int r = 0; r < 3; r++)
+                for (int c = 0; c < 3; c++)
+                    s[3 * r + c] += wij * (x[3 * i + r] - x[3 * j + r]) *
+                                    (p[3 * i + c] - p[3 * j + c]);
+        }
+        double sv[3], uu[9], vt[9], sup[2], rot[9];
+        double a[9];
+        memcpy(a, s, sizeof a);
+        LAPACKE_dgesvd(LAPACK_ROW_MAJOR, 'A', 'A', 3, 3, a, 3, sv, uu, 3, vt, 3, sup);
+        double det = uu[0] * (uu[4] * uu[8] - uu[5] * uu[7]) -
+                     uu[1] * (uu[3] * uu[8] - uu[5] * uu[6]) +
+                     uu[2] * (uu[3] * uu[7] - uu[4] * uu[6]);
+        double dv = vt[0] * (vt[4] * vt[8] - vt[5] * vt[7]) -
+                    vt[1] * (vt[3] * vt[8] - vt[5] * vt[6]) +
+                    vt[2] * (vt[3] * vt[7] - vt[4] * vt[6]);
+        double sign = det * dv < 0 ? -1.0 : 1.0;
+        for (int r = 0; r < 3; r++)
+            for (int c = 0; c < 3; c++)
+                rot[3 * r + c] = uu[3 * r] * vt[c] + uu[3 * r + 1] * vt[3 + c] +
+                                 sign * uu[3 * r + 2] * vt[6 + c];
+        for (dk_index j = 0; j < n; j++) {
+            double wij = w[(size_t)i * n + j];
+            if (clamp && wij < 0)
+                wij = 0;
+            if (wij == 0.0)
+                continue;
+            double q2 = 0;
+            for (int r = 0; r < 3; r++) {
+                double q = x[3 * i + r] - x[3 * j + r];
+                for (int c = 0; c < 3; c++)
+                    q -= rot[3 * r + c] * (p[3 * i + c] - p[3 * j + c]);
+                q2 += q * q;
+            }
+            energy += wij * q2;
+        }
+    }
+    free(w);
+    return energy;
+}
+
+/* Bumpy plane: left column (x = -1) fixed, right column handle. */
+typedef struct plane_setup {
+    dk_test_mesh tm;
+    dk_mesh *mesh;
+    dk_index fixed[64], handle[64];
+    dk_index n_fixed, n_handle;
+} plane_setup;
+
+static int plane_make(plane_setup *s, int cells)
+{
+    memset(s, 0, sizeof *s);
+    if (dk_test_bumpy_plane(cells, 0.15, &s->tm) != 0)
+        return -1;
+    s->mesh = dk_test_mesh_build(&s->tm);
+    if (!s->mesh)
+        return -1;
+    for (int j = 0; j <= cells; j++) {
+        s->fixed[s->n_fixed++] = j * (cells + 1);
+        s->handle[s->n_handle++] = j * (cells + 1) + cells;
+    }
+    return 0;
+}
+
+static void plane_free(plane_setup *s)
+{
+    dk_mesh_free(s->mesh);
+    dk_test_mesh_free(&s->tm);
+}
+
+/* Bend targets: the handle column rotated by `angle` about the y axis around x = 0. */
+static void bend_targets(const plane_setup *s, double angle, double *t)
+{
+    for (dk_index k = 0; k < s->n_handle; k++) {
+        const double *p = s->mesh->positions + 3 * s->handle[k];
+        t[3 * k] = cos(angle) * p[0] - sin(angle) * p[2];
+        t[3 * k + 1] = p[1];
+        t[3 * k + 2] = sin(angle) * p[0] + cos(angle) * p[2] + 0.6;
+    }
+}
+
+/* ------------------------------------------------------------------ tests -------------- */
+
+static void test_zero_drag(void)
+{
+    plane_setup s;
+    if (plane_make(&s, 12) != 0) {
+        CHECK(0);
+        return;
+    }
+    dk_index sizes[1] = {s.n_handle};
+    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    for (int accel = 0; accel < 2; accel++) {
+        dk_arap_options o;
+        dk_arap_default_options(&o);
+        o.acceleration = accel;
+        dk_arap *ar = NULL;
+        dk_error e = {0};
+        dk_status st = dk_arap_bind(s.mesh, &d, &o, &ar, &e);
+        CHECK_MSG(st == DK_OK, "%s", e.message);
+        if (st != DK_OK)
+            break;
+        double t[3 * 64], *x = malloc(sizeof(double) * 3 * s.mesh->n_vertices);
+        for (dk_index k = 0; k < s.n_handle; k++)
+            memcpy(t + 3 * k, s.mesh->positions + 3 * s.handle[k], 3 * sizeof(double));
+        dk_arap_info info;
+        st = dk_arap_solve(ar, t, 0, 0, 0, x, &info, &e);
+        CHECK_MSG(st == DK_OK, "%s", e.message);
+        double maxd = 0;
+        for (dk_index k = 0; k < 3 * s.mesh->n_vertices; k++)
+            maxd = fmax(maxd, fabs(x[k] - s.mesh->positions[k]));
+        CHECK_MSG(maxd <= 1e-12 * s.mesh->bbox_diagonal, "max deviation %g", maxd);
+        CHECK_MSG(info.energy <= 1e-24, "energy %g", info.energy);
+        CHECK(info.converged && info.iterations <= 1);
+        free(x);
+        dk_arap_free(ar);
+    }
+    plane_free(&s);
+}
+
+/* A closed bar moved rigidly through two handle groups at its ends, nothing fixed. */
+static void test_rigid_motion(void)
+{
+    dk_test_mesh tm;
+    if (dk_test_closed_bar(8, 2, 0.5, 4.0, &tm) != 0) {
+        CHECK(0);
+        return;
+    }
+    dk_mesh *m = dk_test_mesh_build(&tm);
+    if (!m) {
+        CHECK(0);
+        dk_test_mesh_free(&tm);
+        return;
+    }
+    const dk_index ring = 8, nr = 9;
+    dk_index hv[16], sizes[2] = {ring, ring};
+    for (dk_index k = 0; k < ring; k++) {
+        hv[k] = k;
+        hv[ring + k] = (nr - 1) * ring + k;
+    }
+    double a = 0.7, b = -0.4;
+    double r[9] = {cos(a), -sin(a) * cos(b), sin(a) * sin(b),
+                   sin(a), cos(a) * cos(b),  -cos(a) * sin(b),
+                   0,      sin(b),           cos(b)};
+    double tr[3] = {0.3, -2.0, 1.5};
+    double tf[32];
+    for (int h = 0; h < 2; h++) {
+        for (int i = 0; i < 3; i++) {
+            for (int j = 0; j < 3; j++)
+                tf[16 * h + 4 * i + j] = r[3 * i + j];
+            tf[16 * h + 4 * i + 3] = tr[i];
+        }
+        tf[16 * h + 12] = tf[16 * h + 13] = tf[16 * h + 14] = 0;
+        tf[16 * h + 15] = 1;
+    }
+    dk_constraint_desc d = {2, sizes, hv, NULL, 0, NULL, 0, NULL, NULL};
+    for (int energy_kind = 0; energy_kind < 2; energy_kind++)
+        for (int accel = 0; accel < 2; accel++) {
+            dk_arap_options o;
+            dk_arap_default_options(&o);
+            o.energy = energy_kind;
+            o.acceleration = accel;
+            o.tolerance = 0.0;
+            o.max_iterations = 3000;
+            dk_arap *ar = NULL;
+            dk_error e = {0};
+            if (dk_arap_bind(m, &d, &o, &ar, &e) != DK_OK) {
+                CHECK_MSG(0, "%s", e.message);
+                continue;
+            }
+            double *x = malloc(sizeof(double) * 3 * m->n_vertices);
+            dk_arap_info info;
+            dk_status st = dk_arap_solve(ar, tf, 1, 0, 0, x, &info, &e);
+            CHECK_MSG(st == DK_OK, "%s", e.message);
+            double maxd = 0;
+            for (dk_index v = 0; v < m->n_vertices; v++)
+                for (int i = 0; i < 3; i++) {
+                    const double *p = m->positions + 3 * v;
+                    double want = r[3 * i] * p[0] + r[3 * i + 1] * p[1] + r[3 * i + 2] * p[2] +
+                                  tr[i];
+                    maxd = fmax(maxd, fabs(x[3 * v + i] - want));
+                }
+            CHECK_MSG(maxd <= 1e-9 * m->bbox_diagonal, "energy %d accel %d: deviation %g",
+                      energy_kind, accel, maxd);
+            CHECK_MSG(info.energy <= 1e-20 && info.converged, "energy %g after %d iterations",
+                      info.energy, info.iterations);
+            free(x);
+            dk_arap_free(ar);
+        }
+    dk_mesh_free(m);
+    dk_test_mesh_free(&tm);
+}
+
+/* Bend: hard constraints exact, monotone energy, plain vs Anderson same minimum, reported
+ * energy = dk_arap_energy = the independent reference, bumps preserved. */
+static void test_bend(void)
+{
+    plane_setup s;
+    if (plane_make(&s, 16) != 0) {
+        CHECK(0);
+        return;
+    }
+    const dk_mesh *m = s.mesh;
+    dk_index sizes[1] = {s.n_handle};
+    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    double t[3 * 64];
+    bend_targets(&s, 1.2, t);
+    double *x[2];
+    double energies[2];
+    int iterations[2];
+    static history h;
+    for (int accel = 0; accel < 2; accel++) {
+        x[accel] = malloc(sizeof(double) * 3 * m->n_vertices);
+        dk_arap_options o;
+        dk_arap_default_options(&o);
+        o.acceleration = accel;
+        o.tolerance = 1e-12;
+        o.max_iterations = 4000;
+        o.on_iteration = record;
+        o.user = &h;
+        h.count = 0;
+        dk_arap *ar = NULL;
+        dk_error e = {0};
+        if (dk_arap_bind(m, &d, &o, &ar, &e) != DK_OK) {
+            CHECK_MSG(0, "%s", e.message);
+            return;
+        }
+        dk_arap_info info;
+        dk_status st = dk_arap_solve(ar, t, 0, 0, 0, x[accel], &info, &e);
+        CHECK_MSG(st == DK_OK, "%s", e.message);
+        CHECK(info.converged);
+        energies[accel] = info.energy;
+        iterations[accel] = info.iterations;
+        CHECK(h.count == info.iterations + 1);
+        int increases = 0;
+        for (int k = 1; k < h.count; k++)
+            if (h.e[k] > h.e[k - 1] * (1 + 1e-13))
+                increases++;
+        CHECK_MSG(increases == 0, "accel %d: energy rose %d times", accel, increases);
+        CHECK_MSG(h.e[h.count - 1] < 0.5 * h.e[0], "initial %g final %g", h.e[0],
+                  h.e[h.count - 1]);
+        /* hard constraints */
+        double maxc = 0;
+        for (dk_index k = 0; k < s.n_handle; k++)
+            for (int i = 0; i < 3; i++)
+                maxc = fmax(maxc, fabs(x[accel][3 * s.handle[k] + i] - t[3 * k + i]));
+        for (dk_index k = 0; k < s.n_fixed; k++)
+            for (int i = 0; i < 3; i++)
+                maxc = fmax(maxc, fabs(x[accel][3 * s.fixed[k] + i] -
+                                       m->positions[3 * s.fixed[k] + i]));
+        CHECK_MSG(maxc <= 1e-12 * m->bbox_diagonal, "constraint error %g", maxc);
+        double e_eval = dk_arap_energy(ar, x[accel]);
+        CHECK_NEAR(e_eval, info.energy, 1e-12 * info.energy);
+        double e_ref = reference_spokes_energy(m, x[accel], 1);
+        CHECK_MSG(fabs(e_ref - info.energy) <= 1e-8 * info.energy, "reference %.15g vs %.15g",
+                  e_ref, info.energy);
+        printf("bumpy plane bend (%d vertices), %s: %d iterations, energy %.10g, RMS relative "
+               "edge-length change %.4f, %d rejected\n", (int)m->n_vertices,
+               accel ? "anderson" : "plain", info.iterations, info.energy,
+               rms_edge_change(m, x[accel]), info.rejected);
+        CHECK(rms_edge_change(m, x[accel]) < 0.05);
+        dk_arap_free(ar);
+    }
+    CHECK_MSG(fabs(energies[0] - energies[1]) <= 1e-6 * energies[0], "plain %.12g anderson %.12g",
+              energies[0], energies[1]);
+    double maxd = 0;
+    for (dk_index k = 0; k < 3 * m->n_vertices; k++)
+        maxd = fmax(maxd, fabs(x[0][k] - x[1][k]));
+    CHECK_MSG(maxd <= 1e-3 * m->bbox_diagonal, "plain vs anderson positions differ by %g",
+              maxd);
+    CHECK_MSG(iterations[1] < iterations[0], "anderson %d vs plain %d iterations",
+              iterations[1], iterations[0]);
+    free(x[0]);
+    free(x[1]);
+    plane_free(&s);
+}
+
+/* Bar twist: bottom ring fixed, top ring rotated by 90 degrees; spokes and spokes-and-rims. */
+static void test_twist(void)
+{
+    dk_test_mesh tm;
+    const int segments = 16, per_side = 2;
+    if (dk_test_bar(segments, per_side, 0.5, 4.0, &tm) != 0) {
+        CHECK(0);
+        return;
+    }
+    dk_mesh *m = dk_test_mesh_build(&tm);
+    if (!m) {
+        dk_test_mesh_free(&tm);
+        CHECK(0);
+        return;
+    }
+    const dk_index ring = 4 * per_side;
+    dk_index fixed[8], hv[8], sizes[1] = {ring};
+    double t[24];
+    for (dk_index k = 0; k < ring; k++) {
+        fixed[k] = k;
+        hv[k] = segments * ring + k;
+        const double *p = m->positions + 3 * hv[k];
+        t[3 * k] = -p[1];
+        t[3 * k + 1] = p[0];
+        t[3 * k + 2] = p[2];
+    }
+    dk_constraint_desc d = {1, sizes, hv, NULL, ring, fixed, 0, NULL, NULL};
+    for (int kind = 0; kind < 2; kind++) {
+        dk_arap_options o;
+        dk_arap_default_options(&o);
+        o.energy = kind;
+        o.tolerance = 1e-10;
+        o.max_iterations = 1000;
+        static history h;
+        o.on_iteration = record;
+        o.user = &h;
+        h.count = 0;
+        dk_arap *ar = NULL;
+        dk_error e = {0};
+        if (dk_arap_bind(m, &d, &o, &ar, &e) != DK_OK) {
+            CHECK_MSG(0, "%s", e.message);
+            continue;
+        }
+        double *x = malloc(sizeof(double) * 3 * m->n_vertices);
+        dk_arap_info info;
+        CHECK(dk_arap_solve(ar, t, 0, 0, 0, x, &info, &e) == DK_OK);
+        for (int k = 1; k < h.count; k++)
+            CHECK(h.e[k] <= h.e[k - 1] * (1 + 1e-13));
+        double rms = rms_edge_change(m, x);
+        printf("bar twist 90 deg (%s): %d iterations, energy %.8g, RMS relative edge-length "
+               "change %.4f\n", kind ? "spokes_and_rims" : "spokes", info.iterations,
+               info.energy, rms);
+        CHECK(rms < 0.1);
+        /* the middle ring turned by about 45 degrees */
+        const double *p = x + 3 * (segments / 2 * ring);
+        const double *q = m->positions + 3 * (segments / 2 * ring);
+        double ang = atan2(p[1], p[0]) - atan2(q[1], q[0]);
+        CHECK_MSG(fabs(ang - 0.78539816339744831) < 0.2, "middle ring angle %g", ang);
+        CHECK_NEAR(dk_arap_energy(ar, x), info.energy, 1e-12 * info.energy);
+        free(x);
+        dk_arap_free(ar);
+    }
+    dk_mesh_free(m);
+    dk_test_mesh_free(&tm);
+}
+
+/* Clamping rule: a flat patch with an edge whose two opposite angles sum to more than pi
+ * (negative cotangent weight). Raw cotangent energy = reference without clamping; clamped =
+ * reference with max(w, 0); the two differ on a deformation stretching that edge. */
+static void test_clamping(void)
+{
+    /* square 0..3 around a thin diamond: edge (4, 5) has opposite vertices 6 and 7 close to
+     * it, so both opposite angles are obtuse. */
+    double p[8 * 3] = {-2, -2, 0, 2, -2, 0, 2, 2, 0, -2, 2, 0,
+                       -1, 0, 0, 1, 0, 0, 0, -0.2, 0, 0, 0.2, 0};
+    dk_index f[] = {4, 6, 5, 4, 5, 7, 0, 1, 6, 0, 6, 4, 1, 5, 6, 1, 2, 5,
+                    2, 7, 5, 2, 3, 7, 3, 4, 7, 3, 0, 4};
+    dk_mesh *m = NULL;
+    dk_error e = {0};
+    if (dk_mesh_create(p, 8, f, 10, &m, &e) != DK_OK) {
+        CHECK_MSG(0, "%s", e.message);
+        return;
+    }
+    dk_index fixed[4] = {0, 1, 2, 3}, hv[1] = {4}, sizes[1] = {1};
+    dk_constraint_desc d = {1, sizes, hv, NULL, 4, fixed, 0, NULL, NULL};
+    double x[24];
+    memcpy(x, p, sizeof x);
+    x[3 * 4] -= 0.3;
+    x[3 * 5] += 0.2;
+    x[3 * 6 + 2] += 0.1;
+    double ref_raw = reference_spokes_energy(m, x, 0);
+    double ref_clamped = reference_spokes_energy(m, x, 1);
+    CHECK(ref_raw < ref_clamped); /* the negative weight lowers the energy of stretching */
+    for (int kind = 0; kind < 2; kind++) {
+        dk_arap_options o;
+        dk_arap_default_options(&o);
+        o.weights = kind == 0 ? DK_ARAP_WEIGHTS_COTANGENT : DK_ARAP_WEIGHTS_CLAMPED_COTANGENT;
+        dk_arap *ar = NULL;
+        if (dk_arap_bind(m, &d, &o, &ar, &e) != DK_OK) {
+            CHECK_MSG(0, "%s", e.message);
+            continue;
+        }
+        double ev = dk_arap_energy(ar, x);
+        double want = kind == 0 ? ref_raw : ref_clamped;
+        CHECK_MSG(fabs(ev - want) <= 1e-10 * fabs(want), "kind %d: %.15g vs %.15g", kind, ev,
+                  want);
+        dk_arap_free(ar);
+    }
+    dk_mesh_free(m);
+}
+
+/* Stiffness and soft handles. */
+static void test_stiffness_soft_warm_rebind(void)
+{
+    plane_setup s;
+    if (plane_make(&s, 12) != 0) {
+        CHECK(0);
+        return;
+    }
+    const dk_mesh *m = s.mesh;
+    const dk_index n = m->n_vertices;
+    dk_index sizes[1] = {s.n_handle};
+    double t[3 * 64];
+    bend_targets(&s, 0.9, t);
+    double *stiff = malloc(sizeof(double) * n), *x = malloc(sizeof(double) * 3 * n),
+           *y = malloc(sizeof(double) * 3 * n);
+    for (dk_index v = 0; v < n; v++)
+        stiff[v] = m->positions[3 * v] < 0 ? 100.0 : 1.0; /* stiff left half */
+    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    dk_constraint_desc ds = d;
+    ds.stiffness = stiff;
+    dk_arap_options o;
+    dk_arap_default_options(&o);
+    o.tolerance = 1e-10;
+    o.max_iterations = 500;
+    dk_arap *ar = NULL, *as = NULL;
+    dk_error e = {0};
+    dk_arap_info info;
+    if (dk_arap_bind(m, &d, &o, &ar, &e) != DK_OK || dk_arap_bind(m, &ds, &o, &as, &e) != DK_OK) {
+        CHECK_MSG(0, "%s", e.message);
+        goto out;
+    }
+    CHECK(dk_arap_solve(ar, t, 0, 0, 0, x, &info, &e) == DK_OK);
+    CHECK(dk_arap_solve(as, t, 0, 0, 0, y, &info, &e) == DK_OK);
+    /* the stiff half keeps its edge lengths better */
+    {
+        double sx = 0, sy = 0;
+        for (dk_index f = 0; f < m->n_faces; f++) {
+            dk_index a = m->faces[3 * f], b = m->faces[3 * f + 1];
+            if (m->positions[3 * a] >= -0.1 || m->positions[3 * b] >= -0.1)
+                continue;
+            double l0 = 0, lx = 0, ly = 0;
+            for (int i = 0; i < 3; i++) {
+                l0 += pow(m->positions[3 * a + i] - m->positions[3 * b + i], 2);
+                lx += pow(x[3 * a + i] - x[3 * b + i], 2);
+                ly += pow(y[3 * a + i] - y[3 * b + i], 2);
+            }
+            sx += pow(sqrt(lx / l0) - 1, 2);
+            sy += pow(sqrt(ly / l0) - 1, 2);
+        }
+        CHECK_MSG(sy < 0.5 * sx, "stiff half distortion %g vs uniform %g", sy, sx);
+    }
+    /* warm start: re-solve the same targets converges at once to the same answer */
+    CHECK(dk_arap_solve(ar, t, 0, 1, 0, y, &info, &e) == DK_OK);
+    CHECK(info.iterations <= 2 && info.converged);
+    /* a small move, warm vs cold: same answer, fewer iterations warm */
+    {
+        double t2[3 * 64];
+        bend_targets(&s, 0.95, t2);
+        dk_arap_info wi, ci;
+        CHECK(dk_arap_solve(ar, t2, 0, 1, 0, y, &wi, &e) == DK_OK);
+        CHECK(dk_arap_solve(ar, t2, 0, 0, 0, x, &ci, &e) == DK_OK);
+        CHECK_MSG(wi.iterations < ci.iterations, "warm %d cold %d", wi.iterations,
+                  ci.iterations);
+        CHECK_NEAR(wi.energy, ci.energy, 1e-5 * ci.energy);
+    }
+    /* rebind with the same unknown set (handle weights to 1 -> same roles): no new analysis;
+     * soft handles: unknowns change -> a new analysis; the penalty pulls towards the target */
+    {
+        int an = dk_arap_analysis_count(ar), fc = dk_arap_factorization_count(ar);
+        CHECK(dk_arap_rebind(ar, &ds, &e) == DK_OK);
+        CHECK(dk_arap_analysis_count(ar) == an && dk_arap_factorization_count(ar) == fc + 1);
+        double w[64];
+        for (int k = 0; k < 64; k++)
+            w[k] = 0.5;
+        dk_constraint_desc dw = d;
+        dw.handle_weights = w;
+        CHECK(dk_arap_rebind(ar, &dw, &e) == DK_OK);
+        CHECK(dk_arap_analysis_count(ar) == an + 1);
+        CHECK(dk_arap_n_unknowns(ar) == n - s.n_fixed);
+        CHECK(dk_arap_solve(ar, t, 0, 0, 0, x, &info, &e) == DK_OK);
+        double gap = 0, move = 0;
+        for (dk_index k = 0; k < s.n_handle; k++)
+            for (int i = 0; i < 3; i++) {
+                gap = fmax(gap, fabs(x[3 * s.handle[k] + i] - t[3 * k + i]));
+                move = fmax(move, fabs(x[3 * s.handle[k] + i] -
+                                       m->positions[3 * s.handle[k] + i]));
+            }
+        CHECK_MSG(gap > 1e-4 && move > 0.2, "soft handle gap %g move %g", gap, move);
+        CHECK_NEAR(dk_arap_energy(ar, x), info.energy, 1e-12 * info.energy);
+        /* a failing rebind keeps the previous constraints */
+        dk_index bad[1] = {100000}, one[1] = {1};
+        dk_constraint_desc db = {1, one, bad, NULL, 0, NULL, 0, NULL, NULL};
+        CHECK(dk_arap_rebind(ar, &db, &e) == DK_ERR_INDEX);
+        CHECK(dk_arap_solve(ar, t, 0, 1, 0, y, &info, &e) == DK_OK);
+    }
+out:
+    dk_arap_free(ar);
+    dk_arap_free(as);
+    free(stiff);
+    free(x);
+    free(y);
+    plane_free(&s);
+}
+
+static void test_errors(void)
+{
+    plane_setup s;
+    if (plane_make(&s, 6) != 0) {
+        CHECK(0);
+        return;
+    }
+    const dk_mesh *m = s.mesh;
+    dk_arap *ar = NULL;
+    dk_error e = {0};
+    dk_index sizes[2] = {s.n_handle, 0};
+    dk_constraint_desc d = {2, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    CHECK(dk_arap_bind(m, &d, NULL, &ar, &e) == DK_ERR_INVALID_ARGUMENT && !ar);
+    CHECK_MSG(strstr(e.message, "handle 1 is empty"), "%s", e.message);
+    d.n_handles = 1;
+    s.handle[2] = 4242;
+    CHECK(dk_arap_bind(m, &d, NULL, &ar, &e) == DK_ERR_INDEX && strstr(e.message, "4242"));
+    s.handle[2] = s.fixed[3];
+    CHECK(dk_arap_bind(m, &d, NULL, &ar, &e) == DK_ERR_INVALID_ARGUMENT);
+    char want[64];
+    snprintf(want, sizeof want, "vertex %d", (int)s.fixed[3]);
+    CHECK_MSG(strstr(e.message, want) && strstr(e.message, "fixed"), "%s", e.message);
+    s.handle[2] = 2 * 7 + 6;
+    /* no free vertex: everything fixed except the handles */
+    {
+        dk_index *all = malloc(sizeof(dk_index) * m->n_vertices), nf = 0;
+        for (dk_index v = 0; v < m->n_vertices; v++)
+            if ((v % 7) != 6)
+                all[nf++] = v;
+        dk_constraint_desc dn = {1, sizes, s.handle, NULL, nf, all, 0, NULL, NULL};
+        CHECK(dk_arap_bind(m, &dn, NULL, &ar, &e) == DK_ERR_INVALID_ARGUMENT);
+        CHECK_MSG(strstr(e.message, "no free"), "%s", e.message);
+        free(all);
+    }
+    /* bad options */
+    dk_arap_options o;
+    dk_arap_default_options(&o);
+    o.anderson_depth = 0;
+    CHECK(dk_arap_bind(m, &d, &o, &ar, &e) == DK_ERR_INVALID_ARGUMENT);
+    /* NaN targets */
+    CHECK(dk_arap_bind(m, &d, NULL, &ar, &e) == DK_OK);
+    double t[3 * 64] = {0}, *x = malloc(sizeof(double) * 3 * m->n_vertices);
+    bend_targets(&s, 0.3, t);
+    t[4] = NAN;
+    CHECK(dk_arap_solve(ar, t, 0, 0, 0, x, NULL, &e) == DK_ERR_NONFINITE);
+    CHECK_MSG(strstr(e.message, "handle 0") && strstr(e.message, "vertex"), "%s", e.message);
+    dk_arap_free(ar);
+    ar = NULL;
+    free(x);
+    plane_free(&s);
+
+    /* non-manifold: three triangles on edge (0, 1) */
+    {
+        double p[] = {0, 0, 0, 1, 0, 0, 0.5, 1, 0, 0.5, -1, 0, 0.5, 0, 1};
+        dk_index f[] = {0, 1, 2, 1, 0, 3, 0, 1, 4};
+        dk_mesh *nm = NULL;
+        if (dk_mesh_create(p, 5, f, 3, &nm, &e) == DK_OK) {
+            dk_index hv[1] = {2}, sz[1] = {1}, fx[1] = {3};
+            dk_constraint_desc dd = {1, sz, hv, NULL, 1, fx, 0, NULL, NULL};
+            CHECK(dk_arap_bind(nm, &dd, NULL, &ar, &e) == DK_ERR_TOPOLOGY);
+            CHECK_MSG(strstr(e.message, "(0, 1)") && strstr(e.message, "non-manifold"), "%s",
+                      e.message);
+            dk_mesh_free(nm);
+        }
+    }
+    /* degenerate: every triangle has zero area (collinear points), a free vertex remains */
+    {
+        double p[] = {0, 0, 0, 1, 0, 0, 2, 0, 0, 3, 0, 0};
+        dk_index f[] = {0, 1, 2, 1, 2, 3};
+        dk_mesh *dm = NULL;
+        if (dk_mesh_create(p, 4, f, 2, &dm, &e) == DK_OK) {
+            dk_index hv[1] = {0}, sz[1] = {1}, fx[1] = {3};
+            dk_constraint_desc dd = {1, sz, hv, NULL, 1, fx, 0, NULL, NULL};
+            dk_status st = dk_arap_bind(dm, &dd, NULL, &ar, &e);
+            CHECK_MSG(st == DK_ERR_DEGENERATE && strstr(e.message, "positive definite"), "%d %s",
+                      (int)st, e.message);
+            dk_mesh_free(dm);
+        }
+    }
+    /* a second component with nothing constrained */
+    {
+        double p[] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, 0, 5, 0, 0, 6, 0, 0, 5, 1, 0};
+        dk_index f[] = {0, 1, 2, 1, 3, 2, 4, 5, 6};
+        dk_mesh *cm = NULL;
+        if (dk_mesh_create(p, 7, f, 3, &cm, &e) == DK_OK) {
+            dk_index hv[1] = {0}, sz[1] = {1}, fx[1] = {3};
+            dk_constraint_desc dd = {1, sz, hv, NULL, 1, fx, 0, NULL, NULL};
+            CHECK(dk_arap_bind(cm, &dd, NULL, &ar, &e) == DK_ERR_DEGENERATE);
+            CHECK_MSG(strstr(e.message, "component of vertex 4"), "%s", e.message);
+            dk_mesh_free(cm);
+        }
+    }
+    CHECK(ar == NULL);
+    dk_arap_free(NULL);
+}
+
+DK_TEST_MAIN(test_zero_drag, test_rigid_motion, test_bend, test_twist, test_clamping,
+             test_stiffness_soft_warm_rebind, test_errors)
