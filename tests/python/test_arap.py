@@ -1,0 +1,333 @@
+"""deformkit.ARAP checked against an independent numpy evaluation of the ARAP energy.
+
+The reference rebuilds the cotangent weights from the face angles (arctan2), the one-ring
+cells from the triangles, the optimal rotations by batched SVD with the reflection fix, and
+sums w_ij |(x_i - x_j) - R_i (p_i - p_j)|^2 (spokes, Sorkine & Alexa 2007) or every edge of
+the cell's triangles with half weights (spokes and rims, Chao et al. 2010). The module's
+reported energy must be the energy of the positions it returns.
+"""
+
+import json
+import math
+import pathlib
+
+import numpy as np
+import pytest
+
+import deformkit
+
+SHARED = pathlib.Path(__file__).resolve().parents[2] / ".." / "shared"
+
+
+# ----------------------------------------------------------------------------- meshes -----
+
+def bumpy_plane(n=16, amp=0.15):
+    """(n+1)^2 grid on [-1, 1]^2 with Gaussian bumps; vertex (i, j) at j * (n + 1) + i."""
+    xs = np.linspace(-1, 1, n + 1)
+    X, Y = np.meshgrid(xs, xs)
+    Z = amp * (np.exp(-((X - 0.3) ** 2 + (Y - 0.2) ** 2) / 0.05)
+               + np.exp(-((X + 0.4) ** 2 + (Y + 0.3) ** 2) / 0.03))
+    v = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])
+    f = []
+    for j in range(n):
+        for i in range(n):
+            a = j * (n + 1) + i
+            b, c, d = a + 1, a + n + 1, a + n + 2
+            f += [(a, b, d), (a, d, c)] if (i + j) % 2 else [(a, b, c), (b, d, c)]
+    return v, np.array(f, dtype=np.int64)
+
+
+def tube(around=10, rings=12, radius=0.5, length=4.0, capped=True):
+    """Cylinder along z; ring r at index r * around; optional cap centres appended."""
+    v = []
+    for r in range(rings + 1):
+        for k in range(around):
+            t = 2 * math.pi * k / around
+            v.append((radius * math.cos(t), radius * math.sin(t), length * r / rings))
+    f = []
+    for r in range(rings):
+        for k in range(around):
+            a, b = r * around + k, r * around + (k + 1) % around
+            c, d = a + around, b + around
+            f += [(a, b, d), (a, d, c)]
+    if capped:
+        c0, c1 = len(v), len(v) + 1
+        v += [(0, 0, 0), (0, 0, length)]
+        top = rings * around
+        for k in range(around):
+            f.append((c0, (k + 1) % around, k))
+            f.append((c1, top + k, top + (k + 1) % around))
+    return np.array(v, dtype=float), np.array(f, dtype=np.int64)
+
+
+def read_obj(path):
+    verts, faces = [], []
+    with open(path) as fh:
+        for line in fh:
+            if line.startswith("v "):
+                verts.append([float(t) for t in line.split()[1:4]])
+            elif line.startswith("f "):
+                idx = [int(t.split("/")[0]) - 1 for t in line.split()[1:]]
+                for k in range(1, len(idx) - 1):
+                    faces.append((idx[0], idx[k], idx[k + 1]))
+    return np.array(verts), np.array(faces, dtype=np.int64)
+
+
+# ----------------------------------------------------------------------------- reference ---
+
+def half_cotangents(v, f):
+    """h[t, k] = cot(angle at corner k of triangle t) / 2 (weight of the opposite edge)."""
+    h = np.zeros(f.shape, dtype=float)
+    for k in range(3):
+        a, b, c = v[f[:, k]], v[f[:, (k + 1) % 3]], v[f[:, (k + 2) % 3]]
+        u, w = b - a, c - a
+        h[:, k] = 0.5 / np.tan(np.arctan2(np.linalg.norm(np.cross(u, w), axis=1),
+                                          np.einsum("ij,ij->i", u, w)))
+    return h
+
+
+def cell_terms(v, f, energy="spokes", weights="clamped_cotangent"):
+    """(cell, a, b, w) arrays: every edge of the cells, duplicates merged, clamping applied."""
+    h = np.full(f.shape, 0.5) if weights == "uniform" else half_cotangents(v, f)
+    cells, ea, eb, ww = [], [], [], []
+    for k in range(3):            # corner k owns the cell
+        for e in range(3):        # edge opposite corner e
+            if energy == "spokes" and e == k:
+                continue
+            a, b = f[:, (e + 1) % 3], f[:, (e + 2) % 3]
+            cells.append(f[:, k])
+            ea.append(np.minimum(a, b))
+            eb.append(np.maximum(a, b))
+            ww.append(h[:, e])
+    cells, ea, eb, ww = map(np.concatenate, (cells, ea, eb, ww))
+    n = len(v)
+    key = (cells.astype(np.int64) * n + ea) * n + eb
+    uniq, inv = np.unique(key, return_inverse=True)
+    w = np.bincount(inv, weights=ww)
+    if weights == "clamped_cotangent":
+        w = np.maximum(w, 0.0)
+    cell, rest = np.divmod(uniq, n * n)
+    a, b = np.divmod(rest, n)
+    return cell, a, b, w
+
+
+def reference_energy(v, f, x, energy="spokes", weights="clamped_cotangent", stiffness=None):
+    cell, a, b, w = cell_terms(v, f, energy, weights)
+    e0 = v[a] - v[b]
+    e1 = x[a] - x[b]
+    S = np.zeros((len(v), 3, 3))
+    np.add.at(S, cell, w[:, None, None] * e1[:, :, None] * e0[:, None, :])
+    U, _, Vt = np.linalg.svd(S)
+    d = np.sign(np.linalg.det(U @ Vt))
+    U[:, :, 2] *= d[:, None]
+    R = U @ Vt
+    r = e1 - np.einsum("tij,tj->ti", R[cell], e0)
+    s = np.ones(len(v)) if stiffness is None else stiffness
+    return float(np.sum(s[cell] * w * np.einsum("ij,ij->i", r, r)))
+
+
+def rms_edge_change(v, f, x):
+    e = np.vstack([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    l0 = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
+    l1 = np.linalg.norm(x[e[:, 0]] - x[e[:, 1]], axis=1)
+    return float(np.sqrt(np.mean(((l1 - l0) / l0) ** 2)))
+
+
+def plane_setup(n=16):
+    v, f = bumpy_plane(n)
+    cols = np.arange(len(v)) % (n + 1)
+    return v, f, np.flatnonzero(cols == 0), np.flatnonzero(cols == n)
+
+
+def bend(v, idx, angle):
+    c, s = math.cos(angle), math.sin(angle)
+    p = v[idx]
+    return np.column_stack([c * p[:, 0] - s * p[:, 2], p[:, 1], s * p[:, 0] + c * p[:, 2] + 0.6])
+
+
+# ----------------------------------------------------------------------------- tests ------
+
+def test_zero_drag_returns_rest():
+    v, f, fixed, handle = plane_setup(10)
+    arap = deformkit.ARAP(deformkit.Mesh(v, f), [handle], fixed=fixed)
+    r = arap.solve(v[handle])
+    bbox = np.linalg.norm(v.max(0) - v.min(0))
+    assert np.abs(np.asarray(r.positions) - v).max() <= 1e-12 * bbox
+    assert r.energy <= 1e-24 and r.converged
+
+
+@pytest.mark.parametrize("energy", ["spokes", "spokes_and_rims"])
+@pytest.mark.parametrize("acceleration", ["none", "anderson"])
+def test_rigid_motion_is_exact(energy, acceleration):
+    v, f = tube()
+    around, rings = 10, 12
+    handles = [np.arange(around), rings * around + np.arange(around)]
+    q, _ = np.linalg.qr(np.random.default_rng(3).normal(size=(3, 3)))
+    q *= np.sign(np.linalg.det(q))
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = q, [0.4, -1.0, 2.0]
+    arap = deformkit.ARAP(deformkit.Mesh(v, f), handles, energy=energy,
+                          acceleration=acceleration, tolerance=0.0, max_iterations=3000)
+    r = arap.solve(transforms=[T, T])
+    want = v @ q.T + T[:3, 3]
+    assert np.abs(np.asarray(r.positions) - want).max() <= 1e-9 * 4.0
+    assert r.energy <= 1e-20 and r.converged
+
+
+@pytest.mark.parametrize("energy", ["spokes", "spokes_and_rims"])
+@pytest.mark.parametrize("weights", ["clamped_cotangent", "cotangent", "uniform"])
+def test_reported_energy_is_energy_of_returned_positions(energy, weights):
+    v, f, fixed, handle = plane_setup(12)
+    mesh = deformkit.Mesh(v, f)
+    stiff = np.where(v[:, 0] < 0, 4.0, 1.0)
+    arap = deformkit.ARAP(mesh, [handle], fixed=fixed, energy=energy, weights=weights,
+                          stiffness=stiff, tolerance=1e-9, max_iterations=500)
+    t = bend(v, handle, 0.8)
+    r = arap.solve(t)
+    x = np.asarray(r.positions)
+    ref = reference_energy(v, f, x, energy, weights, stiff)
+    assert r.energy == pytest.approx(ref, rel=1e-9)
+    assert arap.energy(x) == pytest.approx(r.energy, rel=1e-12)
+    bbox = np.linalg.norm(v.max(0) - v.min(0))
+    assert np.abs(x[handle] - t).max() <= 1e-12 * bbox
+    assert np.abs(x[fixed] - v[fixed]).max() <= 1e-12 * bbox
+    # a local minimum: small random perturbations of the free vertices raise the energy
+    rng = np.random.default_rng(1)
+    free = np.setdiff1d(np.arange(len(v)), np.concatenate([fixed, handle]))
+    for _ in range(3):
+        y = x.copy()
+        y[free] += 1e-3 * rng.normal(size=(len(free), 3))
+        assert reference_energy(v, f, y, energy, weights, stiff) > ref
+
+
+def test_plain_and_anderson_same_minimum_and_bend_rms():
+    v, f, fixed, handle = plane_setup(16)
+    mesh = deformkit.Mesh(v, f)
+    t = bend(v, handle, 1.2)
+    res = {}
+    for acc in ("none", "anderson"):
+        arap = deformkit.ARAP(mesh, [handle], fixed=fixed, acceleration=acc,
+                              tolerance=1e-12, max_iterations=5000)
+        res[acc] = arap.solve(t)
+        assert res[acc].converged
+    e0, e1 = res["none"].energy, res["anderson"].energy
+    assert e1 == pytest.approx(e0, rel=1e-6)
+    assert np.abs(np.asarray(res["none"].positions)
+                  - np.asarray(res["anderson"].positions)).max() < 1e-3
+    assert res["anderson"].iterations < res["none"].iterations / 3
+    rms = rms_edge_change(v, f, np.asarray(res["anderson"].positions))
+    print(f"bumpy plane bend: plain {res['none'].iterations} it, anderson "
+          f"{res['anderson'].iterations} it, energy {e1:.6g}, RMS relative edge-length change "
+          f"{rms:.4f}")
+    assert rms < 0.05
+
+
+def test_energy_never_increases_per_iteration():
+    v, f, fixed, handle = plane_setup(12)
+    mesh = deformkit.Mesh(v, f)
+    t = bend(v, handle, 1.0)
+    for acc in ("none", "anderson"):
+        arap = deformkit.ARAP(mesh, [handle], fixed=fixed, acceleration=acc, tolerance=0.0)
+        energies = []
+        for k in range(1, 25):
+            energies.append(arap.solve(t, warm_start=False, max_iterations=k).energy)
+        # the k-iteration results of the accelerated run are not nested (history depends on
+        # the cap only through the last step), but each is an accepted, non-increasing run
+        if acc == "none":
+            assert all(b <= a * (1 + 1e-12) for a, b in zip(energies, energies[1:]))
+        assert energies[-1] < energies[0]
+
+
+def test_warm_start_and_rebind_reuse():
+    v, f, fixed, handle = plane_setup(12)
+    mesh = deformkit.Mesh(v, f)
+    arap = deformkit.ARAP(mesh, [handle], fixed=fixed, tolerance=1e-9, max_iterations=500)
+    assert arap.handle_sizes == (len(handle),)
+    assert arap.n_vertices == len(v) and arap.mesh is mesh
+    r1 = arap.solve(bend(v, handle, 0.8))
+    cold = arap.solve(bend(v, handle, 0.82), warm_start=False)
+    warm = arap.solve(bend(v, handle, 0.82), warm_start=True)
+    assert warm.iterations < cold.iterations
+    assert warm.energy == pytest.approx(cold.energy, rel=1e-5)
+    assert r1.energy > 0
+    st = arap.stats
+    arap.rebind(handles=[handle[:5], handle[5:]])       # same unknowns: analysis reused
+    assert arap.stats["analysis_count"] == st["analysis_count"]
+    assert arap.stats["factorization_count"] == st["factorization_count"] + 1
+    assert arap.handle_sizes == (5, len(handle) - 5)
+    arap.rebind(fixed=fixed[:-2])                        # unknowns change: new analysis
+    assert arap.stats["analysis_count"] == st["analysis_count"] + 1
+    r = arap.solve(bend(v, handle, 0.8))
+    assert r.energy == pytest.approx(arap.energy(r.positions), rel=1e-12)
+
+
+def test_soft_handles_pull_without_reaching():
+    v, f, fixed, handle = plane_setup(12)
+    t = bend(v, handle, 0.8)
+    hard = deformkit.ARAP(deformkit.Mesh(v, f), [handle], fixed=fixed).solve(t)
+    soft = deformkit.ARAP(deformkit.Mesh(v, f), [handle], fixed=fixed,
+                          handle_weights=[np.full(len(handle), 0.5)]).solve(t)
+    xs = np.asarray(soft.positions)[handle]
+    gap = np.linalg.norm(xs - t, axis=1).max()
+    moved = np.linalg.norm(xs - v[handle], axis=1).min()
+    assert 1e-4 < gap and moved > 0.1
+    assert soft.energy < hard.energy
+
+
+def test_bad_input():
+    v, f, fixed, handle = plane_setup(6)
+    mesh = deformkit.Mesh(v, f)
+    with pytest.raises(ValueError, match="handle 1 is empty"):
+        deformkit.ARAP(mesh, [handle, np.array([], dtype=np.int64)], fixed=fixed)
+    with pytest.raises(IndexError, match=str(len(v) + 3)):
+        deformkit.ARAP(mesh, [np.append(handle, len(v) + 3)], fixed=fixed)
+    with pytest.raises(ValueError, match=rf"vertex {fixed[2]}\b.*fixed"):
+        deformkit.ARAP(mesh, [np.append(handle, fixed[2])], fixed=fixed)
+    with pytest.raises(ValueError, match="no free"):
+        deformkit.ARAP(mesh, [handle], fixed=np.setdiff1d(np.arange(len(v)), handle))
+    with pytest.raises(ValueError, match="energy"):
+        deformkit.ARAP(mesh, [handle], fixed=fixed, energy="rims")
+    arap = deformkit.ARAP(mesh, [handle], fixed=fixed)
+    t = v[handle].copy()
+    t[1, 2] = np.nan
+    with pytest.raises(ValueError, match="not finite"):
+        arap.solve(t)
+    with pytest.raises(ValueError):
+        arap.solve(v[handle][:-1])
+    # non-manifold edge (0, 1)
+    vn = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0.5, -1, 0], [0.5, 0, 1.0]])
+    fn = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])
+    with pytest.raises(ValueError, match="non-manifold"):
+        deformkit.ARAP(deformkit.Mesh(vn, fn), [[2]], fixed=[3])
+    # degenerate (collinear) triangles leave the free vertices undetermined
+    vd = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0.0]])
+    fd = np.array([[0, 1, 2], [1, 2, 3]])
+    with pytest.raises(ValueError, match="positive definite"):
+        deformkit.ARAP(deformkit.Mesh(vd, fd), [[0]], fixed=[3])
+    # a component without any constraint
+    vc = np.vstack([v, v + [5.0, 0, 0]])
+    fc = np.vstack([f, f + len(v)])
+    with pytest.raises(ValueError, match="component"):
+        deformkit.ARAP(deformkit.Mesh(vc, fc), [handle], fixed=fixed)
+
+
+@pytest.mark.skipif(not (SHARED / "scenarios" / "arm-lift.json").exists(),
+                    reason="shared scenarios not available")
+def test_arm_lift_scenario():
+    sc = json.loads((SHARED / "scenarios" / "arm-lift.json").read_text())
+    v, f = read_obj(SHARED / "scenarios" / sc["mesh"])
+    handles = [np.array(h["vertices"]) for h in sc["handles"]]
+    targets = np.vstack([v[h] + h_["translate"] for h, h_ in zip(handles, sc["handles"])])
+    fixed = np.array(sc["fixed"])
+    arap = deformkit.ARAP(deformkit.Mesh(v, f), handles, fixed=fixed, tolerance=1e-7,
+                          max_iterations=300)
+    r = arap.solve(targets)
+    x = np.asarray(r.positions)
+    bbox = np.linalg.norm(v.max(0) - v.min(0))
+    hv = np.concatenate(handles)
+    assert np.abs(x[hv] - targets).max() <= 1e-12 * bbox
+    assert np.abs(x[fixed] - v[fixed]).max() <= 1e-12 * bbox
+    assert r.energy == pytest.approx(reference_energy(v, f, x), rel=1e-8)
+    rms = rms_edge_change(v, f, x)
+    print(f"arm-lift: {r.iterations} iterations, RMS relative edge-length change {rms:.4f}")
+    assert rms < 0.1
