@@ -1,0 +1,370 @@
+/* Tests of the Laplacians (dk_laplacian_*, dk_cotangent_weights): a hand-computed example,
+ * symmetry, zero row sums, PSD on an icosphere, linear precision at interior vertices of an
+ * irregular flat grid, finiteness with a zero-area triangle, uniform degrees, errors; and the
+ * cotangent assembly time on the armadillo when the shared mesh is present. */
+#define _POSIX_C_SOURCE 199309L /* clock_gettime */
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "dk_operators.h"
+#include "dk_test.h"
+#include "dk_test_meshes.h"
+
+static double now(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
+
+/* Dense copy of a CSC matrix (small n only). */
+static double *dense(const dk_sparse *a)
+{
+    double *d = calloc((size_t)a->n_rows * a->n_cols, sizeof *d);
+    if (!d) return NULL;
+    for (dk_index j = 0; j < a->n_cols; j++)
+        for (dk_index p = a->col_start[j]; p < a->col_start[j + 1]; p++)
+            d[(size_t)a->row_index[p] * a->n_cols + j] += a->values[p];
+    return d;
+}
+
+/* Structural checks every Laplacian must pass: sorted CSC, symmetric, zero row sums,
+ * full diagonal, finite. */
+static void check_laplacian_structure(const dk_sparse *l, dk_index n, const char *what)
+{
+    CHECK(l->n_rows == n && l->n_cols == n);
+    int sorted = 1, finite = 1, diag = 1;
+    double worst_sym = 0, worst_sum = 0;
+    for (dk_index j = 0; j < n; j++) {
+        double sum = 0, scale = 0;
+        int has_diag = 0;
+        for (dk_index p = l->col_start[j]; p < l->col_start[j + 1]; p++) {
+            if (p > l->col_start[j] && l->row_index[p] <= l->row_index[p - 1]) sorted = 0;
+            if (!isfinite(l->values[p])) finite = 0;
+            if (l->row_index[p] == j) has_diag = 1;
+            sum += l->values[p];
+            scale += fabs(l->values[p]);
+            double t = dk_sparse_get(l, j, l->row_index[p]);
+            if (fabs(t - l->values[p]) > worst_sym) worst_sym = fabs(t - l->values[p]);
+        }
+        if (!has_diag) diag = 0;
+        if (fabs(sum) > 1e-13 * (scale > 1 ? scale : 1)) worst_sum = fmax(worst_sum, fabs(sum));
+    }
+    CHECK_MSG(sorted, "%s: CSC rows sorted", what);
+    CHECK_MSG(finite, "%s: finite", what);
+    CHECK_MSG(diag, "%s: diagonal stored in every column", what);
+    CHECK_MSG(worst_sym == 0.0, "%s: asymmetry %g", what, worst_sym);
+    CHECK_MSG(worst_sum == 0.0, "%s: row sum %g", what, worst_sum);
+}
+
+static void test_hand_example(void)
+{
+    /* Equilateral triangle 0-1-2 above edge 0-1 and right isosceles 0-3-1 below it, right
+     * angle at 3. Opposite angles: edge 0-1: 60 and 90 degrees; 0-2, 1-2: 60; 0-3, 1-3: 45. */
+    const double s3 = sqrt(3.0);
+    const double p[] = {0, 0, 0, 1, 0, 0, 0.5, s3 / 2, 0, 0.5, -0.5, 0};
+    const dk_index f[] = {0, 1, 2, 0, 3, 1};
+    dk_mesh *m = NULL;
+    dk_error err = {0};
+    CHECK(dk_mesh_create(p, 4, f, 2, &m, &err) == DK_OK);
+    if (!m) return;
+    double w[5];
+    dk_cotangent_weights(m, m->positions, w);
+    double expect01 = (1 / s3 + 0) / 2, expect_eq = 1 / (2 * s3), expect_45 = 0.5;
+    CHECK_NEAR(w[dk_mesh_find_edge(m, 0, 1)], expect01, 1e-15);
+    CHECK_NEAR(w[dk_mesh_find_edge(m, 0, 2)], expect_eq, 1e-15);
+    CHECK_NEAR(w[dk_mesh_find_edge(m, 1, 2)], expect_eq, 1e-15);
+    CHECK_NEAR(w[dk_mesh_find_edge(m, 0, 3)], expect_45, 1e-15);
+    CHECK_NEAR(w[dk_mesh_find_edge(m, 1, 3)], expect_45, 1e-15);
+    dk_sparse *l = NULL;
+    CHECK(dk_laplacian_cotangent(m, &l, &err) == DK_OK);
+    if (l) {
+        check_laplacian_structure(l, 4, "hand example");
+        CHECK(dk_sparse_nnz(l) == 4 + 2 * 5);
+        CHECK_NEAR(dk_sparse_get(l, 0, 1), -expect01, 1e-15);
+        CHECK_NEAR(dk_sparse_get(l, 3, 0), -expect_45, 1e-15);
+        CHECK_NEAR(dk_sparse_get(l, 0, 0), expect01 + expect_eq + expect_45, 1e-15);
+        CHECK_NEAR(dk_sparse_get(l, 2, 2), 2 * expect_eq, 1e-15);
+        CHECK(dk_sparse_get(l, 2, 3) == 0.0); /* not neighbours */
+        /* x^T L x = sum_edges w |x_i - x_j|^2 for x = (1, 2, 0, 5) */
+        double x[4] = {1, 2, 0, 5}, q = 0, *d = dense(l);
+        if (d) {
+            for (int i = 0; i < 4; i++)
+                for (int j = 0; j < 4; j++) q += x[i] * d[4 * i + j] * x[j];
+            double ref = expect01 * 1 + expect_eq * 1 + expect_eq * 4 + expect_45 * 16 +
+                         expect_45 * 9;
+            CHECK_NEAR(q, ref, 1e-13);
+            free(d);
+        }
+    }
+    dk_sparse_free(l);
+    /* arbitrary weights */
+    const double ew[5] = {1, 2, 3, 4, 5};
+    CHECK(dk_laplacian_from_edge_weights(m, ew, &l, &err) == DK_OK);
+    if (l) {
+        check_laplacian_structure(l, 4, "edge weights");
+        for (dk_index e = 0; e < 5; e++)
+            CHECK(dk_sparse_get(l, m->edges[2 * e], m->edges[2 * e + 1]) == -ew[e]);
+    }
+    dk_sparse_free(l);
+    /* errors */
+    const double bad[5] = {1, NAN, 3, 4, 5};
+    l = (dk_sparse *)&err;
+    CHECK(dk_laplacian_from_edge_weights(m, bad, &l, &err) == DK_ERR_NONFINITE);
+    CHECK(l == NULL);
+    CHECK(strstr(err.message, "edge 1") != NULL);
+    CHECK(dk_laplacian_cotangent(NULL, &l, &err) == DK_ERR_INVALID_ARGUMENT);
+    CHECK(dk_laplacian_uniform(m, NULL, &err) == DK_ERR_INVALID_ARGUMENT);
+    dk_mesh_free(m);
+}
+
+static void test_linear_precision(void)
+{
+    dk_test_mesh g;
+    if (dk_test_grid(16, 2.0, 0.28, &g) != 0) {
+        CHECK(0);
+        return;
+    }
+    dk_mesh *m = dk_test_mesh_build(&g);
+    dk_sparse *l = NULL;
+    dk_error err = {0};
+    if (m && dk_laplacian_cotangent(m, &l, &err) == DK_OK) {
+        check_laplacian_structure(l, m->n_vertices, "irregular grid");
+        dk_index n = m->n_vertices;
+        double *f = malloc((size_t)n * sizeof *f), *lf = calloc((size_t)n, sizeof *lf);
+        if (f && lf) {
+            for (dk_index v = 0; v < n; v++)
+                f[v] = 2.0 * m->positions[3 * v] - 3.0 * m->positions[3 * v + 1] + 0.7;
+            for (dk_index j = 0; j < n; j++)
+                for (dk_index p = l->col_start[j]; p < l->col_start[j + 1]; p++)
+                    lf[l->row_index[p]] += l->values[p] * f[j];
+            double worst = 0, boundary_max = 0;
+            int interior = 0;
+            for (dk_index v = 0; v < n; v++) {
+                double scale = 0;
+                for (dk_index p = l->col_start[v]; p < l->col_start[v + 1]; p++)
+                    scale += fabs(l->values[p] * f[l->row_index[p]]);
+                if (m->is_boundary_vertex[v]) {
+                    boundary_max = fmax(boundary_max, fabs(lf[v]));
+                    continue;
+                }
+                interior++;
+                worst = fmax(worst, fabs(lf[v]) / scale);
+            }
+            printf("linear precision: %d interior vertices, worst relative |Lf| %.2e\n",
+                   interior, worst);
+            CHECK(interior > 200);
+            CHECK_MSG(worst < 1e-10, "worst %g", worst);
+            /* the test can fail: on the boundary L f is not 0 */
+            CHECK(boundary_max > 1e-3);
+            /* irregular: the weights are not all equal to the regular-grid values */
+            double wmin = INFINITY, wmax = -INFINITY;
+            for (dk_index j = 0; j < n; j++)
+                for (dk_index p = l->col_start[j]; p < l->col_start[j + 1]; p++)
+                    if (l->row_index[p] != j) {
+                        wmin = fmin(wmin, -l->values[p]);
+                        wmax = fmax(wmax, -l->values[p]);
+                    }
+            CHECK(wmax - wmin > 0.1);
+        }
+        free(f);
+        free(lf);
+    } else {
+        CHECK_MSG(0, "%s", err.message);
+    }
+    dk_sparse_free(l);
+    dk_mesh_free(m);
+    dk_test_mesh_free(&g);
+}
+
+static void test_sphere_psd_and_uniform(void)
+{
+    dk_test_mesh g;
+    if (dk_test_icosphere(2, 1.5, &g) != 0) {
+        CHECK(0);
+        return;
+    }
+    dk_mesh *m = dk_test_mesh_build(&g);
+    dk_sparse *l = NULL, *u = NULL;
+    dk_error err = {0};
+    if (m && dk_laplacian_cotangent(m, &l, &err) == DK_OK &&
+        dk_laplacian_uniform(m, &u, &err) == DK_OK) {
+        dk_index n = m->n_vertices;
+        check_laplacian_structure(l, n, "icosphere cotangent");
+        check_laplacian_structure(u, n, "icosphere uniform");
+        /* PSD: x^T L x >= 0 on random vectors, = sum_e w_e (x_i - x_j)^2 */
+        uint64_t s = 42;
+        double *x = malloc((size_t)n * sizeof *x);
+        double *w = malloc((size_t)m->n_edges * sizeof *w);
+        if (x && w) {
+            dk_cotangent_weights(m, m->positions, w);
+            int all_pos = 1;
+            for (dk_index e = 0; e < m->n_edges; e++) all_pos &= w[e] > 0;
+            CHECK(all_pos); /* an icosphere is Delaunay */
+            for (int trial = 0; trial < 5; trial++) {
+                for (dk_index v = 0; v < n; v++) {
+                    s = s * 6364136223846793005ull + 1442695040888963407ull;
+                    x[v] = (double)(s >> 11) / 9007199254740992.0 - 0.5;
+                }
+                double q = 0, ref = 0;
+                for (dk_index j = 0; j < n; j++)
+                    for (dk_index p = l->col_start[j]; p < l->col_start[j + 1]; p++)
+                        q += x[l->row_index[p]] * l->values[p] * x[j];
+                for (dk_index e = 0; e < m->n_edges; e++) {
+                    double d = x[m->edges[2 * e]] - x[m->edges[2 * e + 1]];
+                    ref += w[e] * d * d;
+                }
+                CHECK(q > 0);
+                CHECK_NEAR(q, ref, 1e-12 * ref);
+            }
+        }
+        free(x);
+        free(w);
+        /* uniform: degree on the diagonal (5 at the 12 icosahedron vertices, else 6) */
+        int fives = 0, ok = 1;
+        for (dk_index v = 0; v < n; v++) {
+            double d = dk_sparse_get(u, v, v);
+            dk_index deg = m->ring_start[v + 1] - m->ring_start[v];
+            if (d != (double)deg) ok = 0;
+            if (deg == 5) fives++;
+            for (dk_index r = m->ring_start[v]; r < m->ring_start[v + 1]; r++)
+                if (dk_sparse_get(u, v, m->ring_index[r]) != -1.0) ok = 0;
+        }
+        CHECK(ok);
+        CHECK(fives == 12);
+    } else {
+        CHECK_MSG(0, "%s", err.message);
+    }
+    dk_sparse_free(l);
+    dk_sparse_free(u);
+    dk_mesh_free(m);
+    dk_test_mesh_free(&g);
+}
+
+static void test_degenerate(void)
+{
+    /* 0, 1, 2 collinear; triangle (0, 2, 1) has zero area; vertex 4 is isolated. */
+    const double p[] = {0, 0, 0, 1, 0, 0, 2, 0, 0, 1, 1, 0, 5, 5, 5};
+    const dk_index f[] = {0, 1, 3, 1, 2, 3, 0, 2, 1};
+    dk_mesh *m = NULL;
+    dk_error err = {0};
+    CHECK(dk_mesh_create(p, 5, f, 3, &m, &err) == DK_OK);
+    if (!m) return;
+    double w[16];
+    dk_cotangent_weights(m, m->positions, w);
+    int finite = 1;
+    for (dk_index e = 0; e < m->n_edges; e++) finite &= isfinite(w[e]);
+    CHECK(finite);
+    CHECK(w[dk_mesh_find_edge(m, 0, 2)] == 0.0); /* only in the degenerate triangle */
+    /* edge 0-1: only the 45 degree angle at 3 counts (the degenerate triangle adds 0);
+     * edge 1-3: 45 degrees at 0 and at 2 */
+    CHECK_NEAR(w[dk_mesh_find_edge(m, 0, 1)], 0.5, 1e-15);
+    CHECK_NEAR(w[dk_mesh_find_edge(m, 1, 3)], 1.0, 1e-15);
+    dk_sparse *l = NULL;
+    CHECK(dk_laplacian_cotangent(m, &l, &err) == DK_OK);
+    if (l) {
+        check_laplacian_structure(l, 5, "degenerate");
+        CHECK(dk_sparse_get(l, 4, 4) == 0.0);
+        CHECK(l->col_start[5] - l->col_start[4] == 1); /* isolated: diagonal only */
+    }
+    dk_sparse_free(l);
+    dk_mesh_free(m);
+}
+
+/* Minimal OBJ reader (v and f lines; polygons fan-triangulated) for the timing below. */
+static int read_obj(const char *path, double **pos, dk_index *nv, dk_index **faces, dk_index *nf)
+{
+    char *text = dk_test_read_file(path, NULL);
+    if (!text) return -1;
+    size_t cv = 1024, cf = 1024;
+    double *p = malloc(cv * 3 * sizeof *p);
+    dk_index *f = malloc(cf * 3 * sizeof *f);
+    dk_index n = 0, m = 0;
+    int ok = p && f;
+    for (char *line = text; ok && line && *line;) {
+        char *next = strchr(line, '\n');
+        if (next) *next++ = '\0';
+        if (line[0] == 'v' && line[1] == ' ') {
+            if ((size_t)n == cv) {
+                double *t = realloc(p, (cv *= 2) * 3 * sizeof *p);
+                if (!t) { ok = 0; break; }
+                p = t;
+            }
+            ok = sscanf(line + 2, "%lf %lf %lf", p + 3 * n, p + 3 * n + 1, p + 3 * n + 2) == 3;
+            n++;
+        } else if (line[0] == 'f' && line[1] == ' ') {
+            dk_index c[64];
+            int k = 0;
+            char *s = line + 2;
+            while (k < 64) {
+                char *end;
+                long v = strtol(s, &end, 10);
+                if (end == s) break;
+                c[k++] = (dk_index)(v > 0 ? v - 1 : n + v);
+                s = end;
+                while (*s && *s != ' ' && *s != '\t') s++;
+            }
+            for (int t = 1; t + 1 < k; t++) {
+                if ((size_t)m == cf) {
+                    dk_index *tt = realloc(f, (cf *= 2) * 3 * sizeof *f);
+                    if (!tt) { ok = 0; break; }
+                    f = tt;
+                }
+                f[3 * m] = c[0], f[3 * m + 1] = c[t], f[3 * m + 2] = c[t + 1];
+                m++;
+            }
+        }
+        line = next;
+    }
+    free(text);
+    if (!ok) {
+        free(p);
+        free(f);
+        return -1;
+    }
+    *pos = p, *nv = n, *faces = f, *nf = m;
+    return 0;
+}
+
+static void test_armadillo_timing(void)
+{
+    char path[1024];
+    if (!dk_test_shared_mesh_path(DK_SHARED_DIR, "armadillo.obj", path, sizeof path)) return;
+    double *p = NULL;
+    dk_index *f = NULL, nv = 0, nf = 0;
+    if (read_obj(path, &p, &nv, &f, &nf) != 0) {
+        printf("armadillo not found, skipping the timing\n");
+        return;
+    }
+    dk_mesh *m = NULL;
+    dk_error err = {0};
+    if (dk_mesh_create(p, nv, f, nf, &m, &err) == DK_OK) {
+        dk_sparse *l = NULL;
+        double best = INFINITY;
+        for (int rep = 0; rep < 3; rep++) {
+            double t0 = now();
+            dk_status st = dk_laplacian_cotangent(m, &l, &err);
+            double t1 = now();
+            CHECK(st == DK_OK);
+            if (st != DK_OK) break;
+            best = fmin(best, t1 - t0);
+            if (rep == 2) check_laplacian_structure(l, nv, "armadillo");
+            dk_sparse_free(l);
+            l = NULL;
+        }
+        printf("armadillo (%d vertices, %d faces): cotangent Laplacian in %.2f ms\n", (int)nv,
+               (int)nf, best * 1e3);
+    } else {
+        CHECK_MSG(0, "armadillo: %s", err.message);
+    }
+    dk_mesh_free(m);
+    free(p);
+    free(f);
+}
+
+DK_TEST_MAIN(test_hand_example, test_linear_precision, test_sphere_psd_and_uniform,
+             test_degenerate, test_armadillo_timing)
