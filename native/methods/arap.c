@@ -17,6 +17,7 @@
 #include "dk_arap.h"
 
 #include <math.h>
+#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -618,13 +619,13 @@ dk_status dk_arap_rebind(dk_arap *ar, const dk_constraint_desc *constraints, dk_
 
 /* ------------------------------------------------------------------ iteration ---------- */
 
-/* Local step and energy at positions x: rotations into rot (may be NULL: then only the
- * energy), returns E(x) including soft penalties (when targets are known). */
-static double local_energy(const dk_arap *ar, const arap_system *s, const double *x,
-                           double *rot)
+/* Local step and energy of the cells v0 .. v1-1 at positions x: rotations into rot (may be
+ * NULL: then only the energy); returns their energy. */
+static double cells_energy(const dk_arap *ar, const arap_system *s, const double *x,
+                           double *rot, dk_index v0, dk_index v1)
 {
     double energy = 0.0;
-    for (dk_index i = 0; i < ar->n; i++) {
+    for (dk_index i = v0; i < v1; i++) {
         dk_index t0 = ar->cell_start[i], t1 = ar->cell_start[i + 1];
         double a[9] = {0}, r[9];
         for (dk_index t = t0; t < t1; t++) {
@@ -649,6 +650,51 @@ static double local_energy(const dk_arap *ar, const arap_system *s, const double
         energy += ce;
         if (rot)
             memcpy(rot + 9 * (size_t)i, r, sizeof r);
+    }
+    return energy;
+}
+
+typedef struct cells_job {
+    const dk_arap *ar;
+    const arap_system *s;
+    const double *x;
+    double *rot;
+    dk_index v0, v1;
+    double energy;
+} cells_job;
+
+static void *cells_thread(void *arg)
+{
+    cells_job *j = arg;
+    j->energy = cells_energy(j->ar, j->s, j->x, j->rot, j->v0, j->v1);
+    return NULL;
+}
+
+/* Below this many cell terms the local step runs on the calling thread only. */
+#define PARALLEL_TERMS 50000
+
+/* Local step and energy at positions x: rotations into rot (may be NULL: then only the
+ * energy), returns E(x) including soft penalties (when targets are known). On big meshes the
+ * cells are split in two halves, the second on a helper thread (the target machines have two
+ * cores); if the thread cannot be started the calling thread does both halves. The split
+ * point depends only on the mesh, so results are reproducible. */
+static double local_energy(const dk_arap *ar, const arap_system *s, const double *x,
+                           double *rot)
+{
+    double energy;
+    if (ar->n_terms >= PARALLEL_TERMS) {
+        dk_index mid = ar->n / 2;
+        cells_job job = {ar, s, x, rot, mid, ar->n, 0.0};
+        pthread_t th;
+        int started = pthread_create(&th, NULL, cells_thread, &job) == 0;
+        energy = cells_energy(ar, s, x, rot, 0, mid);
+        if (started)
+            pthread_join(th, NULL);
+        else
+            cells_thread(&job);
+        energy += job.energy;
+    } else {
+        energy = cells_energy(ar, s, x, rot, 0, ar->n);
     }
     if (s->have_targets)
         for (dk_index u = 0; u < s->nu; u++) {

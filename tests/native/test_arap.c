@@ -673,5 +673,63 @@ static void test_errors(void)
     dk_arap_free(NULL);
 }
 
+/* A mesh big enough for the two-thread local step (>= 50000 cell terms): monotone energy and
+ * reported energy = dk_arap_energy, as on the small meshes. */
+static void test_big_mesh_threaded_local_step(void)
+{
+    dk_test_mesh tm;
+    const int cells = 120;
+    if (dk_test_bumpy_plane(cells, 0.15, &tm) != 0) {
+        CHECK(0);
+        return;
+    }
+    dk_mesh *m = dk_test_mesh_build(&tm);
+    if (!m) {
+        dk_test_mesh_free(&tm);
+        CHECK(0);
+        return;
+    }
+    dk_index *fixed = malloc(sizeof(dk_index) * (cells + 1)),
+             *hv = malloc(sizeof(dk_index) * (cells + 1));
+    double *t = malloc(sizeof(double) * 3 * (cells + 1)),
+           *x = malloc(sizeof(double) * 3 * m->n_vertices);
+    for (int j = 0; j <= cells; j++) {
+        fixed[j] = j * (cells + 1);
+        hv[j] = j * (cells + 1) + cells;
+        const double *p = m->positions + 3 * hv[j];
+        t[3 * j] = p[0] - 0.3;
+        t[3 * j + 1] = p[1];
+        t[3 * j + 2] = p[2] + 0.8;
+    }
+    dk_index sizes[1] = {cells + 1};
+    dk_constraint_desc d = {1, sizes, hv, NULL, cells + 1, fixed, 0, NULL, NULL};
+    dk_arap_options o;
+    dk_arap_default_options(&o);
+    o.max_iterations = 8;
+    static history h;
+    h.count = 0;
+    o.on_iteration = record;
+    o.user = &h;
+    dk_arap *ar = NULL;
+    dk_error e = {0};
+    dk_arap_info info;
+    if (dk_arap_bind(m, &d, &o, &ar, &e) == DK_OK) {
+        CHECK(dk_arap_solve(ar, t, 0, 0, 0, x, &info, &e) == DK_OK);
+        for (int k = 1; k < h.count; k++)
+            CHECK(h.e[k] <= h.e[k - 1] * (1 + 1e-13));
+        CHECK_NEAR(dk_arap_energy(ar, x), info.energy, 1e-12 * info.energy);
+    } else {
+        CHECK_MSG(0, "%s", e.message);
+    }
+    dk_arap_free(ar);
+    free(fixed);
+    free(hv);
+    free(t);
+    free(x);
+    dk_mesh_free(m);
+    dk_test_mesh_free(&tm);
+}
+
 DK_TEST_MAIN(test_zero_drag, test_rigid_motion, test_bend, test_twist, test_clamping,
-             test_stiffness_soft_warm_rebind, test_errors)
+             test_stiffness_soft_warm_rebind, test_errors,
+             test_big_mesh_threaded_local_step)
