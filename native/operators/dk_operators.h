@@ -83,6 +83,11 @@ dk_status dk_heat_distance(dk_heat_geodesic *heat, const dk_index *sources, dk_i
 /** Frees; NULL allowed. */
 void dk_heat_free(dk_heat_geodesic *heat);
 
+/** Total number of numeric Cholesky factorizations the object has done (2 without a
+ *  boundary, 3 with one, fewer on meshes without area); constant across dk_heat_distance
+ *  calls, which only back-substitute. For tests and reports. */
+int dk_heat_factorization_count(const dk_heat_geodesic *heat);
+
 /* ---------------------------------------------------------------- nearest neighbours --- */
 
 /** A static k-d tree over a copy of n points in R^3. */
