@@ -3,8 +3,10 @@
  * heat method against Euclidean distance on an irregular flat grid (with boundary) and
  * great-circle distance on an icosphere, factorizations reused across calls, several
  * components, a source on the boundary. */
+#define _POSIX_C_SOURCE 199309L /* clock_gettime */
 #include <math.h>
 #include <stdio.h>
+#include <time.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -373,5 +375,62 @@ static void test_heat_degenerate(void)
     dk_mesh_free(m);
 }
 
-DK_TEST_MAIN(test_dijkstra_and_hops, test_heat_flat_grid, test_heat_sphere, test_heat_components,
+static double now(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
+
+/* Armadillo-sized sphere (40962 vertices): timings, and the accuracy still holds. */
+static void test_heat_timing(void)
+{
+    dk_test_mesh g;
+    if (dk_test_icosphere(6, 1.0, &g) != 0) {
+        CHECK(0);
+        return;
+    }
+    dk_mesh *m = dk_test_mesh_build(&g);
+    dk_test_mesh_free(&g);
+    if (!m) {
+        CHECK(0);
+        return;
+    }
+    dk_index n = m->n_vertices;
+    double *d = malloc((size_t)n * sizeof *d);
+    dk_heat_geodesic *heat = NULL;
+    dk_error err = {0};
+    double t0 = now();
+    dk_status st = dk_heat_create(m, 0.0, &heat, &err);
+    double t1 = now();
+    CHECK_MSG(st == DK_OK, "%s", err.message);
+    if (st == DK_OK && d) {
+        dk_index src = 7;
+        double t2 = now();
+        CHECK(dk_heat_distance(heat, &src, 1, d, &err) == DK_OK);
+        double t3 = now();
+        double sum = 0;
+        int cnt = 0;
+        const double *c = m->positions + 3 * src;
+        for (dk_index v = 0; v < n; v++) {
+            const double *p = m->positions + 3 * v;
+            double gc = acos(fmax(-1.0, fmin(1.0, p[0] * c[0] + p[1] * c[1] + p[2] * c[2])));
+            if (gc < 0.2 || gc > 2.8) continue;
+            sum += fabs(d[v] - gc) / gc;
+            cnt++;
+        }
+        double t4 = now();
+        CHECK(dk_geodesic_dijkstra(m, &src, 1, d, &err) == DK_OK);
+        double t5 = now();
+        printf("icosphere %d vertices: heat create %.1f ms, heat distance %.1f ms (mean rel "
+               "error %.4f), Dijkstra %.1f ms\n",
+               (int)n, (t1 - t0) * 1e3, (t3 - t2) * 1e3, sum / cnt, (t5 - t4) * 1e3);
+        CHECK(sum / cnt < 0.03);
+    }
+    free(d);
+    dk_heat_free(heat);
+    dk_mesh_free(m);
+}
+
+DK_TEST_MAIN(test_dijkstra_and_hops, test_heat_timing, test_heat_flat_grid, test_heat_sphere, test_heat_components,
              test_heat_degenerate)
