@@ -1,7 +1,9 @@
 /* Tests of the k-d tree (dk_kdtree_*) against brute force: random points, exact ties on a
  * lattice (ties broken by index), duplicated points, k = n, NULL outputs, bad arguments. */
+#define _POSIX_C_SOURCE 199309L /* clock_gettime */
 #include <math.h>
 #include <stdint.h>
+#include <time.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -167,4 +169,55 @@ static void test_k_equals_n_and_small(void)
     CHECK(dk_kdtree_create(NULL, 2, &t, &err) == DK_ERR_INVALID_ARGUMENT);
 }
 
-DK_TEST_MAIN(test_random, test_ties, test_k_equals_n_and_small)
+static double now(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
+
+/* Armadillo-sized cloud: build and all-points 8-NN timings; spot-check against brute force. */
+static void test_timing(void)
+{
+    enum { N = 43243, K = 8 };
+    double *p = malloc((size_t)N * 3 * sizeof *p), *d2 = malloc((size_t)N * K * sizeof *d2);
+    dk_index *idx = malloc((size_t)N * K * sizeof *idx);
+    dk_kdtree *t = NULL;
+    dk_error err = {0};
+    if (p && d2 && idx) {
+        for (int i = 0; i < 3 * N; i++) p[i] = rnd();
+        double t0 = now();
+        CHECK(dk_kdtree_create(p, N, &t, &err) == DK_OK);
+        double t1 = now();
+        CHECK(t && dk_kdtree_knn(t, p, N, K, idx, d2, &err) == DK_OK);
+        double t2 = now();
+        printf("kdtree: %d points built in %.1f ms, %d-NN of every point in %.1f ms\n", N,
+               (t1 - t0) * 1e3, K, (t2 - t1) * 1e3);
+        int ok = 1;
+        for (int q = 0; q < N; q += 4321) { /* brute-force k-th distance */
+            double kth[K];
+            for (int j = 0; j < K; j++) kth[j] = INFINITY;
+            for (int j = 0; j < N; j++) {
+                double dx = p[3 * q] - p[3 * j], dy = p[3 * q + 1] - p[3 * j + 1],
+                       dz = p[3 * q + 2] - p[3 * j + 2], dd = dx * dx + dy * dy + dz * dz;
+                for (int r = 0; r < K; r++)
+                    if (dd < kth[r]) {
+                        for (int s = K - 1; s > r; s--) kth[s] = kth[s - 1];
+                        kth[r] = dd;
+                        break;
+                    }
+            }
+            for (int r = 0; r < K; r++) ok &= d2[(size_t)q * K + r] == kth[r];
+            ok &= idx[(size_t)q * K] == q;
+        }
+        CHECK(ok);
+    } else {
+        CHECK(0);
+    }
+    dk_kdtree_free(t);
+    free(p);
+    free(d2);
+    free(idx);
+}
+
+DK_TEST_MAIN(test_random, test_ties, test_k_equals_n_and_small, test_timing)
