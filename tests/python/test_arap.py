@@ -331,3 +331,28 @@ def test_arm_lift_scenario():
     rms = rms_edge_change(v, f, x)
     print(f"arm-lift: {r.iterations} iterations, RMS relative edge-length change {rms:.4f}")
     assert rms < 0.1
+
+
+def test_roi_and_transforms_equal_targets():
+    v, f, fixed, handle = plane_setup(12)
+    mesh = deformkit.Mesh(v, f)
+    roi = np.flatnonzero(v[:, 0] > -0.3)                 # left part outside: stays put
+    groups = [handle[:6], handle[6:]]
+    T = [np.eye(4), np.eye(4)]
+    T[0][:3, 3] = [0.0, 0.0, 0.4]
+    c, s = math.cos(0.3), math.sin(0.3)
+    T[1][:3, :3] = [[c, -s, 0], [s, c, 0], [0, 0, 1]]
+    arap = deformkit.ARAP(mesh, groups, roi=roi, tolerance=1e-9, max_iterations=400)
+    r = arap.solve(transforms=np.array(T))
+    x = np.asarray(r.positions)
+    outside = np.setdiff1d(np.arange(len(v)), np.concatenate([roi, handle]))
+    assert len(outside) > 0 and np.abs(x[outside] - v[outside]).max() == 0.0
+    targets = np.vstack([v[g] @ t[:3, :3].T + t[:3, 3] for g, t in zip(groups, T)])
+    assert np.abs(x[handle] - targets).max() <= 1e-12 * 3
+    r2 = arap.solve(targets, warm_start=False)
+    assert np.abs(np.asarray(r2.positions) - x).max() <= 1e-9
+    assert r2.energy == pytest.approx(reference_energy(v, f, x), rel=1e-8)
+    with pytest.raises(ValueError, match="bottom row"):
+        bad = np.array(T)
+        bad[1, 3, 3] = 2.0
+        arap.solve(transforms=bad)
