@@ -70,7 +70,10 @@ typedef struct dk_heat_geodesic dk_heat_geodesic;
 /** Precomputes the heat method: t = time_factor * h^2 with h the mean edge length
  *  (time_factor <= 0 selects the paper's default, 1). Factors M + tL and L + eps M.
  *  Boundary condition: the average of Neumann and Dirichlet solutions on meshes with a
- *  boundary, as the paper recommends. */
+ *  boundary, as the paper recommends. The object keeps a pointer to `mesh`, which must
+ *  outlive it; calls on one object must not run concurrently. Vertices without area
+ *  (isolated or only on degenerate triangles) get their smallest neighbour distance plus the
+ *  edge length (INFINITY when none is reached). */
 dk_status dk_heat_create(const dk_mesh *mesh, double time_factor, dk_heat_geodesic **out,
                          dk_error *err);
 
