@@ -324,6 +324,105 @@ static void rotate_deltas(dk_laplacian_edit *le)
 
 /* ------------------------------------------------------------------ the system ---------- */
 
+/* The normal-equations matrix N = A_u^T A_u + diag(soft w^2 + mu^2), assembled column by
+ * column straight into CSC (no triplets): column j (an unknown vertex) gathers
+ * sum_r a_rj a_rk over the rows r that contain j, i.e. r = j and the one-ring of j (the
+ * pattern of A is symmetric). Every diagonal entry is present (a_jj = 1). */
+static dk_status assemble_normal(const dk_laplacian_edit *le, le_system *s, double mu2,
+                                 dk_error *err)
+{
+    const dk_mesh *m = le->mesh;
+    const dk_index nu = s->n_unknowns;
+    dk_index *mark = NULL, *list = NULL;
+    double *acc = NULL;
+    int64_t nnz = 0;
+    dk_sparse *N = NULL;
+    dk_status st;
+
+    mark = malloc(sizeof(dk_index) * ((size_t)nu + 1));
+    list = malloc(sizeof(dk_index) * ((size_t)nu + 1));
+    acc = calloc((size_t)nu + 1, sizeof(double));
+    if (!mark || !list || !acc) {
+        st = oom(err, "normal equations");
+        goto done;
+    }
+    for (int pass = 0; pass < 2; pass++) {
+        for (dk_index u = 0; u < nu; u++)
+            mark[u] = -1;
+        nnz = 0;
+        for (dk_index u = 0; u < nu; u++) {
+            const dk_index j = s->unknowns[u];
+            const dk_index rb = m->ring_start[j], re = m->ring_start[j + 1];
+            dk_index len = 0;
+            for (dk_index q = rb - 1; q < re; q++) {
+                const dk_index r = q < rb ? j : m->ring_index[q];
+                double arj = 0.0;
+                for (dk_index k = le->a_start[r]; k < le->a_start[r + 1]; k++)
+                    if (le->a_col[k] == j) {
+                        arj = le->a_val[k];
+                        break;
+                    }
+                for (dk_index k = le->a_start[r]; k < le->a_start[r + 1]; k++) {
+                    const dk_index uk = s->unknown_index[le->a_col[k]];
+                    if (uk < 0)
+                        continue;
+                    if (mark[uk] != u) {
+                        mark[uk] = u;
+                        list[len++] = uk;
+                    }
+                    if (pass == 1)
+                        acc[uk] += le->a_val[k] * arj;
+                }
+            }
+            if (pass == 0) {
+                nnz += len;
+                continue;
+            }
+            /* sort the (short) column, then move it out of the accumulator */
+            for (dk_index a = 1; a < len; a++) {
+                const dk_index key = list[a];
+                dk_index b = a - 1;
+                while (b >= 0 && list[b] > key) {
+                    list[b + 1] = list[b];
+                    b--;
+                }
+                list[b + 1] = key;
+            }
+            acc[u] += s->soft_w2[j] + mu2;
+            for (dk_index a = 0; a < len; a++) {
+                const int64_t at = N->col_start[u] + a;
+                N->row_index[at] = list[a];
+                N->values[at] = acc[list[a]];
+                acc[list[a]] = 0.0;
+            }
+            N->col_start[u + 1] = (dk_index)(N->col_start[u] + len);
+        }
+        if (pass == 0) {
+            if (nnz > INT32_MAX) {
+                st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY,
+                                  "LaplacianEdit: the normal equations have %lld entries, more "
+                                  "than the index type holds", (long long)nnz);
+                goto done;
+            }
+            st = dk_sparse_alloc(nu, nu, nnz, &N, err);
+            if (st != DK_OK) {
+                dk_error_prefix(err, "LaplacianEdit normal equations");
+                goto done;
+            }
+            N->col_start[0] = 0;
+        }
+    }
+    s->normal = N;
+    N = NULL;
+    st = DK_OK;
+done:
+    dk_sparse_free(N);
+    free(mark);
+    free(list);
+    free(acc);
+    return st;
+}
+
 static dk_status build_system(dk_laplacian_edit *le, const dk_constraint_desc *desc,
                               le_system *s, dk_error *err)
 {
@@ -332,9 +431,6 @@ static dk_status build_system(dk_laplacian_edit *le, const dk_constraint_desc *d
     const int soft = le->opt.constraints == DK_LE_CONSTRAINTS_SOFT;
     const double lambda = le->opt.constraint_weight, mu2 = le->opt.tikhonov * le->opt.tikhonov;
     unsigned char *in_roi = NULL, *pinned = NULL;
-    dk_index *rows = NULL, *cols = NULL;
-    double *vals = NULL;
-    int64_t nt = 0, cap = 0;
     dk_status st;
 
     memset(s, 0, sizeof *s);
@@ -419,63 +515,19 @@ static dk_status build_system(dk_laplacian_edit *le, const dk_constraint_desc *d
                 goto fail;
             }
     }
-    /* Normal equations: sum over rows r of a_r a_r^T on unknown columns, plus diagonals. */
-    for (dk_index r = 0; r < n; r++) {
-        int64_t c = 0;
-        for (dk_index k = le->a_start[r]; k < le->a_start[r + 1]; k++)
-            c += s->unknown_index[le->a_col[k]] >= 0;
-        cap += c * c;
-    }
-    cap += s->n_unknowns;
-    rows = malloc(sizeof(dk_index) * (size_t)cap);
-    cols = malloc(sizeof(dk_index) * (size_t)cap);
-    vals = malloc(sizeof(double) * (size_t)cap);
-    if (!rows || !cols || !vals) {
-        st = oom(err, "normal equations");
+    st = assemble_normal(le, s, mu2, err);
+    if (st != DK_OK)
         goto fail;
-    }
-    for (dk_index r = 0; r < n; r++)
-        for (dk_index k = le->a_start[r]; k < le->a_start[r + 1]; k++) {
-            const dk_index uk = s->unknown_index[le->a_col[k]];
-            if (uk < 0)
-                continue;
-            for (dk_index l = le->a_start[r]; l < le->a_start[r + 1]; l++) {
-                const dk_index ul = s->unknown_index[le->a_col[l]];
-                if (ul < 0)
-                    continue;
-                rows[nt] = uk;
-                cols[nt] = ul;
-                vals[nt] = le->a_val[k] * le->a_val[l];
-                nt++;
-            }
-        }
-    for (dk_index u = 0; u < s->n_unknowns; u++) {
-        rows[nt] = cols[nt] = u;
-        vals[nt] = s->soft_w2[s->unknowns[u]] + mu2;
-        nt++;
-    }
-    st = dk_sparse_from_triplets(s->n_unknowns, s->n_unknowns, nt, rows, cols, vals,
-                                 &s->normal, err);
-    if (st != DK_OK) {
-        dk_error_prefix(err, "LaplacianEdit normal equations");
-        goto fail;
-    }
     s->rhs = malloc(sizeof(double) * 3 * (size_t)s->n_unknowns);
     if (!s->rhs) {
         st = oom(err, "right-hand sides");
         goto fail;
     }
     mark_active_rows(le, s);
-    free(rows);
-    free(cols);
-    free(vals);
     free(in_roi);
     free(pinned);
     return DK_OK;
 fail:
-    free(rows);
-    free(cols);
-    free(vals);
     free(in_roi);
     free(pinned);
     system_free(s);
