@@ -5,10 +5,12 @@
  *   Laplacian (PSD sign, see dk_operators.h).
  *   Heat operator M + tL, factored on all vertices (Neumann); on a mesh with a boundary also
  *   restricted to the interior vertices with u = 0 on the boundary (Dirichlet).
- *   Poisson operator L, made definite by pinning one vertex per connected component
- *   (phi = 0 there, its row and column dropped). The pinned system is exact: the solution
- *   differs from any other solution of L phi = b only by a constant per component, and the
- *   per-component shift below removes that constant.
+ *   Poisson operator L, made definite by pinning one vertex per "area component" (vertices
+ *   joined through triangles with area; this refines the mesh's components where two parts
+ *   touch only through degenerate triangles, on which L is block diagonal) with phi = 0
+ *   there, its row and column dropped. The pinned system is exact: the solution differs
+ *   from any other solution of L phi = b only by a constant per area component, and the
+ *   per-area-component shift below removes that constant.
  * Each dk_heat_distance call is then two or three back-substitutions plus O(faces) work:
  *   1. (M + tL) u = delta_sources (Neumann; averaged with the Dirichlet solution when the
  *      mesh has a boundary, as the paper recommends);
@@ -16,10 +18,12 @@
  *   3. integrated divergence at vertex i: 1/2 sum over its corners of
  *      cot(theta_1) (e_1 . X) + cot(theta_2) (e_2 . X), e_1, e_2 the edges leaving i and
  *      theta_1, theta_2 the angles opposite them;
- *   4. L phi = -div (L = -Delta here), then phi - min over the sources, per component.
+ *   4. L phi = -div (L = -Delta here), then phi - min over the sources, per area component.
  * Vertices carrying no area (isolated, or only on triangles below the degenerate-area rule)
- * are decoupled from both systems; they get the smallest (neighbour distance + edge length)
- * over their neighbours (propagated across such vertices), or INFINITY when none is reached.
+ * are decoupled from both systems. They, and area components without a source, get the
+ * smallest (neighbour distance + edge length) over their neighbours, propagated along
+ * edges from the vertices the heat method reached, or INFINITY when none is reached (so a
+ * mesh component without a source is INFINITY everywhere).
  *
  * The object keeps a pointer to the mesh: the mesh must outlive it (meshes are immutable).
  * Calls on one object must not run concurrently (the factor objects hold solve workspace).
@@ -39,6 +43,9 @@ struct dk_heat_geodesic {
     double *cot;           /* 3 per face: cotangent at each corner (0: degenerate) */
     double *grad;          /* 9 per face: (N x e_k) / (2A), 0 for degenerate faces */
     unsigned char *active; /* n: vertex carries area                              */
+    dk_index *acomp;       /* n: area component of active vertices, -1 otherwise  */
+    dk_index n_acomp;
+    dk_index *relax;       /* n: vertices to relax in a call                      */
     dk_cholesky *heat_n;   /* M + tL on active vertices                           */
     dk_cholesky *heat_d;   /* M + tL on active interior vertices, or NULL         */
     dk_cholesky *poisson;  /* L on active vertices minus one pin per component    */
@@ -55,6 +62,8 @@ void dk_heat_free(dk_heat_geodesic *heat)
     free(heat->cot);
     free(heat->grad);
     free(heat->active);
+    free(heat->acomp);
+    free(heat->relax);
     dk_cholesky_free(heat->heat_n);
     dk_cholesky_free(heat->heat_d);
     dk_cholesky_free(heat->poisson);
@@ -188,10 +197,12 @@ dk_status dk_heat_create(const dk_mesh *mesh, double time_factor, dk_heat_geodes
     h->map_p = malloc((size_t)n * sizeof *h->map_p);
     h->work = malloc(4 * (size_t)n * sizeof *h->work);
     double *w = malloc((size_t)(ne > 0 ? ne : 1) * sizeof *w);
-    unsigned char *pinned = calloc((size_t)mesh->report.n_components + 1, 1);
+    unsigned char *pinned = calloc((size_t)n, 1);
+    h->acomp = malloc((size_t)n * sizeof *h->acomp);
+    h->relax = malloc((size_t)n * sizeof *h->relax);
     dk_status st = DK_OK;
     if (!h->mass || !h->cot || !h->grad || !h->xf || !h->active || !h->map_n || !h->map_d ||
-        !h->map_p || !h->work || !w || !pinned) {
+        !h->map_p || !h->work || !w || !pinned || !h->acomp || !h->relax) {
         st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "heat method: out of memory (%d vertices)",
                           (int)n);
         goto done;
@@ -201,6 +212,39 @@ dk_status dk_heat_create(const dk_mesh *mesh, double time_factor, dk_heat_geodes
     dk_cotangent_weights(mesh, mesh->positions, w);
     face_geometry(mesh, h->cot, h->grad);
 
+    /* area components: union-find over the vertices of triangles with area (acomp is the
+     * parent array here, then relabelled 0 .. n_acomp - 1) */
+    for (dk_index v = 0; v < n; v++) h->acomp[v] = v;
+    for (dk_index f = 0; f < nf; f++) {
+        const double *g = h->grad + 9 * f;
+        if (g[0] == 0.0 && g[1] == 0.0 && g[2] == 0.0 && g[3] == 0.0 && g[4] == 0.0 &&
+            g[5] == 0.0)
+            continue; /* degenerate */
+        dk_index r[3];
+        for (int k = 0; k < 3; k++) {
+            dk_index x = mesh->faces[3 * f + k];
+            while (h->acomp[x] != x) x = h->acomp[x] = h->acomp[h->acomp[x]];
+            r[k] = x;
+        }
+        h->acomp[r[1]] = r[0];
+        h->acomp[r[2]] = r[0];
+    }
+    /* labels: root of every vertex into map_p (scratch), label per root into relax */
+    for (dk_index v = 0; v < n; v++) {
+        dk_index x = v;
+        while (h->acomp[x] != x) x = h->acomp[x];
+        h->map_p[v] = x;
+        h->relax[v] = -1;
+    }
+    h->n_acomp = 0;
+    for (dk_index v = 0; v < n; v++) {
+        dk_index root = h->map_p[v];
+        if (!(h->mass[v] > 0.0)) continue;
+        if (h->relax[root] < 0) h->relax[root] = h->n_acomp++;
+    }
+    for (dk_index v = 0; v < n; v++)
+        h->acomp[v] = h->mass[v] > 0.0 ? h->relax[h->map_p[v]] : -1;
+
     h->size_n = h->size_d = h->size_p = 0;
     for (dk_index v = 0; v < n; v++) {
         h->active[v] = h->mass[v] > 0.0;
@@ -208,7 +252,7 @@ dk_status dk_heat_create(const dk_mesh *mesh, double time_factor, dk_heat_geodes
         if (!h->active[v]) continue;
         h->map_n[v] = h->size_n++;
         if (!mesh->is_boundary_vertex[v]) h->map_d[v] = h->size_d++;
-        dk_index c = mesh->component[v];
+        dk_index c = h->acomp[v];
         if (!pinned[c]) pinned[c] = 1;
         else h->map_p[v] = h->size_p++;
     }
@@ -223,7 +267,7 @@ dk_status dk_heat_create(const dk_mesh *mesh, double time_factor, dk_heat_geodes
     }
     if (h->size_p > 0) {
         st = factor(mesh, w, NULL, 1.0, h->map_p, h->size_p, &h->poisson,
-                    "Poisson operator L (one vertex pinned per component)", err);
+                    "Poisson operator L (one vertex pinned per area component)", err);
         if (st != DK_OK) goto done;
     }
 done:
@@ -330,31 +374,31 @@ dk_status dk_heat_distance(dk_heat_geodesic *heat, const dk_index *sources, dk_i
         for (dk_index v = 0; v < n; v++) distance[v] = 0.0;
     }
 
-    /* Vertices without area: INFINITY until reached from an active neighbour. */
-    for (dk_index v = 0; v < n; v++)
-        if (!heat->active[v]) distance[v] = INFINITY;
-    /* 5. shift per component: min over the sources (only active ones define the shift) */
-    dk_index nc = mesh->report.n_components;
-    double *shift = buf; /* nc <= n entries */
-    for (dk_index c = 0; c < nc; c++) shift[c] = INFINITY;
+    /* 5. shift per area component: min over its sources */
+    double *shift = buf; /* n_acomp <= n entries */
+    for (dk_index c = 0; c < heat->n_acomp; c++) shift[c] = INFINITY;
     for (dk_index s = 0; s < n_sources; s++) {
-        dk_index v = sources[s];
-        if (heat->active[v] && distance[v] < shift[mesh->component[v]])
-            shift[mesh->component[v]] = distance[v];
+        dk_index c = heat->acomp[sources[s]];
+        if (c >= 0 && distance[sources[s]] < shift[c]) shift[c] = distance[sources[s]];
     }
+    dk_index n_relax = 0;
     for (dk_index v = 0; v < n; v++) {
-        double sh = shift[mesh->component[v]];
-        distance[v] = (sh < INFINITY && heat->active[v]) ? distance[v] - sh : INFINITY;
+        dk_index c = heat->acomp[v];
+        if (c >= 0 && shift[c] < INFINITY) {
+            distance[v] -= shift[c];
+        } else {
+            distance[v] = INFINITY;
+            heat->relax[n_relax++] = v;
+        }
     }
-    /* Sources without area are at 0; then relax inactive vertices from their neighbours. */
-    int any_inactive = 0;
+    /* Sources the heat method did not cover (no area) are at 0; then the rest is relaxed
+     * along edges from what was reached (Bellman-Ford sweeps over these vertices only). */
     for (dk_index s = 0; s < n_sources; s++)
-        if (!heat->active[sources[s]]) distance[sources[s]] = 0.0;
-    for (dk_index v = 0; v < n; v++) any_inactive |= !heat->active[v];
-    for (int changed = any_inactive; changed;) {
+        if (heat->acomp[sources[s]] < 0) distance[sources[s]] = 0.0;
+    for (int changed = n_relax > 0; changed;) {
         changed = 0;
-        for (dk_index v = 0; v < n; v++) {
-            if (heat->active[v]) continue;
+        for (dk_index i = 0; i < n_relax; i++) {
+            dk_index v = heat->relax[i];
             for (dk_index r = mesh->ring_start[v]; r < mesh->ring_start[v + 1]; r++) {
                 dk_index j = mesh->ring_index[r];
                 if (!(distance[j] < INFINITY)) continue;

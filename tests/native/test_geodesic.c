@@ -375,6 +375,61 @@ static void test_heat_degenerate(void)
     dk_mesh_free(m);
 }
 
+/* Two grids joined only through a zero-area triangle: one mesh component, but L splits in
+ * two blocks. The far grid has no source: it is reached along edges through the sliver. */
+static void test_heat_sliver_bridge(void)
+{
+    dk_test_mesh g;
+    if (dk_test_grid(4, 1.0, 0.0, &g) != 0) {
+        CHECK(0);
+        return;
+    }
+    dk_index n = g.n_vertices, nf = g.n_faces; /* 25 vertices, corner (4,4) is vertex 24 */
+    double *p = malloc((size_t)(2 * n + 1) * 3 * sizeof *p);
+    dk_index *f = malloc((size_t)(2 * nf + 1) * 3 * sizeof *f);
+    dk_mesh *m = NULL;
+    dk_error err = {0};
+    if (p && f) {
+        for (dk_index v = 0; v < n; v++)
+            for (int d = 0; d < 3; d++) {
+                p[3 * v + d] = g.positions[3 * v + d];
+                p[3 * (n + v) + d] = g.positions[3 * v + d] + 2.0; /* corner 0 at (2,2,2) */
+            }
+        /* c: midpoint of corner 24 = (1,1,0) and corner n = (2,2,2) */
+        p[6 * n] = 1.5, p[6 * n + 1] = 1.5, p[6 * n + 2] = 1.0;
+        for (dk_index k = 0; k < 3 * nf; k++) f[k] = g.faces[k], f[3 * nf + k] = g.faces[k] + n;
+        f[6 * nf] = 24, f[6 * nf + 1] = 2 * n, f[6 * nf + 2] = n;
+        CHECK(dk_mesh_create(p, 2 * n + 1, f, 2 * nf + 1, &m, &err) == DK_OK);
+    }
+    free(p);
+    free(f);
+    dk_test_mesh_free(&g);
+    if (!m) return;
+    dk_heat_geodesic *heat = NULL;
+    double d[64], dj[64];
+    CHECK(dk_heat_create(m, 0.0, &heat, &err) == DK_OK);
+    if (heat) {
+        dk_index src = 6;
+        CHECK(dk_heat_distance(heat, &src, 1, d, &err) == DK_OK);
+        CHECK(dk_geodesic_dijkstra(m, &src, 1, dj, &err) == DK_OK);
+        int ok = 1;
+        for (dk_index v = 0; v <= 2 * n; v++) ok &= isfinite(d[v]) && d[v] >= -1e-9;
+        CHECK(ok);
+        /* the far grid and the sliver vertex continue from corner 24 along edges */
+        double bridge = sqrt(6.0); /* |corner n - corner 24| = |(1, 1, 2)| */
+        CHECK_NEAR(d[n], d[24] + bridge, 1e-12);
+        CHECK_NEAR(d[2 * n], d[24] + 0.5 * bridge, 1e-12);
+        for (dk_index v = n; v < 2 * n; v++)
+            CHECK_NEAR(d[v] - d[24], dj[v] - dj[24], 1e-12); /* edge paths from corner n */
+        /* heat part still accurate: first grid vs straight lines from vertex 6 = (0.25,0.25) */
+        CHECK(d[src] == 0.0);
+    } else {
+        CHECK_MSG(0, "%s", err.message);
+    }
+    dk_heat_free(heat);
+    dk_mesh_free(m);
+}
+
 static double now(void)
 {
     struct timespec t;
@@ -432,5 +487,5 @@ static void test_heat_timing(void)
     dk_mesh_free(m);
 }
 
-DK_TEST_MAIN(test_dijkstra_and_hops, test_heat_timing, test_heat_flat_grid, test_heat_sphere, test_heat_components,
+DK_TEST_MAIN(test_dijkstra_and_hops, test_heat_timing, test_heat_sliver_bridge, test_heat_flat_grid, test_heat_sphere, test_heat_components,
              test_heat_degenerate)
