@@ -96,9 +96,24 @@ def main():
     t0 = time.perf_counter()
     rw = default.solve(moved, warm_start=True)
     dtw = time.perf_counter() - t0
-    print(f"warm re-solve after a {0.002 * bbox:.4g} move (0.2% of bbox diagonal): "
-          f"{rw.iterations} iterations, {dtw * 1e3:.1f} ms, converged={rw.converged}")
-
+    print(f"warm re-solve after a {0.002 * bbox:.4g} move (0.2% of bbox diagonal), from the "
+          f"default-tolerance solve: {rw.iterations} iterations, {dtw * 1e3:.1f} ms, "
+          f"converged={rw.converged}")
+    # The same from a well converged previous solution (as after a few idle redraws with a
+    # tight tolerance): the re-solve then only has to absorb the move, not the previous
+    # solve's residual error.
+    ref_m, _ = bind(tolerance=1e-10, max_iterations=1000)
+    ref_m.solve(targets, warm_start=False)
+    e_m = ref_m.solve(moved, warm_start=True).energy
+    default.solve(targets, warm_start=True, tolerance=1e-10, max_iterations=1000)
+    for tol in (1e-6, 1e-5, 1e-4):
+        default.solve(targets, warm_start=True, tolerance=1e-10, max_iterations=1000)
+        t0 = time.perf_counter()
+        rw = default.solve(moved, warm_start=True, tolerance=tol)
+        dtw = time.perf_counter() - t0
+        print(f"warm re-solve after the same move from a converged solution, tolerance {tol:g}: "
+              f"{rw.iterations} iterations, {dtw * 1e3:.1f} ms, energy "
+              f"{(rw.energy / e_m - 1):.1e} above that target's minimum")
 
 if __name__ == "__main__":
     main()

@@ -949,6 +949,17 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
     return DK_OK;
 }
 
+dk_status dk_arap_set_tolerance(dk_arap *ar, double tolerance, dk_error *err)
+{
+    if (!ar)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "ARAP: object is NULL");
+    if (!(isfinite(tolerance) && tolerance >= 0.0))
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP: tolerance is %g, must be finite and >= 0", tolerance);
+    ar->opt.tolerance = tolerance;
+    return DK_OK;
+}
+
 double dk_arap_energy(const dk_arap *ar, const double *positions)
 {
     if (!ar || !positions)

@@ -110,6 +110,10 @@ dk_status dk_arap_solve(dk_arap *arap, const double *targets, int mode, int warm
                         int max_iterations, double *positions, dk_arap_info *info,
                         dk_error *err);
 
+/** Changes the stopping tolerance (>= 0, see dk_arap_options) for the following solves, e.g.
+ *  a loose one while dragging and a tight one when the user lets go; the warm start is kept. */
+dk_status dk_arap_set_tolerance(dk_arap *arap, double tolerance, dk_error *err);
+
 /** The ARAP energy E of arbitrary positions (n_vertices x 3) with their optimal rotations,
  *  including the soft-handle penalties for the targets of the last solve (none before the
  *  first solve). Independent of the solver state otherwise. Returns NaN on NULL input. */

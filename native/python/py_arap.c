@@ -158,19 +158,23 @@ static void arap_dealloc(PyObject *obj)
 }
 
 PyDoc_STRVAR(solve_doc,
-             "solve(targets=None, transforms=None, warm_start=True, max_iterations=None)\n"
-             "    -> SolveResult\n\n"
+             "solve(targets=None, transforms=None, warm_start=True, max_iterations=None,\n"
+             "      tolerance=None) -> SolveResult\n\n"
              "targets: (sum of handle sizes) x 3 positions, concatenated in handle order;\n"
              "transforms: n_handles x 4 x 4 affine transforms of the rest pose. warm_start\n"
              "starts from the previous solution (else from the naive Laplacian-editing guess).\n"
+             "max_iterations overrides the bound value for this call; tolerance replaces the\n"
+             "bound value for this and later calls.\n"
              "Returns the positions, the ARAP energy of those positions, the iterations used\n"
              "and whether the relative energy change fell below the tolerance.");
 
 static PyObject *arap_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
 {
-    static char *kwlist[] = {"targets", "transforms", "warm_start", "max_iterations", NULL};
+    static char *kwlist[] = {"targets", "transforms", "warm_start", "max_iterations",
+                             "tolerance", NULL};
     ArapObject *self = (ArapObject *)obj;
     PyObject *targets = Py_None, *transforms = Py_None, *maxit_obj = Py_None, *positions;
+    PyObject *tol_obj = Py_None;
     PyObject *module;
     int warm = 1, maxit = 0, mode;
     dk_py_doubles in = {0};
@@ -180,8 +184,8 @@ static PyObject *arap_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
     double *out;
     const dk_constraints *c;
 
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "|OOpO:solve", kwlist, &targets,
-                                     &transforms, &warm, &maxit_obj))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "|OOpOO:solve", kwlist, &targets,
+                                     &transforms, &warm, &maxit_obj, &tol_obj))
         return NULL;
     if (maxit_obj != Py_None) {
         long v = PyLong_AsLong(maxit_obj);
@@ -197,6 +201,14 @@ static PyObject *arap_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
     module = PyType_GetModule(Py_TYPE(obj));
     if (!module || enter(self) < 0)
         return NULL;
+    if (tol_obj != Py_None) {
+        double tol = PyFloat_AsDouble(tol_obj);
+        if ((tol == -1.0 && PyErr_Occurred()) ||
+            dk_arap_set_tolerance(self->arap, tol, &err) != DK_OK) {
+            self->busy = 0;
+            return PyErr_Occurred() ? NULL : dk_py_raise(&err, "ARAP.solve");
+        }
+    }
     c = dk_arap_constraints(self->arap);
     if (dk_py_lap_read_solve_input(targets, transforms, c->n_handles, c->n_handle_vertices,
                                    "ARAP.solve", &in, &mode) < 0) {

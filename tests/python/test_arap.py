@@ -356,3 +356,16 @@ def test_roi_and_transforms_equal_targets():
         bad = np.array(T)
         bad[1, 3, 3] = 2.0
         arap.solve(transforms=bad)
+
+
+def test_tolerance_override_and_repeated_warm_solves():
+    v, f, fixed, handle = plane_setup(10)
+    arap = deformkit.ARAP(deformkit.Mesh(v, f), [handle], fixed=fixed, tolerance=1e-3)
+    t = bend(v, handle, 0.9)
+    loose = arap.solve(t, warm_start=False)
+    tight = arap.solve(t, warm_start=True, tolerance=1e-12, max_iterations=2000)
+    assert tight.energy <= loose.energy and tight.converged
+    again = arap.solve(t, warm_start=True)            # tolerance 1e-12 stays in effect
+    assert again.iterations <= 2 and again.energy == pytest.approx(tight.energy, rel=1e-9)
+    with pytest.raises(ValueError, match="tolerance"):
+        arap.solve(t, tolerance=-1.0)
