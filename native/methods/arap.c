@@ -355,11 +355,9 @@ static dk_status assemble(const dk_arap *ar, arap_system *s, dk_error *err)
         ent[count[u]].row = u;
         ent[count[u]].val = s->soft_k[s->unknowns[u]];
     }
-    double diag_sum = 0.0;
     for (int64_t t = 0; t < ar->n_terms; t++) {
         dk_index ua = s->unk[ar->ta[t]], ub = s->unk[ar->tb[t]];
         double w = s->tws[t];
-        diag_sum += 2.0 * w;
         if (ua >= 0) {
             ent[fill[ua]++] = (entry){ua, w};
             if (ub >= 0)
@@ -410,7 +408,6 @@ static dk_status assemble(const dk_arap *ar, arap_system *s, dk_error *err)
         s->a.values[k] = ent[k].val;
     }
     free(ent);
-    (void)diag_sum;
     return DK_OK;
 }
 
