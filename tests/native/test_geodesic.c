@@ -10,6 +10,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "dk_io.h"
 #include "dk_operators.h"
 #include "dk_test.h"
 #include "dk_test_meshes.h"
@@ -487,5 +488,56 @@ static void test_heat_timing(void)
     dk_mesh_free(m);
 }
 
-DK_TEST_MAIN(test_dijkstra_and_hops, test_heat_timing, test_heat_sliver_bridge, test_heat_flat_grid, test_heat_sphere, test_heat_components,
+/* The armadillo (when the shared meshes are present): timings, and the heat distance is a
+ * plausible geodesic distance: below the edge-graph (Dijkstra) distance, which overestimates
+ * the geodesic, and not far below it. */
+static void test_heat_armadillo(void)
+{
+    char path[1024];
+    if (!dk_test_shared_mesh_path(DK_SHARED_DIR, "armadillo.obj", path, sizeof path)) return;
+    dk_mesh_file file = {0};
+    dk_error err = {0};
+    if (dk_read_mesh_file(path, &file, &err) != DK_OK) {
+        printf("armadillo not readable (%s), skipping\n", err.message);
+        return;
+    }
+    dk_mesh *m = NULL;
+    CHECK(dk_mesh_from_polygons(file.positions, file.n_vertices, file.face_sizes,
+                                file.n_polygons, file.indices, file.n_indices, &m, &err) == DK_OK);
+    dk_mesh_file_free(&file);
+    if (!m) return;
+    dk_index n = m->n_vertices;
+    double *d = malloc((size_t)n * sizeof *d), *dj = malloc((size_t)n * sizeof *dj);
+    dk_heat_geodesic *heat = NULL;
+    double t0 = now();
+    dk_status st = dk_heat_create(m, 0.0, &heat, &err);
+    double t1 = now();
+    CHECK_MSG(st == DK_OK, "%s", err.message);
+    if (st == DK_OK && d && dj) {
+        dk_index src = 0;
+        double t2 = now();
+        CHECK(dk_heat_distance(heat, &src, 1, d, &err) == DK_OK);
+        double t3 = now();
+        CHECK(dk_geodesic_dijkstra(m, &src, 1, dj, &err) == DK_OK);
+        double ratio = 0, maxd = 0;
+        int cnt = 0, finite = 1;
+        for (dk_index v = 0; v < n; v++) {
+            finite &= isfinite(d[v]) == isfinite(dj[v]);
+            if (isfinite(dj[v])) maxd = fmax(maxd, dj[v]);
+        }
+        for (dk_index v = 0; v < n; v++)
+            if (isfinite(dj[v]) && dj[v] > 0.1 * maxd) ratio += d[v] / dj[v], cnt++;
+        ratio /= cnt;
+        printf("armadillo (%d vertices): heat create %.0f ms, distance %.1f ms; mean "
+               "heat/Dijkstra %.3f\n", (int)n, (t1 - t0) * 1e3, (t3 - t2) * 1e3, ratio);
+        CHECK(finite);
+        CHECK(ratio > 0.85 && ratio < 1.0);
+    }
+    free(d);
+    free(dj);
+    dk_heat_free(heat);
+    dk_mesh_free(m);
+}
+
+DK_TEST_MAIN(test_dijkstra_and_hops, test_heat_armadillo, test_heat_timing, test_heat_sliver_bridge, test_heat_flat_grid, test_heat_sphere, test_heat_components,
              test_heat_degenerate)

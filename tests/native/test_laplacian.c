@@ -10,6 +10,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "dk_io.h"
 #include "dk_operators.h"
 #include "dk_test.h"
 #include "dk_test_meshes.h"
@@ -275,74 +276,19 @@ static void test_degenerate(void)
     dk_mesh_free(m);
 }
 
-/* Minimal OBJ reader (v and f lines; polygons fan-triangulated) for the timing below. */
-static int read_obj(const char *path, double **pos, dk_index *nv, dk_index **faces, dk_index *nf)
-{
-    char *text = dk_test_read_file(path, NULL);
-    if (!text) return -1;
-    size_t cv = 1024, cf = 1024;
-    double *p = malloc(cv * 3 * sizeof *p);
-    dk_index *f = malloc(cf * 3 * sizeof *f);
-    dk_index n = 0, m = 0;
-    int ok = p && f;
-    for (char *line = text; ok && line && *line;) {
-        char *next = strchr(line, '\n');
-        if (next) *next++ = '\0';
-        if (line[0] == 'v' && line[1] == ' ') {
-            if ((size_t)n == cv) {
-                double *t = realloc(p, (cv *= 2) * 3 * sizeof *p);
-                if (!t) { ok = 0; break; }
-                p = t;
-            }
-            ok = sscanf(line + 2, "%lf %lf %lf", p + 3 * n, p + 3 * n + 1, p + 3 * n + 2) == 3;
-            n++;
-        } else if (line[0] == 'f' && line[1] == ' ') {
-            dk_index c[64];
-            int k = 0;
-            char *s = line + 2;
-            while (k < 64) {
-                char *end;
-                long v = strtol(s, &end, 10);
-                if (end == s) break;
-                c[k++] = (dk_index)(v > 0 ? v - 1 : n + v);
-                s = end;
-                while (*s && *s != ' ' && *s != '\t') s++;
-            }
-            for (int t = 1; t + 1 < k; t++) {
-                if ((size_t)m == cf) {
-                    dk_index *tt = realloc(f, (cf *= 2) * 3 * sizeof *f);
-                    if (!tt) { ok = 0; break; }
-                    f = tt;
-                }
-                f[3 * m] = c[0], f[3 * m + 1] = c[t], f[3 * m + 2] = c[t + 1];
-                m++;
-            }
-        }
-        line = next;
-    }
-    free(text);
-    if (!ok) {
-        free(p);
-        free(f);
-        return -1;
-    }
-    *pos = p, *nv = n, *faces = f, *nf = m;
-    return 0;
-}
-
 static void test_armadillo_timing(void)
 {
     char path[1024];
     if (!dk_test_shared_mesh_path(DK_SHARED_DIR, "armadillo.obj", path, sizeof path)) return;
-    double *p = NULL;
-    dk_index *f = NULL, nv = 0, nf = 0;
-    if (read_obj(path, &p, &nv, &f, &nf) != 0) {
-        printf("armadillo not found, skipping the timing\n");
+    dk_mesh_file file = {0};
+    dk_error err = {0};
+    if (dk_read_mesh_file(path, &file, &err) != DK_OK) {
+        printf("armadillo not readable (%s), skipping the timing\n", err.message);
         return;
     }
     dk_mesh *m = NULL;
-    dk_error err = {0};
-    if (dk_mesh_create(p, nv, f, nf, &m, &err) == DK_OK) {
+    if (dk_mesh_from_polygons(file.positions, file.n_vertices, file.face_sizes, file.n_polygons,
+                              file.indices, file.n_indices, &m, &err) == DK_OK) {
         dk_sparse *l = NULL;
         double best = INFINITY;
         for (int rep = 0; rep < 3; rep++) {
@@ -352,18 +298,17 @@ static void test_armadillo_timing(void)
             CHECK(st == DK_OK);
             if (st != DK_OK) break;
             best = fmin(best, t1 - t0);
-            if (rep == 2) check_laplacian_structure(l, nv, "armadillo");
+            if (rep == 2) check_laplacian_structure(l, m->n_vertices, "armadillo");
             dk_sparse_free(l);
             l = NULL;
         }
-        printf("armadillo (%d vertices, %d faces): cotangent Laplacian in %.2f ms\n", (int)nv,
-               (int)nf, best * 1e3);
+        printf("armadillo (%d vertices, %d faces): cotangent Laplacian in %.2f ms\n",
+               (int)m->n_vertices, (int)m->n_faces, best * 1e3);
     } else {
         CHECK_MSG(0, "armadillo: %s", err.message);
     }
     dk_mesh_free(m);
-    free(p);
-    free(f);
+    dk_mesh_file_free(&file);
 }
 
 DK_TEST_MAIN(test_hand_example, test_linear_precision, test_sphere_psd_and_uniform,
