@@ -347,7 +347,8 @@ typedef struct ply_elem {
 } ply_elem;
 
 /* Reads the next value of type t: binary from *p (bounded by end) or ascii token. */
-static int ply_value(const char **p, const char *end, int binary, int t, double *out)
+static int ply_value(const char **p, const char *end, int binary, int t, double *out,
+                     long long *line)
 {
     if (binary) {
         size_t n = type_size(t);
@@ -366,16 +367,26 @@ static int ply_value(const char **p, const char *end, int binary, int t, double 
         *p += n;
         return 0;
     }
-    /* ascii: tokens may continue on following lines only within the same element item,
-     * which the caller delimits; here we simply skip whitespace including newlines */
+    /* ascii: whitespace (newlines included) separates tokens; count lines for messages */
     const char *s = *p;
-    while (*s && isspace((unsigned char)*s)) s++;
+    while (*s && isspace((unsigned char)*s)) {
+        if (*s == '\n') (*line)++;
+        s++;
+    }
     if (!*s) return -1;
     char *e;
     *out = strtod(s, &e);
     if (e == s) return -1;
     *p = e;
     return 0;
+}
+
+/* " line N" for ascii data, "" for binary (where messages name the element instead). */
+static const char *ply_where(char *buf, int binary, long long line)
+{
+    buf[0] = '\0';
+    if (!binary) snprintf(buf, 48, " line %lld", line);
+    return buf;
 }
 
 static dk_status read_ply(const char *buf, size_t size, const char *name, dk_mesh_file *out,
@@ -487,41 +498,45 @@ static dk_status read_ply(const char *buf, size_t size, const char *name, dk_mes
     (void)have_faces; /* a point cloud is allowed */
     builder b = {0};
     const char *p = s;
+    char where[48] = "";
+    line++; /* the first data line (ascii line numbers are counted by ply_value) */
     for (int i = 0; i < n_elems; i++) {
         ply_elem *e = &elems[i];
         for (long long item = 0; item < e->count; item++) {
             double xyz[3] = {0, 0, 0};
-            if (!binary) line++;
             for (int k = 0; k < e->n_props; k++) {
                 ply_prop *pr = &e->props[k];
                 double v;
                 if (!pr->count_type) {
-                    if (ply_value(&p, end, binary, pr->type, &v)) goto truncated;
+                    if (ply_value(&p, end, binary, pr->type, &v, &line)) goto truncated;
                     if (pr->role >= 1 && pr->role <= 3) xyz[pr->role - 1] = v;
                     continue;
                 }
                 double cnt;
-                if (ply_value(&p, end, binary, pr->count_type, &cnt)) goto truncated;
+                if (ply_value(&p, end, binary, pr->count_type, &cnt, &line)) goto truncated;
                 if (cnt < 0 || cnt > INT32_MAX || cnt != floor(cnt)) {
                     builder_free(&b);
                     return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
-                                        "%s: element %d item %lld: bad list length", name, i,
+                                        "%s%s: element %d item %lld: bad list length",
+                                        name, ply_where(where, binary, line), i,
                                         item);
                 }
                 if (pr->role == 4 && cnt < 3) {
                     builder_free(&b);
                     return dk_error_set(err, DK_ERR_TOPOLOGY,
-                                        "%s: face %lld has %d corners; at least 3 are needed",
-                                        name, item, (int)cnt);
+                                        "%s%s: face %lld has %d corners; at least 3 are "
+                                        "needed",
+                                        name, ply_where(where, binary, line), item, (int)cnt);
                 }
                 for (long long c = 0; c < (long long)cnt; c++) {
-                    if (ply_value(&p, end, binary, pr->type, &v)) goto truncated;
+                    if (ply_value(&p, end, binary, pr->type, &v, &line)) goto truncated;
                     if (pr->role != 4) continue;
                     if (v < 0 || v >= (double)nv || v != floor(v)) {
                         builder_free(&b);
                         return dk_error_set(err, DK_ERR_INDEX,
-                                            "%s: face %lld index %g is out of range [0, %lld]",
-                                            name, item, v, nv - 1);
+                                            "%s%s: face %lld index %g is out of range "
+                                            "[0, %lld]",
+                                            name, ply_where(where, binary, line), item, v, nv - 1);
                     }
                     if (push_index(&b, (dk_index)v)) goto oom;
                 }
@@ -531,8 +546,8 @@ static dk_status read_ply(const char *buf, size_t size, const char *name, dk_mes
                 if (!isfinite(xyz[0]) || !isfinite(xyz[1]) || !isfinite(xyz[2])) {
                     builder_free(&b);
                     return dk_error_set(err, DK_ERR_NONFINITE,
-                                        "%s: vertex %lld has a non-finite coordinate", name,
-                                        item);
+                                        "%s%s: vertex %lld has a non-finite coordinate",
+                                        name, ply_where(where, binary, line), item);
                 }
                 if (push_vertex(&b, xyz[0], xyz[1], xyz[2])) goto oom;
             }
@@ -541,8 +556,8 @@ static dk_status read_ply(const char *buf, size_t size, const char *name, dk_mes
     return builder_finish(&b, out, name, err);
 truncated:
     builder_free(&b);
-    return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s: PLY data ends early or is malformed",
-                        name);
+    return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s%s: PLY data ends early or is malformed",
+                        name, ply_where(where, binary, line));
 oom:
     builder_free(&b);
     return OOM(name);

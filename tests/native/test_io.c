@@ -212,6 +212,14 @@ static void test_ply_syntax(void)
         CHECK_MSG(strstr(err.message, "ends early"), "%s", err.message);
         remove("test_io_tmp_b.ply");
     }
+    CHECK(read_text("test_io_tmp_d.ply",
+                    "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
+                    "property float y\nproperty float z\nelement face 1\n"
+                    "property list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n"
+                    "0 1 0\n3 0 1 7\n",
+                    &f, &err) == DK_ERR_INDEX);
+    CHECK_MSG(strstr(err.message, "test_io_tmp_d.ply line 13: face 0 index 7"), "%s",
+              err.message);
     CHECK(read_text("test_io_tmp_c.ply", "ply\nformat binary_big_endian 1.0\nend_header\n", &f,
                     &err) == DK_ERR_INVALID_ARGUMENT);
     CHECK_MSG(strstr(err.message, "line 2") && strstr(err.message, "unsupported"), "%s",
