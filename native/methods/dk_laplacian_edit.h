@@ -27,8 +27,13 @@
  *   soft: every vertex inside the ROI is unknown; each handle vertex gets a soft row of
  *         weight lambda * w_i (target c_i), each fixed vertex one of weight lambda (target:
  *         its rest position) -- the [A; lambda I_c] x = [delta; lambda c] system of slide 51.
- * The matrix is factored (CHOLMOD, analysed once) at bind; a solve is three back-
- * substitutions (per local-frame iteration) and no allocation.
+ * The matrix is factored (CHOLMOD, analysed once) at bind; a solve from targets is a
+ * 3-column back-substitution (per local-frame iteration) and no allocation. Because the
+ * solution is affine in the entries of the handle transforms, bind also precomputes (for up
+ * to 16 handles) x = g0 + sum_{h,a} T_h[d][a] G_{h,a} (3 + 4 H columns, one multi-RHS
+ * solve), so a solve from transforms (mode 1) needs no back-substitution at all (the
+ * local-frame updates after it still do). If that basis cannot be allocated, mode 1 falls
+ * back to back-substitution.
  *
  * Local frames (slide 69, as Blender's Laplacian Deform): at every vertex an orthonormal
  * frame (n, u, n x u): n the area-weighted normal of the incident triangles, u the
