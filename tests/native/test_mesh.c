@@ -253,6 +253,11 @@ static void test_defects(void)
     }
     dk_mesh_free(m);
 
+    /* an empty mesh */
+    CHECK(dk_mesh_create(NULL, 0, NULL, 0, &m, &err) == DK_OK);
+    if (m) CHECK(m->n_edges == 0 && m->report.n_components == 0 && m->ring_start[0] == 0);
+    dk_mesh_free(m);
+
     /* a point cloud */
     CHECK(dk_mesh_create(q, 5, NULL, 0, &m, &err) == DK_OK);
     if (m) {
@@ -352,8 +357,8 @@ static void test_polygons(void)
     pos[18] = 5;
     pos[19] = 5;
     pos[20] = 5;
-    /* start the hexagon at the reflex corner so a naive fan would fold over */
-    const dk_index sizes[] = {6, 3}, idx[] = {3, 4, 5, 0, 1, 2, 0, 1, 6};
+    /* start the hexagon at corner (2, 1): a naive fan from there folds over at (1, 1) */
+    const dk_index sizes[] = {6, 3}, idx[] = {2, 3, 4, 5, 0, 1, 0, 1, 6};
     CHECK(dk_mesh_from_polygons(pos, 7, sizes, 2, idx, 9, &m, &err) == DK_OK);
     if (m) {
         CHECK(m->n_faces == 5 && m->n_polygons == 2);
