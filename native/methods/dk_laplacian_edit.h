@@ -30,7 +30,7 @@
  * The matrix is factored (CHOLMOD, analysed once) at bind; a solve from targets is a
  * 3-column back-substitution (per local-frame iteration) and no allocation. Because the
  * solution is affine in the entries of the handle transforms, bind also precomputes (for up
- * to 16 handles) x = g0 + sum_{h,a} T_h[d][a] G_{h,a} (3 + 4 H columns, one multi-RHS
+ * to 16 handles and 128 MB) x = g0 + sum_{h,a} T_h[d][a] G_{h,a} (3 + 4 H columns, one multi-RHS
  * solve), so a solve from transforms (mode 1) needs no back-substitution at all (the
  * local-frame updates after it still do). If that basis cannot be allocated, mode 1 falls
  * back to back-substitution.

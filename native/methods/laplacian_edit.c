@@ -838,11 +838,14 @@ static void mark_active_rows(const dk_laplacian_edit *le, le_system *s)
 
 /* Largest number of handles for which the affine basis is precomputed (4 columns each). */
 enum { LE_MAX_BASIS_HANDLES = 16 };
+/* ... and at most this many doubles (128 MB) for it. */
+#define LE_MAX_BASIS_DOUBLES 16.0e6
 
 /* Precomputes the affine basis (see le_system.basis): the solution is affine in the entries
  * of the handle transforms because the eliminated/soft handle values are T_h [p; 1]. One
  * multi-RHS solve of 3 + 4 H columns. Uses le->x and le->delta as scratch (rest deltas, or
- * zero for the membrane). Skipped (basis NULL) for more than LE_MAX_BASIS_HANDLES handles. */
+ * zero for the membrane). Skipped (basis NULL) for more than LE_MAX_BASIS_HANDLES handles
+ * or more than LE_MAX_BASIS_DOUBLES entries; solves from transforms then back-substitute. */
 static dk_status build_basis(dk_laplacian_edit *le, le_system *s, dk_error *err)
 {
     const dk_index n = le->n;
@@ -853,7 +856,7 @@ static dk_status build_basis(dk_laplacian_edit *le, le_system *s, dk_error *err)
 
     free(s->basis);
     s->basis = NULL;
-    if (H > LE_MAX_BASIS_HANDLES)
+    if (H > LE_MAX_BASIS_HANDLES || (double)ncol * (double)nu > LE_MAX_BASIS_DOUBLES)
         return DK_OK;
     s->basis = malloc(sizeof(double) * (size_t)nu * ncol);
     r = malloc(sizeof(double) * (size_t)n);
