@@ -53,7 +53,7 @@ def main():
                 and S.geonodes.find_modifier(g, g.deformkit.deformers[0]) is not None)
         bpy.context.view_layer.update()
         p = S.evaluated_positions(g)
-        R.check("undo apply: evaluated result back", np.abs(p - deformed).max() < 2e-5, np.abs(p - deformed).max())
+        R.check("undo apply: evaluated result back (re-solved, ARAP tolerance)", np.abs(p - deformed).max() < 1e-3, np.abs(p - deformed).max())
         # the solver works after undo (cache re-validated, no stale bpy references)
         bpy.data.objects["Tip"].location.z -= 0.4
         bpy.context.view_layer.update()
