@@ -51,7 +51,9 @@ def _run(scene, depsgraph, cold=False):
             if obj.mode == "EDIT":
                 continue
             changed = (obj.name in geometry or ("mesh", obj.data.name) in geometry)
-            check = changed and obj.name not in ours
+            # re-read groups on every geometry update of the object, ours included: skipping
+            # our own writes could hide a group edit made in the same update
+            check = changed
             solver.evaluate_object(obj, depsgraph, check_groups=check, cold=cold)
         if cold and depsgraph is not None and any_deformed:
             # Frame change: this depsgraph (the viewport's or a render's) may have been
