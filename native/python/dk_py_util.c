@@ -418,7 +418,7 @@ static int is_row_like(PyObject *o)
 {
     if (PyUnicode_Check(o) || PyBytes_Check(o) || PyByteArray_Check(o))
         return 0;
-    return PySequence_Check(o) || PyObject_CheckBuffer(o);
+    return PySequence_Check(o);
 }
 
 /** Reads a (nested) sequence. Returns 0 or -1 with an exception set. */
