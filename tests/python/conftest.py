@@ -1,0 +1,113 @@
+"""Shared set-up for the deformkit module tests.
+
+The tests import the *built* module: run them as
+
+    PYTHONPATH=build/python /usr/bin/python3 -m pytest tests/python
+
+(any build directory works: build-py/python, build-asan/python, ...). Nothing here adds
+paths or builds anything; when deformkit cannot be imported the session stops with a message
+saying what to do.
+
+The fixtures below generate small meshes with numpy so the tests run anywhere; tests that
+read the real meshes under ../shared/meshes skip when those are absent.
+"""
+
+import os
+import pathlib
+
+import numpy as np
+import pytest
+
+try:
+    import deformkit  # noqa: F401
+except ImportError as exc:  # pragma: no cover - only when misconfigured
+    pytest.exit(
+        "cannot import deformkit ({}): build the module first "
+        "(cmake -S . -B build && cmake --build build) and run the tests with "
+        "PYTHONPATH=build/python /usr/bin/python3 -m pytest tests/python".format(exc),
+        returncode=1,
+    )
+
+SHARED_MESHES = pathlib.Path(
+    os.environ.get("DK_SHARED_DIR", pathlib.Path(__file__).resolve().parents[2] / ".." / "shared")
+) / "meshes"
+
+
+def make_icosphere(subdivisions=2, radius=1.0):
+    """Icosahedron subdivided `subdivisions` times (midpoints projected to the sphere)."""
+    t = (1.0 + 5.0 ** 0.5) / 2.0
+    v = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t),
+         (0, -1, -t), (0, 1, -t), (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)]
+    f = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4),
+         (11, 10, 2), (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8),
+         (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]
+    verts = [np.array(p, dtype=float) / np.linalg.norm(p) for p in v]
+    faces = list(f)
+    for _ in range(subdivisions):
+        cache = {}
+
+        def midpoint(a, b):
+            key = (min(a, b), max(a, b))
+            if key not in cache:
+                m = verts[a] + verts[b]
+                verts.append(m / np.linalg.norm(m))
+                cache[key] = len(verts) - 1
+            return cache[key]
+
+        new_faces = []
+        for a, b, c in faces:
+            ab, bc, ca = midpoint(a, b), midpoint(b, c), midpoint(c, a)
+            new_faces += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
+        faces = new_faces
+    return np.array(verts) * radius, np.array(faces, dtype=np.int64)
+
+
+def make_grid(nx=8, ny=6, bump=0.0, jitter=0.0, seed=0):
+    """A (nx+1) x (ny+1) vertex grid on [0,1]^2 split into triangles, optionally bumped in z
+    and jittered in x/y (jitter breaks the symmetries that make eigenvalues repeat)."""
+    rng = np.random.default_rng(seed)
+    xs, ys = np.meshgrid(np.linspace(0, 1, nx + 1), np.linspace(0, 1, ny + 1), indexing="ij")
+    x, y = xs.ravel(), ys.ravel()
+    if jitter:
+        inner = (x > 0) & (x < 1) & (y > 0) & (y < 1)
+        x = x + inner * rng.uniform(-jitter, jitter, x.shape) / nx
+        y = y + inner * rng.uniform(-jitter, jitter, y.shape) / ny
+    z = bump * np.sin(np.pi * x) * np.sin(np.pi * y)
+    verts = np.stack([x, y, z], axis=1)
+    idx = lambda i, j: i * (ny + 1) + j  # noqa: E731
+    faces = []
+    for i in range(nx):
+        for j in range(ny):
+            a, b, c, d = idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1)
+            faces += [(a, b, c), (a, c, d)]
+    return verts, np.array(faces, dtype=np.int64)
+
+
+def numpy_edges(faces):
+    """Unique undirected edges (a < b), sorted lexicographically."""
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    e.sort(axis=1)
+    return np.unique(e, axis=0)
+
+
+@pytest.fixture
+def icosphere():
+    return make_icosphere
+
+
+@pytest.fixture
+def grid():
+    return make_grid
+
+
+@pytest.fixture
+def shared_mesh():
+    """Returns the path of ../shared/meshes/<name>, skipping the test when it is absent."""
+
+    def get(name):
+        path = SHARED_MESHES / name
+        if not path.exists():
+            pytest.skip("{} not present".format(path))
+        return path
+
+    return get
