@@ -33,7 +33,18 @@ dk_status dk_error_prefix(dk_error *err, const char *fmt, ...)
     va_end(ap);
     memcpy(old, err->message, sizeof old);
     old[sizeof old - 1] = '\0';
-    snprintf(err->message, sizeof err->message, "%s: %s", prefix, old);
+    /* "prefix: old", cut to the buffer (prefix first; the old message's tail goes). Assembled
+     * by hand so the intended truncation is explicit rather than a snprintf warning. */
+    size_t cap = sizeof err->message - 1;
+    size_t lp = strlen(prefix);
+    if (lp > cap) lp = cap;
+    memcpy(err->message, prefix, lp);
+    size_t at = lp;
+    for (const char *sep = ": "; *sep && at < cap; sep++) err->message[at++] = *sep;
+    size_t lo = strlen(old);
+    if (lo > cap - at) lo = cap - at;
+    memcpy(err->message + at, old, lo);
+    err->message[at + lo] = '\0';
     return err->status;
 }
 
