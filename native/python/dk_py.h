@@ -112,5 +112,6 @@ int dk_py_init_operators(PyObject *module);
 int dk_py_init_arap(PyObject *module);
 int dk_py_init_laplacian_edit(PyObject *module);
 int dk_py_init_falloff(PyObject *module);
+int dk_py_init_cholesky(PyObject *module);
 
 #endif

@@ -186,7 +186,7 @@ static int module_exec(PyObject *module)
         return -1;
     if (dk_py_init_mesh(module) < 0 || dk_py_init_operators(module) < 0 ||
         dk_py_init_arap(module) < 0 || dk_py_init_laplacian_edit(module) < 0 ||
-        dk_py_init_falloff(module) < 0)
+        dk_py_init_falloff(module) < 0 || dk_py_init_cholesky(module) < 0)
         return -1;
     return 0;
 }
