@@ -220,6 +220,9 @@ class DEFORMKIT_OT_remove_handle(_Base, bpy.types.Operator):
         d.active_handle = min(d.active_handle, max(0, len(d.handles) - 1))
 
 
+_binding = set()  # (object name, deformer uid) of the UI binds running in a worker thread
+
+
 class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
     """Bind: precompute the solver for the current mesh, groups and target placement"""
     bl_idname = "deformkit.bind"
@@ -242,6 +245,75 @@ class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
         ms = (time.perf_counter() - t0) * 1000
         self.report({"INFO"}, "%s bound: %d vertices, %d handles (%.0f ms)"
                     % (d.name, e.n_vertices, len(d.handles), ms))
+
+    # ---- UI version: the native precomputation runs in a worker thread (it releases the
+    # GIL), the window stays live with the elapsed time in the status bar, Esc cancels and
+    # keeps the previous binding. Scripts and blender -b use the synchronous execute().
+    def invoke(self, context, event):
+        if bpy.app.background:
+            return self.execute(context)
+        import threading
+        try:
+            obj = _get_object(self, context)
+            d = _get_deformer(self, context, obj)
+            if (obj.name, d.uid) in _binding:
+                raise solver.DeformKitError("a bind of %s is already running" % d.name)
+            self._job, self._mats = solver.bind_begin(obj, d, context.evaluated_depsgraph_get())
+        except solver.DeformKitError as ex:
+            if "d" in locals():
+                solver.set_status(d, str(ex), True)
+            self.report({"ERROR"}, str(ex))
+            return {"CANCELLED"}
+        self._obj, self._uid, self._name = obj.name, d.uid, d.name
+        self._t0 = time.perf_counter()
+        self._thread = threading.Thread(target=self._job.run, name="DeformKit bind",
+                                        daemon=True)
+        self._thread.start()
+        _binding.add((obj.name, d.uid))
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(0.05, window=context.window)
+        wm.progress_begin(0, 1)
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def _end(self, context):
+        _binding.discard((self._obj, self._uid))
+        wm = context.window_manager
+        wm.event_timer_remove(self._timer)
+        wm.progress_end()
+        context.workspace.status_text_set(None)
+
+    def modal(self, context, event):
+        if event.type == "ESC":
+            self._end(context)  # the worker finishes on its own; its result is dropped
+            self.report({"WARNING"}, "bind of %s cancelled: the previous state is kept"
+                        % self._name)
+            return {"CANCELLED"}
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        if self._thread.is_alive():
+            context.workspace.status_text_set(
+                "DeformKit: binding %s (%d vertices) %.1f s, Esc to cancel"
+                % (self._name, self._job.n_vertices, time.perf_counter() - self._t0))
+            return {"RUNNING_MODAL"}
+        self._end(context)
+        obj = bpy.data.objects.get(self._obj)
+        d = None if obj is None else next(
+            (x for x in obj.deformkit.deformers if x.uid == self._uid), None)
+        if d is None:
+            self.report({"ERROR"}, "bind of %s: the object or deformer was removed meanwhile"
+                        % self._name)
+            return {"CANCELLED"}
+        try:
+            e = solver.bind_end(obj, d, self._job, self._mats, context.evaluated_depsgraph_get())
+        except solver.DeformKitError as ex:
+            solver.set_status(d, str(ex), True)
+            self.report({"ERROR"}, str(ex))
+            return {"CANCELLED"}
+        self.report({"INFO"}, "%s bound: %d vertices, %d handles (%.0f ms)"
+                    % (d.name, e.n_vertices, len(d.handles),
+                       (time.perf_counter() - self._t0) * 1000))
+        return {"FINISHED"}
 
 
 class DEFORMKIT_OT_unbind(_Base, bpy.types.Operator):

@@ -136,7 +136,8 @@ def _mat(v):
     return Matrix((v[0:4], v[4:8], v[8:12], v[12:16]))
 
 
-def set_bind_matrix(obj, h, depsgraph=None):
+def bind_matrix(obj, h, depsgraph=None):
+    """inverse(target world) @ object world, flat (16 floats): the handle's rest placement."""
     tw = target_world(h, depsgraph)
     try:
         inv = tw.inverted()
@@ -144,7 +145,11 @@ def set_bind_matrix(obj, h, depsgraph=None):
         raise DeformKitError("handle '%s': target '%s' has a singular transform (zero scale?)"
                              % (h.name, h.target.name))
     ow = obj.evaluated_get(depsgraph).matrix_world if depsgraph is not None else obj.matrix_world
-    h.bind_matrix = _flat(inv @ ow)
+    return _flat(inv @ ow)
+
+
+def set_bind_matrix(obj, h, depsgraph=None):
+    h.bind_matrix = bind_matrix(obj, h, depsgraph)
     h.is_bound = True
 
 
@@ -255,8 +260,7 @@ def _native_call(what, fn, *a, **kw):
         raise DeformKitError("%s: %s" % (what, e)) from e
 
 
-def _build(obj, d, kw, groups_key, entry=None):
-    m = methods.get(d.method)
+def _native_class(m):
     dk = native.load()
     if dk is None:
         raise DeformKitError(native.error)
@@ -264,10 +268,64 @@ def _build(obj, d, kw, groups_key, entry=None):
     if cls is None:
         raise DeformKitError("this build of the native module has no deformkit.%s (%s)"
                              % (m.native_class, m.label))
-    me = obj.data
-    settings = _settings_key(d)
+    return dk, cls
+
+
+class BindJob:
+    """One full bind, split so that the native precomputation (factorizations: seconds on big
+    meshes) can run off the main thread while the UI stays live:
+      job = BindJob(obj, d, kw, key)   main thread: reads Blender data, builds the Mesh
+      job.run()                        any thread: native work only, no bpy access
+      job.entry(obj, d)                main thread: caches the result (raises its error)
+    """
+
+    def __init__(self, obj, d, kw, groups_key):
+        m = methods.get(d.method)
+        dk, self._cls = _native_class(m)
+        me = obj.data
+        self.label = m.label
+        self.method_id, self.settings, self.groups = d.method, _settings_key(d), groups_key
+        self.rest = rest_positions(me)
+        self.n_vertices, self.n_faces = len(me.vertices), len(me.polygons)
+        self.dkmesh = _native_call("mesh", dk.Mesh, self.rest, triangles(me))
+        args = dict(kw)
+        args.update(methods.constructor_kwargs(m, d.options))
+        for k in ("fixed", "roi"):
+            if args.get(k) is None:
+                args.pop(k, None)
+        self._args = args
+        self.native, self.error, self.seconds = None, None, 0.0
+
+    def run(self):
+        t0 = time.perf_counter()
+        try:
+            self.native = _native_call(self.label + " bind", self._cls, self.dkmesh,
+                                       **self._args)
+        except DeformKitError as ex:
+            self.error = ex
+        except Exception as ex:  # e.g. a KeyboardInterrupt-free failure in a thread
+            self.error = DeformKitError("%s bind: %s: %s" % (self.label, type(ex).__name__, ex))
+        self.seconds = time.perf_counter() - t0
+
+    def entry(self, obj, d):
+        if self.error is not None:
+            raise self.error
+        me = obj.data
+        if (len(me.vertices), len(me.polygons)) != (self.n_vertices, self.n_faces):
+            raise DeformKitError("mesh changed from %d to %d vertices during the bind: bind "
+                                 "again" % (self.n_vertices, len(me.vertices)))
+        e = _Entry()
+        e.native, e.dkmesh, e.rest = self.native, self.dkmesh, self.rest
+        e.n_vertices, e.n_faces = self.n_vertices, self.n_faces
+        e.settings, e.groups, e.method_id = self.settings, self.groups, self.method_id
+        e.last_inputs, e.verified = None, True
+        _cache[(obj.name, d.uid)] = e
+        return e
+
+
+def _build(obj, d, kw, groups_key, entry=None):
     # Only the constraint groups changed: the native rebind is the fast path.
-    if (entry is not None and entry.method_id == d.method and entry.settings == settings
+    if (entry is not None and entry.method_id == d.method and entry.settings == _settings_key(d)
             and hasattr(entry.native, "rebind") and set(kw) <= {"handles", "fixed", "roi"}):
         try:
             entry.native.rebind(handles=kw["handles"], fixed=kw["fixed"], roi=kw["roi"])
@@ -277,41 +335,48 @@ def _build(obj, d, kw, groups_key, entry=None):
             return entry
         except NATIVE_ERRORS:
             pass  # fall back to a full bind, which reports the error properly
-    rest = rest_positions(me)
-    tri = triangles(me)
-    dkmesh = _native_call("mesh", dk.Mesh, rest, tri)
-    args = dict(kw)
-    args.update(methods.constructor_kwargs(m, d.options))
-    if args.get("fixed") is None:
-        args.pop("fixed", None)
-    if args.get("roi") is None:
-        args.pop("roi", None)
-    nat = _native_call(m.label + " bind", cls, dkmesh, **args)
-    e = _Entry()
-    e.native, e.dkmesh, e.rest = nat, dkmesh, rest
-    e.n_vertices, e.n_faces = len(me.vertices), len(me.polygons)
-    e.settings, e.groups, e.last_inputs, e.method_id = settings, groups_key, None, d.method
-    e.verified = True
-    _cache[(obj.name, d.uid)] = e
-    return e
+    job = BindJob(obj, d, kw, groups_key)
+    job.run()
+    return job.entry(obj, d)
 
 
-def bind(obj, d, depsgraph=None):
-    """Explicit bind: the targets' current placement becomes the rest pose of the handles."""
+def bind_begin(obj, d, depsgraph=None):
+    """Explicit bind, first half (main thread): validates the set-up and reads the groups and
+    the targets' current placement (which becomes the handles' rest pose at bind_end).
+    Returns (job, bind matrices); nothing is changed until bind_end."""
     check_object(obj)
     kw, key = collect(obj, d)
-    for h in d.handles:
-        set_bind_matrix(obj, h, depsgraph)
-    drop(obj.name, d.uid)
-    e = _build(obj, d, kw, key)
+    mats = [bind_matrix(obj, h, depsgraph) for h in d.handles]
+    return BindJob(obj, d, kw, key), mats
+
+
+def bind_end(obj, d, job, mats, depsgraph=None):
+    """Explicit bind, second half (main thread, after job.run()): installs the result. On the
+    native bind's error, or a mesh or handle list changed meanwhile, it raises before touching
+    anything, so the previous binding stays."""
+    if len(d.handles) != len(mats):
+        raise DeformKitError("handles were added or removed during the bind: bind again")
+    e = job.entry(obj, d)
+    for h, mat in zip(d.handles, mats):
+        h.bind_matrix = mat
+        h.is_bound = True
     d.bind_n_vertices = e.n_vertices
     d.bind_n_faces = e.n_faces
     d.bound = True
+    runtime.pop((obj.name, d.uid), None)
     geonodes.ensure_modifier(obj, d)
     geonodes.ensure_attribute(obj.data, d.attribute_name)
     solve(obj, d, depsgraph, force=True)
     set_status(d, "bound: %d vertices, %d handles" % (e.n_vertices, len(d.handles)), False)
     return e
+
+
+def bind(obj, d, depsgraph=None):
+    """Explicit bind (synchronous): the targets' current placement becomes the rest pose of
+    the handles."""
+    job, mats = bind_begin(obj, d, depsgraph)
+    job.run()
+    return bind_end(obj, d, job, mats, depsgraph)
 
 
 def unbind(obj, d):

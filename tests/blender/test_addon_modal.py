@@ -1,13 +1,17 @@
-"""The bake operator's UI path (needs a window: run under
-`xvfb-run -a blender --factory-startup --enable-event-simulate --python FILE`): invoked from the
-UI it bakes frame by frame from a timer (progress in the status bar), and Esc cancels it,
-leaving no partial file and no Mesh Cache modifier."""
+"""The UI paths of the long operators (need a window: run under
+`xvfb-run -a blender --factory-startup --enable-event-simulate --python FILE`):
+- bake: invoked from the UI it bakes frame by frame from a timer (progress in the status bar),
+  and Esc cancels it, leaving no partial file and no Mesh Cache modifier;
+- bind: invoked from the UI the native precomputation runs in a worker thread; the result
+  equals the synchronous bind's, Esc cancels and keeps the previous binding, and a second
+  bind of the same deformer while one runs is refused."""
 import os
 import sys
 import time
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _setup as S  # noqa: E402
 import bpy  # noqa: E402
+import numpy as np  # noqa: E402
 from addon import pc2  # noqa: E402
 
 R = S.Results("test_addon_modal")
@@ -68,4 +72,70 @@ def main():
     R.check("Esc cancels: DeformKit modifier still shown", gn.show_viewport)
 
 
-S.run_in_ui(main, R)
+def esc():
+    win = bpy.context.window_manager.windows[0]
+    win.event_simulate(type="ESC", value="PRESS")
+    win.event_simulate(type="ESC", value="RELEASE")
+
+
+def bind_tests():
+    # reference: the synchronous bind's evaluated result after a move
+    S.reset_scene()
+    with bpy.context.temp_override(**S.ui_context()):
+        obj, d, e, fixed, handle = S.grid_setup(MID)
+        bpy.ops.deformkit.bind()
+        e.location.z += 0.4
+        ref = S.evaluated_positions(obj)
+    S.reset_scene()
+    with bpy.context.temp_override(**S.ui_context()):
+        obj, d, e, fixed, handle = S.grid_setup(MID)
+        r = bpy.ops.deformkit.bind("INVOKE_DEFAULT")
+        try:
+            r2 = bpy.ops.deformkit.bind("INVOKE_DEFAULT")
+        except RuntimeError as ex:  # scripts get the operator's error report as an exception
+            r2 = str(ex)
+    R.check("UI bind starts modal", r == {"RUNNING_MODAL"}, r)
+    R.check("a second bind of the same deformer while one runs is refused",
+            "already running" in str(r2), r2)
+    t0 = time.time()
+    while not obj.deformkit.deformers[0].bound and time.time() - t0 < 30:
+        yield 0.05
+    d = obj.deformkit.deformers[0]
+    R.check("UI bind finished and bound", d.bound and d.status.startswith("bound"), d.status)
+    with bpy.context.temp_override(**S.ui_context()):
+        e.location.z += 0.4
+        got = S.evaluated_positions(obj)
+    R.check("UI bind result equals the synchronous bind's", np.allclose(got, ref, atol=1e-6),
+            np.abs(got - ref).max())
+
+    # Esc right after invoking, on a bound deformer whose target moved: nothing changes
+    before = [list(h.bind_matrix) for h in d.handles]
+    with bpy.context.temp_override(**S.ui_context()):
+        moved = S.evaluated_positions(obj)
+        e.location.x += 0.3  # a re-bind would make this placement the rest pose
+        bpy.context.view_layer.update()
+        moved2 = S.evaluated_positions(obj)
+        r = bpy.ops.deformkit.bind("INVOKE_DEFAULT")
+        esc()
+    yield 0.5
+    R.check("Esc cancels the bind: handles keep their rest pose",
+            [list(h.bind_matrix) for h in d.handles] == before)
+    R.check("Esc cancels the bind: still bound, mesh still follows the target",
+            d.bound and not np.allclose(moved2, moved))
+    with bpy.context.temp_override(**S.ui_context()):
+        after = S.evaluated_positions(obj)
+    R.check("Esc cancels the bind: evaluated mesh unchanged", np.allclose(after, moved2, atol=1e-6))
+    with bpy.context.temp_override(**S.ui_context()):
+        r = bpy.ops.deformkit.bind("INVOKE_DEFAULT")
+    R.check("bind can run again after a cancel", r == {"RUNNING_MODAL"}, r)
+    yield 0.5
+    R.check("the new bind took the new placement as rest pose",
+            [list(h.bind_matrix) for h in d.handles] != before)
+
+
+def all_tests():
+    yield from main()
+    yield from bind_tests()
+
+
+S.run_in_ui(all_tests, R)
