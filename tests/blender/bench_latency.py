@@ -122,6 +122,9 @@ def main():
     # built-in: Hook (handle vertices to the target) then Laplacian Deform (anchors)
     S.handlers.enabled[0] = False
     obj, e = make_object("Builtin", vs, fs, fixed, handle)
+    # the new empty's matrix_world is only valid after an update (else identity, and the Hook
+    # would add the empty's whole location to the handle)
+    bpy.context.view_layer.update()
     hook = obj.modifiers.new("Hook", "HOOK")
     hook.object = e
     hook.vertex_group = "handle"
