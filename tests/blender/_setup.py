@@ -2,7 +2,14 @@
     blender -b --factory-startup --python-exit-code 1 --python tests/blender/test_addon_X.py
 with PYTHONPATH=<build>/python. Puts the repo root on sys.path, imports the add-on (repo
 folder `addon/`) as the package `addon` and registers it. DEFORMKIT_MOCK=1 uses the stand-in
-module in tests/blender/mock (plumbing only)."""
+module in tests/blender/mock (plumbing only).
+
+DEFORMKIT_FROM_ZIP=<legacy zip> instead installs that zip with Preferences > Add-ons > Install
+(bpy.ops.preferences.addon_install) into BLENDER_USER_SCRIPTS, which must be a fresh directory,
+and enables it with addon_utils, so the tests run the packaged add-on and its bundled native
+module (run without build/python on PYTHONPATH; tests/blender/run_all.sh does this). The
+installed package is then also importable as `addon`, and the repo root is not on sys.path."""
+import importlib.util
 import os
 import sys
 import traceback
@@ -11,9 +18,11 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(os.path.dirname(HERE))
 OUTPUT = os.path.join(HERE, "output")
 os.makedirs(OUTPUT, exist_ok=True)
+FROM_ZIP = os.environ.get("DEFORMKIT_FROM_ZIP", "")
+ADDON_NAME = "deformkit"  # the legacy zip's top folder = the manifest id
 if os.environ.get("DEFORMKIT_MOCK") == "1":
     sys.path.insert(0, os.path.join(HERE, "mock"))
-if ROOT not in sys.path:
+if ROOT not in sys.path and not FROM_ZIP:
     sys.path.insert(0, ROOT)
 if HERE not in sys.path:
     sys.path.insert(0, HERE)
@@ -21,9 +30,65 @@ if HERE not in sys.path:
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
-import addon  # noqa: E402
 
-addon.register()
+def _script_name():
+    argv = sys.argv
+    i = argv.index("--python") + 1 if "--python" in argv else -1
+    return os.path.splitext(os.path.basename(argv[i]))[0] if 0 < i < len(argv) else "test"
+
+
+def _setup_failed(msg):
+    print("FAIL set-up: %s" % msg)
+    print("%s: 0 passed, 1 failed" % _script_name())
+    sys.stdout.flush()
+    raise SystemExit(1)
+
+
+def _enable_installed():
+    """addon_utils.enable with import/register errors reported, not swallowed."""
+    import addon_utils
+    errors = []
+    mod = addon_utils.enable(ADDON_NAME, default_set=True,
+                             handle_error=lambda ex: errors.append(traceback.format_exc()))
+    if mod is None or errors:
+        _setup_failed("addon_utils.enable(%r) failed:\n%s" % (ADDON_NAME, "".join(errors)))
+    return mod
+
+
+def install_from_zip(path):
+    """Installs and enables the zip in a clean user directory; returns the add-on package."""
+    user = os.environ.get("BLENDER_USER_SCRIPTS", "")
+    if not user:
+        _setup_failed("DEFORMKIT_FROM_ZIP needs BLENDER_USER_SCRIPTS set to a fresh directory")
+    if not os.path.isfile(path):
+        _setup_failed("no zip at %s (scripts/package.sh writes it)" % path)
+    addons_dir = bpy.utils.user_resource("SCRIPTS", path="addons")
+    if not os.path.realpath(addons_dir).startswith(os.path.realpath(user) + os.sep):
+        _setup_failed("Blender's user add-on folder %s is not inside BLENDER_USER_SCRIPTS=%s"
+                      % (addons_dir, user))
+    if os.path.exists(os.path.join(addons_dir, ADDON_NAME)):
+        _setup_failed("%s already has %s: not a clean user directory" % (addons_dir, ADDON_NAME))
+    spec = importlib.util.find_spec(ADDON_NAME)
+    if spec is not None:
+        _setup_failed("a %r module is importable before the install (%s): run without "
+                      "build/python on PYTHONPATH" % (ADDON_NAME, spec.origin))
+    try:
+        bpy.ops.preferences.addon_install(filepath=path)
+    except RuntimeError as ex:
+        _setup_failed("addon_install(%s): %s" % (path, ex))
+    mod = _enable_installed()
+    where = os.path.realpath(os.path.join(addons_dir, ADDON_NAME)) + os.sep
+    if not os.path.realpath(mod.__file__).startswith(where):
+        _setup_failed("enabled %s, not the installed copy in %s" % (mod.__file__, where))
+    sys.modules["addon"] = mod  # tests say `from addon import X`: the installed package
+    return mod
+
+
+if FROM_ZIP:
+    addon = install_from_zip(os.path.abspath(FROM_ZIP))
+else:
+    import addon  # noqa: E402
+    addon.register()
 from addon import solver, geonodes, native, handlers, methods  # noqa: E402,F401
 
 dk = native.load()
@@ -60,6 +125,10 @@ class Results:
 
 def reset_scene():
     bpy.ops.wm.read_factory_settings(use_empty=True)
+    if FROM_ZIP:
+        # factory settings disable every add-on the factory preferences do not list
+        if _enable_installed() is not addon:
+            _setup_failed("re-enabling after read_factory_settings reloaded the add-on")
     solver.clear_cache()
 
 

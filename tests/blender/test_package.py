@@ -1,0 +1,222 @@
+"""The legacy zip as a user gets it: installed with Preferences > Add-ons > Install into a clean
+user directory, enabled with addon_utils, no build tree on the path. Checks that the installed
+copy and its bundled native module (and the bundled shared libraries) are the ones in use,
+then deforms a small mesh with each method through the add-on's operators. Last, the 4.2
+extension zip (same folder, name without "legacy") is imported under the package name Blender
+4.2 gives extensions (bl_ext.<repository>.deformkit) and deforms a mesh too.
+
+Run by tests/blender/run_all.sh after scripts/package.sh, as
+    env -u PYTHONPATH BLENDER_USER_SCRIPTS=<fresh dir> BLENDER_USER_CONFIG=<fresh dir> \\
+        DEFORMKIT_FROM_ZIP=dist/deformkit-<version>-legacy-linux_x64.zip \\
+        blender -b --factory-startup --python-exit-code 1 --python tests/blender/test_package.py
+(_setup.py does the install and enable when DEFORMKIT_FROM_ZIP is set)."""
+import importlib
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import zipfile
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+if not os.environ.get("DEFORMKIT_FROM_ZIP"):
+    print("FAIL set-up: set DEFORMKIT_FROM_ZIP to the legacy zip (tests/blender/run_all.sh does)")
+    print("test_package: 0 passed, 1 failed")
+    sys.exit(1)
+import _setup as S  # noqa: E402  (installs and enables the zip)
+import addon_utils  # noqa: E402
+import bpy  # noqa: E402
+import numpy as np  # noqa: E402
+
+R = S.Results("test_package")
+ADDONS = bpy.utils.user_resource("SCRIPTS", path="addons")
+ROOT = os.path.realpath(os.path.join(ADDONS, S.ADDON_NAME))
+LIBS = os.path.join(ROOT, "deformkit", "libs")
+
+
+def inside(path, folder):
+    return os.path.realpath(path).startswith(folder + os.sep)
+
+
+def mapped_files():
+    out = set()
+    with open("/proc/self/maps") as f:
+        for line in f:
+            parts = line.split(None, 5)
+            if len(parts) == 6 and parts[5].startswith("/"):
+                out.add(os.path.realpath(parts[5].strip()))
+    return out
+
+
+def test_installed_copy_in_use():
+    zip_name = os.path.basename(os.environ["DEFORMKIT_FROM_ZIP"])
+    m = re.match(r"%s-(\d+)\.(\d+)\.(\d+)-legacy-" % S.ADDON_NAME, zip_name)
+    R.check("zip name carries the version", m is not None, zip_name)
+    R.check("add-on installed as a folder with the native subpackage",
+            all(os.path.isfile(os.path.join(ROOT, p)) for p in
+                ("__init__.py", "deformkit/__init__.py", "deformkit/_native.abi3.so",
+                 "deformkit/libs/THIRD-PARTY-NOTICES.txt")), sorted(os.listdir(ROOT)))
+    R.check("no manifest in the legacy install",
+            not os.path.exists(os.path.join(ROOT, "blender_manifest.toml")))
+    R.check("enabled add-on is the installed copy", inside(S.addon.__file__, ROOT),
+            S.addon.__file__)
+    R.check("enabled in the preferences", S.ADDON_NAME in bpy.context.preferences.addons)
+    if m:
+        v = tuple(int(x) for x in m.groups())
+        R.check("bl_info version = zip version", tuple(S.addon.bl_info["version"]) == v,
+                (S.addon.bl_info["version"], v))
+    R.check("native module loaded without error", S.native.module is not None and
+            not S.native.error, S.native.error)
+    dk = S.native.module
+    R.check("native module is the bundled one",
+            dk is not None and inside(dk.__file__, os.path.join(ROOT, "deformkit"))
+            and inside(dk._native.__file__, os.path.join(ROOT, "deformkit")),
+            getattr(dk, "__file__", None))
+    others = [p for p in sys.path if os.path.isdir(p) and os.path.realpath(p) != ROOT
+              and os.path.exists(os.path.join(p, "deformkit", "_native.abi3.so"))]
+    R.check("no other native module on sys.path (no build/python)", not others, others)
+
+
+def blender_own_libraries():
+    """Files Blender's executable links itself (Debian's links OpenBLAS, LAPACK, libgfortran,
+    libgomp, and ARPACK through Armadillo): those system copies are in the process anyway."""
+    out = subprocess.run(["ldd", bpy.app.binary_path], capture_output=True, text=True).stdout
+    return {os.path.realpath(m) for m in re.findall(r"=> (/\S+)", out)}
+
+
+def test_bundled_libraries_loaded():
+    bundled = sorted(f for f in os.listdir(LIBS) if ".so" in f)
+    R.check("libraries bundled", len(bundled) >= 5, bundled)
+    mapped = mapped_files()
+    missing = [b for b in bundled if os.path.join(LIBS, b) not in mapped]
+    R.check("every bundled library is loaded from the add-on", not missing, missing)
+    own = blender_own_libraries()
+    R.check("Blender's own libraries listed", len(own) > 20, len(own))
+    stems = {b.split("-")[0] for b in bundled}   # libcholmod-1a2b3c4d.so.3 -> libcholmod
+    system = sorted(p for p in mapped - own if not p.startswith(LIBS + os.sep)
+                    and os.path.basename(p).split(".so")[0] in stems)
+    R.check("no system copy of a bundled library loaded beyond Blender's own", not system, system)
+
+
+def test_native_calls():
+    """One call per bundled numerical library, from Blender's Python."""
+    dk = S.dk
+    obj = S.make_grid("NativeGrid", nx=8, ny=5)
+    mesh = dk.Mesh(S.solver.rest_positions(obj.data), S.solver.triangles(obj.data))
+    evals, _ = dk.laplacian_eigenpairs(mesh, 3)                       # ARPACK
+    R.check("eigenpairs: constant mode first", abs(evals[0]) < 1e-6 and evals[1] > 1e-3,
+            list(evals))
+    rot = dk.closest_rotation(np.array([[0, -2.0, 0], [2, 0, 0], [0, 0, 2]]))  # LAPACKE
+    R.check("closest_rotation", np.abs(np.asarray(rot) - [[0, -1, 0], [1, 0, 0], [0, 0, 1]])
+            .max() < 1e-9, rot)
+    bpy.data.objects.remove(obj)
+
+
+def test_deform_end_to_end():
+    for mid in ("ARAP", "LAPLACIAN", "FALLOFF"):
+        S.reset_scene()  # also re-enables the add-on (factory settings disable it)
+        nx, ny = 10, 5
+        obj = S.make_grid(nx=nx, ny=ny)
+        fixed = [j * nx + i for j in range(ny) for i in range(2)]
+        handle = [j * nx + i for j in range(ny) for i in range(nx - 2, nx)]
+        S.group(obj, "fixed", fixed)
+        S.group(obj, "tip", handle)
+        e = S.empty("Tip", (1.0, 0.0, 0.0))
+        bpy.ops.deformkit.add_deformer(method=mid)
+        d = obj.deformkit.deformers[0]
+        d.fixed_group = "fixed"
+        bpy.ops.deformkit.add_handle(vertex_group="tip", target=e.name)
+        bpy.ops.deformkit.bind()
+        R.check("%s bound" % mid, d.bound and not d.status_is_error, d.status)
+        rest = S.rest_positions(obj)
+        R.check("%s at bind = rest" % mid,
+                np.abs(S.evaluated_positions(obj) - rest).max() < 2e-5)
+        e.location = (1.0, 0.0, 0.4)
+        bpy.context.view_layer.update()
+        got = S.evaluated_positions(obj)
+        want_h = rest[handle] + [0.0, 0.0, 0.4]
+        R.check("%s handle vertices follow the target" % mid,
+                np.abs(got[handle] - want_h).max() < 1e-4, np.abs(got[handle] - want_h).max())
+        R.check("%s fixed vertices stay" % mid, np.abs(got[fixed] - rest[fixed]).max() < 1e-5)
+        free = [i for i in range(nx * ny) if i not in set(fixed) | set(handle)]
+        dz = (got[free] - rest[free])[:, 2]
+        R.check("%s the rest of the mesh moved in between" % mid,
+                dz.max() > 0.1 and dz.max() < 0.4 + 1e-6 and dz.min() > -1e-3,
+                (dz.min(), dz.max()))
+        R.check("%s base mesh untouched" % mid, np.abs(S.rest_positions(obj) - rest).max() == 0)
+
+
+def test_disable_enable():
+    addon_utils.disable(S.ADDON_NAME, default_set=True)
+    try:
+        bpy.ops.deformkit.add_deformer.get_rna_type()
+        gone = False
+    except KeyError:
+        gone = True
+    R.check("disable removes the operators", gone)
+    R.check("disable clears the preference entry",
+            S.ADDON_NAME not in bpy.context.preferences.addons)
+    again = S._enable_installed()
+    R.check("re-enable keeps the same package", again is S.addon)
+    S.reset_scene()
+    S.make_grid()
+    bpy.ops.deformkit.add_deformer(method="ARAP")
+    R.check("operators work after re-enable", len(bpy.context.object.deformkit.deformers) == 1)
+
+
+def grid_deform(tag):
+    """ARAP through the operators on a fresh grid; checks the handle follows its target."""
+    obj, d, e, fixed, handle = S.grid_setup("ARAP", nx=8, ny=4)
+    bpy.ops.deformkit.bind()
+    rest = S.rest_positions(obj)
+    e.location = (1.0, 0.0, 0.3)
+    bpy.context.view_layer.update()
+    got = S.evaluated_positions(obj)
+    err = np.abs(got[handle] - (rest[handle] + [0.0, 0.0, 0.3])).max()
+    R.check("%s: ARAP deform, handle follows (err %.1e)" % (tag, err), err < 1e-4, d.status)
+
+
+def test_extension_layout():
+    """Blender 3.4 cannot install an extension; emulate 4.2's import of it: the zip unpacked as
+    <dir>/bl_ext/user_default/deformkit, imported as bl_ext.user_default.deformkit."""
+    legacy = os.environ["DEFORMKIT_FROM_ZIP"]
+    ext_zip = os.path.join(os.path.dirname(legacy),
+                           os.path.basename(legacy).replace("-legacy-", "-"))
+    if not R.check("extension zip next to the legacy one", os.path.isfile(ext_zip), ext_zip):
+        return
+    addon_utils.disable(S.ADDON_NAME, default_set=True)
+    tmp = tempfile.mkdtemp(prefix="deformkit-ext-")
+    dest = os.path.join(tmp, "bl_ext", "user_default", "deformkit")
+    name = "bl_ext.user_default.deformkit"
+    pkg = None
+    try:
+        with zipfile.ZipFile(ext_zip) as z:
+            z.extractall(dest)
+        R.check("extension: manifest and __init__.py at the zip root",
+                os.path.isfile(os.path.join(dest, "blender_manifest.toml"))
+                and os.path.isfile(os.path.join(dest, "__init__.py")))
+        sys.path.insert(0, tmp)
+        pkg = importlib.import_module(name)
+        pkg.register()
+        dk = pkg.native.module
+        R.check("extension: finds its bundled module as %s.deformkit" % name,
+                dk is not None and dk.__name__ == name + ".deformkit"
+                and inside(dk.__file__, os.path.realpath(os.path.join(dest, "deformkit"))),
+                pkg.native.error or getattr(dk, "__file__", None))
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        pkg.solver.clear_cache()
+        grid_deform("extension")
+    finally:
+        if pkg is not None:
+            pkg.unregister()
+        if tmp in sys.path:
+            sys.path.remove(tmp)
+        for m in [m for m in sys.modules if m == "bl_ext" or m.startswith("bl_ext.")]:
+            del sys.modules[m]
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+for t in (test_installed_copy_in_use, test_bundled_libraries_loaded, test_native_calls,
+          test_deform_end_to_end, test_disable_enable, test_extension_layout):
+    R.run(t)
+R.finish()
