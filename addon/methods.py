@@ -64,7 +64,9 @@ METHODS = [
         options=[
             Option("energy", "ENUM", "spokes", "Energy", "Spokes (classic) or spokes and rims",
                    items=_e("spokes", "spokes_and_rims")),
-            Option("weights", "ENUM", "cotangent", "Weights", "Edge weights of the energy",
+            # default = the native default: negative cotangent weights make the energy
+            # indefinite on real meshes (docs/methods/arap.md); item order is stored in files
+            Option("weights", "ENUM", "clamped_cotangent", "Weights", "Edge weights of the energy",
                    items=_e("cotangent", "clamped_cotangent", "uniform")),
             Option("max_iterations", "INT", 100, "Max Iterations",
                    "Local/global iterations per solve", min=1, max=100000),

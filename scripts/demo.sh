@@ -1,0 +1,35 @@
+#!/usr/bin/env bash
+# The DeformKit demo. Sets everything up (scripts/setup.sh: Debian packages if missing, CMake
+# build into build/), then runs scripts/demo_blender.py in headless Blender with the native
+# module from build/python and the add-on from addon/: each method of the add-on deforms the
+# shared arm-lift and armadillo-wave scenarios, is measured, rendered (Cycles, CPU) and saved.
+#
+# usage: scripts/demo.sh [demo options]        (scripts/demo.sh --help lists them)
+# Writes into demo_output/: <scenario>_rest.png, <scenario>_<method>.png, <scenario>_all.png,
+# deformkit_demo.blend, summary.txt, summary.json, and blender.log (Blender's own output).
+# The shared data (meshes/, scenarios/) is $DEFORMKIT_SHARED, else ../shared beside the
+# repository. Exits non-zero on any failure.
+set -euo pipefail
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$here"
+for arg in "$@"; do
+  if [ "$arg" = -h ] || [ "$arg" = --help ]; then
+    PYTHONPATH="$here/build/python" blender -b --factory-startup --python-exit-code 1 \
+      --python scripts/demo_blender.py -- --help 2>&1 | sed -n '/^usage:/,$p' | grep -v '^Blender quit'
+    exit 0
+  fi
+done
+start=$SECONDS
+scripts/setup.sh
+mkdir -p demo_output
+export PYTHONPATH="$here/build/python"
+export PYTHONDONTWRITEBYTECODE=1
+echo "demo: running Blender (its own output: demo_output/blender.log)" >&2
+status=0
+blender -b --factory-startup --python-exit-code 1 --python scripts/demo_blender.py -- "$@" \
+  >demo_output/blender.log || status=$?
+if [ "$status" != 0 ]; then
+  echo "demo: FAILED (exit $status); Blender's output: demo_output/blender.log" >&2
+  exit "$status"
+fi
+echo "demo: done in $((SECONDS - start)) s (setup included)" >&2
