@@ -870,6 +870,9 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
     const double tiny = 1e-26 * s->escale;
     int it = 0, converged = energy <= tiny, rejected = 0;
     int hist = 0, head = 0, have_prev_pair = 0;
+    /* Gram matrix of the df slots, gram[i * MAX_ANDERSON_DEPTH + j] = df_i . df_j: only the
+     * row of the slot written in an iteration changes */
+    double gram[MAX_ANDERSON_DEPTH * MAX_ANDERSON_DEPTH];
     gather(s, ar->x, s->xu);
     while (!converged && it < maxit) {
         it++;
@@ -887,9 +890,12 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
                     dgc[k] = s->gu[k] - s->gprev[k];
                     dfc[k] = s->fu[k] - s->fprev[k];
                 }
-                head = (head + 1) % depth;
                 if (hist < depth)
                     hist++;
+                for (int j = 0; j < hist; j++)
+                    gram[head * MAX_ANDERSON_DEPTH + j] = gram[j * MAX_ANDERSON_DEPTH + head] =
+                        dot(dfc, s->df + (size_t)j * N, N);
+                head = (head + 1) % depth;
             }
             memcpy(s->gprev, s->gu, N * sizeof(double));
             memcpy(s->fprev, s->fu, N * sizeof(double));
@@ -897,10 +903,9 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
             if (hist > 0) {
                 double g[MAX_ANDERSON_DEPTH * MAX_ANDERSON_DEPTH], h[MAX_ANDERSON_DEPTH];
                 for (int i = 0; i < hist; i++) {
-                    const double *di = s->df + (size_t)i * N;
-                    h[i] = dot(di, s->fu, N);
-                    for (int j = 0; j <= i; j++)
-                        g[i * hist + j] = g[j * hist + i] = dot(di, s->df + (size_t)j * N, N);
+                    h[i] = dot(s->df + (size_t)i * N, s->fu, N);
+                    for (int j = 0; j < hist; j++)
+                        g[i * hist + j] = gram[i * MAX_ANDERSON_DEPTH + j];
                 }
                 if (small_spd_solve(g, h, hist) == 0) {
                     memcpy(s->xu, s->gu, N * sizeof(double));
