@@ -10,7 +10,8 @@
  * One iteration from positions x with rotations R (optimal for x) and energy E:
  *   g = G(x): solve A g = rhs(R)                      (global step, 3 right-hand sides)
  *   candidate = g, or the Anderson mix of the last m (x, g) pairs
- *   R', E' = local step and energy at the candidate  (one pass over the cells)
+ *   R', E' = local step and energy at the candidate  (one pass over the cells; each R'
+ *            refined from the previous rotation)
  *   if accelerated and E' > E: candidate = g (plain step, E' <= E is guaranteed), history
  *   is cleared; stop when E - E' <= tolerance * E.
  */
@@ -589,6 +590,9 @@ dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraint
         dk_arap_free(ar);
         return oom(err, "positions");
     }
+    for (dk_index v = 0; v < ar->n; v++) /* rotations are always valid guesses */
+        for (int k = 0; k < 9; k++)
+            ar->rot[9 * (size_t)v + k] = k % 4 == 0 ? 1.0 : 0.0;
     st = build_cells(ar, err);
     if (st == DK_OK)
         st = system_build(ar, constraints, NULL, &ar->sys, err);
@@ -616,8 +620,96 @@ dk_status dk_arap_rebind(dk_arap *ar, const dk_constraint_desc *constraints, dk_
 
 /* ------------------------------------------------------------------ iteration ---------- */
 
+/* The rotation maximising trace(R^T a), refined from the guess r (in/out; a rotation on
+ * entry) by Newton steps on SO(3). For R = r exp([w]x) and M = r^T a,
+ *     trace(R^T a) = tr M - w.g - w^T K w / 2 + O(|w|^3),
+ *     g = (M12 - M21, M20 - M02, M01 - M10),  K = tr(M) I - (M + M^T) / 2,
+ * so a Newton step is w = -K^-1 g, applied with the Cayley rotation (exactly orthogonal,
+ * equal to exp([w]x) to second order, so the convergence stays quadratic). At a stationary
+ * point (M symmetric) K positive definite means a strict local maximum, and on SO(3) every
+ * strict local maximum of trace(R^T a) is the global one (at the other stationary points
+ * U diag(+-1) V^T some pair of signed singular values has a sum <= 0, an eigenvalue of K).
+ * Returns 1 once a step of at most 1e-8 rad has been taken (the remaining error is then of
+ * order 1e-16) with K positive definite by a margin; 0 when the guess is too far (a step
+ * over 1 rad, or not converged in 4 steps) or a is degenerate (rank <= 1, equal singular
+ * values at a reflection): the caller then uses dk_closest_rotation, whose result is the
+ * same maximiser. In a local/global iteration a cell's rotation moves little from one
+ * iteration to the next: two steps from the previous rotation cost about half of
+ * dk_closest_rotation from scratch (61 vs 132 ns on near-rotations; on the armadillo a plain
+ * iteration went from 9.0 to 5.4 ms). */
+static int refine_rotation(const double a[9], double r[9])
+{
+    for (int step = 0; step < 4; step++) {
+        /* M = r^T a */
+        double m0 = r[0] * a[0] + r[3] * a[3] + r[6] * a[6];
+        double m1 = r[0] * a[1] + r[3] * a[4] + r[6] * a[7];
+        double m2 = r[0] * a[2] + r[3] * a[5] + r[6] * a[8];
+        double m3 = r[1] * a[0] + r[4] * a[3] + r[7] * a[6];
+        double m4 = r[1] * a[1] + r[4] * a[4] + r[7] * a[7];
+        double m5 = r[1] * a[2] + r[4] * a[5] + r[7] * a[8];
+        double m6 = r[2] * a[0] + r[5] * a[3] + r[8] * a[6];
+        double m7 = r[2] * a[1] + r[5] * a[4] + r[8] * a[7];
+        double m8 = r[2] * a[2] + r[5] * a[5] + r[8] * a[8];
+        double g0 = m5 - m7, g1 = m6 - m2, g2 = m1 - m3;
+        double tr = m0 + m4 + m8;
+        double k00 = tr - m0, k11 = tr - m4, k22 = tr - m8;
+        double k01 = -0.5 * (m1 + m3), k02 = -0.5 * (m2 + m6), k12 = -0.5 * (m5 + m7);
+        /* adjugate of K, Sylvester's criterion with margins relative to tr K */
+        double c00 = k11 * k22 - k12 * k12, c01 = k02 * k12 - k01 * k22,
+               c02 = k01 * k12 - k02 * k11, c11 = k00 * k22 - k02 * k02,
+               c12 = k01 * k02 - k00 * k12, c22 = k00 * k11 - k01 * k01;
+        double det = k00 * c00 + k01 * c01 + k02 * c02;
+        double s = 1e-3 * (k00 + k11 + k22);
+        if (!(k00 > s && c22 > s * s && det > s * s * s))
+            return 0;
+        double inv = -1.0 / det;
+        double w0 = inv * (c00 * g0 + c01 * g1 + c02 * g2);
+        double w1 = inv * (c01 * g0 + c11 * g1 + c12 * g2);
+        double w2 = inv * (c02 * g0 + c12 * g1 + c22 * g2);
+        double t2 = w0 * w0 + w1 * w1 + w2 * w2;
+        if (!(t2 <= 1.0))
+            return 0; /* not finite, or too far for a Newton step */
+        /* Cayley retraction Q = I + f ([v]x + [v]x^2), v = w / 2, f = 2 / (1 + |v|^2):
+         * orthogonal, agrees with exp([w]x) to second order */
+        double v0 = 0.5 * w0, v1 = 0.5 * w1, v2 = 0.5 * w2, vv = 0.25 * t2;
+        double f = 2.0 / (1.0 + vv);
+        double q0 = 1.0 + f * (v0 * v0 - vv), q4 = 1.0 + f * (v1 * v1 - vv),
+               q8 = 1.0 + f * (v2 * v2 - vv);
+        double q1 = f * (v0 * v1 - v2), q3 = f * (v0 * v1 + v2);
+        double q2 = f * (v0 * v2 + v1), q6 = f * (v0 * v2 - v1);
+        double q5 = f * (v1 * v2 - v0), q7 = f * (v1 * v2 + v0);
+        for (int i = 0; i < 3; i++) {
+            double x = r[3 * i], y = r[3 * i + 1], z = r[3 * i + 2];
+            r[3 * i] = x * q0 + y * q3 + z * q6;
+            r[3 * i + 1] = x * q1 + y * q4 + z * q7;
+            r[3 * i + 2] = x * q2 + y * q5 + z * q8;
+        }
+        if (t2 <= 1e-16) {
+            /* one Newton-Schulz step R (3 I - R^T R) / 2: the products above add ~1e-16 of
+             * non-orthogonality each, which would otherwise accumulate over many calls */
+            double c[9];
+            for (int i = 0; i < 3; i++)
+                for (int j = i; j < 3; j++)
+                    c[3 * i + j] = c[3 * j + i] =
+                        (i == j ? 1.5 : 0.0) -
+                        0.5 * (r[i] * r[j] + r[3 + i] * r[3 + j] + r[6 + i] * r[6 + j]);
+            for (int i = 0; i < 3; i++) {
+                double x = r[3 * i], y = r[3 * i + 1], z = r[3 * i + 2];
+                r[3 * i] = x * c[0] + y * c[3] + z * c[6];
+                r[3 * i + 1] = x * c[1] + y * c[4] + z * c[7];
+                r[3 * i + 2] = x * c[2] + y * c[5] + z * c[8];
+            }
+            return 1;
+        }
+    }
+    return 0;
+}
+
 /* Local step and energy of the cells v0 .. v1-1 at positions x: rotations into rot (may be
- * NULL: then only the energy); returns their energy. */
+ * NULL: then only the energy, with rotations from scratch); returns their energy. When rot
+ * is given it holds rotations on entry (the previous local step's, or identities at a cold
+ * start) from which each cell's rotation is refined (refine_rotation, else
+ * dk_closest_rotation): both give the maximiser to rounding. */
 static double cells_energy(const dk_arap *ar, const arap_system *s, const double *x,
                            double *rot, dk_index v0, dk_index v1)
 {
@@ -634,7 +726,13 @@ static double cells_energy(const dk_arap *ar, const arap_system *s, const double
             a[3] += d1 * e[0]; a[4] += d1 * e[1]; a[5] += d1 * e[2];
             a[6] += d2 * e[0]; a[7] += d2 * e[1]; a[8] += d2 * e[2];
         }
-        dk_closest_rotation(a, r);
+        if (rot) {
+            memcpy(r, rot + 9 * (size_t)i, sizeof r);
+            if (!refine_rotation(a, r))
+                dk_closest_rotation(a, r);
+        } else {
+            dk_closest_rotation(a, r);
+        }
         double ce = 0.0;
         for (dk_index t = t0; t < t1; t++) {
             const double *pa = x + 3 * ar->ta[t], *pb = x + 3 * ar->tb[t];
@@ -858,6 +956,11 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
                     s->target_of[v] >= 0 ? s->targets[3 * s->target_of[v] + d] : rest[3 * v + d];
     build_rhs_const(ar, s, ar->x);
     if (!warm) { /* initial guess: global step with identity rotations */
+        /* identities also start the local steps' refinement (cells_energy), so that a cold
+         * solve depends on its input only, bit for bit, whatever was solved before */
+        static const double id[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+        for (dk_index v = 0; v < n; v++)
+            memcpy(ar->rot + 9 * (size_t)v, id, sizeof id);
         build_rhs(ar, s, NULL);
         st = dk_cholesky_solve(s->chol, s->rhs, 3, s->gu, err);
         if (st != DK_OK)
