@@ -10,8 +10,8 @@
  * One iteration from positions x with rotations R (optimal for x) and energy E:
  *   g = G(x): solve A g = rhs(R)                      (global step, 3 right-hand sides)
  *   candidate = g, or the Anderson mix of the last m (x, g) pairs
- *   R', E' = local step and energy at the candidate  (one pass over the cells; each R'
- *            refined from the previous rotation)
+ *   R', E', rhs(R') = local step, energy and next right-hand side at the candidate (one
+ *                     pass over the cells; each R' refined from the previous rotation)
  *   if accelerated and E' > E: candidate = g (plain step, E' <= E is guaranteed), history
  *   is cleared; stop when E - E' <= tolerance * E.
  */
@@ -27,6 +27,8 @@
 #include "dk_sparse.h"
 
 #define MAX_ANDERSON_DEPTH 20
+/* Below this many cell terms the local step runs on the calling thread only. */
+#define PARALLEL_TERMS 50000
 
 typedef struct arap_system {
     dk_constraints *con;
@@ -40,8 +42,9 @@ typedef struct arap_system {
     double lambda;        /* mean diagonal of the ARAP part of A                         */
     dk_sparse a;          /* reduced matrix (both triangles), arrays owned               */
     dk_cholesky *chol;
-    /* per-solve / per-iteration buffers, N = 3 nu, column-major n x 3 layouts */
-    double *rhs_const, *rhs, *xu, *gu, *fu, *gprev, *fprev, *dg, *df;
+    /* per-solve / per-iteration buffers, N = 3 nu, column-major n x 3 layouts; rhs2: the
+     * helper thread's share of the right-hand side (meshes with a two-thread local step) */
+    double *rhs_const, *rhs, *rhs2, *xu, *gu, *fu, *gprev, *fprev, *dg, *df;
     double *targets;      /* n_handle_vertices x 3: last expanded targets                */
     int have_targets;
 } arap_system;
@@ -263,6 +266,7 @@ static void system_free(arap_system *s)
     dk_cholesky_free(s->chol);
     free(s->rhs_const);
     free(s->rhs);
+    free(s->rhs2);
     free(s->xu);
     free(s->gu);
     free(s->fu);
@@ -480,6 +484,8 @@ static dk_status system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_
     s->rhs = malloc(N * sizeof(double));
     s->xu = malloc(N * sizeof(double));
     s->gu = malloc(N * sizeof(double));
+    if (ar->n_terms >= PARALLEL_TERMS)
+        s->rhs2 = malloc(N * sizeof(double));
     if (accel) {
         s->fu = malloc(N * sizeof(double));
         s->gprev = malloc(N * sizeof(double));
@@ -488,6 +494,7 @@ static dk_status system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_
         s->df = malloc(N * m * sizeof(double));
     }
     if (!s->unknowns || !s->rhs_const || !s->rhs || !s->xu || !s->gu ||
+        (ar->n_terms >= PARALLEL_TERMS && !s->rhs2) ||
         (accel && (!s->fu || !s->gprev || !s->fprev || !s->dg || !s->df))) {
         system_free(s);
         return oom(err, "solve buffers");
@@ -709,10 +716,14 @@ static int refine_rotation(const double a[9], double r[9])
  * NULL: then only the energy, with rotations from scratch); returns their energy. When rot
  * is given it holds rotations on entry (the previous local step's, or identities at a cold
  * start) from which each cell's rotation is refined (refine_rotation, else
- * dk_closest_rotation): both give the maximiser to rounding. */
+ * dk_closest_rotation): both give the maximiser to rounding. With rhs (only with rot), the
+ * cells' rotated rest edges s_i w R_i (p_a - p_b) are also added to rhs at a and minus at b
+ * (column-major nu x 3), i.e. the global step's right-hand side for these rotations, from the
+ * R_i e products the energy needs anyway. */
 static double cells_energy(const dk_arap *ar, const arap_system *s, const double *x,
-                           double *rot, dk_index v0, dk_index v1)
+                           double *rot, double *rhs, dk_index v0, dk_index v1)
 {
+    const size_t nu = (size_t)s->nu;
     double energy = 0.0;
     for (dk_index i = v0; i < v1; i++) {
         dk_index t0 = ar->cell_start[i], t1 = ar->cell_start[i + 1];
@@ -737,10 +748,25 @@ static double cells_energy(const dk_arap *ar, const arap_system *s, const double
         for (dk_index t = t0; t < t1; t++) {
             const double *pa = x + 3 * ar->ta[t], *pb = x + 3 * ar->tb[t];
             const double *e = ar->te + 3 * t;
-            double q0 = pa[0] - pb[0] - (r[0] * e[0] + r[1] * e[1] + r[2] * e[2]);
-            double q1 = pa[1] - pb[1] - (r[3] * e[0] + r[4] * e[1] + r[5] * e[2]);
-            double q2 = pa[2] - pb[2] - (r[6] * e[0] + r[7] * e[1] + r[8] * e[2]);
-            ce += s->tws[t] * (q0 * q0 + q1 * q1 + q2 * q2);
+            double re0 = r[0] * e[0] + r[1] * e[1] + r[2] * e[2];
+            double re1 = r[3] * e[0] + r[4] * e[1] + r[5] * e[2];
+            double re2 = r[6] * e[0] + r[7] * e[1] + r[8] * e[2];
+            double q0 = pa[0] - pb[0] - re0, q1 = pa[1] - pb[1] - re1, q2 = pa[2] - pb[2] - re2;
+            double w = s->tws[t];
+            ce += w * (q0 * q0 + q1 * q1 + q2 * q2);
+            if (rhs) {
+                dk_index ua = s->unk[ar->ta[t]], ub = s->unk[ar->tb[t]];
+                if (ua >= 0) {
+                    rhs[ua] += w * re0;
+                    rhs[nu + ua] += w * re1;
+                    rhs[2 * nu + ua] += w * re2;
+                }
+                if (ub >= 0) {
+                    rhs[ub] -= w * re0;
+                    rhs[nu + ub] -= w * re1;
+                    rhs[2 * nu + ub] -= w * re2;
+                }
+            }
         }
         energy += ce;
         if (rot)
@@ -753,7 +779,7 @@ typedef struct cells_job {
     const dk_arap *ar;
     const arap_system *s;
     const double *x;
-    double *rot;
+    double *rot, *rhs;
     dk_index v0, v1;
     double energy;
 } cells_job;
@@ -761,35 +787,44 @@ typedef struct cells_job {
 static void *cells_thread(void *arg)
 {
     cells_job *j = arg;
-    j->energy = cells_energy(j->ar, j->s, j->x, j->rot, j->v0, j->v1);
+    if (j->rhs)
+        memset(j->rhs, 0, 3 * (size_t)j->s->nu * sizeof(double));
+    j->energy = cells_energy(j->ar, j->s, j->x, j->rot, j->rhs, j->v0, j->v1);
     return NULL;
 }
 
-/* Below this many cell terms the local step runs on the calling thread only. */
-#define PARALLEL_TERMS 50000
-
 /* Local step and energy at positions x: rotations into rot (may be NULL: then only the
- * energy), returns E(x) including soft penalties (when targets are known). On big meshes the
- * cells are split in two halves, the second on a helper thread (the target machines have two
- * cores); if the thread cannot be started the calling thread does both halves. The split
- * point depends only on the mesh, so results are reproducible. */
+ * energy), returns E(x) including soft penalties (when targets are known). With want_rhs
+ * (and rot) it also leaves in s->rhs the right-hand side of the next global step for these
+ * rotations (rhs_const + the rotated rest edges, as build_rhs). On big meshes the cells are
+ * split in two halves, the second on a helper thread (the target machines have two cores)
+ * that accumulates its share of the right-hand side in s->rhs2, added at the end; if the
+ * thread cannot be started the calling thread does both halves. The split point depends
+ * only on the mesh, so results are reproducible. */
 static double local_energy(const dk_arap *ar, const arap_system *s, const double *x,
-                           double *rot)
+                           double *rot, int want_rhs)
 {
+    const size_t N = 3 * (size_t)s->nu;
+    double *rhs = want_rhs && rot ? s->rhs : NULL;
     double energy;
+    if (rhs)
+        memcpy(rhs, s->rhs_const, N * sizeof(double));
     if (ar->n_terms >= PARALLEL_TERMS) {
         dk_index mid = ar->n / 2;
-        cells_job job = {ar, s, x, rot, mid, ar->n, 0.0};
+        cells_job job = {ar, s, x, rot, rhs ? s->rhs2 : NULL, mid, ar->n, 0.0};
         pthread_t th;
         int started = pthread_create(&th, NULL, cells_thread, &job) == 0;
-        energy = cells_energy(ar, s, x, rot, 0, mid);
+        energy = cells_energy(ar, s, x, rot, rhs, 0, mid);
         if (started)
             pthread_join(th, NULL);
         else
             cells_thread(&job);
         energy += job.energy;
+        if (rhs)
+            for (size_t k = 0; k < N; k++)
+                rhs[k] += s->rhs2[k];
     } else {
-        energy = cells_energy(ar, s, x, rot, 0, ar->n);
+        energy = cells_energy(ar, s, x, rot, rhs, 0, ar->n);
     }
     if (s->have_targets)
         for (dk_index u = 0; u < s->nu; u++) {
@@ -800,7 +835,8 @@ static double local_energy(const dk_arap *ar, const arap_system *s, const double
     return energy;
 }
 
-/* rhs = rhs_const + the rotated rest edges; rot NULL = identities. */
+/* rhs = rhs_const + the rotated rest edges; rot NULL = identities (the cold start's first
+ * global step; later right-hand sides come from the local steps, see local_energy). */
 static void build_rhs(const dk_arap *ar, arap_system *s, const double *rot)
 {
     const dk_index nu = s->nu;
@@ -967,7 +1003,7 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
             return dk_error_prefix(err, "ARAP solve");
         scatter(s, s->gu, ar->x);
     }
-    double energy = local_energy(ar, s, ar->x, ar->rot);
+    double energy = local_energy(ar, s, ar->x, ar->rot, 1);
     if (ar->opt.on_iteration && ar->opt.on_iteration(ar->opt.user, 0, energy))
         return dk_error_set(err, DK_ERR_CANCELLED, "ARAP solve: cancelled by the observer");
     const double tiny = 1e-26 * s->escale;
@@ -979,7 +1015,7 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
     gather(s, ar->x, s->xu);
     while (!converged && it < maxit) {
         it++;
-        build_rhs(ar, s, ar->rot);
+        /* s->rhs: from the last local step, the one at the current iterate */
         st = dk_cholesky_solve(s->chol, s->rhs, 3, s->gu, err);
         if (st != DK_OK)
             return dk_error_prefix(err, "ARAP solve");
@@ -1024,7 +1060,7 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
         double e_new;
         if (used_accel) {
             scatter(s, s->xu, ar->x);
-            e_new = local_energy(ar, s, ar->x, ar->rot);
+            e_new = local_energy(ar, s, ar->x, ar->rot, 1);
             if (!(e_new <= energy)) { /* safeguard: plain step, forget the history */
                 rejected++;
                 hist = 0;
@@ -1035,7 +1071,7 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
         if (!used_accel) {
             memcpy(s->xu, s->gu, N * sizeof(double));
             scatter(s, s->xu, ar->x);
-            e_new = local_energy(ar, s, ar->x, ar->rot);
+            e_new = local_energy(ar, s, ar->x, ar->rot, 1);
         }
         converged = e_new <= tiny || (energy - e_new) <= ar->opt.tolerance * energy;
         energy = e_new;
@@ -1069,7 +1105,7 @@ double dk_arap_energy(const dk_arap *ar, const double *positions)
 {
     if (!ar || !positions)
         return NAN;
-    return local_energy(ar, &ar->sys, positions, NULL);
+    return local_energy(ar, &ar->sys, positions, NULL, 0);
 }
 
 const dk_constraints *dk_arap_constraints(const dk_arap *ar)
