@@ -24,10 +24,11 @@ def load_obj(path):
 
 
 def load_scenario(name):
-    path = os.path.join(SHARED, "scenarios", name + ".json")
+    """A scenario of ../shared/scenarios by name (without .json), or a path to a JSON file."""
+    path = name if name.endswith(".json") else os.path.join(SHARED, "scenarios", name + ".json")
     with open(path) as f:
         s = json.load(f)
-    V, F = load_obj(os.path.normpath(os.path.join(SHARED, "scenarios", s["mesh"])))
+    V, F = load_obj(os.path.normpath(os.path.join(os.path.dirname(path), s["mesh"])))
     return s, V, F
 
 
