@@ -102,8 +102,9 @@ dk_status dk_arap_rebind(dk_arap *arap, const dk_constraint_desc *constraints, d
 
 /** Solves for the handle targets (`mode` 0: n_handle_vertices x 3 positions; 1: one 4x4
  *  row-major transform per handle, see dk_constraints_targets). `warm_start` non-zero starts
- *  from the previous solution when there is one (else, and on cold starts, from the global
- *  step with all rotations = identity, i.e. naive Laplacian editing). `max_iterations` > 0
+ *  from the previous solution when there is one, plus the global step's response (previous
+ *  rotations held) to how far the constrained vertices moved since; else, and on cold starts,
+ *  from the global step with all rotations = identity, i.e. naive Laplacian editing. `max_iterations` > 0
  *  overrides the option for this call. Writes `positions` (n_vertices x 3, row-major) and
  *  `info` (may be NULL). Allocation-free. */
 dk_status dk_arap_solve(dk_arap *arap, const double *targets, int mode, int warm_start,
