@@ -32,8 +32,8 @@ _settings_serial = [0]
 
 
 class _Entry:
-    __slots__ = ("native", "dkmesh", "rest", "n_vertices", "n_faces", "settings", "groups",
-                 "last_inputs", "method_id", "verified")
+    __slots__ = ("native", "dkmesh", "rest", "extent", "n_vertices", "n_faces", "settings",
+                 "groups", "last_inputs", "method_id", "verified")
 
 
 def mark_settings_changed():
@@ -316,6 +316,7 @@ class BindJob:
                                  "again" % (self.n_vertices, len(me.vertices)))
         e = _Entry()
         e.native, e.dkmesh, e.rest = self.native, self.dkmesh, self.rest
+        e.extent = float(np.linalg.norm(self.rest.max(axis=0) - self.rest.min(axis=0)))
         e.n_vertices, e.n_faces = self.n_vertices, self.n_faces
         e.settings, e.groups, e.method_id = self.settings, self.groups, self.method_id
         e.last_inputs, e.verified = None, True
@@ -420,6 +421,27 @@ def _entry_for(obj, d, check_groups):
     return _build(obj, d, kw, key, e)
 
 
+# A handle transform this close to the identity is the identity seen through Blender's float32
+# matrix products (the bind pose re-computed, a target keyed back to where it was bound).
+_SNAP_LINEAR = 1e-6   # on the 3x3 part
+_SNAP_SHIFT = 1e-6    # on the translation, times the mesh's bounding-box diagonal
+
+
+def snap_identity(T, extent):
+    """Replaces transforms within float32 rounding of the identity by the exact identity.
+    The solvers then return the rest shape at once; fed the rounding, an iterative method
+    would chase an energy that is itself ~0 (ARAP ran to its iteration cap at the bind pose of
+    a rotated object). A real move or rotation is thousands of times larger."""
+    eye = np.eye(4)
+    for i in range(len(T)):
+        dlt = T[i] - eye
+        if (np.abs(dlt[:3, :3]).max() <= _SNAP_LINEAR
+                and np.abs(dlt[:3, 3]).max() <= _SNAP_SHIFT * max(extent, 1e-30)
+                and not dlt[3].any()):
+            T[i] = eye
+    return T
+
+
 def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_groups=False):
     """Solves `d` for the targets' current placement. Returns the n x 3 positions, or None when
     nothing changed since the last solve (unless `force`). Raises DeformKitError."""
@@ -427,7 +449,7 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
         raise DeformKitError("not bound: press Bind")
     check_object(obj)
     e = _entry_for(obj, d, check_groups)
-    T = transforms(obj, d, depsgraph)
+    T = snap_identity(transforms(obj, d, depsgraph), e.extent)
     inputs = T.tobytes()
     if not force and e.last_inputs == inputs:
         return None

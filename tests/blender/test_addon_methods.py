@@ -90,6 +90,36 @@ def test_methods():
         one_method(m.id)
 
 
+def test_bind_pose_of_transformed_object():
+    """A rotated, scaled, moved object bound where it is: Blender's float32 matrix products
+    put the bind-pose transform ~1e-8 off the identity; the solve must give the rest shape
+    at once (ARAP used to run to its iteration cap on that rounding)."""
+    for mid in ("ARAP", "LAPLACIAN"):
+        S.reset_scene()
+        obj, d, e, fixed, handle = S.grid_setup(mid)
+        obj.location = (12.3, -4.5, 7.8)
+        obj.rotation_euler = Euler((0.7, -0.4, 1.1))
+        obj.scale = (1.3, 0.8, 1.1)
+        e.location = (13.0, -4.0, 8.2)
+        e.rotation_euler = Euler((0.2, 0.5, -0.3))
+        bpy.context.view_layer.update()
+        bpy.ops.deformkit.bind()
+        rest = S.rest_positions(obj)
+        p0 = S.evaluated_positions(obj)
+        info = S.solver.runtime.get((obj.name, d.uid), {})
+        R.check("%s transformed object at bind pose = rest" % mid,
+                np.abs(p0 - rest).max() < 1e-6, np.abs(p0 - rest).max())
+        if mid == "ARAP":  # (local-frame Laplacian editing always does its 2 solves)
+            R.check("ARAP transformed object at bind pose: no iterations spent on rounding",
+                    info.get("iterations", 99) <= 1, info)
+        # a real (small) move is not snapped away
+        e.location.z += 1e-3
+        bpy.context.view_layer.update()
+        p1 = S.evaluated_positions(obj)
+        R.check("%s a 1e-3 move still moves the handle" % mid,
+                np.abs(p1[handle] - rest[handle]).max() > 1e-4, np.abs(p1 - rest).max())
+
+
 def test_registry_drives_ui():
     # every method has an options group with one property per registry option
     for m in S.methods.METHODS:
@@ -243,6 +273,7 @@ def test_skip_when_unchanged():
 
 
 for t in (test_registry_drives_ui, test_methods, test_stiffness_map, test_soft_handles,
-          test_bone_target, test_auto_rebind_on_group_change, test_skip_when_unchanged):
+          test_bone_target, test_auto_rebind_on_group_change, test_skip_when_unchanged,
+          test_bind_pose_of_transformed_object):
     R.run(t)
 R.finish()
