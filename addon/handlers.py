@@ -5,6 +5,9 @@
 - Vertex groups are re-read only when the deformed object's geometry was updated by someone
   else than us (weight paint, edit mode exit, group assignment), since that read is O(n).
 - No bpy references are kept: objects are looked up by name each time.
+- UI updates of iterative methods (ARAP) solve within a time budget; the `refine` timer
+  finishes them once the handles stop, so dragging stays interactive and the result still
+  converges. Frame changes, bakes, scripts and blender -b always solve to convergence.
 """
 
 import bpy
@@ -54,17 +57,53 @@ def _run(scene, depsgraph, cold=False):
             # re-read groups on every geometry update of the object, ours included: skipping
             # our own writes could hide a group edit made in the same update
             check = changed
-            solver.evaluate_object(obj, depsgraph, check_groups=check, cold=cold)
+            solver.evaluate_object(obj, depsgraph, check_groups=check, cold=cold,
+                                   interactive=not cold and not bpy.app.background)
         if cold and depsgraph is not None and any_deformed:
             # Frame change: this depsgraph (the viewport's or a render's) may have been
             # evaluated before the offsets were written (here, or by the handler call of
             # another depsgraph for the same frame); re-evaluate what is tagged so this frame
             # shows this frame's solve. A no-op when nothing is tagged.
             depsgraph.update()
+        if not cold and solver.pending() and not bpy.app.timers.is_registered(refine):
+            bpy.app.timers.register(refine, first_interval=0.001)
     except Exception as ex:  # a handler must never raise
         print("DeformKit handler error: %s: %s" % (type(ex).__name__, ex))
     finally:
         _busy[0] = False
+
+
+def refine():
+    """Timer: continues the interactive solves that stopped at their time budget (ARAP while
+    dragging), one budget per tick, until they converge; a new drag just updates the targets
+    they converge to. The UI stays live between ticks. Returns the next interval, or None."""
+    if not enabled[0]:
+        return None
+    if _busy[0]:
+        return 0.05
+    keys = solver.pending()
+    if not keys:
+        return None
+    _busy[0] = True
+    try:
+        try:
+            depsgraph = bpy.context.evaluated_depsgraph_get()
+        except Exception:
+            depsgraph = None
+        for name in {k[0] for k in keys}:
+            obj = bpy.data.objects.get(name)
+            if obj is None or obj.mode == "EDIT":
+                for k in keys:
+                    if k[0] == name:
+                        solver.drop_pending(k)
+                continue
+            solver.evaluate_object(obj, depsgraph, interactive=True, refine=True)
+    except Exception as ex:  # a timer must never raise either
+        print("DeformKit refine error: %s: %s" % (type(ex).__name__, ex))
+        return None
+    finally:
+        _busy[0] = False
+    return 0.001 if solver.pending() else None
 
 
 @persistent
@@ -113,4 +152,6 @@ def unregister():
         for old in [f for f in lst if getattr(f, "__name__", "") == fn.__name__
                     and getattr(f, "__module__", "") == fn.__module__]:
             lst.remove(old)
+    if bpy.app.timers.is_registered(refine):
+        bpy.app.timers.unregister(refine)
     solver.clear_cache()

@@ -45,6 +45,10 @@ class Method:
     warm_solve: dict = field(default_factory=dict)
     icon: str = "MOD_MESHDEFORM"
     draw: Optional[Callable] = None  # draw(layout, options_pointer) replaces the generic one
+    # iterative methods whose solve takes max_iterations and reports `converged`: while the
+    # user drags in the UI they get a time budget per update, and the add-on finishes the
+    # solve from a timer once the handles stop (see solver.solve / handlers.refine)
+    iterative: bool = False
 
 
 def _e(*ids):
@@ -61,6 +65,7 @@ METHODS = [
         maps=("stiffness",),
         cold_solve={"warm_start": False},
         warm_solve={"warm_start": True},
+        iterative=True,
         options=[
             Option("energy", "ENUM", "spokes", "Energy", "Spokes (classic) or spokes and rims",
                    items=_e("spokes", "spokes_and_rims")),

@@ -348,7 +348,10 @@ class DEFORMKIT_OT_apply(_Base, bpy.types.Operator):
         if self.mode == "MESH" and me.shape_keys is not None:
             raise solver.DeformKitError("mesh '%s' has shape keys: apply as a new shape key "
                                         "instead" % me.name)
-        pos = solver.deformed_positions(obj, d, context.evaluated_depsgraph_get(), cold=False)
+        # what the artist sees: the shown result, brought up to date first
+        dg = context.evaluated_depsgraph_get()
+        solver.finish(obj, d, dg)
+        pos = solver.shown_positions(obj, d)
         flat = np.ascontiguousarray(pos, dtype=np.float32).ravel()
         mod = geonodes.find_modifier(obj, d)
         first = mod is None or list(obj.modifiers).index(mod) == 0

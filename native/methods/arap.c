@@ -50,6 +50,11 @@ typedef struct arap_system {
     double *rhs_const, *rhs, *rhs2, *xu, *gu, *fu, *gprev, *fprev, *dg, *df;
     double *targets;      /* n_handle_vertices x 3: last expanded targets                */
     int have_targets;
+    /* where the last solve stopped, for a resumed solve (warm_start 2, same targets) */
+    double *targets_prev; /* n_handle_vertices x 3: the targets it solved for            */
+    int resumable, aa_hist, aa_head, aa_have_pair;
+    double last_energy;
+    double aa_gram[MAX_ANDERSON_DEPTH * MAX_ANDERSON_DEPTH];
 } arap_system;
 
 struct dk_arap {
@@ -278,6 +283,7 @@ static void system_free(arap_system *s)
     free(s->dg);
     free(s->df);
     free(s->targets);
+    free(s->targets_prev);
     memset(s, 0, sizeof *s);
 }
 
@@ -442,7 +448,8 @@ static dk_status system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_
     s->soft_k = calloc((size_t)n + 1, sizeof *s->soft_k);
     s->tws = malloc(((size_t)ar->n_terms + 1) * sizeof *s->tws);
     s->targets = malloc(((size_t)c->n_handle_vertices * 3 + 1) * sizeof *s->targets);
-    if (!s->unk || !s->target_of || !s->soft_k || !s->tws || !s->targets) {
+    s->targets_prev = malloc(((size_t)c->n_handle_vertices * 3 + 1) * sizeof *s->targets_prev);
+    if (!s->unk || !s->target_of || !s->soft_k || !s->tws || !s->targets || !s->targets_prev) {
         system_free(s);
         return oom(err, "constraint system");
     }
@@ -985,71 +992,84 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
     const int accel = ar->opt.acceleration == DK_ARAP_ACCEL_ANDERSON;
     const int depth = ar->opt.anderson_depth;
 
-    /* Eliminated vertices: hard targets or rest; unknowns: previous solution or rest. */
-    const int warm = warm_start && ar->have_prev;
-    memcpy(ar->x, warm ? ar->prev : rest, 3 * (size_t)n * sizeof(double));
-    for (dk_index v = 0; v < n; v++)
-        if (s->unk[v] < 0)
-            for (int d = 0; d < 3; d++)
-                ar->x[3 * v + d] =
-                    s->target_of[v] >= 0 ? s->targets[3 * s->target_of[v] + d] : rest[3 * v + d];
-    build_rhs_const(ar, s, ar->x);
-    if (!warm) { /* initial guess: global step with identity rotations */
-        /* identities also start the local steps' refinement (cells_energy), so that a cold
-         * solve depends on its input only, bit for bit, whatever was solved before */
-        static const double id[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-        for (dk_index v = 0; v < n; v++)
-            memcpy(ar->rot + 9 * (size_t)v, id, sizeof id);
-        build_rhs(ar, s, NULL);
-        st = dk_cholesky_solve(s->chol, s->rhs, 3, s->gu, err);
-        if (st != DK_OK)
-            return dk_error_prefix(err, "ARAP solve");
-        scatter(s, s->gu, ar->x);
+    /* Resume (warm_start 2): the previous call's targets again, and nothing changed since:
+     * continue exactly where it stopped, acceleration history included, so that solves
+     * resumed in slices (the add-on's interactive time budget) equal one longer solve. */
+    const size_t nhv3 = 3 * (size_t)s->con->n_handle_vertices;
+    const int resume = warm_start == 2 && ar->have_prev && s->resumable &&
+                       memcmp(s->targets, s->targets_prev, nhv3 * sizeof(double)) == 0;
+    /* Gram matrix of the df slots, gram[i * MAX_ANDERSON_DEPTH + j] = df_i . df_j: only the
+     * row of the slot written in an iteration changes */
+    double *gram = s->aa_gram;
+    double energy;
+    if (resume) {
+        energy = s->last_energy; /* ar->x, s->xu, s->rhs, ar->rot: as the last call left them */
     } else {
-        /* Warm start after a handle move: the previous solution plus the response of the
-         * global step (previous rotations held) to the moved constrained vertices, i.e.
-         * x0 = x_prev + A^-1 (b(new known) - b(old known)). This spreads a handle's jump
-         * smoothly over the free vertices instead of leaving it at the handle's border,
-         * while keeping all the progress of the previous (accelerated) solve; measured on
-         * the armadillo, a converged re-solve after a 0.2%-of-diagonal move takes 6-7
-         * iterations instead of 9-10. Soft handles' target changes are not included: this
-         * is only a starting point, and the iterations do the rest. */
-        const dk_index nu = s->nu;
-        int moved = 0;
-        memset(s->rhs, 0, 3 * (size_t)nu * sizeof(double));
-        for (int64_t t = 0; t < ar->n_terms; t++) {
-            const dk_index a = ar->ta[t], b = ar->tb[t];
-            const dk_index ua = s->unk[a], ub = s->unk[b];
-            if ((ua >= 0) == (ub >= 0))
-                continue;
-            const dk_index u = ua >= 0 ? ua : ub, known = ua >= 0 ? b : a;
-            for (int d = 0; d < 3; d++) {
-                const double dx = ar->x[3 * known + d] - ar->prev[3 * known + d];
-                if (dx != 0.0) {
-                    s->rhs[(size_t)d * nu + u] += s->tws[t] * dx;
-                    moved = 1;
-                }
-            }
-        }
-        if (moved) {
+        /* Eliminated vertices: hard targets or rest; unknowns: previous solution or rest. */
+        const int warm = warm_start && ar->have_prev;
+        memcpy(ar->x, warm ? ar->prev : rest, 3 * (size_t)n * sizeof(double));
+        for (dk_index v = 0; v < n; v++)
+            if (s->unk[v] < 0)
+                for (int d = 0; d < 3; d++)
+                    ar->x[3 * v + d] =
+                        s->target_of[v] >= 0 ? s->targets[3 * s->target_of[v] + d] : rest[3 * v + d];
+        build_rhs_const(ar, s, ar->x);
+        if (!warm) { /* initial guess: global step with identity rotations */
+            /* identities also start the local steps' refinement (cells_energy), so that a cold
+             * solve depends on its input only, bit for bit, whatever was solved before */
+            static const double id[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+            for (dk_index v = 0; v < n; v++)
+                memcpy(ar->rot + 9 * (size_t)v, id, sizeof id);
+            build_rhs(ar, s, NULL);
             st = dk_cholesky_solve(s->chol, s->rhs, 3, s->gu, err);
             if (st != DK_OK)
                 return dk_error_prefix(err, "ARAP solve");
-            for (dk_index u = 0; u < nu; u++)
-                for (int d = 0; d < 3; d++)
-                    ar->x[3 * s->unknowns[u] + d] += s->gu[(size_t)d * nu + u];
+            scatter(s, s->gu, ar->x);
+        } else {
+            /* Warm start after a handle move: the previous solution plus the response of the
+             * global step (previous rotations held) to the moved constrained vertices, i.e.
+             * x0 = x_prev + A^-1 (b(new known) - b(old known)). This spreads a handle's jump
+             * smoothly over the free vertices instead of leaving it at the handle's border,
+             * while keeping all the progress of the previous (accelerated) solve; measured on
+             * the armadillo, a converged re-solve after a 0.2%-of-diagonal move takes 6-7
+             * iterations instead of 9-10. Soft handles' target changes are not included: this
+             * is only a starting point, and the iterations do the rest. */
+            const dk_index nu = s->nu;
+            int moved = 0;
+            memset(s->rhs, 0, 3 * (size_t)nu * sizeof(double));
+            for (int64_t t = 0; t < ar->n_terms; t++) {
+                const dk_index a = ar->ta[t], b = ar->tb[t];
+                const dk_index ua = s->unk[a], ub = s->unk[b];
+                if ((ua >= 0) == (ub >= 0))
+                    continue;
+                const dk_index u = ua >= 0 ? ua : ub, known = ua >= 0 ? b : a;
+                for (int d = 0; d < 3; d++) {
+                    const double dx = ar->x[3 * known + d] - ar->prev[3 * known + d];
+                    if (dx != 0.0) {
+                        s->rhs[(size_t)d * nu + u] += s->tws[t] * dx;
+                        moved = 1;
+                    }
+                }
+            }
+            if (moved) {
+                st = dk_cholesky_solve(s->chol, s->rhs, 3, s->gu, err);
+                if (st != DK_OK)
+                    return dk_error_prefix(err, "ARAP solve");
+                for (dk_index u = 0; u < nu; u++)
+                    for (int d = 0; d < 3; d++)
+                        ar->x[3 * s->unknowns[u] + d] += s->gu[(size_t)d * nu + u];
+            }
         }
+        energy = local_energy(ar, s, ar->x, ar->rot, 1);
+        if (ar->opt.on_iteration && ar->opt.on_iteration(ar->opt.user, 0, energy))
+            return dk_error_set(err, DK_ERR_CANCELLED, "ARAP solve: cancelled by the observer");
+        s->aa_hist = s->aa_head = s->aa_have_pair = 0;
+        gather(s, ar->x, s->xu);
     }
-    double energy = local_energy(ar, s, ar->x, ar->rot, 1);
-    if (ar->opt.on_iteration && ar->opt.on_iteration(ar->opt.user, 0, energy))
-        return dk_error_set(err, DK_ERR_CANCELLED, "ARAP solve: cancelled by the observer");
     const double tiny = 1e-26 * s->escale;
     int it = 0, converged = energy <= tiny, rejected = 0;
-    int hist = 0, head = 0, have_prev_pair = 0;
-    /* Gram matrix of the df slots, gram[i * MAX_ANDERSON_DEPTH + j] = df_i . df_j: only the
-     * row of the slot written in an iteration changes */
-    double gram[MAX_ANDERSON_DEPTH * MAX_ANDERSON_DEPTH];
-    gather(s, ar->x, s->xu);
+    int hist = s->aa_hist, head = s->aa_head, have_prev_pair = s->aa_have_pair;
+    s->resumable = 0; /* until this call ends normally */
     while (!converged && it < maxit) {
         it++;
         /* s->rhs: from the last local step, the one at the current iterate */
@@ -1118,6 +1138,12 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
     memcpy(positions, ar->x, 3 * (size_t)n * sizeof(double));
     memcpy(ar->prev, ar->x, 3 * (size_t)n * sizeof(double));
     ar->have_prev = 1;
+    memcpy(s->targets_prev, s->targets, nhv3 * sizeof(double));
+    s->aa_hist = hist;
+    s->aa_head = head;
+    s->aa_have_pair = have_prev_pair;
+    s->last_energy = energy;
+    s->resumable = 1;
     if (info) {
         info->energy = energy;
         info->iterations = it;

@@ -104,7 +104,11 @@ dk_status dk_arap_rebind(dk_arap *arap, const dk_constraint_desc *constraints, d
  *  row-major transform per handle, see dk_constraints_targets). `warm_start` non-zero starts
  *  from the previous solution when there is one, plus the global step's response (previous
  *  rotations held) to how far the constrained vertices moved since; else, and on cold starts,
- *  from the global step with all rotations = identity, i.e. naive Laplacian editing. `max_iterations` > 0
+ *  from the global step with all rotations = identity, i.e. naive Laplacian editing.
+ *  `warm_start` 2 resumes: when the targets equal the previous call's and that call ended
+ *  normally, iterations continue exactly where it stopped (Anderson history included), so a
+ *  solve cut into slices by `max_iterations` gives the same result as one long solve;
+ *  otherwise 2 acts as 1. `max_iterations` > 0
  *  overrides the option for this call. Writes `positions` (n_vertices x 3, row-major) and
  *  `info` (may be NULL). Allocation-free. */
 dk_status dk_arap_solve(dk_arap *arap, const double *targets, int mode, int warm_start,

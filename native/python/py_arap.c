@@ -159,24 +159,27 @@ static void arap_dealloc(PyObject *obj)
 
 PyDoc_STRVAR(solve_doc,
              "solve(targets=None, transforms=None, warm_start=True, max_iterations=None,\n"
-             "      tolerance=None) -> SolveResult\n\n"
+             "      tolerance=None, resume=False) -> SolveResult\n\n"
              "targets: (sum of handle sizes) x 3 positions, concatenated in handle order;\n"
              "transforms: n_handles x 4 x 4 affine transforms of the rest pose. warm_start\n"
              "starts from the previous solution (else from the naive Laplacian-editing guess).\n"
              "max_iterations overrides the bound value for this call; tolerance replaces the\n"
-             "bound value for this and later calls.\n"
+             "bound value for this and later calls. resume=True with the previous call's\n"
+             "targets continues that solve where it stopped (acceleration history kept), so\n"
+             "solves sliced by max_iterations equal one longer solve; with other targets it\n"
+             "is a warm start.\n"
              "Returns the positions, the ARAP energy of those positions, the iterations used\n"
              "and whether the relative energy change fell below the tolerance.");
 
 static PyObject *arap_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
 {
     static char *kwlist[] = {"targets", "transforms", "warm_start", "max_iterations",
-                             "tolerance", NULL};
+                             "tolerance", "resume", NULL};
     ArapObject *self = (ArapObject *)obj;
     PyObject *targets = Py_None, *transforms = Py_None, *maxit_obj = Py_None, *positions;
     PyObject *tol_obj = Py_None;
     PyObject *module;
-    int warm = 1, maxit = 0, mode;
+    int warm = 1, maxit = 0, mode, resume = 0;
     dk_py_doubles in = {0};
     dk_arap_info info;
     dk_error err = {0};
@@ -184,8 +187,8 @@ static PyObject *arap_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
     double *out;
     const dk_constraints *c;
 
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "|OOpOO:solve", kwlist, &targets,
-                                     &transforms, &warm, &maxit_obj, &tol_obj))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "|OOpOOp:solve", kwlist, &targets,
+                                     &transforms, &warm, &maxit_obj, &tol_obj, &resume))
         return NULL;
     if (maxit_obj != Py_None) {
         long v = PyLong_AsLong(maxit_obj);
@@ -222,7 +225,7 @@ static PyObject *arap_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
         return NULL;
     }
     Py_BEGIN_ALLOW_THREADS
-    st = dk_arap_solve(self->arap, in.data, mode, warm, maxit, out, &info, &err);
+    st = dk_arap_solve(self->arap, in.data, mode, resume ? 2 : warm, maxit, out, &info, &err);
     Py_END_ALLOW_THREADS
     dk_py_doubles_release(&in);
     self->busy = 0;

@@ -4,7 +4,9 @@
   and Esc cancels it, leaving no partial file and no Mesh Cache modifier;
 - bind: invoked from the UI the native precomputation runs in a worker thread; the result
   equals the synchronous bind's, Esc cancels and keeps the previous binding, and a second
-  bind of the same deformer while one runs is refused."""
+  bind of the same deformer while one runs is refused;
+- dragging (ARAP): a UI update solves within the interactive time budget, and the refine timer
+  finishes the solve once the handle stops, reaching what a full solve gives."""
 import os
 import sys
 import time
@@ -133,9 +135,51 @@ def bind_tests():
             [list(h.bind_matrix) for h in d.handles] != before)
 
 
+def refine_tests():
+    if not S.native.has_class("ARAP"):
+        return
+    S.reset_scene()
+    with bpy.context.temp_override(**S.ui_context()):
+        obj, d, e, fixed, handle = S.grid_setup("ARAP", nx=160, ny=80)
+        bpy.ops.deformkit.bind()
+        key = (obj.name, d.uid)
+        bind_T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
+        cap = S.solver._budget_iterations(key, d.options)  # from the bind solve's timing
+        e.location = (1.0, 0.1, 0.4)   # a move that takes ~100 iterations, many budgets
+        e.rotation_euler = (0.0, -0.3, 0.0)
+        bpy.context.view_layer.update()
+    first = dict(S.solver.runtime.get(key, {}))
+    R.check("drag update stops at the budget and is left pending",
+            key in S.solver.pending() and not first.get("converged", True)
+            and first.get("iterations", 0) == cap < d.options.max_iterations, (first, cap))
+    t0 = time.time()
+    while S.solver.pending() and time.time() - t0 < 60:
+        yield 0.05
+    last = S.solver.runtime.get(key, {})
+    R.check("refine timer finishes the solve", not S.solver.pending() and last.get("converged"),
+            last)
+    with bpy.context.temp_override(**S.ui_context()):
+        got = S.evaluated_positions(obj)
+        T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
+    rest = S.rest_positions(obj)
+    mesh = S.dk.Mesh(rest, S.solver.triangles(obj.data))
+    # the same as one uninterrupted solve: bind (cold) then one warm solve of Max Iterations
+    ref = S.dk.ARAP(mesh, [handle], fixed=fixed, weights=d.options.weights,
+                    energy=d.options.energy, tolerance=d.options.tolerance,
+                    max_iterations=d.options.max_iterations)
+    ref.solve(transforms=bind_T, warm_start=False)
+    r = ref.solve(transforms=T, warm_start=True)
+    R.check("sliced interactive solve = one uninterrupted solve (iterations)",
+            r.converged and abs(last.get("energy", 0) - r.energy) <= 1e-12 * r.energy,
+            (last, r.energy, r.iterations))
+    R.check("sliced interactive solve = one uninterrupted solve (positions)",
+            np.abs(got - r.positions).max() < 1e-6, np.abs(got - r.positions).max())
+
+
 def all_tests():
     yield from main()
     yield from bind_tests()
+    yield from refine_tests()
 
 
 S.run_in_ui(all_tests, R)

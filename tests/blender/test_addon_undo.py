@@ -44,8 +44,9 @@ def main():
         bpy.context.view_layer.objects.active = grid()
         bpy.ops.deformkit.apply(mode="MESH")
         push("apply")
-        R.check("applied into the mesh", np.abs(S.rest_positions(grid()) - deformed).max() < 2e-5
-                and len(grid().deformkit.deformers) == 0)
+        applied_err = np.abs(S.rest_positions(grid()) - deformed).max()
+        R.check("applied into the mesh", applied_err < 2e-5
+                and len(grid().deformkit.deformers) == 0, applied_err)
         bpy.ops.ed.undo()
         g = grid()
         R.check("undo apply: base mesh restored", np.abs(S.rest_positions(g) - rest).max() == 0)

@@ -238,6 +238,47 @@ def test_energy_never_increases_per_iteration():
         assert energies[-1] < energies[0]
 
 
+@pytest.mark.parametrize("acceleration", ["anderson", "none"])
+def test_resumed_slices_equal_one_long_solve(acceleration):
+    """resume=True continues the previous solve (the add-on cuts interactive solves into
+    time-budget slices): slices of 3 iterations give exactly the positions, energy and total
+    iteration count of one uninterrupted solve; different targets, or a rebind, fall back to
+    an ordinary warm start."""
+    v, f, fixed, handle = plane_setup(12)
+    mesh = deformkit.Mesh(v, f)
+    t = bend(v, handle, 1.1)
+    kw = dict(fixed=fixed, acceleration=acceleration, tolerance=1e-9, max_iterations=1000)
+    whole = deformkit.ARAP(mesh, [handle], **kw).solve(t, warm_start=False)
+    assert whole.converged and whole.iterations > 9
+    sliced = deformkit.ARAP(mesh, [handle], **kw)
+    r = sliced.solve(t, warm_start=False, max_iterations=3)
+    total = r.iterations
+    while not r.converged:
+        r = sliced.solve(t, resume=True, max_iterations=3)
+        total += r.iterations
+        assert total <= whole.iterations
+    assert total == whole.iterations
+    assert np.array_equal(r.positions, whole.positions)
+    assert r.energy == whole.energy
+    # a plain warm restart of the same state (history dropped) is not the same computation
+    other = deformkit.ARAP(mesh, [handle], **kw)
+    other.solve(t, warm_start=False, max_iterations=3)
+    restarted = other.solve(t, warm_start=True, max_iterations=3)
+    sliced_again = deformkit.ARAP(mesh, [handle], **kw)
+    sliced_again.solve(t, warm_start=False, max_iterations=3)
+    resumed = sliced_again.solve(t, resume=True, max_iterations=3)
+    if acceleration == "anderson":
+        assert not np.array_equal(restarted.positions, resumed.positions)
+    # new targets: resume acts as a warm start (handles meet the new targets)
+    t2 = bend(v, handle, 1.2)
+    r2 = sliced.solve(t2, resume=True)
+    assert np.abs(r2.positions[handle] - t2).max() == 0
+    w2 = deformkit.ARAP(mesh, [handle], **kw)
+    w2.solve(t, warm_start=False)
+    ref2 = w2.solve(t2, warm_start=True)
+    assert r2.iterations == ref2.iterations and np.array_equal(r2.positions, ref2.positions)
+
+
 def test_warm_start_and_rebind_reuse():
     v, f, fixed, handle = plane_setup(12)
     mesh = deformkit.Mesh(v, f)
