@@ -18,6 +18,9 @@ from . import solver
 _busy = [False]
 _self_written = set()
 enabled = [True]   # tests and the benchmark may switch automatic solving off
+# UI-style (time-budgeted) solves also under blender -b, where no timer runs: for the latency
+# benchmark, which then calls refine() itself
+force_interactive = [False]
 
 
 def note_self_write(obj_name):
@@ -58,7 +61,8 @@ def _run(scene, depsgraph, cold=False):
             # our own writes could hide a group edit made in the same update
             check = changed
             solver.evaluate_object(obj, depsgraph, check_groups=check, cold=cold,
-                                   interactive=not cold and not bpy.app.background)
+                                   interactive=not cold and (force_interactive[0]
+                                                             or not bpy.app.background))
         if cold and depsgraph is not None and any_deformed:
             # Frame change: this depsgraph (the viewport's or a render's) may have been
             # evaluated before the offsets were written (here, or by the handler call of

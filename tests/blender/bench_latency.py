@@ -30,7 +30,10 @@ def args():
                                                       "armadillo-wave.json"))
     p.add_argument("--steps", type=int, default=20)
     p.add_argument("--json", default=os.path.join(S.OUTPUT, "bench_latency.json"))
-    p.add_argument("--methods", default="ARAP,LAPLACIAN")
+    p.add_argument("--methods", default="ARAP,ARAP:interactive,LAPLACIAN,LAPLACIAN:detail=fixed",
+                   help="registry ids, each optionally with :option=value settings, or "
+                        ":interactive (the UI's time-budgeted solve plus the refine steps that "
+                        "finish it after the drag, timed separately)")
     return p.parse_args(a)
 
 
@@ -92,7 +95,8 @@ def main():
                "fixed": len(fixed), "handle": len(handle), "steps": a.steps,
                "blender": bpy.app.version_string}
     S.reset_scene()
-    for mid in a.methods.split(","):
+    for spec in a.methods.split(","):
+        mid, *mods = spec.split(":")
         m = S.methods.get(mid)
         if not S.native.has_class(m.native_class):
             print("skip %s: no deformkit.%s" % (mid, m.native_class))
@@ -101,21 +105,42 @@ def main():
         bpy.ops.deformkit.add_deformer(method=mid)
         d = obj.deformkit.deformers[0]
         d.fixed_group = "fixed"
+        interactive = "interactive" in mods
+        for mod in mods:
+            if "=" in mod:
+                k, v = mod.split("=", 1)
+                cur = getattr(d.options, k)
+                setattr(d.options, k, type(cur)(v) if not isinstance(cur, str) else v)
         bpy.ops.deformkit.add_handle(vertex_group="handle", target=e.name)
         t0 = time.perf_counter()
         bpy.ops.deformkit.bind()
         bind_ms = (time.perf_counter() - t0) * 1000
+        S.handlers.force_interactive[0] = interactive
         times, err = drag(obj, e, a.steps, translate, 2, handle[0], rest)
         solve = S.solver.runtime.get((obj.name, d.uid), {})
-        results[mid] = dict(bind_ms=bind_ms, drag_ms_median=statistics.median(times),
-                            drag_ms_max=max(times), drag_ms_all=times,
-                            last_solve_ms=solve.get("ms"), iterations=solve.get("iterations"),
-                            handle_error=err)
+        settle_ms, ticks = 0.0, 0
+        if interactive:  # what the timer does once the handle stops
+            t0 = time.perf_counter()
+            while S.solver.pending() and ticks < 10000:
+                S.handlers.refine()
+                bpy.context.evaluated_depsgraph_get().update()
+                ticks += 1
+            settle_ms = (time.perf_counter() - t0) * 1000
+            v = obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).data.vertices
+            err = float(np.abs(np.array(v[handle[0]].co) - (rest[handle[0]] + translate)).max())
+            solve = S.solver.runtime.get((obj.name, d.uid), {})
+        S.handlers.force_interactive[0] = False
+        results[spec] = dict(bind_ms=bind_ms, drag_ms_median=statistics.median(times),
+                             drag_ms_max=max(times), drag_ms_all=times,
+                             last_solve_ms=solve.get("ms"), iterations=solve.get("iterations"),
+                             converged=solve.get("converged"), handle_error=err,
+                             settle_ms=settle_ms, settle_ticks=ticks)
         obj.hide_viewport = True
         S.handlers.enabled[0] = False  # keep the next measurements free of this object
-        print("%s: bind %.0f ms, drag median %.1f ms (max %.1f), last solve %.1f ms, %s it"
-              % (mid, bind_ms, statistics.median(times), max(times), solve.get("ms", -1),
-                 solve.get("iterations")))
+        print("%s: bind %.0f ms, drag median %.1f ms (max %.1f), last solve %.1f ms, %s it%s"
+              % (spec, bind_ms, statistics.median(times), max(times), solve.get("ms", -1),
+                 solve.get("iterations"), ", converged %.0f ms after release (%d refine steps)"
+                 % (settle_ms, ticks) if interactive else ""))
         bpy.data.objects.remove(obj)
         bpy.data.objects.remove(e)
         S.handlers.enabled[0] = True
