@@ -13,7 +13,8 @@
  * below tau), and copies of multiple eigenvalues that Lanczos missed are recovered by a
  * deflated run, so no eigenvalue below the k-th is skipped or duplicated. Results are
  * deterministic (fixed start vectors). Measured on the 43k-vertex armadillo (2 cores):
- * 50 pairs ~1.0-1.3 s, 300 pairs ~7-8.5 s with the default band_size.
+ * 50 pairs ~0.6-0.75 s, 300 pairs ~3.3-4.5 s with the default band_size
+ * (scripts/bench_core.py).
  *
  * ARPACK keeps internal SAVE variables: calls are not reentrant across threads. Callers that
  * may run concurrently (the Python module) serialise eigen computations themselves.
