@@ -74,6 +74,18 @@ def check_object(obj):
         raise DeformKitError("'%s' is in Edit Mode: leave it to bind or solve" % obj.name)
 
 
+def evaluated_positions(obj):
+    """The object's evaluated (modifier stack applied) vertex positions, object space."""
+    dg = bpy.context.evaluated_depsgraph_get()
+    dg.update()
+    ev = obj.evaluated_get(dg)
+    me = ev.to_mesh()
+    co = np.empty(len(me.vertices) * 3, dtype=np.float32)
+    me.vertices.foreach_get("co", co)
+    ev.to_mesh_clear()
+    return co.reshape(-1, 3).astype(np.float64)
+
+
 def rest_positions(me):
     co = np.empty(len(me.vertices) * 3, dtype=np.float32)
     me.vertices.foreach_get("co", co)

@@ -312,14 +312,7 @@ def frame_camera(cam, points, aspect, margin=1.12):
 
 
 def evaluated_local(obj):
-    dg = bpy.context.evaluated_depsgraph_get()
-    dg.update()
-    ev = obj.evaluated_get(dg)
-    me = ev.to_mesh()
-    co = np.empty(len(me.vertices) * 3, dtype=np.float32)
-    me.vertices.foreach_get("co", co)
-    ev.to_mesh_clear()
-    return co.reshape(-1, 3).astype(np.float64)
+    return addon.solver.evaluated_positions(obj)
 
 
 def edges_of(me):

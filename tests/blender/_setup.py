@@ -173,14 +173,7 @@ def empty(name, location=(0, 0, 0)):
 
 
 def evaluated_positions(obj):
-    dg = bpy.context.evaluated_depsgraph_get()
-    dg.update()
-    ev = obj.evaluated_get(dg)
-    me = ev.to_mesh()
-    co = np.empty(len(me.vertices) * 3, dtype=np.float32)
-    me.vertices.foreach_get("co", co)
-    ev.to_mesh_clear()
-    return co.reshape(-1, 3).astype(np.float64)
+    return solver.evaluated_positions(obj)
 
 
 def rest_positions(obj):
