@@ -473,6 +473,69 @@ static void test_clamping(void)
     dk_mesh_free(m);
 }
 
+/* Resume (warm_start 2): a solve cut into slices of 3 iterations equals one uninterrupted
+ * solve bit for bit (Anderson history carried over); other targets make it a warm start; a
+ * rebind makes the next resume a warm start too. */
+static void test_resume(void)
+{
+    plane_setup s;
+    if (plane_make(&s, 12) != 0) {
+        CHECK(0);
+        return;
+    }
+    const dk_mesh *m = s.mesh;
+    const dk_index n = m->n_vertices;
+    dk_index sizes[1] = {s.n_handle};
+    double t[3 * 64], t2[3 * 64];
+    bend_targets(&s, 1.1, t);
+    bend_targets(&s, 1.2, t2);
+    double *x = malloc(sizeof(double) * 3 * n), *y = malloc(sizeof(double) * 3 * n),
+           *z = malloc(sizeof(double) * 3 * n);
+    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    dk_arap_options o;
+    dk_arap_default_options(&o);
+    o.tolerance = 1e-9;
+    o.max_iterations = 1000;
+    dk_arap *whole = NULL, *sliced = NULL, *other = NULL;
+    dk_error e = {0};
+    dk_arap_info iw, is, io;
+    if (!x || !y || !z || dk_arap_bind(m, &d, &o, &whole, &e) != DK_OK ||
+        dk_arap_bind(m, &d, &o, &sliced, &e) != DK_OK ||
+        dk_arap_bind(m, &d, &o, &other, &e) != DK_OK) {
+        CHECK_MSG(0, "%s", e.message);
+        goto out;
+    }
+    CHECK(dk_arap_solve(whole, t, 0, 0, 0, x, &iw, &e) == DK_OK && iw.converged);
+    CHECK(iw.iterations > 9);
+    int total = 0;
+    CHECK(dk_arap_solve(sliced, t, 0, 0, 3, y, &is, &e) == DK_OK);
+    total += is.iterations;
+    for (int k = 0; k < 1000 && !is.converged; k++) {
+        CHECK(dk_arap_solve(sliced, t, 0, 2, 3, y, &is, &e) == DK_OK);
+        total += is.iterations;
+    }
+    CHECK_MSG(total == iw.iterations, "sliced %d iterations, whole %d", total, iw.iterations);
+    CHECK(memcmp(x, y, sizeof(double) * 3 * n) == 0 && is.energy == iw.energy);
+    /* new targets: resume = warm start */
+    CHECK(dk_arap_solve(other, t, 0, 0, 0, z, &io, &e) == DK_OK);
+    CHECK(dk_arap_solve(other, t2, 0, 1, 0, z, &io, &e) == DK_OK);
+    CHECK(dk_arap_solve(sliced, t2, 0, 2, 0, y, &is, &e) == DK_OK);
+    CHECK(is.iterations == io.iterations && memcmp(y, z, sizeof(double) * 3 * n) == 0);
+    /* after a rebind (same constraints), resume starts over as a warm start */
+    CHECK(dk_arap_rebind(sliced, &d, &e) == DK_OK && dk_arap_rebind(other, &d, &e) == DK_OK);
+    CHECK(dk_arap_solve(sliced, t2, 0, 2, 0, y, &is, &e) == DK_OK);
+    CHECK(dk_arap_solve(other, t2, 0, 1, 0, z, &io, &e) == DK_OK);
+    CHECK(is.iterations == io.iterations && memcmp(y, z, sizeof(double) * 3 * n) == 0);
+out:
+    dk_arap_free(whole);
+    dk_arap_free(sliced);
+    dk_arap_free(other);
+    free(x);
+    free(y);
+    free(z);
+    plane_free(&s);
+}
+
 /* Stiffness and soft handles. */
 static void test_stiffness_soft_warm_rebind(void)
 {
@@ -797,7 +860,7 @@ static void test_big_mesh_threaded_local_step(void)
     dk_test_mesh_free(&tm);
 }
 
-DK_TEST_MAIN(test_zero_drag, test_rigid_motion, test_bend, test_twist, test_clamping,
+DK_TEST_MAIN(test_resume, test_zero_drag, test_rigid_motion, test_bend, test_twist, test_clamping,
              test_stiffness_soft_warm_rebind, test_warm_rotations_and_cold_reproducibility,
              test_errors,
              test_big_mesh_threaded_local_step)
