@@ -220,7 +220,10 @@ class DEFORMKIT_OT_remove_handle(_Base, bpy.types.Operator):
         d.active_handle = min(d.active_handle, max(0, len(d.handles) - 1))
 
 
-_binding = set()  # (object name, deformer uid) of the UI binds running in a worker thread
+# (object name, deformer uid) -> worker thread of a UI bind. A modal operator can vanish
+# without ending (a file load drops modal handlers), so an entry only blocks while its thread
+# is alive.
+_binding = {}
 
 
 class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
@@ -256,7 +259,8 @@ class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
         try:
             obj = _get_object(self, context)
             d = _get_deformer(self, context, obj)
-            if (obj.name, d.uid) in _binding:
+            running = _binding.get((obj.name, d.uid))
+            if running is not None and running.is_alive():
                 raise solver.DeformKitError("a bind of %s is already running" % d.name)
             self._job, self._mats = solver.bind_begin(obj, d, context.evaluated_depsgraph_get())
         except solver.DeformKitError as ex:
@@ -269,7 +273,7 @@ class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
         self._thread = threading.Thread(target=self._job.run, name="DeformKit bind",
                                         daemon=True)
         self._thread.start()
-        _binding.add((obj.name, d.uid))
+        _binding[(obj.name, d.uid)] = self._thread
         wm = context.window_manager
         self._timer = wm.event_timer_add(0.05, window=context.window)
         wm.progress_begin(0, 1)
@@ -277,7 +281,7 @@ class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
     def _end(self, context):
-        _binding.discard((self._obj, self._uid))
+        _binding.pop((self._obj, self._uid), None)
         wm = context.window_manager
         wm.event_timer_remove(self._timer)
         wm.progress_end()
