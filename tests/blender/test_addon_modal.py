@@ -134,6 +134,28 @@ def bind_tests():
     R.check("the new bind took the new placement as rest pose",
             [list(h.bind_matrix) for h in d.handles] != before)
 
+    # a file load drops the modal handler of a running bind without ending it: reloading the
+    # same file (same deformer uid) must not leave the deformer refusing binds
+    path = os.path.join(S.OUTPUT, "modal_bind.blend")
+    with bpy.context.temp_override(**S.ui_context()):
+        bpy.ops.wm.save_as_mainfile(filepath=path)
+        bpy.ops.deformkit.bind("INVOKE_DEFAULT")
+        bpy.ops.wm.open_mainfile(filepath=path)
+    yield 0.5
+    with bpy.context.temp_override(**S.ui_context()):
+        bpy.context.view_layer.objects.active = bpy.data.objects["Grid"]
+        try:
+            r = bpy.ops.deformkit.bind("INVOKE_DEFAULT")
+        except RuntimeError as ex:
+            r = str(ex)
+    R.check("bind works again after a file load interrupted one", r == {"RUNNING_MODAL"}, r)
+    t0 = time.time()
+    while S.solver.pending() and time.time() - t0 < 10:
+        yield 0.05
+    yield 0.3
+    d = bpy.data.objects["Grid"].deformkit.deformers[0]
+    R.check("... and binds", d.bound and d.status.startswith("bound"), d.status)
+
 
 def refine_tests():
     if not S.native.has_class("ARAP"):
