@@ -70,7 +70,7 @@ static PyObject *arap_new(PyTypeObject *type, PyObject *args, PyObject *kwargs)
 {
     static char *kwlist[] = {"mesh", "handles", "fixed", "roi", "handle_weights", "stiffness",
                              "energy", "weights", "max_iterations", "tolerance",
-                             "acceleration", "anderson_depth", NULL};
+                             "acceleration", "anderson_depth", "predict", NULL};
     PyObject *mesh_obj, *handles, *fixed = Py_None, *roi = Py_None, *hw = Py_None;
     PyObject *stiffness = Py_None, *energy = NULL, *weights = NULL, *accel = NULL;
     PyObject *module = PyType_GetModule(type);
@@ -88,10 +88,10 @@ static PyObject *arap_new(PyTypeObject *type, PyObject *args, PyObject *kwargs)
     if (!module)
         return NULL;
     dk_arap_default_options(&opt);
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OOOOOOidOi:ARAP", kwlist, &mesh_obj,
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OOOOOOidOip:ARAP", kwlist, &mesh_obj,
                                      &handles, &fixed, &roi, &hw, &stiffness, &energy, &weights,
                                      &opt.max_iterations, &opt.tolerance, &accel,
-                                     &opt.anderson_depth))
+                                     &opt.anderson_depth, &opt.predict))
         return NULL;
     mesh = dk_py_mesh_get(module, mesh_obj, "mesh");
     if (!mesh)
@@ -397,13 +397,14 @@ static PyMethodDef arap_methods[] = {
 PyDoc_STRVAR(arap_doc,
              "ARAP(mesh, handles, fixed=None, roi=None, handle_weights=None, stiffness=None,\n"
              "     energy='spokes', weights='clamped_cotangent', max_iterations=100,\n"
-             "     tolerance=1e-6, acceleration='anderson', anderson_depth=5)\n\n"
+             "     tolerance=1e-6, acceleration='anderson', anderson_depth=5, predict=True)\n\n"
              "As-rigid-as-possible deformation (Sorkine & Alexa 2007; 'spokes_and_rims' after\n"
              "Chao et al. 2010). Fixed vertices, vertices outside roi and handle vertices of\n"
              "weight 1 are eliminated exactly; handle weights w < 1 become soft penalties\n"
              "lambda w/(1-w) |p - t|^2. stiffness (n values > 0) scales each vertex's cell\n"
              "energy. Iterates local/global steps (Anderson-accelerated with an energy\n"
-             "safeguard) until the relative energy change <= tolerance. See\n"
+             "safeguard) until the relative energy change <= tolerance. predict: warm starts\n"
+             "after two converged solves extrapolate along the drag (secant predictor). See\n"
              "docs/methods/arap.md.");
 
 static PyType_Slot arap_slots[] = {
