@@ -16,6 +16,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "dk_trisolve.h"
+
 _Static_assert(sizeof(dk_index) == sizeof(int), "dk_index must match CHOLMOD_INT (int)");
 
 struct dk_cholesky {
@@ -32,6 +34,8 @@ struct dk_cholesky {
     dk_index *pattern_index; /* nnz                                               */
     int n_factorizations;
     int n_analyses;
+    dk_trisolve *plan;       /* two-thread substitutions for big factors, or NULL       */
+    int use_plan;            /* 0: always cholmod_solve2 (tests compare the two)        */
 };
 
 /* A read-only CHOLMOD view of `a` (CHOLMOD does not write through it). */
@@ -120,6 +124,7 @@ static dk_status analyze(const dk_sparse *a, int indefinite, dk_cholesky **out,
     const size_t nnz = (size_t)a->col_start[n];
     ch->n = n;
     ch->indefinite = indefinite;
+    ch->use_plan = 1;
     ch->pattern_start = malloc(((size_t)n + 1) * sizeof(dk_index));
     ch->pattern_index = malloc((nnz ? nnz : 1) * sizeof(dk_index));
     if (!ch->pattern_start || !ch->pattern_index) {
@@ -203,6 +208,8 @@ dk_status dk_cholesky_factorize(dk_cholesky *chol, const dk_sparse *a, dk_error 
 
     cholmod_common *c = &chol->common;
     cholmod_sparse view = sparse_view(a);
+    dk_trisolve_free(chol->plan); /* it points into the factor's arrays */
+    chol->plan = NULL;
     const int ok = cholmod_factorize(&view, chol->factor, c);
     chol->n_factorizations++;
     if (!ok || c->status < CHOLMOD_OK) return cholmod_failure(c, "Cholesky factorize", err);
@@ -219,6 +226,8 @@ dk_status dk_cholesky_factorize(dk_cholesky *chol, const dk_sparse *a, dk_error 
                             "lost at pivot %zu of %d (matrix column %ld)", k, (int)n, col);
     }
     chol->factored = 1;
+    /* NULL (small factor, no gain, no memory): solves use cholmod_solve2 */
+    chol->plan = dk_trisolve_plan(chol->factor);
     return DK_OK;
 }
 
@@ -243,6 +252,8 @@ dk_status dk_cholesky_solve(dk_cholesky *chol, const double *b, int nrhs, double
     if (!chol->factored)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "Cholesky solve: no successful numeric factorization");
+    if (chol->plan && chol->use_plan && dk_trisolve_solve(chol->plan, b, nrhs, x) == 0)
+        return DK_OK;
     cholmod_common *c = &chol->common;
     const size_t n = (size_t)chol->n;
     /* X is kept with the shape of the last solve so cholmod_solve2 reuses it. */
@@ -287,6 +298,16 @@ int dk_cholesky_analysis_count(const dk_cholesky *chol)
     return chol ? chol->n_analyses : 0;
 }
 
+void dk_cholesky_set_parallel(dk_cholesky *chol, int on)
+{
+    if (chol) chol->use_plan = on != 0;
+}
+
+double dk_cholesky_parallel_speedup(const dk_cholesky *chol)
+{
+    return chol && chol->plan ? dk_trisolve_balance(chol->plan) : 0.0;
+}
+
 size_t dk_cholesky_memory(const dk_cholesky *chol)
 {
     if (!chol) return 0;
@@ -321,6 +342,7 @@ dk_status dk_cholesky_negative_pivots(const dk_cholesky *chol, dk_index *count, 
 void dk_cholesky_free(dk_cholesky *chol)
 {
     if (!chol) return;
+    dk_trisolve_free(chol->plan);
     if (chol->common_started) {
         cholmod_common *c = &chol->common;
         if (chol->factor) cholmod_free_factor(&chol->factor, c);

@@ -34,6 +34,16 @@ dk_status dk_cholesky_factorize(dk_cholesky *chol, const dk_sparse *a, dk_error 
 dk_status dk_cholesky_solve(dk_cholesky *chol, const double *b, int nrhs, double *x,
                             dk_error *err);
 
+/** Solves of big factors (>= 200,000 entries) run their forward and backward substitutions
+ *  on two threads, over disjoint subtrees of the elimination tree (dk_trisolve.h), when the
+ *  split promises a speed-up of at least 1.25; results equal cholmod_solve2's to rounding.
+ *  `on` = 0 makes this object always use cholmod_solve2 (tests and benchmarks compare). */
+void dk_cholesky_set_parallel(dk_cholesky *chol, int on);
+
+/** Estimated speed-up (serial work / critical path) of the two-thread solve planned for the
+ *  current factorization, or 0 when solves use cholmod_solve2. */
+double dk_cholesky_parallel_speedup(const dk_cholesky *chol);
+
 /** Matrix dimension. */
 dk_index dk_cholesky_size(const dk_cholesky *chol);
 

@@ -1,0 +1,44 @@
+/* DeformKit internal: two-thread triangular solves with a numeric CHOLMOD factor.
+ *
+ * cholmod_solve2 runs on one thread. The forward and backward substitutions of a sparse
+ * factor are, however, independent in disjoint subtrees of the elimination tree: columns of
+ * one subtree only update rows of that subtree and of its ancestors. A plan splits the tree
+ * into a set of disjoint subtrees, assigned to two threads with balanced work (entries of
+ * the factor), and the remaining "top" columns (the ancestors: on surface meshes the top
+ * separators), done by one thread:
+ *   forward:  both threads do their subtrees (the second on its own copy of the rows it
+ *             writes outside its subtrees, added afterwards), then the top columns;
+ *   backward: the top columns, then both threads their subtrees (read-only outside them).
+ * The factor is read as columns (row list, values, length; diagonal first) for both of
+ * CHOLMOD's layouts: simplicial LL' or LDL', and supernodal LL' (column c of a supernode is
+ * its row list from c on, its dense column from the diagonal on). Results equal
+ * cholmod_solve2's to rounding (the same operations, in another order of summation).
+ * Used by dk_cholesky for factors big enough to gain from it.
+ */
+#ifndef DK_TRISOLVE_H
+#define DK_TRISOLVE_H
+
+#include <cholmod.h>
+#include <stddef.h>
+
+typedef struct dk_trisolve dk_trisolve;
+
+/** A plan for the numeric factor `L` (CHOLMOD_INT indices, real doubles, postordered
+ *  elimination tree). Returns NULL when the factor does not qualify (symbolic, complex,
+ *  not postordered, too small to gain, out of memory): the caller then uses cholmod_solve2.
+ *  The plan refers to L's arrays: rebuild it after every numeric factorization. */
+dk_trisolve *dk_trisolve_plan(const cholmod_factor *L);
+
+/** Solves A X = B with the factor of A (P A P' = L L' or L D L'), B and X column-major
+ *  n x nrhs (X may alias B), 1 <= nrhs <= 16. Returns 0, or -1 when nrhs is out of that
+ *  range or its workspace cannot be allocated
+ *  (nothing written; the caller falls back). Allocates only when nrhs grows. */
+int dk_trisolve_solve(dk_trisolve *plan, const double *b, int nrhs, double *x);
+
+/** Estimated speed-up of the plan's split (serial work / critical path), for tests. */
+double dk_trisolve_balance(const dk_trisolve *plan);
+
+/** Frees the plan (NULL is fine). */
+void dk_trisolve_free(dk_trisolve *plan);
+
+#endif

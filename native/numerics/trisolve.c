@@ -1,0 +1,564 @@
+/* DeformKit: two-thread triangular solves with a CHOLMOD factor (see dk_trisolve.h).
+ *
+ * Plan. Every column j of L is a node of the elimination tree, parent(j) = the smallest
+ * off-diagonal row of column j. CHOLMOD postorders the tree (dk_cholesky asks for it), so the
+ * subtree of j is the column range [first(j), j]; the plan checks this and gives up
+ * otherwise. The split is searched greedily: start from the roots (consecutive small ones
+ * merged into one item), repeatedly replace the heaviest item by the children of its subtree
+ * root (the root and any single-child chain below it move to the top part), and after each
+ * step assign the items to two threads by decreasing work (longest processing time first);
+ * keep the split with the shortest critical path max(thread work) + top work. Work = factor
+ * entries, which is what both substitutions stream through.
+ */
+#include "dk_trisolve.h"
+
+#include <pthread.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Below this many factor entries a solve takes < ~0.3 ms and a thread start (~30-50 us)
+ * plus the extra copies eat most of the gain. */
+#define MIN_ENTRIES 200000
+#define MAX_ITEMS 512
+#define MAX_EXPANSIONS 256
+/* Plans whose estimated speed-up is below this are not worth a thread. */
+#define MIN_SPEEDUP 1.25
+
+struct dk_trisolve {
+    int n;
+    int ll;                 /* 1: L L'; 0: L D L' (unit L, D_j stored as the diagonal)   */
+    const int **rows;       /* n: row list of column j, rows[j][0] == j                   */
+    const double **vals;    /* n: values of column j, vals[j][0] = L_jj or D_j            */
+    int *len;               /* n: entries of column j                                     */
+    const int *perm;        /* n or NULL: row k of L is row perm[k] of A                  */
+    int *ranges;            /* [start, end) pairs: thread 0's, then thread 1's, ascending  */
+    int n_ranges[2];
+    int *top;               /* the other columns, ascending                               */
+    int n_top;
+    double total_work, critical_work;
+    double *wa, *wb;        /* n x cap row-major work of thread 0 and thread 1            */
+    int cap;
+};
+
+typedef struct item {
+    int start, end; /* column range [start, end) */
+    int node;       /* the subtree root (end - 1) when expandable, else -1 */
+    double work;
+} item;
+
+void dk_trisolve_free(dk_trisolve *p)
+{
+    if (!p)
+        return;
+    free(p->rows);
+    free(p->vals);
+    free(p->len);
+    free(p->ranges);
+    free(p->top);
+    free(p->wa);
+    free(p->wb);
+    free(p);
+}
+
+double dk_trisolve_balance(const dk_trisolve *p)
+{
+    return p && p->critical_work > 0.0 ? p->total_work / p->critical_work : 0.0;
+}
+
+static int item_heavier(const void *a, const void *b)
+{
+    const item *x = a, *y = b;
+    return (x->work < y->work) - (x->work > y->work);
+}
+
+static int item_earlier(const void *a, const void *b)
+{
+    const item *x = a, *y = b;
+    return (x->start > y->start) - (x->start < y->start);
+}
+
+/* Appends the subtrees rooted at the consecutive nodes kids[0..nk-1] (ascending, each a
+ * contiguous range, together contiguous) as items, merging consecutive light ones. Returns
+ * the new item count, or -1 when it would exceed MAX_ITEMS. */
+static int add_items(item *it, int count, const int *kids, int nk, const int *first,
+                     const double *subwork, double light)
+{
+    item chunk = {0, 0, -1, 0.0};
+    int open = 0;
+    for (int q = 0; q < nk; q++) {
+        const int v = kids[q];
+        if (subwork[v] >= light) {
+            if (open) {
+                if (count >= MAX_ITEMS)
+                    return -1;
+                it[count++] = chunk;
+                open = 0;
+            }
+            if (count >= MAX_ITEMS)
+                return -1;
+            it[count++] = (item){first[v], v + 1, v, subwork[v]};
+        } else {
+            if (!open) {
+                chunk = (item){first[v], first[v], -1, 0.0};
+                open = 1;
+            }
+            if (chunk.end != first[v]) { /* not adjacent (cannot happen when postordered) */
+                if (count >= MAX_ITEMS)
+                    return -1;
+                it[count++] = chunk;
+                chunk = (item){first[v], v + 1, -1, 0.0};
+            }
+            chunk.end = v + 1;
+            chunk.work += subwork[v];
+            if (chunk.work >= light) {
+                if (count >= MAX_ITEMS)
+                    return -1;
+                it[count++] = chunk;
+                open = 0;
+            }
+        }
+    }
+    if (open) {
+        if (count >= MAX_ITEMS)
+            return -1;
+        it[count++] = chunk;
+    }
+    return count;
+}
+
+/* LPT assignment of the items (sorted heaviest first on return) to two threads; returns
+ * the larger thread's work, and the thread of each item in `who`. */
+static double assign(item *it, int count, unsigned char *who)
+{
+    double bin[2] = {0.0, 0.0};
+    qsort(it, (size_t)count, sizeof *it, item_heavier);
+    for (int q = 0; q < count; q++) {
+        const int t = bin[1] < bin[0];
+        who[q] = (unsigned char)t;
+        bin[t] += it[q].work;
+    }
+    return bin[0] > bin[1] ? bin[0] : bin[1];
+}
+
+static int build_schedule(dk_trisolve *p, const int *parent)
+{
+    const int n = p->n;
+    int ok = 0;
+    int *first = malloc(sizeof(int) * (size_t)n), *cnt = malloc(sizeof(int) * (size_t)n);
+    int *kid_start = calloc((size_t)n + 2, sizeof(int)), *kids = malloc(sizeof(int) * (size_t)n);
+    double *subwork = malloc(sizeof(double) * (size_t)n);
+    item *it = malloc(sizeof(item) * MAX_ITEMS), *best = malloc(sizeof(item) * MAX_ITEMS);
+    unsigned char *who = malloc(MAX_ITEMS), *best_who = malloc(MAX_ITEMS);
+    unsigned char *covered = NULL;
+    if (!first || !cnt || !kid_start || !kids || !subwork || !it || !best || !who || !best_who)
+        goto out;
+    double total = 0.0;
+    for (int j = 0; j < n; j++) {
+        first[j] = j;
+        cnt[j] = 1;
+        subwork[j] = (double)p->len[j];
+        total += (double)p->len[j];
+    }
+    /* children lists (ascending), roots listed under the virtual node n */
+    for (int j = 0; j < n; j++)
+        kid_start[(parent[j] >= 0 ? parent[j] : n) + 1]++;
+    for (int j = 0; j <= n; j++)
+        kid_start[j + 1] += kid_start[j];
+    {
+        int *fill = malloc(sizeof(int) * ((size_t)n + 1));
+        if (!fill)
+            goto out;
+        memcpy(fill, kid_start, sizeof(int) * ((size_t)n + 1));
+        for (int j = 0; j < n; j++)
+            kids[fill[parent[j] >= 0 ? parent[j] : n]++] = j;
+        free(fill);
+    }
+    for (int j = 0; j < n; j++) {
+        if (cnt[j] != j - first[j] + 1)
+            goto out; /* not postordered: subtrees are not column ranges */
+        const int q = parent[j];
+        if (q >= 0) {
+            if (first[j] < first[q])
+                first[q] = first[j];
+            cnt[q] += cnt[j];
+            subwork[q] += subwork[j];
+        }
+    }
+    const double light = total / 64.0;
+    int count = add_items(it, 0, kids + kid_start[n], kid_start[n + 1] - kid_start[n], first,
+                          subwork, light);
+    if (count < 0)
+        goto out;
+    double top_work = 0.0;
+    double best_est = -1.0;
+    int best_count = 0;
+    for (int step = 0; step <= MAX_EXPANSIONS; step++) {
+        const double est = assign(it, count, who) + top_work;
+        if (best_est < 0.0 || est < best_est) {
+            best_est = est;
+            best_count = count;
+            memcpy(best, it, sizeof(item) * (size_t)count);
+            memcpy(best_who, who, (size_t)count);
+        }
+        /* it[] is sorted heaviest first: expand the heaviest expandable item */
+        int e = -1;
+        for (int q = 0; q < count; q++)
+            if (it[q].node >= 0 && kid_start[it[q].node + 1] > kid_start[it[q].node]) {
+                e = q;
+                break;
+            }
+        if (e < 0 || it[e].work < 2.0 * light / 64.0)
+            break;
+        int v = it[e].node;
+        it[e] = it[--count];
+        top_work += (double)p->len[v];
+        while (kid_start[v + 1] - kid_start[v] == 1) { /* single-child chain: to the top */
+            v = kids[kid_start[v]];
+            top_work += (double)p->len[v];
+        }
+        const int c2 = add_items(it, count, kids + kid_start[v], kid_start[v + 1] - kid_start[v],
+                                 first, subwork, light / 64.0);
+        if (c2 < 0)
+            break;
+        count = c2;
+    }
+    p->total_work = total;
+    p->critical_work = best_est;
+    if (!(total >= MIN_SPEEDUP * best_est))
+        goto out;
+    /* ranges per thread, ascending; the top = the columns no range covers */
+    p->ranges = malloc(sizeof(int) * 2 * (size_t)best_count);
+    p->top = malloc(sizeof(int) * (size_t)n);
+    covered = calloc((size_t)n, 1);
+    if (!p->ranges || !p->top || !covered)
+        goto out;
+    {
+        item *sorted = it; /* reuse: items of thread 0, then of thread 1, each by start */
+        int k = 0;
+        for (int t = 0; t < 2; t++) {
+            const int k0 = k;
+            for (int q = 0; q < best_count; q++)
+                if (best_who[q] == t)
+                    sorted[k++] = best[q];
+            qsort(sorted + k0, (size_t)(k - k0), sizeof *sorted, item_earlier);
+            p->n_ranges[t] = k - k0;
+        }
+        for (int q = 0; q < best_count; q++) {
+            p->ranges[2 * q] = sorted[q].start;
+            p->ranges[2 * q + 1] = sorted[q].end;
+            memset(covered + sorted[q].start, 1, (size_t)(sorted[q].end - sorted[q].start));
+        }
+    }
+    p->n_top = 0;
+    for (int j = 0; j < n; j++)
+        if (!covered[j])
+            p->top[p->n_top++] = j;
+    ok = 1;
+out:
+    free(first);
+    free(cnt);
+    free(kid_start);
+    free(kids);
+    free(subwork);
+    free(it);
+    free(best);
+    free(who);
+    free(best_who);
+    free(covered);
+    return ok;
+}
+
+dk_trisolve *dk_trisolve_plan(const cholmod_factor *L)
+{
+    if (!L || L->xtype != CHOLMOD_REAL || L->itype != CHOLMOD_INT ||
+        L->dtype != CHOLMOD_DOUBLE || !L->x || L->n < 2 || L->n > (size_t)INT32_MAX)
+        return NULL;
+    if (L->is_super && !L->is_ll)
+        return NULL;
+    dk_trisolve *p = calloc(1, sizeof *p);
+    int *parent = NULL;
+    if (!p)
+        return NULL;
+    const int n = (int)L->n;
+    p->n = n;
+    p->perm = L->Perm;
+    p->rows = malloc(sizeof(*p->rows) * (size_t)n);
+    p->vals = malloc(sizeof(*p->vals) * (size_t)n);
+    p->len = malloc(sizeof(int) * (size_t)n);
+    parent = malloc(sizeof(int) * (size_t)n);
+    if (!p->rows || !p->vals || !p->len || !parent)
+        goto fail;
+    const double *lx = L->x;
+    double entries = 0.0;
+    if (L->is_super) {
+        const int *super = L->super, *pi = L->pi, *px = L->px, *ls = L->s;
+        if (!super || !pi || !px || !ls)
+            goto fail;
+        for (size_t s = 0; s < L->nsuper; s++) {
+            const int k1 = super[s], k2 = super[s + 1], psi = pi[s], nsrow = pi[s + 1] - psi;
+            const int nscol = k2 - k1;
+            if (nscol < 1 || nsrow < nscol || k2 > n)
+                goto fail;
+            for (int c = 0; c < nscol; c++) {
+                const int j = k1 + c;
+                if (ls[psi + c] != j)
+                    goto fail;
+                p->rows[j] = ls + psi + c;
+                p->vals[j] = lx + (size_t)px[s] + (size_t)c * (size_t)nsrow + (size_t)c;
+                p->len[j] = nsrow - c;
+            }
+        }
+        p->ll = 1;
+    } else {
+        const int *lp = L->p, *li = L->i, *lnz = L->nz;
+        if (!lp || !li || !lnz)
+            goto fail;
+        for (int j = 0; j < n; j++) {
+            p->rows[j] = li + lp[j];
+            p->vals[j] = lx + lp[j];
+            p->len[j] = lnz[j];
+            if (lnz[j] < 1 || li[lp[j]] != j)
+                goto fail;
+        }
+        p->ll = L->is_ll;
+    }
+    for (int j = 0; j < n; j++) {
+        int q = -1;
+        for (int k = 1; k < p->len[j]; k++) {
+            const int r = p->rows[j][k];
+            if (r <= j || r >= n)
+                goto fail;
+            if (q < 0 || r < q)
+                q = r;
+        }
+        parent[j] = q;
+        entries += (double)p->len[j];
+    }
+    if (entries < MIN_ENTRIES || !build_schedule(p, parent))
+        goto fail;
+    free(parent);
+    return p;
+fail:
+    free(parent);
+    dk_trisolve_free(p);
+    return NULL;
+}
+
+/* ------------------------------------------------------------------ substitutions ------ */
+
+/* Forward substitution of columns j0 .. j1-1 on the row-major n x K work w, and backward
+ * substitution of columns j1-1 down to j0. For K = 1..4 the row's values are named scalars
+ * (y0..y3, the unused ones dead code), which keeps them in registers: a loop over a local
+ * array, even of constant length, was left in memory by GCC -O2 and ran ~3x slower than
+ * cholmod_solve2. Any other K (up to 16) uses the loop version. */
+#define DK_SWEEPS4(K)                                                                        \
+    static void forward_##K(const dk_trisolve *p, double *w, int kk, int j0, int j1)         \
+    {                                                                                        \
+        (void)kk;                                                                            \
+        for (int j = j0; j < j1; j++) {                                                      \
+            const int *r = p->rows[j];                                                       \
+            const double *v = p->vals[j];                                                    \
+            const int m = p->len[j];                                                         \
+            double *xj = w + (size_t)j * K;                                                  \
+            const double d = p->ll ? 1.0 / v[0] : 1.0;                                       \
+            const double y0 = xj[0] * d;                                                     \
+            const double y1 = K > 1 ? xj[K > 1 ? 1 : 0] * d : 0.0;                           \
+            const double y2 = K > 2 ? xj[K > 2 ? 2 : 0] * d : 0.0;                           \
+            const double y3 = K > 3 ? xj[K > 3 ? 3 : 0] * d : 0.0;                           \
+            xj[0] = y0;                                                                      \
+            if (K > 1) xj[K > 1 ? 1 : 0] = y1;                                               \
+            if (K > 2) xj[K > 2 ? 2 : 0] = y2;                                               \
+            if (K > 3) xj[K > 3 ? 3 : 0] = y3;                                               \
+            for (int q = 1; q < m; q++) {                                                    \
+                double *xi = w + (size_t)r[q] * K;                                           \
+                const double a = v[q];                                                       \
+                xi[0] -= a * y0;                                                             \
+                if (K > 1) xi[K > 1 ? 1 : 0] -= a * y1;                                      \
+                if (K > 2) xi[K > 2 ? 2 : 0] -= a * y2;                                      \
+                if (K > 3) xi[K > 3 ? 3 : 0] -= a * y3;                                      \
+            }                                                                                \
+        }                                                                                    \
+    }                                                                                        \
+    static void backward_##K(const dk_trisolve *p, double *w, int kk, int j0, int j1)        \
+    {                                                                                        \
+        (void)kk;                                                                            \
+        for (int j = j1 - 1; j >= j0; j--) {                                                 \
+            const int *r = p->rows[j];                                                       \
+            const double *v = p->vals[j];                                                    \
+            const int m = p->len[j];                                                         \
+            double *xj = w + (size_t)j * K;                                                  \
+            double y0 = xj[0], y1 = 0.0, y2 = 0.0, y3 = 0.0;                                 \
+            if (K > 1) y1 = xj[K > 1 ? 1 : 0];                                               \
+            if (K > 2) y2 = xj[K > 2 ? 2 : 0];                                               \
+            if (K > 3) y3 = xj[K > 3 ? 3 : 0];                                               \
+            for (int q = 1; q < m; q++) {                                                    \
+                const double *xi = w + (size_t)r[q] * K;                                     \
+                const double a = v[q];                                                       \
+                y0 -= a * xi[0];                                                             \
+                if (K > 1) y1 -= a * xi[K > 1 ? 1 : 0];                                      \
+                if (K > 2) y2 -= a * xi[K > 2 ? 2 : 0];                                      \
+                if (K > 3) y3 -= a * xi[K > 3 ? 3 : 0];                                      \
+            }                                                                                \
+            const double d = p->ll ? 1.0 / v[0] : 1.0;                                       \
+            xj[0] = y0 * d;                                                                  \
+            if (K > 1) xj[K > 1 ? 1 : 0] = y1 * d;                                           \
+            if (K > 2) xj[K > 2 ? 2 : 0] = y2 * d;                                           \
+            if (K > 3) xj[K > 3 ? 3 : 0] = y3 * d;                                           \
+        }                                                                                    \
+    }
+
+DK_SWEEPS4(1)
+DK_SWEEPS4(2)
+DK_SWEEPS4(3)
+DK_SWEEPS4(4)
+
+static void forward_k(const dk_trisolve *p, double *w, int k, int j0, int j1)
+{
+    for (int j = j0; j < j1; j++) {
+        const int *r = p->rows[j];
+        const double *v = p->vals[j];
+        const int m = p->len[j];
+        double *xj = w + (size_t)j * (size_t)k;
+        if (p->ll)
+            for (int c = 0; c < k; c++)
+                xj[c] /= v[0];
+        for (int q = 1; q < m; q++) {
+            double *xi = w + (size_t)r[q] * (size_t)k;
+            const double a = v[q];
+            for (int c = 0; c < k; c++)
+                xi[c] -= a * xj[c];
+        }
+    }
+}
+
+static void backward_k(const dk_trisolve *p, double *w, int k, int j0, int j1)
+{
+    for (int j = j1 - 1; j >= j0; j--) {
+        const int *r = p->rows[j];
+        const double *v = p->vals[j];
+        const int m = p->len[j];
+        double *xj = w + (size_t)j * (size_t)k;
+        for (int q = 1; q < m; q++) {
+            const double *xi = w + (size_t)r[q] * (size_t)k;
+            const double a = v[q];
+            for (int c = 0; c < k; c++)
+                xj[c] -= a * xi[c];
+        }
+        if (p->ll)
+            for (int c = 0; c < k; c++)
+                xj[c] /= v[0];
+    }
+}
+
+typedef void (*sweep_fn)(const dk_trisolve *, double *, int, int, int);
+
+static void forward(const dk_trisolve *p, double *w, int k, int j0, int j1)
+{
+    static const sweep_fn f[5] = {forward_k, forward_1, forward_2, forward_3, forward_4};
+    f[k <= 4 ? k : 0](p, w, k, j0, j1);
+}
+
+static void backward(const dk_trisolve *p, double *w, int k, int j0, int j1)
+{
+    static const sweep_fn f[5] = {backward_k, backward_1, backward_2, backward_3, backward_4};
+    f[k <= 4 ? k : 0](p, w, k, j0, j1);
+}
+
+typedef struct sweep {
+    const dk_trisolve *p;
+    double *w;
+    int k, thread, back;
+} sweep;
+
+static void *run_sweep(void *arg)
+{
+    const sweep *s = arg;
+    const dk_trisolve *p = s->p;
+    const int *rg = p->ranges + (s->thread ? 2 * p->n_ranges[0] : 0);
+    const int nr = p->n_ranges[s->thread];
+    if (!s->back)
+        for (int q = 0; q < nr; q++)
+            forward(p, s->w, s->k, rg[2 * q], rg[2 * q + 1]);
+    else
+        for (int q = nr - 1; q >= 0; q--)
+            backward(p, s->w, s->k, rg[2 * q], rg[2 * q + 1]);
+    return NULL;
+}
+
+/* Thread 1's sweep on a helper thread while the caller does thread 0's; if the helper
+ * cannot be started the caller does both (each writes only its own rows / array). */
+static void both(sweep *s0, sweep *s1)
+{
+    pthread_t th;
+    const int started = pthread_create(&th, NULL, run_sweep, s1) == 0;
+    run_sweep(s0);
+    if (started)
+        pthread_join(th, NULL);
+    else
+        run_sweep(s1);
+}
+
+int dk_trisolve_solve(dk_trisolve *p, const double *b, int nrhs, double *x)
+{
+    if (!p || !b || !x || nrhs < 1 || nrhs > 16) /* more: cholmod_solve2 */
+        return -1;
+    const int n = p->n, k = nrhs;
+    const size_t nk = (size_t)n * (size_t)k;
+    if (k > p->cap) {
+        double *wa = malloc(sizeof(double) * nk), *wb = malloc(sizeof(double) * nk);
+        if (!wa || !wb) {
+            free(wa);
+            free(wb);
+            return -1;
+        }
+        free(p->wa);
+        free(p->wb);
+        p->wa = wa;
+        p->wb = wb;
+        p->cap = k;
+    }
+    double *wa = p->wa, *wb = p->wb;
+    for (int i = 0; i < n; i++) {
+        const size_t src = p->perm ? (size_t)p->perm[i] : (size_t)i;
+        for (int c = 0; c < k; c++)
+            wa[(size_t)i * k + c] = b[(size_t)c * n + src];
+    }
+    const int *r1 = p->ranges + 2 * p->n_ranges[0];
+    for (int q = 0; q < p->n_ranges[1]; q++)
+        memcpy(wb + (size_t)r1[2 * q] * k, wa + (size_t)r1[2 * q] * k,
+               sizeof(double) * (size_t)(r1[2 * q + 1] - r1[2 * q]) * (size_t)k);
+    for (int t = 0; t < p->n_top; t++)
+        memset(wb + (size_t)p->top[t] * k, 0, sizeof(double) * (size_t)k);
+
+    sweep s0 = {p, wa, k, 0, 0}, s1 = {p, wb, k, 1, 0};
+    both(&s0, &s1);
+    for (int t = 0; t < p->n_top; t++) {
+        double *xa = wa + (size_t)p->top[t] * k;
+        const double *xb = wb + (size_t)p->top[t] * k;
+        for (int c = 0; c < k; c++)
+            xa[c] += xb[c];
+    }
+    for (int q = 0; q < p->n_ranges[1]; q++)
+        memcpy(wa + (size_t)r1[2 * q] * k, wb + (size_t)r1[2 * q] * k,
+               sizeof(double) * (size_t)(r1[2 * q + 1] - r1[2 * q]) * (size_t)k);
+    for (int t = 0; t < p->n_top; t++)
+        forward(p, wa, k, p->top[t], p->top[t] + 1);
+    if (!p->ll)
+        for (int j = 0; j < n; j++) {
+            const double d = p->vals[j][0];
+            for (int c = 0; c < k; c++)
+                wa[(size_t)j * k + c] /= d;
+        }
+    for (int t = p->n_top - 1; t >= 0; t--)
+        backward(p, wa, k, p->top[t], p->top[t] + 1);
+    s0.back = s1.back = 1;
+    s1.w = wa;
+    both(&s0, &s1);
+    for (int i = 0; i < n; i++) {
+        const size_t dst = p->perm ? (size_t)p->perm[i] : (size_t)i;
+        for (int c = 0; c < k; c++)
+            x[(size_t)c * n + dst] = wa[(size_t)i * k + c];
+    }
+    return 0;
+}
