@@ -388,11 +388,26 @@ fail:
             const double *v = p->vals[j];                                                    \
             const int m = p->len[j];                                                         \
             double *xj = w + (size_t)j * K;                                                  \
+            /* two sets of accumulators (even and odd entries): halves the dependency chain */ \
             double y0 = xj[0], y1 = 0.0, y2 = 0.0, y3 = 0.0;                                 \
+            double z0 = 0.0, z1 = 0.0, z2 = 0.0, z3 = 0.0;                                   \
             if (K > 1) y1 = xj[K > 1 ? 1 : 0];                                               \
             if (K > 2) y2 = xj[K > 2 ? 2 : 0];                                               \
             if (K > 3) y3 = xj[K > 3 ? 3 : 0];                                               \
-            for (int q = 1; q < m; q++) {                                                    \
+            int q = 1;                                                                       \
+            for (; q + 1 < m; q += 2) {                                                      \
+                const double *xi = w + (size_t)r[q] * K, *xh = w + (size_t)r[q + 1] * K;     \
+                const double a = v[q], b = v[q + 1];                                         \
+                y0 -= a * xi[0];                                                             \
+                z0 -= b * xh[0];                                                             \
+                if (K > 1) y1 -= a * xi[K > 1 ? 1 : 0];                                      \
+                if (K > 1) z1 -= b * xh[K > 1 ? 1 : 0];                                      \
+                if (K > 2) y2 -= a * xi[K > 2 ? 2 : 0];                                      \
+                if (K > 2) z2 -= b * xh[K > 2 ? 2 : 0];                                      \
+                if (K > 3) y3 -= a * xi[K > 3 ? 3 : 0];                                      \
+                if (K > 3) z3 -= b * xh[K > 3 ? 3 : 0];                                      \
+            }                                                                                \
+            if (q < m) {                                                                     \
                 const double *xi = w + (size_t)r[q] * K;                                     \
                 const double a = v[q];                                                       \
                 y0 -= a * xi[0];                                                             \
@@ -400,6 +415,10 @@ fail:
                 if (K > 2) y2 -= a * xi[K > 2 ? 2 : 0];                                      \
                 if (K > 3) y3 -= a * xi[K > 3 ? 3 : 0];                                      \
             }                                                                                \
+            y0 += z0;                                                                        \
+            y1 += z1;                                                                        \
+            y2 += z2;                                                                        \
+            y3 += z3;                                                                        \
             const double d = p->ll ? 1.0 / v[0] : 1.0;                                       \
             xj[0] = y0 * d;                                                                  \
             if (K > 1) xj[K > 1 ? 1 : 0] = y1 * d;                                           \
