@@ -5,8 +5,9 @@
  * once. CHOLMOD's printing is switched off; its failures come back as dk_status codes.
  * Ordering AMD; simplicial or supernodal LL' chosen by CHOLMOD from the flops per factor entry
  * (switch at 100: simplicial on surface meshes up to ~10^5 vertices, where it is 2-3x
- * faster; supernodal beyond). Armadillo (43k vertices, 2 cores): analyze 0.03 s, factorize
- * 0.04 s, 3-RHS solve ~3.5 ms.
+ * faster; supernodal beyond). Solves of factors with >= 200,000 entries run on two threads
+ * (dk_trisolve.h), others through cholmod_solve2. Armadillo (43k vertices, 2 cores): analyze
+ * 0.03 s, factorize 0.04 s, 3-RHS solve ~1-2 ms.
  */
 #ifndef DK_CHOLESKY_H
 #define DK_CHOLESKY_H
