@@ -3,45 +3,13 @@
  * Multi-phase initialisation with per-module state (dk_py_state): no C globals, so the module
  * may be loaded in several interpreters. The exec step creates the state (ARPACK lock,
  * SolveResult type, cached numpy.frombuffer) and then calls each binding file's
- * dk_py_init_<name> hook in a fixed order. Method hooks live in files written separately;
- * weak defaults here keep the module building and importable before those files exist.
+ * dk_py_init_<name> hook (declared in dk_py.h, defined in its py_<name>.c) in a fixed order.
+ * A binding file missing from the build makes the import fail (undefined symbol) instead of
+ * silently giving a module without its class.
  */
 #include "dk_py.h"
 
 #include <string.h>
-
-/* ------------------------------------------------------------------ default hooks ------- */
-/* Each is overridden by the strong definition in its binding file when that file is linked. */
-
-__attribute__((weak)) int dk_py_init_mesh(PyObject *module)
-{
-    (void)module;
-    return 0;
-}
-
-__attribute__((weak)) int dk_py_init_operators(PyObject *module)
-{
-    (void)module;
-    return 0;
-}
-
-__attribute__((weak)) int dk_py_init_arap(PyObject *module)
-{
-    (void)module;
-    return 0;
-}
-
-__attribute__((weak)) int dk_py_init_laplacian_edit(PyObject *module)
-{
-    (void)module;
-    return 0;
-}
-
-__attribute__((weak)) int dk_py_init_falloff(PyObject *module)
-{
-    (void)module;
-    return 0;
-}
 
 /* ------------------------------------------------------------------ SolveResult --------- */
 
