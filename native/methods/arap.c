@@ -53,6 +53,7 @@ typedef struct arap_system {
     /* where the last solve stopped, for a resumed solve (warm_start 2, same targets) */
     double *targets_prev; /* n_handle_vertices x 3: the targets it solved for            */
     double *conv_t1, *conv_t2; /* n_handle_vertices x 3: the targets of dk_arap's conv1/2 */
+    double *warm;         /* 6 nu: the two warm-start responses (plain, predicted)       */
     int resumable, aa_hist, aa_head, aa_have_pair;
     int predicted;        /* the last warm start used the secant predictor                */
     double last_energy;
@@ -71,10 +72,10 @@ struct dk_arap {
     double *rot;          /* n x 9 rotations                                             */
     double *prev;         /* n x 3 previous solution (warm start)                        */
     int have_prev;
-    /* secant predictor of a warm start: the last two converged solutions (for different
-     * constrained positions) of the current constraints, n x 3 each; n_conv counts them */
+    /* secant predictor of a warm start: the ends of the last two calls for different
+     * targets under the current constraints, n x 3 each; n_conv counts them */
     double *conv1, *conv2;
-    int n_conv, prev_converged;
+    int n_conv;
     int analysis_count, factorization_count;
 };
 
@@ -296,6 +297,7 @@ static void system_free(arap_system *s)
     free(s->targets_prev);
     free(s->conv_t1);
     free(s->conv_t2);
+    free(s->warm);
     memset(s, 0, sizeof *s);
 }
 
@@ -509,6 +511,7 @@ static dk_status system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_
     s->rhs = malloc(N * sizeof(double));
     s->xu = malloc(N * sizeof(double));
     s->gu = malloc(N * sizeof(double));
+    s->warm = malloc(2 * N * sizeof(double) + sizeof(double));
     if (ar->n_terms >= PARALLEL_TERMS)
         s->rhs2 = malloc(N * sizeof(double));
     if (accel) {
@@ -518,7 +521,7 @@ static dk_status system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_
         s->dg = malloc(N * m * sizeof(double));
         s->df = malloc(N * m * sizeof(double));
     }
-    if (!s->unknowns || !s->rhs_const || !s->rhs || !s->xu || !s->gu ||
+    if (!s->unknowns || !s->rhs_const || !s->rhs || !s->xu || !s->gu || !s->warm ||
         (ar->n_terms >= PARALLEL_TERMS && !s->rhs2) ||
         (accel && (!s->fu || !s->gprev || !s->fprev || !s->dg || !s->df))) {
         system_free(s);
@@ -1027,6 +1030,7 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
     } else {
         /* Eliminated vertices: hard targets or rest; unknowns: previous solution or rest. */
         const int warm = warm_start && ar->have_prev;
+        int have_energy = 0;
         s->predicted = 0;
         memcpy(ar->x, warm ? ar->prev : rest, 3 * (size_t)n * sizeof(double));
         for (dk_index v = 0; v < n; v++)
@@ -1051,26 +1055,28 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
              * (previous rotations held) to how far the constrained vertices are from the
              * base, x0 = base + A^-1 (b(new known) - b(base known)). This spreads a handle's
              * jump smoothly over the free vertices instead of leaving it at the handle's
-             * border. The base is the previous solution, or, when the previous call converged
-             * and the two converged solutions before it (x1 for targets t1, x2 for t2) show
-             * the direction of the drag, their secant extrapolation (a predictor-corrector
-             * continuation along the drag): with alpha the projection of the new targets'
-             * step t - t1 onto the last step t1 - t2, base = x1 + alpha (x1 - x2), and the
-             * response covers what of the move is not along the last step. alpha is clamped
-             * to [0, 2]: a reversed drag falls back to the previous solution, and no step
-             * extrapolates more than twice the last one. The choice is ours (the paper
-             * restarts from the previous solution); measured on the armadillo-wave drag in 20
-             * straight steps of 1.6% of the bbox, converged (1e-6) re-solves take 7-29
-             * iterations (median 12.5) instead of 19-65 (median 35), and stop closer to the
-             * true minimum (1e-5..7e-5 above it instead of up to 2.3e-4); on a curved drag
-             * 5-42 (median 13) instead of 12-64 (median 27.5). Soft handles' own target
-             * changes are not in the response: this is only a starting point, and the
-             * iterations do the rest. */
+             * border. The plain base is the previous solution. The predicted one (option
+             * predict) continues the drag: with the ends x1, x2 of the last two calls for
+             * different targets t1, t2 (x1 = the previous solution; converged or cut by
+             * max_iterations, as the add-on's time-budgeted updates are), alpha = the
+             * projection of the new targets' step t - t1 onto the last step t1 - t2, clamped
+             * to [0, 2], and base = x1 + alpha (x1 - x2): a predictor-corrector continuation,
+             * the response covering what of the move is not along the last step. Both starts
+             * come from one 6-column solve and the one with the lower ARAP energy is taken,
+             * so a drag that turns or stops cannot start worse than the plain warm start.
+             * The choice is ours (the paper restarts from the previous solution); measured on
+             * the armadillo-wave drag in 20 straight steps of 1.6% of the bbox, converged
+             * (1e-6) re-solves take 7-29 iterations (median 12.5) instead of 19-65 (median
+             * 35) and stop closer to the true minimum (1e-5..7e-5 above it instead of up to
+             * 2.3e-4); on a curved drag 5-42 (median 13) instead of 12-64 (median 27.5); with
+             * 4 iterations per step (an interactive budget) the energy after each step is
+             * 5-14x closer to the step's minimum. Soft handles' own target changes are not in
+             * the response: this is only a starting point, and the iterations do the rest. */
             const dk_index nu = s->nu;
             const double *x1 = ar->conv1, *x2 = ar->conv2;
             double alpha = 0.0;
             int moved = 0;
-            if (ar->opt.predict && ar->n_conv == 2 && ar->prev_converged) {
+            if (ar->opt.predict && ar->n_conv == 2) {
                 double dd = 0.0, dt = 0.0;
                 for (size_t k = 0; k < nhv3; k++) {
                     const double a = s->conv_t1[k] - s->conv_t2[k];
@@ -1080,8 +1086,10 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
                 if (dd > 0.0 && dt > 0.0)
                     alpha = dt / dd < 2.0 ? dt / dd : 2.0;
             }
-            s->predicted = alpha > 0.0;
-            memset(s->rhs, 0, 3 * (size_t)nu * sizeof(double));
+            const int predict = alpha > 0.0;
+            const size_t N3 = 3 * (size_t)nu;
+            double *w = s->warm; /* columns 0-2: plain response; 3-5: predicted one */
+            memset(w, 0, (predict ? 2 : 1) * N3 * sizeof(double));
             for (int64_t t = 0; t < ar->n_terms; t++) {
                 const dk_index a = ar->ta[t], b = ar->tb[t];
                 const dk_index ua = s->unk[a], ub = s->unk[b];
@@ -1090,31 +1098,47 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
                 const dk_index u = ua >= 0 ? ua : ub, known = ua >= 0 ? b : a;
                 for (int d = 0; d < 3; d++) {
                     const size_t k = 3 * (size_t)known + (size_t)d;
-                    const double base = alpha > 0.0 ? x1[k] + alpha * (x1[k] - x2[k])
-                                                     : ar->prev[k];
-                    const double dx = ar->x[k] - base;
+                    const double dx = ar->x[k] - ar->prev[k];
                     if (dx != 0.0) {
-                        s->rhs[(size_t)d * nu + u] += s->tws[t] * dx;
+                        w[(size_t)d * nu + u] += s->tws[t] * dx;
                         moved = 1;
                     }
+                    if (predict)
+                        w[N3 + (size_t)d * nu + u] +=
+                            s->tws[t] * (ar->x[k] - (x1[k] + alpha * (x1[k] - x2[k])));
                 }
             }
-            if (alpha > 0.0)
+            if (moved || predict) {
+                st = dk_cholesky_solve(s->chol, w, predict ? 6 : 3, w, err);
+                if (st != DK_OK)
+                    return dk_error_prefix(err, "ARAP solve");
+            }
+            /* the plain start (ar->x holds the previous solution on the unknowns) */
+            if (moved)
+                for (dk_index u = 0; u < nu; u++)
+                    for (int d = 0; d < 3; d++)
+                        ar->x[3 * s->unknowns[u] + d] += w[(size_t)d * nu + u];
+            if (predict) {
+                const double e_plain = local_energy(ar, s, ar->x, ar->rot, 1);
+                gather(s, ar->x, s->xu); /* keep the plain start */
                 for (dk_index u = 0; u < nu; u++)
                     for (int d = 0; d < 3; d++) {
                         const size_t k = 3 * (size_t)s->unknowns[u] + (size_t)d;
-                        ar->x[k] = x1[k] + alpha * (x1[k] - x2[k]);
+                        ar->x[k] = x1[k] + alpha * (x1[k] - x2[k]) + w[N3 + (size_t)d * nu + u];
                     }
-            if (moved) {
-                st = dk_cholesky_solve(s->chol, s->rhs, 3, s->gu, err);
-                if (st != DK_OK)
-                    return dk_error_prefix(err, "ARAP solve");
-                for (dk_index u = 0; u < nu; u++)
-                    for (int d = 0; d < 3; d++)
-                        ar->x[3 * s->unknowns[u] + d] += s->gu[(size_t)d * nu + u];
+                const double e_pred = local_energy(ar, s, ar->x, ar->rot, 1);
+                if (e_pred <= e_plain) {
+                    s->predicted = 1;
+                    energy = e_pred;
+                } else {
+                    scatter(s, s->xu, ar->x);
+                    energy = local_energy(ar, s, ar->x, ar->rot, 1);
+                }
+                have_energy = 1;
             }
         }
-        energy = local_energy(ar, s, ar->x, ar->rot, 1);
+        if (!have_energy)
+            energy = local_energy(ar, s, ar->x, ar->rot, 1);
         if (ar->opt.on_iteration && ar->opt.on_iteration(ar->opt.user, 0, energy))
             return dk_error_set(err, DK_ERR_CANCELLED, "ARAP solve: cancelled by the observer");
         s->aa_hist = s->aa_head = s->aa_have_pair = 0;
@@ -1192,10 +1216,10 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
     memcpy(positions, ar->x, 3 * (size_t)n * sizeof(double));
     memcpy(ar->prev, ar->x, 3 * (size_t)n * sizeof(double));
     ar->have_prev = 1;
-    /* the predictor's history: converged solutions only, one per distinct target set */
+    /* the predictor's history: the end of every call, one per distinct target set */
     if (!warm_start)
         ar->n_conv = 0;
-    if (converged) {
+    {
         if (ar->n_conv == 0 || memcmp(s->conv_t1, s->targets, nhv3 * sizeof(double)) != 0) {
             double *t = ar->conv2;
             ar->conv2 = ar->conv1;
@@ -1209,7 +1233,6 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
         memcpy(ar->conv1, ar->x, 3 * (size_t)n * sizeof(double));
         memcpy(s->conv_t1, s->targets, nhv3 * sizeof(double));
     }
-    ar->prev_converged = converged;
     memcpy(s->targets_prev, s->targets, nhv3 * sizeof(double));
     s->aa_hist = hist;
     s->aa_head = head;
