@@ -67,9 +67,9 @@ typedef struct dk_arap_options {
                                             >= 0, default 1e-6                            */
     dk_arap_acceleration acceleration; /**< default DK_ARAP_ACCEL_ANDERSON                */
     int anderson_depth;                /**< 1..20, default 5                              */
-    int predict;                       /**< warm starts extrapolate along the drag (the
-                                            secant of the last two converged solutions,
-                                            see dk_arap_solve); 0 or 1, default 1         */
+    int predict;                       /**< warm starts may extrapolate along the drag
+                                            (the secant of the last two solutions, see
+                                            dk_arap_solve); 0 or 1, default 1             */
     dk_arap_iteration_fn on_iteration; /**< optional, NULL by default                     */
     void *user;                        /**< passed to on_iteration                        */
 } dk_arap_options;
@@ -108,10 +108,11 @@ dk_status dk_arap_rebind(dk_arap *arap, const dk_constraint_desc *constraints, d
  *  row-major transform per handle, see dk_constraints_targets). `warm_start` non-zero starts
  *  from the previous solution when there is one, plus the global step's response (previous
  *  rotations held) to how far the constrained vertices moved since. With the `predict` option,
- *  when the previous call converged and the two converged solutions before (x1, x2, for
- *  targets t1, t2) show a drag direction, the base is x1 + alpha (x1 - x2) instead, alpha =
- *  the projection of t - t1 on t1 - t2 clamped to [0, 2] (0, a reversed drag: the plain warm
- *  start), and the response covers the rest of the move. Else, and on cold starts,
+ *  when the ends of the last two calls for different targets (x1 = the previous solution for
+ *  t1, x2 for t2; converged or not) show a drag direction, a second start is built from the
+ *  base x1 + alpha (x1 - x2), alpha = the projection of t - t1 on t1 - t2 clamped to [0, 2]
+ *  (<= 0, a reversed drag: no second start), and the start with the lower energy is used
+ *  (info.predicted says which). Else, and on cold starts,
  *  from the global step with all rotations = identity, i.e. naive Laplacian editing.
  *  `warm_start` 2 resumes: when the targets equal the previous call's and that call ended
  *  normally, iterations continue exactly where it stopped (Anderson history included), so a

@@ -404,7 +404,7 @@ PyDoc_STRVAR(arap_doc,
              "lambda w/(1-w) |p - t|^2. stiffness (n values > 0) scales each vertex's cell\n"
              "energy. Iterates local/global steps (Anderson-accelerated with an energy\n"
              "safeguard) until the relative energy change <= tolerance. predict: warm starts\n"
-             "after two converged solves extrapolate along the drag (secant predictor). See\n"
+             "may extrapolate along the drag (secant of the last two solutions). See\n"
              "docs/methods/arap.md.");
 
 static PyType_Slot arap_slots[] = {
