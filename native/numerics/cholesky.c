@@ -315,6 +315,7 @@ size_t dk_cholesky_memory(const dk_cholesky *chol)
     bytes += ((size_t)chol->n + 1) * sizeof(dk_index);
     bytes += (size_t)chol->pattern_start[chol->n] * sizeof(dk_index);
     if (chol->common_started) bytes += chol->common.memory_inuse;
+    bytes += dk_trisolve_bytes(chol->plan);
     return bytes;
 }
 

@@ -38,6 +38,9 @@ int dk_trisolve_solve(dk_trisolve *plan, const double *b, int nrhs, double *x);
 /** Estimated speed-up of the plan's split (serial work / critical path), for tests. */
 double dk_trisolve_balance(const dk_trisolve *plan);
 
+/** Bytes held by the plan and its workspace. */
+size_t dk_trisolve_bytes(const dk_trisolve *plan);
+
 /** Frees the plan (NULL is fine). */
 void dk_trisolve_free(dk_trisolve *plan);
 

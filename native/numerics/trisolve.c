@@ -61,6 +61,16 @@ void dk_trisolve_free(dk_trisolve *p)
     free(p);
 }
 
+size_t dk_trisolve_bytes(const dk_trisolve *p)
+{
+    if (!p)
+        return 0;
+    const size_t n = (size_t)p->n;
+    return sizeof *p + n * (sizeof(*p->rows) + sizeof(*p->vals) + sizeof(int)) +
+           sizeof(int) * (2 * (size_t)(p->n_ranges[0] + p->n_ranges[1]) + n) +
+           2 * n * (size_t)p->cap * sizeof(double);
+}
+
 double dk_trisolve_balance(const dk_trisolve *p)
 {
     return p && p->critical_work > 0.0 ? p->total_work / p->critical_work : 0.0;
