@@ -333,17 +333,25 @@ dk_trisolve *dk_trisolve_plan(const cholmod_factor *L)
         }
         p->ll = L->is_ll;
     }
-    for (int j = 0; j < n; j++) {
+    /* parent(j) = the smallest row below the diagonal. Inside a supernode the tree is a
+     * chain (parent = the next column) and only the last column's list is scanned: O(|Ls|)
+     * per factor instead of O(entries), which matters at 10^6 vertices. */
+    for (size_t sn = 0; sn < (L->is_super ? L->nsuper : (size_t)n); sn++) {
+        const int j0 = L->is_super ? ((const int *)L->super)[sn] : (int)sn;
+        const int tail = L->is_super ? ((const int *)L->super)[sn + 1] - 1 : (int)sn;
         int q = -1;
-        for (int k = 1; k < p->len[j]; k++) {
-            const int r = p->rows[j][k];
-            if (r <= j || r >= n)
+        for (int k = 1; k < p->len[tail]; k++) {
+            const int r = p->rows[tail][k];
+            if (r <= tail || r >= n)
                 goto fail;
             if (q < 0 || r < q)
                 q = r;
         }
-        parent[j] = q;
-        entries += (double)p->len[j];
+        for (int c = j0; c < tail; c++)
+            parent[c] = c + 1;
+        parent[tail] = q;
+        for (int c = j0; c <= tail; c++)
+            entries += (double)p->len[c];
     }
     if (entries < MIN_ENTRIES || !build_schedule(p, parent))
         goto fail;
