@@ -35,7 +35,8 @@ struct dk_cholesky {
     int n_factorizations;
     int n_analyses;
     dk_trisolve *plan;       /* two-thread substitutions for big factors, or NULL       */
-    int use_plan;            /* 0: always cholmod_solve2 (tests compare the two)        */
+    int use_plan;            /* 0: always cholmod_solve2; 1: plans when worthwhile;
+                                2: plans for any factor (tests)                        */
 };
 
 /* A read-only CHOLMOD view of `a` (CHOLMOD does not write through it). */
@@ -227,7 +228,8 @@ dk_status dk_cholesky_factorize(dk_cholesky *chol, const dk_sparse *a, dk_error 
     }
     chol->factored = 1;
     /* NULL (small factor, no gain, no memory): solves use cholmod_solve2 */
-    chol->plan = dk_trisolve_plan(chol->factor);
+    chol->plan = chol->use_plan == 2 ? dk_trisolve_plan(chol->factor, 0.0, 0.0)
+                                     : dk_trisolve_plan(chol->factor, 200000.0, 1.25);
     return DK_OK;
 }
 
@@ -300,7 +302,7 @@ int dk_cholesky_analysis_count(const dk_cholesky *chol)
 
 void dk_cholesky_set_parallel(dk_cholesky *chol, int on)
 {
-    if (chol) chol->use_plan = on != 0;
+    if (chol) chol->use_plan = on == 2 ? 2 : on != 0;
 }
 
 double dk_cholesky_parallel_speedup(const dk_cholesky *chol)

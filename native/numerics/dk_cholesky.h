@@ -38,7 +38,9 @@ dk_status dk_cholesky_solve(dk_cholesky *chol, const double *b, int nrhs, double
 /** Solves of big factors (>= 200,000 entries) run their forward and backward substitutions
  *  on two threads, over disjoint subtrees of the elimination tree (dk_trisolve.h), when the
  *  split promises a speed-up of at least 1.25; results equal cholmod_solve2's to rounding.
- *  `on` = 0 makes this object always use cholmod_solve2 (tests and benchmarks compare). */
+ *  `on` = 0 makes this object always use cholmod_solve2 (tests and benchmarks compare); 1 is
+ *  the default; 2 plans two-thread solves for every later factorization whatever its size
+ *  and balance (tests of the scheduling on small and degenerate trees). */
 void dk_cholesky_set_parallel(dk_cholesky *chol, int on);
 
 /** Estimated speed-up (serial work / critical path) of the two-thread solve planned for the

@@ -25,9 +25,12 @@ typedef struct dk_trisolve dk_trisolve;
 
 /** A plan for the numeric factor `L` (CHOLMOD_INT indices, real doubles, postordered
  *  elimination tree). Returns NULL when the factor does not qualify (symbolic, complex,
- *  not postordered, too small to gain, out of memory): the caller then uses cholmod_solve2.
- *  The plan refers to L's arrays: rebuild it after every numeric factorization. */
-dk_trisolve *dk_trisolve_plan(const cholmod_factor *L);
+ *  not postordered, fewer than `min_entries` entries, an estimated speed-up below
+ *  `min_speedup`, out of memory): the caller then uses cholmod_solve2. dk_cholesky passes
+ *  200,000 entries (below, a solve takes < ~0.3 ms and the thread start and copies eat the
+ *  gain) and 1.25; tests pass 0 and 0 to exercise any tree. The plan refers to L's arrays:
+ *  rebuild it after every numeric factorization. */
+dk_trisolve *dk_trisolve_plan(const cholmod_factor *L, double min_entries, double min_speedup);
 
 /** Solves A X = B with the factor of A (P A P' = L L' or L D L'), B and X column-major
  *  n x nrhs (X may alias B), 1 <= nrhs <= 16. Returns 0, or -1 when nrhs is out of that

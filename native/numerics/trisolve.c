@@ -17,13 +17,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* Below this many factor entries a solve takes < ~0.3 ms and a thread start (~30-50 us)
- * plus the extra copies eat most of the gain. */
-#define MIN_ENTRIES 200000
 #define MAX_ITEMS 512
 #define MAX_EXPANSIONS 256
-/* Plans whose estimated speed-up is below this are not worth a thread. */
-#define MIN_SPEEDUP 1.25
 
 struct dk_trisolve {
     int n;
@@ -151,7 +146,7 @@ static double assign(item *it, int count, unsigned char *who)
     return bin[0] > bin[1] ? bin[0] : bin[1];
 }
 
-static int build_schedule(dk_trisolve *p, const int *parent)
+static int build_schedule(dk_trisolve *p, const int *parent, double min_speedup)
 {
     const int n = p->n;
     int ok = 0;
@@ -227,18 +222,24 @@ static int build_schedule(dk_trisolve *p, const int *parent)
             v = kids[kid_start[v]];
             top_work += (double)p->len[v];
         }
+        /* merge light children into chunks of at least light / 64, and of 1/128 of their
+         * total so that a node with thousands of children (a star) still fits MAX_ITEMS */
+        double kids_work = 0.0;
+        for (int q = kid_start[v]; q < kid_start[v + 1]; q++)
+            kids_work += subwork[kids[q]];
+        const double chunk = kids_work / 128.0 > light / 64.0 ? kids_work / 128.0 : light / 64.0;
         const int c2 = add_items(it, count, kids + kid_start[v], kid_start[v + 1] - kid_start[v],
-                                 first, subwork, light / 64.0);
+                                 first, subwork, chunk);
         if (c2 < 0)
             break;
         count = c2;
     }
     p->total_work = total;
     p->critical_work = best_est;
-    if (!(total >= MIN_SPEEDUP * best_est))
+    if (!(total >= min_speedup * best_est))
         goto out;
     /* ranges per thread, ascending; the top = the columns no range covers */
-    p->ranges = malloc(sizeof(int) * 2 * (size_t)best_count);
+    p->ranges = malloc(sizeof(int) * (2 * (size_t)best_count + 2));
     p->top = malloc(sizeof(int) * (size_t)n);
     covered = calloc((size_t)n, 1);
     if (!p->ranges || !p->top || !covered)
@@ -279,7 +280,7 @@ out:
     return ok;
 }
 
-dk_trisolve *dk_trisolve_plan(const cholmod_factor *L)
+dk_trisolve *dk_trisolve_plan(const cholmod_factor *L, double min_entries, double min_speedup)
 {
     if (!L || L->xtype != CHOLMOD_REAL || L->itype != CHOLMOD_INT ||
         L->dtype != CHOLMOD_DOUBLE || !L->x || L->n < 2 || L->n > (size_t)INT32_MAX)
@@ -353,7 +354,7 @@ dk_trisolve *dk_trisolve_plan(const cholmod_factor *L)
         for (int c = j0; c <= tail; c++)
             entries += (double)p->len[c];
     }
-    if (entries < MIN_ENTRIES || !build_schedule(p, parent))
+    if (entries < min_entries || !build_schedule(p, parent, min_speedup))
         goto fail;
     free(parent);
     return p;

@@ -566,6 +566,164 @@ static void test_parallel_solve(void)
     free(shift);
 }
 
+/* The schedule on trees of every shape, with plans forced on small and unbalanced factors
+ * (dk_cholesky_set_parallel 2): a path (the elimination tree is one chain: everything is
+ * "top"), a star (one root with thousands of leaf children, merged into chunks), a forest of
+ * 37 random components (many roots), a random sparse graph, and the latter shifted to be
+ * indefinite (LDL'). Each against cholmod_solve2 for 1, 3 and 5 right-hand sides. */
+static dk_sparse *from_edges(dk_index n, const dk_index *ea, const dk_index *eb, int64_t m,
+                             double shift)
+{
+    const int64_t nt = 2 * m + n;
+    dk_index *r = malloc(sizeof(dk_index) * (size_t)nt), *c = malloc(sizeof(dk_index) * (size_t)nt);
+    double *v = malloc(sizeof(double) * (size_t)nt);
+    dk_sparse *a = NULL;
+    dk_error err = {0};
+    if (r && c && v) {
+        int64_t k = 0;
+        for (dk_index i = 0; i < n; i++) {
+            r[k] = c[k] = i;
+            v[k++] = shift;
+        }
+        for (int64_t e = 0; e < m; e++) {
+            const double w = 0.5 + 0.5 * (rnd() + 1.0);
+            r[k] = ea[e]; c[k] = eb[e]; v[k++] = -w;
+            r[k] = eb[e]; c[k] = ea[e]; v[k++] = -w;
+        }
+        dk_sparse *t = NULL;
+        if (dk_sparse_from_triplets(n, n, k, r, c, v, &t, &err) == DK_OK) {
+            /* add the degrees to the diagonal (a weighted graph Laplacian + shift) */
+            for (dk_index j = 0; j < n; j++) {
+                double deg = 0.0;
+                dk_index dpos = -1;
+                for (dk_index q = t->col_start[j]; q < t->col_start[j + 1]; q++) {
+                    if (t->row_index[q] == j)
+                        dpos = q;
+                    else
+                        deg -= t->values[q];
+                }
+                if (dpos >= 0)
+                    t->values[dpos] += deg;
+            }
+            a = t;
+        }
+    }
+    free(r);
+    free(c);
+    free(v);
+    return a;
+}
+
+static void check_forced(dk_sparse *a, int indefinite, const char *name)
+{
+    const dk_index n = a->n_rows;
+    dk_error err = {0};
+    dk_cholesky *ch = NULL;
+    int ok = (indefinite ? dk_cholesky_analyze_indefinite(a, &ch, &err)
+                         : dk_cholesky_analyze(a, &ch, &err)) == DK_OK;
+    if (ok) {
+        dk_cholesky_set_parallel(ch, 2);
+        ok = dk_cholesky_factorize(ch, a, &err) == DK_OK;
+    }
+    CHECK_MSG(ok, "%s: %s", name, err.message);
+    if (!ok) {
+        dk_cholesky_free(ch);
+        return;
+    }
+    CHECK_MSG(dk_cholesky_parallel_speedup(ch) > 0.0, "%s: no plan", name);
+    double *b = malloc(sizeof(double) * (size_t)n * 5), *x = malloc(sizeof(double) * (size_t)n * 5),
+           *y = malloc(sizeof(double) * (size_t)n * 5);
+    for (int k = 1; b && x && y && k <= 5; k += 2) {
+        for (size_t i = 0; i < (size_t)n * (size_t)k; i++)
+            b[i] = rnd();
+        dk_cholesky_set_parallel(ch, 0);
+        CHECK(dk_cholesky_solve(ch, b, k, x, &err) == DK_OK);
+        dk_cholesky_set_parallel(ch, 2);
+        CHECK(dk_cholesky_solve(ch, b, k, y, &err) == DK_OK);
+        double diff = 0.0, big = 0.0;
+        for (size_t i = 0; i < (size_t)n * (size_t)k; i++) {
+            diff = fmax(diff, fabs(x[i] - y[i]));
+            big = fmax(big, fabs(x[i]));
+        }
+        CHECK_MSG(diff <= 1e-10 * big, "%s, %d right-hand sides: differs by %.3g (of %.3g)", name,
+                  k, diff, big);
+    }
+    printf("%s: n=%d, forced plan, estimated speed-up %.2f\n", name, (int)n,
+           dk_cholesky_parallel_speedup(ch));
+    free(b);
+    free(x);
+    free(y);
+    dk_cholesky_free(ch);
+}
+
+static void test_parallel_schedule_shapes(void)
+{
+    enum { NMAX = 6000, MMAX = 6 * NMAX };
+    dk_index *ea = malloc(sizeof(dk_index) * MMAX), *eb = malloc(sizeof(dk_index) * MMAX);
+    CHECK(ea && eb);
+    if (!ea || !eb) {
+        free(ea);
+        free(eb);
+        return;
+    }
+    int64_t m = 0;
+    dk_sparse *a;
+    /* path */
+    for (dk_index i = 0; i + 1 < 3000; i++, m++) {
+        ea[m] = i;
+        eb[m] = i + 1;
+    }
+    a = from_edges(3000, ea, eb, m, 1e-3);
+    if (a) check_forced(a, 0, "path");
+    dk_sparse_free(a);
+    /* star */
+    m = 0;
+    for (dk_index i = 1; i < 2500; i++, m++) {
+        ea[m] = 0;
+        eb[m] = i;
+    }
+    a = from_edges(2500, ea, eb, m, 1e-3);
+    if (a) check_forced(a, 0, "star");
+    dk_sparse_free(a);
+    /* forest of 37 random components */
+    m = 0;
+    dk_index start = 0;
+    for (int comp = 0; comp < 37; comp++) {
+        const dk_index size = 20 + (dk_index)((rnd() + 1.0) * 60.0);
+        for (dk_index i = 1; i < size; i++) { /* a random tree plus extra edges */
+            ea[m] = start + i;
+            eb[m++] = start + (dk_index)((rnd() + 1.0) * 0.5 * i) % i;
+            const dk_index j = (dk_index)((rnd() + 1.0) * 0.5 * size) % size;
+            if (j != i) {
+                ea[m] = start + i;
+                eb[m++] = start + j;
+            }
+        }
+        start += size;
+    }
+    a = from_edges(start, ea, eb, m, 1e-3);
+    if (a) check_forced(a, 0, "forest of 37 components");
+    dk_sparse_free(a);
+    /* random sparse graph, SPD and shifted indefinite */
+    m = 0;
+    for (dk_index i = 0; i < NMAX; i++)
+        for (int k = 0; k < 2; k++) {
+            const dk_index j = (dk_index)((rnd() + 1.0) * 0.5 * NMAX) % NMAX;
+            if (j != i) {
+                ea[m] = i;
+                eb[m++] = j;
+            }
+        }
+    a = from_edges(NMAX, ea, eb, m, 1e-3);
+    if (a) check_forced(a, 0, "random graph");
+    dk_sparse_free(a);
+    a = from_edges(NMAX, ea, eb, m, -0.37);
+    if (a) check_forced(a, 1, "random graph - 0.37 I (LDL')");
+    dk_sparse_free(a);
+    free(ea);
+    free(eb);
+}
+
 /* Minimal OBJ reading ("v x y z" and "f a b c ..." with a/b/c corner forms, polygons fanned)
  * and cotangent Laplacian, local to this test so that it depends on the numerics layer only
  * (the library's own reader and operators are tested in their own suites). */
@@ -704,7 +862,7 @@ static void test_armadillo(void)
     free(m.tri);
 }
 
-DK_TEST_MAIN(test_small_against_lapack, test_parallel_solve, test_not_positive_definite,
+DK_TEST_MAIN(test_small_against_lapack, test_parallel_solve, test_parallel_schedule_shapes, test_not_positive_definite,
              test_not_positive_definite_supernodal,
              test_refactorize_and_multi_rhs, test_bad_arguments, test_indefinite_inertia,
              test_big_grid, test_armadillo)
