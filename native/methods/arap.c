@@ -52,7 +52,7 @@ typedef struct arap_system {
     int have_targets;
     /* where the last solve stopped, for a resumed solve (warm_start 2, same targets) */
     double *targets_prev; /* n_handle_vertices x 3: the targets it solved for            */
-    double *conv_t1, *conv_t2; /* n_handle_vertices x 3: the targets of dk_arap's conv1/2 */
+    double *targets_prev2; /* n_handle_vertices x 3: the targets of dk_arap's prev2      */
     double *warm;         /* 6 nu: the two warm-start responses (plain, predicted)       */
     int resumable, aa_hist, aa_head, aa_have_pair;
     int predicted;        /* the last warm start used the secant predictor                */
@@ -72,10 +72,12 @@ struct dk_arap {
     double *rot;          /* n x 9 rotations                                             */
     double *prev;         /* n x 3 previous solution (warm start)                        */
     int have_prev;
-    /* secant predictor of a warm start: the ends of the last two calls for different
-     * targets under the current constraints, n x 3 each; n_conv counts them */
-    double *conv1, *conv2;
-    int n_conv;
+    /* secant predictor of a warm start: prev2 (n x 3) is the end of the last call before
+     * the previous one with other targets; n_hist counts how many of prev (with
+     * sys.targets_prev) and prev2 (with sys.targets_prev2) hold ends of calls under the
+     * current constraints */
+    double *prev2;
+    int n_hist;
     int analysis_count, factorization_count;
 };
 
@@ -295,8 +297,7 @@ static void system_free(arap_system *s)
     free(s->df);
     free(s->targets);
     free(s->targets_prev);
-    free(s->conv_t1);
-    free(s->conv_t2);
+    free(s->targets_prev2);
     free(s->warm);
     memset(s, 0, sizeof *s);
 }
@@ -463,10 +464,9 @@ static dk_status system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_
     s->tws = malloc(((size_t)ar->n_terms + 1) * sizeof *s->tws);
     s->targets = malloc(((size_t)c->n_handle_vertices * 3 + 1) * sizeof *s->targets);
     s->targets_prev = malloc(((size_t)c->n_handle_vertices * 3 + 1) * sizeof *s->targets_prev);
-    s->conv_t1 = malloc(((size_t)c->n_handle_vertices * 3 + 1) * sizeof *s->conv_t1);
-    s->conv_t2 = malloc(((size_t)c->n_handle_vertices * 3 + 1) * sizeof *s->conv_t2);
+    s->targets_prev2 = malloc(((size_t)c->n_handle_vertices * 3 + 1) * sizeof *s->targets_prev2);
     if (!s->unk || !s->target_of || !s->soft_k || !s->tws || !s->targets || !s->targets_prev ||
-        !s->conv_t1 || !s->conv_t2) {
+        !s->targets_prev2) {
         system_free(s);
         return oom(err, "constraint system");
     }
@@ -591,8 +591,7 @@ void dk_arap_free(dk_arap *ar)
     free(ar->x);
     free(ar->rot);
     free(ar->prev);
-    free(ar->conv1);
-    free(ar->conv2);
+    free(ar->prev2);
     free(ar);
 }
 
@@ -623,9 +622,8 @@ dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraint
     ar->x = malloc(((size_t)ar->n * 3 + 1) * sizeof *ar->x);
     ar->rot = malloc(((size_t)ar->n * 9 + 1) * sizeof *ar->rot);
     ar->prev = malloc(((size_t)ar->n * 3 + 1) * sizeof *ar->prev);
-    ar->conv1 = malloc(((size_t)ar->n * 3 + 1) * sizeof *ar->conv1);
-    ar->conv2 = malloc(((size_t)ar->n * 3 + 1) * sizeof *ar->conv2);
-    if (!ar->x || !ar->rot || !ar->prev || !ar->conv1 || !ar->conv2) {
+    ar->prev2 = malloc(((size_t)ar->n * 3 + 1) * sizeof *ar->prev2);
+    if (!ar->x || !ar->rot || !ar->prev || !ar->prev2) {
         dk_arap_free(ar);
         return oom(err, "positions");
     }
@@ -654,7 +652,7 @@ dk_status dk_arap_rebind(dk_arap *ar, const dk_constraint_desc *constraints, dk_
         return st;
     system_free(&ar->sys);
     ar->sys = s;
-    ar->n_conv = 0; /* other constraints: the drag history no longer predicts */
+    ar->n_hist = 0; /* other constraints: the drag history no longer predicts */
     return DK_OK;
 }
 
@@ -1073,15 +1071,15 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
              * 5-14x closer to the step's minimum. Soft handles' own target changes are not in
              * the response: this is only a starting point, and the iterations do the rest. */
             const dk_index nu = s->nu;
-            const double *x1 = ar->conv1, *x2 = ar->conv2;
+            const double *x1 = ar->prev, *x2 = ar->prev2;
             double alpha = 0.0;
             int moved = 0;
-            if (ar->opt.predict && ar->n_conv == 2) {
+            if (ar->opt.predict && ar->n_hist == 2) {
                 double dd = 0.0, dt = 0.0;
                 for (size_t k = 0; k < nhv3; k++) {
-                    const double a = s->conv_t1[k] - s->conv_t2[k];
+                    const double a = s->targets_prev[k] - s->targets_prev2[k];
                     dd += a * a;
-                    dt += a * (s->targets[k] - s->conv_t1[k]);
+                    dt += a * (s->targets[k] - s->targets_prev[k]);
                 }
                 if (dd > 0.0 && dt > 0.0)
                     alpha = dt / dd < 2.0 ? dt / dd : 2.0;
@@ -1213,26 +1211,24 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
         if (ar->opt.on_iteration && ar->opt.on_iteration(ar->opt.user, it, energy))
             return dk_error_set(err, DK_ERR_CANCELLED, "ARAP solve: cancelled by the observer");
     }
+    /* the predictor's history: with other targets than the previous call's, that call's end
+     * moves to prev2 (a pointer swap); with the same ones (a resumed slice) it is replaced */
+    if (!warm_start)
+        ar->n_hist = 0;
+    if (ar->n_hist > 0 && memcmp(s->targets_prev, s->targets, nhv3 * sizeof(double)) != 0) {
+        double *t = ar->prev2;
+        ar->prev2 = ar->prev;
+        ar->prev = t;
+        t = s->targets_prev2;
+        s->targets_prev2 = s->targets_prev;
+        s->targets_prev = t;
+        ar->n_hist = 2;
+    } else if (ar->n_hist == 0) {
+        ar->n_hist = 1;
+    }
     memcpy(positions, ar->x, 3 * (size_t)n * sizeof(double));
     memcpy(ar->prev, ar->x, 3 * (size_t)n * sizeof(double));
     ar->have_prev = 1;
-    /* the predictor's history: the end of every call, one per distinct target set */
-    if (!warm_start)
-        ar->n_conv = 0;
-    {
-        if (ar->n_conv == 0 || memcmp(s->conv_t1, s->targets, nhv3 * sizeof(double)) != 0) {
-            double *t = ar->conv2;
-            ar->conv2 = ar->conv1;
-            ar->conv1 = t;
-            double *tt = s->conv_t2;
-            s->conv_t2 = s->conv_t1;
-            s->conv_t1 = tt;
-            if (ar->n_conv < 2)
-                ar->n_conv++;
-        }
-        memcpy(ar->conv1, ar->x, 3 * (size_t)n * sizeof(double));
-        memcpy(s->conv_t1, s->targets, nhv3 * sizeof(double));
-    }
     memcpy(s->targets_prev, s->targets, nhv3 * sizeof(double));
     s->aa_hist = hist;
     s->aa_head = head;
