@@ -407,16 +407,20 @@ fail:
             const double *v = p->vals[j];                                                    \
             const int m = p->len[j];                                                         \
             double *xj = w + (size_t)j * K;                                                  \
-            /* two sets of accumulators (even and odd entries): halves the dependency chain */ \
+            /* two sets of accumulators (even and odd entries): halves the dependency chain. \
+             * The entries are read from the last to the first, so that with the columns  \
+             * also taken last to first the factor is streamed in one descending sweep;   \
+             * ascending runs inside descending columns defeated the hardware prefetch   \
+             * (bi-Laplacian, 3 RHS: 2.0 ms -> 0.9 ms for the parallel part). */         \
             double y0 = xj[0], y1 = 0.0, y2 = 0.0, y3 = 0.0;                                 \
             double z0 = 0.0, z1 = 0.0, z2 = 0.0, z3 = 0.0;                                   \
             if (K > 1) y1 = xj[K > 1 ? 1 : 0];                                               \
             if (K > 2) y2 = xj[K > 2 ? 2 : 0];                                               \
             if (K > 3) y3 = xj[K > 3 ? 3 : 0];                                               \
-            int q = 1;                                                                       \
-            for (; q + 1 < m; q += 2) {                                                      \
-                const double *xi = w + (size_t)r[q] * K, *xh = w + (size_t)r[q + 1] * K;     \
-                const double a = v[q], b = v[q + 1];                                         \
+            int q = m - 1;                                                                   \
+            for (; q >= 2; q -= 2) {                                                         \
+                const double *xi = w + (size_t)r[q] * K, *xh = w + (size_t)r[q - 1] * K;     \
+                const double a = v[q], b = v[q - 1];                                         \
                 y0 -= a * xi[0];                                                             \
                 z0 -= b * xh[0];                                                             \
                 if (K > 1) y1 -= a * xi[K > 1 ? 1 : 0];                                      \
@@ -426,9 +430,9 @@ fail:
                 if (K > 3) y3 -= a * xi[K > 3 ? 3 : 0];                                      \
                 if (K > 3) z3 -= b * xh[K > 3 ? 3 : 0];                                      \
             }                                                                                \
-            if (q < m) {                                                                     \
-                const double *xi = w + (size_t)r[q] * K;                                     \
-                const double a = v[q];                                                       \
+            if (q == 1) {                                                                    \
+                const double *xi = w + (size_t)r[1] * K;                                     \
+                const double a = v[1];                                                       \
                 y0 -= a * xi[0];                                                             \
                 if (K > 1) y1 -= a * xi[K > 1 ? 1 : 0];                                      \
                 if (K > 2) y2 -= a * xi[K > 2 ? 2 : 0];                                      \
@@ -477,7 +481,7 @@ static void backward_k(const dk_trisolve *p, double *w, int k, int j0, int j1)
         const double *v = p->vals[j];
         const int m = p->len[j];
         double *xj = w + (size_t)j * (size_t)k;
-        for (int q = 1; q < m; q++) {
+        for (int q = m - 1; q >= 1; q--) {
             const double *xi = w + (size_t)r[q] * (size_t)k;
             const double a = v[q];
             for (int c = 0; c < k; c++)
