@@ -10,6 +10,7 @@
 
 #include "dk_cholesky.h"
 #include "dk_operators.h"
+#include "dk_parallel.h"
 #include "dk_sparse.h"
 
 /* One constraint set: everything that changes on rebind. */
@@ -36,9 +37,11 @@ struct dk_laplacian_edit {
     const dk_mesh *mesh;
     dk_laplacian_edit_options opt;
     dk_index n;
-    /* A: row i holds a_col/a_val[a_start[i] .. a_start[i+1]-1], the diagonal first. */
+    /* A: row i holds a_col/a_val[a_start[i] .. a_start[i+1]-1], the diagonal first. The
+     * pattern is symmetric (i and its one-ring); at_val[k] is the transposed entry: for
+     * k in row i with column j, at_val[k] = a_ji, so A^T y is a gather over row i too. */
     dk_index *a_start, *a_col;
-    double *a_val;
+    double *a_val, *at_val;
     double *delta_rest;  /* n x 3 column-major: A x0                                      */
     double *rest;        /* n x 3 column-major copy of the rest positions                 */
     dk_index *frame_nb;  /* n: neighbour defining the tangent, -1 = no rest frame          */
@@ -49,10 +52,13 @@ struct dk_laplacian_edit {
     /* solve buffers */
     double *x;           /* n x 3 column-major current positions                           */
     double *delta;       /* n x 3 column-major delta of the last solve                     */
-    double *r;           /* n: residual of one coordinate                                  */
-    double *normals;     /* n x 3 row-major (local frames)                                 */
-    double *prev;        /* n x 3 column-major previous iterate (local frames)             */
+    double *ddelta;      /* n x 3 column-major change of delta in a local-frame update      */
+    double *face_cross;  /* n_faces x 3 face cross products (local frames)                */
 };
+
+/* Passes over at least this many vertices run on two threads (dk_run_halves): below it the
+ * thread start (~30 us) is not repaid. */
+enum { LE_PARALLEL_MIN = 8192 };
 
 /* ------------------------------------------------------------------ small helpers ------- */
 
@@ -181,6 +187,29 @@ static dk_status build_operator(dk_laplacian_edit *le, dk_error *err)
     }
     le->a_start[n] = (dk_index)nnz;
     free(w);
+    le->at_val = malloc(sizeof(double) * (size_t)nnz);
+    if (!le->at_val)
+        return oom(err, "operator");
+    for (dk_index i = 0; i < n; i++) {
+        le->at_val[le->a_start[i]] = le->a_val[le->a_start[i]];
+        for (dk_index k = le->a_start[i] + 1; k < le->a_start[i + 1]; k++) {
+            /* find i in row j (its neighbours are sorted ascending after the diagonal) */
+            const dk_index j = le->a_col[k];
+            dk_index lo = le->a_start[j] + 1, hi = le->a_start[j + 1];
+            while (lo < hi) {
+                const dk_index mid = lo + (hi - lo) / 2;
+                if (le->a_col[mid] < i)
+                    lo = mid + 1;
+                else
+                    hi = mid;
+            }
+            if (lo >= le->a_start[j + 1] || le->a_col[lo] != i)
+                return dk_error_set(err, DK_ERR_INTERNAL,
+                                    "LaplacianEdit: one-rings of vertices %d and %d disagree",
+                                    (int)i, (int)j);
+            le->at_val[k] = le->a_val[lo];
+        }
+    }
     return DK_OK;
 }
 
@@ -197,26 +226,53 @@ static void apply_a(const dk_laplacian_edit *le, const double *x, double *y)
 
 /* ------------------------------------------------------------------ local frames -------- */
 
-/* Area-weighted vertex normals (unnormalised: sums of face cross products) of the
- * column-major positions x into le->normals (row-major). */
-static void vertex_normals(const dk_laplacian_edit *le, const double *x, double *nrm)
+typedef struct face_normal_job {
+    const dk_laplacian_edit *le;
+    const double *x; /* column-major positions */
+    double *out;     /* n_faces x 3: cross products (twice the area times the unit normal) */
+} face_normal_job;
+
+/* Face cross products of faces [f0, f1) (a dk_range_fn). */
+static void face_normals_range(void *ctx, dk_index f0, dk_index f1, int part)
 {
-    const dk_mesh *m = le->mesh;
-    const dk_index n = le->n;
-    memset(nrm, 0, sizeof(double) * 3 * (size_t)n);
-    for (dk_index f = 0; f < m->n_faces; f++) {
-        const dk_index *t = m->faces + 3 * f;
-        double a[3], b[3], c[3];
+    const face_normal_job *job = ctx;
+    const dk_mesh *m = job->le->mesh;
+    const size_t n = (size_t)job->le->n;
+    const double *x = job->x;
+    (void)part;
+    for (dk_index f = f0; f < f1; f++) {
+        const dk_index *t = m->faces + 3 * (size_t)f;
+        double a[3], b[3];
         for (int d = 0; d < 3; d++) {
-            a[d] = x[d * n + t[1]] - x[d * n + t[0]];
-            b[d] = x[d * n + t[2]] - x[d * n + t[0]];
+            a[d] = x[d * n + (size_t)t[1]] - x[d * n + (size_t)t[0]];
+            b[d] = x[d * n + (size_t)t[2]] - x[d * n + (size_t)t[0]];
         }
+        double *c = job->out + 3 * (size_t)f;
         c[0] = a[1] * b[2] - a[2] * b[1];
         c[1] = a[2] * b[0] - a[0] * b[2];
         c[2] = a[0] * b[1] - a[1] * b[0];
-        for (int k = 0; k < 3; k++)
-            for (int d = 0; d < 3; d++)
-                nrm[3 * t[k] + d] += c[d];
+    }
+}
+
+/* le->face_cross := the face cross products at the column-major positions x. */
+static void face_normals(dk_laplacian_edit *le, const double *x)
+{
+    face_normal_job job = {le, x, le->face_cross};
+    dk_run_halves(face_normals_range, &job, le->mesh->n_faces, LE_PARALLEL_MIN);
+}
+
+/* Area-weighted normal of vertex i (unnormalised: the sum of its faces' cross products in
+ * le->face_cross), gathered over the vertex's faces so that vertices can be processed
+ * independently (in parallel). */
+static void vertex_normal(const dk_laplacian_edit *le, dk_index i, double nrm[3])
+{
+    const dk_mesh *m = le->mesh;
+    nrm[0] = nrm[1] = nrm[2] = 0.0;
+    for (dk_index k = m->vf_start[i]; k < m->vf_start[i + 1]; k++) {
+        const double *c = le->face_cross + 3 * (size_t)m->vf_index[k];
+        nrm[0] += c[0];
+        nrm[1] += c[1];
+        nrm[2] += c[2];
     }
 }
 
@@ -235,19 +291,21 @@ static int make_frame(const dk_laplacian_edit *le, const double *x, dk_index i, 
     nl = sqrt(nl);
     if (!(el2 > 0.0) || !(nl > 1e-14 * el2) || !isfinite(nl))
         return 0;
+    const double inl = 1.0 / nl; /* one division per vector (this runs per vertex per drag) */
     for (int d = 0; d < 3; d++) {
-        nh[d] = nraw[d] / nl;
+        nh[d] = nraw[d] * inl;
         dot += e[d] * nh[d];
     }
     for (int d = 0; d < 3; d++) {
         u[d] = e[d] - dot * nh[d];
         ul += u[d] * u[d];
     }
-    ul = sqrt(ul);
-    if (!(ul > 1e-8 * sqrt(el2)))
+    /* |u| > 1e-8 |e|, compared squared */
+    if (!(ul > 1e-16 * el2))
         return 0;
+    const double iul = 1.0 / sqrt(ul);
     for (int d = 0; d < 3; d++)
-        u[d] /= ul;
+        u[d] *= iul;
     bt[0] = nh[1] * u[2] - nh[2] * u[1];
     bt[1] = nh[2] * u[0] - nh[0] * u[2];
     bt[2] = nh[0] * u[1] - nh[1] * u[0];
@@ -262,9 +320,13 @@ static dk_status build_rest_frames(dk_laplacian_edit *le, dk_error *err)
     le->frame_coef = malloc(sizeof(double) * 3 * (size_t)n);
     if (!le->frame_nb || !le->frame_coef)
         return oom(err, "local frames");
-    vertex_normals(le, le->rest, le->normals);
+    le->face_cross = malloc(sizeof(double) * 3 * (size_t)m->n_faces);
+    if (!le->face_cross)
+        return oom(err, "local frames");
+    face_normals(le, le->rest);
     for (dk_index i = 0; i < n; i++) {
-        const double *nraw = le->normals + 3 * i;
+        double nraw[3];
+        vertex_normal(le, i, nraw);
         double nl = sqrt(nraw[0] * nraw[0] + nraw[1] * nraw[1] + nraw[2] * nraw[2]);
         double best = INFINITY, nh[3], u[3], bt[3];
         dk_index bestj = -1;
@@ -303,23 +365,83 @@ static dk_status build_rest_frames(dk_laplacian_edit *le, dk_error *err)
     return DK_OK;
 }
 
-/* delta := rest frame coordinates rotated into the frames of the positions le->x. */
-static void rotate_deltas(dk_laplacian_edit *le)
+/* Local-frame update of vertices [i0, i1) (a dk_range_fn): delta := the rest frame
+ * coordinates rotated into the frames of the positions le->x, and ddelta := its change. */
+static void rotate_deltas_range(void *ctx, dk_index i0, dk_index i1, int part)
 {
-    const dk_index n = le->n;
-    vertex_normals(le, le->x, le->normals);
-    for (dk_index i = 0; i < n; i++) {
-        double nh[3], u[3], bt[3];
-        const double *c = le->frame_coef + 3 * i;
-        if (le->frame_nb[i] < 0 ||
-            !make_frame(le, le->x, i, le->frame_nb[i], le->normals + 3 * i, nh, u, bt)) {
-            for (int d = 0; d < 3; d++)
-                le->delta[d * n + i] = le->delta_rest[d * n + i];
-            continue;
+    dk_laplacian_edit *le = ctx;
+    const size_t n = (size_t)le->n;
+    (void)part;
+    for (dk_index i = i0; i < i1; i++) {
+        double nraw[3], nh[3], u[3], bt[3], nd[3];
+        const double *c = le->frame_coef + 3 * (size_t)i;
+        int ok = le->frame_nb[i] >= 0;
+        if (ok) {
+            vertex_normal(le, i, nraw);
+            ok = make_frame(le, le->x, i, le->frame_nb[i], nraw, nh, u, bt);
         }
         for (int d = 0; d < 3; d++)
-            le->delta[d * n + i] = c[0] * nh[d] + c[1] * u[d] + c[2] * bt[d];
+            nd[d] = ok ? c[0] * nh[d] + c[1] * u[d] + c[2] * bt[d]
+                       : le->delta_rest[d * n + (size_t)i];
+        for (int d = 0; d < 3; d++) {
+            le->ddelta[d * n + (size_t)i] = nd[d] - le->delta[d * n + (size_t)i];
+            le->delta[d * n + (size_t)i] = nd[d];
+        }
     }
+}
+
+/* Right-hand side of a local-frame update for unknowns [u0, u1) (a dk_range_fn): the
+ * normal equations are linear in delta through A_u^T delta only, so the change of the
+ * solution solves N dx = A_u^T ddelta; gathered per unknown with the transposed values. */
+static void ddelta_rhs_range(void *ctx, dk_index u0, dk_index u1, int part)
+{
+    dk_laplacian_edit *le = ctx;
+    const le_system *s = &le->sys;
+    const size_t n = (size_t)le->n, nu = (size_t)s->n_unknowns;
+    const double *g0 = le->ddelta, *g1 = le->ddelta + n, *g2 = le->ddelta + 2 * n;
+    (void)part;
+    for (dk_index u = u0; u < u1; u++) {
+        const dk_index j = s->unknowns[u];
+        double r0 = 0.0, r1 = 0.0, r2 = 0.0;
+        for (dk_index k = le->a_start[j]; k < le->a_start[j + 1]; k++) {
+            const double a = le->at_val[k];
+            const dk_index i = le->a_col[k];
+            r0 += a * g0[i];
+            r1 += a * g1[i];
+            r2 += a * g2[i];
+        }
+        s->rhs[u] = r0;
+        s->rhs[nu + (size_t)u] = r1;
+        s->rhs[2 * nu + (size_t)u] = r2;
+    }
+}
+
+/* One local-frame update from the solution in le->x (which solves for le->delta): new
+ * frames and deltas, N dx = A_u^T (delta_new - delta_old), x += dx. Returns the largest
+ * vertex move in *change (squared length). */
+static dk_status local_frame_update(dk_laplacian_edit *le, double *change, dk_error *err)
+{
+    le_system *s = &le->sys;
+    const size_t n = (size_t)le->n, nu = (size_t)s->n_unknowns;
+    double big = 0.0;
+    face_normals(le, le->x);
+    dk_run_halves(rotate_deltas_range, le, le->n, LE_PARALLEL_MIN);
+    dk_run_halves(ddelta_rhs_range, le, s->n_unknowns, LE_PARALLEL_MIN);
+    dk_status st = dk_cholesky_solve(s->chol, s->rhs, 3, s->rhs, err);
+    if (st != DK_OK)
+        return dk_error_prefix(err, "LaplacianEdit solve");
+    for (size_t u = 0; u < nu; u++) {
+        const size_t i = (size_t)s->unknowns[u];
+        const double d0 = s->rhs[u], d1 = s->rhs[nu + u], d2 = s->rhs[2 * nu + u];
+        const double d2sum = d0 * d0 + d1 * d1 + d2 * d2;
+        le->x[i] += d0;
+        le->x[n + i] += d1;
+        le->x[2 * n + i] += d2;
+        if (d2sum > big)
+            big = d2sum;
+    }
+    *change = big;
+    return DK_OK;
 }
 
 /* ------------------------------------------------------------------ the system ---------- */
@@ -597,11 +719,8 @@ dk_status dk_laplacian_edit_bind(const dk_mesh *mesh, const dk_constraint_desc *
     le->delta_rest = malloc(sizeof(double) * 3 * (size_t)n);
     le->x = malloc(sizeof(double) * 3 * (size_t)n);
     le->delta = malloc(sizeof(double) * 3 * (size_t)n);
-    le->r = malloc(sizeof(double) * (size_t)n);
-    le->normals = malloc(sizeof(double) * 3 * (size_t)n);
-    le->prev = malloc(sizeof(double) * 3 * (size_t)n);
-    if (!le->rest || !le->delta_rest || !le->x || !le->delta || !le->r || !le->normals ||
-        !le->prev) {
+    le->ddelta = malloc(sizeof(double) * 3 * (size_t)n);
+    if (!le->rest || !le->delta_rest || !le->x || !le->delta || !le->ddelta) {
         st = oom(err, "buffers");
         goto fail;
     }
@@ -694,15 +813,27 @@ dk_status dk_laplacian_edit_rebind(dk_laplacian_edit *le, const dk_constraint_de
 
 /* ------------------------------------------------------------------ energy -------------- */
 
-/* E(x) for positions with element (i, d) at x[i * si + d * sd]. */
-static double energy_of(const dk_laplacian_edit *le, const double *x, size_t si, size_t sd)
+typedef struct energy_job {
+    const dk_laplacian_edit *le;
+    const double *x;  /* element (i, d) at x[i * si + d * sd] */
+    size_t si, sd;
+    double *positions; /* NULL, or n x 3 row-major: receives x (done in the same pass)     */
+    double part[2];
+} energy_job;
+
+/* The terms of E(x) owned by vertices [i0, i1) (their rows of A, soft and Tikhonov terms),
+ * into job->part[part] (a dk_range_fn). */
+static void energy_range(void *ctx, dk_index i0, dk_index i1, int part)
 {
-    const dk_index n = le->n;
+    energy_job *job = ctx;
+    const dk_laplacian_edit *le = job->le;
+    const double *x = job->x;
+    const size_t si = job->si, sd = job->sd, n = (size_t)le->n;
     const le_system *s = &le->sys;
     const double mu2 = le->opt.tikhonov * le->opt.tikhonov;
-    const double *d0 = le->delta, *d1 = le->delta + n, *d2 = le->delta + 2 * (size_t)n;
+    const double *d0 = le->delta, *d1 = le->delta + n, *d2 = le->delta + 2 * n;
     double e = 0.0;
-    for (dk_index i = 0; i < n; i++) {
+    for (dk_index i = i0; i < i1; i++) {
         double v0 = -d0[i], v1 = -d1[i], v2 = -d2[i];
         for (dk_index k = le->a_start[i]; k < le->a_start[i + 1]; k++) {
             const double a = le->a_val[k];
@@ -712,8 +843,11 @@ static double energy_of(const dk_laplacian_edit *le, const double *x, size_t si,
             v2 += a * xj[2 * sd];
         }
         e += v0 * v0 + v1 * v1 + v2 * v2;
+        if (job->positions)
+            for (int d = 0; d < 3; d++)
+                job->positions[3 * (size_t)i + (size_t)d] = x[(size_t)i * si + (size_t)d * sd];
     }
-    for (dk_index i = 0; i < n; i++) {
+    for (dk_index i = i0; i < i1; i++) {
         const int unknown = s->unknown_index[i] >= 0;
         if (s->soft_w2[i] > 0.0) {
             const dk_index t = s->target_of[i];
@@ -729,7 +863,18 @@ static double energy_of(const dk_laplacian_edit *le, const double *x, size_t si,
                 e += mu2 * v * v;
             }
     }
-    return e;
+    job->part[part] = e;
+}
+
+/* E(x) for positions with element (i, d) at x[i * si + d * sd]; with `positions` also
+ * writes x there (n x 3 row-major) in the same pass. Two threads on big meshes; the two
+ * halves are summed in order, so the value does not depend on whether the helper ran. */
+static double energy_of(const dk_laplacian_edit *le, const double *x, size_t si, size_t sd,
+                        double *positions)
+{
+    energy_job job = {le, x, si, sd, positions, {0.0, 0.0}};
+    dk_run_halves(energy_range, &job, le->n, LE_PARALLEL_MIN);
+    return job.part[0] + job.part[1];
 }
 
 dk_status dk_laplacian_edit_energy(const dk_laplacian_edit *le, const double *positions,
@@ -738,7 +883,7 @@ dk_status dk_laplacian_edit_energy(const dk_laplacian_edit *le, const double *po
     if (!le || !positions || !energy)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "LaplacianEdit energy: NULL argument");
-    *energy = energy_of(le, positions, 3, 1);
+    *energy = energy_of(le, positions, 3, 1, NULL);
     return DK_OK;
 }
 
@@ -986,33 +1131,23 @@ dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const double *targets, 
         const double scale = le->mesh->bbox_diagonal;
         converged = le->opt.local_frame_iterations == 0;
         for (int it = 0; it < le->opt.local_frame_iterations; it++) {
-            memcpy(le->prev, le->x, sizeof(double) * 3 * (size_t)n);
-            rotate_deltas(le);
-            st = linear_solve(le, err);
+            st = local_frame_update(le, &last_change, err);
             if (st != DK_OK)
                 return st;
             iterations++;
-            last_change = 0.0;
-            for (dk_index i = 0; i < n; i++) {
-                double d2 = 0.0;
-                for (int d = 0; d < 3; d++) {
-                    const double v = le->x[(size_t)d * n + i] - le->prev[(size_t)d * n + i];
-                    d2 += v * v;
-                }
-                if (d2 > last_change)
-                    last_change = d2;
-            }
             last_change = sqrt(last_change) / scale;
             converged = last_change <= le->opt.local_frame_tolerance;
             if (converged)
                 break;
         }
     }
-    for (dk_index i = 0; i < n; i++)
-        for (int d = 0; d < 3; d++)
-            positions[3 * i + d] = le->x[(size_t)d * n + i];
+    {
+        /* the output and the energy in one pass */
+        const double e = energy_of(le, le->x, 1, (size_t)n, positions);
+        if (info)
+            info->energy = e;
+    }
     if (info) {
-        info->energy = energy_of(le, le->x, 1, (size_t)n);
         info->iterations = iterations;
         info->converged = converged;
         info->last_change = last_change;
@@ -1055,14 +1190,14 @@ void dk_laplacian_edit_free(dk_laplacian_edit *le)
     free(le->a_start);
     free(le->a_col);
     free(le->a_val);
+    free(le->at_val);
     free(le->delta_rest);
     free(le->rest);
     free(le->frame_nb);
     free(le->frame_coef);
     free(le->x);
     free(le->delta);
-    free(le->r);
-    free(le->normals);
-    free(le->prev);
+    free(le->ddelta);
+    free(le->face_cross);
     free(le);
 }

@@ -34,6 +34,8 @@ def args():
                    help="registry ids, each optionally with :option=value settings, or "
                         ":interactive (the UI's time-budgeted solve plus the refine steps that "
                         "finish it after the drag, timed separately)")
+    p.add_argument("--profile", action="store_true",
+                   help="print the cProfile of each DeformKit drag (where Python time goes)")
     return p.parse_args(a)
 
 
@@ -116,7 +118,15 @@ def main():
         bpy.ops.deformkit.bind()
         bind_ms = (time.perf_counter() - t0) * 1000
         S.handlers.force_interactive[0] = interactive
+        if a.profile:
+            import cProfile
+            import pstats
+            prof = cProfile.Profile()
+            prof.enable()
         times, err = drag(obj, e, a.steps, translate, 2, handle[0], rest)
+        if a.profile:
+            prof.disable()
+            pstats.Stats(prof).sort_stats("tottime").print_stats(12)
         solve = S.solver.runtime.get((obj.name, d.uid), {})
         settle_ms, ticks = 0.0, 0
         if interactive:  # what the timer does once the handle stops
