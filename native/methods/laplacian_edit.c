@@ -365,24 +365,52 @@ static dk_status build_rest_frames(dk_laplacian_edit *le, dk_error *err)
     return DK_OK;
 }
 
+/* The rest-frame coordinates c of vertex i's delta, expressed in the frame of the raw
+ * normal nr and the edge e to its frame neighbour (make_frame's frame, without its
+ * normalisation chain): with nn = |nr|^2, en = e.nr, q = nn |e|^2 - en^2 = |nr x e|^2,
+ *   n = nr / sqrt(nn),  u = (nn e - en nr) / sqrt(nn q),  n x u = (nr x e) / sqrt(q),
+ * so two independent reciprocal square roots and no division remain (this runs for every
+ * vertex on every drag). Returns 0 where make_frame would call the frame degenerate. */
+static inline int rotated_delta(const double nr[3], const double e[3], const double c[3],
+                                double out[3])
+{
+    const double ee = e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
+    const double nn = nr[0] * nr[0] + nr[1] * nr[1] + nr[2] * nr[2];
+    const double en = e[0] * nr[0] + e[1] * nr[1] + e[2] * nr[2];
+    const double q = nn * ee - en * en;
+    /* make_frame's tests, squared: |e| > 0, |nr| > 1e-14 |e|^2, finite, |u| > 1e-8 |e| */
+    if (!(ee > 0.0) || !(nn > 1e-28 * ee * ee) || !isfinite(nn) || !(q > 1e-16 * ee * nn))
+        return 0;
+    const double r1 = 1.0 / sqrt(nn), r2 = 1.0 / sqrt(q);
+    const double a = c[0] * r1 - c[1] * r1 * r2 * en, b = c[1] * r1 * r2 * nn, g = c[2] * r2;
+    const double x0 = nr[1] * e[2] - nr[2] * e[1], x1 = nr[2] * e[0] - nr[0] * e[2],
+                 x2 = nr[0] * e[1] - nr[1] * e[0];
+    out[0] = a * nr[0] + b * e[0] + g * x0;
+    out[1] = a * nr[1] + b * e[1] + g * x1;
+    out[2] = a * nr[2] + b * e[2] + g * x2;
+    return 1;
+}
+
 /* Local-frame update of vertices [i0, i1) (a dk_range_fn): delta := the rest frame
  * coordinates rotated into the frames of the positions le->x, and ddelta := its change. */
 static void rotate_deltas_range(void *ctx, dk_index i0, dk_index i1, int part)
 {
     dk_laplacian_edit *le = ctx;
     const size_t n = (size_t)le->n;
+    const double *x0 = le->x, *x1 = le->x + n, *x2 = le->x + 2 * n;
     (void)part;
     for (dk_index i = i0; i < i1; i++) {
-        double nraw[3], nh[3], u[3], bt[3], nd[3];
-        const double *c = le->frame_coef + 3 * (size_t)i;
-        int ok = le->frame_nb[i] >= 0;
+        double nraw[3], nd[3];
+        const dk_index j = le->frame_nb[i];
+        int ok = j >= 0;
         if (ok) {
+            const double e[3] = {x0[j] - x0[i], x1[j] - x1[i], x2[j] - x2[i]};
             vertex_normal(le, i, nraw);
-            ok = make_frame(le, le->x, i, le->frame_nb[i], nraw, nh, u, bt);
+            ok = rotated_delta(nraw, e, le->frame_coef + 3 * (size_t)i, nd);
         }
-        for (int d = 0; d < 3; d++)
-            nd[d] = ok ? c[0] * nh[d] + c[1] * u[d] + c[2] * bt[d]
-                       : le->delta_rest[d * n + (size_t)i];
+        if (!ok)
+            for (int d = 0; d < 3; d++)
+                nd[d] = le->delta_rest[d * n + (size_t)i];
         for (int d = 0; d < 3; d++) {
             le->ddelta[d * n + (size_t)i] = nd[d] - le->delta[d * n + (size_t)i];
             le->delta[d * n + (size_t)i] = nd[d];
