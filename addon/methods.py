@@ -92,6 +92,9 @@ METHODS = [
         description="Laplacian surface editing: one linear solve per update",
         icon="MOD_SMOOTH",
         maps=("handle_weights",),
+        # the add-on never shows the energy: skip its pass over the operator (~0.4 ms a drag)
+        cold_solve={"energy": False},
+        warm_solve={"energy": False},
         options=[
             Option("weights", "ENUM", "cotangent", "Weights", "Laplacian weights",
                    items=_e("cotangent", "uniform")),

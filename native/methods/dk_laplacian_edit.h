@@ -133,10 +133,16 @@ dk_status dk_laplacian_edit_bind(const dk_mesh *mesh, const dk_constraint_desc *
 dk_status dk_laplacian_edit_rebind(dk_laplacian_edit *le, const dk_constraint_desc *desc,
                                    dk_error *err);
 
+/** Bit for dk_laplacian_edit_solve's `mode`: do not evaluate the energy (info->energy is
+ *  then NaN). Saves one pass over the operator, ~0.4 ms of a 6 ms local-frame solve on 43k
+ *  vertices: for interactive updates that never show the energy. */
+#define DK_LE_SOLVE_NO_ENERGY 0x100
+
 /** Deformed positions (n x 3, row-major) for handle targets: mode 0, `targets` holds one
  *  position per handle vertex (concatenated in handle order); mode 1, one 4x4 row-major
- *  affine transform per handle (see dk_constraints_targets). `info` may be NULL. Not
- *  thread-safe on the same object (uses buffers held in it). */
+ *  affine transform per handle (see dk_constraints_targets); either may be or-ed with
+ *  DK_LE_SOLVE_NO_ENERGY. `info` may be NULL. Not thread-safe on the same object (uses
+ *  buffers held in it). */
 dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const double *targets, int mode,
                                   double *positions, dk_laplacian_edit_info *info,
                                   dk_error *err);

@@ -846,6 +846,7 @@ typedef struct energy_job {
     const double *x;  /* element (i, d) at x[i * si + d * sd] */
     size_t si, sd;
     double *positions; /* NULL, or n x 3 row-major: receives x (done in the same pass)     */
+    int want_energy;   /* 0: only the positions                                           */
     double part[2];
 } energy_job;
 
@@ -861,6 +862,13 @@ static void energy_range(void *ctx, dk_index i0, dk_index i1, int part)
     const double mu2 = le->opt.tikhonov * le->opt.tikhonov;
     const double *d0 = le->delta, *d1 = le->delta + n, *d2 = le->delta + 2 * n;
     double e = 0.0;
+    if (!job->want_energy) {
+        for (dk_index i = i0; i < i1; i++)
+            for (int d = 0; d < 3; d++)
+                job->positions[3 * (size_t)i + (size_t)d] = x[(size_t)i * si + (size_t)d * sd];
+        job->part[part] = NAN;
+        return;
+    }
     for (dk_index i = i0; i < i1; i++) {
         double v0 = -d0[i], v1 = -d1[i], v2 = -d2[i];
         for (dk_index k = le->a_start[i]; k < le->a_start[i + 1]; k++) {
@@ -898,9 +906,9 @@ static void energy_range(void *ctx, dk_index i0, dk_index i1, int part)
  * writes x there (n x 3 row-major) in the same pass. Two threads on big meshes; the two
  * halves are summed in order, so the value does not depend on whether the helper ran. */
 static double energy_of(const dk_laplacian_edit *le, const double *x, size_t si, size_t sd,
-                        double *positions)
+                        double *positions, int want_energy)
 {
-    energy_job job = {le, x, si, sd, positions, {0.0, 0.0}};
+    energy_job job = {le, x, si, sd, positions, want_energy || !positions, {0.0, 0.0}};
     dk_run_halves(energy_range, &job, le->n, LE_PARALLEL_MIN);
     return job.part[0] + job.part[1];
 }
@@ -911,7 +919,7 @@ dk_status dk_laplacian_edit_energy(const dk_laplacian_edit *le, const double *po
     if (!le || !positions || !energy)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "LaplacianEdit energy: NULL argument");
-    *energy = energy_of(le, positions, 3, 1, NULL);
+    *energy = energy_of(le, positions, 3, 1, NULL, 1);
     return DK_OK;
 }
 
@@ -1107,10 +1115,12 @@ dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const double *targets, 
     if (!le || !targets || !positions)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "LaplacianEdit solve: NULL object, targets or positions");
+    const int want_energy = !(mode & DK_LE_SOLVE_NO_ENERGY);
+    mode &= ~DK_LE_SOLVE_NO_ENERGY;
     if (mode != 0 && mode != 1)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "LaplacianEdit solve: mode must be 0 (positions) or 1 (transforms), "
-                            "got %d", mode);
+                            "optionally | DK_LE_SOLVE_NO_ENERGY, got %d", mode);
     s = &le->sys;
     if (!s->chol)
         return dk_error_set(err, DK_ERR_INTERNAL,
@@ -1171,7 +1181,7 @@ dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const double *targets, 
     }
     {
         /* the output and the energy in one pass */
-        const double e = energy_of(le, le->x, 1, (size_t)n, positions);
+        const double e = energy_of(le, le->x, 1, (size_t)n, positions, want_energy);
         if (info)
             info->energy = e;
     }

@@ -146,17 +146,20 @@ static void lap_dealloc(PyObject *obj)
 }
 
 PyDoc_STRVAR(solve_doc,
-             "solve(targets=None, transforms=None) -> SolveResult\n\n"
+             "solve(targets=None, transforms=None, energy=True) -> SolveResult\n\n"
              "targets: (sum of handle sizes) x 3 positions, concatenated in handle order;\n"
              "transforms: n_handles x 4 x 4 affine transforms of the rest pose. Returns the\n"
              "deformed positions, the energy ||A x - delta||^2 (+ soft and Tikhonov terms) at\n"
              "them, the number of linear solves and whether the local-frame iteration met\n"
-             "its tolerance (always True for 'fixed' and 'membrane').");
+             "its tolerance (always True for 'fixed' and 'membrane'). energy=False skips the\n"
+             "energy (result.energy is nan): one pass over the operator less, for interactive\n"
+             "updates that never show it.");
 
 static PyObject *lap_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
 {
-    static char *kwlist[] = {"targets", "transforms", NULL};
+    static char *kwlist[] = {"targets", "transforms", "energy", NULL};
     LapObject *self = (LapObject *)obj;
+    int want_energy = 1;
     PyObject *targets = Py_None, *transforms = Py_None, *positions, *module;
     dk_py_doubles in = {0};
     dk_laplacian_edit_info info;
@@ -165,7 +168,8 @@ static PyObject *lap_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
     double *out;
     int mode;
 
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "|OO:solve", kwlist, &targets, &transforms))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "|OOp:solve", kwlist, &targets, &transforms,
+                                     &want_energy))
         return NULL;
     module = PyType_GetModule(Py_TYPE(obj));
     if (!module || enter(self) < 0)
@@ -183,7 +187,9 @@ static PyObject *lap_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
         return NULL;
     }
     Py_BEGIN_ALLOW_THREADS
-    st = dk_laplacian_edit_solve(self->le, in.data, mode, out, &info, &err);
+    st = dk_laplacian_edit_solve(self->le, in.data,
+                                 mode | (want_energy ? 0 : DK_LE_SOLVE_NO_ENERGY), out, &info,
+                                 &err);
     Py_END_ALLOW_THREADS
     dk_py_doubles_release(&in);
     self->busy = 0;

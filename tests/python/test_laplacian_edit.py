@@ -365,6 +365,20 @@ def test_local_frame_matches_reference(iterations, tikhonov):
     assert np.abs(fixed_only.solve(tg).positions - ref).max() > 1e-3 * bbox
 
 
+def test_energy_can_be_skipped():
+    v, f, fixed, handle = grid_setup()
+    mesh = deformkit.Mesh(v, f)
+    T = np.eye(4)
+    T[:3, 3] = [0.1, 0.0, 0.3]
+    for detail in ("fixed", "local_frame"):
+        le = deformkit.LaplacianEdit(mesh, [handle], fixed=fixed, detail=detail)
+        a = le.solve(transforms=[T])
+        b = le.solve(transforms=[T], energy=False)
+        assert np.array_equal(a.positions, b.positions)
+        assert math.isnan(b.energy) and a.energy > 0.0
+        assert (a.iterations, a.converged) == (b.iterations, b.converged)
+
+
 def test_bad_input():
     v, f, fixed, handle = grid_setup(6, 4, bump=0.0)
     mesh = deformkit.Mesh(v, f)
