@@ -523,7 +523,10 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
         e.pending_its += int(res.iterations)
     e.pending = bool(budgeted and not res.converged and (not cap or e.pending_its < cap))
     if write:
-        write_offset(obj, d, pos - e.rest, retime=cold)
+        # the offset computed in float64 and rounded once, straight into float32 (one pass)
+        off = np.empty(pos.shape, dtype=np.float32)
+        np.subtract(pos, e.rest, out=off, casting="unsafe")
+        write_offset(obj, d, off, retime=cold)
         e.last_inputs = inputs
     return pos
 
