@@ -1010,6 +1010,72 @@ static void test_local_frame_convergence(void)
 }
 
 
+/* A mesh above the two-thread threshold (8,192 vertices): the local-frame passes, the
+ * correction and the energy run split in halves (under ASan/UBSan too, via ctest). Checks
+ * the hard constraints, that the reported energy is the energy of the returned positions,
+ * that repeated solves are identical bit for bit (the split does not depend on timing), and
+ * that DK_LE_SOLVE_NO_ENERGY returns the same positions with a NaN energy. */
+static void test_big_local_frame_threads(void)
+{
+    grid_setup s;
+    if (!grid_setup_make(&s, 120, 80, 0.02)) {
+        CHECK(0);
+        return;
+    }
+    const dk_index n = s.m->n_vertices;
+    CHECK(n > 8192);
+    double T[16], c[3] = {0.5, 0.0, 0.0}, e_check = 0.0;
+    double *x = malloc(sizeof(double) * 3 * (size_t)n), *y = malloc(sizeof(double) * 3 * (size_t)n);
+    if (!x || !y)
+        abort();
+    rotation_about(1, -M_PI / 5, c, T);
+    dk_laplacian_edit_options o;
+    dk_laplacian_edit *le = NULL;
+    dk_laplacian_edit_info a, b;
+    dk_error e;
+    dk_error_clear(&e);
+    dk_laplacian_edit_default_options(&o);
+    o.detail = DK_LE_DETAIL_LOCAL_FRAME;
+    o.local_frame_iterations = 3;
+    o.local_frame_tolerance = 0.0;
+    if (dk_laplacian_edit_bind(s.m, &s.desc, &o, &le, &e) != DK_OK) {
+        CHECK_MSG(0, "%s", e.message);
+        goto out;
+    }
+    CHECK(dk_laplacian_edit_solve(le, T, 1, x, &a, &e) == DK_OK);
+    CHECK(a.iterations == 4);
+    CHECK(dk_laplacian_edit_energy(le, x, &e_check, &e) == DK_OK);
+    CHECK_MSG(fabs(e_check - a.energy) <= 1e-12 * a.energy, "energy %.17g vs %.17g", a.energy,
+              e_check);
+    double worst = 0.0;
+    for (dk_index k = 0; k < s.n_fixed; k++)
+        for (int d = 0; d < 3; d++)
+            worst = fmax(worst, fabs(x[3 * s.fixed[k] + d] - s.m->positions[3 * s.fixed[k] + d]));
+    for (dk_index k = 0; k < s.n_handle; k++) {
+        const double *p = s.m->positions + 3 * s.handle[k];
+        for (int d = 0; d < 3; d++) {
+            const double t = T[4 * d] * p[0] + T[4 * d + 1] * p[1] + T[4 * d + 2] * p[2] + T[4 * d + 3];
+            worst = fmax(worst, fabs(x[3 * s.handle[k] + d] - t));
+        }
+    }
+    CHECK_MSG(worst <= 1e-12, "constraint error %.3e", worst);
+    for (int rep = 0; rep < 3; rep++) {
+        CHECK(dk_laplacian_edit_solve(le, T, 1, y, &b, &e) == DK_OK);
+        CHECK(memcmp(x, y, sizeof(double) * 3 * (size_t)n) == 0);
+        CHECK(memcmp(&a.energy, &b.energy, sizeof(double)) == 0);
+    }
+    CHECK(dk_laplacian_edit_solve(le, T, 1 | DK_LE_SOLVE_NO_ENERGY, y, &b, &e) == DK_OK);
+    CHECK(memcmp(x, y, sizeof(double) * 3 * (size_t)n) == 0);
+    CHECK(isnan(b.energy) && b.iterations == a.iterations);
+    CHECK(dk_laplacian_edit_solve(le, T, 2 | DK_LE_SOLVE_NO_ENERGY, y, &b, &e) ==
+          DK_ERR_INVALID_ARGUMENT);
+out:
+    dk_laplacian_edit_free(le);
+    free(x);
+    free(y);
+    grid_setup_free(&s);
+}
+
 /* Solves from transforms use a precomputed affine basis instead of a back-substitution;
  * they must agree with solves from the equivalent per-vertex targets in every mode. */
 static void test_transforms_match_targets(void)
@@ -1129,4 +1195,5 @@ static void test_many_handles_transforms(void)
 
 DK_TEST_MAIN(test_transforms_match_targets, test_many_handles_transforms, test_zero_drag_returns_rest, test_hard_constraints_and_energy,
              test_soft_tikhonov_membrane, test_handle_weights_and_rebind, test_bad_input,
-             test_bumpy_plane_bend, test_bar_twist, test_local_frame_convergence)
+             test_bumpy_plane_bend, test_bar_twist, test_local_frame_convergence,
+             test_big_local_frame_threads)
