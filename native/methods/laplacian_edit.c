@@ -52,7 +52,8 @@ struct dk_laplacian_edit {
     /* solve buffers */
     double *x;           /* n x 3 column-major current positions                           */
     double *delta;       /* n x 3 column-major delta of the last solve                     */
-    double *ddelta;      /* n x 3 column-major change of delta in a local-frame update      */
+    double *ddelta;      /* n x 3 column-major change of delta in a local-frame update; also
+                            the rows delta - A_e x_e while assemble_rhs runs              */
     double *face_cross;  /* n_faces x 3 face cross products (local frames)                */
 };
 
@@ -927,63 +928,86 @@ dk_status dk_laplacian_edit_energy(const dk_laplacian_edit *le, const double *po
 
 /* Right-hand sides of the normal equations for three columns at once:
  *   rhs = A_u^T (delta - A_e x_e) + S c + mu^2 x0_u
- * where x_e are the eliminated values in le->x (column-major), c the soft targets. */
+ * where x_e are the eliminated values in le->x (column-major), c the soft targets. Two
+ * passes, each split over two threads: the rows r = delta - A_e x_e into le->ddelta (zero
+ * for rows without an unknown, which the unknowns' gather never reads anyway), then per
+ * unknown the gather A_u^T r with the transposed values. */
+typedef struct rhs_job {
+    const dk_laplacian_edit *le;
+    const le_system *s;
+    double *rhs;
+} rhs_job;
+
+static void rhs_rows_range(void *ctx, dk_index i0, dk_index i1, int part)
+{
+    const rhs_job *job = ctx;
+    const dk_laplacian_edit *le = job->le;
+    const le_system *s = job->s;
+    const size_t n = (size_t)le->n;
+    const double *x0 = le->x, *x1 = le->x + n, *x2 = le->x + 2 * n;
+    double *r0 = le->ddelta, *r1 = le->ddelta + n, *r2 = le->ddelta + 2 * n;
+    (void)part;
+    for (dk_index i = i0; i < i1; i++) {
+        double v0 = 0.0, v1 = 0.0, v2 = 0.0;
+        if (s->row_active[i]) {
+            v0 = le->delta[i];
+            v1 = le->delta[n + (size_t)i];
+            v2 = le->delta[2 * n + (size_t)i];
+            for (dk_index k = le->a_start[i]; k < le->a_start[i + 1]; k++) {
+                const dk_index j = le->a_col[k];
+                if (s->unknown_index[j] < 0) {
+                    const double a = le->a_val[k];
+                    v0 -= a * x0[j];
+                    v1 -= a * x1[j];
+                    v2 -= a * x2[j];
+                }
+            }
+        }
+        r0[i] = v0;
+        r1[i] = v1;
+        r2[i] = v2;
+    }
+}
+
+static void rhs_unknowns_range(void *ctx, dk_index u0, dk_index u1, int part)
+{
+    const rhs_job *job = ctx;
+    const dk_laplacian_edit *le = job->le;
+    const le_system *s = job->s;
+    const size_t n = (size_t)le->n, nu = (size_t)s->n_unknowns;
+    const double mu2 = le->opt.tikhonov * le->opt.tikhonov;
+    const double *g0 = le->ddelta, *g1 = le->ddelta + n, *g2 = le->ddelta + 2 * n;
+    (void)part;
+    for (dk_index u = u0; u < u1; u++) {
+        const dk_index j = s->unknowns[u];
+        double c0 = mu2 * le->rest[j], c1 = mu2 * le->rest[n + (size_t)j],
+               c2 = mu2 * le->rest[2 * n + (size_t)j];
+        if (s->soft_w2[j] > 0.0) {
+            const dk_index t = s->target_of[j];
+            const double w = s->soft_w2[j];
+            const double *c = t >= 0 ? s->targets + 3 * (size_t)t : NULL;
+            c0 += w * (c ? c[0] : le->rest[j]);
+            c1 += w * (c ? c[1] : le->rest[n + (size_t)j]);
+            c2 += w * (c ? c[2] : le->rest[2 * n + (size_t)j]);
+        }
+        for (dk_index k = le->a_start[j]; k < le->a_start[j + 1]; k++) {
+            const double a = le->at_val[k];
+            const dk_index i = le->a_col[k];
+            c0 += a * g0[i];
+            c1 += a * g1[i];
+            c2 += a * g2[i];
+        }
+        job->rhs[u] = c0;
+        job->rhs[nu + (size_t)u] = c1;
+        job->rhs[2 * nu + (size_t)u] = c2;
+    }
+}
+
 static void assemble_rhs(const dk_laplacian_edit *le, const le_system *s, double *rhs)
 {
-    const dk_index n = le->n;
-    const dk_index nu = s->n_unknowns;
-    const double mu2 = le->opt.tikhonov * le->opt.tikhonov;
-    const double *x0 = le->x, *x1 = le->x + n, *x2 = le->x + 2 * (size_t)n;
-    const double *d0 = le->delta, *d1 = le->delta + n, *d2 = le->delta + 2 * (size_t)n;
-    double *r0 = rhs, *r1 = rhs + nu, *r2 = rhs + 2 * (size_t)nu;
-
-    for (dk_index u = 0; u < nu; u++) {
-        const dk_index i = s->unknowns[u];
-        double c0 = mu2 * le->rest[i], c1 = mu2 * le->rest[n + i],
-               c2 = mu2 * le->rest[2 * (size_t)n + i];
-        if (s->soft_w2[i] > 0.0) {
-            const dk_index t = s->target_of[i];
-            const double w = s->soft_w2[i];
-            if (t >= 0) {
-                c0 += w * s->targets[3 * t];
-                c1 += w * s->targets[3 * t + 1];
-                c2 += w * s->targets[3 * t + 2];
-            } else {
-                c0 += w * le->rest[i];
-                c1 += w * le->rest[n + i];
-                c2 += w * le->rest[2 * (size_t)n + i];
-            }
-        }
-        r0[u] = c0;
-        r1[u] = c1;
-        r2[u] = c2;
-    }
-    for (dk_index i = 0; i < n; i++) {
-        double v0, v1, v2;
-        if (!s->row_active[i])
-            continue;
-        v0 = d0[i];
-        v1 = d1[i];
-        v2 = d2[i];
-        for (dk_index k = le->a_start[i]; k < le->a_start[i + 1]; k++) {
-            const dk_index j = le->a_col[k];
-            if (s->unknown_index[j] < 0) {
-                const double a = le->a_val[k];
-                v0 -= a * x0[j];
-                v1 -= a * x1[j];
-                v2 -= a * x2[j];
-            }
-        }
-        for (dk_index k = le->a_start[i]; k < le->a_start[i + 1]; k++) {
-            const dk_index u = s->unknown_index[le->a_col[k]];
-            if (u >= 0) {
-                const double a = le->a_val[k];
-                r0[u] += a * v0;
-                r1[u] += a * v1;
-                r2[u] += a * v2;
-            }
-        }
-    }
+    rhs_job job = {le, s, rhs};
+    dk_run_halves(rhs_rows_range, &job, le->n, LE_PARALLEL_MIN);
+    dk_run_halves(rhs_unknowns_range, &job, s->n_unknowns, LE_PARALLEL_MIN);
 }
 
 /* One linear solve with the current le->delta; writes the unknowns into le->x (whose
