@@ -21,12 +21,12 @@
 #include "dk_arap.h"
 
 #include <math.h>
-#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "dk_cholesky.h"
 #include "dk_operators.h"
+#include "dk_parallel.h"
 #include "dk_sparse.h"
 
 #define MAX_ANDERSON_DEPTH 20
@@ -810,18 +810,18 @@ typedef struct cells_job {
     const dk_arap *ar;
     const arap_system *s;
     const double *x;
-    double *rot, *rhs;
-    dk_index v0, v1;
-    double energy;
+    double *rot;
+    double *rhs[2]; /* part 0 adds into s->rhs (holding rhs_const), part 1 into s->rhs2 */
+    double energy[2];
 } cells_job;
 
-static void *cells_thread(void *arg)
+/* One half of the cells (a dk_range_fn). */
+static void cells_part(void *ctx, dk_index v0, dk_index v1, int part)
 {
-    cells_job *j = arg;
-    if (j->rhs)
-        memset(j->rhs, 0, 3 * (size_t)j->s->nu * sizeof(double));
-    j->energy = cells_energy(j->ar, j->s, j->x, j->rot, j->rhs, j->v0, j->v1);
-    return NULL;
+    cells_job *j = ctx;
+    if (part == 1 && j->rhs[1])
+        memset(j->rhs[1], 0, 3 * (size_t)j->s->nu * sizeof(double));
+    j->energy[part] = cells_energy(j->ar, j->s, j->x, j->rot, j->rhs[part], v0, v1);
 }
 
 /* Local step and energy at positions x: rotations into rot (may be NULL: then only the
@@ -841,16 +841,9 @@ static double local_energy(const dk_arap *ar, const arap_system *s, const double
     if (rhs)
         memcpy(rhs, s->rhs_const, N * sizeof(double));
     if (ar->n_terms >= PARALLEL_TERMS) {
-        dk_index mid = ar->n / 2;
-        cells_job job = {ar, s, x, rot, rhs ? s->rhs2 : NULL, mid, ar->n, 0.0};
-        pthread_t th;
-        int started = pthread_create(&th, NULL, cells_thread, &job) == 0;
-        energy = cells_energy(ar, s, x, rot, rhs, 0, mid);
-        if (started)
-            pthread_join(th, NULL);
-        else
-            cells_thread(&job);
-        energy += job.energy;
+        cells_job job = {ar, s, x, rot, {rhs, rhs ? s->rhs2 : NULL}, {0.0, 0.0}};
+        dk_run_halves(cells_part, &job, ar->n, 0);
+        energy = job.energy[0] + job.energy[1];
         if (rhs)
             for (size_t k = 0; k < N; k++)
                 rhs[k] += s->rhs2[k];
