@@ -11,8 +11,8 @@
  * entries, which is what both substitutions stream through.
  */
 #include "dk_trisolve.h"
+#include "dk_parallel.h"
 
-#include <pthread.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -513,9 +513,8 @@ typedef struct sweep {
     int k, thread, back;
 } sweep;
 
-static void *run_sweep(void *arg)
+static void run_sweep(const sweep *s)
 {
-    const sweep *s = arg;
     const dk_trisolve *p = s->p;
     const int *rg = p->ranges + (s->thread ? 2 * p->n_ranges[0] : 0);
     const int nr = p->n_ranges[s->thread];
@@ -525,20 +524,22 @@ static void *run_sweep(void *arg)
     else
         for (int q = nr - 1; q >= 0; q--)
             backward(p, s->w, s->k, rg[2 * q], rg[2 * q + 1]);
-    return NULL;
 }
 
-/* Thread 1's sweep on a helper thread while the caller does thread 0's; if the helper
- * cannot be started the caller does both (each writes only its own rows / array). */
+static void sweep_part(void *ctx, dk_index begin, dk_index end, int part)
+{
+    (void)begin;
+    (void)end;
+    run_sweep((sweep *)ctx + part);
+}
+
+/* Thread 1's sweep on a helper thread while the caller does thread 0's (dk_run_halves over
+ * the two sweeps); if the helper cannot be started the caller does both (each writes only
+ * its own rows / array). */
 static void both(sweep *s0, sweep *s1)
 {
-    pthread_t th;
-    const int started = pthread_create(&th, NULL, run_sweep, s1) == 0;
-    run_sweep(s0);
-    if (started)
-        pthread_join(th, NULL);
-    else
-        run_sweep(s1);
+    sweep pair[2] = {*s0, *s1};
+    dk_run_halves(sweep_part, pair, 2, 2);
 }
 
 int dk_trisolve_solve(dk_trisolve *p, const double *b, int nrhs, double *x)
