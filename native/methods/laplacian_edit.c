@@ -419,59 +419,6 @@ static void rotate_deltas_range(void *ctx, dk_index i0, dk_index i1, int part)
     }
 }
 
-/* Right-hand side of a local-frame update for unknowns [u0, u1) (a dk_range_fn): the
- * normal equations are linear in delta through A_u^T delta only, so the change of the
- * solution solves N dx = A_u^T ddelta; gathered per unknown with the transposed values. */
-static void ddelta_rhs_range(void *ctx, dk_index u0, dk_index u1, int part)
-{
-    dk_laplacian_edit *le = ctx;
-    const le_system *s = &le->sys;
-    const size_t n = (size_t)le->n, nu = (size_t)s->n_unknowns;
-    const double *g0 = le->ddelta, *g1 = le->ddelta + n, *g2 = le->ddelta + 2 * n;
-    (void)part;
-    for (dk_index u = u0; u < u1; u++) {
-        const dk_index j = s->unknowns[u];
-        double r0 = 0.0, r1 = 0.0, r2 = 0.0;
-        for (dk_index k = le->a_start[j]; k < le->a_start[j + 1]; k++) {
-            const double a = le->at_val[k];
-            const dk_index i = le->a_col[k];
-            r0 += a * g0[i];
-            r1 += a * g1[i];
-            r2 += a * g2[i];
-        }
-        s->rhs[u] = r0;
-        s->rhs[nu + (size_t)u] = r1;
-        s->rhs[2 * nu + (size_t)u] = r2;
-    }
-}
-
-/* One local-frame update from the solution in le->x (which solves for le->delta): new
- * frames and deltas, N dx = A_u^T (delta_new - delta_old), x += dx. Returns the largest
- * vertex move in *change (squared length). */
-static dk_status local_frame_update(dk_laplacian_edit *le, double *change, dk_error *err)
-{
-    le_system *s = &le->sys;
-    const size_t n = (size_t)le->n, nu = (size_t)s->n_unknowns;
-    double big = 0.0;
-    face_normals(le, le->x);
-    dk_run_halves(rotate_deltas_range, le, le->n, LE_PARALLEL_MIN);
-    dk_run_halves(ddelta_rhs_range, le, s->n_unknowns, LE_PARALLEL_MIN);
-    dk_status st = dk_cholesky_solve(s->chol, s->rhs, 3, s->rhs, err);
-    if (st != DK_OK)
-        return dk_error_prefix(err, "LaplacianEdit solve");
-    for (size_t u = 0; u < nu; u++) {
-        const size_t i = (size_t)s->unknowns[u];
-        const double d0 = s->rhs[u], d1 = s->rhs[nu + u], d2 = s->rhs[2 * nu + u];
-        const double d2sum = d0 * d0 + d1 * d1 + d2 * d2;
-        le->x[i] += d0;
-        le->x[n + i] += d1;
-        le->x[2 * n + i] += d2;
-        if (d2sum > big)
-            big = d2sum;
-    }
-    *change = big;
-    return DK_OK;
-}
 
 /* ------------------------------------------------------------------ the system ---------- */
 
@@ -931,11 +878,13 @@ dk_status dk_laplacian_edit_energy(const dk_laplacian_edit *le, const double *po
  * where x_e are the eliminated values in le->x (column-major), c the soft targets. Two
  * passes, each split over two threads: the rows r = delta - A_e x_e into le->ddelta (zero
  * for rows without an unknown, which the unknowns' gather never reads anyway), then per
- * unknown the gather A_u^T r with the transposed values. */
+ * unknown the gather A_u^T r with the transposed values. The second pass alone, on
+ * r = delta_new - delta_old, is a local-frame correction's right-hand side. */
 typedef struct rhs_job {
     const dk_laplacian_edit *le;
     const le_system *s;
     double *rhs;
+    int constants; /* 0: only A_u^T r (a local-frame correction, r = the change of delta) */
 } rhs_job;
 
 static void rhs_rows_range(void *ctx, dk_index i0, dk_index i1, int part)
@@ -980,9 +929,13 @@ static void rhs_unknowns_range(void *ctx, dk_index u0, dk_index u1, int part)
     (void)part;
     for (dk_index u = u0; u < u1; u++) {
         const dk_index j = s->unknowns[u];
-        double c0 = mu2 * le->rest[j], c1 = mu2 * le->rest[n + (size_t)j],
-               c2 = mu2 * le->rest[2 * n + (size_t)j];
-        if (s->soft_w2[j] > 0.0) {
+        double c0 = 0.0, c1 = 0.0, c2 = 0.0;
+        if (job->constants) {
+            c0 = mu2 * le->rest[j];
+            c1 = mu2 * le->rest[n + (size_t)j];
+            c2 = mu2 * le->rest[2 * n + (size_t)j];
+        }
+        if (job->constants && s->soft_w2[j] > 0.0) {
             const dk_index t = s->target_of[j];
             const double w = s->soft_w2[j];
             const double *c = t >= 0 ? s->targets + 3 * (size_t)t : NULL;
@@ -1005,9 +958,38 @@ static void rhs_unknowns_range(void *ctx, dk_index u0, dk_index u1, int part)
 
 static void assemble_rhs(const dk_laplacian_edit *le, const le_system *s, double *rhs)
 {
-    rhs_job job = {le, s, rhs};
+    rhs_job job = {le, s, rhs, 1};
     dk_run_halves(rhs_rows_range, &job, le->n, LE_PARALLEL_MIN);
     dk_run_halves(rhs_unknowns_range, &job, s->n_unknowns, LE_PARALLEL_MIN);
+}
+
+/* One local-frame update from the solution in le->x (which solves for le->delta): new
+ * frames and deltas, N dx = A_u^T (delta_new - delta_old), x += dx. Returns the largest
+ * vertex move in *change (squared length). */
+static dk_status local_frame_update(dk_laplacian_edit *le, double *change, dk_error *err)
+{
+    le_system *s = &le->sys;
+    const size_t n = (size_t)le->n, nu = (size_t)s->n_unknowns;
+    double big = 0.0;
+    face_normals(le, le->x);
+    dk_run_halves(rotate_deltas_range, le, le->n, LE_PARALLEL_MIN);
+    rhs_job job = {le, s, s->rhs, 0};
+    dk_run_halves(rhs_unknowns_range, &job, s->n_unknowns, LE_PARALLEL_MIN);
+    dk_status st = dk_cholesky_solve(s->chol, s->rhs, 3, s->rhs, err);
+    if (st != DK_OK)
+        return dk_error_prefix(err, "LaplacianEdit solve");
+    for (size_t u = 0; u < nu; u++) {
+        const size_t i = (size_t)s->unknowns[u];
+        const double d0 = s->rhs[u], d1 = s->rhs[nu + u], d2 = s->rhs[2 * nu + u];
+        const double d2sum = d0 * d0 + d1 * d1 + d2 * d2;
+        le->x[i] += d0;
+        le->x[n + i] += d1;
+        le->x[2 * n + i] += d2;
+        if (d2sum > big)
+            big = d2sum;
+    }
+    *change = big;
+    return DK_OK;
 }
 
 /* One linear solve with the current le->delta; writes the unknowns into le->x (whose
