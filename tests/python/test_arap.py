@@ -412,6 +412,8 @@ def test_tolerance_override_and_repeated_warm_solves():
         arap.solve(t, tolerance=-1.0)
 
 
+@pytest.mark.skipif(not (SHARED / "scenarios" / "bunny-ear-pull.json").exists(),
+                    reason="shared scenarios not available")
 def test_predicted_drag_on_a_scanned_mesh():
     """The first half of the bunny's ear drag in 8 steps, converged at every step: the secant predictor
     (default) is used from the third step on, needs fewer iterations in total than the plain
