@@ -27,6 +27,7 @@
 #include "dk_cholesky.h"
 #include "dk_operators.h"
 #include "dk_parallel.h"
+#include "dk_reorder.h"
 #include "dk_sparse.h"
 
 #define MAX_ANDERSON_DEPTH 20
@@ -45,9 +46,17 @@ typedef struct arap_system {
     double lambda;        /* mean diagonal of the ARAP part of A                         */
     dk_sparse a;          /* reduced matrix (both triangles), arrays owned               */
     dk_cholesky *chol;
-    /* per-solve / per-iteration buffers, N = 3 nu, column-major n x 3 layouts; rhs2: the
-     * helper thread's share of the right-hand side (meshes with a two-thread local step) */
-    double *rhs_const, *rhs, *rhs2, *xu, *gu, *fu, *gprev, *fprev, *dg, *df;
+    /* The global step's right-hand side is linear in the rotations: for unknown u (vertex
+     * v), b_u = rhs_const_u + sum over the cells c with a term touching v of R_c g_{v,c},
+     * g_{v,c} = sum of tws_t e_t over c's terms with ta = v minus those with tb = v. The
+     * entries of u are rg[rg_start[u] .. rg_start[u+1]-1] (the cells are v and its
+     * one-ring). A gather per unknown: each half of the pass writes its own rows, where
+     * scattering each term's R_c e_t to both ends had needed a second buffer for the helper
+     * thread and cost ~0.8 ms an iteration on the armadillo. */
+    int64_t *rg_start;    /* nu + 1                                                       */
+    struct rhs_entry { double g[3]; dk_index cell; } *rg;
+    /* per-solve / per-iteration buffers, N = 3 nu, column-major n x 3 layouts */
+    double *rhs_const, *rhs, *xu, *gu, *fu, *gprev, *fprev, *dg, *df;
     double *targets;      /* n_handle_vertices x 3: last expanded targets                */
     int have_targets;
     /* where the last solve stopped, for a resumed solve (warm_start 2, same targets) */
@@ -61,7 +70,12 @@ typedef struct arap_system {
 } arap_system;
 
 struct dk_arap {
+    /* The mesh in the internal numbering (dk_reorder.h: breadth-first, for cache
+     * locality); every array below uses it. The API maps at its boundary: constraints in
+     * (rebind too), positions in and out, vertex numbers in messages (ro->perm). */
     const dk_mesh *mesh;
+    const dk_mesh *caller_mesh;
+    dk_reorder *ro;
     dk_arap_options opt;
     dk_index n;
     int64_t n_terms;
@@ -229,7 +243,8 @@ static dk_status build_cells(dk_arap *ar, dk_error *err)
             if ((merged.a == i || merged.b == i) && e - s > 2) {
                 st = dk_error_set(err, DK_ERR_TOPOLOGY,
                                   "ARAP: edge (%d, %d) is non-manifold (%d incident "
-                                  "triangles)", (int)merged.a, (int)merged.b, (int)(e - s));
+                                  "triangles)", (int)ar->ro->perm[merged.a],
+                                  (int)ar->ro->perm[merged.b], (int)(e - s));
                 goto done;
             }
             if (ar->opt.weights == DK_ARAP_WEIGHTS_CLAMPED_COTANGENT && merged.w < 0.0)
@@ -287,7 +302,8 @@ static void system_free(arap_system *s)
     dk_cholesky_free(s->chol);
     free(s->rhs_const);
     free(s->rhs);
-    free(s->rhs2);
+    free(s->rg_start);
+    free(s->rg);
     free(s->xu);
     free(s->gu);
     free(s->fu);
@@ -337,12 +353,15 @@ static dk_status check_components(const dk_arap *ar, const arap_system *s, dk_er
         if (s->unk[v] < 0 || s->soft_k[v] > 0.0)
             anchored[uf_find(parent, v)] = 1;
     dk_status st = DK_OK;
-    for (dk_index v = 0; v < n && st == DK_OK; v++)
+    /* in the caller's order, so that the message names the component's smallest vertex */
+    for (dk_index cv = 0; cv < n && st == DK_OK; cv++) {
+        const dk_index v = ar->ro->iperm[cv];
         if (s->unk[v] >= 0 && !anchored[uf_find(parent, v)])
             st = dk_error_set(err, DK_ERR_DEGENERATE,
                               "ARAP: the connected component of vertex %d has free vertices "
                               "but no handle or fixed vertex, so its position is undetermined",
-                              (int)v);
+                              (int)cv);
+    }
     free(parent);
     free(anchored);
     return st;
@@ -449,6 +468,62 @@ static int same_unknowns(const arap_system *x, const arap_system *y, dk_index n)
 
 /* Builds a complete system for `desc`; `old` (may be NULL) lends its symbolic analysis when
  * the unknown set is the same (it is then moved into the new system). */
+/* g_{v,c} of cell c for vertex v (see arap_system.rg); returns whether a term touches v. */
+static int cell_gather_vector(const dk_arap *ar, const arap_system *s, dk_index c, dk_index v,
+                              double g[3])
+{
+    int touches = 0;
+    g[0] = g[1] = g[2] = 0.0;
+    for (dk_index t = ar->cell_start[c]; t < ar->cell_start[c + 1]; t++) {
+        const double sign = ar->ta[t] == v ? 1.0 : ar->tb[t] == v ? -1.0 : 0.0;
+        if (sign == 0.0)
+            continue;
+        touches = 1;
+        for (int d = 0; d < 3; d++)
+            g[d] += sign * s->tws[t] * ar->te[3 * t + d];
+    }
+    return touches;
+}
+
+/* The rotations-to-right-hand-side map s->rg (needs s->unknowns, s->tws). Every cell with a
+ * term touching v is v's own or one of its one-ring's (a spoke (c, v), or a rim of a
+ * triangle (c, v, k)), so candidates are scanned there: O(sum of one-ring cell sizes). */
+static dk_status build_rhs_map(const dk_arap *ar, arap_system *s, dk_error *err)
+{
+    const dk_mesh *m = ar->mesh;
+    const dk_index nu = s->nu;
+    double g[3];
+    s->rg_start = malloc(((size_t)nu + 1) * sizeof *s->rg_start);
+    if (!s->rg_start)
+        return oom(err, "right-hand-side map");
+    int64_t k = 0;
+    for (int pass = 0; pass < 2; pass++) {
+        k = 0;
+        for (dk_index u = 0; u < nu; u++) {
+            const dk_index v = s->unknowns[u];
+            if (pass == 0)
+                s->rg_start[u] = k;
+            for (dk_index q = m->ring_start[v] - 1; q < m->ring_start[v + 1]; q++) {
+                const dk_index c = q < m->ring_start[v] ? v : m->ring_index[q];
+                if (!cell_gather_vector(ar, s, c, v, g))
+                    continue;
+                if (pass == 1) {
+                    memcpy(s->rg[k].g, g, sizeof g);
+                    s->rg[k].cell = c;
+                }
+                k++;
+            }
+        }
+        if (pass == 0) {
+            s->rg_start[nu] = k;
+            s->rg = malloc(((size_t)k + 1) * sizeof *s->rg);
+            if (!s->rg)
+                return oom(err, "right-hand-side map");
+        }
+    }
+    return DK_OK;
+}
+
 static dk_status system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_system *old,
                               arap_system *s, dk_error *err)
 {
@@ -512,8 +587,6 @@ static dk_status system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_
     s->xu = malloc(N * sizeof(double));
     s->gu = malloc(N * sizeof(double));
     s->warm = malloc(2 * N * sizeof(double) + sizeof(double));
-    if (ar->n_terms >= PARALLEL_TERMS)
-        s->rhs2 = malloc(N * sizeof(double));
     if (accel) {
         s->fu = malloc(N * sizeof(double));
         s->gprev = malloc(N * sizeof(double));
@@ -522,7 +595,6 @@ static dk_status system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_
         s->df = malloc(N * m * sizeof(double));
     }
     if (!s->unknowns || !s->rhs_const || !s->rhs || !s->xu || !s->gu || !s->warm ||
-        (ar->n_terms >= PARALLEL_TERMS && !s->rhs2) ||
         (accel && (!s->fu || !s->gprev || !s->fprev || !s->dg || !s->df))) {
         system_free(s);
         return oom(err, "solve buffers");
@@ -530,7 +602,9 @@ static dk_status system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_
     for (dk_index v = 0; v < n; v++)
         if (s->unk[v] >= 0)
             s->unknowns[s->unk[v]] = v;
-    st = check_components(ar, s, err);
+    st = build_rhs_map(ar, s, err);
+    if (st == DK_OK)
+        st = check_components(ar, s, err);
     if (st == DK_OK)
         st = assemble(ar, s, err);
     if (st != DK_OK) {
@@ -592,6 +666,7 @@ void dk_arap_free(dk_arap *ar)
     free(ar->rot);
     free(ar->prev);
     free(ar->prev2);
+    dk_reorder_free(ar->ro);
     free(ar);
 }
 
@@ -616,9 +691,15 @@ dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraint
     dk_arap *ar = calloc(1, sizeof *ar);
     if (!ar)
         return oom(err, "object");
-    ar->mesh = mesh;
+    ar->caller_mesh = mesh;
     ar->opt = opt;
     ar->n = mesh->n_vertices;
+    st = dk_reorder_create(mesh, &ar->ro, err);
+    if (st != DK_OK) {
+        dk_arap_free(ar);
+        return dk_error_prefix(err, "ARAP bind");
+    }
+    ar->mesh = ar->ro->mesh;
     ar->x = malloc(((size_t)ar->n * 3 + 1) * sizeof *ar->x);
     ar->rot = malloc(((size_t)ar->n * 9 + 1) * sizeof *ar->rot);
     ar->prev = malloc(((size_t)ar->n * 3 + 1) * sizeof *ar->prev);
@@ -630,9 +711,16 @@ dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraint
     for (dk_index v = 0; v < ar->n; v++) /* rotations are always valid guesses */
         for (int k = 0; k < 9; k++)
             ar->rot[9 * (size_t)v + k] = k % 4 == 0 ? 1.0 : 0.0;
+    dk_reorder_desc rd;
+    st = dk_reorder_desc_create(ar->ro, mesh, constraints, &rd, err);
+    if (st != DK_OK) {
+        dk_arap_free(ar);
+        return dk_error_prefix(err, "ARAP");
+    }
     st = build_cells(ar, err);
     if (st == DK_OK)
-        st = system_build(ar, constraints, NULL, &ar->sys, err);
+        st = system_build(ar, &rd.desc, NULL, &ar->sys, err);
+    dk_reorder_desc_free(&rd);
     if (st != DK_OK) {
         dk_arap_free(ar);
         return st;
@@ -647,7 +735,12 @@ dk_status dk_arap_rebind(dk_arap *ar, const dk_constraint_desc *constraints, dk_
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "ARAP rebind: object and constraints must not be NULL");
     arap_system s;
-    dk_status st = system_build(ar, constraints, &ar->sys, &s, err);
+    dk_reorder_desc rd;
+    dk_status st = dk_reorder_desc_create(ar->ro, ar->caller_mesh, constraints, &rd, err);
+    if (st != DK_OK)
+        return dk_error_prefix(err, "ARAP");
+    st = system_build(ar, &rd.desc, &ar->sys, &s, err);
+    dk_reorder_desc_free(&rd);
     if (st != DK_OK)
         return st;
     system_free(&ar->sys);
@@ -743,31 +836,162 @@ static int refine_rotation(const double a[9], double r[9])
     return 0;
 }
 
+#if defined(__GNUC__)
+/* Four cells' refine_rotation at once, lane by lane the same operations in the same order
+ * (no contraction: the results equal refine_rotation's bit for bit), on GCC/Clang generic
+ * vectors: SSE2 / NEON pairs or one AVX register. refine_rotation is about half of a local
+ * step's instructions, all of it arithmetic on a few registers: in lock step the four
+ * dependency chains overlap. a: 9 x 4 (entry-major, lane-minor); r: 9 x 4 in/out. Returns
+ * a bit mask of the lanes that converged (bit l); the other lanes' r are unspecified and the
+ * caller redoes them with dk_closest_rotation. */
+typedef double v4d __attribute__((vector_size(32)));
+typedef long long v4l __attribute__((vector_size(32)));
+
+#define V4SEL(m, x, y) ((v4d)(((v4l)(x) & (m)) | ((v4l)(y) & ~(m))))
+
+static int refine_rotation4(const v4d a[9], v4d r[9])
+{
+    const v4d one = {1.0, 1.0, 1.0, 1.0}, half = {0.5, 0.5, 0.5, 0.5};
+    v4l done = {0, 0, 0, 0}, failed = {0, 0, 0, 0};
+    for (int step = 0; step < 4; step++) {
+        const v4l active = ~(done | failed);
+        v4d m0 = r[0] * a[0] + r[3] * a[3] + r[6] * a[6];
+        v4d m1 = r[0] * a[1] + r[3] * a[4] + r[6] * a[7];
+        v4d m2 = r[0] * a[2] + r[3] * a[5] + r[6] * a[8];
+        v4d m3 = r[1] * a[0] + r[4] * a[3] + r[7] * a[6];
+        v4d m4 = r[1] * a[1] + r[4] * a[4] + r[7] * a[7];
+        v4d m5 = r[1] * a[2] + r[4] * a[5] + r[7] * a[8];
+        v4d m6 = r[2] * a[0] + r[5] * a[3] + r[8] * a[6];
+        v4d m7 = r[2] * a[1] + r[5] * a[4] + r[8] * a[7];
+        v4d m8 = r[2] * a[2] + r[5] * a[5] + r[8] * a[8];
+        v4d g0 = m5 - m7, g1 = m6 - m2, g2 = m1 - m3;
+        v4d tr = m0 + m4 + m8;
+        v4d k00 = tr - m0, k11 = tr - m4, k22 = tr - m8;
+        v4d k01 = -half * (m1 + m3), k02 = -half * (m2 + m6), k12 = -half * (m5 + m7);
+        v4d c00 = k11 * k22 - k12 * k12, c01 = k02 * k12 - k01 * k22,
+            c02 = k01 * k12 - k02 * k11, c11 = k00 * k22 - k02 * k02,
+            c12 = k01 * k02 - k00 * k12, c22 = k00 * k11 - k01 * k01;
+        v4d det = k00 * c00 + k01 * c01 + k02 * c02;
+        v4d s = 1e-3 * (k00 + k11 + k22);
+        v4l spd = (k00 > s) & (c22 > s * s) & (det > s * s * s);
+        v4d inv = -one / det;
+        v4d w0 = inv * (c00 * g0 + c01 * g1 + c02 * g2);
+        v4d w1 = inv * (c01 * g0 + c11 * g1 + c12 * g2);
+        v4d w2 = inv * (c02 * g0 + c12 * g1 + c22 * g2);
+        v4d t2 = w0 * w0 + w1 * w1 + w2 * w2;
+        const v4l ok = spd & (t2 <= one); /* false for NaN */
+        failed |= active & ~ok;
+        const v4l go = active & ok;
+        v4d v0 = half * w0, v1 = half * w1, v2 = half * w2, vv = 0.25 * t2;
+        v4d f = 2.0 / (one + vv);
+        v4d q0 = one + f * (v0 * v0 - vv), q4 = one + f * (v1 * v1 - vv),
+            q8 = one + f * (v2 * v2 - vv);
+        v4d q1 = f * (v0 * v1 - v2), q3 = f * (v0 * v1 + v2);
+        v4d q2 = f * (v0 * v2 + v1), q6 = f * (v0 * v2 - v1);
+        v4d q5 = f * (v1 * v2 - v0), q7 = f * (v1 * v2 + v0);
+        for (int i = 0; i < 3; i++) {
+            v4d x = r[3 * i], y = r[3 * i + 1], z = r[3 * i + 2];
+            r[3 * i] = V4SEL(go, x * q0 + y * q3 + z * q6, x);
+            r[3 * i + 1] = V4SEL(go, x * q1 + y * q4 + z * q7, y);
+            r[3 * i + 2] = V4SEL(go, x * q2 + y * q5 + z * q8, z);
+        }
+        const v4l fin = go & (t2 <= 1e-16);
+        if (fin[0] | fin[1] | fin[2] | fin[3]) {
+            v4d c[9];
+            for (int i = 0; i < 3; i++)
+                for (int j = i; j < 3; j++)
+                    c[3 * i + j] = c[3 * j + i] =
+                        (i == j ? 1.5 : 0.0) -
+                        half * (r[i] * r[j] + r[3 + i] * r[3 + j] + r[6 + i] * r[6 + j]);
+            for (int i = 0; i < 3; i++) {
+                v4d x = r[3 * i], y = r[3 * i + 1], z = r[3 * i + 2];
+                r[3 * i] = V4SEL(fin, x * c[0] + y * c[3] + z * c[6], x);
+                r[3 * i + 1] = V4SEL(fin, x * c[1] + y * c[4] + z * c[7], y);
+                r[3 * i + 2] = V4SEL(fin, x * c[2] + y * c[5] + z * c[8], z);
+            }
+            done |= fin;
+        }
+        const v4l left = ~(done | failed);
+        if (!(left[0] | left[1] | left[2] | left[3]))
+            break;
+    }
+    return (done[0] ? 1 : 0) | (done[1] ? 2 : 0) | (done[2] ? 4 : 0) | (done[3] ? 8 : 0);
+}
+#endif
+
+/* Cell i's covariance a = sum_t w_t (x_a - x_b) e_t^T (the local step's input). */
+static inline void cell_covariance(const dk_arap *ar, const double *x, dk_index i, double a[9])
+{
+    for (int k = 0; k < 9; k++)
+        a[k] = 0.0;
+    for (dk_index t = ar->cell_start[i]; t < ar->cell_start[i + 1]; t++) {
+        const double *pa = x + 3 * ar->ta[t], *pb = x + 3 * ar->tb[t];
+        const double *e = ar->te + 3 * t;
+        double w = ar->tw[t];
+        double d0 = w * (pa[0] - pb[0]), d1 = w * (pa[1] - pb[1]), d2 = w * (pa[2] - pb[2]);
+        a[0] += d0 * e[0]; a[1] += d0 * e[1]; a[2] += d0 * e[2];
+        a[3] += d1 * e[0]; a[4] += d1 * e[1]; a[5] += d1 * e[2];
+        a[6] += d2 * e[0]; a[7] += d2 * e[1]; a[8] += d2 * e[2];
+    }
+}
+
+/* Cell i's energy with rotation r. */
+static inline double cell_energy(const dk_arap *ar, const arap_system *s, const double *x,
+                                 dk_index i, const double r[9])
+{
+    double ce = 0.0;
+    for (dk_index t = ar->cell_start[i]; t < ar->cell_start[i + 1]; t++) {
+        const double *pa = x + 3 * ar->ta[t], *pb = x + 3 * ar->tb[t];
+        const double *e = ar->te + 3 * t;
+        double re0 = r[0] * e[0] + r[1] * e[1] + r[2] * e[2];
+        double re1 = r[3] * e[0] + r[4] * e[1] + r[5] * e[2];
+        double re2 = r[6] * e[0] + r[7] * e[1] + r[8] * e[2];
+        double q0 = pa[0] - pb[0] - re0, q1 = pa[1] - pb[1] - re1, q2 = pa[2] - pb[2] - re2;
+        ce += s->tws[t] * (q0 * q0 + q1 * q1 + q2 * q2);
+    }
+    return ce;
+}
+
 /* Local step and energy of the cells v0 .. v1-1 at positions x: rotations into rot (may be
  * NULL: then only the energy, with rotations from scratch); returns their energy. When rot
  * is given it holds rotations on entry (the previous local step's, or identities at a cold
  * start) from which each cell's rotation is refined (refine_rotation, else
- * dk_closest_rotation): both give the maximiser to rounding. With rhs (only with rot), the
- * cells' rotated rest edges s_i w R_i (p_a - p_b) are also added to rhs at a and minus at b
- * (column-major nu x 3), i.e. the global step's right-hand side for these rotations, from the
- * R_i e products the energy needs anyway. */
+ * dk_closest_rotation): both give the maximiser to rounding. The refinements run four cells
+ * at a time (refine_rotation4, the same result); the energies are summed in cell order
+ * either way. */
 static double cells_energy(const dk_arap *ar, const arap_system *s, const double *x,
-                           double *rot, double *rhs, dk_index v0, dk_index v1)
+                           double *rot, dk_index v0, dk_index v1)
 {
-    const size_t nu = (size_t)s->nu;
     double energy = 0.0;
-    for (dk_index i = v0; i < v1; i++) {
-        dk_index t0 = ar->cell_start[i], t1 = ar->cell_start[i + 1];
-        double a[9] = {0}, r[9];
-        for (dk_index t = t0; t < t1; t++) {
-            const double *pa = x + 3 * ar->ta[t], *pb = x + 3 * ar->tb[t];
-            const double *e = ar->te + 3 * t;
-            double w = ar->tw[t];
-            double d0 = w * (pa[0] - pb[0]), d1 = w * (pa[1] - pb[1]), d2 = w * (pa[2] - pb[2]);
-            a[0] += d0 * e[0]; a[1] += d0 * e[1]; a[2] += d0 * e[2];
-            a[3] += d1 * e[0]; a[4] += d1 * e[1]; a[5] += d1 * e[2];
-            a[6] += d2 * e[0]; a[7] += d2 * e[1]; a[8] += d2 * e[2];
+    dk_index i = v0;
+#if defined(__GNUC__)
+    if (rot)
+        for (; i + 4 <= v1; i += 4) {
+            double a4[4][9];
+            v4d av[9], rv[9];
+            for (int l = 0; l < 4; l++)
+                cell_covariance(ar, x, i + l, a4[l]);
+            const double *r0 = rot + 9 * (size_t)i;
+            for (int k = 0; k < 9; k++) {
+                av[k] = (v4d){a4[0][k], a4[1][k], a4[2][k], a4[3][k]};
+                rv[k] = (v4d){r0[k], r0[9 + k], r0[18 + k], r0[27 + k]};
+            }
+            const int okmask = refine_rotation4(av, rv);
+            for (int l = 0; l < 4; l++) {
+                double r[9];
+                if (okmask & (1 << l))
+                    for (int k = 0; k < 9; k++)
+                        r[k] = rv[k][l];
+                else
+                    dk_closest_rotation(a4[l], r);
+                energy += cell_energy(ar, s, x, i + l, r);
+                memcpy(rot + 9 * (size_t)(i + l), r, sizeof r);
+            }
         }
+#endif
+    for (; i < v1; i++) {
+        double a[9], r[9];
+        cell_covariance(ar, x, i, a);
         if (rot) {
             memcpy(r, rot + 9 * (size_t)i, sizeof r);
             if (!refine_rotation(a, r))
@@ -775,31 +999,7 @@ static double cells_energy(const dk_arap *ar, const arap_system *s, const double
         } else {
             dk_closest_rotation(a, r);
         }
-        double ce = 0.0;
-        for (dk_index t = t0; t < t1; t++) {
-            const double *pa = x + 3 * ar->ta[t], *pb = x + 3 * ar->tb[t];
-            const double *e = ar->te + 3 * t;
-            double re0 = r[0] * e[0] + r[1] * e[1] + r[2] * e[2];
-            double re1 = r[3] * e[0] + r[4] * e[1] + r[5] * e[2];
-            double re2 = r[6] * e[0] + r[7] * e[1] + r[8] * e[2];
-            double q0 = pa[0] - pb[0] - re0, q1 = pa[1] - pb[1] - re1, q2 = pa[2] - pb[2] - re2;
-            double w = s->tws[t];
-            ce += w * (q0 * q0 + q1 * q1 + q2 * q2);
-            if (rhs) {
-                dk_index ua = s->unk[ar->ta[t]], ub = s->unk[ar->tb[t]];
-                if (ua >= 0) {
-                    rhs[ua] += w * re0;
-                    rhs[nu + ua] += w * re1;
-                    rhs[2 * nu + ua] += w * re2;
-                }
-                if (ub >= 0) {
-                    rhs[ub] -= w * re0;
-                    rhs[nu + ub] -= w * re1;
-                    rhs[2 * nu + ub] -= w * re2;
-                }
-            }
-        }
-        energy += ce;
+        energy += cell_energy(ar, s, x, i, r);
         if (rot)
             memcpy(rot + 9 * (size_t)i, r, sizeof r);
     }
@@ -811,7 +1011,6 @@ typedef struct cells_job {
     const arap_system *s;
     const double *x;
     double *rot;
-    double *rhs[2]; /* part 0 adds into s->rhs (holding rhs_const), part 1 into s->rhs2 */
     double energy[2];
 } cells_job;
 
@@ -819,36 +1018,59 @@ typedef struct cells_job {
 static void cells_part(void *ctx, dk_index v0, dk_index v1, int part)
 {
     cells_job *j = ctx;
-    if (part == 1 && j->rhs[1])
-        memset(j->rhs[1], 0, 3 * (size_t)j->s->nu * sizeof(double));
-    j->energy[part] = cells_energy(j->ar, j->s, j->x, j->rot, j->rhs[part], v0, v1);
+    j->energy[part] = cells_energy(j->ar, j->s, j->x, j->rot, v0, v1);
+}
+
+typedef struct rhs_job {
+    const arap_system *s;
+    const double *rot;
+} rhs_job;
+
+/* Rows [u0, u1) of the right-hand side for the rotations (a dk_range_fn; see
+ * arap_system.rg). */
+static void rhs_part(void *ctx, dk_index u0, dk_index u1, int part)
+{
+    const rhs_job *j = ctx;
+    const arap_system *s = j->s;
+    const size_t nu = (size_t)s->nu;
+    (void)part;
+    for (dk_index u = u0; u < u1; u++) {
+        double b0 = s->rhs_const[u], b1 = s->rhs_const[nu + u], b2 = s->rhs_const[2 * nu + u];
+        for (int64_t k = s->rg_start[u]; k < s->rg_start[u + 1]; k++) {
+            const double *g = s->rg[k].g, *r = j->rot + 9 * (size_t)s->rg[k].cell;
+            b0 += r[0] * g[0] + r[1] * g[1] + r[2] * g[2];
+            b1 += r[3] * g[0] + r[4] * g[1] + r[5] * g[2];
+            b2 += r[6] * g[0] + r[7] * g[1] + r[8] * g[2];
+        }
+        s->rhs[u] = b0;
+        s->rhs[nu + u] = b1;
+        s->rhs[2 * nu + u] = b2;
+    }
+}
+
+/* s->rhs := the global step's right-hand side for the rotations rot. */
+static void rotations_rhs(const dk_arap *ar, arap_system *s, const double *rot)
+{
+    rhs_job job = {s, rot};
+    dk_run_halves(rhs_part, &job, s->nu, ar->n_terms >= PARALLEL_TERMS ? 0 : s->nu + 1);
 }
 
 /* Local step and energy at positions x: rotations into rot (may be NULL: then only the
- * energy), returns E(x) including soft penalties (when targets are known). With want_rhs
- * (and rot) it also leaves in s->rhs the right-hand side of the next global step for these
- * rotations (rhs_const + the rotated rest edges, as build_rhs). On big meshes the cells are
- * split in two halves, the second on a helper thread (the target machines have two cores)
- * that accumulates its share of the right-hand side in s->rhs2, added at the end; if the
- * thread cannot be started the calling thread does both halves. The split point depends
- * only on the mesh, so results are reproducible. */
+ * energy), returns E(x) including soft penalties (when targets are known); the caller gets
+ * the next global step's right-hand side from rotations_rhs, once it keeps the iterate. On big meshes the cells are split in two halves, the second on
+ * a helper thread (the target machines have two cores); if the thread cannot be started the
+ * calling thread does both halves. The split point depends only on the mesh, so results are
+ * reproducible. */
 static double local_energy(const dk_arap *ar, const arap_system *s, const double *x,
-                           double *rot, int want_rhs)
+                           double *rot)
 {
-    const size_t N = 3 * (size_t)s->nu;
-    double *rhs = want_rhs && rot ? s->rhs : NULL;
     double energy;
-    if (rhs)
-        memcpy(rhs, s->rhs_const, N * sizeof(double));
     if (ar->n_terms >= PARALLEL_TERMS) {
-        cells_job job = {ar, s, x, rot, {rhs, rhs ? s->rhs2 : NULL}, {0.0, 0.0}};
+        cells_job job = {ar, s, x, rot, {0.0, 0.0}};
         dk_run_halves(cells_part, &job, ar->n, 0);
         energy = job.energy[0] + job.energy[1];
-        if (rhs)
-            for (size_t k = 0; k < N; k++)
-                rhs[k] += s->rhs2[k];
     } else {
-        energy = cells_energy(ar, s, x, rot, rhs, 0, ar->n);
+        energy = cells_energy(ar, s, x, rot, 0, ar->n);
     }
     if (s->have_targets)
         for (dk_index u = 0; u < s->nu; u++) {
@@ -857,38 +1079,6 @@ static double local_energy(const dk_arap *ar, const arap_system *s, const double
                 energy += s->soft_k[v] * dist2(x + 3 * v, s->targets + 3 * s->target_of[v]);
         }
     return energy;
-}
-
-/* rhs = rhs_const + the rotated rest edges; rot NULL = identities (the cold start's first
- * global step; later right-hand sides come from the local steps, see local_energy). */
-static void build_rhs(const dk_arap *ar, arap_system *s, const double *rot)
-{
-    const dk_index nu = s->nu;
-    memcpy(s->rhs, s->rhs_const, 3 * (size_t)nu * sizeof(double));
-    static const double id[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-    for (dk_index i = 0; i < ar->n; i++) {
-        const double *r = rot ? rot + 9 * (size_t)i : id;
-        for (dk_index t = ar->cell_start[i]; t < ar->cell_start[i + 1]; t++) {
-            dk_index ua = s->unk[ar->ta[t]], ub = s->unk[ar->tb[t]];
-            if (ua < 0 && ub < 0)
-                continue;
-            const double *e = ar->te + 3 * t;
-            double w = s->tws[t];
-            double q0 = w * (r[0] * e[0] + r[1] * e[1] + r[2] * e[2]);
-            double q1 = w * (r[3] * e[0] + r[4] * e[1] + r[5] * e[2]);
-            double q2 = w * (r[6] * e[0] + r[7] * e[1] + r[8] * e[2]);
-            if (ua >= 0) {
-                s->rhs[ua] += q0;
-                s->rhs[nu + ua] += q1;
-                s->rhs[2 * (size_t)nu + ua] += q2;
-            }
-            if (ub >= 0) {
-                s->rhs[ub] -= q0;
-                s->rhs[nu + ub] -= q1;
-                s->rhs[2 * (size_t)nu + ub] -= q2;
-            }
-        }
-    }
 }
 
 /* Constant part of the right-hand side: couplings to eliminated vertices at positions x,
@@ -1047,7 +1237,7 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
             static const double id[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
             for (dk_index v = 0; v < n; v++)
                 memcpy(ar->rot + 9 * (size_t)v, id, sizeof id);
-            build_rhs(ar, s, NULL);
+            rotations_rhs(ar, s, ar->rot);
             st = dk_cholesky_solve(s->chol, s->rhs, 3, s->gu, err);
             if (st != DK_OK)
                 return dk_error_prefix(err, "ARAP solve");
@@ -1121,26 +1311,27 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
                     for (int d = 0; d < 3; d++)
                         ar->x[3 * s->unknowns[u] + d] += w[(size_t)d * nu + u];
             if (predict) {
-                const double e_plain = local_energy(ar, s, ar->x, ar->rot, 1);
+                const double e_plain = local_energy(ar, s, ar->x, ar->rot);
                 gather(s, ar->x, s->xu); /* keep the plain start */
                 for (dk_index u = 0; u < nu; u++)
                     for (int d = 0; d < 3; d++) {
                         const size_t k = 3 * (size_t)s->unknowns[u] + (size_t)d;
                         ar->x[k] = x1[k] + alpha * (x1[k] - x2[k]) + w[N3 + (size_t)d * nu + u];
                     }
-                const double e_pred = local_energy(ar, s, ar->x, ar->rot, 1);
+                const double e_pred = local_energy(ar, s, ar->x, ar->rot);
                 if (e_pred <= e_plain) {
                     s->predicted = 1;
                     energy = e_pred;
                 } else {
                     scatter(s, s->xu, ar->x);
-                    energy = local_energy(ar, s, ar->x, ar->rot, 1);
+                    energy = local_energy(ar, s, ar->x, ar->rot);
                 }
                 have_energy = 1;
             }
         }
         if (!have_energy)
-            energy = local_energy(ar, s, ar->x, ar->rot, 1);
+            energy = local_energy(ar, s, ar->x, ar->rot);
+        rotations_rhs(ar, s, ar->rot);
         if (ar->opt.on_iteration && ar->opt.on_iteration(ar->opt.user, 0, energy))
             return dk_error_set(err, DK_ERR_CANCELLED, "ARAP solve: cancelled by the observer");
         s->aa_hist = s->aa_head = s->aa_have_pair = 0;
@@ -1197,7 +1388,7 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
         double e_new;
         if (used_accel) {
             scatter(s, s->xu, ar->x);
-            e_new = local_energy(ar, s, ar->x, ar->rot, 1);
+            e_new = local_energy(ar, s, ar->x, ar->rot);
             if (!(e_new <= energy)) { /* safeguard: plain step, forget the history */
                 rejected++;
                 hist = 0;
@@ -1208,8 +1399,9 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
         if (!used_accel) {
             memcpy(s->xu, s->gu, N * sizeof(double));
             scatter(s, s->xu, ar->x);
-            e_new = local_energy(ar, s, ar->x, ar->rot, 1);
+            e_new = local_energy(ar, s, ar->x, ar->rot);
         }
+        rotations_rhs(ar, s, ar->rot); /* the next global step's, at the kept iterate */
         converged = e_new <= tiny || (energy - e_new) <= ar->opt.tolerance * energy;
         energy = e_new;
         if (ar->opt.on_iteration && ar->opt.on_iteration(ar->opt.user, it, energy))
@@ -1230,7 +1422,7 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
     } else if (ar->n_hist == 0) {
         ar->n_hist = 1;
     }
-    memcpy(positions, ar->x, 3 * (size_t)n * sizeof(double));
+    dk_reorder_rows_out(ar->ro, ar->x, positions);
     memcpy(ar->prev, ar->x, 3 * (size_t)n * sizeof(double));
     ar->have_prev = 1;
     memcpy(s->targets_prev, s->targets, nhv3 * sizeof(double));
@@ -1264,7 +1456,13 @@ double dk_arap_energy(const dk_arap *ar, const double *positions)
 {
     if (!ar || !positions)
         return NAN;
-    return local_energy(ar, &ar->sys, positions, NULL, 0);
+    double *x = malloc(((size_t)ar->n * 3 + 1) * sizeof *x);
+    if (!x)
+        return NAN;
+    dk_reorder_rows_in(ar->ro, positions, x);
+    const double e = local_energy(ar, &ar->sys, x, NULL);
+    free(x);
+    return e;
 }
 
 const dk_constraints *dk_arap_constraints(const dk_arap *ar)

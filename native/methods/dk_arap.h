@@ -130,10 +130,12 @@ dk_status dk_arap_set_tolerance(dk_arap *arap, double tolerance, dk_error *err);
 
 /** The ARAP energy E of arbitrary positions (n_vertices x 3) with their optimal rotations,
  *  including the soft-handle penalties for the targets of the last solve (none before the
- *  first solve). Independent of the solver state otherwise. Returns NaN on NULL input. */
+ *  first solve). Independent of the solver state otherwise. Returns NaN on NULL input or
+ *  when its n x 3 scratch copy cannot be allocated. */
 double dk_arap_energy(const dk_arap *arap, const double *positions);
 
-/** Accessors. */
+/** Accessors. The constraints are in the object's internal vertex numbering (a locality
+ *  order, see dk_reorder.h): read their counts, not their vertex lists. */
 const dk_constraints *dk_arap_constraints(const dk_arap *arap);
 dk_index dk_arap_n_unknowns(const dk_arap *arap);
 int dk_arap_analysis_count(const dk_arap *arap);      /**< symbolic analyses since bind   */

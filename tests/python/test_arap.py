@@ -446,3 +446,38 @@ def test_predicted_drag_on_a_scanned_mesh():
             assert res[True].iterations == res[False].iterations
     print("bunny ear drag iterations: predicted %s, plain %s" % (its[True], its[False]))
     assert sum(its[True][2:]) < sum(its[False][2:])
+
+
+@pytest.mark.parametrize("energy", ["spokes", "spokes_and_rims"])
+def test_vertex_numbering_does_not_change_the_result(energy):
+    # ARAP binds on its own locality numbering (native/methods/dk_reorder.h) and maps at the
+    # API: a shuffled copy of the mesh, with the constraints, stiffness and handle weights
+    # shuffled the same way, must give the same deformation (to rounding), the same
+    # iterations, and energies of positions in the caller's numbering.
+    v, f, fixed, handle = plane_setup(14)
+    n = len(v)
+    stiff = np.where(v[:, 0] < 0, 3.0, 1.0)
+    hw = np.linspace(0.6, 1.0, len(handle))
+    roi = np.flatnonzero(v[:, 1] > -0.45)
+    kw = dict(energy=energy, tolerance=1e-10, max_iterations=400)
+    t = bend(v, handle, 0.7)
+    a = deformkit.ARAP(deformkit.Mesh(v, f), [handle], fixed=fixed, roi=roi,
+                       handle_weights=[hw], stiffness=stiff, **kw)
+    ra = a.solve(t)
+    p = np.random.default_rng(7).permutation(n)   # new vertex k is old vertex p[k]
+    ip = np.argsort(p)                            # old vertex v is new vertex ip[v]
+    b = deformkit.ARAP(deformkit.Mesh(v[p], ip[f]), [ip[handle]], fixed=ip[fixed], roi=ip[roi],
+                       handle_weights=[hw], stiffness=stiff[p], **kw)
+    rb = b.solve(t)
+    bbox = np.linalg.norm(v.max(0) - v.min(0))
+    xa, xb = np.asarray(ra.positions), np.asarray(rb.positions)
+    assert np.abs(xb[ip] - xa).max() <= 1e-9 * bbox
+    assert abs(rb.iterations - ra.iterations) <= 1
+    assert rb.energy == pytest.approx(ra.energy, rel=1e-9)
+    assert b.energy(xb) == pytest.approx(a.energy(xa), rel=1e-9)
+    assert b.energy(xb[p]) != pytest.approx(b.energy(xb), rel=1e-6)  # the numbering matters
+    # errors name the caller's vertices: a floating component (no constraint) in b
+    v2 = np.vstack([v, v[:3] + [0.0, 0.0, 5.0]])
+    f2 = np.vstack([f, [[n, n + 1, n + 2]]])
+    with pytest.raises(ValueError, match="component of vertex %d" % n):
+        deformkit.ARAP(deformkit.Mesh(v2, f2), [handle], fixed=fixed)
