@@ -1140,6 +1140,30 @@ static double dot(const double *a, const double *b, size_t n)
     return (s0 + s1) + (s2 + s3);
 }
 
+/* a . b (returned) and a . c (into *ac) in one pass over a, each with dot's four partial
+ * sums (the same results as two dot calls). */
+static double dot2(const double *a, const double *b, const double *c, size_t n, double *ac)
+{
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0, t0 = 0.0, t1 = 0.0, t2 = 0.0, t3 = 0.0;
+    size_t k = 0;
+    for (; k + 4 <= n; k += 4) {
+        s0 += a[k] * b[k];
+        s1 += a[k + 1] * b[k + 1];
+        s2 += a[k + 2] * b[k + 2];
+        s3 += a[k + 3] * b[k + 3];
+        t0 += a[k] * c[k];
+        t1 += a[k + 1] * c[k + 1];
+        t2 += a[k + 2] * c[k + 2];
+        t3 += a[k + 3] * c[k + 3];
+    }
+    for (; k < n; k++) {
+        s0 += a[k] * b[k];
+        t0 += a[k] * c[k];
+    }
+    *ac = (t0 + t1) + (t2 + t3);
+    return (s0 + s1) + (s2 + s3);
+}
+
 /* Solves the m x m SPD system g theta = h in place (Cholesky, regularised); 0 on success. */
 static int small_spd_solve(double *g, double *h, int m)
 {
@@ -1349,37 +1373,52 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
             return dk_error_prefix(err, "ARAP solve");
         int used_accel = 0;
         if (accel) {
-            for (size_t k = 0; k < N; k++)
-                s->fu[k] = s->gu[k] - s->xu[k];
+            /* The vector passes are fused (each was memory-bound on its own): the residual,
+             * the new difference pair and the saved pair in one pass; each slot's Gram entry
+             * and its projection of the residual in one pass over the slot; the mix in one
+             * pass (the same subtraction order as one pass per slot). */
+            double h[MAX_ANDERSON_DEPTH];
             if (have_prev_pair) {
                 double *dgc = s->dg + (size_t)head * N, *dfc = s->df + (size_t)head * N;
                 for (size_t k = 0; k < N; k++) {
-                    dgc[k] = s->gu[k] - s->gprev[k];
-                    dfc[k] = s->fu[k] - s->fprev[k];
+                    const double gk = s->gu[k], fk = gk - s->xu[k];
+                    s->fu[k] = fk;
+                    dgc[k] = gk - s->gprev[k];
+                    dfc[k] = fk - s->fprev[k];
+                    s->gprev[k] = gk;
+                    s->fprev[k] = fk;
                 }
                 if (hist < depth)
                     hist++;
                 for (int j = 0; j < hist; j++)
                     gram[head * MAX_ANDERSON_DEPTH + j] = gram[j * MAX_ANDERSON_DEPTH + head] =
-                        dot(dfc, s->df + (size_t)j * N, N);
+                        dot2(s->df + (size_t)j * N, dfc, s->fu, N, &h[j]);
                 head = (head + 1) % depth;
+            } else {
+                for (size_t k = 0; k < N; k++) {
+                    const double gk = s->gu[k], fk = gk - s->xu[k];
+                    s->fu[k] = fk;
+                    s->gprev[k] = gk;
+                    s->fprev[k] = fk;
+                }
+                for (int j = 0; j < hist; j++)
+                    h[j] = dot(s->df + (size_t)j * N, s->fu, N);
             }
-            memcpy(s->gprev, s->gu, N * sizeof(double));
-            memcpy(s->fprev, s->fu, N * sizeof(double));
             have_prev_pair = 1;
             if (hist > 0) {
-                double g[MAX_ANDERSON_DEPTH * MAX_ANDERSON_DEPTH], h[MAX_ANDERSON_DEPTH];
-                for (int i = 0; i < hist; i++) {
-                    h[i] = dot(s->df + (size_t)i * N, s->fu, N);
+                double g[MAX_ANDERSON_DEPTH * MAX_ANDERSON_DEPTH];
+                for (int i = 0; i < hist; i++)
                     for (int j = 0; j < hist; j++)
                         g[i * hist + j] = gram[i * MAX_ANDERSON_DEPTH + j];
-                }
                 if (small_spd_solve(g, h, hist) == 0) {
-                    memcpy(s->xu, s->gu, N * sizeof(double));
-                    for (int i = 0; i < hist; i++) {
-                        const double *dgi = s->dg + (size_t)i * N;
-                        for (size_t k = 0; k < N; k++)
-                            s->xu[k] -= h[i] * dgi[k];
+                    const double *dgs[MAX_ANDERSON_DEPTH];
+                    for (int i = 0; i < hist; i++)
+                        dgs[i] = s->dg + (size_t)i * N;
+                    for (size_t k = 0; k < N; k++) {
+                        double xk = s->gu[k];
+                        for (int i = 0; i < hist; i++)
+                            xk -= h[i] * dgs[i][k];
+                        s->xu[k] = xk;
                     }
                     used_accel = 1;
                 }
