@@ -847,9 +847,16 @@ static int refine_rotation(const double a[9], double r[9])
 typedef double v4d __attribute__((vector_size(32)));
 typedef long long v4l __attribute__((vector_size(32)));
 
+/* On x86-64 Linux (ifunc) an AVX2 clone runs the four lanes in one register where the CPU
+ * has it; without FMA, so every lane rounds exactly as the baseline SSE2 code does. */
+#if defined(__x86_64__) && defined(__linux__) && !defined(__clang__)
+#define DK_VEC_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define DK_VEC_CLONES
+#endif
 #define V4SEL(m, x, y) ((v4d)(((v4l)(x) & (m)) | ((v4l)(y) & ~(m))))
 
-static int refine_rotation4(const v4d a[9], v4d r[9])
+DK_VEC_CLONES static int refine_rotation4(const v4d a[9], v4d r[9])
 {
     const v4d one = {1.0, 1.0, 1.0, 1.0}, half = {0.5, 0.5, 0.5, 0.5};
     v4l done = {0, 0, 0, 0}, failed = {0, 0, 0, 0};
