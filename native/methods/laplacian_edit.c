@@ -51,13 +51,7 @@ struct dk_laplacian_edit {
     int analysis_count, factorization_count;
     /* solve buffers */
     double *x;           /* n x 3 column-major current positions                           */
-    double *delta;       /* n x 3 column-major: the rotated deltas of local-frame updates;
-                            zeros for the membrane                                        */
-    const double *dcur;  /* the delta of the last linear solve: delta_rest (fixed, and the
-                            first solve of local_frame, so that no per-solve copy is
-                            needed), or delta (membrane, after local-frame updates)       */
-    int x_ready;         /* x's eliminated non-handle entries hold their rest values (a
-                            solve then only writes the handle targets); 0 after a rebind  */
+    double *delta;       /* n x 3 column-major delta of the last solve                     */
     double *ddelta;      /* n x 3 column-major change of delta in a local-frame update; also
                             the rows delta - A_e x_e while assemble_rhs runs              */
     double *face_cross;  /* n_faces x 3 face cross products (local frames)                */
@@ -79,13 +73,6 @@ static void try_build_basis(dk_laplacian_edit *le, le_system *s)
     dk_error ignored;
     dk_error_clear(&ignored);
     (void)build_basis(le, s, &ignored);
-}
-
-/* dcur := the deltas of a first linear solve: the rest deltas, or zeros (membrane, whose
- * le->delta stays zero from bind on: no local-frame update writes it). */
-static void reset_delta(dk_laplacian_edit *le)
-{
-    le->dcur = le->opt.detail == DK_LE_DETAIL_MEMBRANE ? le->delta : le->delta_rest;
 }
 
 static void system_free(le_system *s)
@@ -406,8 +393,7 @@ static inline int rotated_delta(const double nr[3], const double e[3], const dou
 }
 
 /* Local-frame update of vertices [i0, i1) (a dk_range_fn): delta := the rest frame
- * coordinates rotated into the frames of the positions le->x, and ddelta := its change from
- * dcur (the caller then points dcur at delta). */
+ * coordinates rotated into the frames of the positions le->x, and ddelta := its change. */
 static void rotate_deltas_range(void *ctx, dk_index i0, dk_index i1, int part)
 {
     dk_laplacian_edit *le = ctx;
@@ -427,7 +413,7 @@ static void rotate_deltas_range(void *ctx, dk_index i0, dk_index i1, int part)
             for (int d = 0; d < 3; d++)
                 nd[d] = le->delta_rest[d * n + (size_t)i];
         for (int d = 0; d < 3; d++) {
-            le->ddelta[d * n + (size_t)i] = nd[d] - le->dcur[d * n + (size_t)i];
+            le->ddelta[d * n + (size_t)i] = nd[d] - le->delta[d * n + (size_t)i];
             le->delta[d * n + (size_t)i] = nd[d];
         }
     }
@@ -714,7 +700,6 @@ dk_status dk_laplacian_edit_bind(const dk_mesh *mesh, const dk_constraint_desc *
         st = oom(err, "buffers");
         goto fail;
     }
-    memset(le->delta, 0, sizeof(double) * 3 * (size_t)n);
     for (dk_index i = 0; i < n; i++)
         for (int d = 0; d < 3; d++)
             le->rest[d * n + i] = mesh->positions[3 * i + d];
@@ -728,7 +713,10 @@ dk_status dk_laplacian_edit_bind(const dk_mesh *mesh, const dk_constraint_desc *
         if (st != DK_OK)
             goto fail;
     }
-    reset_delta(le);
+    if (le->opt.detail == DK_LE_DETAIL_MEMBRANE)
+        memset(le->delta, 0, sizeof(double) * 3 * (size_t)n);
+    else
+        memcpy(le->delta, le->delta_rest, sizeof(double) * 3 * (size_t)n);
     st = build_system(le, desc, &le->sys, err);
     if (st != DK_OK)
         goto fail;
@@ -736,7 +724,10 @@ dk_status dk_laplacian_edit_bind(const dk_mesh *mesh, const dk_constraint_desc *
     if (st != DK_OK)
         goto fail;
     try_build_basis(le, &le->sys);
-    reset_delta(le);
+    if (le->opt.detail == DK_LE_DETAIL_MEMBRANE)
+        memset(le->delta, 0, sizeof(double) * 3 * (size_t)n);
+    else
+        memcpy(le->delta, le->delta_rest, sizeof(double) * 3 * (size_t)n);
     *out = le;
     return DK_OK;
 fail:
@@ -752,7 +743,6 @@ dk_status dk_laplacian_edit_rebind(dk_laplacian_edit *le, const dk_constraint_de
 
     if (!le)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "LaplacianEdit rebind: object is NULL");
-    le->x_ready = 0; /* other eliminated vertices, whatever happens below */
     st = build_system(le, desc, &s, err);
     if (st != DK_OK)
         return st;
@@ -790,7 +780,10 @@ dk_status dk_laplacian_edit_rebind(dk_laplacian_edit *le, const dk_constraint_de
     try_build_basis(le, &s);
     system_free(&le->sys);
     le->sys = s;
-    reset_delta(le);
+    if (le->opt.detail == DK_LE_DETAIL_MEMBRANE)
+        memset(le->delta, 0, sizeof(double) * 3 * (size_t)le->n);
+    else
+        memcpy(le->delta, le->delta_rest, sizeof(double) * 3 * (size_t)le->n);
     return DK_OK;
 }
 
@@ -815,7 +808,7 @@ static void energy_range(void *ctx, dk_index i0, dk_index i1, int part)
     const size_t si = job->si, sd = job->sd, n = (size_t)le->n;
     const le_system *s = &le->sys;
     const double mu2 = le->opt.tikhonov * le->opt.tikhonov;
-    const double *d0 = le->dcur, *d1 = le->dcur + n, *d2 = le->dcur + 2 * n;
+    const double *d0 = le->delta, *d1 = le->delta + n, *d2 = le->delta + 2 * n;
     double e = 0.0;
     if (!job->want_energy) {
         for (dk_index i = i0; i < i1; i++)
@@ -906,9 +899,9 @@ static void rhs_rows_range(void *ctx, dk_index i0, dk_index i1, int part)
     for (dk_index i = i0; i < i1; i++) {
         double v0 = 0.0, v1 = 0.0, v2 = 0.0;
         if (s->row_active[i]) {
-            v0 = le->dcur[i];
-            v1 = le->dcur[n + (size_t)i];
-            v2 = le->dcur[2 * n + (size_t)i];
+            v0 = le->delta[i];
+            v1 = le->delta[n + (size_t)i];
+            v2 = le->delta[2 * n + (size_t)i];
             for (dk_index k = le->a_start[i]; k < le->a_start[i + 1]; k++) {
                 const dk_index j = le->a_col[k];
                 if (s->unknown_index[j] < 0) {
@@ -980,7 +973,6 @@ static dk_status local_frame_update(dk_laplacian_edit *le, double *change, dk_er
     double big = 0.0;
     face_normals(le, le->x);
     dk_run_halves(rotate_deltas_range, le, le->n, LE_PARALLEL_MIN);
-    le->dcur = le->delta;
     rhs_job job = {le, s, s->rhs, 0};
     dk_run_halves(rhs_unknowns_range, &job, s->n_unknowns, LE_PARALLEL_MIN);
     dk_status st = dk_cholesky_solve(s->chol, s->rhs, 3, s->rhs, err);
@@ -1049,7 +1041,6 @@ static dk_status build_basis(dk_laplacian_edit *le, le_system *s, dk_error *err)
     double *r = NULL;
     dk_status st;
 
-    le->x_ready = 0; /* x is scratch here */
     free(s->basis);
     s->basis = NULL;
     if (H > LE_MAX_BASIS_HANDLES || (double)ncol * (double)nu > LE_MAX_BASIS_DOUBLES)
@@ -1068,7 +1059,10 @@ static dk_status build_basis(dk_laplacian_edit *le, le_system *s, dk_error *err)
             le->x[(size_t)d * n + i] = s->con->role[i] >= 0 ? 0.0 : le->rest[(size_t)d * n + i];
     for (dk_index k = 0; k < 3 * s->con->n_handle_vertices; k++)
         s->targets[k] = 0.0;
-    reset_delta(le);
+    if (le->opt.detail == DK_LE_DETAIL_MEMBRANE)
+        memset(le->delta, 0, sizeof(double) * 3 * (size_t)n);
+    else
+        memcpy(le->delta, le->delta_rest, sizeof(double) * 3 * (size_t)n);
     assemble_rhs(le, s, s->basis);
     /* G_{h,a}: the map from P_a (x, y, z, 1 of the rest handle positions) to the rhs */
     for (dk_index h = 0; h < H; h++)
@@ -1142,26 +1136,17 @@ dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const double *targets, 
     st = dk_constraints_targets(s->con, le->mesh->positions, targets, mode, s->targets, err);
     if (st != DK_OK)
         return dk_error_prefix(err, "LaplacianEdit solve");
-    if (!le->x_ready) {
-        /* eliminated vertices: handle targets or rest (unknowns: overwritten below) */
-        for (dk_index i = 0; i < n; i++) {
-            const dk_index t = s->target_of[i];
-            for (int d = 0; d < 3; d++)
-                le->x[(size_t)d * n + i] = (s->unknown_index[i] < 0 && t >= 0)
-                                               ? s->targets[3 * t + d]
-                                               : le->rest[(size_t)d * n + i];
-        }
-        le->x_ready = 1;
-    } else {
-        /* only the eliminated handle vertices change from one solve to the next */
-        for (dk_index k = 0; k < s->con->n_handle_vertices; k++) {
-            const dk_index i = s->con->handle_vertices[k];
-            if (s->unknown_index[i] < 0)
-                for (int d = 0; d < 3; d++)
-                    le->x[(size_t)d * n + i] = s->targets[3 * k + d];
-        }
+    for (dk_index i = 0; i < n; i++) {
+        const dk_index t = s->target_of[i];
+        for (int d = 0; d < 3; d++)
+            le->x[(size_t)d * n + i] = (s->unknown_index[i] < 0 && t >= 0)
+                                           ? s->targets[3 * t + d]
+                                           : le->rest[(size_t)d * n + i];
     }
-    reset_delta(le);
+    if (le->opt.detail == DK_LE_DETAIL_MEMBRANE)
+        memset(le->delta, 0, sizeof(double) * 3 * (size_t)n);
+    else
+        memcpy(le->delta, le->delta_rest, sizeof(double) * 3 * (size_t)n);
     if (mode == 1 && s->basis) {
         /* affine in the transforms: combine the precomputed basis (no back-substitution) */
         const dk_index nu = s->n_unknowns;
