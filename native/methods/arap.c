@@ -241,10 +241,11 @@ static dk_status build_cells(dk_arap *ar, dk_error *err)
             while (e < len && c[e].a == merged.a && c[e].b == merged.b)
                 merged.w += c[e++].w;
             if ((merged.a == i || merged.b == i) && e - s > 2) {
+                const dk_index ca = ar->ro->perm[merged.a], cb = ar->ro->perm[merged.b];
                 st = dk_error_set(err, DK_ERR_TOPOLOGY,
                                   "ARAP: edge (%d, %d) is non-manifold (%d incident "
-                                  "triangles)", (int)ar->ro->perm[merged.a],
-                                  (int)ar->ro->perm[merged.b], (int)(e - s));
+                                  "triangles)", (int)(ca < cb ? ca : cb), (int)(ca < cb ? cb : ca),
+                                  (int)(e - s));
                 goto done;
             }
             if (ar->opt.weights == DK_ARAP_WEIGHTS_CLAMPED_COTANGENT && merged.w < 0.0)
