@@ -752,6 +752,47 @@ dk_status dk_arap_rebind(dk_arap *ar, const dk_constraint_desc *constraints, dk_
 
 /* ------------------------------------------------------------------ iteration ---------- */
 
+/* One Newton step of refine_rotation for element type T (double, or a GCC vector of
+ * doubles lane by lane): declares M = r^T a, its skew part g, K = tr(M) I - sym(M), K's
+ * adjugate c.., det, the margin s, the step w = -K^-1 g with t2 = |w|^2, and the Cayley
+ * factors q0..q8 of the rotation update. Computed before the caller's tests of K and t2
+ * (pure arithmetic: a failed test discards them), in one text for the scalar and the
+ * four-lane code, so that both round every lane identically. */
+#define DK_NEWTON_STEP(T, a, r)                                                            \
+    T m0 = r[0] * a[0] + r[3] * a[3] + r[6] * a[6];                                        \
+    T m1 = r[0] * a[1] + r[3] * a[4] + r[6] * a[7];                                        \
+    T m2 = r[0] * a[2] + r[3] * a[5] + r[6] * a[8];                                        \
+    T m3 = r[1] * a[0] + r[4] * a[3] + r[7] * a[6];                                        \
+    T m4 = r[1] * a[1] + r[4] * a[4] + r[7] * a[7];                                        \
+    T m5 = r[1] * a[2] + r[4] * a[5] + r[7] * a[8];                                        \
+    T m6 = r[2] * a[0] + r[5] * a[3] + r[8] * a[6];                                        \
+    T m7 = r[2] * a[1] + r[5] * a[4] + r[8] * a[7];                                        \
+    T m8 = r[2] * a[2] + r[5] * a[5] + r[8] * a[8];                                        \
+    T g0 = m5 - m7, g1 = m6 - m2, g2 = m1 - m3;                                            \
+    T tr = m0 + m4 + m8;                                                                   \
+    T k00 = tr - m0, k11 = tr - m4, k22 = tr - m8;                                         \
+    T k01 = -0.5 * (m1 + m3), k02 = -0.5 * (m2 + m6), k12 = -0.5 * (m5 + m7);              \
+    /* adjugate of K; Sylvester's criterion (the caller) with margins relative to tr K */ \
+    T c00 = k11 * k22 - k12 * k12, c01 = k02 * k12 - k01 * k22,                            \
+      c02 = k01 * k12 - k02 * k11, c11 = k00 * k22 - k02 * k02,                            \
+      c12 = k01 * k02 - k00 * k12, c22 = k00 * k11 - k01 * k01;                            \
+    T det = k00 * c00 + k01 * c01 + k02 * c02;                                             \
+    T s = 1e-3 * (k00 + k11 + k22);                                                        \
+    T inv = -1.0 / det;                                                                    \
+    T w0 = inv * (c00 * g0 + c01 * g1 + c02 * g2);                                         \
+    T w1 = inv * (c01 * g0 + c11 * g1 + c12 * g2);                                         \
+    T w2 = inv * (c02 * g0 + c12 * g1 + c22 * g2);                                         \
+    T t2 = w0 * w0 + w1 * w1 + w2 * w2;                                                    \
+    /* Cayley retraction Q = I + f ([v]x + [v]x^2), v = w / 2, f = 2 / (1 + |v|^2):       \
+     * orthogonal, agrees with exp([w]x) to second order */                               \
+    T v0 = 0.5 * w0, v1 = 0.5 * w1, v2 = 0.5 * w2, vv = 0.25 * t2;                         \
+    T f = 2.0 / (1.0 + vv);                                                                \
+    T q0 = 1.0 + f * (v0 * v0 - vv), q4 = 1.0 + f * (v1 * v1 - vv),                        \
+      q8 = 1.0 + f * (v2 * v2 - vv);                                                       \
+    T q1 = f * (v0 * v1 - v2), q3 = f * (v0 * v1 + v2);                                    \
+    T q2 = f * (v0 * v2 + v1), q6 = f * (v0 * v2 - v1);                                    \
+    T q5 = f * (v1 * v2 - v0), q7 = f * (v1 * v2 + v0);
+
 /* The rotation maximising trace(R^T a), refined from the guess r (in/out; a rotation on
  * entry) by Newton steps on SO(3). For R = r exp([w]x) and M = r^T a,
  *     trace(R^T a) = tr M - w.g - w^T K w / 2 + O(|w|^3),
@@ -772,44 +813,11 @@ dk_status dk_arap_rebind(dk_arap *ar, const dk_constraint_desc *constraints, dk_
 static int refine_rotation(const double a[9], double r[9])
 {
     for (int step = 0; step < 4; step++) {
-        /* M = r^T a */
-        double m0 = r[0] * a[0] + r[3] * a[3] + r[6] * a[6];
-        double m1 = r[0] * a[1] + r[3] * a[4] + r[6] * a[7];
-        double m2 = r[0] * a[2] + r[3] * a[5] + r[6] * a[8];
-        double m3 = r[1] * a[0] + r[4] * a[3] + r[7] * a[6];
-        double m4 = r[1] * a[1] + r[4] * a[4] + r[7] * a[7];
-        double m5 = r[1] * a[2] + r[4] * a[5] + r[7] * a[8];
-        double m6 = r[2] * a[0] + r[5] * a[3] + r[8] * a[6];
-        double m7 = r[2] * a[1] + r[5] * a[4] + r[8] * a[7];
-        double m8 = r[2] * a[2] + r[5] * a[5] + r[8] * a[8];
-        double g0 = m5 - m7, g1 = m6 - m2, g2 = m1 - m3;
-        double tr = m0 + m4 + m8;
-        double k00 = tr - m0, k11 = tr - m4, k22 = tr - m8;
-        double k01 = -0.5 * (m1 + m3), k02 = -0.5 * (m2 + m6), k12 = -0.5 * (m5 + m7);
-        /* adjugate of K, Sylvester's criterion with margins relative to tr K */
-        double c00 = k11 * k22 - k12 * k12, c01 = k02 * k12 - k01 * k22,
-               c02 = k01 * k12 - k02 * k11, c11 = k00 * k22 - k02 * k02,
-               c12 = k01 * k02 - k00 * k12, c22 = k00 * k11 - k01 * k01;
-        double det = k00 * c00 + k01 * c01 + k02 * c02;
-        double s = 1e-3 * (k00 + k11 + k22);
+        DK_NEWTON_STEP(double, a, r)
         if (!(k00 > s && c22 > s * s && det > s * s * s))
             return 0;
-        double inv = -1.0 / det;
-        double w0 = inv * (c00 * g0 + c01 * g1 + c02 * g2);
-        double w1 = inv * (c01 * g0 + c11 * g1 + c12 * g2);
-        double w2 = inv * (c02 * g0 + c12 * g1 + c22 * g2);
-        double t2 = w0 * w0 + w1 * w1 + w2 * w2;
         if (!(t2 <= 1.0))
             return 0; /* not finite, or too far for a Newton step */
-        /* Cayley retraction Q = I + f ([v]x + [v]x^2), v = w / 2, f = 2 / (1 + |v|^2):
-         * orthogonal, agrees with exp([w]x) to second order */
-        double v0 = 0.5 * w0, v1 = 0.5 * w1, v2 = 0.5 * w2, vv = 0.25 * t2;
-        double f = 2.0 / (1.0 + vv);
-        double q0 = 1.0 + f * (v0 * v0 - vv), q4 = 1.0 + f * (v1 * v1 - vv),
-               q8 = 1.0 + f * (v2 * v2 - vv);
-        double q1 = f * (v0 * v1 - v2), q3 = f * (v0 * v1 + v2);
-        double q2 = f * (v0 * v2 + v1), q6 = f * (v0 * v2 - v1);
-        double q5 = f * (v1 * v2 - v0), q7 = f * (v1 * v2 + v0);
         for (int i = 0; i < 3; i++) {
             double x = r[3 * i], y = r[3 * i + 1], z = r[3 * i + 2];
             r[3 * i] = x * q0 + y * q3 + z * q6;
@@ -859,44 +867,15 @@ typedef long long v4l __attribute__((vector_size(32)));
 
 DK_VEC_CLONES static int refine_rotation4(const v4d a[9], v4d r[9])
 {
-    const v4d one = {1.0, 1.0, 1.0, 1.0}, half = {0.5, 0.5, 0.5, 0.5};
+    const v4d half = {0.5, 0.5, 0.5, 0.5};
     v4l done = {0, 0, 0, 0}, failed = {0, 0, 0, 0};
     for (int step = 0; step < 4; step++) {
         const v4l active = ~(done | failed);
-        v4d m0 = r[0] * a[0] + r[3] * a[3] + r[6] * a[6];
-        v4d m1 = r[0] * a[1] + r[3] * a[4] + r[6] * a[7];
-        v4d m2 = r[0] * a[2] + r[3] * a[5] + r[6] * a[8];
-        v4d m3 = r[1] * a[0] + r[4] * a[3] + r[7] * a[6];
-        v4d m4 = r[1] * a[1] + r[4] * a[4] + r[7] * a[7];
-        v4d m5 = r[1] * a[2] + r[4] * a[5] + r[7] * a[8];
-        v4d m6 = r[2] * a[0] + r[5] * a[3] + r[8] * a[6];
-        v4d m7 = r[2] * a[1] + r[5] * a[4] + r[8] * a[7];
-        v4d m8 = r[2] * a[2] + r[5] * a[5] + r[8] * a[8];
-        v4d g0 = m5 - m7, g1 = m6 - m2, g2 = m1 - m3;
-        v4d tr = m0 + m4 + m8;
-        v4d k00 = tr - m0, k11 = tr - m4, k22 = tr - m8;
-        v4d k01 = -half * (m1 + m3), k02 = -half * (m2 + m6), k12 = -half * (m5 + m7);
-        v4d c00 = k11 * k22 - k12 * k12, c01 = k02 * k12 - k01 * k22,
-            c02 = k01 * k12 - k02 * k11, c11 = k00 * k22 - k02 * k02,
-            c12 = k01 * k02 - k00 * k12, c22 = k00 * k11 - k01 * k01;
-        v4d det = k00 * c00 + k01 * c01 + k02 * c02;
-        v4d s = 1e-3 * (k00 + k11 + k22);
+        DK_NEWTON_STEP(v4d, a, r)
         v4l spd = (k00 > s) & (c22 > s * s) & (det > s * s * s);
-        v4d inv = -one / det;
-        v4d w0 = inv * (c00 * g0 + c01 * g1 + c02 * g2);
-        v4d w1 = inv * (c01 * g0 + c11 * g1 + c12 * g2);
-        v4d w2 = inv * (c02 * g0 + c12 * g1 + c22 * g2);
-        v4d t2 = w0 * w0 + w1 * w1 + w2 * w2;
-        const v4l ok = spd & (t2 <= one); /* false for NaN */
+        const v4l ok = spd & (t2 <= 1.0); /* false for NaN */
         failed |= active & ~ok;
         const v4l go = active & ok;
-        v4d v0 = half * w0, v1 = half * w1, v2 = half * w2, vv = 0.25 * t2;
-        v4d f = 2.0 / (one + vv);
-        v4d q0 = one + f * (v0 * v0 - vv), q4 = one + f * (v1 * v1 - vv),
-            q8 = one + f * (v2 * v2 - vv);
-        v4d q1 = f * (v0 * v1 - v2), q3 = f * (v0 * v1 + v2);
-        v4d q2 = f * (v0 * v2 + v1), q6 = f * (v0 * v2 - v1);
-        v4d q5 = f * (v1 * v2 - v0), q7 = f * (v1 * v2 + v0);
         for (int i = 0; i < 3; i++) {
             v4d x = r[3 * i], y = r[3 * i + 1], z = r[3 * i + 2];
             r[3 * i] = V4SEL(go, x * q0 + y * q3 + z * q6, x);
@@ -1129,27 +1108,10 @@ static void gather(const arap_system *s, const double *x, double *xu)
             xu[(size_t)d * nu + u] = x[3 * s->unknowns[u] + d];
 }
 
-/* Four partial sums: a single running sum is one floating-point add latency per element
- * (~4 cycles), which made Anderson's ten dot products per iteration cost ~1 ms on the
- * armadillo; four chains run at the loads' speed. (The order of summation is fixed, so the
- * results stay reproducible.) */
-static double dot(const double *a, const double *b, size_t n)
-{
-    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
-    size_t k = 0;
-    for (; k + 4 <= n; k += 4) {
-        s0 += a[k] * b[k];
-        s1 += a[k + 1] * b[k + 1];
-        s2 += a[k + 2] * b[k + 2];
-        s3 += a[k + 3] * b[k + 3];
-    }
-    for (; k < n; k++)
-        s0 += a[k] * b[k];
-    return (s0 + s1) + (s2 + s3);
-}
-
-/* a . b (returned) and a . c (into *ac) in one pass over a, each with dot's four partial
- * sums (the same results as two dot calls). */
+/* a . b (returned) and a . c (into *ac) in one pass over a, each with four partial sums: a
+ * single running sum is one floating-point add latency per element (~4 cycles), which made
+ * Anderson's dot products cost ~1 ms an iteration on the armadillo; four chains run at the
+ * loads' speed. The order of summation is fixed, so the results stay reproducible. */
 static double dot2(const double *a, const double *b, const double *c, size_t n, double *ac)
 {
     double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0, t0 = 0.0, t1 = 0.0, t2 = 0.0, t3 = 0.0;
@@ -1409,8 +1371,8 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
                     s->gprev[k] = gk;
                     s->fprev[k] = fk;
                 }
-                for (int j = 0; j < hist; j++)
-                    h[j] = dot(s->df + (size_t)j * N, s->fu, N);
+                for (int j = 0; j < hist; j++) /* (hist is 0 here in practice) */
+                    (void)dot2(s->df + (size_t)j * N, s->fu, s->fu, N, &h[j]);
             }
             have_prev_pair = 1;
             if (hist > 0) {
