@@ -17,6 +17,16 @@
 
 /* ================================================================== errors ============== */
 
+/* Whether a native message already starts with the context's class name (the C library
+ * names its method: "ARAP: ...", "LaplacianEdit rebind: ..."), so that prefixing the context
+ * would say it twice ("ARAP: ARAP: ..."). */
+static int names_itself(const char *message, const char *context)
+{
+    size_t k = strcspn(context, ".");
+    return k > 0 && strncmp(message, context, k) == 0 &&
+           (message[k] == ':' || message[k] == ' ');
+}
+
 PyObject *dk_py_raise(const dk_error *err, const char *context)
 {
     PyObject *type;
@@ -49,7 +59,7 @@ PyObject *dk_py_raise(const dk_error *err, const char *context)
         type = PyExc_RuntimeError;
         break;
     }
-    if (context && context[0])
+    if (context && context[0] && !names_itself(message, context))
         PyErr_Format(type, "%s: %s", context, message);
     else
         PyErr_SetString(type, message);
