@@ -16,7 +16,8 @@
  *   is cleared; stop when E - E' <= tolerance * E.
  * A warm solve starts from the previous solution with the move of the constrained vertices
  * spread by one global step (previous rotations held); a cold one from the global step with
- * identity rotations.
+ * identity rotations. Acceleration NEWTON replaces the iteration by inexact Newton steps on
+ * the same energy (newton_step), from the same starts.
  */
 #include "dk_arap.h"
 
@@ -67,6 +68,19 @@ typedef struct arap_system {
     int predicted;        /* the last warm start used the secant predictor                */
     double last_energy;
     double aa_gram[MAX_ANDERSON_DEPTH * MAX_ANDERSON_DEPTH];
+    /* Newton (acceleration NEWTON) only, see newton_step: per cell K_c^-1 at the current
+     * iterate (6: 00 01 02 11 12 22, zero where K_c is not safely positive definite) and
+     * omega_c (3); the PCG direction in the mesh layout (n x 3, zero on eliminated
+     * vertices); per right-hand-side entry R_c g_{v,c} (written with the right-hand side)
+     * and the cell terms packed for the Hessian products, both in single precision: the
+     * products only steer conjugate gradients (truncated far above that rounding), the
+     * gradient, energies and line search stay in double, and halving these streams made a
+     * product ~25% faster (memory-bound); the PCG vectors (N each) */
+    double *kinv, *omega, *vfull;
+    dk_index *a_vrow; /* per entry of a: the vertex of its row (products in the mesh layout) */
+    struct nt_entry { float h[3]; dk_index cell; } *nt;
+    struct nt_term { float e[3], w; dk_index a, b; } *ntt; /* the cell terms, packed */
+    double *nt_r, *nt_z, *nt_p, *nt_q, *nt_d, *nt_z0;
 } arap_system;
 
 struct dk_arap {
@@ -110,6 +124,7 @@ void dk_arap_default_options(dk_arap_options *o)
     o->tolerance = 1e-6;
     o->acceleration = DK_ARAP_ACCEL_ANDERSON;
     o->anderson_depth = 5;
+    o->cg_iterations = 10;
     o->predict = 1;
     o->on_iteration = NULL;
     o->user = NULL;
@@ -132,10 +147,14 @@ static dk_status check_options(const dk_arap_options *o, dk_error *err)
     if (!(isfinite(o->tolerance) && o->tolerance >= 0.0))
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "ARAP: tolerance is %g, must be finite and >= 0", o->tolerance);
-    if (o->acceleration != DK_ARAP_ACCEL_NONE && o->acceleration != DK_ARAP_ACCEL_ANDERSON)
+    if (o->acceleration != DK_ARAP_ACCEL_NONE && o->acceleration != DK_ARAP_ACCEL_ANDERSON &&
+        o->acceleration != DK_ARAP_ACCEL_NEWTON)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
-                            "ARAP: unknown acceleration %d (none = 0, anderson = 1)",
+                            "ARAP: unknown acceleration %d (none = 0, anderson = 1, newton = 2)",
                             (int)o->acceleration);
+    if (o->cg_iterations < 1 || o->cg_iterations > 100)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP: cg_iterations is %d, must be in [1, 100]", o->cg_iterations);
     if (o->predict != 0 && o->predict != 1)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "ARAP: predict is %d, must be 0 or 1",
                             o->predict);
@@ -316,6 +335,18 @@ static void system_free(arap_system *s)
     free(s->targets_prev);
     free(s->targets_prev2);
     free(s->warm);
+    free(s->kinv);
+    free(s->omega);
+    free(s->vfull);
+    free(s->nt);
+    free(s->ntt);
+    free(s->a_vrow);
+    free(s->nt_r);
+    free(s->nt_z);
+    free(s->nt_p);
+    free(s->nt_q);
+    free(s->nt_d);
+    free(s->nt_z0);
     memset(s, 0, sizeof *s);
 }
 
@@ -595,8 +626,22 @@ static dk_status system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_
         s->dg = malloc(N * m * sizeof(double));
         s->df = malloc(N * m * sizeof(double));
     }
+    const int newton = ar->opt.acceleration == DK_ARAP_ACCEL_NEWTON;
+    if (newton) {
+        s->kinv = malloc(6 * (size_t)n * sizeof(double) + sizeof(double));
+        s->omega = malloc(3 * (size_t)n * sizeof(double) + sizeof(double));
+        s->vfull = calloc(3 * (size_t)n + 1, sizeof(double));
+        s->nt_r = malloc(N * sizeof(double));
+        s->nt_z = malloc(N * sizeof(double));
+        s->nt_p = malloc(N * sizeof(double));
+        s->nt_q = malloc(N * sizeof(double));
+        s->nt_d = malloc(N * sizeof(double));
+        s->nt_z0 = malloc(N * sizeof(double));
+    }
     if (!s->unknowns || !s->rhs_const || !s->rhs || !s->xu || !s->gu || !s->warm ||
-        (accel && (!s->fu || !s->gprev || !s->fprev || !s->dg || !s->df))) {
+        (accel && (!s->fu || !s->gprev || !s->fprev || !s->dg || !s->df)) ||
+        (newton && (!s->kinv || !s->omega || !s->vfull || !s->nt_r || !s->nt_z || !s->nt_p ||
+                    !s->nt_q || !s->nt_d || !s->nt_z0))) {
         system_free(s);
         return oom(err, "solve buffers");
     }
@@ -604,10 +649,38 @@ static dk_status system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_
         if (s->unk[v] >= 0)
             s->unknowns[s->unk[v]] = v;
     st = build_rhs_map(ar, s, err);
+    if (st == DK_OK && newton) {
+        const int64_t ne = s->rg_start[nu];
+        s->nt = malloc(((size_t)ne + 1) * sizeof *s->nt);
+        s->ntt = malloc(((size_t)ar->n_terms + 1) * sizeof *s->ntt);
+        if (!s->nt || !s->ntt) {
+            st = oom(err, "Newton buffers");
+        } else {
+            for (int64_t k = 0; k < ne; k++)
+                s->nt[k].cell = s->rg[k].cell;
+            for (int64_t t = 0; t < ar->n_terms; t++) {
+                struct nt_term *q = s->ntt + t;
+                for (int d = 0; d < 3; d++)
+                    q->e[d] = (float)ar->te[3 * t + d];
+                q->w = (float)ar->tw[t];
+                q->a = ar->ta[t];
+                q->b = ar->tb[t];
+            }
+        }
+    }
     if (st == DK_OK)
         st = check_components(ar, s, err);
     if (st == DK_OK)
         st = assemble(ar, s, err);
+    if (st == DK_OK && newton) {
+        const dk_index nnz = s->a.col_start[nu];
+        s->a_vrow = malloc(((size_t)nnz + 1) * sizeof *s->a_vrow);
+        if (!s->a_vrow)
+            st = oom(err, "Newton buffers");
+        else
+            for (dk_index k = 0; k < nnz; k++)
+                s->a_vrow[k] = s->unknowns[s->a.row_index[k]];
+    }
     if (st != DK_OK) {
         system_free(s);
         return st;
@@ -922,6 +995,29 @@ static inline void cell_covariance(const dk_arap *ar, const double *x, dk_index 
     }
 }
 
+/* K^-1 for the optimal rotation r of covariance a, K = tr(M) I - sym(M), M = r^T a: the
+ * Hessian of -trace(R^T a) in R = r exp([w]x) at w = 0 (see refine_rotation), whose inverse
+ * maps a change of a to the rotation's response (newton_step). Stored as 00 01 02 11 12
+ * 22; all zero (the rotation held in the Hessian, a positive semi-definite simplification)
+ * where K is not positive definite by refine_rotation's margins (a degenerate cell). */
+static inline void cell_kinv(const double a[9], const double r[9], double o[6])
+{
+    DK_NEWTON_STEP(double, a, r)
+    (void)g0, (void)g1, (void)g2, (void)inv, (void)w0, (void)w1, (void)w2, (void)q0, (void)q1,
+        (void)q2, (void)q3, (void)q4, (void)q5, (void)q6, (void)q7, (void)q8;
+    if (k00 > s && c22 > s * s && det > s * s * s && isfinite(det)) {
+        const double id = 1.0 / det;
+        o[0] = c00 * id;
+        o[1] = c01 * id;
+        o[2] = c02 * id;
+        o[3] = c11 * id;
+        o[4] = c12 * id;
+        o[5] = c22 * id;
+    } else {
+        o[0] = o[1] = o[2] = o[3] = o[4] = o[5] = 0.0;
+    }
+}
+
 /* Cell i's energy with rotation r. */
 static inline double cell_energy(const dk_arap *ar, const arap_system *s, const double *x,
                                  dk_index i, const double r[9])
@@ -971,6 +1067,8 @@ static double cells_energy(const dk_arap *ar, const arap_system *s, const double
                         r[k] = rv[k][l];
                 else
                     dk_closest_rotation(a4[l], r);
+                if (s->kinv)
+                    cell_kinv(a4[l], r, s->kinv + 6 * (size_t)(i + l));
                 energy += cell_energy(ar, s, x, i + l, r);
                 memcpy(rot + 9 * (size_t)(i + l), r, sizeof r);
             }
@@ -987,8 +1085,11 @@ static double cells_energy(const dk_arap *ar, const arap_system *s, const double
             dk_closest_rotation(a, r);
         }
         energy += cell_energy(ar, s, x, i, r);
-        if (rot)
+        if (rot) {
             memcpy(rot + 9 * (size_t)i, r, sizeof r);
+            if (s->kinv)
+                cell_kinv(a, r, s->kinv + 6 * (size_t)i);
+        }
     }
     return energy;
 }
@@ -1025,9 +1126,17 @@ static void rhs_part(void *ctx, dk_index u0, dk_index u1, int part)
         double b0 = s->rhs_const[u], b1 = s->rhs_const[nu + u], b2 = s->rhs_const[2 * nu + u];
         for (int64_t k = s->rg_start[u]; k < s->rg_start[u + 1]; k++) {
             const double *g = s->rg[k].g, *r = j->rot + 9 * (size_t)s->rg[k].cell;
-            b0 += r[0] * g[0] + r[1] * g[1] + r[2] * g[2];
-            b1 += r[3] * g[0] + r[4] * g[1] + r[5] * g[2];
-            b2 += r[6] * g[0] + r[7] * g[1] + r[8] * g[2];
+            const double h0 = r[0] * g[0] + r[1] * g[1] + r[2] * g[2];
+            const double h1 = r[3] * g[0] + r[4] * g[1] + r[5] * g[2];
+            const double h2 = r[6] * g[0] + r[7] * g[1] + r[8] * g[2];
+            b0 += h0;
+            b1 += h1;
+            b2 += h2;
+            if (s->nt) { /* Newton: R_c g_{v,c}, for the Hessian products */
+                s->nt[k].h[0] = (float)h0;
+                s->nt[k].h[1] = (float)h1;
+                s->nt[k].h[2] = (float)h2;
+            }
         }
         s->rhs[u] = b0;
         s->rhs[nu + u] = b1;
@@ -1177,6 +1286,204 @@ static int small_spd_solve(double *g, double *h, int m)
     return 0;
 }
 
+/* ------------------------------------------------------------------ Newton ------------- */
+/* acceleration NEWTON. With R(x) the optimal rotations, E(x) = E(x, R(x)) and (envelope
+ * theorem) half its gradient over the unknowns is g = A x - b(R(x)), the global step being
+ * x - A^-1 g. Half its Hessian is H = A - db/dx with db(v) = sum_c dR_c g_{v,c} (the
+ * right-hand-side map, linear in the rotations) and dR_c = R_c [w_c]x the first-order
+ * response of cell c's rotation to the direction v: differentiating its optimality condition
+ * skew(R^T S) = 0 gives w_c = -K_c^-1 skew(R_c^T dS_c), dS_c = the covariance of v, K_c as in
+ * refine_rotation. With omega_c = R_c w_c, dR_c g = omega_c x (R_c g): the products read 3 + 3
+ * numbers per map entry (R_c g is stored with each right-hand side). A Newton step solves
+ * H d = -g approximately by preconditioned conjugate gradients, preconditioner A^-1 (the
+ * bound factor), from d = 0: its first iterate is the local/global step; at most
+ * cg_iterations Hessian products; a direction of non-positive curvature ends it (the first
+ * one: the local/global step is used). Then a line search on E (t = 1, 1/2, 1/4, 1/8;
+ * accept when E does not increase), and if it fails, the local/global step (which never
+ * increases E). Stopping test: at the first conjugate-gradient iterate, the quadratic
+ * model's decrease for the best step along the local/global direction (alpha_0 r_0.z_0) is
+ * at most tolerance * E: the local/global test, predicted instead of taken. Cells
+ * whose K is not safely positive definite (degenerate) have their rotation held in H (a
+ * positive semi-definite simplification, like Gauss-Newton). */
+
+typedef struct hv_job {
+    const dk_arap *ar;
+    arap_system *s;
+    const double *v;   /* rows: the vector, in the mesh layout (n x 3; only unknowns read)  */
+    double *out;       /* rows: the result                                                   */
+    const double *rhs; /* rows: non-NULL: out = rhs - A v (minus the gradient), else H v    */
+    double dot[2];     /* rows: per half, v . out                                           */
+} hv_job;
+
+/* Cells [v0, v1) (a dk_range_fn): omega_c for the direction in s->vfull. */
+static void hv_cells_part(void *ctx, dk_index v0, dk_index v1, int part)
+{
+    const hv_job *j = ctx;
+    const dk_arap *ar = j->ar;
+    const arap_system *s = j->s;
+    (void)part;
+    const double *x = s->vfull;
+    for (dk_index i = v0; i < v1; i++) {
+        double a[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};
+        for (dk_index t = ar->cell_start[i]; t < ar->cell_start[i + 1]; t++) {
+            const struct nt_term *q = s->ntt + t;
+            const double *pa = x + 3 * (size_t)q->a, *pb = x + 3 * (size_t)q->b;
+            const double w = q->w, e0 = q->e[0], e1 = q->e[1], e2 = q->e[2];
+            const double d0 = w * (pa[0] - pb[0]), d1 = w * (pa[1] - pb[1]),
+                         d2 = w * (pa[2] - pb[2]);
+            a[0] += d0 * e0; a[1] += d0 * e1; a[2] += d0 * e2;
+            a[3] += d1 * e0; a[4] += d1 * e1; a[5] += d1 * e2;
+            a[6] += d2 * e0; a[7] += d2 * e1; a[8] += d2 * e2;
+        }
+        const double *r = ar->rot + 9 * (size_t)i, *k = s->kinv + 6 * (size_t)i;
+        /* the skew part of M = r^T a, as in DK_NEWTON_STEP */
+        const double m1 = r[0] * a[1] + r[3] * a[4] + r[6] * a[7];
+        const double m2 = r[0] * a[2] + r[3] * a[5] + r[6] * a[8];
+        const double m3 = r[1] * a[0] + r[4] * a[3] + r[7] * a[6];
+        const double m5 = r[1] * a[2] + r[4] * a[5] + r[7] * a[8];
+        const double m6 = r[2] * a[0] + r[5] * a[3] + r[8] * a[6];
+        const double m7 = r[2] * a[1] + r[5] * a[4] + r[8] * a[7];
+        const double g0 = m5 - m7, g1 = m6 - m2, g2 = m1 - m3;
+        const double w0 = -(k[0] * g0 + k[1] * g1 + k[2] * g2);
+        const double w1 = -(k[1] * g0 + k[3] * g1 + k[4] * g2);
+        const double w2 = -(k[2] * g0 + k[4] * g1 + k[5] * g2);
+        double *o = s->omega + 3 * (size_t)i;
+        o[0] = r[0] * w0 + r[1] * w1 + r[2] * w2;
+        o[1] = r[3] * w0 + r[4] * w1 + r[5] * w2;
+        o[2] = r[6] * w0 + r[7] * w1 + r[8] * w2;
+    }
+}
+
+/* Unknowns [u0, u1) (a dk_range_fn): out = rhs - A v, or H v = A v - sum omega_c x R_c g. */
+static void hv_rows_part(void *ctx, dk_index u0, dk_index u1, int part)
+{
+    hv_job *j = ctx;
+    const arap_system *s = j->s;
+    const size_t nu = (size_t)s->nu;
+    const double *v = j->v;
+    double dot = 0.0;
+    for (dk_index u = u0; u < u1; u++) {
+        double b0 = 0.0, b1 = 0.0, b2 = 0.0;
+        for (dk_index k = s->a.col_start[u]; k < s->a.col_start[u + 1]; k++) {
+            const double av = s->a.values[k], *y = v + 3 * (size_t)s->a_vrow[k];
+            b0 += av * y[0];
+            b1 += av * y[1];
+            b2 += av * y[2];
+        }
+        if (j->rhs) {
+            b0 = j->rhs[u] - b0;
+            b1 = j->rhs[nu + u] - b1;
+            b2 = j->rhs[2 * nu + u] - b2;
+        } else {
+            for (int64_t k = s->rg_start[u]; k < s->rg_start[u + 1]; k++) {
+                const float *h = s->nt[k].h;
+                const double *o = s->omega + 3 * (size_t)s->nt[k].cell;
+                b0 -= o[1] * h[2] - o[2] * h[1];
+                b1 -= o[2] * h[0] - o[0] * h[2];
+                b2 -= o[0] * h[1] - o[1] * h[0];
+            }
+        }
+        j->out[u] = b0;
+        j->out[nu + u] = b1;
+        j->out[2 * nu + u] = b2;
+        const double *y = v + 3 * (size_t)s->unknowns[u];
+        dot += y[0] * b0 + y[1] * b1 + y[2] * b2;
+    }
+    j->dot[part] = dot;
+}
+
+/* One Newton step from the current iterate (s->xu = ar->x on the unknowns, with its
+ * rotations, K^-1, right-hand side and R_c g; energy `energy`), or the finding that it has
+ * converged (*newton_converged = 1, nothing moves). Else the new iterate with all of those,
+ * its energy in *e_new. Counters: *rejected (line search failed), *cg_total (products). */
+static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double *e_new,
+                             int *newton_converged, int *rejected, int *cg_total, dk_error *err)
+{
+    const dk_index nu = s->nu;
+    const size_t N = 3 * (size_t)nu;
+    const int par = ar->n_terms >= PARALLEL_TERMS;
+    const dk_index cells_min = par ? 0 : ar->n + 1, rows_min = par ? 0 : nu + 1;
+    double *r = s->nt_r, *z = s->nt_z, *p = s->nt_p, *q = s->nt_q, *d = s->nt_d;
+    double *z0 = s->nt_z0, ignored;
+    *newton_converged = 0;
+    hv_job job = {ar, s, ar->x, r, s->rhs, {0.0, 0.0}};
+    dk_run_halves(hv_rows_part, &job, nu, rows_min); /* r = -g */
+    dk_status st = dk_cholesky_solve(s->chol, r, 3, z0, err);
+    if (st != DK_OK)
+        return st;
+    double rz = dot2(r, z0, z0, N, &ignored);
+    const double rz0 = rz;
+    memcpy(p, z0, N * sizeof(double));
+    memset(d, 0, N * sizeof(double));
+    scatter(s, p, s->vfull);
+    job.v = s->vfull;
+    job.out = q;
+    job.rhs = NULL;
+    for (int k = 0; k < ar->opt.cg_iterations; k++) {
+        dk_run_halves(hv_cells_part, &job, ar->n, cells_min);
+        dk_run_halves(hv_rows_part, &job, nu, rows_min);
+        (*cg_total)++;
+        const double pq = job.dot[0] + job.dot[1];
+        if (!(pq > 0.0) || !(rz > 0.0)) {
+            if (k == 0) /* non-positive curvature at once: the local/global step */
+                memcpy(d, p, N * sizeof(double));
+            break;
+        }
+        const double alpha = rz / pq;
+        /* The stopping test, on the first iterate: alpha rz0 is the decrease of the
+         * quadratic model for the best step along the local/global direction, which is at
+         * least what a local/global step would achieve; at most tolerance * E: converged,
+         * the local/global test predicted instead of taken (so that one tolerance means the
+         * same for every acceleration). Nothing moves. */
+        if (k == 0 && alpha * rz <= ar->opt.tolerance * energy) {
+            *newton_converged = 1;
+            *e_new = energy;
+            return DK_OK;
+        }
+        for (size_t i = 0; i < N; i++) {
+            d[i] += alpha * p[i];
+            r[i] -= alpha * q[i];
+        }
+        if (k + 1 == ar->opt.cg_iterations)
+            break;
+        st = dk_cholesky_solve(s->chol, r, 3, z, err);
+        if (st != DK_OK)
+            return st;
+        const double rzn = dot2(r, z, z, N, &ignored);
+        if (!(rzn > 1e-24 * rz0))
+            break; /* solved to rounding */
+        const double beta = rzn / rz;
+        for (size_t i = 0; i < N; i++)
+            p[i] = z[i] + beta * p[i];
+        scatter(s, p, s->vfull);
+        rz = rzn;
+    }
+    /* line search on E; its last evaluation is the kept iterate's local step */
+    double t = 1.0, e = NAN;
+    int accepted = 0;
+    for (int ls = 0; ls < 4 && !accepted; ls++) {
+        if (ls > 0)
+            t *= 0.5;
+        for (size_t i = 0; i < N; i++)
+            s->gu[i] = s->xu[i] + t * d[i];
+        scatter(s, s->gu, ar->x);
+        e = local_energy(ar, s, ar->x, ar->rot);
+        accepted = e <= energy;
+    }
+    if (accepted) {
+        memcpy(s->xu, s->gu, N * sizeof(double));
+    } else { /* the local/global step x + A^-1 (b - A x): E cannot increase */
+        (*rejected)++;
+        for (size_t i = 0; i < N; i++)
+            s->xu[i] += z0[i];
+        scatter(s, s->xu, ar->x);
+        e = local_energy(ar, s, ar->x, ar->rot);
+    }
+    rotations_rhs(ar, s, ar->rot);
+    *e_new = e;
+    return DK_OK;
+}
+
 dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_start,
                         int max_iterations, double *positions, dk_arap_info *info,
                         dk_error *err)
@@ -1199,6 +1506,7 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
     s->have_targets = 1;
     const int maxit = max_iterations > 0 ? max_iterations : ar->opt.max_iterations;
     const int accel = ar->opt.acceleration == DK_ARAP_ACCEL_ANDERSON;
+    const int newton = ar->opt.acceleration == DK_ARAP_ACCEL_NEWTON;
     const int depth = ar->opt.anderson_depth;
 
     /* Resume (warm_start 2): the previous call's targets again, and nothing changed since:
@@ -1332,10 +1640,23 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
         gather(s, ar->x, s->xu);
     }
     const double tiny = 1e-26 * s->escale;
-    int it = 0, converged = energy <= tiny, rejected = 0;
+    int it = 0, converged = energy <= tiny, rejected = 0, cg_total = 0;
     int hist = s->aa_hist, head = s->aa_head, have_prev_pair = s->aa_have_pair;
     s->resumable = 0; /* until this call ends normally */
-    while (!converged && it < maxit) {
+    while (newton && !converged && it < maxit) {
+        it++;
+        double e_new;
+        int newton_converged;
+        st = newton_step(ar, s, energy, &e_new, &newton_converged, &rejected, &cg_total, err);
+        if (st != DK_OK)
+            return dk_error_prefix(err, "ARAP solve");
+        /* or a step that did not lower E at all (rounding level: stagnation) */
+        converged = e_new <= tiny || newton_converged || (energy - e_new) <= 0.0;
+        energy = e_new;
+        if (ar->opt.on_iteration && ar->opt.on_iteration(ar->opt.user, it, energy))
+            return dk_error_set(err, DK_ERR_CANCELLED, "ARAP solve: cancelled by the observer");
+    }
+    while (!newton && !converged && it < maxit) {
         it++;
         /* s->rhs: from the last local step, the one at the current iterate */
         st = dk_cholesky_solve(s->chol, s->rhs, 3, s->gu, err);
@@ -1446,6 +1767,7 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
         info->converged = converged;
         info->rejected = rejected;
         info->predicted = !resume && s->predicted;
+        info->cg_iterations = cg_total;
     }
     return DK_OK;
 }

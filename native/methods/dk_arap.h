@@ -49,9 +49,18 @@ typedef enum dk_arap_weight_kind {
     DK_ARAP_WEIGHTS_UNIFORM = 2            /**< 1 per spoke                              */
 } dk_arap_weight_kind;
 
+/** How the solve iterates. NONE: the paper's local/global iteration. ANDERSON: the same,
+ *  with Anderson acceleration and an energy safeguard (Peng et al. 2018). NEWTON: inexact
+ *  Newton steps on E(x) (rotations optimal for x): the exact Hessian applied by matrix-free
+ *  products, inverted approximately by `cg_iterations` preconditioned conjugate-gradient
+ *  iterations with the bound factor as preconditioner (so the first iterate is the
+ *  local/global step), an energy line search with the local/global step as fallback (E never
+ *  increases). Ours; docs/methods/arap.md. Fewer, costlier iterations that reach the
+ *  minimum's slow (bending) modes, which local/global iterations barely move. */
 typedef enum dk_arap_acceleration {
     DK_ARAP_ACCEL_NONE = 0,
-    DK_ARAP_ACCEL_ANDERSON = 1
+    DK_ARAP_ACCEL_ANDERSON = 1,
+    DK_ARAP_ACCEL_NEWTON = 2
 } dk_arap_acceleration;
 
 /** Per-iteration observer: called after every iteration (and once with iteration 0 for the
@@ -63,10 +72,16 @@ typedef struct dk_arap_options {
     dk_arap_energy_kind energy;        /**< default DK_ARAP_SPOKES                        */
     dk_arap_weight_kind weights;       /**< default DK_ARAP_WEIGHTS_CLAMPED_COTANGENT     */
     int max_iterations;                /**< >= 1, default 100                             */
-    double tolerance;                  /**< stop when (E_prev - E) <= tolerance * E_prev;
-                                            >= 0, default 1e-6                            */
+    double tolerance;                  /**< >= 0, default 1e-6. NONE / ANDERSON: stop when
+                                            the last iteration lowered E by at most
+                                            tolerance * E_prev. NEWTON: stop when the best
+                                            step along the local/global direction would
+                                            lower E by at most tolerance * E (predicted by
+                                            the quadratic model, before any step is taken)*/
     dk_arap_acceleration acceleration; /**< default DK_ARAP_ACCEL_ANDERSON                */
     int anderson_depth;                /**< 1..20, default 5                              */
+    int cg_iterations;                 /**< NEWTON: conjugate-gradient iterations (Hessian
+                                            products) per Newton step, 1..100, default 10 */
     int predict;                       /**< warm starts may extrapolate along the drag
                                             (the secant of the last two solutions, see
                                             dk_arap_solve); 0 or 1, default 1             */
@@ -77,10 +92,12 @@ typedef struct dk_arap_options {
 /** Result of one solve. */
 typedef struct dk_arap_info {
     double energy;      /**< E of the returned positions (with their optimal rotations) */
-    int iterations;     /**< local/global iterations done                                */
-    int converged;      /**< 1 if the relative energy change fell below the tolerance    */
-    int rejected;       /**< accelerated steps rejected by the safeguard                 */
+    int iterations;     /**< local/global iterations, or Newton steps, done              */
+    int converged;      /**< 1 if the stopping test (see dk_arap_options.tolerance) held  */
+    int rejected;       /**< accelerated steps rejected by the safeguard (Newton: steps
+                             whose line search failed, replaced by a local/global step)  */
     int predicted;      /**< 1 if the warm start extrapolated along the drag             */
+    int cg_iterations;  /**< NEWTON: Hessian products done in all                         */
 } dk_arap_info;
 
 typedef struct dk_arap dk_arap;

@@ -25,7 +25,7 @@ typedef struct ArapObject {
 
 static const char *const energy_names[] = {"spokes", "spokes_and_rims", NULL};
 static const char *const weights_names[] = {"cotangent", "clamped_cotangent", "uniform", NULL};
-static const char *const accel_names[] = {"none", "anderson", NULL};
+static const char *const accel_names[] = {"none", "anderson", "newton", NULL};
 
 static int enter(ArapObject *self)
 {
@@ -70,7 +70,8 @@ static PyObject *arap_new(PyTypeObject *type, PyObject *args, PyObject *kwargs)
 {
     static char *kwlist[] = {"mesh", "handles", "fixed", "roi", "handle_weights", "stiffness",
                              "energy", "weights", "max_iterations", "tolerance",
-                             "acceleration", "anderson_depth", "predict", NULL};
+                             "acceleration", "anderson_depth", "predict", "cg_iterations",
+                             NULL};
     PyObject *mesh_obj, *handles, *fixed = Py_None, *roi = Py_None, *hw = Py_None;
     PyObject *stiffness = Py_None, *energy = NULL, *weights = NULL, *accel = NULL;
     PyObject *module = PyType_GetModule(type);
@@ -88,10 +89,10 @@ static PyObject *arap_new(PyTypeObject *type, PyObject *args, PyObject *kwargs)
     if (!module)
         return NULL;
     dk_arap_default_options(&opt);
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OOOOOOidOip:ARAP", kwlist, &mesh_obj,
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OOOOOOidOipi:ARAP", kwlist, &mesh_obj,
                                      &handles, &fixed, &roi, &hw, &stiffness, &energy, &weights,
                                      &opt.max_iterations, &opt.tolerance, &accel,
-                                     &opt.anderson_depth, &opt.predict))
+                                     &opt.anderson_depth, &opt.predict, &opt.cg_iterations))
         return NULL;
     mesh = dk_py_mesh_get(module, mesh_obj, "mesh");
     if (!mesh)
@@ -397,15 +398,19 @@ static PyMethodDef arap_methods[] = {
 PyDoc_STRVAR(arap_doc,
              "ARAP(mesh, handles, fixed=None, roi=None, handle_weights=None, stiffness=None,\n"
              "     energy='spokes', weights='clamped_cotangent', max_iterations=100,\n"
-             "     tolerance=1e-6, acceleration='anderson', anderson_depth=5, predict=True)\n\n"
+             "     tolerance=1e-6, acceleration='anderson', anderson_depth=5, predict=True,\n"
+             "     cg_iterations=10)\n\n"
              "As-rigid-as-possible deformation (Sorkine & Alexa 2007; 'spokes_and_rims' after\n"
              "Chao et al. 2010). Fixed vertices, vertices outside roi and handle vertices of\n"
              "weight 1 are eliminated exactly; handle weights w < 1 become soft penalties\n"
              "lambda w/(1-w) |p - t|^2. stiffness (n values > 0) scales each vertex's cell\n"
-             "energy. Iterates local/global steps (Anderson-accelerated with an energy\n"
-             "safeguard) until the relative energy change <= tolerance. predict: warm starts\n"
-             "may extrapolate along the drag (secant of the last two solutions). See\n"
-             "docs/methods/arap.md.");
+             "energy. acceleration: 'none' (the paper's local/global iteration), 'anderson'\n"
+             "(Anderson-accelerated, with an energy safeguard) or 'newton' (inexact Newton\n"
+             "steps, cg_iterations conjugate-gradient iterations each, preconditioned by the\n"
+             "local/global step; an energy line search). Stops when a local/global step\n"
+             "changes the energy by at most tolerance (relative; Newton: predicted before the\n"
+             "step). predict: warm starts may extrapolate along the drag (secant of the last\n"
+             "two solutions). See docs/methods/arap.md.");
 
 static PyType_Slot arap_slots[] = {
     {Py_tp_new, (void *)arap_new},

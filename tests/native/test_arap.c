@@ -1,6 +1,7 @@
 /* Tests of ARAP deformation (native/methods/arap.c) on generated meshes: zero drag, rigid
  * motions reproduced with zero energy, exact hard constraints, energy never increasing per
- * iteration (plain and Anderson), plain and accelerated reaching the same minimum, reported
+ * iteration (plain, Anderson and Newton), all three reaching the same minimum, Newton's
+ * quadratic convergence (a wrong Hessian product would lose it), reported
  * energy = energy of the returned positions = an independent evaluation written here (with
  * its own cotangents and LAPACK SVD rotations), the weight clamping rule, stiffness, soft
  * handles, warm start, rebind reuse, bumpy plane bend / bar twist edge-length preservation,
@@ -177,7 +178,7 @@ static void test_zero_drag(void)
     }
     dk_index sizes[1] = {s.n_handle};
     dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
-    for (int accel = 0; accel < 2; accel++) {
+    for (int accel = 0; accel < 3; accel++) {
         dk_arap_options o;
         dk_arap_default_options(&o);
         o.acceleration = accel;
@@ -242,7 +243,7 @@ static void test_rigid_motion(void)
     }
     dk_constraint_desc d = {2, sizes, hv, NULL, 0, NULL, 0, NULL, NULL};
     for (int energy_kind = 0; energy_kind < 2; energy_kind++)
-        for (int accel = 0; accel < 2; accel++) {
+        for (int accel = 0; accel < 3; accel++) {
             dk_arap_options o;
             dk_arap_default_options(&o);
             o.energy = energy_kind;
@@ -278,8 +279,8 @@ static void test_rigid_motion(void)
     dk_test_mesh_free(&tm);
 }
 
-/* Bend: hard constraints exact, monotone energy, plain vs Anderson same minimum, reported
- * energy = dk_arap_energy = the independent reference, bumps preserved. */
+/* Bend: hard constraints exact, monotone energy, plain vs Anderson vs Newton same minimum,
+ * reported energy = dk_arap_energy = the independent reference, bumps preserved. */
 static void test_bend(void)
 {
     plane_setup s;
@@ -292,11 +293,12 @@ static void test_bend(void)
     dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
     double t[3 * 64];
     bend_targets(&s, 1.2, t);
-    double *x[2];
-    double energies[2];
-    int iterations[2];
+    double *x[3];
+    double energies[3];
+    int iterations[3];
+    static const char *const names[3] = {"plain", "anderson", "newton"};
     static history h;
-    for (int accel = 0; accel < 2; accel++) {
+    for (int accel = 0; accel < 3; accel++) {
         x[accel] = malloc(sizeof(double) * 3 * m->n_vertices);
         dk_arap_options o;
         dk_arap_default_options(&o);
@@ -342,23 +344,184 @@ static void test_bend(void)
         CHECK_MSG(fabs(e_ref - info.energy) <= 1e-8 * info.energy, "reference %.15g vs %.15g",
                   e_ref, info.energy);
         printf("bumpy plane bend (%d vertices), %s: %d iterations, energy %.10g, RMS relative "
-               "edge-length change %.4f, %d rejected\n", (int)m->n_vertices,
-               accel ? "anderson" : "plain", info.iterations, info.energy,
-               rms_edge_change(m, x[accel]), info.rejected);
+               "edge-length change %.4f, %d rejected\n", (int)m->n_vertices, names[accel],
+               info.iterations, info.energy, rms_edge_change(m, x[accel]), info.rejected);
         CHECK(rms_edge_change(m, x[accel]) < 0.05);
         dk_arap_free(ar);
     }
-    CHECK_MSG(fabs(energies[0] - energies[1]) <= 1e-6 * energies[0], "plain %.12g anderson %.12g",
-              energies[0], energies[1]);
-    double maxd = 0;
-    for (dk_index k = 0; k < 3 * m->n_vertices; k++)
-        maxd = fmax(maxd, fabs(x[0][k] - x[1][k]));
-    CHECK_MSG(maxd <= 1e-3 * m->bbox_diagonal, "plain vs anderson positions differ by %g",
-              maxd);
-    CHECK_MSG(iterations[1] < iterations[0], "anderson %d vs plain %d iterations",
-              iterations[1], iterations[0]);
-    free(x[0]);
-    free(x[1]);
+    for (int a = 1; a < 3; a++) {
+        CHECK_MSG(fabs(energies[0] - energies[a]) <= 1e-6 * energies[0], "plain %.12g %s %.12g",
+                  energies[0], names[a], energies[a]);
+        double maxd = 0;
+        for (dk_index k = 0; k < 3 * m->n_vertices; k++)
+            maxd = fmax(maxd, fabs(x[0][k] - x[a][k]));
+        CHECK_MSG(maxd <= 1e-3 * m->bbox_diagonal, "plain vs %s positions differ by %g",
+                  names[a], maxd);
+        CHECK_MSG(iterations[a] < iterations[a - 1], "%s %d vs %s %d iterations", names[a],
+                  iterations[a], names[a - 1], iterations[a - 1]);
+    }
+    /* Newton (the tightest solve: its test is on a predicted step) vs Anderson */
+    CHECK_MSG(energies[2] <= energies[1] * (1 + 1e-9), "newton %.15g anderson %.15g",
+              energies[2], energies[1]);
+    for (int a = 0; a < 3; a++)
+        free(x[a]);
+    plane_free(&s);
+}
+
+/* Newton (acceleration NEWTON) with conjugate gradients run to convergence on a small mesh is
+ * an exact Newton method: from the naive start of a 1.2 rad bend the energy gap to the
+ * minimum must fall below 1e-10 of the energy within 10 steps, shrinking at least
+ * quadratically once small (a Hessian product missing the rotations' response, or with a
+ * wrong sign, converges only linearly and fails this), and the minimum is the one a tight
+ * Anderson solve finds. Never a failed line search on this smooth problem. With the default
+ * cg_iterations and tolerance the solve stops within 1e-5 of that minimum, closer than
+ * Anderson's at the same tolerance. */
+static void test_newton_quadratic(void)
+{
+    plane_setup s;
+    if (plane_make(&s, 16) != 0) {
+        CHECK(0);
+        return;
+    }
+    const dk_mesh *m = s.mesh;
+    dk_index sizes[1] = {s.n_handle};
+    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    double t[3 * 64];
+    bend_targets(&s, 1.2, t);
+    double *x = malloc(sizeof(double) * 3 * m->n_vertices);
+    static history h;
+    dk_arap_options o;
+    dk_arap_default_options(&o);
+    o.tolerance = 1e-15;
+    o.max_iterations = 20000;
+    dk_arap *ar = NULL, *an = NULL;
+    dk_error e = {0};
+    dk_arap_info ia, in;
+    if (!x || dk_arap_bind(m, &d, &o, &an, &e) != DK_OK) { /* Anderson reference */
+        CHECK_MSG(0, "%s", e.message);
+        goto out;
+    }
+    CHECK(dk_arap_solve(an, t, 0, 0, 0, x, &ia, &e) == DK_OK && ia.converged);
+    o.acceleration = DK_ARAP_ACCEL_NEWTON;
+    o.cg_iterations = 100;
+    o.tolerance = 1e-13; /* stops before the rounding level, where line searches fail */
+    o.max_iterations = 12;
+    o.on_iteration = record;
+    o.user = &h;
+    h.count = 0;
+    if (dk_arap_bind(m, &d, &o, &ar, &e) != DK_OK) {
+        CHECK_MSG(0, "%s", e.message);
+        goto out;
+    }
+    CHECK(dk_arap_solve(ar, t, 0, 0, 0, x, &in, &e) == DK_OK);
+    const double emin = ia.energy;
+    printf("newton (exact CG) gaps:");
+    for (int k = 0; k < h.count; k++)
+        printf(" %.1e", (h.e[k] - emin) / emin);
+    printf("; %d products, %d rejected\n", in.cg_iterations, in.rejected);
+    CHECK_MSG(fabs(in.energy - emin) <= 1e-10 * emin, "newton %.15g anderson %.15g",
+              in.energy, emin);
+    int reached = -1;
+    for (int k = 0; k < h.count && reached < 0; k++)
+        if (h.e[k] - emin <= 1e-10 * emin)
+            reached = k;
+    CHECK_MSG(reached >= 0 && reached <= 10, "gap below 1e-10 after %d steps", reached);
+    for (int k = 1; k < h.count; k++) {
+        const double g0 = (h.e[k - 1] - emin) / emin, g1 = (h.e[k] - emin) / emin;
+        if (g0 < 1e-3 && g0 > 1e-9)
+            CHECK_MSG(g1 <= 10.0 * g0 * g0 + 1e-12, "step %d: gap %g -> %g, not quadratic", k,
+                      g0, g1);
+    }
+    CHECK_MSG(in.converged && in.rejected == 0, "converged %d, %d rejected", in.converged,
+              in.rejected);
+    /* defaults: stops close to the minimum, closer than Anderson at the same tolerance */
+    {
+        dk_arap_options od;
+        dk_arap_default_options(&od);
+        dk_arap *a1 = NULL, *a2 = NULL;
+        dk_arap_info i1, i2;
+        if (dk_arap_bind(m, &d, &od, &a1, &e) == DK_OK) {
+            od.acceleration = DK_ARAP_ACCEL_NEWTON;
+            if (dk_arap_bind(m, &d, &od, &a2, &e) == DK_OK) {
+                CHECK(dk_arap_solve(a1, t, 0, 0, 0, x, &i1, &e) == DK_OK && i1.converged);
+                CHECK(dk_arap_solve(a2, t, 0, 0, 0, x, &i2, &e) == DK_OK && i2.converged);
+                printf("defaults: anderson %d it, gap %.1e; newton %d steps (%d products), gap "
+                       "%.1e\n", i1.iterations, (i1.energy - emin) / emin, i2.iterations,
+                       i2.cg_iterations, (i2.energy - emin) / emin);
+                CHECK(i2.energy - emin <= 1e-5 * emin && i2.energy <= i1.energy);
+            }
+        }
+        CHECK_MSG(a1 && a2, "%s", e.message);
+        dk_arap_free(a1);
+        dk_arap_free(a2);
+    }
+out:
+    dk_arap_free(ar);
+    dk_arap_free(an);
+    free(x);
+    plane_free(&s);
+}
+
+/* Newton with soft handles (weight 0.5: unknowns with a penalty in E, its gradient and its
+ * Hessian) and per-vertex stiffness reaches the minimum a tight Anderson solve finds. */
+static void test_newton_soft_stiffness(void)
+{
+    plane_setup s;
+    if (plane_make(&s, 12) != 0) {
+        CHECK(0);
+        return;
+    }
+    const dk_mesh *m = s.mesh;
+    const dk_index n = m->n_vertices;
+    dk_index sizes[1] = {s.n_handle};
+    double t[3 * 64], w[64];
+    bend_targets(&s, 0.9, t);
+    for (int k = 0; k < 64; k++)
+        w[k] = 0.5;
+    double *stiff = malloc(sizeof(double) * n), *x = malloc(sizeof(double) * 3 * n),
+           *y = malloc(sizeof(double) * 3 * n);
+    dk_arap *a = NULL, *b = NULL;
+    dk_error e = {0};
+    if (!stiff || !x || !y) {
+        CHECK(0);
+        goto out;
+    }
+    for (dk_index v = 0; v < n; v++)
+        stiff[v] = m->positions[3 * v] < 0 ? 20.0 : 1.0;
+    dk_constraint_desc d = {1, sizes, s.handle, w, s.n_fixed, s.fixed, 0, NULL, stiff};
+    dk_arap_options o;
+    dk_arap_default_options(&o);
+    o.tolerance = 1e-14;
+    o.max_iterations = 20000;
+    dk_arap_info ia, ib;
+    CHECK_MSG(dk_arap_bind(m, &d, &o, &a, &e) == DK_OK, "%s", e.message);
+    o.acceleration = DK_ARAP_ACCEL_NEWTON;
+    o.tolerance = 1e-12;
+    o.max_iterations = 50;
+    CHECK_MSG(dk_arap_bind(m, &d, &o, &b, &e) == DK_OK, "%s", e.message);
+    if (!a || !b)
+        goto out;
+    CHECK(dk_arap_solve(a, t, 0, 0, 0, x, &ia, &e) == DK_OK && ia.converged);
+    CHECK(dk_arap_solve(b, t, 0, 0, 0, y, &ib, &e) == DK_OK && ib.converged);
+    CHECK_MSG(fabs(ia.energy - ib.energy) <= 1e-9 * ia.energy, "anderson %.15g newton %.15g",
+              ia.energy, ib.energy);
+    double maxd = 0, gap = 0;
+    for (dk_index k = 0; k < 3 * n; k++)
+        maxd = fmax(maxd, fabs(x[k] - y[k]));
+    for (dk_index k = 0; k < s.n_handle; k++)
+        for (int i = 0; i < 3; i++)
+            gap = fmax(gap, fabs(y[3 * s.handle[k] + i] - t[3 * k + i]));
+    CHECK_MSG(maxd <= 1e-5 * m->bbox_diagonal, "positions differ by %g", maxd);
+    CHECK_MSG(gap > 1e-4, "soft handles at their targets (%g)", gap);
+    CHECK_NEAR(dk_arap_energy(b, y), ib.energy, 1e-12 * ib.energy);
+    printf("soft + stiffness: anderson %d it, newton %d steps (%d products)\n", ia.iterations,
+           ib.iterations, ib.cg_iterations);
+out:
+    dk_arap_free(a);
+    dk_arap_free(b);
+    free(stiff);
+    free(x);
+    free(y);
     plane_free(&s);
 }
 
@@ -389,10 +552,14 @@ static void test_twist(void)
         t[3 * k + 2] = p[2];
     }
     dk_constraint_desc d = {1, sizes, hv, NULL, ring, fixed, 0, NULL, NULL};
-    for (int kind = 0; kind < 2; kind++) {
+    double anderson_energy[2] = {0, 0};
+    for (int run = 0; run < 4; run++) {
+        const int kind = run % 2, newton = run / 2;
         dk_arap_options o;
         dk_arap_default_options(&o);
         o.energy = kind;
+        if (newton)
+            o.acceleration = DK_ARAP_ACCEL_NEWTON;
         o.tolerance = 1e-10;
         o.max_iterations = 1000;
         static history h;
@@ -411,9 +578,14 @@ static void test_twist(void)
         for (int k = 1; k < h.count; k++)
             CHECK(h.e[k] <= h.e[k - 1] * (1 + 1e-13));
         double rms = rms_edge_change(m, x);
-        printf("bar twist 90 deg (%s): %d iterations, energy %.8g, RMS relative edge-length "
-               "change %.4f\n", kind ? "spokes_and_rims" : "spokes", info.iterations,
-               info.energy, rms);
+        printf("bar twist 90 deg (%s, %s): %d iterations, energy %.8g, RMS relative edge-length "
+               "change %.4f\n", kind ? "spokes_and_rims" : "spokes",
+               newton ? "newton" : "anderson", info.iterations, info.energy, rms);
+        if (!newton)
+            anderson_energy[kind] = info.energy;
+        else /* the same minimum (the tighter solve may be lower by the other's gap) */
+            CHECK_MSG(fabs(info.energy - anderson_energy[kind]) <= 1e-6 * info.energy,
+                      "newton %.12g anderson %.12g", info.energy, anderson_energy[kind]);
         CHECK(rms < 0.1);
         /* the middle ring turned by about 45 degrees */
         const double *p = x + 3 * (segments / 2 * ring);
@@ -492,44 +664,49 @@ static void test_resume(void)
     double *x = malloc(sizeof(double) * 3 * n), *y = malloc(sizeof(double) * 3 * n),
            *z = malloc(sizeof(double) * 3 * n);
     dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
-    dk_arap_options o;
-    dk_arap_default_options(&o);
-    o.tolerance = 1e-9;
-    o.max_iterations = 1000;
-    dk_arap *whole = NULL, *sliced = NULL, *other = NULL;
-    dk_error e = {0};
-    dk_arap_info iw, is, io;
-    if (!x || !y || !z || dk_arap_bind(m, &d, &o, &whole, &e) != DK_OK ||
-        dk_arap_bind(m, &d, &o, &sliced, &e) != DK_OK ||
-        dk_arap_bind(m, &d, &o, &other, &e) != DK_OK) {
-        CHECK_MSG(0, "%s", e.message);
-        goto out;
-    }
-    CHECK(dk_arap_solve(whole, t, 0, 0, 0, x, &iw, &e) == DK_OK && iw.converged);
-    CHECK(iw.iterations > 9);
-    int total = 0;
-    CHECK(dk_arap_solve(sliced, t, 0, 0, 3, y, &is, &e) == DK_OK);
-    total += is.iterations;
-    for (int k = 0; k < 1000 && !is.converged; k++) {
-        CHECK(dk_arap_solve(sliced, t, 0, 2, 3, y, &is, &e) == DK_OK);
+    for (int accel = 1; accel < 3; accel++) {
+        dk_arap_options o;
+        dk_arap_default_options(&o);
+        o.acceleration = accel;
+        o.tolerance = accel == 2 ? 1e-12 : 1e-9;
+        o.max_iterations = 1000;
+        o.cg_iterations = 3; /* several Newton steps to slice */
+        dk_arap *whole = NULL, *sliced = NULL, *other = NULL;
+        dk_error e = {0};
+        dk_arap_info iw, is, io;
+        if (!x || !y || !z || dk_arap_bind(m, &d, &o, &whole, &e) != DK_OK ||
+            dk_arap_bind(m, &d, &o, &sliced, &e) != DK_OK ||
+            dk_arap_bind(m, &d, &o, &other, &e) != DK_OK) {
+            CHECK_MSG(0, "%s", e.message);
+            goto out;
+        }
+        CHECK(dk_arap_solve(whole, t, 0, 0, 0, x, &iw, &e) == DK_OK && iw.converged);
+        CHECK_MSG(iw.iterations > 6, "acceleration %d: %d iterations", accel, iw.iterations);
+        int total = 0;
+        const int slice = accel == 2 ? 2 : 3;
+        CHECK(dk_arap_solve(sliced, t, 0, 0, slice, y, &is, &e) == DK_OK);
         total += is.iterations;
-    }
-    CHECK_MSG(total == iw.iterations, "sliced %d iterations, whole %d", total, iw.iterations);
-    CHECK(memcmp(x, y, sizeof(double) * 3 * n) == 0 && is.energy == iw.energy);
-    /* new targets: resume = warm start */
-    CHECK(dk_arap_solve(other, t, 0, 0, 0, z, &io, &e) == DK_OK);
-    CHECK(dk_arap_solve(other, t2, 0, 1, 0, z, &io, &e) == DK_OK);
-    CHECK(dk_arap_solve(sliced, t2, 0, 2, 0, y, &is, &e) == DK_OK);
-    CHECK(is.iterations == io.iterations && memcmp(y, z, sizeof(double) * 3 * n) == 0);
-    /* after a rebind (same constraints), resume starts over as a warm start */
-    CHECK(dk_arap_rebind(sliced, &d, &e) == DK_OK && dk_arap_rebind(other, &d, &e) == DK_OK);
-    CHECK(dk_arap_solve(sliced, t2, 0, 2, 0, y, &is, &e) == DK_OK);
-    CHECK(dk_arap_solve(other, t2, 0, 1, 0, z, &io, &e) == DK_OK);
-    CHECK(is.iterations == io.iterations && memcmp(y, z, sizeof(double) * 3 * n) == 0);
+        for (int k = 0; k < 1000 && !is.converged; k++) {
+            CHECK(dk_arap_solve(sliced, t, 0, 2, slice, y, &is, &e) == DK_OK);
+            total += is.iterations;
+        }
+        CHECK_MSG(total == iw.iterations, "sliced %d iterations, whole %d", total, iw.iterations);
+        CHECK(memcmp(x, y, sizeof(double) * 3 * n) == 0 && is.energy == iw.energy);
+        /* new targets: resume = warm start */
+        CHECK(dk_arap_solve(other, t, 0, 0, 0, z, &io, &e) == DK_OK);
+        CHECK(dk_arap_solve(other, t2, 0, 1, 0, z, &io, &e) == DK_OK);
+        CHECK(dk_arap_solve(sliced, t2, 0, 2, 0, y, &is, &e) == DK_OK);
+        CHECK(is.iterations == io.iterations && memcmp(y, z, sizeof(double) * 3 * n) == 0);
+        /* after a rebind (same constraints), resume starts over as a warm start */
+        CHECK(dk_arap_rebind(sliced, &d, &e) == DK_OK && dk_arap_rebind(other, &d, &e) == DK_OK);
+        CHECK(dk_arap_solve(sliced, t2, 0, 2, 0, y, &is, &e) == DK_OK);
+        CHECK(dk_arap_solve(other, t2, 0, 1, 0, z, &io, &e) == DK_OK);
+        CHECK(is.iterations == io.iterations && memcmp(y, z, sizeof(double) * 3 * n) == 0);
 out:
-    dk_arap_free(whole);
-    dk_arap_free(sliced);
-    dk_arap_free(other);
+        dk_arap_free(whole);
+        dk_arap_free(sliced);
+        dk_arap_free(other);
+    }
     free(x);
     free(y);
     free(z);
@@ -778,11 +955,12 @@ static void test_warm_rotations_and_cold_reproducibility(void)
     double t[3 * 64];
     double *x0 = malloc(bytes), *x = malloc(bytes);
     static history h;
-    for (int accel = 0; accel < 2 && x0 && x; accel++) {
+    static const char *const names[3] = {"plain", "anderson", "newton"};
+    for (int accel = 0; accel < 3 && x0 && x; accel++) {
         dk_arap_options o;
         dk_arap_default_options(&o);
         o.acceleration = accel;
-        o.max_iterations = 40;
+        o.max_iterations = accel == 2 ? 6 : 40;
         o.on_iteration = record;
         o.user = &h;
         dk_arap *ar = NULL, *fresh = NULL;
@@ -805,16 +983,16 @@ static void test_warm_rotations_and_cold_reproducibility(void)
             for (int j = 1; j < h.count; j++)
                 monotone &= h.e[j] <= h.e[j - 1];
         }
-        CHECK_MSG(monotone, "%s: an iteration raised the energy", accel ? "anderson" : "plain");
+        CHECK_MSG(monotone, "%s: an iteration raised the energy", names[accel]);
         CHECK_NEAR(dk_arap_energy(ar, x), info.energy, 1e-12 * info.energy);
         bend_targets(&s, 1.2, t);
         CHECK(dk_arap_solve(ar, t, 0, 0, 0, x, &info, &e) == DK_OK);
         CHECK_MSG(memcmp(x, x0, bytes) == 0 && info.energy == i0.energy &&
                       info.iterations == i0.iterations,
-                  "%s: cold solve after other solves differs", accel ? "anderson" : "plain");
+                  "%s: cold solve after other solves differs", names[accel]);
         CHECK(dk_arap_solve(fresh, t, 0, 0, 0, x, &info, &e) == DK_OK);
         CHECK_MSG(memcmp(x, x0, bytes) == 0 && info.energy == i0.energy,
-                  "%s: cold solve on a fresh object differs", accel ? "anderson" : "plain");
+                  "%s: cold solve on a fresh object differs", names[accel]);
         dk_arap_free(ar);
         dk_arap_free(fresh);
     }
@@ -863,6 +1041,16 @@ static void test_errors(void)
     dk_arap_default_options(&o);
     o.anderson_depth = 0;
     CHECK(dk_arap_bind(m, &d, &o, &ar, &e) == DK_ERR_INVALID_ARGUMENT);
+    for (int bad = 0; bad < 3; bad++) {
+        dk_arap_default_options(&o);
+        if (bad == 2)
+            o.acceleration = (dk_arap_acceleration)3;
+        else
+            o.cg_iterations = bad ? 101 : 0;
+        CHECK(dk_arap_bind(m, &d, &o, &ar, &e) == DK_ERR_INVALID_ARGUMENT && !ar);
+        CHECK_MSG(strstr(e.message, bad == 2 ? "acceleration" : "cg_iterations"), "%s",
+                  e.message);
+    }
     /* NaN targets */
     CHECK(dk_arap_bind(m, &d, NULL, &ar, &e) == DK_OK);
     double t[3 * 64] = {0}, *x = malloc(sizeof(double) * 3 * m->n_vertices);
@@ -950,25 +1138,32 @@ static void test_big_mesh_threaded_local_step(void)
     }
     dk_index sizes[1] = {cells + 1};
     dk_constraint_desc d = {1, sizes, hv, NULL, cells + 1, fixed, 0, NULL, NULL};
-    dk_arap_options o;
-    dk_arap_default_options(&o);
-    o.max_iterations = 8;
-    static history h;
-    h.count = 0;
-    o.on_iteration = record;
-    o.user = &h;
-    dk_arap *ar = NULL;
-    dk_error e = {0};
-    dk_arap_info info;
-    if (dk_arap_bind(m, &d, &o, &ar, &e) == DK_OK) {
-        CHECK(dk_arap_solve(ar, t, 0, 0, 0, x, &info, &e) == DK_OK);
-        for (int k = 1; k < h.count; k++)
-            CHECK(h.e[k] <= h.e[k - 1] * (1 + 1e-13));
-        CHECK_NEAR(dk_arap_energy(ar, x), info.energy, 1e-12 * info.energy);
-    } else {
-        CHECK_MSG(0, "%s", e.message);
+    for (int accel = 1; accel < 3; accel++) {
+        dk_arap_options o;
+        dk_arap_default_options(&o);
+        o.acceleration = accel;
+        o.max_iterations = accel == 2 ? 3 : 8;
+        static history h;
+        h.count = 0;
+        o.on_iteration = record;
+        o.user = &h;
+        dk_arap *ar = NULL;
+        dk_error e = {0};
+        dk_arap_info info;
+        if (dk_arap_bind(m, &d, &o, &ar, &e) == DK_OK) {
+            CHECK(dk_arap_solve(ar, t, 0, 0, 0, x, &info, &e) == DK_OK);
+            CHECK(h.count == info.iterations + 1 && h.count > 2);
+            for (int k = 1; k < h.count; k++)
+                CHECK(h.e[k] <= h.e[k - 1] * (1 + 1e-13));
+            CHECK_NEAR(dk_arap_energy(ar, x), info.energy, 1e-12 * info.energy);
+            printf("threaded (%d vertices), %s: %d iterations, energy %.10g\n",
+                   (int)m->n_vertices, accel == 2 ? "newton" : "anderson", info.iterations,
+                   info.energy);
+        } else {
+            CHECK_MSG(0, "%s", e.message);
+        }
+        dk_arap_free(ar);
     }
-    dk_arap_free(ar);
     free(fixed);
     free(hv);
     free(t);
@@ -977,7 +1172,7 @@ static void test_big_mesh_threaded_local_step(void)
     dk_test_mesh_free(&tm);
 }
 
-DK_TEST_MAIN(test_resume, test_predictor, test_zero_drag, test_rigid_motion, test_bend, test_twist, test_clamping,
+DK_TEST_MAIN(test_newton_quadratic, test_newton_soft_stiffness, test_resume, test_predictor, test_zero_drag, test_rigid_motion, test_bend, test_twist, test_clamping,
              test_stiffness_soft_warm_rebind, test_warm_rotations_and_cold_reproducibility,
              test_errors,
              test_big_mesh_threaded_local_step)
