@@ -74,12 +74,23 @@ METHODS = [
             Option("weights", "ENUM", "clamped_cotangent", "Weights", "Edge weights of the energy",
                    items=_e("cotangent", "clamped_cotangent", "uniform")),
             Option("max_iterations", "INT", 100, "Max Iterations",
-                   "Local/global iterations per solve", min=1, max=100000),
-            Option("tolerance", "FLOAT", 1e-6, "Tolerance", "Relative energy change to stop at",
-                   min=0.0, max=1.0),
-            Option("acceleration", "ENUM", "anderson", "Acceleration",
-                   "Anderson acceleration of the local/global iterations, or Newton steps",
-                   items=_e("anderson", "none", "newton")),
+                   "Iterations (Newton steps, or local/global iterations) per solve",
+                   min=1, max=100000),
+            Option("tolerance", "FLOAT", 1e-6, "Tolerance",
+                   "Stop when a local/global step would change the energy by less than this "
+                   "fraction", min=0.0, max=1.0),
+            # item order is stored in files: new items go last. Default: Newton (faster to
+            # convergence and closer to the minimum, docs/methods/arap.md)
+            Option("acceleration", "ENUM", "newton", "Solver",
+                   "Newton steps (default), or local/global iterations with Anderson "
+                   "acceleration or without",
+                   items=(("anderson", "Anderson", "Local/global iterations, Anderson-accelerated"),
+                          ("none", "None", "Plain local/global iterations (the paper's)"),
+                          ("newton", "Newton", "Inexact Newton steps: fewer, costlier iterations "
+                                               "that reach the minimum's bending modes"))),
+            Option("cg_iterations", "INT", 10, "CG Iterations",
+                   "Newton: conjugate-gradient iterations (Hessian products) per step",
+                   min=1, max=100),
             Option("stiffness_scale", "FLOAT", 10.0, "Material Stiffness",
                    "Stiffness where the material group's weight is 1 (weight 0 gives 1)",
                    min=0.001, max=1e6, kw=None),

@@ -469,7 +469,8 @@ def _budget_iterations(key, opts):
     else:
         e = _cache.get(key)
         per_it = 1.5e-4 * (e.n_vertices if e is not None else 1e5)
-    return max(2, min(cap, int(INTERACTIVE_BUDGET_MS / max(per_it, 1e-3))))
+    # at least one: a Newton step can take most of the budget on its own
+    return max(1, min(cap, int(INTERACTIVE_BUDGET_MS / max(per_it, 1e-3))))
 
 
 def pending():

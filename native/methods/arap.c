@@ -122,7 +122,7 @@ void dk_arap_default_options(dk_arap_options *o)
     o->weights = DK_ARAP_WEIGHTS_CLAMPED_COTANGENT;
     o->max_iterations = 100;
     o->tolerance = 1e-6;
-    o->acceleration = DK_ARAP_ACCEL_ANDERSON;
+    o->acceleration = DK_ARAP_ACCEL_NEWTON;
     o->anderson_depth = 5;
     o->cg_iterations = 10;
     o->predict = 1;

@@ -78,7 +78,7 @@ typedef struct dk_arap_options {
                                             step along the local/global direction would
                                             lower E by at most tolerance * E (predicted by
                                             the quadratic model, before any step is taken)*/
-    dk_arap_acceleration acceleration; /**< default DK_ARAP_ACCEL_ANDERSON                */
+    dk_arap_acceleration acceleration; /**< default DK_ARAP_ACCEL_NEWTON                  */
     int anderson_depth;                /**< 1..20, default 5                              */
     int cg_iterations;                 /**< NEWTON: conjugate-gradient iterations (Hessian
                                             products) per Newton step, 1..100, default 10 */

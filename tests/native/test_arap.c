@@ -392,6 +392,7 @@ static void test_newton_quadratic(void)
     static history h;
     dk_arap_options o;
     dk_arap_default_options(&o);
+    o.acceleration = DK_ARAP_ACCEL_ANDERSON;
     o.tolerance = 1e-15;
     o.max_iterations = 20000;
     dk_arap *ar = NULL, *an = NULL;
@@ -438,6 +439,7 @@ static void test_newton_quadratic(void)
     {
         dk_arap_options od;
         dk_arap_default_options(&od);
+        od.acceleration = DK_ARAP_ACCEL_ANDERSON;
         dk_arap *a1 = NULL, *a2 = NULL;
         dk_arap_info i1, i2;
         if (dk_arap_bind(m, &d, &od, &a1, &e) == DK_OK) {
@@ -491,6 +493,7 @@ static void test_newton_soft_stiffness(void)
     dk_constraint_desc d = {1, sizes, s.handle, w, s.n_fixed, s.fixed, 0, NULL, stiff};
     dk_arap_options o;
     dk_arap_default_options(&o);
+    o.acceleration = DK_ARAP_ACCEL_ANDERSON;
     o.tolerance = 1e-14;
     o.max_iterations = 20000;
     dk_arap_info ia, ib;
@@ -558,8 +561,7 @@ static void test_twist(void)
         dk_arap_options o;
         dk_arap_default_options(&o);
         o.energy = kind;
-        if (newton)
-            o.acceleration = DK_ARAP_ACCEL_NEWTON;
+        o.acceleration = newton ? DK_ARAP_ACCEL_NEWTON : DK_ARAP_ACCEL_ANDERSON;
         o.tolerance = 1e-10;
         o.max_iterations = 1000;
         static history h;
@@ -718,7 +720,7 @@ out:
  * never starts above the plain warm start (the energy guard), takes fewer iterations in total
  * and reaches the same minimum; it continues after an unconverged call; cold solves and
  * rebinds reset it. */
-static void test_predictor(void)
+static void predictor_case(dk_arap_acceleration accel)
 {
     plane_setup s;
     if (plane_make(&s, 12) != 0) {
@@ -736,6 +738,7 @@ static void test_predictor(void)
            *z = malloc(sizeof(double) * 3 * n);
     dk_arap_options o, oq, oref;
     dk_arap_default_options(&o);
+    o.acceleration = accel;
     o.tolerance = 1e-8;
     o.max_iterations = 2000;
     oq = o;
@@ -830,8 +833,14 @@ out:
     plane_free(&s);
 }
 
+static void test_predictor(void)
+{
+    predictor_case(DK_ARAP_ACCEL_ANDERSON);
+    predictor_case(DK_ARAP_ACCEL_NEWTON);
+}
+
 /* Stiffness and soft handles. */
-static void test_stiffness_soft_warm_rebind(void)
+static void stiffness_soft_warm_rebind_case(dk_arap_acceleration accel)
 {
     plane_setup s;
     if (plane_make(&s, 12) != 0) {
@@ -852,6 +861,7 @@ static void test_stiffness_soft_warm_rebind(void)
     ds.stiffness = stiff;
     dk_arap_options o;
     dk_arap_default_options(&o);
+    o.acceleration = accel;
     o.tolerance = 1e-10;
     o.max_iterations = 500;
     dk_arap *ar = NULL, *as = NULL;
@@ -932,6 +942,12 @@ out:
     free(x);
     free(y);
     plane_free(&s);
+}
+
+static void test_stiffness_soft_warm_rebind(void)
+{
+    stiffness_soft_warm_rebind_case(DK_ARAP_ACCEL_ANDERSON);
+    stiffness_soft_warm_rebind_case(DK_ARAP_ACCEL_NEWTON);
 }
 
 /* The local steps refine each rotation from the previous one (with the closest rotation from
