@@ -34,6 +34,19 @@
 #define MAX_ANDERSON_DEPTH 20
 /* Below this many cell terms the local step runs on the calling thread only. */
 #define PARALLEL_TERMS 50000
+/* Newton takes a plain local/global step while that step's predicted decrease (at least
+ * r0.z0, see newton_step) exceeds this fraction of E. Far from a minimum (cold starts of big
+ * deformations: the naive start) the Hessian is indefinite, damped Newton steps can jump into
+ * another basin, and local/global steps, descending a majorizer, follow the energy downhill
+ * into the basin the local/global solvers find. Chosen on 8 cold solves (bumpy-plane bends of
+ * 1.2-2.4 rad, the three scenarios): pure Newton ended 23% above the local/global minimum on
+ * the 1.5 rad bend; 0.5, 0.3 and 0.1 fixed that but sent arm-lift 2e-3 higher; 0.03 and 0.01
+ * kept all eight in the local/global basin, 0.003 ran into max_iterations. Checked on 16
+ * other cold solves (other bends, tube twists with and without a lift, the scenarios at half
+ * and 1.5 times their translation): worst 2.3e-4 above Anderson's minimum with 0.03 (pure
+ * Newton: 0.19 and 3e-3 on two of them), and 10% less time in all. Warm drag starts are at
+ * ~5e-4, so drags are unaffected. */
+#define NEWTON_FAR 0.03
 
 typedef struct arap_system {
     dk_constraints *con;
@@ -1300,7 +1313,9 @@ static int small_spd_solve(double *g, double *h, int m)
  * cg_iterations Hessian products; a direction of non-positive curvature ends it (the first
  * one: the local/global step is used). Then a line search on E (t = 1, 1/2, 1/4, 1/8;
  * accept when E does not increase), and if it fails, the local/global step (which never
- * increases E). Stopping test: at the first conjugate-gradient iterate, the quadratic
+ * increases E). Far from a minimum (the local/global step promises more than NEWTON_FAR of
+ * E) the local/global step is taken instead. Stopping test: at the first conjugate-gradient
+ * iterate, the quadratic
  * model's decrease for the best step along the local/global direction (alpha_0 r_0.z_0) is
  * at most tolerance * E: the local/global test, predicted instead of taken. Cells
  * whose K is not safely positive definite (degenerate) have their rotation held in H (a
@@ -1413,6 +1428,14 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
         return st;
     double rz = dot2(r, z0, z0, N, &ignored);
     const double rz0 = rz;
+    if (rz0 > NEWTON_FAR * energy) { /* far from a minimum: the local/global step */
+        for (size_t i = 0; i < N; i++)
+            s->xu[i] += z0[i];
+        scatter(s, s->xu, ar->x);
+        *e_new = local_energy(ar, s, ar->x, ar->rot);
+        rotations_rhs(ar, s, ar->rot);
+        return DK_OK;
+    }
     memcpy(p, z0, N * sizeof(double));
     memset(d, 0, N * sizeof(double));
     scatter(s, p, s->vfull);
