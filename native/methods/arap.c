@@ -1407,6 +1407,18 @@ static void hv_rows_part(void *ctx, dk_index u0, dk_index u1, int part)
     j->dot[part] = dot;
 }
 
+/* The local/global step from the current iterate, x + A^-1 (b - A x) with z0 = that
+ * correction (E cannot increase): moves s->xu and ar->x, returns the new energy (rotations
+ * and K^-1 with it; the caller forms the right-hand side). */
+static double local_global_step(const dk_arap *ar, arap_system *s, const double *z0)
+{
+    const size_t N = 3 * (size_t)s->nu;
+    for (size_t i = 0; i < N; i++)
+        s->xu[i] += z0[i];
+    scatter(s, s->xu, ar->x);
+    return local_energy(ar, s, ar->x, ar->rot);
+}
+
 /* One Newton step from the current iterate (s->xu = ar->x on the unknowns, with its
  * rotations, K^-1, right-hand side and R_c g; energy `energy`), or the finding that it has
  * converged (*newton_converged = 1, nothing moves). Else the new iterate with all of those,
@@ -1429,10 +1441,7 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
     double rz = dot2(r, z0, z0, N, &ignored);
     const double rz0 = rz;
     if (rz0 > NEWTON_FAR * energy) { /* far from a minimum: the local/global step */
-        for (size_t i = 0; i < N; i++)
-            s->xu[i] += z0[i];
-        scatter(s, s->xu, ar->x);
-        *e_new = local_energy(ar, s, ar->x, ar->rot);
+        *e_new = local_global_step(ar, s, z0);
         rotations_rhs(ar, s, ar->rot);
         return DK_OK;
     }
@@ -1495,12 +1504,9 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
     }
     if (accepted) {
         memcpy(s->xu, s->gu, N * sizeof(double));
-    } else { /* the local/global step x + A^-1 (b - A x): E cannot increase */
+    } else { /* the line search failed: the local/global step */
         (*rejected)++;
-        for (size_t i = 0; i < N; i++)
-            s->xu[i] += z0[i];
-        scatter(s, s->xu, ar->x);
-        e = local_energy(ar, s, ar->x, ar->rot);
+        e = local_global_step(ar, s, z0);
     }
     rotations_rhs(ar, s, ar->rot);
     *e_new = e;
