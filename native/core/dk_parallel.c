@@ -1,7 +1,13 @@
 /* DeformKit: two-way data parallelism (see dk_parallel.h). */
+#define _POSIX_C_SOURCE 200809L
 #include "dk_parallel.h"
 
 #include <pthread.h>
+#include <signal.h>
+#include <stdatomic.h>
+#include <stdlib.h>
+#include <time.h>
+#include <unistd.h>
 
 typedef struct half_job {
     dk_range_fn fn;
@@ -31,4 +37,192 @@ void dk_run_halves(dk_range_fn fn, void *ctx, dk_index n, dk_index min_parallel)
         pthread_join(th, NULL);
     else
         fn(ctx, mid, n, 1);
+}
+
+/* ------------------------------------------------------------------ teams --------------- */
+
+/* How long the helper spins for the next pass before sleeping, and the caller for the
+ * helper's half before sleeping. Passes of one solve follow each other within tens to
+ * hundreds of microseconds (the serial work between them); a futex wake-up costs ~10 us. */
+#define HELPER_SPIN_NS 300000L
+#define CALLER_SPIN_NS 200000L
+
+struct dk_team {
+    pthread_t thread;
+    pthread_mutex_t mu;
+    pthread_cond_t wake;     /* the helper waits here for a pass                  */
+    pthread_cond_t finished; /* the caller waits here for the helper's half       */
+    atomic_uint gen;         /* number of passes posted (bumped under mu)         */
+    atomic_uint done;        /* number of passes whose helper half has finished    */
+    atomic_int busy;         /* a caller holds the team                           */
+    atomic_int park;         /* sleep after the current pass instead of spinning  */
+    int helper_sleeping;     /* under mu */
+    int caller_waiting;      /* under mu */
+    int quit;                /* under mu */
+    pid_t pid;               /* process that owns the helper thread               */
+    half_job job;            /* written before gen is bumped, read after          */
+};
+
+static inline void cpu_relax(void)
+{
+#if defined(__x86_64__) || defined(__i386__)
+    __builtin_ia32_pause();
+#elif defined(__aarch64__)
+    __asm__ __volatile__("yield");
+#endif
+}
+
+static long elapsed_ns(const struct timespec *t0)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (long)(t.tv_sec - t0->tv_sec) * 1000000000L + (t.tv_nsec - t0->tv_nsec);
+}
+
+static void *helper_main(void *arg)
+{
+    dk_team *t = arg;
+    unsigned seen = 0;
+    for (;;) {
+        unsigned g = atomic_load_explicit(&t->gen, memory_order_acquire);
+        if (g == seen && !atomic_load_explicit(&t->park, memory_order_relaxed)) {
+            struct timespec t0;
+            clock_gettime(CLOCK_MONOTONIC, &t0);
+            while (g == seen && !atomic_load_explicit(&t->park, memory_order_relaxed)) {
+                for (int k = 0; k < 64; k++)
+                    cpu_relax();
+                g = atomic_load_explicit(&t->gen, memory_order_acquire);
+                if (g == seen && elapsed_ns(&t0) > HELPER_SPIN_NS)
+                    break;
+            }
+        }
+        if (g == seen) {
+            int quit;
+            pthread_mutex_lock(&t->mu);
+            while ((g = atomic_load_explicit(&t->gen, memory_order_acquire)) == seen &&
+                   !t->quit) {
+                t->helper_sleeping = 1;
+                pthread_cond_wait(&t->wake, &t->mu);
+                t->helper_sleeping = 0;
+            }
+            quit = t->quit;
+            pthread_mutex_unlock(&t->mu);
+            if (g == seen && quit)
+                return NULL;
+        }
+        seen = g;
+        t->job.fn(t->job.ctx, t->job.begin, t->job.end, 1);
+        atomic_store_explicit(&t->done, g, memory_order_release);
+        pthread_mutex_lock(&t->mu);
+        if (t->caller_waiting)
+            pthread_cond_signal(&t->finished);
+        pthread_mutex_unlock(&t->mu);
+    }
+}
+
+dk_team *dk_team_create(void)
+{
+    dk_team *t = calloc(1, sizeof *t);
+    int have_mu = 0, have_wake = 0, have_fin = 0, started = 0;
+    if (!t)
+        return NULL;
+    atomic_init(&t->gen, 0u);
+    atomic_init(&t->done, 0u);
+    atomic_init(&t->busy, 0);
+    atomic_init(&t->park, 0);
+    t->pid = getpid();
+    have_mu = pthread_mutex_init(&t->mu, NULL) == 0;
+    have_wake = have_mu && pthread_cond_init(&t->wake, NULL) == 0;
+    have_fin = have_wake && pthread_cond_init(&t->finished, NULL) == 0;
+    if (have_fin) {
+        /* the helper blocks every signal: they go to the application's own threads */
+        sigset_t all, old;
+        sigfillset(&all);
+        const int masked = pthread_sigmask(SIG_SETMASK, &all, &old) == 0;
+        started = pthread_create(&t->thread, NULL, helper_main, t) == 0;
+        if (masked)
+            pthread_sigmask(SIG_SETMASK, &old, NULL);
+    }
+    if (started)
+        return t;
+    if (have_fin)
+        pthread_cond_destroy(&t->finished);
+    if (have_wake)
+        pthread_cond_destroy(&t->wake);
+    if (have_mu)
+        pthread_mutex_destroy(&t->mu);
+    free(t);
+    return NULL;
+}
+
+void dk_team_run_halves(dk_team *t, dk_range_fn fn, void *ctx, dk_index n,
+                        dk_index min_parallel)
+{
+    if (n < 0)
+        return;
+    if (!t || n < min_parallel || n < 2) {
+        dk_run_halves(fn, ctx, n, min_parallel);
+        return;
+    }
+    if (t->pid != getpid() || atomic_exchange(&t->busy, 1)) {
+        dk_run_halves(fn, ctx, n, min_parallel);
+        return;
+    }
+    const dk_index mid = n / 2;
+    t->job = (half_job){fn, ctx, mid, n};
+    pthread_mutex_lock(&t->mu);
+    const unsigned g = atomic_load_explicit(&t->gen, memory_order_relaxed) + 1u;
+    atomic_store_explicit(&t->park, 0, memory_order_relaxed);
+    atomic_store_explicit(&t->gen, g, memory_order_release);
+    if (t->helper_sleeping)
+        pthread_cond_signal(&t->wake);
+    pthread_mutex_unlock(&t->mu);
+
+    fn(ctx, 0, mid, 0);
+
+    if (atomic_load_explicit(&t->done, memory_order_acquire) != g) {
+        struct timespec t0;
+        clock_gettime(CLOCK_MONOTONIC, &t0);
+        while (atomic_load_explicit(&t->done, memory_order_acquire) != g) {
+            for (int k = 0; k < 16; k++)
+                cpu_relax();
+            if (elapsed_ns(&t0) > CALLER_SPIN_NS) {
+                pthread_mutex_lock(&t->mu);
+                while (atomic_load_explicit(&t->done, memory_order_acquire) != g) {
+                    t->caller_waiting = 1;
+                    pthread_cond_wait(&t->finished, &t->mu);
+                    t->caller_waiting = 0;
+                }
+                pthread_mutex_unlock(&t->mu);
+                break;
+            }
+        }
+    }
+    atomic_store_explicit(&t->busy, 0, memory_order_release);
+}
+
+void dk_team_park(dk_team *t)
+{
+    if (t)
+        atomic_store_explicit(&t->park, 1, memory_order_relaxed);
+}
+
+void dk_team_free(dk_team *t)
+{
+    if (!t)
+        return;
+    if (t->pid == getpid()) {
+        atomic_store_explicit(&t->park, 1, memory_order_relaxed); /* stop spinning now */
+        pthread_mutex_lock(&t->mu);
+        t->quit = 1;
+        pthread_cond_signal(&t->wake);
+        pthread_mutex_unlock(&t->mu);
+        pthread_join(t->thread, NULL);
+        pthread_cond_destroy(&t->finished);
+        pthread_cond_destroy(&t->wake);
+        pthread_mutex_destroy(&t->mu);
+    }
+    /* in a forked child the helper does not exist and the mutex may have been copied in any
+     * state: free the memory only */
+    free(t);
 }

@@ -120,6 +120,7 @@ struct dk_arap {
     double *prev2;
     int n_hist;
     int analysis_count, factorization_count;
+    dk_team *team;        /* the passes' and the factor's helper thread (NULL: per pass)  */
 };
 
 static dk_status oom(dk_error *err, const char *what)
@@ -709,6 +710,7 @@ static dk_status system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_
             system_free(s);
             return dk_error_prefix(err, "ARAP: analysis of the reduced matrix");
         }
+        dk_cholesky_set_team(s->chol, ar->team);
         ar->analysis_count++;
     }
     st = dk_cholesky_factorize(s->chol, &s->a, err);
@@ -754,6 +756,7 @@ void dk_arap_free(dk_arap *ar)
     free(ar->prev);
     free(ar->prev2);
     dk_reorder_free(ar->ro);
+    dk_team_free(ar->team); /* after the factor, which used it */
     free(ar);
 }
 
@@ -779,6 +782,7 @@ dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraint
     if (!ar)
         return oom(err, "object");
     ar->caller_mesh = mesh;
+    ar->team = dk_team_create(); /* NULL (no thread available) is fine: passes start threads */
     ar->opt = opt;
     ar->n = mesh->n_vertices;
     st = dk_reorder_create(mesh, &ar->ro, err);
@@ -1161,7 +1165,8 @@ static void rhs_part(void *ctx, dk_index u0, dk_index u1, int part)
 static void rotations_rhs(const dk_arap *ar, arap_system *s, const double *rot)
 {
     rhs_job job = {s, rot};
-    dk_run_halves(rhs_part, &job, s->nu, ar->n_terms >= PARALLEL_TERMS ? 0 : s->nu + 1);
+    dk_team_run_halves(ar->team, rhs_part, &job, s->nu,
+                       ar->n_terms >= PARALLEL_TERMS ? 0 : s->nu + 1);
 }
 
 /* Local step and energy at positions x: rotations into rot (may be NULL: then only the
@@ -1176,7 +1181,7 @@ static double local_energy(const dk_arap *ar, const arap_system *s, const double
     double energy;
     if (ar->n_terms >= PARALLEL_TERMS) {
         cells_job job = {ar, s, x, rot, {0.0, 0.0}};
-        dk_run_halves(cells_part, &job, ar->n, 0);
+        dk_team_run_halves(ar->team, cells_part, &job, ar->n, 0);
         energy = job.energy[0] + job.energy[1];
     } else {
         energy = cells_energy(ar, s, x, rot, 0, ar->n);
@@ -1434,7 +1439,7 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
     double *z0 = s->nt_z0, ignored;
     *newton_converged = 0;
     hv_job job = {ar, s, ar->x, r, s->rhs, {0.0, 0.0}};
-    dk_run_halves(hv_rows_part, &job, nu, rows_min); /* r = -g */
+    dk_team_run_halves(ar->team, hv_rows_part, &job, nu, rows_min); /* r = -g */
     dk_status st = dk_cholesky_solve(s->chol, r, 3, z0, err);
     if (st != DK_OK)
         return st;
@@ -1452,8 +1457,8 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
     job.out = q;
     job.rhs = NULL;
     for (int k = 0; k < ar->opt.cg_iterations; k++) {
-        dk_run_halves(hv_cells_part, &job, ar->n, cells_min);
-        dk_run_halves(hv_rows_part, &job, nu, rows_min);
+        dk_team_run_halves(ar->team, hv_cells_part, &job, ar->n, cells_min);
+        dk_team_run_halves(ar->team, hv_rows_part, &job, nu, rows_min);
         (*cg_total)++;
         const double pq = job.dot[0] + job.dot[1];
         if (!(pq > 0.0) || !(rz > 0.0)) {
@@ -1513,9 +1518,9 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
     return DK_OK;
 }
 
-dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_start,
-                        int max_iterations, double *positions, dk_arap_info *info,
-                        dk_error *err)
+static dk_status solve_impl(dk_arap *ar, const double *targets, int mode, int warm_start,
+                            int max_iterations, double *positions, dk_arap_info *info,
+                            dk_error *err)
 {
     if (info)
         memset(info, 0, sizeof *info);
@@ -1799,6 +1804,17 @@ dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_s
         info->cg_iterations = cg_total;
     }
     return DK_OK;
+}
+
+dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_start,
+                        int max_iterations, double *positions, dk_arap_info *info,
+                        dk_error *err)
+{
+    const dk_status st =
+        solve_impl(ar, targets, mode, warm_start, max_iterations, positions, info, err);
+    if (ar)
+        dk_team_park(ar->team); /* the helper sleeps until the next solve */
+    return st;
 }
 
 dk_status dk_arap_set_tolerance(dk_arap *ar, double tolerance, dk_error *err)

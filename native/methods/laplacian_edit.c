@@ -55,10 +55,12 @@ struct dk_laplacian_edit {
     double *ddelta;      /* n x 3 column-major change of delta in a local-frame update; also
                             the rows delta - A_e x_e while assemble_rhs runs              */
     double *face_cross;  /* n_faces x 3 face cross products (local frames)                */
+    dk_team *team;       /* the passes' and the factor's helper thread (NULL: per pass)    */
 };
 
-/* Passes over at least this many vertices run on two threads (dk_run_halves): below it the
- * thread start (~30 us) is not repaid. */
+/* Passes over at least this many vertices run on two threads (dk_team_run_halves on the
+ * object's team, whose helper waits between passes): below it the hand-off (a few us
+ * when the helper spins, ~30 us when it has to start or wake) is not repaid. */
 enum { LE_PARALLEL_MIN = 8192 };
 
 /* ------------------------------------------------------------------ small helpers ------- */
@@ -259,7 +261,7 @@ static void face_normals_range(void *ctx, dk_index f0, dk_index f1, int part)
 static void face_normals(dk_laplacian_edit *le, const double *x)
 {
     face_normal_job job = {le, x, le->face_cross};
-    dk_run_halves(face_normals_range, &job, le->mesh->n_faces, LE_PARALLEL_MIN);
+    dk_team_run_halves(job.le->team, face_normals_range, &job, le->mesh->n_faces, LE_PARALLEL_MIN);
 }
 
 /* Area-weighted normal of vertex i (unnormalised: the sum of its faces' cross products in
@@ -646,6 +648,7 @@ static dk_status factor_new(dk_laplacian_edit *le, le_system *s, dk_error *err)
 {
     dk_status st = dk_cholesky_analyze(s->normal, &s->chol, err);
     if (st == DK_OK) {
+        dk_cholesky_set_team(s->chol, le->team);
         le->analysis_count++;
         st = dk_cholesky_factorize(s->chol, s->normal, err);
         if (st == DK_OK)
@@ -683,6 +686,7 @@ dk_status dk_laplacian_edit_bind(const dk_mesh *mesh, const dk_constraint_desc *
     if (!le)
         return oom(err, "object");
     le->mesh = mesh;
+    le->team = dk_team_create(); /* NULL (no thread available) is fine: passes start threads */
     n = le->n = mesh->n_vertices;
     if (options)
         le->opt = *options;
@@ -728,6 +732,7 @@ dk_status dk_laplacian_edit_bind(const dk_mesh *mesh, const dk_constraint_desc *
         memset(le->delta, 0, sizeof(double) * 3 * (size_t)n);
     else
         memcpy(le->delta, le->delta_rest, sizeof(double) * 3 * (size_t)n);
+    dk_team_park(le->team);
     *out = le;
     return DK_OK;
 fail:
@@ -778,6 +783,7 @@ dk_status dk_laplacian_edit_rebind(dk_laplacian_edit *le, const dk_constraint_de
         }
     }
     try_build_basis(le, &s);
+    dk_team_park(le->team);
     system_free(&le->sys);
     le->sys = s;
     if (le->opt.detail == DK_LE_DETAIL_MEMBRANE)
@@ -857,7 +863,7 @@ static double energy_of(const dk_laplacian_edit *le, const double *x, size_t si,
                         double *positions, int want_energy)
 {
     energy_job job = {le, x, si, sd, positions, want_energy || !positions, {0.0, 0.0}};
-    dk_run_halves(energy_range, &job, le->n, LE_PARALLEL_MIN);
+    dk_team_run_halves(le->team, energy_range, &job, le->n, LE_PARALLEL_MIN);
     return job.part[0] + job.part[1];
 }
 
@@ -868,6 +874,7 @@ dk_status dk_laplacian_edit_energy(const dk_laplacian_edit *le, const double *po
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "LaplacianEdit energy: NULL argument");
     *energy = energy_of(le, positions, 3, 1, NULL, 1);
+    dk_team_park(le->team);
     return DK_OK;
 }
 
@@ -959,8 +966,8 @@ static void rhs_unknowns_range(void *ctx, dk_index u0, dk_index u1, int part)
 static void assemble_rhs(const dk_laplacian_edit *le, const le_system *s, double *rhs)
 {
     rhs_job job = {le, s, rhs, 1};
-    dk_run_halves(rhs_rows_range, &job, le->n, LE_PARALLEL_MIN);
-    dk_run_halves(rhs_unknowns_range, &job, s->n_unknowns, LE_PARALLEL_MIN);
+    dk_team_run_halves(le->team, rhs_rows_range, &job, le->n, LE_PARALLEL_MIN);
+    dk_team_run_halves(le->team, rhs_unknowns_range, &job, s->n_unknowns, LE_PARALLEL_MIN);
 }
 
 /* One local-frame update from the solution in le->x (which solves for le->delta): new
@@ -972,9 +979,9 @@ static dk_status local_frame_update(dk_laplacian_edit *le, double *change, dk_er
     const size_t n = (size_t)le->n, nu = (size_t)s->n_unknowns;
     double big = 0.0;
     face_normals(le, le->x);
-    dk_run_halves(rotate_deltas_range, le, le->n, LE_PARALLEL_MIN);
+    dk_team_run_halves(le->team, rotate_deltas_range, le, le->n, LE_PARALLEL_MIN);
     rhs_job job = {le, s, s->rhs, 0};
-    dk_run_halves(rhs_unknowns_range, &job, s->n_unknowns, LE_PARALLEL_MIN);
+    dk_team_run_halves(le->team, rhs_unknowns_range, &job, s->n_unknowns, LE_PARALLEL_MIN);
     dk_status st = dk_cholesky_solve(s->chol, s->rhs, 3, s->rhs, err);
     if (st != DK_OK)
         return dk_error_prefix(err, "LaplacianEdit solve");
@@ -1188,6 +1195,7 @@ dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const double *targets, 
     {
         /* the output and the energy in one pass */
         const double e = energy_of(le, le->x, 1, (size_t)n, positions, want_energy);
+        dk_team_park(le->team); /* the last pass: let the helper sleep now */
         if (info)
             info->energy = e;
     }
@@ -1243,5 +1251,6 @@ void dk_laplacian_edit_free(dk_laplacian_edit *le)
     free(le->delta);
     free(le->ddelta);
     free(le->face_cross);
+    dk_team_free(le->team); /* after the factor, which used it */
     free(le);
 }

@@ -35,6 +35,7 @@ struct dk_cholesky {
     int n_factorizations;
     int n_analyses;
     dk_trisolve *plan;       /* two-thread substitutions for big factors, or NULL       */
+    dk_team *team;           /* helper thread for the plan's solves (not owned), or NULL */
     int use_plan;            /* 0: always cholmod_solve2; 1: plans when worthwhile;
                                 2: plans for any factor (tests)                        */
 };
@@ -254,7 +255,7 @@ dk_status dk_cholesky_solve(dk_cholesky *chol, const double *b, int nrhs, double
     if (!chol->factored)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "Cholesky solve: no successful numeric factorization");
-    if (chol->plan && chol->use_plan && dk_trisolve_solve(chol->plan, b, nrhs, x) == 0)
+    if (chol->plan && chol->use_plan && dk_trisolve_solve(chol->plan, chol->team, b, nrhs, x) == 0)
         return DK_OK;
     cholmod_common *c = &chol->common;
     const size_t n = (size_t)chol->n;
@@ -303,6 +304,11 @@ int dk_cholesky_analysis_count(const dk_cholesky *chol)
 void dk_cholesky_set_parallel(dk_cholesky *chol, int on)
 {
     if (chol) chol->use_plan = on == 2 ? 2 : on != 0;
+}
+
+void dk_cholesky_set_team(dk_cholesky *chol, dk_team *team)
+{
+    if (chol) chol->team = team;
 }
 
 double dk_cholesky_parallel_speedup(const dk_cholesky *chol)

@@ -12,6 +12,7 @@
 #ifndef DK_CHOLESKY_H
 #define DK_CHOLESKY_H
 
+#include "dk_parallel.h"
 #include "dk_sparse.h"
 #include "dk_status.h"
 
@@ -42,6 +43,11 @@ dk_status dk_cholesky_solve(dk_cholesky *chol, const double *b, int nrhs, double
  *  the default; 2 plans two-thread solves for every later factorization whatever its size
  *  and balance (tests of the scheduling on small and degenerate trees). */
 void dk_cholesky_set_parallel(dk_cholesky *chol, int on);
+
+/** Two-thread solves use `team`'s helper thread (dk_parallel.h) instead of starting a thread
+ *  per sweep. The team is not owned: it must outlive the solves (a method object owns both
+ *  and sets its team on every factor object it makes). NULL (the default) starts threads. */
+void dk_cholesky_set_team(dk_cholesky *chol, dk_team *team);
 
 /** Estimated speed-up (serial work / critical path) of the two-thread solve planned for the
  *  current factorization, or 0 when solves use cholmod_solve2. */

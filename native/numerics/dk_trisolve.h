@@ -18,6 +18,8 @@
 #ifndef DK_TRISOLVE_H
 #define DK_TRISOLVE_H
 
+#include "dk_parallel.h"
+
 #include <cholmod.h>
 #include <stddef.h>
 
@@ -33,10 +35,12 @@ typedef struct dk_trisolve dk_trisolve;
 dk_trisolve *dk_trisolve_plan(const cholmod_factor *L, double min_entries, double min_speedup);
 
 /** Solves A X = B with the factor of A (P A P' = L L' or L D L'), B and X column-major
- *  n x nrhs (X may alias B), 1 <= nrhs <= 16. Returns 0, or -1 when nrhs is out of that
+ *  n x nrhs (X may alias B), 1 <= nrhs <= 16. The second thread is `team`'s helper (NULL: a
+ *  thread started for each of the two sweeps). Returns 0, or -1 when nrhs is out of that
  *  range or its workspace cannot be allocated
  *  (nothing written; the caller falls back). Allocates only when nrhs grows. */
-int dk_trisolve_solve(dk_trisolve *plan, const double *b, int nrhs, double *x);
+int dk_trisolve_solve(dk_trisolve *plan, dk_team *team, const double *b, int nrhs,
+                      double *x);
 
 /** Estimated speed-up of the plan's split (serial work / critical path), for tests. */
 double dk_trisolve_balance(const dk_trisolve *plan);

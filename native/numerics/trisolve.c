@@ -533,16 +533,16 @@ static void sweep_part(void *ctx, dk_index begin, dk_index end, int part)
     run_sweep((sweep *)ctx + part);
 }
 
-/* Thread 1's sweep on a helper thread while the caller does thread 0's (dk_run_halves over
- * the two sweeps); if the helper cannot be started the caller does both (each writes only
+/* Thread 1's sweep on a helper thread (the team's, or a new one) while the caller does
+ * thread 0's (dk_team_run_halves over the two sweeps); if the helper cannot be started the caller does both (each writes only
  * its own rows / array). */
-static void both(sweep *s0, sweep *s1)
+static void both(dk_team *team, sweep *s0, sweep *s1)
 {
     sweep pair[2] = {*s0, *s1};
-    dk_run_halves(sweep_part, pair, 2, 2);
+    dk_team_run_halves(team, sweep_part, pair, 2, 2);
 }
 
-int dk_trisolve_solve(dk_trisolve *p, const double *b, int nrhs, double *x)
+int dk_trisolve_solve(dk_trisolve *p, dk_team *team, const double *b, int nrhs, double *x)
 {
     if (!p || !b || !x || nrhs < 1 || nrhs > 16) /* more: cholmod_solve2 */
         return -1;
@@ -575,7 +575,7 @@ int dk_trisolve_solve(dk_trisolve *p, const double *b, int nrhs, double *x)
         memset(wb + (size_t)p->top[t] * k, 0, sizeof(double) * (size_t)k);
 
     sweep s0 = {p, wa, k, 0, 0}, s1 = {p, wb, k, 1, 0};
-    both(&s0, &s1);
+    both(team, &s0, &s1);
     for (int t = 0; t < p->n_top; t++) {
         double *xa = wa + (size_t)p->top[t] * k;
         const double *xb = wb + (size_t)p->top[t] * k;
@@ -597,7 +597,7 @@ int dk_trisolve_solve(dk_trisolve *p, const double *b, int nrhs, double *x)
         backward(p, wa, k, p->top[t], p->top[t] + 1);
     s0.back = s1.back = 1;
     s1.w = wa;
-    both(&s0, &s1);
+    both(team, &s0, &s1);
     for (int i = 0; i < n; i++) {
         const size_t dst = p->perm ? (size_t)p->perm[i] : (size_t)i;
         for (int c = 0; c < k; c++)

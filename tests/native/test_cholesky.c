@@ -519,6 +519,20 @@ static void check_parallel(dk_sparse *a, int indefinite, const char *name)
         }
         CHECK_MSG(diff <= 1e-11 * big, "%s, %d right-hand sides: differs by %.3g (of %.3g)",
                   name, k, diff, big);
+        {   /* on a team's helper thread: the same operations, so the same bits */
+            dk_team *team = dk_team_create();
+            double *z = malloc(sizeof(double) * (size_t)n * (size_t)k);
+            CHECK(team != NULL && z != NULL);
+            dk_cholesky_set_team(ch, team);
+            for (int rep = 0; z && rep < 2; rep++) { /* helper woken, then spinning */
+                CHECK(dk_cholesky_solve(ch, b, k, z, &err) == DK_OK);
+                CHECK_MSG(memcmp(z, y, sizeof(double) * (size_t)n * (size_t)k) == 0,
+                          "%s, %d right-hand sides: the team's solve differs", name, k);
+            }
+            dk_cholesky_set_team(ch, NULL);
+            dk_team_free(team);
+            free(z);
+        }
         if (k == 3) {
             printf("%s: n=%d, estimated speed-up %.2f, 3-RHS two-thread solve %.2f ms\n", name,
                    (int)n, speedup, 1e3 * (t1 - t0));

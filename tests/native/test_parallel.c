@@ -1,9 +1,15 @@
-/* Tests of dk_run_halves: every item is processed exactly once, by the part the split
- * assigns it to, for empty, tiny, odd and large ranges, with and without the helper thread;
- * the two parts really run at the same time when the helper is used. */
+/* Tests of dk_run_halves and of teams (dk_team_run_halves): every item is processed exactly
+ * once, by the part the split assigns it to, for empty, tiny, odd and large ranges, with and
+ * without the helper thread; the two parts really run at the same time when the helper is
+ * used; a team survives many passes back to back, passes after parking (the helper asleep),
+ * nested passes (which must not deadlock) and a fork (the child has no helper). */
+#define _POSIX_C_SOURCE 200809L
 #include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
 
 #include "dk_parallel.h"
 #include "dk_test.h"
@@ -75,4 +81,165 @@ static void test_parts_run_concurrently(void)
     CHECK(j.saw_other[1] == 1);
 }
 
-DK_TEST_MAIN(test_every_item_once, test_parts_run_concurrently)
+static void test_team_every_item_once(void)
+{
+    const dk_index sizes[] = {0, 1, 2, 3, 7, 8191, 8192, 100001};
+    dk_team *team = dk_team_create();
+    CHECK(team != NULL);
+    for (int with_team = 0; with_team < 2; with_team++)
+        for (size_t s = 0; s < sizeof sizes / sizeof sizes[0]; s++)
+            for (int threaded = 0; threaded < 2; threaded++) {
+                const dk_index n = sizes[s];
+                count_job j;
+                memset(&j, 0, sizeof j);
+                j.hits = calloc((size_t)n + 1, 1);
+                CHECK(j.hits != NULL);
+                if (!j.hits)
+                    break;
+                dk_team_run_halves(with_team ? team : NULL, count_items, &j, n,
+                                   threaded ? 2 : n + 1);
+                CHECK(j.calls[0] == 1 && j.calls[1] == 1);
+                CHECK(j.begin[0] == 0 && j.end[0] == n / 2 && j.begin[1] == n / 2 &&
+                      j.end[1] == n);
+                for (dk_index i = 0; i < n; i++)
+                    CHECK(j.hits[i] == (i < n / 2 ? 1 : 2));
+                free(j.hits);
+            }
+    dk_team_free(team);
+    dk_team_free(NULL);
+    dk_team_park(NULL);
+}
+
+static void test_team_parts_run_concurrently(void)
+{
+    dk_team *team = dk_team_create();
+    CHECK(team != NULL);
+    for (int round = 0; round < 3; round++) {
+        meet_job j;
+        atomic_init(&j.arrived, 0);
+        j.saw_other[0] = j.saw_other[1] = 0;
+        if (round == 2)
+            dk_team_park(team);
+        dk_team_run_halves(team, meet, &j, 10, 2);
+        CHECK_MSG(j.saw_other[0] == 1 && j.saw_other[1] == 1, "round %d", round);
+    }
+    dk_team_free(team);
+}
+
+/* Part sums of many short passes back to back, with parks and sleeps in between (the helper
+ * spinning, going to sleep by itself, parked): each pass's result must be complete when
+ * dk_team_run_halves returns. */
+typedef struct sum_job {
+    const int *v;
+    long part[2];
+} sum_job;
+
+static void sum_items(void *ctx, dk_index b, dk_index e, int part)
+{
+    sum_job *j = ctx;
+    long s = 0;
+    for (dk_index i = b; i < e; i++)
+        s += j->v[i];
+    j->part[part] = s;
+}
+
+static void test_team_many_passes(void)
+{
+    enum { N = 4099 };
+    int *v = malloc(sizeof(int) * N);
+    CHECK(v != NULL);
+    if (!v)
+        return;
+    long want = 0;
+    for (int i = 0; i < N; i++) {
+        v[i] = (i * 7919) % 1013 - 500;
+        want += v[i];
+    }
+    dk_team *team = dk_team_create();
+    CHECK(team != NULL);
+    int bad = 0;
+    for (int pass = 0; pass < 20000; pass++) {
+        sum_job j = {v, {-1, -1}};
+        if (pass % 1000 == 999)
+            dk_team_park(team);
+        if (pass % 5000 == 4999) { /* longer than the helper spins: it sleeps by itself */
+            struct timespec ts = {0, 2000000};
+            nanosleep(&ts, NULL);
+        }
+        dk_team_run_halves(team, sum_items, &j, N, 2);
+        bad += j.part[0] + j.part[1] != want;
+    }
+    CHECK_MSG(bad == 0, "%d of 20000 passes were incomplete", bad);
+    dk_team_free(team);
+    free(v);
+}
+
+/* A pass whose parts run passes on the same team (e.g. a solve called from a callback): the
+ * inner passes cannot get the helper and must fall back instead of waiting for it. */
+typedef struct nested_job {
+    dk_team *team;
+    count_job inner[2];
+    unsigned char hits[2][101];
+} nested_job;
+
+static void nested_outer(void *ctx, dk_index b, dk_index e, int part)
+{
+    nested_job *j = ctx;
+    (void)b;
+    (void)e;
+    j->inner[part].hits = j->hits[part];
+    dk_team_run_halves(j->team, count_items, &j->inner[part], 101, 2);
+}
+
+static void test_team_nested(void)
+{
+    nested_job j;
+    memset(&j, 0, sizeof j);
+    j.team = dk_team_create();
+    CHECK(j.team != NULL);
+    dk_team_run_halves(j.team, nested_outer, &j, 2, 2);
+    for (int p = 0; p < 2; p++) {
+        CHECK(j.inner[p].calls[0] == 1 && j.inner[p].calls[1] == 1);
+        for (int i = 0; i < 101; i++)
+            CHECK(j.hits[p][i] == (i < 50 ? 1 : 2));
+    }
+    dk_team_free(j.team);
+}
+
+/* After fork() the child has the team's memory but not its helper thread: passes must still
+ * run (on a started thread or serially) and freeing must not wait for the missing helper. */
+static void test_team_after_fork(void)
+{
+    dk_team *team = dk_team_create();
+    CHECK(team != NULL);
+    unsigned char hits[1000];
+    count_job j;
+    memset(&j, 0, sizeof j);
+    memset(hits, 0, sizeof hits);
+    j.hits = hits;
+    dk_team_run_halves(team, count_items, &j, 1000, 2); /* the helper exists and has run */
+    const pid_t pid = fork();
+    CHECK(pid >= 0);
+    if (pid == 0) {
+        count_job c;
+        unsigned char h[1000];
+        memset(&c, 0, sizeof c);
+        memset(h, 0, sizeof h);
+        c.hits = h;
+        alarm(20); /* a hang becomes a failure */
+        dk_team_run_halves(team, count_items, &c, 1000, 2);
+        int ok = c.calls[0] == 1 && c.calls[1] == 1;
+        for (int i = 0; i < 1000; i++)
+            ok = ok && h[i] == (i < 500 ? 1 : 2);
+        dk_team_free(team);
+        _exit(ok ? 0 : 3);
+    }
+    int status = 0;
+    CHECK(pid > 0 && waitpid(pid, &status, 0) == pid);
+    CHECK_MSG(WIFEXITED(status) && WEXITSTATUS(status) == 0, "child status %d", status);
+    dk_team_free(team);
+}
+
+DK_TEST_MAIN(test_every_item_once, test_parts_run_concurrently, test_team_every_item_once,
+             test_team_parts_run_concurrently, test_team_many_passes, test_team_nested,
+             test_team_after_fork)
