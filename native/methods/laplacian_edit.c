@@ -1127,6 +1127,68 @@ static dk_status build_basis(dk_laplacian_edit *le, le_system *s, dk_error *err)
     return DK_OK;
 }
 
+/* ------------------------------------------------------------------ solve passes ------ */
+
+typedef struct solve_init_job {
+    dk_laplacian_edit *le;
+    const double *transforms; /* n_handles x 4 x 4 (basis_range) */
+} solve_init_job;
+
+/* Vertices [i0, i1) of the start of a solve: eliminated handle vertices at their targets,
+ * the others at rest (the unknowns are overwritten by the solve), delta := the rest deltas,
+ * or zero for the membrane (a dk_range_fn). */
+static void solve_init_range(void *ctx, dk_index i0, dk_index i1, int part)
+{
+    const solve_init_job *job = ctx;
+    dk_laplacian_edit *le = job->le;
+    const le_system *s = &le->sys;
+    const size_t n = (size_t)le->n, len = (size_t)(i1 - i0);
+    (void)part;
+    for (dk_index i = i0; i < i1; i++) {
+        const dk_index t = s->target_of[i];
+        for (int d = 0; d < 3; d++)
+            le->x[(size_t)d * n + (size_t)i] = (s->unknown_index[i] < 0 && t >= 0)
+                                                   ? s->targets[3 * t + d]
+                                                   : le->rest[(size_t)d * n + (size_t)i];
+    }
+    for (int d = 0; d < 3; d++) {
+        double *dst = le->delta + (size_t)d * n + (size_t)i0;
+        if (le->opt.detail == DK_LE_DETAIL_MEMBRANE)
+            memset(dst, 0, sizeof(double) * len);
+        else
+            memcpy(dst, le->delta_rest + (size_t)d * n + (size_t)i0, sizeof(double) * len);
+    }
+}
+
+/* Unknowns [u0, u1) from the affine basis: x_d = g0_d + sum_{h,a} T_h[d][a] G_{h,a}, terms
+ * with a zero coefficient skipped, summed in that order (a dk_range_fn). */
+static void basis_range(void *ctx, dk_index u0, dk_index u1, int part)
+{
+    const solve_init_job *job = ctx;
+    dk_laplacian_edit *le = job->le;
+    const le_system *s = &le->sys;
+    const size_t n = (size_t)le->n, nu = (size_t)s->n_unknowns;
+    const int H = (int)s->con->n_handles;
+    (void)part;
+    for (int d = 0; d < 3; d++) {
+        const double *b = s->basis + (size_t)d * nu;
+        double *xd = le->x + (size_t)d * n;
+        for (dk_index u = u0; u < u1; u++)
+            s->rhs[(size_t)d * nu + (size_t)u] = b[u];
+        for (int h = 0; h < H; h++)
+            for (int a = 0; a < 4; a++) {
+                const double c = job->transforms[16 * (size_t)h + 4 * (size_t)d + (size_t)a];
+                const double *g = s->basis + nu * (3 + 4 * (size_t)h + (size_t)a);
+                if (c == 0.0)
+                    continue;
+                for (dk_index u = u0; u < u1; u++)
+                    s->rhs[(size_t)d * nu + (size_t)u] += c * g[u];
+            }
+        for (dk_index u = u0; u < u1; u++)
+            xd[s->unknowns[u]] = s->rhs[(size_t)d * nu + (size_t)u];
+    }
+}
+
 dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const double *targets, int mode,
                                   double *positions, dk_laplacian_edit_info *info,
                                   dk_error *err)
@@ -1155,35 +1217,17 @@ dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const double *targets, 
     st = dk_constraints_targets(s->con, le->mesh->positions, targets, mode, s->targets, err);
     if (st != DK_OK)
         return dk_error_prefix(err, "LaplacianEdit solve");
-    for (dk_index i = 0; i < n; i++) {
-        const dk_index t = s->target_of[i];
-        for (int d = 0; d < 3; d++)
-            le->x[(size_t)d * n + i] = (s->unknown_index[i] < 0 && t >= 0)
-                                           ? s->targets[3 * t + d]
-                                           : le->rest[(size_t)d * n + i];
+    {
+        /* x := targets (eliminated handle vertices) or rest, delta := the rest deltas (or 0):
+         * sequential passes on two threads, which also bring the arrays back into the cache
+         * for the gathers that follow */
+        solve_init_job job = {le, NULL};
+        dk_team_run_halves(le->team, solve_init_range, &job, n, LE_PARALLEL_MIN);
     }
-    if (le->opt.detail == DK_LE_DETAIL_MEMBRANE)
-        memset(le->delta, 0, sizeof(double) * 3 * (size_t)n);
-    else
-        memcpy(le->delta, le->delta_rest, sizeof(double) * 3 * (size_t)n);
     if (mode == 1 && s->basis) {
         /* affine in the transforms: combine the precomputed basis (no back-substitution) */
-        const dk_index nu = s->n_unknowns;
-        for (int d = 0; d < 3; d++) {
-            double *xd = s->rhs + (size_t)d * nu;
-            memcpy(xd, s->basis + (size_t)d * nu, sizeof(double) * (size_t)nu);
-            for (dk_index h = 0; h < s->con->n_handles; h++)
-                for (int a = 0; a < 4; a++) {
-                    const double c = targets[16 * (size_t)h + 4 * (size_t)d + (size_t)a];
-                    const double *g = s->basis + (size_t)nu * (3 + 4 * (size_t)h + (size_t)a);
-                    if (c == 0.0)
-                        continue;
-                    for (dk_index u = 0; u < nu; u++)
-                        xd[u] += c * g[u];
-                }
-            for (dk_index u = 0; u < nu; u++)
-                le->x[(size_t)d * n + s->unknowns[u]] = xd[u];
-        }
+        solve_init_job job = {le, targets};
+        dk_team_run_halves(le->team, basis_range, &job, s->n_unknowns, LE_PARALLEL_MIN);
     } else {
         st = linear_solve(le, err);
         if (st != DK_OK)
