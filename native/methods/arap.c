@@ -785,7 +785,7 @@ dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraint
     ar->team = dk_team_create(); /* NULL (no thread available) is fine: passes start threads */
     ar->opt = opt;
     ar->n = mesh->n_vertices;
-    st = dk_reorder_create(mesh, &ar->ro, err);
+    st = dk_reorder_create(mesh, 0, &ar->ro, err);
     if (st != DK_OK) {
         dk_arap_free(ar);
         return dk_error_prefix(err, "ARAP bind");

@@ -38,7 +38,8 @@
  * Local frames (slide 69, as Blender's Laplacian Deform): at every vertex an orthonormal
  * frame (n, u, n x u): n the area-weighted normal of the incident triangles, u the
  * projection onto the tangent plane of the edge to one fixed neighbour (chosen at rest as
- * the one whose edge is most orthogonal to n). The rest delta_i is stored as coordinates in
+ * the one whose edge is most orthogonal to n; cosines within 1e-9 tie, ties go to the
+ * longest edge, then to the smaller vertex number). The rest delta_i is stored as coordinates in
  * the rest frame. A solve first uses the rest deltas (= "fixed"), then repeats
  * `local_frame_iterations` times: rebuild the frames on the current solution, rotate the
  * stored coordinates into them (|delta_i| is preserved exactly), solve again. Blender does

@@ -13,7 +13,12 @@
  * by a first search from that smallest vertex), neighbours in ascending caller order; i.e.
  * Cuthill-McKee without the degree sort, which only matters for bandwidth, not for
  * locality. Faces keep the caller's order (relabelled), so that sums over a vertex's faces
- * (normals, areas) run in the same order as on the caller's mesh; methods that pick among
+ * (normals, areas) run in the same order as on the caller's mesh, unless the method asks
+ * for DK_REORDER_SORT_FACES: then faces are sorted by their smallest internal corner (stably,
+ * so ties keep the caller's order), which keeps the faces of neighbouring vertices close in
+ * memory for methods that gather per-face data on every solve (Laplacian editing's local
+ * frames: per-vertex sums of face cross products), at the price of summing a vertex's faces
+ * in another order (rounding-level differences). Methods that pick among
  * neighbours break exact ties by the caller's vertex order (ro->perm), so results do not
  * depend on the internal numbering beyond rounding. Deterministic: depends only on the
  * mesh's connectivity and the caller's numbering.
@@ -35,11 +40,18 @@ typedef struct dk_reorder {
     dk_index *perm;  /**< n: internal vertex i is the caller's vertex perm[i]               */
     dk_index *iperm; /**< n: the caller's vertex v is internal vertex iperm[v]              */
     dk_mesh *mesh;   /**< owned: the caller's mesh with vertices and faces renumbered       */
+    dk_index *face_perm; /**< n_faces: internal face f is the caller's face face_perm[f]      */
 } dk_reorder;
 
+/** Flags of dk_reorder_create. */
+enum { DK_REORDER_SORT_FACES = 1 /**< faces sorted by their smallest internal corner */ };
+
 /** Computes the order for `mesh` and builds the renumbered mesh (same positions, rows
- *  permuted; same triangles, relabelled). DK_ERR_OUT_OF_MEMORY on allocation failure. */
-dk_status dk_reorder_create(const dk_mesh *mesh, dk_reorder **out, dk_error *err);
+ *  permuted; same triangles, relabelled, in the caller's order or, with
+ *  DK_REORDER_SORT_FACES in `flags`, sorted). DK_ERR_OUT_OF_MEMORY on allocation failure,
+ *  DK_ERR_INVALID_ARGUMENT for unknown flags. */
+dk_status dk_reorder_create(const dk_mesh *mesh, unsigned flags, dk_reorder **out,
+                            dk_error *err);
 
 /** Frees; NULL allowed. */
 void dk_reorder_free(dk_reorder *r);

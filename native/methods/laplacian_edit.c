@@ -11,6 +11,7 @@
 #include "dk_cholesky.h"
 #include "dk_operators.h"
 #include "dk_parallel.h"
+#include "dk_reorder.h"
 #include "dk_sparse.h"
 
 /* One constraint set: everything that changes on rebind. */
@@ -34,7 +35,13 @@ typedef struct le_system {
 } le_system;
 
 struct dk_laplacian_edit {
+    /* The mesh in an internal numbering (dk_reorder.h: breadth-first vertices, faces sorted
+     * by their smallest corner), for the cache locality of the per-drag passes; every array
+     * below uses it. The API maps at its boundary: constraints in (rebind too), positions
+     * out (and in, for energy), vertex numbers in messages (ro->perm). */
     const dk_mesh *mesh;
+    const dk_mesh *caller_mesh;
+    dk_reorder *ro;
     dk_laplacian_edit_options opt;
     dk_index n;
     /* A: row i holds a_col/a_val[a_start[i] .. a_start[i+1]-1], the diagonal first. The
@@ -62,6 +69,9 @@ struct dk_laplacian_edit {
  * object's team, whose helper waits between passes): below it the hand-off (a few us
  * when the helper spins, ~30 us when it has to start or wake) is not repaid. */
 enum { LE_PARALLEL_MIN = 8192 };
+
+/* Cosines of frame-neighbour candidates this close count as a tie (build_rest_frames). */
+#define LE_FRAME_TIE 1e-9
 
 /* ------------------------------------------------------------------ small helpers ------- */
 
@@ -209,7 +219,7 @@ static dk_status build_operator(dk_laplacian_edit *le, dk_error *err)
             if (lo >= le->a_start[j + 1] || le->a_col[lo] != i)
                 return dk_error_set(err, DK_ERR_INTERNAL,
                                     "LaplacianEdit: one-rings of vertices %d and %d disagree",
-                                    (int)i, (int)j);
+                                    (int)le->ro->perm[i], (int)le->ro->perm[j]);
             le->at_val[k] = le->a_val[lo];
         }
     }
@@ -337,19 +347,34 @@ static dk_status build_rest_frames(dk_laplacian_edit *le, dk_error *err)
         le->frame_coef[3 * i] = le->frame_coef[3 * i + 1] = le->frame_coef[3 * i + 2] = 0.0;
         if (!(nl > 0.0))
             continue;
-        /* the neighbour whose edge is most orthogonal to the normal */
-        for (dk_index k = m->ring_start[i]; k < m->ring_start[i + 1]; k++) {
-            dk_index j = m->ring_index[k];
-            double e[3], el = 0.0, dot = 0.0;
-            for (int d = 0; d < 3; d++) {
-                e[d] = le->rest[d * n + j] - le->rest[d * n + i];
-                el += e[d] * e[d];
-                dot += e[d] * nraw[d];
-            }
-            el = sqrt(el);
-            if (el > 0.0 && fabs(dot) / (el * nl) < best) {
-                best = fabs(dot) / (el * nl);
-                bestj = j;
+        /* The neighbour whose edge is most orthogonal to the normal: the smallest cosine
+         * c = |e.n| / (|e| |n|). Cosines within LE_FRAME_TIE of the smallest count as a
+         * tie (a vertex in one triangle has two edges at c = 0, decided by rounding
+         * otherwise, so by the order of the sums, i.e. by the vertex numbering); ties go to
+         * the longest edge (the better conditioned tangent), then to the caller's smaller
+         * vertex number. */
+        for (int pass = 0; pass < 2; pass++) {
+            double longest = -1.0;
+            for (dk_index k = m->ring_start[i]; k < m->ring_start[i + 1]; k++) {
+                const dk_index j = m->ring_index[k];
+                double el = 0.0, dot = 0.0;
+                for (int d = 0; d < 3; d++) {
+                    const double e = le->rest[d * n + j] - le->rest[d * n + i];
+                    el += e * e;
+                    dot += e * nraw[d];
+                }
+                el = sqrt(el);
+                if (!(el > 0.0))
+                    continue;
+                const double c = fabs(dot) / (el * nl);
+                if (pass == 0) {
+                    best = c < best ? c : best;
+                } else if (c <= best + LE_FRAME_TIE &&
+                           (el > longest ||
+                            (el == longest && le->ro->perm[j] < le->ro->perm[bestj]))) {
+                    longest = el;
+                    bestj = j;
+                }
             }
         }
         if (bestj < 0 || !make_frame(le, le->rest, i, bestj, nraw, nh, u, bt))
@@ -616,16 +641,19 @@ static dk_status build_system(dk_laplacian_edit *le, const dk_constraint_desc *d
             if (s->unknown_index[i] < 0 || s->soft_w2[i] > 0.0 ||
                 m->ring_start[i + 1] == m->ring_start[i])
                 pinned[m->component[i]] = 1;
-        for (dk_index i = 0; i < n; i++)
+        /* in the caller's order, naming the caller's first such vertex and its component */
+        for (dk_index v = 0; v < n; v++) {
+            const dk_index i = le->ro->iperm[v];
             if (s->unknown_index[i] >= 0 && !pinned[m->component[i]]) {
                 st = dk_error_set(err, DK_ERR_DEGENERATE,
                                   "LaplacianEdit: connected component %d (vertex %d) has no "
                                   "handle or fixed vertex, so its position is undetermined; "
                                   "constrain a vertex there, exclude it from the region of "
                                   "interest or use tikhonov > 0",
-                                  (int)m->component[i], (int)i);
+                                  (int)le->caller_mesh->component[v], (int)v);
                 goto fail;
             }
+        }
     }
     st = assemble_normal(le, s, mu2, err);
     if (st != DK_OK)
@@ -643,6 +671,23 @@ fail:
     free(in_roi);
     free(pinned);
     system_free(s);
+    return st;
+}
+
+/* build_system for a description in the caller's numbering (validated against the caller's
+ * mesh first, so that errors name the caller's vertices). */
+static dk_status build_system_caller(dk_laplacian_edit *le, const dk_constraint_desc *desc,
+                                     le_system *s, dk_error *err)
+{
+    dk_reorder_desc rd;
+    memset(s, 0, sizeof *s);
+    if (!desc)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "LaplacianEdit: constraints are NULL");
+    dk_status st = dk_reorder_desc_create(le->ro, le->caller_mesh, desc, &rd, err);
+    if (st != DK_OK)
+        return dk_error_prefix(err, "LaplacianEdit");
+    st = build_system(le, &rd.desc, s, err);
+    dk_reorder_desc_free(&rd);
     return st;
 }
 
@@ -697,8 +742,14 @@ dk_status dk_laplacian_edit_bind(const dk_mesh *mesh, const dk_constraint_desc *
     le = calloc(1, sizeof *le);
     if (!le)
         return oom(err, "object");
-    le->mesh = mesh;
+    le->caller_mesh = mesh;
     le->team = dk_team_create(); /* NULL (no thread available) is fine: passes start threads */
+    st = dk_reorder_create(mesh, DK_REORDER_SORT_FACES, &le->ro, err);
+    if (st != DK_OK) {
+        dk_error_prefix(err, "LaplacianEdit bind");
+        goto fail;
+    }
+    le->mesh = le->ro->mesh;
     n = le->n = mesh->n_vertices;
     if (options)
         le->opt = *options;
@@ -718,7 +769,7 @@ dk_status dk_laplacian_edit_bind(const dk_mesh *mesh, const dk_constraint_desc *
     }
     for (dk_index i = 0; i < n; i++)
         for (int d = 0; d < 3; d++)
-            le->rest[d * n + i] = mesh->positions[3 * i + d];
+            le->rest[d * n + i] = le->mesh->positions[3 * i + d];
     st = build_operator(le, err);
     if (st != DK_OK)
         goto fail;
@@ -733,7 +784,7 @@ dk_status dk_laplacian_edit_bind(const dk_mesh *mesh, const dk_constraint_desc *
         memset(le->delta, 0, sizeof(double) * 3 * (size_t)n);
     else
         memcpy(le->delta, le->delta_rest, sizeof(double) * 3 * (size_t)n);
-    st = build_system(le, desc, &le->sys, err);
+    st = build_system_caller(le, desc, &le->sys, err);
     if (st != DK_OK)
         goto fail;
     st = factor_new(le, &le->sys, err);
@@ -760,7 +811,7 @@ dk_status dk_laplacian_edit_rebind(dk_laplacian_edit *le, const dk_constraint_de
 
     if (!le)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "LaplacianEdit rebind: object is NULL");
-    st = build_system(le, desc, &s, err);
+    st = build_system_caller(le, desc, &s, err);
     if (st != DK_OK)
         return st;
     if (le->sys.chol && s.n_unknowns == le->sys.n_unknowns &&
@@ -811,7 +862,8 @@ typedef struct energy_job {
     const dk_laplacian_edit *le;
     const double *x;  /* element (i, d) at x[i * si + d * sd] */
     size_t si, sd;
-    double *positions; /* NULL, or n x 3 row-major: receives x (done in the same pass)     */
+    double *positions; /* NULL, or n x 3 row-major in the caller's numbering: receives x
+                          (done in the same pass)                                         */
     int want_energy;   /* 0: only the positions                                           */
     double part[2];
 } energy_job;
@@ -828,10 +880,12 @@ static void energy_range(void *ctx, dk_index i0, dk_index i1, int part)
     const double mu2 = le->opt.tikhonov * le->opt.tikhonov;
     const double *d0 = le->delta, *d1 = le->delta + n, *d2 = le->delta + 2 * n;
     double e = 0.0;
+    const dk_index *perm = le->ro->perm;
     if (!job->want_energy) {
         for (dk_index i = i0; i < i1; i++)
             for (int d = 0; d < 3; d++)
-                job->positions[3 * (size_t)i + (size_t)d] = x[(size_t)i * si + (size_t)d * sd];
+                job->positions[3 * (size_t)perm[i] + (size_t)d] =
+                    x[(size_t)i * si + (size_t)d * sd];
         job->part[part] = NAN;
         return;
     }
@@ -847,7 +901,8 @@ static void energy_range(void *ctx, dk_index i0, dk_index i1, int part)
         e += v0 * v0 + v1 * v1 + v2 * v2;
         if (job->positions)
             for (int d = 0; d < 3; d++)
-                job->positions[3 * (size_t)i + (size_t)d] = x[(size_t)i * si + (size_t)d * sd];
+                job->positions[3 * (size_t)perm[i] + (size_t)d] =
+                    x[(size_t)i * si + (size_t)d * sd];
     }
     for (dk_index i = i0; i < i1; i++) {
         const int unknown = s->unknown_index[i] >= 0;
@@ -885,8 +940,14 @@ dk_status dk_laplacian_edit_energy(const dk_laplacian_edit *le, const double *po
     if (!le || !positions || !energy)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "LaplacianEdit energy: NULL argument");
-    *energy = energy_of(le, positions, 3, 1, NULL, 1);
+    /* into the internal numbering (a diagnostic: one allocation is fine) */
+    double *x = malloc(sizeof(double) * 3 * ((size_t)le->n + 1));
+    if (!x)
+        return oom(err, "energy");
+    dk_reorder_rows_in(le->ro, positions, x);
+    *energy = energy_of(le, x, 3, 1, NULL, 1);
     dk_team_park(le->team);
+    free(x);
     return DK_OK;
 }
 
@@ -1308,5 +1369,6 @@ void dk_laplacian_edit_free(dk_laplacian_edit *le)
     free(le->ddelta);
     free(le->face_cross);
     dk_team_free(le->team); /* after the factor, which used it */
+    dk_reorder_free(le->ro); /* le->mesh */
     free(le);
 }

@@ -26,11 +26,22 @@ static dk_index bfs(const dk_mesh *m, dk_index start, dk_index *order, dk_index 
     return last;
 }
 
-dk_status dk_reorder_create(const dk_mesh *mesh, dk_reorder **out, dk_error *err)
+/* The smallest internal index among the caller's triangle t's corners. */
+static dk_index min_corner(const dk_reorder *r, const dk_index *t)
+{
+    dk_index a = r->iperm[t[0]], b = r->iperm[t[1]], c = r->iperm[t[2]];
+    a = b < a ? b : a;
+    return c < a ? c : a;
+}
+
+dk_status dk_reorder_create(const dk_mesh *mesh, unsigned flags, dk_reorder **out,
+                            dk_error *err)
 {
     if (!mesh || !out)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "reorder: NULL mesh or output");
     *out = NULL;
+    if (flags & ~(unsigned)DK_REORDER_SORT_FACES)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "reorder: unknown flags %#x", flags);
     const dk_index n = mesh->n_vertices, nf = mesh->n_faces;
     dk_reorder *r = calloc(1, sizeof *r);
     int *seen = malloc(((size_t)n + 1) * sizeof *seen);
@@ -40,9 +51,10 @@ dk_status dk_reorder_create(const dk_mesh *mesh, dk_reorder **out, dk_error *err
         r->n = n;
         r->perm = malloc(((size_t)n + 1) * sizeof *r->perm);
         r->iperm = malloc(((size_t)n + 1) * sizeof *r->iperm);
+        r->face_perm = malloc(((size_t)nf + 1) * sizeof *r->face_perm);
     }
     dk_status st = DK_OK;
-    if (!r || !seen || !pos || !faces || !r->perm || !r->iperm) {
+    if (!r || !seen || !pos || !faces || !r->perm || !r->iperm || !r->face_perm) {
         st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "reorder: out of memory");
         goto done;
     }
@@ -63,9 +75,22 @@ dk_status dk_reorder_create(const dk_mesh *mesh, dk_reorder **out, dk_error *err
     for (dk_index i = 0; i < n; i++)
         memcpy(pos + 3 * (size_t)i, mesh->positions + 3 * (size_t)r->perm[i], 3 * sizeof(double));
     /* faces in the caller's order, corners relabelled: per-vertex sums over incident faces
-     * (normals) then run in the same order as on the caller's mesh, bit for bit */
-    for (size_t k = 0; k < 3 * (size_t)nf; k++)
-        faces[k] = r->iperm[mesh->faces[k]];
+     * (normals) then run in the same order as on the caller's mesh, bit for bit; or, sorted,
+     * a stable counting sort by the smallest internal corner (seen[] reused as counts) */
+    for (dk_index f = 0; f < nf; f++)
+        r->face_perm[f] = f;
+    if (flags & DK_REORDER_SORT_FACES) {
+        memset(seen, 0, ((size_t)n + 1) * sizeof *seen);
+        for (dk_index f = 0; f < nf; f++)
+            seen[min_corner(r, mesh->faces + 3 * (size_t)f) + 1]++;
+        for (dk_index i = 0; i < n; i++)
+            seen[i + 1] += seen[i];
+        for (dk_index f = 0; f < nf; f++)
+            r->face_perm[seen[min_corner(r, mesh->faces + 3 * (size_t)f)]++] = f;
+    }
+    for (dk_index f = 0; f < nf; f++)
+        for (int k = 0; k < 3; k++)
+            faces[3 * (size_t)f + k] = r->iperm[mesh->faces[3 * (size_t)r->face_perm[f] + k]];
     st = dk_mesh_create(pos, n, faces, nf, &r->mesh, err);
     if (st != DK_OK)
         dk_error_prefix(err, "reorder");
@@ -87,6 +112,7 @@ void dk_reorder_free(dk_reorder *r)
         return;
     free(r->perm);
     free(r->iperm);
+    free(r->face_perm);
     dk_mesh_free(r->mesh);
     free(r);
 }

@@ -81,8 +81,8 @@ static void test_order_and_mesh(void)
     }
     dk_reorder *r = NULL, *r2 = NULL;
     dk_error err;
-    CHECK(dk_reorder_create(m, &r, &err) == DK_OK);
-    CHECK(dk_reorder_create(m, &r2, &err) == DK_OK);
+    CHECK(dk_reorder_create(m, 0, &r, &err) == DK_OK);
+    CHECK(dk_reorder_create(m, 0, &r2, &err) == DK_OK);
     if (!r || !r2)
         goto done;
     const dk_index n = m->n_vertices;
@@ -145,7 +145,7 @@ static void test_constraint_descriptions(void)
     dk_reorder *r = NULL;
     dk_error err;
     CHECK(m != NULL);
-    if (!m || dk_reorder_create(m, &r, &err) != DK_OK) {
+    if (!m || dk_reorder_create(m, 0, &r, &err) != DK_OK) {
         CHECK(0);
         dk_mesh_free(m);
         free(sc);
@@ -189,4 +189,50 @@ static void test_constraint_descriptions(void)
     free(sc);
 }
 
-DK_TEST_MAIN(test_order_and_mesh, test_constraint_descriptions)
+/* DK_REORDER_SORT_FACES: the same vertex order, the same triangles (face_perm says which),
+ * sorted by their smallest internal corner, ties in the caller's order; unknown flags fail. */
+static void test_sorted_faces(void)
+{
+    dk_index *sc = NULL;
+    dk_mesh *m = scrambled_grid(30, &sc);
+    dk_reorder *r = NULL, *plain = NULL;
+    dk_error err;
+    CHECK(m != NULL);
+    if (!m || dk_reorder_create(m, DK_REORDER_SORT_FACES, &r, &err) != DK_OK ||
+        dk_reorder_create(m, 0, &plain, &err) != DK_OK) {
+        CHECK(0);
+        goto done;
+    }
+    dk_reorder *bad = NULL;
+    CHECK(dk_reorder_create(m, 2, &bad, &err) == DK_ERR_INVALID_ARGUMENT && bad == NULL);
+    const dk_index n = m->n_vertices, nf = m->n_faces;
+    CHECK(memcmp(r->perm, plain->perm, sizeof(dk_index) * (size_t)n) == 0);
+    unsigned char *hit = calloc((size_t)nf, 1);
+    CHECK(hit != NULL);
+    dk_index prev_min = -1, prev_face = -1;
+    for (dk_index f = 0; hit && f < nf; f++) {
+        const dk_index src = r->face_perm[f];
+        CHECK(src >= 0 && src < nf && !hit[src]);
+        hit[src] = 1;
+        dk_index lo = n;
+        for (int k = 0; k < 3; k++) {
+            CHECK(r->perm[r->mesh->faces[3 * f + k]] == m->faces[3 * src + k]);
+            lo = r->mesh->faces[3 * f + k] < lo ? r->mesh->faces[3 * f + k] : lo;
+        }
+        CHECK(lo >= prev_min);
+        if (lo == prev_min)
+            CHECK(src > prev_face); /* stable */
+        prev_min = lo;
+        prev_face = src;
+    }
+    free(hit);
+    for (dk_index f = 0; f < nf; f++)
+        CHECK(plain->face_perm[f] == f);
+done:
+    dk_reorder_free(r);
+    dk_reorder_free(plain);
+    dk_mesh_free(m);
+    free(sc);
+}
+
+DK_TEST_MAIN(test_order_and_mesh, test_constraint_descriptions, test_sorted_faces)

@@ -311,8 +311,18 @@ def reference_local_frame(v, f, A, constrained, values, iterations, mu=0.0):
         return nh, u, np.cross(nh, u)
 
     nrm0 = normals(v)
-    nb = np.array([min(ring[i], key=lambda j: abs(np.dot(v[j] - v[i], nrm0[i]))
-                       / np.linalg.norm(v[j] - v[i])) for i in range(n)])
+
+    def frame_neighbour(i):
+        # the most orthogonal edge; cosines within 1e-9 tie, ties to the longest edge, then
+        # to the smallest vertex number
+        js = np.array(ring[i])
+        e = v[js] - v[i]
+        el = np.linalg.norm(e, axis=1)
+        c = np.abs(e @ nrm0[i]) / (el * np.linalg.norm(nrm0[i]))
+        cand = np.flatnonzero(c <= c.min() + 1e-9)
+        return int(js[cand[np.lexsort((js[cand], -el[cand]))[0]]])
+
+    nb = np.array([frame_neighbour(i) for i in range(n)])
     delta0 = A @ v
     nh, u, b = frames(v, nb)
     coef = np.stack([np.sum(delta0 * nh, 1), np.sum(delta0 * u, 1), np.sum(delta0 * b, 1)], 1)
@@ -335,11 +345,15 @@ def reference_local_frame(v, f, A, constrained, values, iterations, mu=0.0):
     return x, delta if iterations else delta0
 
 
-@pytest.mark.parametrize("iterations,tikhonov", [(1, 0.0), (3, 0.0), (2, 0.3)])
-def test_local_frame_matches_reference(iterations, tikhonov):
+@pytest.mark.parametrize("iterations,tikhonov,bump", [(1, 0.0, 0.04), (3, 0.0, 0.04),
+                                                     (2, 0.3, 0.04), (2, 0.0, 0.0)])
+def test_local_frame_matches_reference(iterations, tikhonov, bump):
     """Positions and energy of the local-frame solve equal an independent rebuild of the
-    scheme (each frame update a fresh solve there, an incremental one in the module)."""
-    v, f, fixed, handle = grid_setup(18, 9, bump=0.04)
+    scheme (each frame update a fresh solve there, an incremental one in the module). The
+    flat grid (bump 0) has ties in the choice of the frame neighbour (equal cosines and equal
+    edge lengths): the reference's rule decides them by the smallest vertex number, which the
+    module must do too whatever its internal numbering."""
+    v, f, fixed, handle = grid_setup(18, 9, bump=bump)
     mesh = deformkit.Mesh(v, f)
     T = np.eye(4)
     c, s = math.cos(-0.9), math.sin(-0.9)
@@ -415,6 +429,58 @@ def test_bad_input():
     v2 = np.vstack([v, v + [0, 0, 2]])
     f2 = np.vstack([f, f + len(v)])
     with pytest.raises(ValueError, match="component"):
+        deformkit.LaplacianEdit(deformkit.Mesh(v2, f2), [handle], fixed=fixed)
+
+
+@pytest.mark.parametrize("bump", [0.05])
+@pytest.mark.parametrize("detail,constraints,tikhonov", [("local_frame", "hard", 0.0),
+                                                          ("local_frame", "soft", 0.0),
+                                                          ("fixed", "hard", 0.1)])
+def test_vertex_numbering_does_not_change_the_result(bump, detail, constraints, tikhonov):
+    # LaplacianEdit binds on its own locality numbering (native/methods/dk_reorder.h, faces
+    # sorted) and maps at the API: a shuffled copy of the mesh (faces shuffled too), with the
+    # constraints and handle weights shuffled the same way, must give the same deformation
+    # (to rounding), the same energies of positions in the caller's numbering, and errors
+    # naming the caller's vertices. (Jittered, so that no two frame-neighbour candidates tie
+    # in both cosine and edge length: such ties go to the caller's smaller vertex number,
+    # which a shuffle changes on purpose; the flat case of test_local_frame_matches_reference
+    # checks that rule.)
+    v, f, fixed, handle = grid_setup(14, 8, bump=bump)
+    n = len(v)
+    v[:, 2] += 0.01 * np.random.default_rng(5).standard_normal(n)  # no symmetric ties
+    hw = np.linspace(0.5, 1.0, len(handle))
+    roi = np.flatnonzero(v[:, 1] < 0.45)
+    kw = dict(detail=detail, constraints=constraints, tikhonov=tikhonov,
+              local_frame_iterations=3)
+    ang = 0.8
+    R = np.array([[math.cos(ang), 0, -math.sin(ang)], [0, 1, 0], [math.sin(ang), 0, math.cos(ang)]])
+    t = (v[handle] - [1, 0, 0]) @ R.T + [1, 0, 0.3]
+    a = deformkit.LaplacianEdit(deformkit.Mesh(v, f), [handle], fixed=fixed, roi=roi,
+                                handle_weights=[hw], **kw)
+    ra = a.solve(t)
+    rng = np.random.default_rng(11)
+    p = rng.permutation(n)                    # new vertex k is old vertex p[k]
+    ip = np.argsort(p)                        # old vertex v is new vertex ip[v]
+    fb = ip[f][rng.permutation(len(f))]
+    b = deformkit.LaplacianEdit(deformkit.Mesh(v[p], fb), [ip[handle]], fixed=ip[fixed],
+                                roi=ip[roi], handle_weights=[hw], **kw)
+    rb = b.solve(t)
+    bbox = np.linalg.norm(v.max(0) - v.min(0))
+    xa, xb = np.asarray(ra.positions), np.asarray(rb.positions)
+    assert np.abs(xa - v).max() > 0.05 * bbox          # a real deformation
+    assert np.abs(xb[ip] - xa).max() <= 1e-9 * bbox
+    assert rb.energy == pytest.approx(ra.energy, rel=1e-9, abs=1e-14)
+    assert b.energy(xb) == pytest.approx(a.energy(xa), rel=1e-9, abs=1e-14)
+    assert b.energy(xb[p]) != pytest.approx(b.energy(xb), rel=1e-6)   # the numbering matters
+    # by transforms too (the affine basis)
+    T = np.eye(4)[None].copy()
+    T[0, :3, 3] = (0.0, 0.1, 0.2)
+    ya, yb = a.solve(transforms=T).positions, b.solve(transforms=T).positions
+    assert np.abs(np.asarray(yb)[ip] - np.asarray(ya)).max() <= 1e-9 * bbox
+    # an unconstrained component: the message names the caller's first vertex of it
+    v2 = np.vstack([v, v[:3] + [0.0, 0.0, 5.0]])
+    f2 = np.vstack([f, [[n + 2, n + 1, n]]])
+    with pytest.raises(ValueError, match="vertex %d\\)" % n):
         deformkit.LaplacianEdit(deformkit.Mesh(v2, f2), [handle], fixed=fixed)
 
 
