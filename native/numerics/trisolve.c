@@ -509,21 +509,65 @@ static void backward(const dk_trisolve *p, double *w, int k, int j0, int j1)
 
 typedef struct sweep {
     const dk_trisolve *p;
-    double *w;
+    double *w;        /* the thread's work array: wa (thread 0, and thread 1 backward), wb */
+    double *wa;       /* thread 0's array (where thread 1's rows go after the forward)      */
+    const double *b;  /* forward: the right-hand sides (column-major n x k)                 */
+    double *x;        /* backward: the solution (column-major n x k, may alias b)           */
     int k, thread, back;
 } sweep;
 
+/* Rows [j0, j1) of the work array w from the right-hand sides (permuted), or zero. */
+static void rows_in(const dk_trisolve *p, const double *b, int k, double *w, int j0, int j1)
+{
+    const size_t n = (size_t)p->n;
+    for (int i = j0; i < j1; i++) {
+        const size_t src = p->perm ? (size_t)p->perm[i] : (size_t)i;
+        for (int c = 0; c < k; c++)
+            w[(size_t)i * (size_t)k + (size_t)c] = b ? b[(size_t)c * n + src] : 0.0;
+    }
+}
+
+/* Rows [j0, j1) of the solution x from the work array w (permuted back). */
+static void rows_out(const dk_trisolve *p, const double *w, int k, double *x, int j0, int j1)
+{
+    const size_t n = (size_t)p->n;
+    for (int i = j0; i < j1; i++) {
+        const size_t dst = p->perm ? (size_t)p->perm[i] : (size_t)i;
+        for (int c = 0; c < k; c++)
+            x[(size_t)c * n + dst] = w[(size_t)i * (size_t)k + (size_t)c];
+    }
+}
+
+/* One thread's part of a sweep. The copies in and out of the work arrays are done here by
+ * the thread that owns the rows, in parallel, instead of serially around the sweeps: the
+ * rows of a thread's ranges are read and written only by that thread (subtrees update only
+ * themselves and the top); the top rows start in wa (thread 0) and as zeros in wb (thread
+ * 1, added in afterwards). */
 static void run_sweep(const sweep *s)
 {
     const dk_trisolve *p = s->p;
     const int *rg = p->ranges + (s->thread ? 2 * p->n_ranges[0] : 0);
-    const int nr = p->n_ranges[s->thread];
-    if (!s->back)
+    const int nr = p->n_ranges[s->thread], k = s->k;
+    if (!s->back) {
         for (int q = 0; q < nr; q++)
-            forward(p, s->w, s->k, rg[2 * q], rg[2 * q + 1]);
-    else
+            rows_in(p, s->b, k, s->w, rg[2 * q], rg[2 * q + 1]);
+        for (int t = 0; t < p->n_top; t++)
+            rows_in(p, s->thread ? NULL : s->b, k, s->w, p->top[t], p->top[t] + 1);
+        for (int q = 0; q < nr; q++)
+            forward(p, s->w, k, rg[2 * q], rg[2 * q + 1]);
+        if (s->thread) /* thread 1's rows into wa, for the top columns and the backward */
+            for (int q = 0; q < nr; q++)
+                memcpy(s->wa + (size_t)rg[2 * q] * (size_t)k, s->w + (size_t)rg[2 * q] * (size_t)k,
+                       sizeof(double) * (size_t)(rg[2 * q + 1] - rg[2 * q]) * (size_t)k);
+    } else {
         for (int q = nr - 1; q >= 0; q--)
-            backward(p, s->w, s->k, rg[2 * q], rg[2 * q + 1]);
+            backward(p, s->w, k, rg[2 * q], rg[2 * q + 1]);
+        for (int q = 0; q < nr; q++)
+            rows_out(p, s->w, k, s->x, rg[2 * q], rg[2 * q + 1]);
+        if (!s->thread) /* the top rows, final before the parallel backward began */
+            for (int t = 0; t < p->n_top; t++)
+                rows_out(p, s->w, k, s->x, p->top[t], p->top[t] + 1);
+    }
 }
 
 static void sweep_part(void *ctx, dk_index begin, dk_index end, int part)
@@ -534,8 +578,8 @@ static void sweep_part(void *ctx, dk_index begin, dk_index end, int part)
 }
 
 /* Thread 1's sweep on a helper thread (the team's, or a new one) while the caller does
- * thread 0's (dk_team_run_halves over the two sweeps); if the helper cannot be started the caller does both (each writes only
- * its own rows / array). */
+ * thread 0's (dk_team_run_halves over the two sweeps); without a helper the caller does
+ * both, part 0 first (each writes only its own rows). */
 static void both(dk_team *team, sweep *s0, sweep *s1)
 {
     sweep pair[2] = {*s0, *s1};
@@ -562,19 +606,8 @@ int dk_trisolve_solve(dk_trisolve *p, dk_team *team, const double *b, int nrhs, 
         p->cap = k;
     }
     double *wa = p->wa, *wb = p->wb;
-    for (int i = 0; i < n; i++) {
-        const size_t src = p->perm ? (size_t)p->perm[i] : (size_t)i;
-        for (int c = 0; c < k; c++)
-            wa[(size_t)i * k + c] = b[(size_t)c * n + src];
-    }
-    const int *r1 = p->ranges + 2 * p->n_ranges[0];
-    for (int q = 0; q < p->n_ranges[1]; q++)
-        memcpy(wb + (size_t)r1[2 * q] * k, wa + (size_t)r1[2 * q] * k,
-               sizeof(double) * (size_t)(r1[2 * q + 1] - r1[2 * q]) * (size_t)k);
-    for (int t = 0; t < p->n_top; t++)
-        memset(wb + (size_t)p->top[t] * k, 0, sizeof(double) * (size_t)k);
-
-    sweep s0 = {p, wa, k, 0, 0}, s1 = {p, wb, k, 1, 0};
+    /* forward: both threads copy their rows in and sweep their subtrees */
+    sweep s0 = {p, wa, wa, b, x, k, 0, 0}, s1 = {p, wb, wa, b, x, k, 1, 0};
     both(team, &s0, &s1);
     for (int t = 0; t < p->n_top; t++) {
         double *xa = wa + (size_t)p->top[t] * k;
@@ -582,9 +615,6 @@ int dk_trisolve_solve(dk_trisolve *p, dk_team *team, const double *b, int nrhs, 
         for (int c = 0; c < k; c++)
             xa[c] += xb[c];
     }
-    for (int q = 0; q < p->n_ranges[1]; q++)
-        memcpy(wa + (size_t)r1[2 * q] * k, wb + (size_t)r1[2 * q] * k,
-               sizeof(double) * (size_t)(r1[2 * q + 1] - r1[2 * q]) * (size_t)k);
     for (int t = 0; t < p->n_top; t++)
         forward(p, wa, k, p->top[t], p->top[t] + 1);
     if (!p->ll)
@@ -595,13 +625,9 @@ int dk_trisolve_solve(dk_trisolve *p, dk_team *team, const double *b, int nrhs, 
         }
     for (int t = p->n_top - 1; t >= 0; t--)
         backward(p, wa, k, p->top[t], p->top[t] + 1);
+    /* backward: both threads on wa, each copying its rows out (b is no longer read) */
     s0.back = s1.back = 1;
     s1.w = wa;
     both(team, &s0, &s1);
-    for (int i = 0; i < n; i++) {
-        const size_t dst = p->perm ? (size_t)p->perm[i] : (size_t)i;
-        for (int c = 0; c < k; c++)
-            x[(size_t)c * n + dst] = wa[(size_t)i * k + c];
-    }
     return 0;
 }
