@@ -1428,6 +1428,50 @@ static double local_global_step(const dk_arap *ar, arap_system *s, const double 
  * rotations, K^-1, right-hand side and R_c g; energy `energy`), or the finding that it has
  * converged (*newton_converged = 1, nothing moves). Else the new iterate with all of those,
  * its energy in *e_new. Counters: *rejected (line search failed), *cg_total (products). */
+/* Element-wise CG vector updates over the unknowns [u0, u1) of all three coordinate blocks
+ * (a dk_range_fn), so that they run on the team like the products: each is a pass over
+ * 3 nu doubles that left the helper idle. Element-wise, so the split changes nothing. */
+typedef struct vec_job {
+    const arap_system *s;
+    int op;           /* VEC_STEP, VEC_DIRECTION or VEC_TRIAL                            */
+    double a;         /* alpha, beta or t                                                */
+    double *y, *w;    /* STEP: d, r;  DIRECTION: p;  TRIAL: gu                           */
+    const double *u, *v; /* STEP: p, q;  DIRECTION: z;  TRIAL: xu, d                     */
+    double *full;     /* DIRECTION, TRIAL: n x 3 row-major, receives the scattered result */
+} vec_job;
+
+enum { VEC_STEP, VEC_DIRECTION, VEC_TRIAL };
+
+static void vec_part(void *ctx, dk_index u0, dk_index u1, int part)
+{
+    const vec_job *j = ctx;
+    const arap_system *s = j->s;
+    const size_t nu = (size_t)s->nu;
+    const double a = j->a;
+    (void)part;
+    for (int c = 0; c < 3; c++) {
+        const size_t o = (size_t)c * nu;
+        if (j->op == VEC_STEP) { /* d += alpha p, r -= alpha q */
+            for (size_t i = o + (size_t)u0; i < o + (size_t)u1; i++) {
+                j->y[i] += a * j->u[i];
+                j->w[i] -= a * j->v[i];
+            }
+        } else if (j->op == VEC_DIRECTION) { /* p = z + beta p, scattered */
+            for (dk_index u = u0; u < u1; u++) {
+                const double v = j->u[o + (size_t)u] + a * j->y[o + (size_t)u];
+                j->y[o + (size_t)u] = v;
+                j->full[3 * (size_t)s->unknowns[u] + (size_t)c] = v;
+            }
+        } else { /* gu = xu + t d, scattered */
+            for (dk_index u = u0; u < u1; u++) {
+                const double v = j->u[o + (size_t)u] + a * j->v[o + (size_t)u];
+                j->y[o + (size_t)u] = v;
+                j->full[3 * (size_t)s->unknowns[u] + (size_t)c] = v;
+            }
+        }
+    }
+}
+
 static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double *e_new,
                              int *newton_converged, int *rejected, int *cg_total, dk_error *err)
 {
@@ -1477,9 +1521,9 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
             *e_new = energy;
             return DK_OK;
         }
-        for (size_t i = 0; i < N; i++) {
-            d[i] += alpha * p[i];
-            r[i] -= alpha * q[i];
+        {
+            vec_job vj = {s, VEC_STEP, alpha, d, r, p, q, NULL};
+            dk_team_run_halves(ar->team, vec_part, &vj, nu, rows_min);
         }
         if (k + 1 == ar->opt.cg_iterations)
             break;
@@ -1490,9 +1534,10 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
         if (!(rzn > 1e-24 * rz0))
             break; /* solved to rounding */
         const double beta = rzn / rz;
-        for (size_t i = 0; i < N; i++)
-            p[i] = z[i] + beta * p[i];
-        scatter(s, p, s->vfull);
+        {
+            vec_job vj = {s, VEC_DIRECTION, beta, p, NULL, z, NULL, s->vfull};
+            dk_team_run_halves(ar->team, vec_part, &vj, nu, rows_min);
+        }
         rz = rzn;
     }
     /* line search on E; its last evaluation is the kept iterate's local step */
@@ -1501,9 +1546,10 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
     for (int ls = 0; ls < 4 && !accepted; ls++) {
         if (ls > 0)
             t *= 0.5;
-        for (size_t i = 0; i < N; i++)
-            s->gu[i] = s->xu[i] + t * d[i];
-        scatter(s, s->gu, ar->x);
+        {
+            vec_job vj = {s, VEC_TRIAL, t, s->gu, NULL, s->xu, d, ar->x};
+            dk_team_run_halves(ar->team, vec_part, &vj, nu, rows_min);
+        }
         e = local_energy(ar, s, ar->x, ar->rot);
         accepted = e <= energy;
     }
