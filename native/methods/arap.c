@@ -56,6 +56,9 @@ typedef struct arap_system {
     dk_index *target_of;  /* n: row into the expanded targets, or -1                     */
     double *soft_k;       /* n: penalty k_v of a soft handle vertex, 0 otherwise         */
     double *tws;          /* n_terms: stiffness x base weight                            */
+    int64_t *bterms;      /* the terms with one eliminated and one unknown end, ascending
+                             (the warm start's response reads only these)                */
+    int64_t n_bterms;
     double escale;        /* sum over terms of tws |te|^2: the energy's natural scale    */
     double lambda;        /* mean diagonal of the ARAP part of A                         */
     dk_sparse a;          /* reduced matrix (both triangles), arrays owned               */
@@ -332,6 +335,7 @@ static void system_free(arap_system *s)
     free(s->target_of);
     free(s->soft_k);
     free(s->tws);
+    free(s->bterms);
     sparse_release(&s->a);
     dk_cholesky_free(s->chol);
     free(s->rhs_const);
@@ -619,6 +623,18 @@ static dk_status system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_
         s->unk[v] = (c->role[v] == DK_VERTEX_FREE || soft) ? nu++ : -1;
     }
     s->nu = nu;
+    s->n_bterms = 0;
+    for (int64_t t = 0; t < ar->n_terms; t++)
+        s->n_bterms += (s->unk[ar->ta[t]] >= 0) != (s->unk[ar->tb[t]] >= 0);
+    s->bterms = malloc(((size_t)s->n_bterms + 1) * sizeof *s->bterms);
+    if (!s->bterms) {
+        system_free(s);
+        return oom(err, "constraint system");
+    }
+    s->n_bterms = 0;
+    for (int64_t t = 0; t < ar->n_terms; t++)
+        if ((s->unk[ar->ta[t]] >= 0) != (s->unk[ar->tb[t]] >= 0))
+            s->bterms[s->n_bterms++] = t;
     if (nu == 0) {
         system_free(s);
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
@@ -1664,11 +1680,11 @@ static dk_status solve_impl(dk_arap *ar, const double *targets, int mode, int wa
             const size_t N3 = 3 * (size_t)nu;
             double *w = s->warm; /* columns 0-2: plain response; 3-5: predicted one */
             memset(w, 0, (predict ? 2 : 1) * N3 * sizeof(double));
-            for (int64_t t = 0; t < ar->n_terms; t++) {
+            /* only the terms across the constraints' borders (a few % of all), in order */
+            for (int64_t bt = 0; bt < s->n_bterms; bt++) {
+                const int64_t t = s->bterms[bt];
                 const dk_index a = ar->ta[t], b = ar->tb[t];
                 const dk_index ua = s->unk[a], ub = s->unk[b];
-                if ((ua >= 0) == (ub >= 0))
-                    continue;
                 const dk_index u = ua >= 0 ? ua : ub, known = ua >= 0 ? b : a;
                 for (int d = 0; d < 3; d++) {
                     const size_t k = 3 * (size_t)known + (size_t)d;
