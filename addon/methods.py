@@ -88,7 +88,7 @@ METHODS = [
                           ("none", "None", "Plain local/global iterations (the paper's)"),
                           ("newton", "Newton", "Inexact Newton steps: fewer, costlier iterations "
                                                "that reach the minimum's bending modes"))),
-            Option("cg_iterations", "INT", 10, "CG Iterations",
+            Option("cg_iterations", "INT", 12, "CG Iterations",
                    "Newton: conjugate-gradient iterations (Hessian products) per step",
                    min=1, max=100),
             Option("stiffness_scale", "FLOAT", 10.0, "Material Stiffness",

@@ -141,7 +141,7 @@ void dk_arap_default_options(dk_arap_options *o)
     o->tolerance = 1e-6;
     o->acceleration = DK_ARAP_ACCEL_NEWTON;
     o->anderson_depth = 5;
-    o->cg_iterations = 10;
+    o->cg_iterations = 12;
     o->predict = 1;
     o->on_iteration = NULL;
     o->user = NULL;

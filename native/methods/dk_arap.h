@@ -81,7 +81,7 @@ typedef struct dk_arap_options {
     dk_arap_acceleration acceleration; /**< default DK_ARAP_ACCEL_NEWTON                  */
     int anderson_depth;                /**< 1..20, default 5                              */
     int cg_iterations;                 /**< NEWTON: conjugate-gradient iterations (Hessian
-                                            products) per Newton step, 1..100, default 10 */
+                                            products) per Newton step, 1..100, default 12 */
     int predict;                       /**< warm starts may extrapolate along the drag
                                             (the secant of the last two solutions, see
                                             dk_arap_solve); 0 or 1, default 1             */
