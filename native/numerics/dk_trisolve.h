@@ -9,6 +9,9 @@
  *   forward:  both threads do their subtrees (the second on its own copy of the rows it
  *             writes outside its subtrees, added afterwards), then the top columns;
  *   backward: the top columns, then both threads their subtrees (read-only outside them).
+ * In supernodal factors the big top supernodes are cut into blocks of 64 columns whose
+ * triangle one thread does while the rows below each block are split between both (the
+ * root separator of a surface mesh is a dense supernode of hundreds of columns).
  * The factor is read as columns (row list, values, length; diagonal first) for both of
  * CHOLMOD's layouts: simplicial LL' or LDL', and supernodal LL' (column c of a supernode is
  * its row list from c on, its dense column from the diagonal on). Results equal
