@@ -427,11 +427,11 @@ fail:
 /* ------------------------------------------------------------------ substitutions ------ */
 
 /* Forward substitution of columns j0 .. j1-1 on the row-major n x K work w, and backward
- * substitution of columns j1-1 down to j0. For K = 1..4 the row's values are named scalars
- * (y0..y3, the unused ones dead code), which keeps them in registers: a loop over a local
+ * substitution of columns j1-1 down to j0. For K = 1..6 the row's values are named scalars
+ * (y0..y5, the unused ones dead code), which keeps them in registers: a loop over a local
  * array, even of constant length, was left in memory by GCC -O2 and ran ~3x slower than
  * cholmod_solve2. Any other K (up to 16) uses the loop version. */
-#define DK_SWEEPS4(K)                                                                        \
+#define DK_SWEEPS6(K)                                                                        \
     static void forward_##K(const dk_trisolve *p, double *w, int kk, int j0, int j1)         \
     {                                                                                        \
         (void)kk;                                                                            \
@@ -445,10 +445,14 @@ fail:
             const double y1 = K > 1 ? xj[K > 1 ? 1 : 0] * d : 0.0;                           \
             const double y2 = K > 2 ? xj[K > 2 ? 2 : 0] * d : 0.0;                           \
             const double y3 = K > 3 ? xj[K > 3 ? 3 : 0] * d : 0.0;                           \
+            const double y4 = K > 4 ? xj[K > 4 ? 4 : 0] * d : 0.0;                           \
+            const double y5 = K > 5 ? xj[K > 5 ? 5 : 0] * d : 0.0;                           \
             xj[0] = y0;                                                                      \
             if (K > 1) xj[K > 1 ? 1 : 0] = y1;                                               \
             if (K > 2) xj[K > 2 ? 2 : 0] = y2;                                               \
             if (K > 3) xj[K > 3 ? 3 : 0] = y3;                                               \
+            if (K > 4) xj[K > 4 ? 4 : 0] = y4;                                               \
+            if (K > 5) xj[K > 5 ? 5 : 0] = y5;                                               \
             for (int q = 1; q < m; q++) {                                                    \
                 double *xi = w + (size_t)r[q] * K;                                           \
                 const double a = v[q];                                                       \
@@ -456,6 +460,8 @@ fail:
                 if (K > 1) xi[K > 1 ? 1 : 0] -= a * y1;                                      \
                 if (K > 2) xi[K > 2 ? 2 : 0] -= a * y2;                                      \
                 if (K > 3) xi[K > 3 ? 3 : 0] -= a * y3;                                      \
+                if (K > 4) xi[K > 4 ? 4 : 0] -= a * y4;                                      \
+                if (K > 5) xi[K > 5 ? 5 : 0] -= a * y5;                                      \
             }                                                                                \
         }                                                                                    \
     }                                                                                        \
@@ -472,11 +478,13 @@ fail:
              * also taken last to first the factor is streamed in one descending sweep;   \
              * ascending runs inside descending columns defeated the hardware prefetch   \
              * (bi-Laplacian, 3 RHS: 2.0 ms -> 0.9 ms for the parallel part). */         \
-            double y0 = xj[0], y1 = 0.0, y2 = 0.0, y3 = 0.0;                                 \
-            double z0 = 0.0, z1 = 0.0, z2 = 0.0, z3 = 0.0;                                   \
+            double y0 = xj[0], y1 = 0.0, y2 = 0.0, y3 = 0.0, y4 = 0.0, y5 = 0.0;             \
+            double z0 = 0.0, z1 = 0.0, z2 = 0.0, z3 = 0.0, z4 = 0.0, z5 = 0.0;               \
             if (K > 1) y1 = xj[K > 1 ? 1 : 0];                                               \
             if (K > 2) y2 = xj[K > 2 ? 2 : 0];                                               \
             if (K > 3) y3 = xj[K > 3 ? 3 : 0];                                               \
+            if (K > 4) y4 = xj[K > 4 ? 4 : 0];                                               \
+            if (K > 5) y5 = xj[K > 5 ? 5 : 0];                                               \
             int q = m - 1;                                                                   \
             for (; q >= 2; q -= 2) {                                                         \
                 const double *xi = w + (size_t)r[q] * K, *xh = w + (size_t)r[q - 1] * K;     \
@@ -488,7 +496,11 @@ fail:
                 if (K > 2) y2 -= a * xi[K > 2 ? 2 : 0];                                      \
                 if (K > 2) z2 -= b * xh[K > 2 ? 2 : 0];                                      \
                 if (K > 3) y3 -= a * xi[K > 3 ? 3 : 0];                                      \
+                if (K > 4) y4 -= a * xi[K > 4 ? 4 : 0];                                      \
+                if (K > 5) y5 -= a * xi[K > 5 ? 5 : 0];                                      \
                 if (K > 3) z3 -= b * xh[K > 3 ? 3 : 0];                                      \
+                if (K > 4) z4 -= b * xh[K > 4 ? 4 : 0];                                      \
+                if (K > 5) z5 -= b * xh[K > 5 ? 5 : 0];                                      \
             }                                                                                \
             if (q == 1) {                                                                    \
                 const double *xi = w + (size_t)r[1] * K;                                     \
@@ -497,23 +509,31 @@ fail:
                 if (K > 1) y1 -= a * xi[K > 1 ? 1 : 0];                                      \
                 if (K > 2) y2 -= a * xi[K > 2 ? 2 : 0];                                      \
                 if (K > 3) y3 -= a * xi[K > 3 ? 3 : 0];                                      \
+                if (K > 4) y4 -= a * xi[K > 4 ? 4 : 0];                                      \
+                if (K > 5) y5 -= a * xi[K > 5 ? 5 : 0];                                      \
             }                                                                                \
             y0 += z0;                                                                        \
             y1 += z1;                                                                        \
             y2 += z2;                                                                        \
             y3 += z3;                                                                        \
+            y4 += z4;                                                                        \
+            y5 += z5;                                                                        \
             const double d = p->ll ? 1.0 / v[0] : 1.0;                                       \
             xj[0] = y0 * d;                                                                  \
             if (K > 1) xj[K > 1 ? 1 : 0] = y1 * d;                                           \
             if (K > 2) xj[K > 2 ? 2 : 0] = y2 * d;                                           \
             if (K > 3) xj[K > 3 ? 3 : 0] = y3 * d;                                           \
+            if (K > 4) xj[K > 4 ? 4 : 0] = y4 * d;                                           \
+            if (K > 5) xj[K > 5 ? 5 : 0] = y5 * d;                                           \
         }                                                                                    \
     }
 
-DK_SWEEPS4(1)
-DK_SWEEPS4(2)
-DK_SWEEPS4(3)
-DK_SWEEPS4(4)
+DK_SWEEPS6(1)
+DK_SWEEPS6(2)
+DK_SWEEPS6(3)
+DK_SWEEPS6(4)
+DK_SWEEPS6(5)
+DK_SWEEPS6(6)
 
 static void forward_k(const dk_trisolve *p, double *w, int k, int j0, int j1)
 {
@@ -557,14 +577,16 @@ typedef void (*sweep_fn)(const dk_trisolve *, double *, int, int, int);
 
 static void forward(const dk_trisolve *p, double *w, int k, int j0, int j1)
 {
-    static const sweep_fn f[5] = {forward_k, forward_1, forward_2, forward_3, forward_4};
-    f[k <= 4 ? k : 0](p, w, k, j0, j1);
+    static const sweep_fn f[7] = {forward_k, forward_1, forward_2, forward_3,
+                                  forward_4, forward_5, forward_6};
+    f[k <= 6 ? k : 0](p, w, k, j0, j1);
 }
 
 static void backward(const dk_trisolve *p, double *w, int k, int j0, int j1)
 {
-    static const sweep_fn f[5] = {backward_k, backward_1, backward_2, backward_3, backward_4};
-    f[k <= 4 ? k : 0](p, w, k, j0, j1);
+    static const sweep_fn f[7] = {backward_k, backward_1, backward_2, backward_3,
+                                  backward_4, backward_5, backward_6};
+    f[k <= 6 ? k : 0](p, w, k, j0, j1);
 }
 
 typedef struct sweep {
