@@ -510,3 +510,37 @@ def test_arm_lift_scenario(detail):
     d = np.linalg.norm(x - v, axis=1)
     tr = np.linalg.norm(sc["handles"][0]["translate"])
     assert d.max() < 1.5 * tr and np.median(d) > 1e-3 * tr
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="needs os.fork")
+def test_solvers_work_in_a_forked_child():
+    # Each ARAP / LaplacianEdit object owns a helper thread (native/core/dk_parallel.h); a
+    # child forked after the objects were made has their memory but not the thread, and must
+    # still solve (falling back to threads started per pass), give the parent's result, and
+    # free the objects without waiting for the missing helper.
+    import os
+    import signal
+    v, f, fixed, handle = grid_setup(120, 70, bump=0.03)   # big enough for two-thread passes
+    mesh = deformkit.Mesh(v, f)
+    T = np.eye(4)
+    T[:3, 3] = (0.0, 0.1, 0.2)
+    le = deformkit.LaplacianEdit(mesh, [handle], fixed=fixed, detail="local_frame")
+    ar = deformkit.ARAP(mesh, [handle], fixed=fixed)
+    want_le = np.asarray(le.solve(transforms=[T]).positions)
+    want_ar = np.asarray(ar.solve(transforms=[T]).positions)
+    pid = os.fork()
+    if pid == 0:
+        code = 3
+        try:
+            signal.alarm(20)   # a hang becomes a failure
+            got_le = np.asarray(le.solve(transforms=[T]).positions)
+            got_ar = np.asarray(ar.solve(transforms=[T]).positions)
+            ok = np.array_equal(got_le, want_le) and np.array_equal(got_ar, want_ar)
+            del le, ar
+            code = 0 if ok else 1
+        finally:
+            os._exit(code)
+    _, status = os.waitpid(pid, 0)
+    assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0, status
+    # and the parent's objects still work with their helpers
+    assert np.array_equal(np.asarray(le.solve(transforms=[T]).positions), want_le)
