@@ -678,6 +678,7 @@ typedef struct panel_job {
     const top_panel *b;
     double *w;
     int k;
+    int back;                        /* 0: forward, 1: backward                            */
     double sums[2][PANEL_COLS * 16]; /* backward: each part's sums, column-major k x cols */
 } panel_job;
 
@@ -689,42 +690,10 @@ static void panel_rows(const panel_job *j, int part, int col, int *q0, int *q1)
     *q1 = (part ? nsrow : mid) - c;
 }
 
-/* Forward, the rows below the block: w_r -= L_rj y_j for the block's columns in ascending
- * order, each row by one part: the same operations in the same order as column by column. */
-static void panel_forward_part(void *ctx, dk_index begin, dk_index end, int part)
-{
-    const panel_job *j = ctx;
-    const dk_trisolve *p = j->p;
-    const int k = j->k;
-    (void)begin;
-    (void)end;
-    for (int col = j->b->j0; col < j->b->j1; col++) {
-        int q0, q1;
-        panel_rows(j, part, col, &q0, &q1);
-        const int *r = p->rows[col];
-        const double *v = p->vals[col];
-        const double *y = j->w + (size_t)col * (size_t)k;
-        if (k == 3) {
-            const double y0 = y[0], y1 = y[1], y2 = y[2];
-            for (int q = q0; q < q1; q++) {
-                double *xi = j->w + (size_t)r[q] * 3;
-                const double a = v[q];
-                xi[0] -= a * y0;
-                xi[1] -= a * y1;
-                xi[2] -= a * y2;
-            }
-        } else {
-            for (int q = q0; q < q1; q++) {
-                double *xi = j->w + (size_t)r[q] * (size_t)k;
-                for (int c = 0; c < k; c++)
-                    xi[c] -= v[q] * y[c];
-            }
-        }
-    }
-}
-
-/* Backward, the rows below the block: each part's sums of L_rj x_r over its rows. */
-static void panel_backward_part(void *ctx, dk_index begin, dk_index end, int part)
+/* The rows below the block, one part's half (a dk_range_fn). Forward (job->back 0):
+ * w_r -= L_rj y_j for the block's columns in ascending order, each row by one part: the same
+ * operations in the same order as column by column. Backward: the part's sums of L_rj x_r. */
+static void panel_part(void *ctx, dk_index begin, dk_index end, int part)
 {
     panel_job *j = ctx;
     const dk_trisolve *p = j->p;
@@ -736,29 +705,54 @@ static void panel_backward_part(void *ctx, dk_index begin, dk_index end, int par
         panel_rows(j, part, col, &q0, &q1);
         const int *r = p->rows[col];
         const double *v = p->vals[col];
-        double *sum = j->sums[part] + (size_t)(col - j->b->j0) * (size_t)k;
-        if (k == 3) {
-            double s0 = 0.0, s1 = 0.0, s2 = 0.0;
-            for (int q = q1 - 1; q >= q0; q--) {
-                const double *xi = j->w + (size_t)r[q] * 3;
-                const double a = v[q];
-                s0 += a * xi[0];
-                s1 += a * xi[1];
-                s2 += a * xi[2];
+        if (!j->back) {
+            const double *y = j->w + (size_t)col * (size_t)k;
+            for (int q = q0; q < q1; q++) {
+                double *xi = j->w + (size_t)r[q] * (size_t)k;
+                if (k == 3) { /* named scalars: the common case stays in registers */
+                    xi[0] -= v[q] * y[0];
+                    xi[1] -= v[q] * y[1];
+                    xi[2] -= v[q] * y[2];
+                } else {
+                    for (int c = 0; c < k; c++)
+                        xi[c] -= v[q] * y[c];
+                }
             }
-            sum[0] = s0;
-            sum[1] = s1;
-            sum[2] = s2;
         } else {
+            double *sum = j->sums[part] + (size_t)(col - j->b->j0) * (size_t)k;
+            double s0 = 0.0, s1 = 0.0, s2 = 0.0;
             for (int c = 0; c < k; c++)
                 sum[c] = 0.0;
             for (int q = q1 - 1; q >= q0; q--) {
                 const double *xi = j->w + (size_t)r[q] * (size_t)k;
-                for (int c = 0; c < k; c++)
-                    sum[c] += v[q] * xi[c];
+                if (k == 3) {
+                    s0 += v[q] * xi[0];
+                    s1 += v[q] * xi[1];
+                    s2 += v[q] * xi[2];
+                } else {
+                    for (int c = 0; c < k; c++)
+                        sum[c] += v[q] * xi[c];
+                }
+            }
+            if (k == 3) {
+                sum[0] = s0;
+                sum[1] = s1;
+                sum[2] = s2;
             }
         }
     }
+}
+
+/* The rows below block b on the two threads of `team`, forward or backward. */
+static void run_panel(const dk_trisolve *p, dk_team *team, double *w, int k,
+                      const top_panel *b, panel_job *job, int back)
+{
+    job->p = p;
+    job->b = b;
+    job->w = w;
+    job->k = k;
+    job->back = back;
+    dk_team_run_halves(team, panel_part, job, 2, 2);
 }
 
 /* Forward substitution of a block: its triangle on the calling thread (each column's
@@ -779,11 +773,7 @@ static void panel_forward(const dk_trisolve *p, dk_team *team, double *w, int k,
                 xi[c] -= v[q] * y[c];
         }
     }
-    job->p = p;
-    job->b = b;
-    job->w = w;
-    job->k = k;
-    dk_team_run_halves(team, panel_forward_part, job, 2, 2);
+    run_panel(p, team, w, k, b, job, 0);
 }
 
 /* Backward substitution of a block: the sums over the rows below on two threads, then the
@@ -791,11 +781,7 @@ static void panel_forward(const dk_trisolve *p, dk_team *team, double *w, int k,
 static void panel_backward(const dk_trisolve *p, dk_team *team, double *w, int k,
                            const top_panel *b, panel_job *job)
 {
-    job->p = p;
-    job->b = b;
-    job->w = w;
-    job->k = k;
-    dk_team_run_halves(team, panel_backward_part, job, 2, 2);
+    run_panel(p, team, w, k, b, job, 1);
     for (int col = b->j1 - 1; col >= b->j0; col--) {
         const int *r = p->rows[col];
         const double *v = p->vals[col];

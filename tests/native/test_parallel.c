@@ -30,7 +30,9 @@ static void count_items(void *ctx, dk_index b, dk_index e, int part)
         j->hits[i] = (unsigned char)(j->hits[i] + 1 + part);
 }
 
-static void test_every_item_once(void)
+/* Every item once, by the part the split assigns it to: through dk_run_halves (mode 0) or
+ * dk_team_run_halves on `team` (mode 1; team may be NULL), with and without a helper. */
+static void check_every_item_once(int mode, dk_team *team)
 {
     const dk_index sizes[] = {0, 1, 2, 3, 7, 8191, 8192, 100001};
     for (size_t s = 0; s < sizeof sizes / sizeof sizes[0]; s++)
@@ -42,13 +44,21 @@ static void test_every_item_once(void)
             CHECK(j.hits != NULL);
             if (!j.hits)
                 return;
-            dk_run_halves(count_items, &j, n, threaded ? 2 : n + 1);
+            if (mode)
+                dk_team_run_halves(team, count_items, &j, n, threaded ? 2 : n + 1);
+            else
+                dk_run_halves(count_items, &j, n, threaded ? 2 : n + 1);
             CHECK(j.calls[0] == 1 && j.calls[1] == 1);
             CHECK(j.begin[0] == 0 && j.end[0] == n / 2 && j.begin[1] == n / 2 && j.end[1] == n);
             for (dk_index i = 0; i < n; i++)
                 CHECK(j.hits[i] == (i < n / 2 ? 1 : 2));
             free(j.hits);
         }
+}
+
+static void test_every_item_once(void)
+{
+    check_every_item_once(0, NULL);
 }
 
 /* Each part waits (bounded) for the other to start: only concurrent parts both see it. */
@@ -83,28 +93,10 @@ static void test_parts_run_concurrently(void)
 
 static void test_team_every_item_once(void)
 {
-    const dk_index sizes[] = {0, 1, 2, 3, 7, 8191, 8192, 100001};
     dk_team *team = dk_team_create();
     CHECK(team != NULL);
-    for (int with_team = 0; with_team < 2; with_team++)
-        for (size_t s = 0; s < sizeof sizes / sizeof sizes[0]; s++)
-            for (int threaded = 0; threaded < 2; threaded++) {
-                const dk_index n = sizes[s];
-                count_job j;
-                memset(&j, 0, sizeof j);
-                j.hits = calloc((size_t)n + 1, 1);
-                CHECK(j.hits != NULL);
-                if (!j.hits)
-                    break;
-                dk_team_run_halves(with_team ? team : NULL, count_items, &j, n,
-                                   threaded ? 2 : n + 1);
-                CHECK(j.calls[0] == 1 && j.calls[1] == 1);
-                CHECK(j.begin[0] == 0 && j.end[0] == n / 2 && j.begin[1] == n / 2 &&
-                      j.end[1] == n);
-                for (dk_index i = 0; i < n; i++)
-                    CHECK(j.hits[i] == (i < n / 2 ? 1 : 2));
-                free(j.hits);
-            }
+    check_every_item_once(1, team);
+    check_every_item_once(1, NULL);
     dk_team_free(team);
     dk_team_free(NULL);
     dk_team_park(NULL);
