@@ -3,12 +3,17 @@ and Laplacian editing against Blender's built-in Laplacian Deform modifier (+ a 
 anchors) on the same mesh, anchors and drag, in the same run.
 
   PYTHONPATH=build/python blender -b --factory-startup --python-exit-code 1 \
-      --python tests/blender/bench_latency.py -- [--scenario PATH] [--steps N] [--json OUT]
+      --python tests/blender/bench_latency.py -- [--scenario PATH] [--steps N] [--json OUT] \
+      [--methods ...] [--paired]
 
 Default scenario: ../shared/scenarios/armadillo-wave.json (43k vertices). The drag moves the
 handle target along the scenario's translation in N steps; each step's time covers the depsgraph
 update that runs the add-on's handler (solve + attribute write) and the re-evaluation of the
 modifier stack that shows it (two updates for DeformKit, one for the built-in modifier).
+--paired adds, per DeformKit variant (not the interactive ones), a drag alternating step by
+step with a built-in Laplacian Deform object of its own, for a ratio that machine-speed drift
+between the variants' runs cannot skew (the add-on's handler also runs, and returns at once,
+on the built-in's updates: ~0.05 ms of its ~100).
 """
 import argparse
 import json
@@ -36,6 +41,11 @@ def args():
                         "finish it after the drag, timed separately)")
     p.add_argument("--profile", action="store_true",
                    help="print the cProfile of each DeformKit drag (where Python time goes)")
+    p.add_argument("--paired", action="store_true",
+                   help="also drag a built-in Laplacian Deform object step by step alternating "
+                        "with each DeformKit variant (its own copy of the mesh), so that the "
+                        "ratio compares steps taken within milliseconds of each other: the "
+                        "VM's speed can drift by tens of percent between the variants' runs")
     return p.parse_args(a)
 
 
@@ -63,6 +73,50 @@ def make_object(name, vs, fs, fixed, handle):
     centre = np.asarray(vs)[handle].mean(axis=0)
     e = S.empty(name + " target", tuple(centre))
     return obj, e
+
+
+def make_builtin(name, vs, fs, fixed, handle):
+    """Blender's Laplacian Deform on the anchors (fixed + handle), with a Hook moving the
+    handle vertices by the target empty; bound. Returns (object, empty, modifier, bind ms)."""
+    obj, e = make_object(name, vs, fs, fixed, handle)
+    # the new empty's matrix_world is only valid after an update (else identity, and the Hook
+    # would add the empty's whole location to the handle)
+    bpy.context.view_layer.update()
+    hook = obj.modifiers.new("Hook", "HOOK")
+    hook.object = e
+    hook.vertex_group = "handle"
+    hook.center = e.location
+    hook.matrix_inverse = e.matrix_world.inverted()
+    lap = obj.modifiers.new("LaplacianDeform", "LAPLACIANDEFORM")
+    lap.vertex_group = "anchors"
+    lap.iterations = 1
+    t0 = time.perf_counter()
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        bpy.ops.object.laplaciandeform_bind(modifier=lap.name)
+    bpy.context.evaluated_depsgraph_get().update()
+    return obj, e, lap, (time.perf_counter() - t0) * 1000
+
+
+def drag_paired(obj, e, bobj, be, steps, translate, check_idx, rest):
+    """Steps of the DeformKit drag (two updates each) and of the built-in one (one update)
+    alternating, the order swapped every step. Returns (DeformKit ms, built-in ms, errors)."""
+    start, bstart = np.array(e.location), np.array(be.location)
+    dk, bi = [], []
+    dg = bpy.context.evaluated_depsgraph_get()
+    for i in range(1, steps + 1):
+        for which in ((0, 1) if i % 2 else (1, 0)):
+            target, base, n_updates, out, o = ((e, start, 2, dk, obj) if which == 0
+                                                else (be, bstart, 1, bi, bobj))
+            target.location = tuple(base + np.asarray(translate) * i / steps)
+            t0 = time.perf_counter()
+            for _ in range(n_updates):
+                dg.update()
+            v = o.evaluated_get(dg).data.vertices[check_idx].co
+            out.append((time.perf_counter() - t0) * 1000.0)
+    want = rest[check_idx] + np.asarray(translate)
+    errs = [float(np.abs(np.array(o.evaluated_get(dg).data.vertices[check_idx].co) - want).max())
+            for o in (obj, bobj)]
+    return dk, bi, errs
 
 
 def drag(obj, e, steps, translate, n_updates, check_idx, rest):
@@ -118,6 +172,27 @@ def main():
         bpy.ops.deformkit.bind()
         bind_ms = (time.perf_counter() - t0) * 1000
         S.handlers.force_interactive[0] = interactive
+        if a.paired and not interactive:
+            bobj, be, _, bbind = make_builtin("Builtin_" + mid, vs, fs, fixed, handle)
+            dk, bi, errs = drag_paired(obj, e, bobj, be, a.steps, translate, handle[0], rest)
+            ratio = statistics.median(bi) / statistics.median(dk)
+            per_step = [b / d for b, d in zip(bi, dk)]
+            results[spec + ":paired"] = dict(drag_ms_median=statistics.median(dk),
+                                             builtin_drag_ms_median=statistics.median(bi),
+                                             ratio_of_medians=ratio,
+                                             step_ratio_median=statistics.median(per_step),
+                                             drag_ms_all=dk, builtin_drag_ms_all=bi,
+                                             handle_errors=errs, builtin_bind_ms=bbind)
+            print("%s paired with the built-in: drag median %.1f ms against %.1f ms: %.1fx "
+                  "(median of the per-step ratios %.1fx), handle errors %.1e / %.1e"
+                  % (spec, statistics.median(dk), statistics.median(bi), ratio,
+                     statistics.median(per_step), errs[0], errs[1]))
+            bpy.data.objects.remove(bobj)
+            bpy.data.objects.remove(be)
+            # back to the start for the unpaired drag below (not timed)
+            e.location = tuple(np.array(e.location) - np.asarray(translate))
+            bpy.context.evaluated_depsgraph_get().update()
+            bpy.context.evaluated_depsgraph_get().update()
         if a.profile:
             import cProfile
             import pstats
@@ -156,23 +231,7 @@ def main():
         S.handlers.enabled[0] = True
     # built-in: Hook (handle vertices to the target) then Laplacian Deform (anchors)
     S.handlers.enabled[0] = False
-    obj, e = make_object("Builtin", vs, fs, fixed, handle)
-    # the new empty's matrix_world is only valid after an update (else identity, and the Hook
-    # would add the empty's whole location to the handle)
-    bpy.context.view_layer.update()
-    hook = obj.modifiers.new("Hook", "HOOK")
-    hook.object = e
-    hook.vertex_group = "handle"
-    hook.center = e.location
-    hook.matrix_inverse = e.matrix_world.inverted()
-    lap = obj.modifiers.new("LaplacianDeform", "LAPLACIANDEFORM")
-    lap.vertex_group = "anchors"
-    lap.iterations = 1
-    t0 = time.perf_counter()
-    with bpy.context.temp_override(object=obj, active_object=obj):
-        bpy.ops.object.laplaciandeform_bind(modifier=lap.name)
-    bpy.context.evaluated_depsgraph_get().update()
-    bind_ms = (time.perf_counter() - t0) * 1000
+    obj, e, lap, bind_ms = make_builtin("Builtin", vs, fs, fixed, handle)
     times, err = drag(obj, e, a.steps, translate, 1, handle[0], rest)
     results["BUILTIN_LAPLACIAN_DEFORM"] = dict(bind_ms=bind_ms, drag_ms_median=statistics.median(times),
                                                drag_ms_max=max(times), drag_ms_all=times,
