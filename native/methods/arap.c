@@ -1187,10 +1187,10 @@ static void rotations_rhs(const dk_arap *ar, arap_system *s, const double *rot)
 
 /* Local step and energy at positions x: rotations into rot (may be NULL: then only the
  * energy), returns E(x) including soft penalties (when targets are known); the caller gets
- * the next global step's right-hand side from rotations_rhs, once it keeps the iterate. On big meshes the cells are split in two halves, the second on
- * a helper thread (the target machines have two cores); if the thread cannot be started the
- * calling thread does both halves. The split point depends only on the mesh, so results are
- * reproducible. */
+ * the next global step's right-hand side from rotations_rhs, once it keeps the iterate. On
+ * big meshes the cells are split in two halves, the second on the object's helper thread
+ * (the target machines have two cores); without one the calling thread does both halves.
+ * The split point depends only on the mesh, so results are reproducible. */
 static double local_energy(const dk_arap *ar, const arap_system *s, const double *x,
                            double *rot)
 {
