@@ -374,8 +374,8 @@ static void test_bend(void)
  * quadratically once small (a Hessian product missing the rotations' response, or with a
  * wrong sign, converges only linearly and fails this), and the minimum is the one a tight
  * Anderson solve finds. Never a failed line search on this smooth problem. With the default
- * cg_iterations and tolerance both solvers stop within 1e-5 of that minimum (measured: 1.4e-6
- * and 1.3e-6 above it). */
+ * cg_iterations and tolerance both solvers stop within 1e-5 of that minimum (measured with
+ * 12 CG iterations: Anderson 1.3e-6 above it, Newton 4.4e-8). */
 static void test_newton_quadratic(void)
 {
     plane_setup s;
