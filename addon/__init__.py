@@ -14,13 +14,13 @@ bl_info = {
 
 if "bpy" in locals():  # script reload
     import importlib
-    for _m in (methods, native, properties, geonodes, solver, handlers, pc2, bake,  # noqa: F821
+    for _m in (compat, methods, native, properties, geonodes, solver, handlers, pc2, bake,  # noqa: F821
                operators, ui):  # noqa: F821
         importlib.reload(_m)
 
 import bpy  # noqa: E402
 
-from . import methods, native, properties, geonodes, solver, handlers, pc2, bake  # noqa: E402
+from . import compat, methods, native, properties, geonodes, solver, handlers, pc2, bake  # noqa: E402
 from . import operators, ui  # noqa: E402
 
 _modules = (properties, operators, ui, handlers)

@@ -11,12 +11,14 @@ the add-on finds the modifier again (modifiers may be renamed and reordered free
 
 import bpy
 
+from . import compat
+
 GROUP_NAME = "DeformKit Offset"
 GROUP_VERSION = 1
 
 
 def _socket_id(ng, name):
-    for s in ng.inputs:
+    for s in compat.group_sockets(ng, "INPUT"):
         if s.name == name:
             return s.identifier
     raise KeyError(name)
@@ -30,13 +32,13 @@ def ensure_node_group():
         ng.name = GROUP_NAME + ".old"
     ng = bpy.data.node_groups.new(GROUP_NAME, "GeometryNodeTree")
     ng["deformkit_version"] = GROUP_VERSION
-    ng.inputs.new("NodeSocketGeometry", "Geometry")
-    f = ng.inputs.new("NodeSocketFloat", "Factor")
+    compat.new_group_socket(ng, "Geometry", "INPUT", "NodeSocketGeometry")
+    f = compat.new_group_socket(ng, "Factor", "INPUT", "NodeSocketFloat")
     f.default_value = 1.0
     f.min_value = -10.0
     f.max_value = 10.0
-    ng.inputs.new("NodeSocketString", "Attribute")
-    ng.outputs.new("NodeSocketGeometry", "Geometry")
+    compat.new_group_socket(ng, "Attribute", "INPUT", "NodeSocketString")
+    compat.new_group_socket(ng, "Geometry", "OUTPUT", "NodeSocketGeometry")
     nodes, links = ng.nodes, ng.links
     gin = nodes.new("NodeGroupInput")
     gin.location = (-600, 0)

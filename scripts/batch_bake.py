@@ -4,6 +4,8 @@
       --object NAME [--deformer NAME] --frames A-B --out FILE.pc2 [--save]
   blender -b --python-exit-code 1 --python scripts/batch_bake.py -- --join a.pc2 b.pc2 --out all.pc2
   python3 scripts/batch_bake.py --join a.pc2 b.pc2 --out all.pc2      (join needs no Blender)
+  python scripts/batch_bake.py --blend scene.blend [--scene NAME] --object NAME ...
+                                 (Blender as a Python module: a venv with the `bpy` wheel)
 
 Each frame is solved from a cold start, so a frame's result depends only on that frame's inputs:
 ranges baked on different machines and joined equal one bake of the whole range. If the
@@ -27,14 +29,34 @@ def log(msg):
     sys.stderr.flush()
 
 
+def running_as_module():
+    """True under Blender as a Python module (`import bpy` in a plain Python), False under the
+    blender program or without bpy."""
+    bpy = sys.modules.get("bpy")
+    return bpy is not None and not bpy.app.binary_path
+
+
+def leave(code):
+    """Exits with `code`. The bpy module (4.5, 5.0) can hang in its exit handlers once a file
+    was written, so there the process ends at once, its output flushed."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    if running_as_module():
+        os._exit(code)
+    sys.exit(code)
+
+
 def fail(msg):
     log("error: " + msg)
-    sys.exit(1)
+    leave(1)
 
 
 def parse(argv):
     argv = argv[argv.index("--") + 1:] if "--" in argv else argv[1:]
     p = argparse.ArgumentParser(prog="batch_bake.py", description=__doc__.split("\n")[0])
+    p.add_argument("--blend", help="open this .blend first (for Blender as a Python module; "
+                                   "the blender program takes the file before --python)")
+    p.add_argument("--scene", help="with --blend: the scene to bake in (default: the file's)")
     p.add_argument("--object", help="name of the deformed mesh object")
     p.add_argument("--deformer", help="deformer name (default: the object's active deformer)")
     p.add_argument("--frames", help="frame range A-B (inclusive); default: the scene's range")
@@ -70,12 +92,12 @@ def do_join(args):
 def ensure_addon():
     import bpy
     if hasattr(bpy.types.Object, "deformkit") and hasattr(bpy.ops, "deformkit"):
-        for name in ("addon", "deformkit", "bl_ext.user_default.deformkit"):
+        for name in ("addon", "deformkit_addon", "bl_ext.user_default.deformkit_addon"):
             m = sys.modules.get(name)
             if m is not None and hasattr(m, "solver"):
                 return m
     import addon_utils
-    for name in ("deformkit",):
+    for name in ("deformkit_addon",):
         try:
             mod = addon_utils.enable(name, default_set=False)
             if mod is not None and hasattr(mod, "solver"):
@@ -106,6 +128,19 @@ def do_bake(args):
     import bpy
     if not args.object:
         fail("--object NAME is required (or --join)")
+    if args.blend:
+        if not os.path.isfile(args.blend):
+            fail("no such .blend file: %s" % args.blend)
+        bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend), load_ui=False)
+        if args.scene:
+            sc = bpy.data.scenes.get(args.scene)
+            if sc is None:
+                fail("%s has no scene %r (has: %s)" % (args.blend, args.scene,
+                                                     ", ".join(x.name for x in bpy.data.scenes)))
+            wins = bpy.context.window_manager.windows
+            if not len(wins):
+                fail("--scene: this Blender has no window to switch scenes in")
+            wins[0].scene = sc
     ext = ensure_addon()
     solver, bake = ext.solver, ext.bake
     if ext.native.load() is None:
@@ -169,6 +204,7 @@ def main():
         import traceback
         traceback.print_exc()
         fail("%s: %s" % (type(e).__name__, e))
+    leave(0)
 
 
 if __name__ == "__main__":

@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
 # The DeformKit demo. Sets everything up (scripts/setup.sh: Debian packages if missing, CMake
-# build into build/), then runs scripts/demo_blender.py in headless Blender with the native
-# module from build/python and the add-on from addon/: each method of the add-on deforms the
-# shared arm-lift and armadillo-wave scenarios, is measured, rendered (Cycles, CPU) and saved.
+# build into build/; scripts/venvs.sh: the pinned Blenders as Python modules), then runs
+# scripts/demo_blender.py in the newest Blender the machine has (headless: the newest bpy
+# environment, or Debian's blender program if that is newer) with the native module from
+# build/python and the add-on from addon/: each method of the add-on deforms the shared
+# arm-lift and armadillo-wave scenarios, is measured, rendered (Cycles, CPU) and saved.
 #
 # usage: scripts/demo.sh [demo options]        (scripts/demo.sh --help lists them)
 # Writes into demo_output/: <scenario>_rest.png, <scenario>_<method>.png, <scenario>_all.png,
@@ -21,13 +23,29 @@ for arg in "$@"; do
 done
 start=$SECONDS
 scripts/setup.sh
+scripts/venvs.sh $(scripts/venvs.sh --blenders)
 mkdir -p demo_output
 export PYTHONPATH="$here/build/python"
 export PYTHONDONTWRITEBYTECODE=1
-echo "demo: running Blender (its own output: demo_output/blender.log)" >&2
+
+# the newest Blender here: each bpy environment's pinned version, and Debian's program
+newest=debian
+newest_version="$(blender --version 2>/dev/null | sed -n 's/^Blender \([0-9.]*\).*/\1/p' | head -1)"
+for b in $(scripts/venvs.sh --blenders); do
+  v="$(sed -n "/^\[$b\]/,/^\[/s/^bpy==\([0-9.]*\).*/\1/p" scripts/pins.txt)"
+  if [ -n "$v" ] && [ "$(printf '%s\n%s\n' "${newest_version:-0}" "$v" | sort -V | tail -1)" = "$v" ]; then
+    newest="$b"; newest_version="$v"
+  fi
+done
+echo "demo: running Blender $newest_version ($newest; its own output: demo_output/blender.log)" >&2
 status=0
-blender -b --factory-startup --python-exit-code 1 --python scripts/demo_blender.py -- "$@" \
-  >demo_output/blender.log || status=$?
+if [ "$newest" = debian ]; then
+  blender -b --factory-startup --python-exit-code 1 --python scripts/demo_blender.py -- "$@" \
+    >demo_output/blender.log || status=$?
+else
+  "build/venvs/$newest/bin/python" scripts/demo_blender.py -- "$@" >demo_output/blender.log \
+    || status=$?
+fi
 if [ "$status" != 0 ]; then
   echo "demo: FAILED (exit $status); Blender's output: demo_output/blender.log" >&2
   exit "$status"

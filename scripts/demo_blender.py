@@ -32,6 +32,7 @@ if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
 import bpy  # noqa: E402
+import bmesh  # noqa: E402  (after bpy: the bpy module provides it)
 import numpy as np  # noqa: E402
 from mathutils import Matrix, Vector  # noqa: E402
 
@@ -205,7 +206,7 @@ def make_material(name, colour):
     """Clay: the colour, tinted by the region attribute; lit by the sun, plus a fill term
     (emission, brighter where the surface faces the camera) that needs no sampling."""
     mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
+    use_nodes(mat)
     nt = mat.node_tree
     bsdf = nt.nodes.get("Principled BSDF")
     bsdf.inputs["Roughness"].default_value = 0.6
@@ -247,14 +248,30 @@ def make_label(scene, coll, text, location, size):
     ob.rotation_euler = (math.radians(90.0), 0.0, 0.0)   # upright, readable from the front
     mat = bpy.data.materials.get("DK demo label") or bpy.data.materials.new("DK demo label")
     mat.diffuse_color = (0.02, 0.02, 0.02, 1.0)
-    mat.use_nodes = True
+    use_nodes(mat)
     mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (0.02, 0.02,
                                                                                  0.02, 1.0)
     cu.materials.append(mat)
     return ob
 
 
+def use_nodes(idblock):
+    """Node-based shading on a material or world: to be switched on before 5.0, always on
+    from 5.0 (which deprecates the switch)."""
+    if bpy.app.version < (5, 0, 0):
+        idblock.use_nodes = True
+
+
 def setup_render(scene, args):
+    # the world first, assigned before it is edited: Cycles' property updates expect the
+    # scene to have one
+    world = bpy.data.worlds.new(scene.name + " world")
+    scene.world = world
+    use_nodes(world)
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.50, 0.52, 0.55, 1.0)
+    world.cycles.sampling_method = "NONE"
+    vis = world.cycles_visibility
+    vis.diffuse = vis.glossy = vis.transmission = vis.scatter = False
     scene.render.engine = "CYCLES"
     scene.cycles.device = "CPU"
     scene.cycles.samples = args.samples
@@ -277,13 +294,6 @@ def setup_render(scene, args):
     # One sun, no bounces, and the fill light as emission in the material (make_material):
     # nearly noise-free at few samples without a denoiser. The world is only the background.
     scene.cycles.max_bounces = 0
-    world = bpy.data.worlds.new(scene.name + " world")
-    world.use_nodes = True
-    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.50, 0.52, 0.55, 1.0)
-    world.cycles.sampling_method = "NONE"
-    vis = world.cycles_visibility
-    vis.diffuse = vis.glossy = vis.transmission = vis.scatter = False
-    scene.world = world
     li = bpy.data.lights.new(scene.name + " sun", "SUN")
     li.energy = 3.0
     li.angle = math.radians(2.0)
@@ -329,12 +339,18 @@ def rms_edge_change(rest, pos, edges):
 
 
 def select_only(obj, indices):
-    me = obj.data
-    mask = np.zeros(len(me.vertices), dtype=bool)
-    mask[indices] = True
-    me.vertices.foreach_set("select", mask)
-    me.edges.foreach_set("select", np.zeros(len(me.edges), dtype=bool))
-    me.polygons.foreach_set("select", np.zeros(len(me.polygons), dtype=bool))
+    """Selects exactly these vertices, in Edit Mode (where it stays), as an artist would.
+    Through bmesh: writing the selection with foreach_set crashes Blender 5.0 when the mesh
+    has no edge-selection attribute yet (MeshEdge.select on a fresh mesh)."""
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.ops.mesh.select_mode(type="VERT")
+    bpy.ops.mesh.select_all(action="DESELECT")
+    bm = bmesh.from_edit_mesh(obj.data)
+    bm.verts.ensure_lookup_table()
+    for i in np.asarray(indices, dtype=np.int64).tolist():
+        bm.verts[i].select = True
+    bm.select_flush_mode()
+    bmesh.update_edit_mesh(obj.data)
 
 
 def set_active(obj):
@@ -448,13 +464,13 @@ def set_up_and_bind(scene, obj, mid, label, fixed, handles):
     empties = []
     for k, h in enumerate(handles):
         select_only(obj, h)
-        bpy.ops.object.mode_set(mode="EDIT")
         bpy.ops.deformkit.add_handle_from_selection()
         bpy.ops.object.mode_set(mode="OBJECT")
         e = d.handles[-1].target
         e.name = "%s handle %d" % (obj.name, k + 1)
         empties.append(e.name)
     select_only(obj, [])
+    bpy.ops.object.mode_set(mode="OBJECT")
     t0 = time.perf_counter()
     bpy.ops.deformkit.bind()
     bind_ms = (time.perf_counter() - t0) * 1000.0
@@ -724,14 +740,25 @@ def main():
                               + ["deformkit_demo.blend", "summary.txt", "summary.json"]))
 
 
+def leave(code):
+    """Exits with `code`. Blender as a Python module (the bpy wheels) can hang in its own exit
+    handlers once a file was written, so there the process ends at once, output flushed."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    if not bpy.app.binary_path:
+        os._exit(code)
+    sys.exit(code)
+
+
 try:
     main()
-except SystemExit:
-    raise
+except SystemExit as ex:
+    leave(ex.code if isinstance(ex.code, int) else (0 if ex.code is None else 1))
 except DemoError as ex:
     log("error: %s" % ex)
-    sys.exit(1)
+    leave(1)
 except Exception:
     traceback.print_exc()
     log("error: unexpected failure (traceback above)")
-    sys.exit(1)
+    leave(1)
+leave(0)

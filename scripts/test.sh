@@ -2,11 +2,17 @@
 # Sets everything up and runs every DeformKit test:
 #   1. C tests (ctest) in the Release build and in the ASan+UBSan build,
 #   2. Python module tests (pytest under Debian's /usr/bin/python3),
-#   3. the module and the add-on inside real Blender (blender -b --factory-startup),
-#      and the UI screenshot test under Xvfb; then scripts/package.sh writes the zips to dist/
-#      and the legacy zip is installed into a clean Blender user directory and tested
-#      (tests/blender/run_all.sh).
-# Ends with one line "suites: N passed, N failed" and exits non-zero if any suite failed.
+#   3. the packages: scripts/package.sh builds the wheel and the two add-on zips into dist/
+#      (and validates the extension in every Blender 4.2+ here); the wheel is installed into
+#      a clean virtual environment and smoke-tested there,
+#   4. the add-on in every Blender (tests/blender/run_all.sh): Debian's `blender` program,
+#      with the window suites under Xvfb, and each bpy-* environment of scripts/pins.txt
+#      (the official 4.5 LTS and newest 5.x releases as Python modules), each also installing
+#      its packaged zip into a clean user directory,
+#   5. the cross-Blender comparison: the same scenes give the same meshes in every Blender,
+#      and the newest reopens the others' saved files without the add-on.
+# Ends with a matrix of Blender x suite, then one line "suites: N passed, N failed" that
+# counts each Blender's suites, and exits non-zero if any suite failed.
 #
 # usage: scripts/test.sh [--quick]     (--quick skips the sanitized build)
 set -uo pipefail
@@ -14,12 +20,14 @@ here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
 quick=0
 [ "${1:-}" = "--quick" ] && quick=1
+t_start=$SECONDS
 
 if [ "$quick" = 1 ]; then
   scripts/setup.sh || { echo "suites: 0 passed, 1 failed"; exit 1; }
 else
   scripts/setup.sh --asan || { echo "suites: 0 passed, 1 failed"; exit 1; }
 fi
+scripts/venvs.sh || { echo "scripts/venvs.sh failed"; echo "suites: 0 passed, 1 failed"; exit 1; }
 
 PY=/usr/bin/python3
 export PYTHONPATH="$here/build/python"
@@ -42,15 +50,47 @@ if [ "$quick" = 0 ]; then
   run_suite "C tests (ASan+UBSan)" ctest --test-dir build-asan --output-on-failure
 fi
 run_suite "Python tests" "$PY" -m pytest -q tests/python
-blender_cmd=(blender -b --factory-startup --python-exit-code 1)
-if [ -f tests/blender/test_module_blender.py ]; then
-  run_suite "module in Blender" "${blender_cmd[@]}" --python tests/blender/test_module_blender.py
-fi
-if [ -x tests/blender/run_all.sh ]; then
-  run_suite "add-on in Blender" tests/blender/run_all.sh "$here/build"
-fi
+run_suite "package" scripts/package.sh --no-setup
+run_suite "wheel in a clean venv" tests/wheel/test_wheel.sh
+
+# ---- the add-on in each Blender: run_all.sh prints "ok NAME" / "FAILED NAME" per suite
+blenders=(debian $(scripts/venvs.sh --blenders))
+rm -rf tests/blender/output/cross
+matrix="$(mktemp)"; log="$(mktemp)"; trap 'rm -f "$matrix" "$log"' EXIT
+for b in "${blenders[@]}"; do
+  echo
+  echo "=== add-on in Blender ($b): tests/blender/run_all.sh --blender $b"
+  start=$SECONDS
+  tests/blender/run_all.sh --blender "$b" "$here/build" | tee "$log"
+  rc=${PIPESTATUS[0]}
+  sed -n "s/^\(ok\|FAILED\) *\([A-Za-z0-9_]*\).*/$b \1 \2/p" "$log" >>"$matrix"
+  n_ok="$(grep -c "^$b ok " "$matrix")"; n_bad="$(grep -c "^$b FAILED " "$matrix")"
+  passed=$((passed + n_ok)); failed=$((failed + n_bad))
+  if [ "$rc" != 0 ] && [ "$n_bad" = 0 ]; then   # failed before any suite ran
+    failed=$((failed + 1)); echo "$b FAILED setup" >>"$matrix"
+  fi
+  [ "$rc" = 0 ] || failed_names+=("add-on in Blender ($b)")
+  echo "=== add-on in Blender ($b): $n_ok passed, $n_bad failed ($((SECONDS - start)) s)"
+done
+labels=()
+for b in "${blenders[@]}"; do labels+=("$b"); done
+run_suite "same results in every Blender" "$PY" tests/blender/compare_blenders.py "${labels[@]}"
 
 echo
-if [ "$failed" -gt 0 ]; then echo "failed suites: ${failed_names[*]}"; fi
+echo "Blender x suite (ok / FAILED / - not run there):"
+"$PY" - "$matrix" "${blenders[@]}" <<'EOF'
+import sys
+rows, cols = {}, sys.argv[2:]
+for line in open(sys.argv[1]):
+    b, status, name = line.split()
+    rows.setdefault(name, {})[b] = "ok" if status == "ok" else "FAILED"
+width = max([len(n) for n in rows] + [10])
+print("  %-*s %s" % (width, "suite", " ".join("%-8s" % c for c in cols)))
+for name, cells in rows.items():
+    print("  %-*s %s" % (width, name, " ".join("%-8s" % cells.get(c, "-") for c in cols)))
+EOF
+echo
+if [ ${#failed_names[@]} -gt 0 ]; then echo "failed suites: ${failed_names[*]}"; fi
+echo "wall time: $((SECONDS - t_start)) s"
 echo "suites: $passed passed, $failed failed"
 [ "$failed" -eq 0 ]

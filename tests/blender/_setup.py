@@ -1,14 +1,21 @@
-"""Shared set-up for the add-on tests run inside Blender:
+"""Shared set-up for the add-on tests run inside Blender, either the blender program:
     blender -b --factory-startup --python-exit-code 1 --python tests/blender/test_addon_X.py
+or Blender as a Python module (a bpy wheel's virtual environment, scripts/venvs.sh):
+    build/venvs/bpy-5.0/bin/python tests/blender/test_addon_X.py
 with PYTHONPATH=<build>/python. Puts the repo root on sys.path, imports the add-on (repo
 folder `addon/`) as the package `addon` and registers it. DEFORMKIT_MOCK=1 uses the stand-in
 module in tests/blender/mock (plumbing only).
 
-DEFORMKIT_FROM_ZIP=<legacy zip> instead installs that zip with Preferences > Add-ons > Install
-(bpy.ops.preferences.addon_install) into BLENDER_USER_SCRIPTS, which must be a fresh directory,
-and enables it with addon_utils, so the tests run the packaged add-on and its bundled native
-module (run without build/python on PYTHONPATH; tests/blender/run_all.sh does this). The
-installed package is then also importable as `addon`, and the repo root is not on sys.path."""
+DEFORMKIT_FROM_ZIP=<zip> instead installs a packaged zip into a fresh user directory and
+enables it, so the tests run the packaged add-on and its native module (run without
+build/python on PYTHONPATH; tests/blender/run_all.sh does this):
+- an extension zip (Blender 4.2+) with Get Extensions > Install from Disk
+  (bpy.ops.extensions.package_install_files) into BLENDER_USER_RESOURCES; Blender installs the
+  wheel its manifest lists, and the add-on is bl_ext.user_default.deformkit_addon;
+- a legacy zip (Blender 3.4 to 4.1) with Preferences > Add-ons > Install
+  (bpy.ops.preferences.addon_install) into BLENDER_USER_SCRIPTS.
+The installed package is then also importable as `addon`, and the repo root is not on
+sys.path."""
 import importlib.util
 import os
 import sys
@@ -19,7 +26,8 @@ ROOT = os.path.dirname(os.path.dirname(HERE))
 OUTPUT = os.path.join(HERE, "output")
 os.makedirs(OUTPUT, exist_ok=True)
 FROM_ZIP = os.environ.get("DEFORMKIT_FROM_ZIP", "")
-ADDON_NAME = "deformkit"  # the legacy zip's top folder = the manifest id
+PACKAGE = "deformkit_addon"  # the add-on's package: the legacy zip's top folder, the manifest id
+ADDON_NAME = PACKAGE         # the module Blender enables: bl_ext.user_default.<id> for extensions
 if os.environ.get("DEFORMKIT_MOCK") == "1":
     sys.path.insert(0, os.path.join(HERE, "mock"))
 if ROOT not in sys.path and not FROM_ZIP:
@@ -31,17 +39,64 @@ import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
 
+# Blender as a Python module (the `bpy` wheels, run as `python FILE`) rather than the blender
+# program: no --python argument, and no binary path.
+AS_MODULE = not bpy.app.binary_path
+
+
+def blender_command(blend=None, script=None, expr=None, args=()):
+    """The command that runs `script` (or the Python source `expr`) in this same Blender, on
+    `blend` if given, headless and with factory settings; `args` reach the script after "--".
+    Under the blender program: blender -b --factory-startup [BLEND] --python... Under the bpy
+    module: this Python, opening BLEND first, then running the script or source as __main__
+    and ending through os._exit (see exit_now)."""
+    if not AS_MODULE:
+        cmd = [bpy.app.binary_path, "-b", "--factory-startup"] + ([blend] if blend else [])
+        cmd += ["--python-exit-code", "1"]
+        cmd += ["--python", script] if script else ["--python-expr", expr]
+        return cmd + ["--"] + list(args)
+    boot = ("import bpy, os, sys, traceback\n"
+            "blend, script, expr = sys.argv[1], sys.argv[2], sys.argv[3]\n"
+            "sys.argv = [script or '-c', '--'] + sys.argv[4:]\n"
+            "bpy.ops.wm.read_factory_settings(use_empty=True)\n"
+            "if blend:\n"
+            "    bpy.ops.wm.open_mainfile(filepath=blend, load_ui=False)\n"
+            "code = 0\n"
+            "try:\n"
+            "    src = open(script).read() if script else expr\n"
+            "    exec(compile(src, script or '<expr>', 'exec'),\n"
+            "         {'__name__': '__main__', '__file__': script or '<expr>'})\n"
+            "except SystemExit as e:\n"
+            "    code = e.code if isinstance(e.code, int) else (0 if e.code is None else 1)\n"
+            "except BaseException:\n"
+            "    traceback.print_exc()\n"
+            "    code = 1\n"
+            "sys.stdout.flush(); sys.stderr.flush()\n"
+            "os._exit(code)\n")
+    return [sys.executable, "-c", boot, blend or "", script or "", expr or ""] + list(args)
+
+
 def _script_name():
     argv = sys.argv
-    i = argv.index("--python") + 1 if "--python" in argv else -1
-    return os.path.splitext(os.path.basename(argv[i]))[0] if 0 < i < len(argv) else "test"
+    i = argv.index("--python") + 1 if "--python" in argv else (0 if AS_MODULE else -1)
+    return os.path.splitext(os.path.basename(argv[i]))[0] if 0 <= i < len(argv) else "test"
+
+
+def exit_now(code):
+    """Ends the test process with `code`. The bpy module (4.5, 5.0) can hang in its own exit
+    handlers after a file was written (a destructor waits on a thread that is gone), so there
+    the process ends at once, its output flushed; the blender program exits normally."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    if AS_MODULE:
+        os._exit(code)
+    sys.exit(code)
 
 
 def _setup_failed(msg):
     print("FAIL set-up: %s" % msg)
     print("%s: 0 passed, 1 failed" % _script_name())
-    sys.stdout.flush()
-    raise SystemExit(1)
+    exit_now(1)
 
 
 def _enable_installed():
@@ -55,29 +110,77 @@ def _enable_installed():
     return mod
 
 
-def install_from_zip(path):
-    """Installs and enables the zip in a clean user directory; returns the add-on package."""
+def zip_is_extension(path):
+    """An extension zip has blender_manifest.toml at its root; a legacy zip has one folder."""
+    import zipfile
+    with zipfile.ZipFile(path) as z:
+        return "blender_manifest.toml" in z.namelist()
+
+
+def _native_importable_before_install():
+    spec = importlib.util.find_spec("deformkit")
+    if spec is not None:
+        _setup_failed("a 'deformkit' module is importable before the install (%s): run "
+                      "without build/python on PYTHONPATH" % spec.origin)
+
+
+def _install_legacy(path):
+    """Preferences > Add-ons > Install (Blender 3.4 to 4.1) into BLENDER_USER_SCRIPTS."""
     user = os.environ.get("BLENDER_USER_SCRIPTS", "")
     if not user:
-        _setup_failed("DEFORMKIT_FROM_ZIP needs BLENDER_USER_SCRIPTS set to a fresh directory")
-    if not os.path.isfile(path):
-        _setup_failed("no zip at %s (scripts/package.sh writes it)" % path)
+        _setup_failed("a legacy zip needs BLENDER_USER_SCRIPTS set to a fresh directory")
     addons_dir = bpy.utils.user_resource("SCRIPTS", path="addons")
     if not os.path.realpath(addons_dir).startswith(os.path.realpath(user) + os.sep):
         _setup_failed("Blender's user add-on folder %s is not inside BLENDER_USER_SCRIPTS=%s"
                       % (addons_dir, user))
-    if os.path.exists(os.path.join(addons_dir, ADDON_NAME)):
-        _setup_failed("%s already has %s: not a clean user directory" % (addons_dir, ADDON_NAME))
-    spec = importlib.util.find_spec(ADDON_NAME)
-    if spec is not None:
-        _setup_failed("a %r module is importable before the install (%s): run without "
-                      "build/python on PYTHONPATH" % (ADDON_NAME, spec.origin))
+    where = os.path.join(addons_dir, PACKAGE)
+    if os.path.exists(where):
+        _setup_failed("%s already exists: not a clean user directory" % where)
+    _native_importable_before_install()
     try:
         bpy.ops.preferences.addon_install(filepath=path)
     except RuntimeError as ex:
         _setup_failed("addon_install(%s): %s" % (path, ex))
+    return PACKAGE, where
+
+
+def _install_extension(path):
+    """Get Extensions > Install from Disk (Blender 4.2+) into the user_default repository of
+    BLENDER_USER_RESOURCES; Blender installs the wheel the manifest lists."""
+    user = os.environ.get("BLENDER_USER_RESOURCES", "")
+    if not user:
+        _setup_failed("an extension zip needs BLENDER_USER_RESOURCES set to a fresh directory")
+    ext_dir = bpy.utils.user_resource("EXTENSIONS")
+    if not os.path.realpath(ext_dir).startswith(os.path.realpath(user) + os.sep):
+        _setup_failed("Blender's extensions folder %s is not inside BLENDER_USER_RESOURCES=%s"
+                      % (ext_dir, user))
+    where = os.path.join(ext_dir, "user_default", PACKAGE)
+    if os.path.exists(where):
+        _setup_failed("%s already exists: not a clean user directory" % where)
+    _native_importable_before_install()
+    try:
+        bpy.ops.extensions.package_install_files(filepath=path, repo="user_default",
+                                                 enable_on_install=False)
+    except (RuntimeError, AttributeError) as ex:
+        _setup_failed("extensions.package_install_files(%s): %s" % (path, ex))
+    return "bl_ext.user_default." + PACKAGE, where
+
+
+def install_from_zip(path):
+    """Installs and enables the zip (an extension in 4.2+, else the legacy add-on) in a clean
+    user directory; returns the add-on package."""
+    global ADDON_NAME
+    if not os.path.isfile(path):
+        _setup_failed("no zip at %s (scripts/package.sh writes it)" % path)
+    if zip_is_extension(path):
+        if bpy.app.version < (4, 2, 0):
+            _setup_failed("Blender %s cannot install an extension zip (4.2+)"
+                          % bpy.app.version_string)
+        ADDON_NAME, where = _install_extension(path)
+    else:
+        ADDON_NAME, where = _install_legacy(path)
     mod = _enable_installed()
-    where = os.path.realpath(os.path.join(addons_dir, ADDON_NAME)) + os.sep
+    where = os.path.realpath(where) + os.sep
     if not os.path.realpath(mod.__file__).startswith(where):
         _setup_failed("enabled %s, not the installed copy in %s" % (mod.__file__, where))
     sys.modules["addon"] = mod  # tests say `from addon import X`: the installed package
@@ -118,9 +221,7 @@ class Results:
 
     def finish(self):
         print("%s: %d passed, %d failed" % (self.name, self.passed, self.failed))
-        sys.stdout.flush()
-        if self.failed or self.passed == 0:
-            sys.exit(1)
+        exit_now(1 if (self.failed or self.passed == 0) else 0)
 
 
 def reset_scene():

@@ -107,10 +107,7 @@ def test_render_sees_each_frame():
 
 
 def run_batch(*args, blend=BLEND):
-    cmd = [bpy.app.binary_path, "-b", "--factory-startup"]
-    if blend:
-        cmd.append(blend)
-    cmd += ["--python-exit-code", "1", "--python", BATCH, "--"] + list(args)
+    cmd = S.blender_command(blend=blend, script=BATCH, args=args)
     r = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     return r
 

@@ -69,8 +69,7 @@ def test_renders_without_addon():
             "np.save(%r, co.reshape(-1, 3))\n" % out)
     env = dict(os.environ)
     env.pop("PYTHONPATH", None)
-    r = subprocess.run([bpy.app.binary_path, "-b", "--factory-startup", BLEND,
-                        "--python-exit-code", "1", "--python-expr", code],
+    r = subprocess.run(S.blender_command(blend=BLEND, expr=code),
                        env=env, capture_output=True, text=True, timeout=120)
     if not R.check("Blender without the add-on opens the file", r.returncode == 0 and os.path.exists(out),
                    r.stdout[-500:] + r.stderr[-500:]):
