@@ -14,8 +14,8 @@ bl_info = {
 
 if "bpy" in locals():  # script reload
     import importlib
-    for _m in (compat, methods, native, properties, geonodes, solver, handlers, pc2, bake,  # noqa: F821
-               operators, ui):  # noqa: F821
+    for _m in (compat, methods, native, properties, geonodes, solver,  # noqa: F821
+               handlers, pc2, bake, operators, ui):  # noqa: F821
         importlib.reload(_m)
 
 import bpy  # noqa: E402

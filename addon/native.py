@@ -1,9 +1,10 @@
 """Finds the native `deformkit` module.
 
-Order: a `deformkit` package inside the add-on folder (how packaged add-ons ship it), then
-`deformkit` on sys.path (development: PYTHONPATH=build/python). If the add-on folder itself is
-installed under the name `deformkit`, the absolute import would find the add-on, so a module
-without `Mesh` is rejected.
+Order: a `deformkit` package inside the add-on folder (how the legacy zip ships it), then
+`deformkit` on sys.path: the wheel that Blender 4.2+ installs from the extension zip, a
+`pip install` into Blender's Python, or the build tree (PYTHONPATH=build/python). The add-on's
+own package is `deformkit_addon`, so it cannot shadow the module; a `deformkit` without `Mesh`
+(some other package of that name) is still rejected.
 """
 
 import importlib

@@ -28,6 +28,9 @@ else
   fi
 fi
 export PYTHONDONTWRITEBYTECODE=1 DEFORMKIT_BLENDER_LABEL="$blender_name"
+# deprecation warnings shown (Python hides them outside __main__), so that no_warnings below
+# sees any that this Blender raises for the add-on's code
+export PYTHONWARNINGS="default::DeprecationWarning,default::FutureWarning"
 
 if [ "$blender_name" = debian ]; then
   if ! command -v blender >/dev/null; then
@@ -106,6 +109,8 @@ m = tomllib.load(open(sys.argv[1], "rb")); print(m["id"], m["version"])' "$root/
     done
   fi
 fi
+# ---- no Python warning raised in the add-on's code, in any suite above
+run no_warnings bash -c '! grep -HnE "Warning: .*|^(.*/)?(addon|deformkit_addon)/[a-z_]+\.py:[0-9]+: [A-Za-z]*Warning" "$0"/*.log | grep -E "(addon|deformkit_addon)/[a-z_]+\.py"' "$out"
 [ "$failed" -gt 0 ] && echo "failed: ${failed_names[*]}"
 echo "add-on tests ($blender_name): $passed passed, $failed failed"
 [ "$failed" -eq 0 ]

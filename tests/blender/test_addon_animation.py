@@ -107,7 +107,10 @@ def test_render_sees_each_frame():
 
 
 def run_batch(*args, blend=BLEND):
-    cmd = S.blender_command(blend=blend, script=BATCH, args=args)
+    if S.AS_MODULE:   # as a pipeline runs it with the bpy module: the script opens the file
+        cmd = [sys.executable, BATCH] + (["--blend", blend] if blend else []) + list(args)
+    else:
+        cmd = S.blender_command(blend=blend, script=BATCH, args=args)
     r = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     return r
 
