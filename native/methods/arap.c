@@ -76,7 +76,7 @@ typedef struct arap_system {
     double *rhs_const, *rhs, *xu, *gu, *fu, *gprev, *fprev, *dg, *df;
     double *targets;      /* n_handle_vertices x 3: last expanded targets                */
     int have_targets;
-    /* where the last solve stopped, for a resumed solve (warm_start 2, same targets) */
+    /* where the last solve stopped, for a resumed solve (DK_START_RESUME, same targets) */
     double *targets_prev; /* n_handle_vertices x 3: the targets it solved for            */
     double *targets_prev2; /* n_handle_vertices x 3: the targets of dk_arap's prev2      */
     double *warm;         /* 6 nu: the two warm-start responses (plain, predicted)       */
@@ -1580,21 +1580,26 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
     return DK_OK;
 }
 
-static dk_status solve_impl(dk_arap *ar, const double *targets, int mode, int warm_start,
-                            int max_iterations, double *positions, dk_arap_info *info,
-                            dk_error *err)
+static dk_status solve_impl(dk_arap *ar, const dk_solve_request *rq, double *positions,
+                            dk_solve_info *info, dk_error *err)
 {
     if (info)
         memset(info, 0, sizeof *info);
-    if (!ar || !targets || !positions)
+    if (!ar || !positions)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
-                            "ARAP solve: object, targets and positions must not be NULL");
+                            "ARAP solve: object and positions must not be NULL");
+    dk_status st = dk_solve_request_check(rq, "ARAP solve", err);
+    if (st != DK_OK)
+        return st;
+    const double *targets = rq->targets;
+    const int warm_start = rq->start != DK_START_COLD;
+    const int max_iterations = rq->max_iterations;
     arap_system *s = &ar->sys;
     const dk_constraints *c = s->con;
     const dk_index n = ar->n, nu = s->nu;
     const size_t N = 3 * (size_t)nu;
     const double *rest = ar->mesh->positions;
-    dk_status st = dk_constraints_targets(c, rest, targets, mode, s->targets, err);
+    st = dk_constraints_targets(c, rest, targets, (int)rq->target_kind, s->targets, err);
     if (st != DK_OK) {
         s->have_targets = 0;
         return dk_error_prefix(err, "ARAP solve");
@@ -1605,11 +1610,11 @@ static dk_status solve_impl(dk_arap *ar, const double *targets, int mode, int wa
     const int newton = ar->opt.acceleration == DK_ARAP_ACCEL_NEWTON;
     const int depth = ar->opt.anderson_depth;
 
-    /* Resume (warm_start 2): the previous call's targets again, and nothing changed since:
+    /* Resume: the previous call's targets again, and nothing changed since:
      * continue exactly where it stopped, acceleration history included, so that solves
      * resumed in slices (the add-on's interactive time budget) equal one longer solve. */
     const size_t nhv3 = 3 * (size_t)s->con->n_handle_vertices;
-    const int resume = warm_start == 2 && ar->have_prev && s->resumable &&
+    const int resume = rq->start == DK_START_RESUME && ar->have_prev && s->resumable &&
                        memcmp(s->targets, s->targets_prev, nhv3 * sizeof(double)) == 0;
     /* Gram matrix of the df slots, gram[i * MAX_ANDERSON_DEPTH + j] = df_i . df_j: only the
      * row of the slot written in an iteration changes */
@@ -1868,12 +1873,10 @@ static dk_status solve_impl(dk_arap *ar, const double *targets, int mode, int wa
     return DK_OK;
 }
 
-dk_status dk_arap_solve(dk_arap *ar, const double *targets, int mode, int warm_start,
-                        int max_iterations, double *positions, dk_arap_info *info,
-                        dk_error *err)
+dk_status dk_arap_solve(dk_arap *ar, const dk_solve_request *request, double *positions,
+                        dk_solve_info *info, dk_error *err)
 {
-    const dk_status st =
-        solve_impl(ar, targets, mode, warm_start, max_iterations, positions, info, err);
+    const dk_status st = solve_impl(ar, request, positions, info, err);
     if (ar)
         dk_team_park(ar->team); /* the helper sleeps until the next solve */
     return st;
@@ -1890,17 +1893,21 @@ dk_status dk_arap_set_tolerance(dk_arap *ar, double tolerance, dk_error *err)
     return DK_OK;
 }
 
-double dk_arap_energy(const dk_arap *ar, const double *positions)
+dk_status dk_arap_energy(const dk_arap *ar, const double *positions, double *energy,
+                         dk_error *err)
 {
-    if (!ar || !positions)
-        return NAN;
+    if (energy)
+        *energy = NAN;
+    if (!ar || !positions || !energy)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP energy: object, positions and energy must not be NULL");
     double *x = malloc(((size_t)ar->n * 3 + 1) * sizeof *x);
     if (!x)
-        return NAN;
+        return oom(err, "ARAP energy");
     dk_reorder_rows_in(ar->ro, positions, x);
-    const double e = local_energy(ar, &ar->sys, x, NULL);
+    *energy = local_energy(ar, &ar->sys, x, NULL);
     free(x);
-    return e;
+    return DK_OK;
 }
 
 const dk_constraints *dk_arap_constraints(const dk_arap *ar)
@@ -1908,17 +1915,63 @@ const dk_constraints *dk_arap_constraints(const dk_arap *ar)
     return ar ? ar->sys.con : NULL;
 }
 
-dk_index dk_arap_n_unknowns(const dk_arap *ar)
+void dk_arap_stats(const dk_arap *ar, dk_method_stats *stats)
 {
-    return ar ? ar->sys.nu : 0;
+    if (!stats)
+        return;
+    memset(stats, 0, sizeof *stats);
+    if (!ar)
+        return;
+    stats->n_vertices = ar->n;
+    stats->n_handles = ar->sys.con->n_handles;
+    stats->n_handle_vertices = ar->sys.con->n_handle_vertices;
+    stats->n_unknowns = ar->sys.nu;
+    stats->analysis_count = ar->analysis_count;
+    stats->factorization_count = ar->factorization_count;
 }
 
-int dk_arap_analysis_count(const dk_arap *ar)
+/* ---------------------------------------------------------------- the method contract --- */
+
+static dk_status ops_bind(const dk_mesh *mesh, const dk_constraint_desc *c,
+                          const void *options, void **out, dk_error *err)
 {
-    return ar ? ar->analysis_count : 0;
+    return dk_arap_bind(mesh, c, (const dk_arap_options *)options, (dk_arap **)out, err);
 }
 
-int dk_arap_factorization_count(const dk_arap *ar)
+static dk_status ops_rebind(void *self, const dk_constraint_desc *c, dk_error *err)
 {
-    return ar ? ar->factorization_count : 0;
+    return dk_arap_rebind((dk_arap *)self, c, err);
 }
+
+static dk_status ops_solve(void *self, const dk_solve_request *rq, double *positions,
+                           dk_solve_info *info, dk_error *err)
+{
+    return dk_arap_solve((dk_arap *)self, rq, positions, info, err);
+}
+
+static dk_status ops_energy(const void *self, const double *positions, double *energy,
+                            dk_error *err)
+{
+    return dk_arap_energy((const dk_arap *)self, positions, energy, err);
+}
+
+static void ops_stats(const void *self, dk_method_stats *stats)
+{
+    dk_arap_stats((const dk_arap *)self, stats);
+}
+
+static void ops_free(void *self)
+{
+    dk_arap_free((dk_arap *)self);
+}
+
+const dk_method_ops dk_arap_ops = {
+    .name = "ARAP",
+    .flags = DK_METHOD_ITERATIVE | DK_METHOD_TRANSFORMS_AS_POSITIONS,
+    .bind = ops_bind,
+    .rebind = ops_rebind,
+    .solve = ops_solve,
+    .energy = ops_energy,
+    .stats = ops_stats,
+    .free = ops_free,
+};

@@ -32,6 +32,7 @@
 
 #include "dk_constraints.h"
 #include "dk_mesh.h"
+#include "dk_method.h"
 #include "dk_status.h"
 
 #ifdef __cplusplus
@@ -89,17 +90,6 @@ typedef struct dk_arap_options {
     void *user;                        /**< passed to on_iteration                        */
 } dk_arap_options;
 
-/** Result of one solve. */
-typedef struct dk_arap_info {
-    double energy;      /**< E of the returned positions (with their optimal rotations) */
-    int iterations;     /**< local/global iterations, or Newton steps, done              */
-    int converged;      /**< 1 if the stopping test (see dk_arap_options.tolerance) held  */
-    int rejected;       /**< accelerated steps rejected by the safeguard (Newton: steps
-                             whose line search failed, replaced by a local/global step)  */
-    int predicted;      /**< 1 if the warm start extrapolated along the drag             */
-    int cg_iterations;  /**< NEWTON: Hessian products done in all                         */
-} dk_arap_info;
-
 typedef struct dk_arap dk_arap;
 
 /** Fills the defaults above. */
@@ -121,25 +111,28 @@ dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraint
  *  the object keeps its previous constraints. The previous solution stays as warm start. */
 dk_status dk_arap_rebind(dk_arap *arap, const dk_constraint_desc *constraints, dk_error *err);
 
-/** Solves for the handle targets (`mode` 0: n_handle_vertices x 3 positions; 1: one 4x4
- *  row-major transform per handle, see dk_constraints_targets). `warm_start` non-zero starts
- *  from the previous solution when there is one, plus the global step's response (previous
- *  rotations held) to how far the constrained vertices moved since. With the `predict` option,
- *  when the ends of the last two calls for different targets (x1 = the previous solution for
- *  t1, x2 for t2; converged or not) show a drag direction, a second start is built from the
- *  base x1 + alpha (x1 - x2), alpha = the projection of t - t1 on t1 - t2 clamped to [0, 2]
- *  (<= 0, a reversed drag: no second start), and the start with the lower energy is used
- *  (info.predicted says which). Else, and on cold starts,
- *  from the global step with all rotations = identity, i.e. naive Laplacian editing.
- *  `warm_start` 2 resumes: when the targets equal the previous call's and that call ended
- *  normally, iterations continue exactly where it stopped (Anderson history included), so a
- *  solve cut into slices by `max_iterations` gives the same result as one long solve;
- *  otherwise 2 acts as 1. `max_iterations` > 0
- *  overrides the option for this call. Writes `positions` (n_vertices x 3, row-major) and
- *  `info` (may be NULL). Allocation-free. */
-dk_status dk_arap_solve(dk_arap *arap, const double *targets, int mode, int warm_start,
-                        int max_iterations, double *positions, dk_arap_info *info,
-                        dk_error *err);
+/** Solves for the handle targets of `request` (dk_method.h). Starts (request->start):
+ *  DK_START_WARM from the previous solution when there is one, plus the global step's
+ *  response (previous rotations held) to how far the constrained vertices moved since. With
+ *  the `predict` option, when the ends of the last two calls for different targets (x1 = the
+ *  previous solution for t1, x2 for t2; converged or not) show a drag direction, a second
+ *  start is built from the base x1 + alpha (x1 - x2), alpha = the projection of t - t1 on
+ *  t1 - t2 clamped to [0, 2] (<= 0, a reversed drag: no second start), and the start with
+ *  the lower energy is used (info.predicted says which). DK_START_COLD, and WARM without a
+ *  previous solution: from the global step with all rotations = identity, i.e. naive
+ *  Laplacian editing. DK_START_RESUME: when the targets equal the previous call's and that
+ *  call ended normally, iterations continue exactly where it stopped (Anderson history
+ *  included), so a solve cut into slices by `max_iterations` gives the same result as one
+ *  long solve; otherwise as WARM. request->max_iterations > 0 overrides the option for this
+ *  call; the energy is always reported (it costs nothing extra). Writes `positions`
+ *  (n_vertices x 3, row-major) and `info` (may be NULL): energy E of the returned positions
+ *  (with their optimal rotations), iterations (local/global iterations or Newton steps),
+ *  converged (the stopping test of dk_arap_options.tolerance held), rejected (accelerated
+ *  steps rejected by the safeguard; Newton: steps whose line search failed, replaced by a
+ *  local/global step), predicted, cg_iterations (Newton: Hessian products in all).
+ *  Allocation-free. */
+dk_status dk_arap_solve(dk_arap *arap, const dk_solve_request *request, double *positions,
+                        dk_solve_info *info, dk_error *err);
 
 /** Changes the stopping tolerance (>= 0, see dk_arap_options) for the following solves, e.g.
  *  a loose one while dragging and a tight one when the user lets go; the warm start is kept. */
@@ -147,19 +140,23 @@ dk_status dk_arap_set_tolerance(dk_arap *arap, double tolerance, dk_error *err);
 
 /** The ARAP energy E of arbitrary positions (n_vertices x 3) with their optimal rotations,
  *  including the soft-handle penalties for the targets of the last solve (none before the
- *  first solve). Independent of the solver state otherwise. Returns NaN on NULL input or
- *  when its n x 3 scratch copy cannot be allocated. */
-double dk_arap_energy(const dk_arap *arap, const double *positions);
+ *  first solve), into `energy` (NaN on failure). Independent of the solver state otherwise.
+ *  Allocates an n x 3 scratch copy. */
+dk_status dk_arap_energy(const dk_arap *arap, const double *positions, double *energy,
+                         dk_error *err);
 
-/** Accessors. The constraints are in the object's internal vertex numbering (a locality
- *  order, see dk_reorder.h): read their counts, not their vertex lists. */
+/** The constraints, in the object's internal vertex numbering (a locality order, see
+ *  dk_reorder.h): read their counts, not their vertex lists. */
 const dk_constraints *dk_arap_constraints(const dk_arap *arap);
-dk_index dk_arap_n_unknowns(const dk_arap *arap);
-int dk_arap_analysis_count(const dk_arap *arap);      /**< symbolic analyses since bind   */
-int dk_arap_factorization_count(const dk_arap *arap); /**< numeric factorizations         */
+
+/** The contract's counters (dk_method.h); zeros for NULL. */
+void dk_arap_stats(const dk_arap *arap, dk_method_stats *stats);
 
 /** Frees; NULL allowed. */
 void dk_arap_free(dk_arap *arap);
+
+/** ARAP's table of the method contract (dk_method.h); options are a dk_arap_options. */
+extern const dk_method_ops dk_arap_ops;
 
 #ifdef __cplusplus
 }

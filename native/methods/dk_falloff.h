@@ -44,6 +44,7 @@
 
 #include "dk_constraints.h"
 #include "dk_mesh.h"
+#include "dk_method.h"
 #include "dk_status.h"
 
 #ifdef __cplusplus
@@ -86,11 +87,16 @@ dk_status dk_falloff_bind(const dk_mesh *mesh, const dk_constraint_desc *desc,
  *  failure the object keeps its previous constraints. */
 dk_status dk_falloff_rebind(dk_falloff *f, const dk_constraint_desc *desc, dk_error *err);
 
-/** Deformed positions (n x 3) for handle targets (mode 0: one position per handle vertex;
- *  mode 1: one 4x4 row-major affine transform per handle). `energy` (may be NULL) gets the
- *  sum of squared displacements. Allocation-free. */
-dk_status dk_falloff_solve(dk_falloff *f, const double *targets, int mode, double *positions,
-                           double *energy, dk_error *err);
+/** Deformed positions (n x 3) for the handle targets of `request` (dk_method.h; a direct
+ *  method: start and max_iterations change nothing). `info` (may be NULL): energy = the sum
+ *  of squared displacements, iterations = converged = 1. Allocation-free. */
+dk_status dk_falloff_solve(dk_falloff *f, const dk_solve_request *request, double *positions,
+                           dk_solve_info *info, dk_error *err);
+
+/** The sum over all vertices of |positions - rest|^2 (n_vertices x 3), into `energy`: the
+ *  energy a solve reports. */
+dk_status dk_falloff_energy(const dk_falloff *f, const double *positions, double *energy,
+                            dk_error *err);
 
 /** The distance (in the chosen kind's units; INFINITY when unreachable) and weight S of
  *  vertex v from handle group g, as computed at bind; for tests. Out-of-range arguments
@@ -98,12 +104,14 @@ dk_status dk_falloff_solve(dk_falloff *f, const double *targets, int mode, doubl
 void dk_falloff_vertex_weight(const dk_falloff *f, dk_index g, dk_index v, double *distance,
                               double *weight);
 
-/** Number of handle vertices / handles of the current constraints. */
-dk_index dk_falloff_n_handle_vertices(const dk_falloff *f);
-dk_index dk_falloff_n_handles(const dk_falloff *f);
+/** The contract's counters (dk_method.h); zeros for NULL. */
+void dk_falloff_stats(const dk_falloff *f, dk_method_stats *stats);
 
 /** Frees; NULL allowed. */
 void dk_falloff_free(dk_falloff *f);
+
+/** Falloff's table of the method contract (dk_method.h); options are a dk_falloff_options. */
+extern const dk_method_ops dk_falloff_ops;
 
 #ifdef __cplusplus
 }

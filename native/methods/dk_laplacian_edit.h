@@ -7,7 +7,7 @@
  * so (A x)_i = x_i - (weighted mean of the neighbours). Weights are 1 (uniform) or the
  * cotangent weights of dk_cotangent_weights at rest. Cotangent fallback: a vertex whose
  * cotangent weight sum is not > 1e-12 * degree (only degenerate or strongly obtuse incident
- * triangles) gets the uniform row instead; dk_laplacian_edit_stats counts those vertices.
+ * triangles) gets the uniform row instead; dk_laplacian_edit_counters counts those vertices.
  * An isolated vertex (no neighbour) gets the row A_ii = 1 and therefore stays at rest.
  * A is not symmetric; only A^T A is used.
  *
@@ -56,6 +56,7 @@
 
 #include "dk_constraints.h"
 #include "dk_mesh.h"
+#include "dk_method.h"
 #include "dk_status.h"
 
 #ifdef __cplusplus
@@ -93,23 +94,15 @@ typedef struct dk_laplacian_edit_options {
     double local_frame_tolerance;     /**< >= 0, relative to the bbox diagonal; default 1e-6 */
 } dk_laplacian_edit_options;
 
-/** What a solve did. */
-typedef struct dk_laplacian_edit_info {
-    double energy;       /**< E(x) at the returned positions (see the file comment)         */
-    int iterations;      /**< linear solves done (1 unless local_frame)                    */
-    int converged;       /**< 1 for fixed/membrane; local_frame: last change <= tolerance   */
-    double last_change;  /**< local_frame: max vertex move of the last iteration / bbox diag */
-} dk_laplacian_edit_info;
-
 /** Counters for tests and reports. */
-typedef struct dk_laplacian_edit_stats {
+typedef struct dk_laplacian_edit_counters {
     dk_index n_unknowns;          /**< size of the factored system                          */
     dk_index n_soft_rows;         /**< vertices with a soft constraint row                   */
     dk_index n_cotangent_fallback;/**< rows that fell back to uniform weights                */
     dk_index n_degenerate_frames; /**< vertices without a rest frame (local_frame only)      */
     int analysis_count;           /**< symbolic analyses done so far (bind + rebinds)        */
     int factorization_count;      /**< numeric factorizations done so far                    */
-} dk_laplacian_edit_stats;
+} dk_laplacian_edit_counters;
 
 typedef struct dk_laplacian_edit dk_laplacian_edit;
 
@@ -134,34 +127,34 @@ dk_status dk_laplacian_edit_bind(const dk_mesh *mesh, const dk_constraint_desc *
 dk_status dk_laplacian_edit_rebind(dk_laplacian_edit *le, const dk_constraint_desc *desc,
                                    dk_error *err);
 
-/** Bit for dk_laplacian_edit_solve's `mode`: do not evaluate the energy (info->energy is
- *  then NaN). Saves one pass over the operator, ~0.4 ms of a 6 ms local-frame solve on 43k
- *  vertices: for interactive updates that never show the energy. */
-#define DK_LE_SOLVE_NO_ENERGY 0x100
-
-/** Deformed positions (n x 3, row-major) for handle targets: mode 0, `targets` holds one
- *  position per handle vertex (concatenated in handle order); mode 1, one 4x4 row-major
- *  affine transform per handle (see dk_constraints_targets); either may be or-ed with
- *  DK_LE_SOLVE_NO_ENERGY. `info` may be NULL. Not thread-safe on the same object (uses
- *  buffers held in it). */
-dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const double *targets, int mode,
-                                  double *positions, dk_laplacian_edit_info *info,
-                                  dk_error *err);
+/** Deformed positions (n x 3, row-major) for the handle targets of `request`
+ *  (dk_method.h): a direct method, so request->start and max_iterations change nothing;
+ *  request->skip_energy saves one pass over the operator (~0.4 ms of a 6 ms local-frame
+ *  solve on 43k vertices; info.energy is then NaN). `info` (may be NULL): energy E(x) at the
+ *  returned positions (see the file comment), iterations (linear solves done: 1 unless
+ *  local_frame), converged (1 for fixed/membrane; local_frame: the last change <= tolerance),
+ *  last_change (local_frame: the max vertex move of the last iteration / bbox diagonal).
+ *  Not thread-safe on the same object (uses buffers held in it). */
+dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const dk_solve_request *request,
+                                  double *positions, dk_solve_info *info, dk_error *err);
 
 /** E(x) for arbitrary positions (n x 3) with the handle targets and deltas of the most
  *  recent solve (before any solve: rest deltas and rest handle positions). */
 dk_status dk_laplacian_edit_energy(const dk_laplacian_edit *le, const double *positions,
                                    double *energy, dk_error *err);
 
-/** Number of handle vertices / handles of the current constraints. */
-dk_index dk_laplacian_edit_n_handle_vertices(const dk_laplacian_edit *le);
-dk_index dk_laplacian_edit_n_handles(const dk_laplacian_edit *le);
+/** The contract's counters (dk_method.h); zeros for NULL. */
+void dk_laplacian_edit_stats(const dk_laplacian_edit *le, dk_method_stats *stats);
 
-/** Counters (see dk_laplacian_edit_stats). */
-void dk_laplacian_edit_get_stats(const dk_laplacian_edit *le, dk_laplacian_edit_stats *stats);
+/** Laplacian editing's own counters (see dk_laplacian_edit_counters). */
+void dk_laplacian_edit_get_counters(const dk_laplacian_edit *le, dk_laplacian_edit_counters *stats);
 
 /** Frees; NULL allowed. */
 void dk_laplacian_edit_free(dk_laplacian_edit *le);
+
+/** Laplacian editing's table of the method contract (dk_method.h); options are a
+ *  dk_laplacian_edit_options. */
+extern const dk_method_ops dk_laplacian_edit_ops;
 
 #ifdef __cplusplus
 }

@@ -389,8 +389,8 @@ dk_status dk_falloff_rebind(dk_falloff *f, const dk_constraint_desc *desc, dk_er
 
 /* ------------------------------------------------------------------ solve --------------- */
 
-dk_status dk_falloff_solve(dk_falloff *f, const double *targets, int mode, double *positions,
-                           double *energy, dk_error *err)
+dk_status dk_falloff_solve(dk_falloff *f, const dk_solve_request *rq, double *positions,
+                           dk_solve_info *info, dk_error *err)
 {
     const dk_mesh *m;
     const falloff_state *s;
@@ -398,13 +398,16 @@ dk_status dk_falloff_solve(dk_falloff *f, const double *targets, int mode, doubl
     double e = 0.0;
     dk_status st;
 
-    if (!f || !targets || !positions)
+    if (info)
+        memset(info, 0, sizeof *info);
+    if (!f || !positions)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
-                            "Falloff solve: NULL object, targets or positions");
-    if (mode != 0 && mode != 1)
-        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
-                            "Falloff solve: mode must be 0 (positions) or 1 (transforms), got %d",
-                            mode);
+                            "Falloff solve: NULL object or positions");
+    st = dk_solve_request_check(rq, "Falloff solve", err);
+    if (st != DK_OK)
+        return st;
+    const double *targets = rq->targets;
+    const int mode = (int)rq->target_kind;
     m = f->mesh;
     s = &f->st;
     n = m->n_vertices;
@@ -450,8 +453,29 @@ dk_status dk_falloff_solve(dk_falloff *f, const double *targets, int mode, doubl
             e += dsp[d] * dsp[d];
         }
     }
+    if (info) {
+        info->energy = e;
+        info->iterations = 1;
+        info->converged = 1;
+    }
+    return DK_OK;
+}
+
+dk_status dk_falloff_energy(const dk_falloff *f, const double *positions, double *energy,
+                            dk_error *err)
+{
     if (energy)
-        *energy = e;
+        *energy = NAN;
+    if (!f || !positions || !energy)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "Falloff energy: object, positions and energy must not be NULL");
+    const double *rest = f->mesh->positions;
+    double e = 0.0;
+    for (size_t i = 0; i < 3 * (size_t)f->mesh->n_vertices; i++) {
+        const double d = positions[i] - rest[i];
+        e += d * d;
+    }
+    *energy = e;
     return DK_OK;
 }
 
@@ -472,14 +496,17 @@ void dk_falloff_vertex_weight(const dk_falloff *f, dk_index g, dk_index v, doubl
         *weight = w;
 }
 
-dk_index dk_falloff_n_handle_vertices(const dk_falloff *f)
+void dk_falloff_stats(const dk_falloff *f, dk_method_stats *st)
 {
-    return f && f->st.con ? f->st.con->n_handle_vertices : 0;
-}
-
-dk_index dk_falloff_n_handles(const dk_falloff *f)
-{
-    return f && f->st.con ? f->st.con->n_handles : 0;
+    if (!st)
+        return;
+    memset(st, 0, sizeof *st);
+    if (!f)
+        return;
+    st->n_vertices = f->mesh->n_vertices;
+    st->n_handles = f->st.con ? f->st.con->n_handles : 0;
+    st->n_handle_vertices = f->st.con ? f->st.con->n_handle_vertices : 0;
+    st->factorization_count = f->heat ? dk_heat_factorization_count(f->heat) : 0;
 }
 
 void dk_falloff_free(dk_falloff *f)
@@ -490,3 +517,50 @@ void dk_falloff_free(dk_falloff *f)
     dk_heat_free(f->heat);
     free(f);
 }
+
+/* ---------------------------------------------------------------- the method contract --- */
+
+static dk_status ops_bind(const dk_mesh *mesh, const dk_constraint_desc *c,
+                          const void *options, void **out, dk_error *err)
+{
+    return dk_falloff_bind(mesh, c, (const dk_falloff_options *)options, (dk_falloff **)out,
+                           err);
+}
+
+static dk_status ops_rebind(void *self, const dk_constraint_desc *c, dk_error *err)
+{
+    return dk_falloff_rebind((dk_falloff *)self, c, err);
+}
+
+static dk_status ops_solve(void *self, const dk_solve_request *rq, double *positions,
+                           dk_solve_info *info, dk_error *err)
+{
+    return dk_falloff_solve((dk_falloff *)self, rq, positions, info, err);
+}
+
+static dk_status ops_energy(const void *self, const double *positions, double *energy,
+                            dk_error *err)
+{
+    return dk_falloff_energy((const dk_falloff *)self, positions, energy, err);
+}
+
+static void ops_stats(const void *self, dk_method_stats *stats)
+{
+    dk_falloff_stats((const dk_falloff *)self, stats);
+}
+
+static void ops_free(void *self)
+{
+    dk_falloff_free((dk_falloff *)self);
+}
+
+const dk_method_ops dk_falloff_ops = {
+    .name = "Falloff",
+    .flags = 0,
+    .bind = ops_bind,
+    .rebind = ops_rebind,
+    .solve = ops_solve,
+    .energy = ops_energy,
+    .stats = ops_stats,
+    .free = ops_free,
+};

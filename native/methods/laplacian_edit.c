@@ -1250,9 +1250,8 @@ static void basis_range(void *ctx, dk_index u0, dk_index u1, int part)
     }
 }
 
-dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const double *targets, int mode,
-                                  double *positions, dk_laplacian_edit_info *info,
-                                  dk_error *err)
+dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const dk_solve_request *rq,
+                                  double *positions, dk_solve_info *info, dk_error *err)
 {
     le_system *s;
     dk_index n;
@@ -1260,15 +1259,17 @@ dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const double *targets, 
     int iterations = 0, converged = 1;
     double last_change = 0.0;
 
-    if (!le || !targets || !positions)
+    if (info)
+        memset(info, 0, sizeof *info);
+    if (!le || !positions)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
-                            "LaplacianEdit solve: NULL object, targets or positions");
-    const int want_energy = !(mode & DK_LE_SOLVE_NO_ENERGY);
-    mode &= ~DK_LE_SOLVE_NO_ENERGY;
-    if (mode != 0 && mode != 1)
-        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
-                            "LaplacianEdit solve: mode must be 0 (positions) or 1 (transforms), "
-                            "optionally | DK_LE_SOLVE_NO_ENERGY, got %d", mode);
+                            "LaplacianEdit solve: NULL object or positions");
+    st = dk_solve_request_check(rq, "LaplacianEdit solve", err);
+    if (st != DK_OK)
+        return st;
+    const double *targets = rq->targets;
+    const int want_energy = !rq->skip_energy;
+    const int mode = (int)rq->target_kind;
     s = &le->sys;
     if (!s->chol)
         return dk_error_set(err, DK_ERR_INTERNAL,
@@ -1326,17 +1327,22 @@ dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const double *targets, 
 
 /* ------------------------------------------------------------------ accessors ----------- */
 
-dk_index dk_laplacian_edit_n_handle_vertices(const dk_laplacian_edit *le)
+void dk_laplacian_edit_stats(const dk_laplacian_edit *le, dk_method_stats *st)
 {
-    return le && le->sys.con ? le->sys.con->n_handle_vertices : 0;
+    if (!st)
+        return;
+    memset(st, 0, sizeof *st);
+    if (!le)
+        return;
+    st->n_vertices = le->n;
+    st->n_handles = le->sys.con ? le->sys.con->n_handles : 0;
+    st->n_handle_vertices = le->sys.con ? le->sys.con->n_handle_vertices : 0;
+    st->n_unknowns = le->sys.n_unknowns;
+    st->analysis_count = le->analysis_count;
+    st->factorization_count = le->factorization_count;
 }
 
-dk_index dk_laplacian_edit_n_handles(const dk_laplacian_edit *le)
-{
-    return le && le->sys.con ? le->sys.con->n_handles : 0;
-}
-
-void dk_laplacian_edit_get_stats(const dk_laplacian_edit *le, dk_laplacian_edit_stats *st)
+void dk_laplacian_edit_get_counters(const dk_laplacian_edit *le, dk_laplacian_edit_counters *st)
 {
     if (!st)
         return;
@@ -1372,3 +1378,50 @@ void dk_laplacian_edit_free(dk_laplacian_edit *le)
     dk_reorder_free(le->ro); /* le->mesh */
     free(le);
 }
+
+/* ---------------------------------------------------------------- the method contract --- */
+
+static dk_status ops_bind(const dk_mesh *mesh, const dk_constraint_desc *c,
+                          const void *options, void **out, dk_error *err)
+{
+    return dk_laplacian_edit_bind(mesh, c, (const dk_laplacian_edit_options *)options,
+                                  (dk_laplacian_edit **)out, err);
+}
+
+static dk_status ops_rebind(void *self, const dk_constraint_desc *c, dk_error *err)
+{
+    return dk_laplacian_edit_rebind((dk_laplacian_edit *)self, c, err);
+}
+
+static dk_status ops_solve(void *self, const dk_solve_request *rq, double *positions,
+                           dk_solve_info *info, dk_error *err)
+{
+    return dk_laplacian_edit_solve((dk_laplacian_edit *)self, rq, positions, info, err);
+}
+
+static dk_status ops_energy(const void *self, const double *positions, double *energy,
+                            dk_error *err)
+{
+    return dk_laplacian_edit_energy((const dk_laplacian_edit *)self, positions, energy, err);
+}
+
+static void ops_stats(const void *self, dk_method_stats *stats)
+{
+    dk_laplacian_edit_stats((const dk_laplacian_edit *)self, stats);
+}
+
+static void ops_free(void *self)
+{
+    dk_laplacian_edit_free((dk_laplacian_edit *)self);
+}
+
+const dk_method_ops dk_laplacian_edit_ops = {
+    .name = "LaplacianEdit",
+    .flags = DK_METHOD_TRANSFORMS_AS_POSITIONS,
+    .bind = ops_bind,
+    .rebind = ops_rebind,
+    .solve = ops_solve,
+    .energy = ops_energy,
+    .stats = ops_stats,
+    .free = ops_free,
+};

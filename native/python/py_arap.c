@@ -182,7 +182,7 @@ static PyObject *arap_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
     PyObject *module;
     int warm = 1, maxit = 0, mode, resume = 0;
     dk_py_doubles in = {0};
-    dk_arap_info info;
+    dk_solve_info info;
     dk_error err = {0};
     dk_status st;
     double *out;
@@ -225,8 +225,13 @@ static PyObject *arap_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
         self->busy = 0;
         return NULL;
     }
+    const dk_solve_request rq = {
+        .targets = in.data,
+        .target_kind = (dk_target_kind)mode,
+        .start = resume ? DK_START_RESUME : warm ? DK_START_WARM : DK_START_COLD,
+        .max_iterations = maxit};
     Py_BEGIN_ALLOW_THREADS
-    st = dk_arap_solve(self->arap, in.data, mode, resume ? 2 : warm, maxit, out, &info, &err);
+    st = dk_arap_solve(self->arap, &rq, out, &info, &err);
     Py_END_ALLOW_THREADS
     dk_py_doubles_release(&in);
     self->busy = 0;
@@ -315,11 +320,15 @@ static PyObject *arap_energy(PyObject *obj, PyObject *arg)
             self->busy = 0;
             return NULL;
         }
+    dk_error err = {0};
+    dk_status st;
     Py_BEGIN_ALLOW_THREADS
-    e = dk_arap_energy(self->arap, x.data);
+    st = dk_arap_energy(self->arap, x.data, &e, &err);
     Py_END_ALLOW_THREADS
     dk_py_doubles_release(&x);
     self->busy = 0;
+    if (st != DK_OK)
+        return dk_py_raise(&err, "ARAP.energy");
     return PyFloat_FromDouble(e);
 }
 
@@ -368,11 +377,12 @@ static PyObject *get_stats(PyObject *obj, void *c)
 {
     ArapObject *self = (ArapObject *)obj;
     const dk_constraints *k = dk_arap_constraints(self->arap);
+    dk_method_stats ms;
     (void)c;
-    return Py_BuildValue("{s:i,s:i,s:i,s:i}", "n_unknowns", (int)dk_arap_n_unknowns(self->arap),
-                         "n_free", (int)k->n_free, "analysis_count",
-                         dk_arap_analysis_count(self->arap), "factorization_count",
-                         dk_arap_factorization_count(self->arap));
+    dk_arap_stats(self->arap, &ms);
+    return Py_BuildValue("{s:i,s:i,s:i,s:i}", "n_unknowns", (int)ms.n_unknowns, "n_free",
+                         (int)k->n_free, "analysis_count", ms.analysis_count,
+                         "factorization_count", ms.factorization_count);
 }
 
 static PyGetSetDef arap_getset[] = {

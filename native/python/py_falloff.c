@@ -143,7 +143,8 @@ static PyObject *falloff_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
     FalloffObject *self = (FalloffObject *)obj;
     PyObject *targets = Py_None, *transforms = Py_None, *positions, *module;
     dk_py_doubles in = {0};
-    double energy = 0.0;
+    dk_solve_info info;
+    dk_method_stats ms;
     dk_error err = {0};
     dk_status st;
     double *out;
@@ -154,8 +155,8 @@ static PyObject *falloff_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
     module = PyType_GetModule(Py_TYPE(obj));
     if (!module || enter(self) < 0)
         return NULL;
-    if (dk_py_lap_read_solve_input(targets, transforms, dk_falloff_n_handles(self->f),
-                                   dk_falloff_n_handle_vertices(self->f),
+    dk_falloff_stats(self->f, &ms);
+    if (dk_py_lap_read_solve_input(targets, transforms, ms.n_handles, ms.n_handle_vertices,
                                    "Falloff.solve", &in, &mode) < 0) {
         self->busy = 0;
         return NULL;
@@ -166,8 +167,9 @@ static PyObject *falloff_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
         self->busy = 0;
         return NULL;
     }
+    const dk_solve_request rq = {.targets = in.data, .target_kind = (dk_target_kind)mode};
     Py_BEGIN_ALLOW_THREADS
-    st = dk_falloff_solve(self->f, in.data, mode, out, &energy, &err);
+    st = dk_falloff_solve(self->f, &rq, out, &info, &err);
     Py_END_ALLOW_THREADS
     dk_py_doubles_release(&in);
     self->busy = 0;
@@ -175,7 +177,8 @@ static PyObject *falloff_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
         Py_DECREF(positions);
         return dk_py_raise(&err, "Falloff.solve");
     }
-    return dk_py_new_solve_result(module, positions, energy, 1, 1);
+    return dk_py_new_solve_result(module, positions, info.energy, info.iterations,
+                                  info.converged);
 }
 
 PyDoc_STRVAR(rebind_doc,
@@ -231,12 +234,14 @@ static PyObject *falloff_weights(PyObject *obj, PyObject *arg)
     FalloffObject *self = (FalloffObject *)obj;
     PyObject *d, *w;
     double *dp, *wp;
+    dk_method_stats ms;
     long g = PyLong_AsLong(arg);
     if (g == -1 && PyErr_Occurred())
         return NULL;
-    if (g < 0 || g >= dk_falloff_n_handles(self->f)) {
+    dk_falloff_stats(self->f, &ms);
+    if (g < 0 || g >= ms.n_handles) {
         PyErr_Format(PyExc_IndexError, "Falloff.weights: group %ld out of range [0, %d)", g,
-                     (int)dk_falloff_n_handles(self->f));
+                     (int)ms.n_handles);
         return NULL;
     }
     d = dk_py_new_doubles(1, self->mesh->n_vertices, 0, &dp);
@@ -261,13 +266,17 @@ static PyObject *get_mesh(PyObject *obj, void *c)
 static PyObject *get_n_handles(PyObject *obj, void *c)
 {
     (void)c;
-    return PyLong_FromLong(dk_falloff_n_handles(((FalloffObject *)obj)->f));
+    dk_method_stats ms;
+    dk_falloff_stats(((FalloffObject *)obj)->f, &ms);
+    return PyLong_FromLong(ms.n_handles);
 }
 
 static PyObject *get_n_handle_vertices(PyObject *obj, void *c)
 {
     (void)c;
-    return PyLong_FromLong(dk_falloff_n_handle_vertices(((FalloffObject *)obj)->f));
+    dk_method_stats ms;
+    dk_falloff_stats(((FalloffObject *)obj)->f, &ms);
+    return PyLong_FromLong(ms.n_handle_vertices);
 }
 
 static PyGetSetDef falloff_getset[] = {

@@ -162,7 +162,8 @@ static PyObject *lap_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
     int want_energy = 1;
     PyObject *targets = Py_None, *transforms = Py_None, *positions, *module;
     dk_py_doubles in = {0};
-    dk_laplacian_edit_info info;
+    dk_solve_info info;
+    dk_method_stats ms;
     dk_error err = {0};
     dk_status st;
     double *out;
@@ -174,8 +175,8 @@ static PyObject *lap_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
     module = PyType_GetModule(Py_TYPE(obj));
     if (!module || enter(self) < 0)
         return NULL;
-    if (dk_py_lap_read_solve_input(targets, transforms, dk_laplacian_edit_n_handles(self->le),
-                                   dk_laplacian_edit_n_handle_vertices(self->le),
+    dk_laplacian_edit_stats(self->le, &ms);
+    if (dk_py_lap_read_solve_input(targets, transforms, ms.n_handles, ms.n_handle_vertices,
                                    "LaplacianEdit.solve", &in, &mode) < 0) {
         self->busy = 0;
         return NULL;
@@ -186,10 +187,11 @@ static PyObject *lap_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
         self->busy = 0;
         return NULL;
     }
+    const dk_solve_request rq = {.targets = in.data,
+                                 .target_kind = (dk_target_kind)mode,
+                                 .skip_energy = !want_energy};
     Py_BEGIN_ALLOW_THREADS
-    st = dk_laplacian_edit_solve(self->le, in.data,
-                                 mode | (want_energy ? 0 : DK_LE_SOLVE_NO_ENERGY), out, &info,
-                                 &err);
+    st = dk_laplacian_edit_solve(self->le, &rq, out, &info, &err);
     Py_END_ALLOW_THREADS
     dk_py_doubles_release(&in);
     self->busy = 0;
@@ -274,9 +276,9 @@ static PyObject *lap_energy(PyObject *obj, PyObject *arg)
 static PyObject *get_stats(PyObject *obj, void *c)
 {
     LapObject *self = (LapObject *)obj;
-    dk_laplacian_edit_stats s;
+    dk_laplacian_edit_counters s;
     (void)c;
-    dk_laplacian_edit_get_stats(self->le, &s);
+    dk_laplacian_edit_get_counters(self->le, &s);
     return Py_BuildValue("{s:i,s:i,s:i,s:i,s:i,s:i}", "n_unknowns", (int)s.n_unknowns,
                          "n_soft_rows", (int)s.n_soft_rows, "n_cotangent_fallback",
                          (int)s.n_cotangent_fallback, "n_degenerate_frames",
@@ -293,13 +295,17 @@ static PyObject *get_mesh(PyObject *obj, void *c)
 static PyObject *get_n_handles(PyObject *obj, void *c)
 {
     (void)c;
-    return PyLong_FromLong(dk_laplacian_edit_n_handles(((LapObject *)obj)->le));
+    dk_method_stats ms;
+    dk_laplacian_edit_stats(((LapObject *)obj)->le, &ms);
+    return PyLong_FromLong(ms.n_handles);
 }
 
 static PyObject *get_n_handle_vertices(PyObject *obj, void *c)
 {
     (void)c;
-    return PyLong_FromLong(dk_laplacian_edit_n_handle_vertices(((LapObject *)obj)->le));
+    dk_method_stats ms;
+    dk_laplacian_edit_stats(((LapObject *)obj)->le, &ms);
+    return PyLong_FromLong(ms.n_handle_vertices);
 }
 
 static PyGetSetDef lap_getset[] = {

@@ -22,6 +22,21 @@ typedef struct history {
     double e[4096];
 } history;
 
+
+/* The contract's energy and counters as values, for assertions. */
+static double arap_energy(const dk_arap *ar, const double *x)
+{
+    double energy;
+    dk_error e = {0};
+    return dk_arap_energy(ar, x, &energy, &e) == DK_OK ? energy : NAN;
+}
+
+static dk_method_stats arap_stats(const dk_arap *ar)
+{
+    dk_method_stats st;
+    dk_arap_stats(ar, &st);
+    return st;
+}
 static int record(void *user, int iteration, double energy)
 {
     history *h = user;
@@ -191,8 +206,8 @@ static void test_zero_drag(void)
         double t[3 * 64], *x = malloc(sizeof(double) * 3 * s.mesh->n_vertices);
         for (dk_index k = 0; k < s.n_handle; k++)
             memcpy(t + 3 * k, s.mesh->positions + 3 * s.handle[k], 3 * sizeof(double));
-        dk_arap_info info;
-        st = dk_arap_solve(ar, t, 0, 0, 0, x, &info, &e);
+        dk_solve_info info;
+        st = dk_arap_solve(ar, &(dk_solve_request){.targets = t}, x, &info, &e);
         CHECK_MSG(st == DK_OK, "%s", e.message);
         double maxd = 0;
         for (dk_index k = 0; k < 3 * s.mesh->n_vertices; k++)
@@ -257,8 +272,11 @@ static void test_rigid_motion(void)
                 continue;
             }
             double *x = malloc(sizeof(double) * 3 * m->n_vertices);
-            dk_arap_info info;
-            dk_status st = dk_arap_solve(ar, tf, 1, 0, 0, x, &info, &e);
+            dk_solve_info info;
+            dk_status st = dk_arap_solve(ar,
+                                         &(dk_solve_request){.targets = tf,
+                                                             .target_kind = DK_TARGETS_TRANSFORMS},
+                                         x, &info, &e);
             CHECK_MSG(st == DK_OK, "%s", e.message);
             double maxd = 0;
             for (dk_index v = 0; v < m->n_vertices; v++)
@@ -314,8 +332,8 @@ static void test_bend(void)
             CHECK_MSG(0, "%s", e.message);
             return;
         }
-        dk_arap_info info;
-        dk_status st = dk_arap_solve(ar, t, 0, 0, 0, x[accel], &info, &e);
+        dk_solve_info info;
+        dk_status st = dk_arap_solve(ar, &(dk_solve_request){.targets = t}, x[accel], &info, &e);
         CHECK_MSG(st == DK_OK, "%s", e.message);
         CHECK(info.converged);
         energies[accel] = info.energy;
@@ -338,7 +356,7 @@ static void test_bend(void)
                 maxc = fmax(maxc, fabs(x[accel][3 * s.fixed[k] + i] -
                                        m->positions[3 * s.fixed[k] + i]));
         CHECK_MSG(maxc <= 1e-12 * m->bbox_diagonal, "constraint error %g", maxc);
-        double e_eval = dk_arap_energy(ar, x[accel]);
+        double e_eval = arap_energy(ar, x[accel]);
         CHECK_NEAR(e_eval, info.energy, 1e-12 * info.energy);
         double e_ref = reference_spokes_energy(m, x[accel], 1);
         CHECK_MSG(fabs(e_ref - info.energy) <= 1e-8 * info.energy, "reference %.15g vs %.15g",
@@ -397,12 +415,13 @@ static void test_newton_quadratic(void)
     o.max_iterations = 20000;
     dk_arap *ar = NULL, *an = NULL;
     dk_error e = {0};
-    dk_arap_info ia, in;
+    dk_solve_info ia, in;
     if (!x || dk_arap_bind(m, &d, &o, &an, &e) != DK_OK) { /* Anderson reference */
         CHECK_MSG(0, "%s", e.message);
         goto out;
     }
-    CHECK(dk_arap_solve(an, t, 0, 0, 0, x, &ia, &e) == DK_OK && ia.converged);
+    CHECK(dk_arap_solve(an, &(dk_solve_request){.targets = t}, x, &ia,
+                        &e) == DK_OK && ia.converged);
     o.acceleration = DK_ARAP_ACCEL_NEWTON;
     o.cg_iterations = 100;
     o.tolerance = 1e-13; /* stops before the rounding level, where line searches fail */
@@ -414,7 +433,7 @@ static void test_newton_quadratic(void)
         CHECK_MSG(0, "%s", e.message);
         goto out;
     }
-    CHECK(dk_arap_solve(ar, t, 0, 0, 0, x, &in, &e) == DK_OK);
+    CHECK(dk_arap_solve(ar, &(dk_solve_request){.targets = t}, x, &in, &e) == DK_OK);
     const double emin = ia.energy;
     printf("newton (exact CG) gaps:");
     for (int k = 0; k < h.count; k++)
@@ -441,12 +460,14 @@ static void test_newton_quadratic(void)
         dk_arap_default_options(&od);
         od.acceleration = DK_ARAP_ACCEL_ANDERSON;
         dk_arap *a1 = NULL, *a2 = NULL;
-        dk_arap_info i1, i2;
+        dk_solve_info i1, i2;
         if (dk_arap_bind(m, &d, &od, &a1, &e) == DK_OK) {
             od.acceleration = DK_ARAP_ACCEL_NEWTON;
             if (dk_arap_bind(m, &d, &od, &a2, &e) == DK_OK) {
-                CHECK(dk_arap_solve(a1, t, 0, 0, 0, x, &i1, &e) == DK_OK && i1.converged);
-                CHECK(dk_arap_solve(a2, t, 0, 0, 0, x, &i2, &e) == DK_OK && i2.converged);
+                CHECK(dk_arap_solve(a1, &(dk_solve_request){.targets = t}, x, &i1,
+                                    &e) == DK_OK && i1.converged);
+                CHECK(dk_arap_solve(a2, &(dk_solve_request){.targets = t}, x, &i2,
+                                    &e) == DK_OK && i2.converged);
                 printf("defaults: anderson %d it, gap %.1e; newton %d steps (%d products), gap "
                        "%.1e\n", i1.iterations, (i1.energy - emin) / emin, i2.iterations,
                        i2.cg_iterations, (i2.energy - emin) / emin);
@@ -496,7 +517,7 @@ static void test_newton_soft_stiffness(void)
     o.acceleration = DK_ARAP_ACCEL_ANDERSON;
     o.tolerance = 1e-14;
     o.max_iterations = 20000;
-    dk_arap_info ia, ib;
+    dk_solve_info ia, ib;
     CHECK_MSG(dk_arap_bind(m, &d, &o, &a, &e) == DK_OK, "%s", e.message);
     o.acceleration = DK_ARAP_ACCEL_NEWTON;
     o.tolerance = 1e-12;
@@ -504,8 +525,8 @@ static void test_newton_soft_stiffness(void)
     CHECK_MSG(dk_arap_bind(m, &d, &o, &b, &e) == DK_OK, "%s", e.message);
     if (!a || !b)
         goto out;
-    CHECK(dk_arap_solve(a, t, 0, 0, 0, x, &ia, &e) == DK_OK && ia.converged);
-    CHECK(dk_arap_solve(b, t, 0, 0, 0, y, &ib, &e) == DK_OK && ib.converged);
+    CHECK(dk_arap_solve(a, &(dk_solve_request){.targets = t}, x, &ia, &e) == DK_OK && ia.converged);
+    CHECK(dk_arap_solve(b, &(dk_solve_request){.targets = t}, y, &ib, &e) == DK_OK && ib.converged);
     CHECK_MSG(fabs(ia.energy - ib.energy) <= 1e-9 * ia.energy, "anderson %.15g newton %.15g",
               ia.energy, ib.energy);
     double maxd = 0, gap = 0;
@@ -516,7 +537,7 @@ static void test_newton_soft_stiffness(void)
             gap = fmax(gap, fabs(y[3 * s.handle[k] + i] - t[3 * k + i]));
     CHECK_MSG(maxd <= 1e-5 * m->bbox_diagonal, "positions differ by %g", maxd);
     CHECK_MSG(gap > 1e-4, "soft handles at their targets (%g)", gap);
-    CHECK_NEAR(dk_arap_energy(b, y), ib.energy, 1e-12 * ib.energy);
+    CHECK_NEAR(arap_energy(b, y), ib.energy, 1e-12 * ib.energy);
     printf("soft + stiffness: anderson %d it, newton %d steps (%d products)\n", ia.iterations,
            ib.iterations, ib.cg_iterations);
 out:
@@ -575,8 +596,8 @@ static void test_twist(void)
             continue;
         }
         double *x = malloc(sizeof(double) * 3 * m->n_vertices);
-        dk_arap_info info;
-        CHECK(dk_arap_solve(ar, t, 0, 0, 0, x, &info, &e) == DK_OK);
+        dk_solve_info info;
+        CHECK(dk_arap_solve(ar, &(dk_solve_request){.targets = t}, x, &info, &e) == DK_OK);
         for (int k = 1; k < h.count; k++)
             CHECK(h.e[k] <= h.e[k - 1] * (1 + 1e-13));
         double rms = rms_edge_change(m, x);
@@ -594,7 +615,7 @@ static void test_twist(void)
         const double *q = m->positions + 3 * (segments / 2 * ring);
         double ang = atan2(p[1], p[0]) - atan2(q[1], q[0]);
         CHECK_MSG(fabs(ang - 0.78539816339744831) < 0.2, "middle ring angle %g", ang);
-        CHECK_NEAR(dk_arap_energy(ar, x), info.energy, 1e-12 * info.energy);
+        CHECK_NEAR(arap_energy(ar, x), info.energy, 1e-12 * info.energy);
         free(x);
         dk_arap_free(ar);
     }
@@ -638,7 +659,7 @@ static void test_clamping(void)
             CHECK_MSG(0, "%s", e.message);
             continue;
         }
-        double ev = dk_arap_energy(ar, x);
+        double ev = arap_energy(ar, x);
         double want = kind == 0 ? ref_raw : ref_clamped;
         CHECK_MSG(fabs(ev - want) <= 1e-10 * fabs(want), "kind %d: %.15g vs %.15g", kind, ev,
                   want);
@@ -675,34 +696,43 @@ static void test_resume(void)
         o.cg_iterations = 3; /* several Newton steps to slice */
         dk_arap *whole = NULL, *sliced = NULL, *other = NULL;
         dk_error e = {0};
-        dk_arap_info iw, is, io;
+        dk_solve_info iw, is, io;
         if (!x || !y || !z || dk_arap_bind(m, &d, &o, &whole, &e) != DK_OK ||
             dk_arap_bind(m, &d, &o, &sliced, &e) != DK_OK ||
             dk_arap_bind(m, &d, &o, &other, &e) != DK_OK) {
             CHECK_MSG(0, "%s", e.message);
             goto out;
         }
-        CHECK(dk_arap_solve(whole, t, 0, 0, 0, x, &iw, &e) == DK_OK && iw.converged);
+        CHECK(dk_arap_solve(whole, &(dk_solve_request){.targets = t}, x, &iw,
+                            &e) == DK_OK && iw.converged);
         CHECK_MSG(iw.iterations > 6, "acceleration %d: %d iterations", accel, iw.iterations);
         int total = 0;
         const int slice = accel == 2 ? 2 : 3;
-        CHECK(dk_arap_solve(sliced, t, 0, 0, slice, y, &is, &e) == DK_OK);
+        CHECK(dk_arap_solve(sliced, &(dk_solve_request){.targets = t, .max_iterations = slice}, y,
+                            &is, &e) == DK_OK);
         total += is.iterations;
         for (int k = 0; k < 1000 && !is.converged; k++) {
-            CHECK(dk_arap_solve(sliced, t, 0, 2, slice, y, &is, &e) == DK_OK);
+            CHECK(dk_arap_solve(sliced,
+                                &(dk_solve_request){.targets = t, .start = DK_START_RESUME,
+                                                    .max_iterations = slice},
+                                y, &is, &e) == DK_OK);
             total += is.iterations;
         }
         CHECK_MSG(total == iw.iterations, "sliced %d iterations, whole %d", total, iw.iterations);
         CHECK(memcmp(x, y, sizeof(double) * 3 * n) == 0 && is.energy == iw.energy);
         /* new targets: resume = warm start */
-        CHECK(dk_arap_solve(other, t, 0, 0, 0, z, &io, &e) == DK_OK);
-        CHECK(dk_arap_solve(other, t2, 0, 1, 0, z, &io, &e) == DK_OK);
-        CHECK(dk_arap_solve(sliced, t2, 0, 2, 0, y, &is, &e) == DK_OK);
+        CHECK(dk_arap_solve(other, &(dk_solve_request){.targets = t}, z, &io, &e) == DK_OK);
+        CHECK(dk_arap_solve(other, &(dk_solve_request){.targets = t2, .start = DK_START_WARM}, z,
+                            &io, &e) == DK_OK);
+        CHECK(dk_arap_solve(sliced, &(dk_solve_request){.targets = t2, .start = DK_START_RESUME}, y,
+                            &is, &e) == DK_OK);
         CHECK(is.iterations == io.iterations && memcmp(y, z, sizeof(double) * 3 * n) == 0);
         /* after a rebind (same constraints), resume starts over as a warm start */
         CHECK(dk_arap_rebind(sliced, &d, &e) == DK_OK && dk_arap_rebind(other, &d, &e) == DK_OK);
-        CHECK(dk_arap_solve(sliced, t2, 0, 2, 0, y, &is, &e) == DK_OK);
-        CHECK(dk_arap_solve(other, t2, 0, 1, 0, z, &io, &e) == DK_OK);
+        CHECK(dk_arap_solve(sliced, &(dk_solve_request){.targets = t2, .start = DK_START_RESUME}, y,
+                            &is, &e) == DK_OK);
+        CHECK(dk_arap_solve(other, &(dk_solve_request){.targets = t2, .start = DK_START_WARM}, z,
+                            &io, &e) == DK_OK);
         CHECK(is.iterations == io.iterations && memcmp(y, z, sizeof(double) * 3 * n) == 0);
 out:
         dk_arap_free(whole);
@@ -756,7 +786,7 @@ static void predictor_case(dk_arap_acceleration accel)
     }
     dk_arap *p = NULL, *q = NULL, *ref = NULL;
     dk_error e = {0};
-    dk_arap_info ip, iq, ir;
+    dk_solve_info ip, iq, ir;
     if (!x || !y || !z || !hp || !hq || dk_arap_bind(m, &d, &o, &p, &e) != DK_OK ||
         dk_arap_bind(m, &d, &oq, &q, &e) != DK_OK || dk_arap_bind(m, &d, &oref, &ref, &e) != DK_OK) {
         CHECK_MSG(0, "%s", e.message);
@@ -765,9 +795,12 @@ static void predictor_case(dk_arap_acceleration accel)
     int its_p = 0, its_q = 0;
     for (int k = 0; k < steps; k++) {
         bend_targets(&s, angles[k], t);
-        CHECK(dk_arap_solve(p, t, 0, 1, 0, x, &ip, &e) == DK_OK && ip.converged);
-        CHECK(dk_arap_solve(q, t, 0, 1, 0, y, &iq, &e) == DK_OK && iq.converged);
-        CHECK(dk_arap_solve(ref, t, 0, 0, 0, z, &ir, &e) == DK_OK && ir.converged);
+        CHECK(dk_arap_solve(p, &(dk_solve_request){.targets = t, .start = DK_START_WARM}, x, &ip,
+                            &e) == DK_OK && ip.converged);
+        CHECK(dk_arap_solve(q, &(dk_solve_request){.targets = t, .start = DK_START_WARM}, y, &iq,
+                            &e) == DK_OK && iq.converged);
+        CHECK(dk_arap_solve(ref, &(dk_solve_request){.targets = t}, z, &ir,
+                            &e) == DK_OK && ir.converged);
         CHECK(!iq.predicted);
         if (k < 4) {
             /* k = 0, 1: fewer than two converged solutions; k = 2, 3: the drag reverses */
@@ -797,24 +830,30 @@ static void predictor_case(dk_arap_acceleration accel)
     /* after an unconverged call (an interactive budget) the drag still predicts, and the
      * next solve reaches the minimum */
     bend_targets(&s, 0.85, t);
-    CHECK(dk_arap_solve(p, t, 0, 1, 1, x, &ip, &e) == DK_OK && !ip.converged);
+    CHECK(dk_arap_solve(p,
+                        &(dk_solve_request){.targets = t, .start = DK_START_WARM,
+                                            .max_iterations = 1},
+                        x, &ip, &e) == DK_OK && !ip.converged);
     bend_targets(&s, 0.95, t);
-    CHECK(dk_arap_solve(p, t, 0, 1, 0, x, &ip, &e) == DK_OK && ip.predicted && ip.converged);
-    CHECK(dk_arap_solve(ref, t, 0, 0, 0, z, &ir, &e) == DK_OK);
+    CHECK(dk_arap_solve(p, &(dk_solve_request){.targets = t, .start = DK_START_WARM}, x, &ip,
+                        &e) == DK_OK && ip.predicted && ip.converged);
+    CHECK(dk_arap_solve(ref, &(dk_solve_request){.targets = t}, z, &ir, &e) == DK_OK);
     CHECK_MSG(ip.energy <= ir.energy * (1 + 1e-5), "after an unconverged call: %.12g vs %.12g",
               ip.energy, ir.energy);
     bend_targets(&s, 1.05, t);
-    CHECK(dk_arap_solve(p, t, 0, 1, 0, x, &ip, &e) == DK_OK && ip.converged);
+    CHECK(dk_arap_solve(p, &(dk_solve_request){.targets = t, .start = DK_START_WARM}, x, &ip,
+                        &e) == DK_OK && ip.converged);
     /* a rebind forgets the drag */
     CHECK(dk_arap_rebind(p, &d, &e) == DK_OK);
     bend_targets(&s, 1.15, t);
-    CHECK(dk_arap_solve(p, t, 0, 1, 0, x, &ip, &e) == DK_OK && !ip.predicted);
+    CHECK(dk_arap_solve(p, &(dk_solve_request){.targets = t, .start = DK_START_WARM}, x, &ip,
+                        &e) == DK_OK && !ip.predicted);
     /* a cold solve is a function of its input whatever the history */
-    CHECK(dk_arap_solve(p, t, 0, 0, 0, x, &ip, &e) == DK_OK);
+    CHECK(dk_arap_solve(p, &(dk_solve_request){.targets = t}, x, &ip, &e) == DK_OK);
     dk_arap_free(q);
     q = NULL;
     CHECK(dk_arap_bind(m, &d, &o, &q, &e) == DK_OK);
-    CHECK(dk_arap_solve(q, t, 0, 0, 0, y, &iq, &e) == DK_OK);
+    CHECK(dk_arap_solve(q, &(dk_solve_request){.targets = t}, y, &iq, &e) == DK_OK);
     CHECK(memcmp(x, y, sizeof(double) * 3 * n) == 0 && !ip.predicted);
     /* the option is validated */
     o.predict = 2;
@@ -866,13 +905,13 @@ static void stiffness_soft_warm_rebind_case(dk_arap_acceleration accel)
     o.max_iterations = 500;
     dk_arap *ar = NULL, *as = NULL;
     dk_error e = {0};
-    dk_arap_info info;
+    dk_solve_info info;
     if (dk_arap_bind(m, &d, &o, &ar, &e) != DK_OK || dk_arap_bind(m, &ds, &o, &as, &e) != DK_OK) {
         CHECK_MSG(0, "%s", e.message);
         goto out;
     }
-    CHECK(dk_arap_solve(ar, t, 0, 0, 0, x, &info, &e) == DK_OK);
-    CHECK(dk_arap_solve(as, t, 0, 0, 0, y, &info, &e) == DK_OK);
+    CHECK(dk_arap_solve(ar, &(dk_solve_request){.targets = t}, x, &info, &e) == DK_OK);
+    CHECK(dk_arap_solve(as, &(dk_solve_request){.targets = t}, y, &info, &e) == DK_OK);
     /* the stiff half keeps its edge lengths better */
     {
         double sx = 0, sy = 0;
@@ -892,15 +931,17 @@ static void stiffness_soft_warm_rebind_case(dk_arap_acceleration accel)
         CHECK_MSG(sy < 0.5 * sx, "stiff half distortion %g vs uniform %g", sy, sx);
     }
     /* warm start: re-solve the same targets converges at once to the same answer */
-    CHECK(dk_arap_solve(ar, t, 0, 1, 0, y, &info, &e) == DK_OK);
+    CHECK(dk_arap_solve(ar, &(dk_solve_request){.targets = t, .start = DK_START_WARM}, y, &info,
+                        &e) == DK_OK);
     CHECK(info.iterations <= 2 && info.converged);
     /* a small move, warm vs cold: same answer, fewer iterations warm */
     {
         double t2[3 * 64];
         bend_targets(&s, 0.95, t2);
-        dk_arap_info wi, ci;
-        CHECK(dk_arap_solve(ar, t2, 0, 1, 0, y, &wi, &e) == DK_OK);
-        CHECK(dk_arap_solve(ar, t2, 0, 0, 0, x, &ci, &e) == DK_OK);
+        dk_solve_info wi, ci;
+        CHECK(dk_arap_solve(ar, &(dk_solve_request){.targets = t2, .start = DK_START_WARM}, y, &wi,
+                            &e) == DK_OK);
+        CHECK(dk_arap_solve(ar, &(dk_solve_request){.targets = t2}, x, &ci, &e) == DK_OK);
         CHECK_MSG(wi.iterations < ci.iterations, "warm %d cold %d", wi.iterations,
                   ci.iterations);
         CHECK_NEAR(wi.energy, ci.energy, 1e-5 * ci.energy);
@@ -908,18 +949,18 @@ static void stiffness_soft_warm_rebind_case(dk_arap_acceleration accel)
     /* rebind with the same unknown set (handle weights to 1 -> same roles): no new analysis;
      * soft handles: unknowns change -> a new analysis; the penalty pulls towards the target */
     {
-        int an = dk_arap_analysis_count(ar), fc = dk_arap_factorization_count(ar);
+        int an = arap_stats(ar).analysis_count, fc = arap_stats(ar).factorization_count;
         CHECK(dk_arap_rebind(ar, &ds, &e) == DK_OK);
-        CHECK(dk_arap_analysis_count(ar) == an && dk_arap_factorization_count(ar) == fc + 1);
+        CHECK(arap_stats(ar).analysis_count == an && arap_stats(ar).factorization_count == fc + 1);
         double w[64];
         for (int k = 0; k < 64; k++)
             w[k] = 0.5;
         dk_constraint_desc dw = d;
         dw.handle_weights = w;
         CHECK(dk_arap_rebind(ar, &dw, &e) == DK_OK);
-        CHECK(dk_arap_analysis_count(ar) == an + 1);
-        CHECK(dk_arap_n_unknowns(ar) == n - s.n_fixed);
-        CHECK(dk_arap_solve(ar, t, 0, 0, 0, x, &info, &e) == DK_OK);
+        CHECK(arap_stats(ar).analysis_count == an + 1);
+        CHECK(arap_stats(ar).n_unknowns == n - s.n_fixed);
+        CHECK(dk_arap_solve(ar, &(dk_solve_request){.targets = t}, x, &info, &e) == DK_OK);
         double gap = 0, move = 0;
         for (dk_index k = 0; k < s.n_handle; k++)
             for (int i = 0; i < 3; i++) {
@@ -928,12 +969,13 @@ static void stiffness_soft_warm_rebind_case(dk_arap_acceleration accel)
                                        m->positions[3 * s.handle[k] + i]));
             }
         CHECK_MSG(gap > 1e-4 && move > 0.2, "soft handle gap %g move %g", gap, move);
-        CHECK_NEAR(dk_arap_energy(ar, x), info.energy, 1e-12 * info.energy);
+        CHECK_NEAR(arap_energy(ar, x), info.energy, 1e-12 * info.energy);
         /* a failing rebind keeps the previous constraints */
         dk_index bad[1] = {100000}, one[1] = {1};
         dk_constraint_desc db = {1, one, bad, NULL, 0, NULL, 0, NULL, NULL};
         CHECK(dk_arap_rebind(ar, &db, &e) == DK_ERR_INDEX);
-        CHECK(dk_arap_solve(ar, t, 0, 1, 0, y, &info, &e) == DK_OK);
+        CHECK(dk_arap_solve(ar, &(dk_solve_request){.targets = t, .start = DK_START_WARM}, y, &info,
+                            &e) == DK_OK);
     }
 out:
     dk_arap_free(ar);
@@ -981,7 +1023,7 @@ static void test_warm_rotations_and_cold_reproducibility(void)
         o.user = &h;
         dk_arap *ar = NULL, *fresh = NULL;
         dk_error e = {0};
-        dk_arap_info i0, info;
+        dk_solve_info i0, info;
         if (dk_arap_bind(m, &d, &o, &ar, &e) != DK_OK ||
             dk_arap_bind(m, &d, &o, &fresh, &e) != DK_OK) {
             CHECK_MSG(0, "%s", e.message);
@@ -989,24 +1031,25 @@ static void test_warm_rotations_and_cold_reproducibility(void)
             break;
         }
         bend_targets(&s, 1.2, t);
-        CHECK(dk_arap_solve(ar, t, 0, 0, 0, x0, &i0, &e) == DK_OK);
+        CHECK(dk_arap_solve(ar, &(dk_solve_request){.targets = t}, x0, &i0, &e) == DK_OK);
         int monotone = 1;
         for (int k = 0; k < 120; k++) {
             double angle = 1.2 + 0.5 * sin(0.15 * k);
             bend_targets(&s, angle, t);
             h.count = 0;
-            CHECK(dk_arap_solve(ar, t, 0, 1, 0, x, &info, &e) == DK_OK);
+            CHECK(dk_arap_solve(ar, &(dk_solve_request){.targets = t, .start = DK_START_WARM}, x,
+                                &info, &e) == DK_OK);
             for (int j = 1; j < h.count; j++)
                 monotone &= h.e[j] <= h.e[j - 1];
         }
         CHECK_MSG(monotone, "%s: an iteration raised the energy", names[accel]);
-        CHECK_NEAR(dk_arap_energy(ar, x), info.energy, 1e-12 * info.energy);
+        CHECK_NEAR(arap_energy(ar, x), info.energy, 1e-12 * info.energy);
         bend_targets(&s, 1.2, t);
-        CHECK(dk_arap_solve(ar, t, 0, 0, 0, x, &info, &e) == DK_OK);
+        CHECK(dk_arap_solve(ar, &(dk_solve_request){.targets = t}, x, &info, &e) == DK_OK);
         CHECK_MSG(memcmp(x, x0, bytes) == 0 && info.energy == i0.energy &&
                       info.iterations == i0.iterations,
                   "%s: cold solve after other solves differs", names[accel]);
-        CHECK(dk_arap_solve(fresh, t, 0, 0, 0, x, &info, &e) == DK_OK);
+        CHECK(dk_arap_solve(fresh, &(dk_solve_request){.targets = t}, x, &info, &e) == DK_OK);
         CHECK_MSG(memcmp(x, x0, bytes) == 0 && info.energy == i0.energy,
                   "%s: cold solve on a fresh object differs", names[accel]);
         dk_arap_free(ar);
@@ -1072,7 +1115,7 @@ static void test_errors(void)
     double t[3 * 64] = {0}, *x = malloc(sizeof(double) * 3 * m->n_vertices);
     bend_targets(&s, 0.3, t);
     t[4] = NAN;
-    CHECK(dk_arap_solve(ar, t, 0, 0, 0, x, NULL, &e) == DK_ERR_NONFINITE);
+    CHECK(dk_arap_solve(ar, &(dk_solve_request){.targets = t}, x, NULL, &e) == DK_ERR_NONFINITE);
     CHECK_MSG(strstr(e.message, "handle 0") && strstr(e.message, "vertex"), "%s", e.message);
     dk_arap_free(ar);
     ar = NULL;
@@ -1165,13 +1208,13 @@ static void test_big_mesh_threaded_local_step(void)
         o.user = &h;
         dk_arap *ar = NULL;
         dk_error e = {0};
-        dk_arap_info info;
+        dk_solve_info info;
         if (dk_arap_bind(m, &d, &o, &ar, &e) == DK_OK) {
-            CHECK(dk_arap_solve(ar, t, 0, 0, 0, x, &info, &e) == DK_OK);
+            CHECK(dk_arap_solve(ar, &(dk_solve_request){.targets = t}, x, &info, &e) == DK_OK);
             CHECK(h.count == info.iterations + 1 && h.count > 2);
             for (int k = 1; k < h.count; k++)
                 CHECK(h.e[k] <= h.e[k - 1] * (1 + 1e-13));
-            CHECK_NEAR(dk_arap_energy(ar, x), info.energy, 1e-12 * info.energy);
+            CHECK_NEAR(arap_energy(ar, x), info.energy, 1e-12 * info.energy);
             printf("threaded (%d vertices), %s: %d iterations, energy %.10g\n",
                    (int)m->n_vertices, accel == 2 ? "newton" : "anderson", info.iterations,
                    info.energy);

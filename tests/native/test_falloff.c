@@ -125,8 +125,10 @@ static void test_distance_kinds(void)
                 continue;
             }
             double t[3] = {m->positions[3 * centre], m->positions[3 * centre + 1], 1.0};
-            double energy = -1, esum = 0;
-            CHECK(dk_falloff_solve(f, t, 0, x, &energy, &e) == DK_OK);
+            double esum = 0;
+            dk_solve_info info = {.energy = -1};
+            CHECK(dk_falloff_solve(f, &(dk_solve_request){.targets = t}, x, &info, &e) == DK_OK);
+            const double energy = info.energy;
             int bad_formula = 0, bad_dist = 0, bad_xy = 0;
             for (dk_index v = 0; v < n; v++) {
                 double dist, w;
@@ -209,7 +211,7 @@ static void test_groups_and_constraints(void)
         memcpy(t + 3 * k, m->positions + 3 * hv[k], sizeof(double) * 3);
         t[3 * k + 2] += k < 5 ? 0.1 * (k + 1) : -1.0;
     }
-    CHECK(dk_falloff_solve(f, t, 0, x, NULL, &e) == DK_OK);
+    CHECK(dk_falloff_solve(f, &(dk_solve_request){.targets = t}, x, NULL, &e) == DK_OK);
     int bad = 0;
     for (int j = 0; j < 5; j++)
         for (int i = 0; i <= 20; i++) {
@@ -247,8 +249,11 @@ static void test_groups_and_constraints(void)
             memcpy(t2 + 3 * k, m->positions + 3 * hv[k], sizeof(double) * 3);
             t2[3 * k + 2] += k < 5 ? 0.3 : -1.0;
         }
-        CHECK(dk_falloff_solve(f, T, 1, x, NULL, &e) == DK_OK);
-        CHECK(dk_falloff_solve(f, t2, 0, y, NULL, &e) == DK_OK);
+        CHECK(dk_falloff_solve(f,
+                               &(dk_solve_request){.targets = T,
+                                                   .target_kind = DK_TARGETS_TRANSFORMS},
+                               x, NULL, &e) == DK_OK);
+        CHECK(dk_falloff_solve(f, &(dk_solve_request){.targets = t2}, y, NULL, &e) == DK_OK);
         double md = 0;
         for (dk_index i = 0; i < 3 * n; i++)
             md = fmax(md, fabs(x[i] - y[i]));
@@ -257,7 +262,10 @@ static void test_groups_and_constraints(void)
         memset(T, 0, sizeof T);
         T[1] = -1; T[4] = 1; T[10] = 1; T[15] = 1; /* 90 deg about z */
         T[16] = T[21] = T[26] = T[31] = 1;
-        CHECK(dk_falloff_solve(f, T, 1, x, NULL, &e) == DK_OK);
+        CHECK(dk_falloff_solve(f,
+                               &(dk_solve_request){.targets = T,
+                                                   .target_kind = DK_TARGETS_TRANSFORMS},
+                               x, NULL, &e) == DK_OK);
         const dk_index v = 2 * W + 3;
         double d0, w0;
         dk_falloff_vertex_weight(f, 0, v, &d0, &w0);
@@ -281,9 +289,11 @@ static void test_groups_and_constraints(void)
         d2.n_roi = nr;
         d2.roi_vertices = roi;
         CHECK(dk_falloff_rebind(f, &d2, &e) == DK_OK);
-        CHECK(dk_falloff_n_handles(f) == 1 && dk_falloff_n_handle_vertices(f) == 1);
+        dk_method_stats ms;
+        dk_falloff_stats(f, &ms);
+        CHECK(ms.n_handles == 1 && ms.n_handle_vertices == 1);
         double t1[3] = {m->positions[3 * h0], m->positions[3 * h0 + 1], 2.0};
-        CHECK(dk_falloff_solve(f, t1, 0, x, NULL, &e) == DK_OK);
+        CHECK(dk_falloff_solve(f, &(dk_solve_request){.targets = t1}, x, NULL, &e) == DK_OK);
         int moved_out = 0, moved_in = 0;
         for (dk_index v = 0; v < n; v++) {
             if (v % W > 10)
@@ -343,10 +353,14 @@ static void test_bad_input(void)
         double t[6] = {0, 0, NAN, 0, 0, 0}, *x = malloc(sizeof(double) * 3 * (size_t)m->n_vertices);
         if (!x)
             abort();
-        CHECK(dk_falloff_solve(f, t, 0, x, NULL, &e) == DK_ERR_NONFINITE);
+        CHECK(dk_falloff_solve(f, &(dk_solve_request){.targets = t}, x, NULL,
+                               &e) == DK_ERR_NONFINITE);
         t[2] = 0;
-        CHECK(dk_falloff_solve(f, t, 0, x, NULL, &e) == DK_OK);
-        CHECK(dk_falloff_solve(f, t, 2, x, NULL, &e) == DK_ERR_INVALID_ARGUMENT);
+        CHECK(dk_falloff_solve(f, &(dk_solve_request){.targets = t}, x, NULL, &e) == DK_OK);
+        CHECK(dk_falloff_solve(f,
+                               &(dk_solve_request){.targets = t,
+                                                   .target_kind = (dk_target_kind)(2)},
+                               x, NULL, &e) == DK_ERR_INVALID_ARGUMENT);
         free(x);
     }
     dk_falloff_free(f);

@@ -26,6 +26,14 @@ typedef struct gen_mesh {
     dk_index nv, nf;
 } gen_mesh;
 
+
+/* The contract's counters as a value, for assertions. */
+static dk_method_stats le_stats(const dk_laplacian_edit *le)
+{
+    dk_method_stats st;
+    dk_laplacian_edit_stats(le, &st);
+    return st;
+}
 static void gen_free(gen_mesh *g)
 {
     free(g->p);
@@ -297,7 +305,7 @@ static void test_zero_drag_returns_rest(void)
             for (int c = 0; c < 2; c++) {
                 dk_laplacian_edit_options o;
                 dk_laplacian_edit *le = NULL;
-                dk_laplacian_edit_info info;
+                dk_solve_info info;
                 dk_error e;
                 dk_error_clear(&e);
                 dk_laplacian_edit_default_options(&o);
@@ -309,7 +317,7 @@ static void test_zero_drag_returns_rest(void)
                 CHECK_MSG(st == DK_OK, "%s", e.message);
                 if (st != DK_OK)
                     continue;
-                st = dk_laplacian_edit_solve(le, t, 0, x, &info, &e);
+                st = dk_laplacian_edit_solve(le, &(dk_solve_request){.targets = t}, x, &info, &e);
                 CHECK_MSG(st == DK_OK, "%s", e.message);
                 CHECK_MSG(max_abs_diff(x, s.m->positions, 3 * (size_t)s.m->n_vertices) <
                               1e-10 * s.m->bbox_diagonal,
@@ -343,7 +351,7 @@ static void test_hard_constraints_and_energy(void)
     for (int det = 0; det < 3; det++) {
         dk_laplacian_edit_options o;
         dk_laplacian_edit *le = NULL;
-        dk_laplacian_edit_info info;
+        dk_solve_info info;
         dk_error e;
         dk_error_clear(&e);
         dk_laplacian_edit_default_options(&o);
@@ -353,7 +361,8 @@ static void test_hard_constraints_and_energy(void)
             CHECK_MSG(0, "%s", e.message);
             continue;
         }
-        CHECK(dk_laplacian_edit_solve(le, t, 0, x, &info, &e) == DK_OK);
+        CHECK(dk_laplacian_edit_solve(le, &(dk_solve_request){.targets = t}, x, &info,
+                                      &e) == DK_OK);
         double herr = 0.0, ferr = 0.0;
         for (dk_index k = 0; k < s.n_handle; k++)
             for (int d = 0; d < 3; d++)
@@ -412,12 +421,12 @@ static void test_soft_tikhonov_membrane(void)
         t[3 * k + 2] += 0.3;
     dk_laplacian_edit_options o;
     dk_laplacian_edit *le = NULL;
-    dk_laplacian_edit_info info;
+    dk_solve_info info;
     dk_error e;
     dk_error_clear(&e);
     dk_laplacian_edit_default_options(&o);
     CHECK(dk_laplacian_edit_bind(s.m, &s.desc, &o, &le, &e) == DK_OK);
-    CHECK(dk_laplacian_edit_solve(le, t, 0, xh, &info, &e) == DK_OK);
+    CHECK(dk_laplacian_edit_solve(le, &(dk_solve_request){.targets = t}, xh, &info, &e) == DK_OK);
     dk_laplacian_edit_free(le);
     /* soft: the handle error shrinks as lambda grows and tends to the hard solution */
     double prev_err = INFINITY, last_diff = 0.0;
@@ -429,7 +438,8 @@ static void test_soft_tikhonov_membrane(void)
             CHECK_MSG(0, "%s", e.message);
             continue;
         }
-        CHECK(dk_laplacian_edit_solve(le, t, 0, x, &info, &e) == DK_OK);
+        CHECK(dk_laplacian_edit_solve(le, &(dk_solve_request){.targets = t}, x, &info,
+                                      &e) == DK_OK);
         double herr = 0.0, en = -1.0;
         for (dk_index k = 0; k < s.n_handle; k++)
             herr = fmax(herr, fabs(x[3 * s.handle[k] + 2] - t[3 * k + 2]));
@@ -438,8 +448,8 @@ static void test_soft_tikhonov_membrane(void)
         dk_laplacian_edit_energy(le, x, &en, &e);
         CHECK_NEAR(en, info.energy, 1e-12 * fmax(1.0, en));
         last_diff = max_abs_diff(x, xh, 3 * (size_t)n);
-        dk_laplacian_edit_stats stt;
-        dk_laplacian_edit_get_stats(le, &stt);
+        dk_laplacian_edit_counters stt;
+        dk_laplacian_edit_get_counters(le, &stt);
         CHECK(stt.n_soft_rows == s.n_handle + s.n_fixed);
         CHECK(stt.n_unknowns == n);
         dk_laplacian_edit_free(le);
@@ -452,7 +462,8 @@ static void test_soft_tikhonov_membrane(void)
         o.tikhonov = 0.5;
         le = NULL;
         CHECK(dk_laplacian_edit_bind(s.m, &s.desc, &o, &le, &e) == DK_OK);
-        CHECK(dk_laplacian_edit_solve(le, t, 0, x, &info, &e) == DK_OK);
+        CHECK(dk_laplacian_edit_solve(le, &(dk_solve_request){.targets = t}, x, &info,
+                                      &e) == DK_OK);
         for (size_t i = 0; i < 3 * (size_t)n; i++) {
             d0 += pow(xh[i] - s.m->positions[i], 2);
             d1 += pow(x[i] - s.m->positions[i], 2);
@@ -470,7 +481,8 @@ static void test_soft_tikhonov_membrane(void)
         le = NULL;
         rest_targets(s.m, s.handle, s.n_handle, t);
         CHECK(dk_laplacian_edit_bind(s.m, &s.desc, &o, &le, &e) == DK_OK);
-        CHECK(dk_laplacian_edit_solve(le, t, 0, x, &info, &e) == DK_OK);
+        CHECK(dk_laplacian_edit_solve(le, &(dk_solve_request){.targets = t}, x, &info,
+                                      &e) == DK_OK);
         double z0 = 0, z1 = 0, e_rest = -1;
         for (dk_index v = 0; v < n; v++) {
             z0 += fabs(s.m->positions[3 * v + 2]);
@@ -508,15 +520,15 @@ static void test_handle_weights_and_rebind(void)
         hw[k] = 1.0;
     }
     dk_laplacian_edit *le = NULL;
-    dk_laplacian_edit_info info;
-    dk_laplacian_edit_stats st0, st1;
+    dk_solve_info info;
+    dk_laplacian_edit_counters st0, st1;
     dk_error e;
     dk_error_clear(&e);
     CHECK(dk_laplacian_edit_bind(s.m, &s.desc, NULL, &le, &e) == DK_OK);
     if (!le)
         goto out;
-    CHECK(dk_laplacian_edit_solve(le, t, 0, x, &info, &e) == DK_OK);
-    dk_laplacian_edit_get_stats(le, &st0);
+    CHECK(dk_laplacian_edit_solve(le, &(dk_solve_request){.targets = t}, x, &info, &e) == DK_OK);
+    dk_laplacian_edit_get_counters(le, &st0);
     CHECK(st0.analysis_count == 1 && st0.factorization_count == 1);
     /* same constrained set split into two groups: analysis and factor reused */
     {
@@ -525,10 +537,11 @@ static void test_handle_weights_and_rebind(void)
         d2.n_handles = 2;
         d2.handle_sizes = sizes;
         CHECK(dk_laplacian_edit_rebind(le, &d2, &e) == DK_OK);
-        dk_laplacian_edit_get_stats(le, &st1);
+        dk_laplacian_edit_get_counters(le, &st1);
         CHECK(st1.analysis_count == 1 && st1.factorization_count == 1);
-        CHECK(dk_laplacian_edit_n_handles(le) == 2);
-        CHECK(dk_laplacian_edit_solve(le, t, 0, y, &info, &e) == DK_OK);
+        CHECK(le_stats(le).n_handles == 2);
+        CHECK(dk_laplacian_edit_solve(le, &(dk_solve_request){.targets = t}, y, &info,
+                                      &e) == DK_OK);
         CHECK(max_abs_diff(x, y, 3 * (size_t)n) < 1e-12);
     }
     /* a soft handle vertex (weight < 1) in hard mode becomes an unknown with a soft row */
@@ -537,10 +550,11 @@ static void test_handle_weights_and_rebind(void)
         hw[0] = 0.5;
         d3.handle_weights = hw;
         CHECK(dk_laplacian_edit_rebind(le, &d3, &e) == DK_OK);
-        dk_laplacian_edit_get_stats(le, &st1);
+        dk_laplacian_edit_get_counters(le, &st1);
         CHECK(st1.n_soft_rows == 1);
         CHECK(st1.analysis_count == 2);
-        CHECK(dk_laplacian_edit_solve(le, t, 0, y, &info, &e) == DK_OK);
+        CHECK(dk_laplacian_edit_solve(le, &(dk_solve_request){.targets = t}, y, &info,
+                                      &e) == DK_OK);
         double z = y[3 * s.handle[0] + 2], z0 = s.m->positions[3 * s.handle[0] + 2];
         CHECK(z > z0 && z < t[2]);
         double en = -1;
@@ -549,7 +563,7 @@ static void test_handle_weights_and_rebind(void)
         /* change only the weight: same pattern, new values: refactor without analysis */
         hw[0] = 0.25;
         CHECK(dk_laplacian_edit_rebind(le, &d3, &e) == DK_OK);
-        dk_laplacian_edit_get_stats(le, &st0);
+        dk_laplacian_edit_get_counters(le, &st0);
         CHECK(st0.analysis_count == 2 && st0.factorization_count == st1.factorization_count + 1);
     }
     /* a failing rebind keeps the object usable */
@@ -560,7 +574,8 @@ static void test_handle_weights_and_rebind(void)
         bad.handle_vertices = &bad_idx;
         bad.handle_sizes = &one;
         CHECK(dk_laplacian_edit_rebind(le, &bad, &e) == DK_ERR_INDEX);
-        CHECK(dk_laplacian_edit_solve(le, t, 0, y, &info, &e) == DK_OK);
+        CHECK(dk_laplacian_edit_solve(le, &(dk_solve_request){.targets = t}, y, &info,
+                                      &e) == DK_OK);
     }
     dk_laplacian_edit_free(le);
 out:
@@ -643,10 +658,14 @@ static void test_bad_input(void)
         rest_targets(s.m, s.handle, s.n_handle, t);
         CHECK(dk_laplacian_edit_bind(s.m, &s.desc, NULL, &le, &e) == DK_OK);
         t[4] = NAN;
-        CHECK(dk_laplacian_edit_solve(le, t, 0, x, NULL, &e) == DK_ERR_NONFINITE);
+        CHECK(dk_laplacian_edit_solve(le, &(dk_solve_request){.targets = t}, x, NULL,
+                                      &e) == DK_ERR_NONFINITE);
         t[4] = s.m->positions[3 * s.handle[1] + 1];
-        CHECK(dk_laplacian_edit_solve(le, t, 0, x, NULL, &e) == DK_OK);
-        CHECK(dk_laplacian_edit_solve(le, t, 7, x, NULL, &e) == DK_ERR_INVALID_ARGUMENT);
+        CHECK(dk_laplacian_edit_solve(le, &(dk_solve_request){.targets = t}, x, NULL, &e) == DK_OK);
+        CHECK(dk_laplacian_edit_solve(le,
+                                      &(dk_solve_request){.targets = t,
+                                                          .target_kind = (dk_target_kind)(7)},
+                                      x, NULL, &e) == DK_ERR_INVALID_ARGUMENT);
         dk_laplacian_edit_free(le);
         le = NULL;
         free(t);
@@ -737,15 +756,16 @@ static void test_bad_input(void)
             if (st == DK_OK) {
                 double t[3] = {m->positions[90], m->positions[91], m->positions[92] + 0.5};
                 double *x = malloc(sizeof(double) * 3 * (size_t)m->n_vertices);
-                dk_laplacian_edit_stats stt;
+                dk_laplacian_edit_counters stt;
                 if (!x)
                     abort();
-                CHECK(dk_laplacian_edit_solve(le, t, 0, x, NULL, &e) == DK_OK);
+                CHECK(dk_laplacian_edit_solve(le, &(dk_solve_request){.targets = t}, x, NULL,
+                                              &e) == DK_OK);
                 int finite = 1;
                 for (dk_index i = 0; i < 3 * m->n_vertices; i++)
                     finite &= isfinite(x[i]) != 0;
                 CHECK(finite);
-                dk_laplacian_edit_get_stats(le, &stt);
+                dk_laplacian_edit_get_counters(le, &stt);
                 CHECK(stt.n_cotangent_fallback == 0); /* vertex 8 still has good triangles */
                 free(x);
                 dk_laplacian_edit_free(le);
@@ -776,7 +796,7 @@ static void test_bad_input(void)
         if (m) {
             dk_index hv = 30, one = 1, fx = 6;
             dk_constraint_desc d = {0};
-            dk_laplacian_edit_stats stt;
+            dk_laplacian_edit_counters stt;
             d.n_handles = 1;
             d.handle_sizes = &one;
             d.handle_vertices = &hv;
@@ -790,9 +810,10 @@ static void test_bad_input(void)
                 int finite = 1;
                 if (!x)
                     abort();
-                dk_laplacian_edit_get_stats(le, &stt);
+                dk_laplacian_edit_get_counters(le, &stt);
                 CHECK(stt.n_cotangent_fallback == 1);
-                CHECK(dk_laplacian_edit_solve(le, t, 0, x, NULL, &e) == DK_OK);
+                CHECK(dk_laplacian_edit_solve(le, &(dk_solve_request){.targets = t}, x, NULL,
+                                              &e) == DK_OK);
                 for (dk_index i = 0; i < 3 * m->n_vertices; i++)
                     finite &= isfinite(x[i]) != 0;
                 CHECK(finite);
@@ -848,7 +869,7 @@ static void test_bumpy_plane_bend(void)
     for (int variant = 0; variant < 2; variant++) {
         dk_laplacian_edit_options o;
         dk_laplacian_edit *le = NULL;
-        dk_laplacian_edit_info info;
+        dk_solve_info info;
         dk_error e;
         dk_error_clear(&e);
         dk_laplacian_edit_default_options(&o);
@@ -860,7 +881,10 @@ static void test_bumpy_plane_bend(void)
             CHECK_MSG(0, "%s", e.message);
             continue;
         }
-        CHECK(dk_laplacian_edit_solve(le, T, 1, x, &info, &e) == DK_OK);
+        CHECK(dk_laplacian_edit_solve(le,
+                                      &(dk_solve_request){.targets = T,
+                                                          .target_kind = DK_TARGETS_TRANSFORMS},
+                                      x, &info, &e) == DK_OK);
         rms[variant] = rel_rms_edge_change(s.m, x);
         align[variant] = bump_alignment(s.m, x, sel, 1e-4);
         printf("bumpy plane bend %s: rel RMS edge change %.4f, bump/normal alignment %.3f "
@@ -924,7 +948,7 @@ static void test_bar_twist(void)
     for (int variant = 0; variant < 2; variant++) {
         dk_laplacian_edit_options o;
         dk_laplacian_edit *le = NULL;
-        dk_laplacian_edit_info info;
+        dk_solve_info info;
         dk_error e;
         dk_error_clear(&e);
         dk_laplacian_edit_default_options(&o);
@@ -935,7 +959,10 @@ static void test_bar_twist(void)
             CHECK_MSG(0, "%s", e.message);
             continue;
         }
-        CHECK(dk_laplacian_edit_solve(le, T, 1, x, &info, &e) == DK_OK);
+        CHECK(dk_laplacian_edit_solve(le,
+                                      &(dk_solve_request){.targets = T,
+                                                          .target_kind = DK_TARGETS_TRANSFORMS},
+                                      x, &info, &e) == DK_OK);
         rms[variant] = rel_rms_edge_change(mesh, x);
         align[variant] = bump_alignment(mesh, x, sel, 1e-3);
         /* mean distance of the middle ring from the axis */
@@ -985,7 +1012,7 @@ static void test_local_frame_convergence(void)
     for (int its = 1; its <= 64; its *= 4) {
         dk_laplacian_edit_options o;
         dk_laplacian_edit *le = NULL;
-        dk_laplacian_edit_info info;
+        dk_solve_info info;
         dk_error e;
         dk_error_clear(&e);
         dk_laplacian_edit_default_options(&o);
@@ -996,7 +1023,10 @@ static void test_local_frame_convergence(void)
             CHECK_MSG(0, "%s", e.message);
             continue;
         }
-        CHECK(dk_laplacian_edit_solve(le, T, 1, x, &info, &e) == DK_OK);
+        CHECK(dk_laplacian_edit_solve(le,
+                                      &(dk_solve_request){.targets = T,
+                                                          .target_kind = DK_TARGETS_TRANSFORMS},
+                                      x, &info, &e) == DK_OK);
         printf("local_frame iterations %d: used %d, last change %.3e, converged %d\n", its,
                info.iterations, info.last_change, info.converged);
         CHECK(info.last_change <= prev);
@@ -1031,7 +1061,7 @@ static void test_big_local_frame_threads(void)
     rotation_about(1, -M_PI / 5, c, T);
     dk_laplacian_edit_options o;
     dk_laplacian_edit *le = NULL;
-    dk_laplacian_edit_info a, b;
+    dk_solve_info a, b;
     dk_error e;
     dk_error_clear(&e);
     dk_laplacian_edit_default_options(&o);
@@ -1042,7 +1072,10 @@ static void test_big_local_frame_threads(void)
         CHECK_MSG(0, "%s", e.message);
         goto out;
     }
-    CHECK(dk_laplacian_edit_solve(le, T, 1, x, &a, &e) == DK_OK);
+    CHECK(dk_laplacian_edit_solve(le,
+                                  &(dk_solve_request){.targets = T,
+                                                      .target_kind = DK_TARGETS_TRANSFORMS},
+                                  x, &a, &e) == DK_OK);
     CHECK(a.iterations == 4);
     CHECK(dk_laplacian_edit_energy(le, x, &e_check, &e) == DK_OK);
     CHECK_MSG(fabs(e_check - a.energy) <= 1e-12 * a.energy, "energy %.17g vs %.17g", a.energy,
@@ -1060,14 +1093,25 @@ static void test_big_local_frame_threads(void)
     }
     CHECK_MSG(worst <= 1e-12, "constraint error %.3e", worst);
     for (int rep = 0; rep < 3; rep++) {
-        CHECK(dk_laplacian_edit_solve(le, T, 1, y, &b, &e) == DK_OK);
+        CHECK(dk_laplacian_edit_solve(le,
+                                      &(dk_solve_request){.targets = T,
+                                                          .target_kind = DK_TARGETS_TRANSFORMS},
+                                      y, &b, &e) == DK_OK);
         CHECK(memcmp(x, y, sizeof(double) * 3 * (size_t)n) == 0);
         CHECK(memcmp(&a.energy, &b.energy, sizeof(double)) == 0);
     }
-    CHECK(dk_laplacian_edit_solve(le, T, 1 | DK_LE_SOLVE_NO_ENERGY, y, &b, &e) == DK_OK);
+    CHECK(dk_laplacian_edit_solve(le,
+                                  &(dk_solve_request){.targets = T,
+                                                      .target_kind = DK_TARGETS_TRANSFORMS,
+                                                      .skip_energy = 1},
+                                  y, &b, &e) == DK_OK);
     CHECK(memcmp(x, y, sizeof(double) * 3 * (size_t)n) == 0);
     CHECK(isnan(b.energy) && b.iterations == a.iterations);
-    CHECK(dk_laplacian_edit_solve(le, T, 2 | DK_LE_SOLVE_NO_ENERGY, y, &b, &e) ==
+    CHECK(dk_laplacian_edit_solve(le,
+                                  &(dk_solve_request){.targets = T,
+                                                      .target_kind = (dk_target_kind)(2),
+                                                      .skip_energy = 1},
+                                  y, &b, &e) ==
           DK_ERR_INVALID_ARGUMENT);
 out:
     dk_laplacian_edit_free(le);
@@ -1108,7 +1152,7 @@ static void test_transforms_match_targets(void)
     for (int variant = 0; variant < 5; variant++) {
         dk_laplacian_edit_options o;
         dk_laplacian_edit *le = NULL;
-        dk_laplacian_edit_info i1, i2;
+        dk_solve_info i1, i2;
         dk_constraint_desc d = s.desc;
         dk_error e;
         dk_error_clear(&e);
@@ -1133,8 +1177,11 @@ static void test_transforms_match_targets(void)
             CHECK_MSG(0, "%s", e.message);
             continue;
         }
-        CHECK(dk_laplacian_edit_solve(le, T, 1, x, &i1, &e) == DK_OK);
-        CHECK(dk_laplacian_edit_solve(le, t, 0, y, &i2, &e) == DK_OK);
+        CHECK(dk_laplacian_edit_solve(le,
+                                      &(dk_solve_request){.targets = T,
+                                                          .target_kind = DK_TARGETS_TRANSFORMS},
+                                      x, &i1, &e) == DK_OK);
+        CHECK(dk_laplacian_edit_solve(le, &(dk_solve_request){.targets = t}, y, &i2, &e) == DK_OK);
         CHECK_MSG(max_abs_diff(x, y, 3 * (size_t)n) < 1e-11, "variant %d: %g", variant,
                   max_abs_diff(x, y, 3 * (size_t)n));
         CHECK_NEAR(i1.energy, i2.energy, 1e-10 * fmax(1.0, i2.energy));
@@ -1181,8 +1228,11 @@ static void test_many_handles_transforms(void)
     d.handle_sizes = sizes;
     CHECK(dk_laplacian_edit_bind(s.m, &d, NULL, &le, &e) == DK_OK);
     if (le) {
-        CHECK(dk_laplacian_edit_solve(le, T, 1, x, NULL, &e) == DK_OK);
-        CHECK(dk_laplacian_edit_solve(le, t, 0, y, NULL, &e) == DK_OK);
+        CHECK(dk_laplacian_edit_solve(le,
+                                      &(dk_solve_request){.targets = T,
+                                                          .target_kind = DK_TARGETS_TRANSFORMS},
+                                      x, NULL, &e) == DK_OK);
+        CHECK(dk_laplacian_edit_solve(le, &(dk_solve_request){.targets = t}, y, NULL, &e) == DK_OK);
         CHECK(max_abs_diff(x, y, 3 * (size_t)n) < 1e-12);
         dk_laplacian_edit_free(le);
     }

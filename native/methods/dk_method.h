@@ -1,0 +1,130 @@
+/* DeformKit: the one contract every deformation method implements.
+ *
+ * A method is a bound object with two verbs, as in libigl's precompute/solve pairs:
+ *   bind   (precompute, seconds on big meshes): mesh + constraint description + the method's
+ *          own typed options -> an object holding factorizations and buffers;
+ *   solve  (per update, allocation-free): a dk_solve_request -> n_vertices x 3 positions and
+ *          one dk_solve_info.
+ * plus rebind (new constraints, same mesh and options, reusing what it can; on failure the
+ * object keeps its previous constraints), energy (of arbitrary positions), stats (counters)
+ * and free. Each method fills one dk_method_ops table with these (Blender's ModifierTypeInfo
+ * is the model), so that code written against the contract -- the generic tests, the
+ * Python binding -- works for every method registered in dk_methods().
+ *
+ * The request follows CHOLMOD's short form over a full form: a zero-initialised request with
+ * only `targets` set, `(dk_solve_request){.targets = t}`, is the common case (handle
+ * positions, a cold start, the bound iteration cap, the energy reported); the other fields
+ * can grow without changing any signature. Options stay typed per method (dk_arap_options,
+ * ...); the ops table takes them as `const void *`, NULL meaning the defaults.
+ */
+#ifndef DK_METHOD_H
+#define DK_METHOD_H
+
+#include "dk_constraints.h"
+#include "dk_mesh.h"
+#include "dk_status.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/** What `targets` holds. */
+typedef enum dk_target_kind {
+    DK_TARGETS_POSITIONS = 0,  /**< n_handle_vertices x 3 positions, concatenated in handle
+                                    order                                                  */
+    DK_TARGETS_TRANSFORMS = 1  /**< n_handles 4x4 row-major affine transforms of the rest
+                                    positions of each handle's vertices (bottom row
+                                    0 0 0 1); see dk_constraints_targets                   */
+} dk_target_kind;
+
+/** Where an iterative method starts. Direct methods give the same result for each. */
+typedef enum dk_start {
+    DK_START_COLD = 0,   /**< from the rest state only: the result depends on this request
+                              alone (frames, renders, bakes)                               */
+    DK_START_WARM = 1,   /**< from the previous solution when there is one (dragging)      */
+    DK_START_RESUME = 2  /**< when the targets equal the previous request's and it ended
+                              normally: continue exactly where it stopped, so that a solve
+                              cut into slices by max_iterations equals one long solve;
+                              otherwise as WARM                                            */
+} dk_start;
+
+/** One solve. Zero-initialise, then set what differs from the defaults. */
+typedef struct dk_solve_request {
+    const double *targets;      /**< see target_kind; must not be NULL                     */
+    dk_target_kind target_kind; /**< default DK_TARGETS_POSITIONS                          */
+    dk_start start;             /**< default DK_START_COLD                                 */
+    int max_iterations;         /**< > 0 overrides the bound option for this call; 0 keeps
+                                     it (direct methods ignore it)                         */
+    int skip_energy;            /**< 1: do not evaluate the energy (info.energy is NaN), for
+                                     interactive updates that never show it                */
+} dk_solve_request;
+
+/** What one solve did. Fields a method does not have are 0. */
+typedef struct dk_solve_info {
+    double energy;      /**< the method's energy at the returned positions (its header says
+                             which); NaN when the request skipped it                       */
+    int iterations;     /**< iterations done (1 for a direct method)                       */
+    int converged;      /**< 1 if the method's stopping test held (always for direct ones) */
+    int rejected;       /**< ARAP: accelerated steps rejected by the safeguard             */
+    int predicted;      /**< ARAP: 1 if the warm start extrapolated along the drag         */
+    int cg_iterations;  /**< ARAP Newton: Hessian products done in all                     */
+    double last_change; /**< Laplacian editing, local frames: max vertex move of the last
+                             iteration / bounding-box diagonal                             */
+} dk_solve_info;
+
+/** Counters every method reports; a method may have more of its own. */
+typedef struct dk_method_stats {
+    dk_index n_vertices;         /**< of the bound mesh                                     */
+    dk_index n_handles;          /**< of the current constraints                            */
+    dk_index n_handle_vertices;  /**< of the current constraints                            */
+    dk_index n_unknowns;         /**< size of the factored system (0 for direct methods)    */
+    int analysis_count;          /**< symbolic analyses since bind                          */
+    int factorization_count;     /**< numeric factorizations since bind                     */
+} dk_method_stats;
+
+/** What a method's results depend on, for code that is written against the contract. */
+typedef enum dk_method_flags {
+    DK_METHOD_ITERATIVE = 1,           /**< request.start and max_iterations matter        */
+    DK_METHOD_TRANSFORMS_AS_POSITIONS = 2 /**< a transform gives the result of the positions
+                                            it maps the handle to (else only translations
+                                            do: Falloff blends transforms per vertex)      */
+} dk_method_flags;
+
+/** The functions of one method; every entry is set. `self` is the method's object. */
+typedef struct dk_method_ops {
+    const char *name;  /**< the class name, as in the Python module ("ARAP", ...)          */
+    unsigned flags;    /**< dk_method_flags                                                 */
+    /** Binds: `options` is the method's own options struct, or NULL for the defaults. The
+     *  mesh is borrowed and must outlive the object. */
+    dk_status (*bind)(const dk_mesh *mesh, const dk_constraint_desc *constraints,
+                      const void *options, void **out, dk_error *err);
+    /** New constraints, same mesh and options; on failure nothing changes. */
+    dk_status (*rebind)(void *self, const dk_constraint_desc *constraints, dk_error *err);
+    /** Writes positions (n_vertices x 3, row-major) and info (may be NULL). */
+    dk_status (*solve)(void *self, const dk_solve_request *request, double *positions,
+                       dk_solve_info *info, dk_error *err);
+    /** The method's energy of arbitrary positions (n_vertices x 3) for the targets of the
+     *  last solve (before any solve: the rest targets). */
+    dk_status (*energy)(const void *self, const double *positions, double *energy,
+                        dk_error *err);
+    void (*stats)(const void *self, dk_method_stats *stats);
+    void (*free)(void *self);
+} dk_method_ops;
+
+/** Every registered method, in a fixed order, terminated by NULL. Adding a method adds its
+ *  table here (methods.c). */
+const dk_method_ops *const *dk_methods(void);
+
+/** The registered method called `name`, or NULL. */
+const dk_method_ops *dk_method_find(const char *name);
+
+/** Checks the parts of a request every method checks the same way: a non-NULL request and
+ *  targets, known target kind and start, max_iterations >= 0. `who` prefixes the message
+ *  ("ARAP solve"). */
+dk_status dk_solve_request_check(const dk_solve_request *request, const char *who,
+                                 dk_error *err);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,53 @@
+/* DeformKit: the registry of methods (dk_method.h) and the request checks they share. */
+#include "dk_method.h"
+
+#include <stddef.h>
+#include <string.h>
+
+#include "dk_arap.h"
+#include "dk_falloff.h"
+#include "dk_laplacian_edit.h"
+
+/* Adding a method: its table here, in the order the Python module lists its classes. */
+static const dk_method_ops *const registry[] = {&dk_arap_ops, &dk_laplacian_edit_ops,
+                                                &dk_falloff_ops, NULL};
+
+const dk_method_ops *const *dk_methods(void)
+{
+    return registry;
+}
+
+const dk_method_ops *dk_method_find(const char *name)
+{
+    if (!name)
+        return NULL;
+    for (const dk_method_ops *const *m = registry; *m; m++)
+        if (strcmp((*m)->name, name) == 0)
+            return *m;
+    return NULL;
+}
+
+dk_status dk_solve_request_check(const dk_solve_request *rq, const char *who, dk_error *err)
+{
+    if (!rq)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s: the request is NULL", who);
+    if (!rq->targets)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s: targets must not be NULL", who);
+    if (rq->target_kind != DK_TARGETS_POSITIONS && rq->target_kind != DK_TARGETS_TRANSFORMS)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "%s: target kind %d is neither positions (0) nor transforms (1)",
+                            who, (int)rq->target_kind);
+    if (rq->start != DK_START_COLD && rq->start != DK_START_WARM &&
+        rq->start != DK_START_RESUME)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "%s: start %d is not cold (0), warm (1) or resume (2)", who,
+                            (int)rq->start);
+    if (rq->max_iterations < 0)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "%s: max_iterations is %d, must be >= 0 (0: the bound option)",
+                            who, rq->max_iterations);
+    if (rq->skip_energy != 0 && rq->skip_energy != 1)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s: skip_energy must be 0 or 1",
+                            who);
+    return DK_OK;
+}

@@ -1,0 +1,265 @@
+/* The method contract (dk_method.h), checked for every method of dk_methods(): a method
+ * registered there gets these tests without writing any. Each runs on a bumpy plane with two
+ * handles (the left and the right column of vertices) and a fixed row, and on a closed
+ * icosphere with one handle cap and a fixed cap, with the method's default options:
+ *   - zero drag (the handles' rest positions as targets) returns the rest mesh;
+ *   - positions and transforms describing the same targets give the same result (for a
+ *     method without DK_METHOD_TRANSFORMS_AS_POSITIONS: translations);
+ *   - a rebind with the same constraints equals a fresh bind, and the counters follow;
+ *   - two cold solves of one request are bit-identical, whatever was solved in between;
+ *   - energy(positions returned) equals the energy the solve reported;
+ *   - every malformed request is refused with the same status by every method, and a
+ *     refused solve leaves the object as it was. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "dk_method.h"
+#include "dk_test.h"
+#include "dk_test_meshes.h"
+
+typedef struct scene {
+    const char *name;
+    dk_mesh *mesh;
+    dk_index sizes[2], *hv, n_hv, *fixed, n_fixed;
+    dk_constraint_desc desc;
+    double diag;
+} scene;
+
+static void scene_free(scene *s)
+{
+    dk_mesh_free(s->mesh);
+    free(s->hv);
+    free(s->fixed);
+    memset(s, 0, sizeof *s);
+}
+
+/* vertices by a coordinate: handle 0 where coord[axis] <= lo, handle 1 where >= hi (if two
+ * handles), fixed where |coord[faxis] - fval| <= ftol and not in a handle */
+static int scene_make(scene *s, const char *name, dk_test_mesh *tm, int axis, double lo,
+                      double hi, int two_handles, int faxis, double fval, double ftol)
+{
+    memset(s, 0, sizeof *s);
+    s->name = name;
+    s->mesh = dk_test_mesh_build(tm);
+    const dk_index n = tm->n_vertices;
+    s->hv = malloc(sizeof(dk_index) * (size_t)n);
+    s->fixed = malloc(sizeof(dk_index) * (size_t)n);
+    if (!s->mesh || !s->hv || !s->fixed)
+        return -1;
+    for (int h = 0; h < 1 + two_handles; h++)
+        for (dk_index v = 0; v < n; v++) {
+            const double c = tm->positions[3 * v + axis];
+            if (h == 0 ? c <= lo : c >= hi) {
+                s->hv[s->n_hv++] = v;
+                s->sizes[h]++;
+            }
+        }
+    for (dk_index v = 0; v < n; v++) {
+        const double c = tm->positions[3 * v + axis];
+        const int in_handle = c <= lo || (two_handles && c >= hi);
+        if (!in_handle && fabs(tm->positions[3 * v + faxis] - fval) <= ftol)
+            s->fixed[s->n_fixed++] = v;
+    }
+    s->desc.n_handles = 1 + two_handles;
+    s->desc.handle_sizes = s->sizes;
+    s->desc.handle_vertices = s->hv;
+    s->desc.n_fixed = s->n_fixed;
+    s->desc.fixed_vertices = s->fixed;
+    s->diag = s->mesh->bbox_diagonal;
+    return 0;
+}
+
+static double max_diff(const double *a, const double *b, size_t n)
+{
+    double m = 0;
+    for (size_t i = 0; i < n; i++)
+        m = fmax(m, fabs(a[i] - b[i]));
+    return m;
+}
+
+/* a rotation of 0.4 rad about (1, 2, 2)/3 and a translation, row-major 4x4 */
+static void some_transform(double T[16], double shift)
+{
+    const double ax[3] = {1.0 / 3, 2.0 / 3, 2.0 / 3}, a = 0.4, c = cos(a), s = sin(a);
+    memset(T, 0, 16 * sizeof(double));
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            T[4 * i + j] = (i == j ? c : 0) + (1 - c) * ax[i] * ax[j];
+    T[1] -= s * ax[2], T[2] += s * ax[1], T[4] += s * ax[2];
+    T[6] -= s * ax[0], T[8] -= s * ax[1], T[9] += s * ax[0];
+    T[3] = 0.1 + shift, T[7] = -0.05, T[11] = 0.2, T[15] = 1;
+}
+
+static void apply(const double T[16], const double *p, double *out)
+{
+    for (int d = 0; d < 3; d++)
+        out[d] = T[4 * d] * p[0] + T[4 * d + 1] * p[1] + T[4 * d + 2] * p[2] + T[4 * d + 3];
+}
+
+static void check_method(const dk_method_ops *ops, scene *s)
+{
+    const dk_index n = s->mesh->n_vertices;
+    const size_t N = 3 * (size_t)n;
+    const double tol = 1e-9 * s->diag;
+    double *x = malloc(sizeof(double) * N), *y = malloc(sizeof(double) * N);
+    double *t = malloc(sizeof(double) * 3 * (size_t)s->n_hv);
+    double T[32];
+    void *m = NULL, *fresh = NULL;
+    dk_error e = {0};
+    dk_solve_info info, info2;
+    dk_method_stats st;
+    if (!x || !y || !t)
+        goto out;
+    if (ops->bind(s->mesh, &s->desc, NULL, &m, &e) != DK_OK) {
+        CHECK_MSG(0, "%s on %s: bind: %s", ops->name, s->name, e.message);
+        goto out;
+    }
+    ops->stats(m, &st);
+    CHECK_MSG(st.n_vertices == n && st.n_handles == s->desc.n_handles &&
+                  st.n_handle_vertices == s->n_hv,
+              "%s on %s: stats %d %d %d", ops->name, s->name, (int)st.n_vertices,
+              (int)st.n_handles, (int)st.n_handle_vertices);
+
+    /* zero drag, cold and warm */
+    for (dk_index k = 0; k < s->n_hv; k++)
+        memcpy(t + 3 * k, s->mesh->positions + 3 * s->hv[k], 3 * sizeof(double));
+    for (int start = DK_START_COLD; start <= DK_START_WARM; start++) {
+        const dk_solve_request rq = {.targets = t, .start = (dk_start)start};
+        CHECK_MSG(ops->solve(m, &rq, x, &info, &e) == DK_OK, "%s: %s", ops->name, e.message);
+        const double d = max_diff(x, s->mesh->positions, N);
+        CHECK_MSG(d <= tol, "%s on %s: zero drag (start %d) moved the mesh by %g", ops->name,
+                  s->name, start, d);
+    }
+
+    /* positions and transforms of the same targets: rotated and moved handles, or for a
+     * method whose transforms are not positions (Falloff) moved ones */
+    const int affine = (ops->flags & DK_METHOD_TRANSFORMS_AS_POSITIONS) != 0;
+    for (dk_index h = 0; h < s->desc.n_handles; h++) {
+        some_transform(T + 16 * h, 0.05 * (double)h);
+        if (!affine)
+            for (int i = 0; i < 3; i++)
+                for (int j = 0; j < 3; j++)
+                    T[16 * h + 4 * i + j] = i == j;
+    }
+    for (dk_index k = 0, h = 0, end = s->sizes[0]; k < s->n_hv; k++) {
+        while (k >= end)
+            end += s->sizes[++h];
+        apply(T + 16 * h, s->mesh->positions + 3 * s->hv[k], t + 3 * k);
+    }
+    const dk_solve_request by_pos = {.targets = t};
+    const dk_solve_request by_tf = {.targets = T, .target_kind = DK_TARGETS_TRANSFORMS};
+    CHECK(ops->solve(m, &by_pos, x, &info, &e) == DK_OK);
+    CHECK(ops->solve(m, &by_tf, y, &info2, &e) == DK_OK);
+    double d = max_diff(x, y, N);
+    CHECK_MSG(d <= 1e-7 * s->diag, "%s on %s: positions vs transforms differ by %g", ops->name,
+              s->name, d);
+    for (dk_index k = 0; k < s->n_hv; k++) /* handles of weight 1 are met */
+        CHECK_MSG(max_diff(x + 3 * s->hv[k], t + 3 * k, 3) <= tol, "%s: handle vertex %d off",
+                  ops->name, (int)s->hv[k]);
+    for (dk_index k = 0; k < s->n_fixed; k++)
+        CHECK(max_diff(x + 3 * s->fixed[k], s->mesh->positions + 3 * s->fixed[k], 3) <= tol);
+
+    /* energy of the returned positions = the reported energy */
+    double energy = NAN;
+    CHECK(ops->energy(m, x, &energy, &e) == DK_OK);
+    CHECK_MSG(fabs(energy - info.energy) <= 1e-9 * fmax(fabs(info.energy), 1e-300),
+              "%s on %s: energy %.17g, solve reported %.17g", ops->name, s->name, energy,
+              info.energy);
+
+    /* determinism: a cold solve after other solves = the first cold solve, bit for bit */
+    CHECK(ops->solve(m, &by_pos, y, &info2, &e) == DK_OK);
+    CHECK_MSG(memcmp(x, y, N * sizeof(double)) == 0 && info.iterations == info2.iterations,
+              "%s on %s: two cold solves differ", ops->name, s->name);
+
+    /* rebind with the same constraints = a fresh bind */
+    CHECK_MSG(ops->rebind(m, &s->desc, &e) == DK_OK, "%s: rebind: %s", ops->name, e.message);
+    CHECK(ops->bind(s->mesh, &s->desc, NULL, &fresh, &e) == DK_OK);
+    if (fresh) {
+        CHECK(ops->solve(m, &by_pos, x, &info, &e) == DK_OK);
+        CHECK(ops->solve(fresh, &by_pos, y, &info2, &e) == DK_OK);
+        d = max_diff(x, y, N);
+        CHECK_MSG(d <= 1e-12 * s->diag, "%s on %s: rebind vs fresh bind differ by %g",
+                  ops->name, s->name, d);
+    }
+
+    /* malformed requests: the same status from every method, and nothing changes */
+    const double nan_t[3] = {NAN, 0, 0};
+    double *tn = malloc(sizeof(double) * 3 * (size_t)s->n_hv);
+    struct {
+        const char *what;
+        dk_solve_request rq;
+        dk_status want;
+    } bad[] = {
+        {"NULL targets", {.targets = NULL}, DK_ERR_INVALID_ARGUMENT},
+        {"unknown target kind", {.targets = t, .target_kind = (dk_target_kind)7},
+         DK_ERR_INVALID_ARGUMENT},
+        {"unknown start", {.targets = t, .start = (dk_start)9}, DK_ERR_INVALID_ARGUMENT},
+        {"negative max_iterations", {.targets = t, .max_iterations = -1},
+         DK_ERR_INVALID_ARGUMENT},
+        {"skip_energy not 0/1", {.targets = t, .skip_energy = 3}, DK_ERR_INVALID_ARGUMENT},
+        {"NaN target", {.targets = tn}, DK_ERR_NONFINITE},
+    };
+    if (tn) {
+        memcpy(tn, t, sizeof(double) * 3 * (size_t)s->n_hv);
+        memcpy(tn + 3 * (s->n_hv - 1), nan_t, sizeof nan_t);
+    }
+    CHECK(ops->solve(m, &by_pos, x, &info, &e) == DK_OK);
+    for (size_t b = 0; tn && b < sizeof bad / sizeof bad[0]; b++) {
+        const dk_status got = ops->solve(m, &bad[b].rq, y, &info2, &e);
+        CHECK_MSG(got == bad[b].want, "%s: %s gave status %d, want %d (%s)", ops->name,
+                  bad[b].what, (int)got, (int)bad[b].want, e.message);
+    }
+    CHECK(ops->solve(m, NULL, y, &info2, &e) == DK_ERR_INVALID_ARGUMENT);
+    CHECK(ops->solve(m, &by_pos, y, &info2, &e) == DK_OK);
+    CHECK_MSG(memcmp(x, y, N * sizeof(double)) == 0,
+              "%s on %s: a refused request changed the next cold solve", ops->name, s->name);
+    free(tn);
+out:
+    if (m)
+        ops->free(m);
+    if (fresh)
+        ops->free(fresh);
+    free(x);
+    free(y);
+    free(t);
+}
+
+static void test_registry(void)
+{
+    const dk_method_ops *const *all = dk_methods();
+    int count = 0;
+    for (const dk_method_ops *const *m = all; *m; m++, count++) {
+        const dk_method_ops *o = *m;
+        CHECK_MSG(o->name && o->bind && o->rebind && o->solve && o->energy && o->stats &&
+                      o->free,
+                  "method %d has an empty entry", count);
+        CHECK(dk_method_find(o->name) == o);
+    }
+    CHECK(count >= 3);
+    CHECK(dk_method_find("no such method") == NULL && dk_method_find(NULL) == NULL);
+}
+
+static void test_every_method(void)
+{
+    dk_test_mesh plane = {0}, sphere = {0};
+    scene scenes[2];
+    int ok = dk_test_bumpy_plane(16, 0.1, &plane) == 0 && dk_test_icosphere(2, 1.0, &sphere) == 0;
+    CHECK(ok);
+    if (!ok)
+        return;
+    /* plane: handles at x <= -0.99 and x >= 0.99, fixed row y = -1 */
+    ok = scene_make(&scenes[0], "bumpy plane", &plane, 0, -0.99, 0.99, 1, 1, -1.0, 1e-9) == 0;
+    /* sphere: one handle cap z <= -0.8, fixed cap z >= 0.8 (a band around z = 1) */
+    ok = ok && scene_make(&scenes[1], "icosphere", &sphere, 2, -0.8, 2.0, 0, 2, 1.0, 0.2) == 0;
+    CHECK(ok);
+    for (int k = 0; ok && k < 2; k++)
+        for (const dk_method_ops *const *m = dk_methods(); *m; m++)
+            check_method(*m, &scenes[k]);
+    for (int k = 0; k < 2; k++)
+        scene_free(&scenes[k]);
+    dk_test_mesh_free(&plane);
+    dk_test_mesh_free(&sphere);
+}
+
+DK_TEST_MAIN(test_registry, test_every_method)
