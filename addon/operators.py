@@ -220,11 +220,6 @@ class DEFORMKIT_OT_remove_handle(_Base, bpy.types.Operator):
         d.active_handle = min(d.active_handle, max(0, len(d.handles) - 1))
 
 
-# (object name, deformer uid) -> worker thread of a UI bind. A modal operator can vanish
-# without ending (a file load drops modal handlers), so an entry only blocks while its thread
-# is alive.
-_binding = {}
-
 
 class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
     """Bind: precompute the solver for the current mesh, groups and target placement"""
@@ -259,8 +254,9 @@ class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
         try:
             obj = _get_object(self, context)
             d = _get_deformer(self, context, obj)
-            running = _binding.get((obj.name, d.uid))
-            if running is not None and running.is_alive():
+            # running from invoke until its modal part ends (not only while the worker
+            # thread lives: a small mesh's bind is done before the next event)
+            if (obj.name, d.uid) in solver.running_binds:
                 raise solver.DeformKitError("a bind of %s is already running" % d.name)
             self._job, self._mats = solver.bind_begin(obj, d, context.evaluated_depsgraph_get())
         except solver.DeformKitError as ex:
@@ -273,7 +269,7 @@ class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
         self._thread = threading.Thread(target=self._job.run, name="DeformKit bind",
                                         daemon=True)
         self._thread.start()
-        _binding[(obj.name, d.uid)] = self._thread
+        solver.running_binds[(obj.name, d.uid)] = self._thread
         wm = context.window_manager
         self._timer = wm.event_timer_add(0.05, window=context.window)
         wm.progress_begin(0, 1)
@@ -281,7 +277,7 @@ class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
     def _end(self, context):
-        _binding.pop((self._obj, self._uid), None)
+        solver.running_binds.pop((self._obj, self._uid), None)
         wm = context.window_manager
         wm.event_timer_remove(self._timer)
         wm.progress_end()

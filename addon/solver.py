@@ -29,6 +29,10 @@ NATIVE_ERRORS = (ValueError, IndexError, TypeError, RuntimeError, MemoryError, O
 _cache = {}            # (object name, deformer uid) -> _Entry
 runtime = {}           # (object name, deformer uid) -> dict(ms=..., iterations=..., converged=...)
 _settings_serial = [0]
+# (object name, deformer uid) -> worker thread of a UI bind (operators.DEFORMKIT_OT_bind),
+# from its invoke until its modal part ends. A file load drops modal handlers without ending
+# them: clear_cache (on load_post) forgets those.
+running_binds = {}
 
 
 class _Entry:
@@ -43,6 +47,7 @@ def mark_settings_changed():
 def clear_cache():
     _cache.clear()
     runtime.clear()
+    running_binds.clear()
 
 
 def mark_all_dirty():
