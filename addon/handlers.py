@@ -16,15 +16,10 @@ from bpy.app.handlers import persistent
 from . import solver
 
 _busy = [False]
-_self_written = set()
 enabled = [True]   # tests and the benchmark may switch automatic solving off
 # UI-style (time-budgeted) solves also under blender -b, where no timer runs: for the latency
 # benchmark, which then calls refine() itself
 force_interactive = [False]
-
-
-def note_self_write(obj_name):
-    _self_written.add(obj_name)
 
 
 def _deformed_objects(scene):
@@ -40,8 +35,6 @@ def _run(scene, depsgraph, cold=False):
         return
     _busy[0] = True
     try:
-        ours = set(_self_written)
-        _self_written.clear()
         geometry = set()
         if depsgraph is not None:
             for u in depsgraph.updates:
@@ -124,13 +117,11 @@ def on_frame_change(scene, depsgraph=None):
 @persistent
 def on_load(*_args):
     solver.clear_cache()
-    _self_written.clear()
 
 
 @persistent
 def on_undo(*_args):
     solver.mark_all_dirty()
-    _self_written.clear()
 
 
 _HANDLERS = (

@@ -23,6 +23,9 @@ class Option:
     max: Optional[float] = None
     kw: Optional[str] = "same"   # constructor keyword; "same" = name; None = add-on only
     bind_time: bool = True       # True: a change re-binds; False: used at solve time only
+    # the deformer setting (a group name) that must be set for the option to matter; the
+    # panel hides the option otherwise (e.g. the material stiffness without a material group)
+    shown_with: Optional[str] = None
 
     @property
     def keyword(self):
@@ -36,9 +39,14 @@ class Method:
     native_class: str            # attribute of the `deformkit` module
     description: str
     options: list = field(default_factory=list)
-    # which vertex-group maps the method consumes: 'stiffness' (the material group's weights
-    # become the per-vertex `stiffness` keyword) and/or 'handle_weights' (soft handles).
+    # What the method consumes from Blender, beyond the mesh, the handles' groups and targets
+    # and the Region and Fixed groups that every method takes:
+    # which vertex-group maps: 'stiffness' (the material group's weights become the
+    # per-vertex `stiffness` keyword) and/or 'handle_weights' (soft handles).
     maps: tuple = ()
+    # 'stiffness' map: the option holding the stiffness where the material weight is 1
+    # (weight 0 gives 1, linear in between)
+    stiffness_option: Optional[str] = None
     # solve keywords that make a frame's result depend only on that frame (cold start)
     cold_solve: dict = field(default_factory=dict)
     # solve keywords for interactive updates
@@ -49,6 +57,9 @@ class Method:
     # user drags in the UI they get a time budget per update, and the add-on finishes the
     # solve from a timer once the handles stop (see solver.solve / handlers.refine)
     iterative: bool = False
+    # iterative methods: the option capping the iterations of one solve (the budgeted
+    # slices of an interactive solve add up to at most that many)
+    iteration_cap: Optional[str] = None
 
 
 def _e(*ids):
@@ -63,9 +74,11 @@ METHODS = [
         description="As-rigid-as-possible: keeps local shape, bends and twists naturally",
         icon="MOD_SIMPLEDEFORM",
         maps=("stiffness",),
+        stiffness_option="stiffness_scale",
         cold_solve={"warm_start": False},
         warm_solve={"warm_start": True},
         iterative=True,
+        iteration_cap="max_iterations",
         options=[
             Option("energy", "ENUM", "spokes", "Energy", "Spokes (classic) or spokes and rims",
                    items=_e("spokes", "spokes_and_rims")),
@@ -93,7 +106,7 @@ METHODS = [
                    min=1, max=100),
             Option("stiffness_scale", "FLOAT", 10.0, "Material Stiffness",
                    "Stiffness where the material group's weight is 1 (weight 0 gives 1)",
-                   min=0.001, max=1e6, kw=None),
+                   min=0.001, max=1e6, kw=None, shown_with="material_group"),
         ],
     ),
     Method(
@@ -142,6 +155,24 @@ METHODS = [
 ]
 
 BY_ID = {m.id: m for m in METHODS}
+
+
+def _check_registry():
+    """Every field that names an option names one of the method's options."""
+    for m in METHODS:
+        names = {o.name for o in m.options}
+        for field_name in ("stiffness_option", "iteration_cap"):
+            ref = getattr(m, field_name)
+            if ref is not None and ref not in names:
+                raise ValueError("%s.%s names %r, which is not one of its options"
+                                 % (m.id, field_name, ref))
+        if ("stiffness" in m.maps) != (m.stiffness_option is not None):
+            raise ValueError("%s: a 'stiffness' map needs a stiffness_option" % m.id)
+        if m.iterative and m.iteration_cap is None:
+            raise ValueError("%s: an iterative method needs an iteration_cap option" % m.id)
+
+
+_check_registry()
 
 
 def get(method_id):

@@ -255,7 +255,7 @@ def collect(obj, d):
     if "stiffness" in m.maps and d.material_group:
         idx, w = groups[d.material_group]
         s = np.ones(len(obj.data.vertices))
-        s[idx] = 1.0 + (d.options.stiffness_scale - 1.0) * w
+        s[idx] = 1.0 + (getattr(d.options, m.stiffness_option) - 1.0) * w
         kw["stiffness"] = s
     if "handle_weights" in m.maps and any(h.use_weights for h in d.handles):
         kw["handle_weights"] = weights
@@ -464,11 +464,11 @@ def snap_identity(T, extent):
 INTERACTIVE_BUDGET_MS = 30.0
 
 
-def _budget_iterations(key, opts):
-    """Iterations that fit the interactive budget, from the last solve's time per iteration
-    (before any solve was timed: ~0.15 us per vertex, the armadillo's 6.5 ms at 43k)."""
+def _budget_iterations(key, cap):
+    """Iterations that fit the interactive budget, at most `cap`, from the last solve's time
+    per iteration (before any solve was timed: ~0.15 us per vertex, the armadillo's 6.5 ms
+    at 43k)."""
     last = runtime.get(key)
-    cap = int(getattr(opts, "max_iterations", 100))
     if last and last.get("iterations", 0) >= 1:
         per_it = last["ms"] / last["iterations"]
     else:
@@ -508,13 +508,13 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
     key = (obj.name, d.uid)
     kw = methods.solve_kwargs(m, d.options, cold)
     budgeted = interactive and m.iterative and not cold
-    cap = int(getattr(d.options, "max_iterations", 0) or 0)
+    cap = int(getattr(d.options, m.iteration_cap)) if m.iteration_cap else 0
     if budgeted:
         # slices of one solve: together at most the method's Max Iterations, so the sliced
         # result is exactly what one uninterrupted solve would give
         if not resume:
             e.pending_its = 0
-        kw["max_iterations"] = max(1, min(_budget_iterations(key, d.options),
+        kw["max_iterations"] = max(1, min(_budget_iterations(key, cap or 100),
                                           cap - e.pending_its if cap else 1 << 30))
         if resume:
             kw["resume"] = True
@@ -547,8 +547,6 @@ def write_offset(obj, d, offset, retime=False):
         # re-copies the object from the original, whose animated values (the modifier's
         # Factor) are not flushed there; re-run the object's animation with it.
         obj.update_tag(refresh={"TIME"})
-    from . import handlers
-    handlers.note_self_write(obj.name)
 
 
 def zero_offset(obj, d):
@@ -557,8 +555,6 @@ def zero_offset(obj, d):
     if a is not None and len(a.data) == len(me.vertices):
         a.data.foreach_set("vector", np.zeros(len(me.vertices) * 3, dtype=np.float32))
         me.update_tag()
-        from . import handlers
-        handlers.note_self_write(obj.name)
 
 
 def finish(obj, d, depsgraph=None):

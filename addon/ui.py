@@ -44,7 +44,7 @@ def draw_options(layout, d):
         return
     col = layout.column()
     for o in m.options:
-        if o.name == "stiffness_scale" and not d.material_group:
+        if o.shown_with and not getattr(d, o.shown_with):
             continue
         col.prop(opts, o.name)
 

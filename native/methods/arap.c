@@ -1967,7 +1967,8 @@ static void ops_free(void *self)
 
 const dk_method_ops dk_arap_ops = {
     .name = "ARAP",
-    .flags = DK_METHOD_ITERATIVE | DK_METHOD_TRANSFORMS_AS_POSITIONS,
+    .flags = DK_METHOD_ITERATIVE | DK_METHOD_TRANSFORMS_AS_POSITIONS |
+             DK_METHOD_TRANSLATION_INVARIANT | DK_METHOD_RIGID_INVARIANT,
     .bind = ops_bind,
     .rebind = ops_rebind,
     .solve = ops_solve,

@@ -84,10 +84,16 @@ typedef struct dk_method_stats {
 
 /** What a method's results depend on, for code that is written against the contract. */
 typedef enum dk_method_flags {
-    DK_METHOD_ITERATIVE = 1,           /**< request.start and max_iterations matter        */
-    DK_METHOD_TRANSFORMS_AS_POSITIONS = 2 /**< a transform gives the result of the positions
-                                            it maps the handle to (else only translations
-                                            do: Falloff blends transforms per vertex)      */
+    DK_METHOD_ITERATIVE = 1,               /**< request.start and max_iterations matter    */
+    DK_METHOD_TRANSFORMS_AS_POSITIONS = 2, /**< a transform gives the result of the
+                                                positions it maps the handle to (else only
+                                                translations do: Falloff blends transforms
+                                                per vertex)                                */
+    DK_METHOD_TRANSLATION_INVARIANT = 4,   /**< translating every constraint by t (handles,
+                                                and fixed vertices' rest) translates the
+                                                result by t                                */
+    DK_METHOD_RIGID_INVARIANT = 8          /**< the same for every rigid motion (ARAP; naive
+                                                Laplacian editing does not rotate details) */
 } dk_method_flags;
 
 /** The functions of one method; every entry is set. `self` is the method's object. */

@@ -1417,7 +1417,7 @@ static void ops_free(void *self)
 
 const dk_method_ops dk_laplacian_edit_ops = {
     .name = "LaplacianEdit",
-    .flags = DK_METHOD_TRANSFORMS_AS_POSITIONS,
+    .flags = DK_METHOD_TRANSFORMS_AS_POSITIONS | DK_METHOD_TRANSLATION_INVARIANT,
     .bind = ops_bind,
     .rebind = ops_rebind,
     .solve = ops_solve,

@@ -7,8 +7,8 @@
  * calling numpy.frombuffer on a bytearray the module filled), else memoryviews.
  *
  * One binding file per idea (py_mesh.c, py_operators.c, py_arap.c, ...); each exports
- * `int dk_py_init_<name>(PyObject *module)` which module.c calls; it returns 0 or -1 with an
- * exception set.
+ * `int dk_py_init_<name>(PyObject *module)`, listed once in DK_PY_PARTS below, which
+ * module.c calls; it returns 0 or -1 with an exception set.
  */
 #ifndef DK_PY_H
 #define DK_PY_H
@@ -105,13 +105,23 @@ dk_py_state *dk_py_get_state(PyObject *module);
 PyObject *dk_py_new_solve_result(PyObject *module, PyObject *positions, double energy,
                                  int iterations, int converged);
 
-/* Registration hooks, one per binding file (called by module.c in this order). A method's
- * binding file adds its hook here and one line to module.c. */
-int dk_py_init_mesh(PyObject *module);
-int dk_py_init_operators(PyObject *module);
-int dk_py_init_arap(PyObject *module);
-int dk_py_init_laplacian_edit(PyObject *module);
-int dk_py_init_falloff(PyObject *module);
-int dk_py_init_cholesky(PyObject *module);
+/* The binding files, in the order module.c registers them: each defines
+ * `int dk_py_init_<part>(PyObject *module)`. A method's binding file adds one line here:
+ * X(part) for the module's other parts, M(part, "Class") for a deformation method, whose
+ * class name also goes into the module's `_methods` tuple (the list the add-on's mock module
+ * and the tests compare against the add-on's registry). */
+#define DK_PY_PARTS(X, M)                                                                  \
+    X(mesh)                                                                                \
+    X(operators)                                                                           \
+    M(arap, "ARAP")                                                                        \
+    M(laplacian_edit, "LaplacianEdit")                                                     \
+    M(falloff, "Falloff")                                                                  \
+    X(cholesky)
+
+#define DK_PY_DECLARE_PART(part) int dk_py_init_##part(PyObject *module);
+#define DK_PY_DECLARE_METHOD(part, cls) int dk_py_init_##part(PyObject *module);
+DK_PY_PARTS(DK_PY_DECLARE_PART, DK_PY_DECLARE_METHOD)
+#undef DK_PY_DECLARE_PART
+#undef DK_PY_DECLARE_METHOD
 
 #endif

@@ -9,6 +9,8 @@
  */
 #include "dk_py.h"
 
+#include "dk_method.h"
+
 #include <string.h>
 
 /* ------------------------------------------------------------------ SolveResult --------- */
@@ -113,7 +115,35 @@ static PyObject *py_raise_status(PyObject *module, PyObject *args)
     return dk_py_raise(&err, context);
 }
 
+PyDoc_STRVAR(method_info_doc,
+             "_method_info(name) -> dict\n\n"
+             "What the native method contract says of method `name` (dk_method.h flags):\n"
+             "iterative, transforms_as_positions, translation_invariant, rigid_invariant.\n"
+             "For code and tests written against the contract.");
+
+static PyObject *py_method_info(PyObject *module, PyObject *arg)
+{
+    (void)module;
+    const char *name = PyUnicode_AsUTF8AndSize(arg, NULL);
+    if (!name)
+        return NULL;
+    const dk_method_ops *ops = dk_method_find(name);
+    if (!ops) {
+        PyErr_Format(PyExc_KeyError, "no method %R", arg);
+        return NULL;
+    }
+    const unsigned f = ops->flags;
+    return Py_BuildValue("{s:O,s:O,s:O,s:O}", "iterative",
+                         (f & DK_METHOD_ITERATIVE) ? Py_True : Py_False,
+                         "transforms_as_positions",
+                         (f & DK_METHOD_TRANSFORMS_AS_POSITIONS) ? Py_True : Py_False,
+                         "translation_invariant",
+                         (f & DK_METHOD_TRANSLATION_INVARIANT) ? Py_True : Py_False,
+                         "rigid_invariant", (f & DK_METHOD_RIGID_INVARIANT) ? Py_True : Py_False);
+}
+
 static PyMethodDef module_methods[] = {
+    {"_method_info", py_method_info, METH_O, method_info_doc},
     {"_read_doubles", (PyCFunction)(void (*)(void))py_read_doubles,
      METH_VARARGS | METH_KEYWORDS, read_doubles_doc},
     {"_read_indices", (PyCFunction)(void (*)(void))py_read_indices,
@@ -152,11 +182,32 @@ static int module_exec(PyObject *module)
     }
     if (init_solve_result(module, st) < 0)
         return -1;
-    if (dk_py_init_mesh(module) < 0 || dk_py_init_operators(module) < 0 ||
-        dk_py_init_arap(module) < 0 || dk_py_init_laplacian_edit(module) < 0 ||
-        dk_py_init_falloff(module) < 0 || dk_py_init_cholesky(module) < 0)
+#define DK_PY_INIT_PART(part)                                                              \
+    if (dk_py_init_##part(module) < 0)                                                     \
         return -1;
-    return 0;
+#define DK_PY_INIT_METHOD(part, cls) DK_PY_INIT_PART(part)
+    DK_PY_PARTS(DK_PY_INIT_PART, DK_PY_INIT_METHOD)
+#undef DK_PY_INIT_PART
+#undef DK_PY_INIT_METHOD
+    /* _methods: the deformation classes, in registration order */
+#define DK_PY_NO_NAME(part)
+#define DK_PY_METHOD_NAME(part, cls) cls,
+    static const char *const method_names[] = {DK_PY_PARTS(DK_PY_NO_NAME, DK_PY_METHOD_NAME)};
+#undef DK_PY_NO_NAME
+#undef DK_PY_METHOD_NAME
+    const Py_ssize_t n_methods = (Py_ssize_t)(sizeof method_names / sizeof method_names[0]);
+    PyObject *names = PyTuple_New(n_methods);
+    if (!names)
+        return -1;
+    for (Py_ssize_t i = 0; i < n_methods; i++) {
+        PyObject *name = PyUnicode_FromString(method_names[i]);
+        if (!name) {
+            Py_DECREF(names);
+            return -1;
+        }
+        PyTuple_SetItem(names, i, name);
+    }
+    return PyModule_AddObject(module, "_methods", names) < 0 ? (Py_DECREF(names), -1) : 0;
 }
 
 static int module_traverse(PyObject *module, visitproc visit, void *arg)

@@ -166,7 +166,7 @@ def refine_tests():
         bpy.ops.deformkit.bind()
         key = (obj.name, d.uid)
         bind_T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
-        cap = S.solver._budget_iterations(key, d.options)  # from the bind solve's timing
+        cap = S.solver._budget_iterations(key, d.options.max_iterations)  # from the bind solve's timing
         e.location = (1.0, 0.1, 0.4)   # a move that takes several budgets
         e.rotation_euler = (0.0, -0.3, 0.0)
         bpy.context.view_layer.update()

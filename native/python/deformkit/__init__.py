@@ -9,8 +9,8 @@ re-exports everything public from it:
 * operators: ``uniform_laplacian``, ``cotangent_laplacian``, ``cotangent_weights``,
   ``mass_matrix``, ``geodesic_distance`` / ``HeatGeodesic``, ``laplacian_eigenpairs``,
   ``knn`` / ``KDTree``, ``closest_rotation``;
-* deformation methods, one class each (``ARAP``, ``LaplacianEdit``, ``Falloff``) whose
-  ``solve`` returns a ``SolveResult``.
+* deformation methods, one class each, named in ``METHODS``, whose ``solve`` returns a
+  ``SolveResult``; they share one contract (docs/python-api.md, "The method contract").
 
 Inputs are any buffer (numpy arrays, memoryviews, array.array) of float32/float64 or
 int32/int64, or nested sequences; outputs are numpy arrays when numpy is importable.
@@ -25,4 +25,7 @@ __all__ = sorted(name for name in dir(_native) if not name.startswith("_"))
 
 globals().update({name: getattr(_native, name) for name in __all__})
 
-__all__.append("__version__")
+#: The deformation method classes' names, in the native registry's order.
+METHODS = tuple(_native._methods)
+
+__all__ += ["METHODS", "__version__"]

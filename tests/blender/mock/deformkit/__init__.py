@@ -41,13 +41,17 @@ class _Method:
         return SolveResult(p, 0.0, 1, True)
 
 
-class ARAP(_Method):
-    pass
+def _registry_classes():
+    """One stand-in class per method of the add-on's registry (addon/methods.py, read by
+    path: it needs no bpy), so that the mock never keeps a list of its own."""
+    import importlib.util
+    import os
+    path = os.path.join(os.path.dirname(__file__), "..", "..", "..", "..", "addon", "methods.py")
+    spec = importlib.util.spec_from_file_location("_deformkit_mock_registry", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return [m.native_class for m in mod.METHODS]
 
 
-class LaplacianEdit(_Method):
-    pass
-
-
-class Falloff(_Method):
-    pass
+METHODS = tuple(_registry_classes())
+globals().update({name: type(name, (_Method,), {}) for name in METHODS})

@@ -1,0 +1,199 @@
+"""The method contract through the Python API, for every method class the module registers
+(deformkit.METHODS, from the native registry): a new method gets these tests by being
+registered. What a method promises beyond the common part comes from the native contract's
+flags (deformkit._native._method_info). The add-on's registry must list the same classes.
+
+Checked on a bumpy grid with a handle at each end and a fixed row, and on an icosphere with
+one handle cap:
+- zero drag gives the rest mesh, from positions and from transforms;
+- positions and transforms of the same targets agree (translations only where the method
+  says transforms are not positions);
+- rebind with the same constraints equals a fresh bind;
+- with nothing fixed, a rigid motion (or translation) of every handle is reproduced where the
+  method promises it, and the handles are always met;
+- cold solves are deterministic, bit for bit;
+- every malformed input raises the same exception type from every method, and a refused
+  call leaves the object answering as before.
+"""
+import importlib.util
+import math
+import os
+
+import numpy as np
+import pytest
+
+import deformkit as dk
+from conftest import make_grid, make_icosphere
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def info(name):
+    return dk._native._method_info(name)
+
+
+def cold(name):
+    """Solve keywords that start from the rest state."""
+    return {"warm_start": False} if info(name)["iterative"] else {}
+
+
+def rotation(angle=0.4, axis=(1.0, 2.0, 2.0)):
+    a = np.asarray(axis, dtype=float)
+    a /= np.linalg.norm(a)
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+
+
+def transform(R=np.eye(3), t=(0.1, -0.05, 0.2)):
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = t
+    return T
+
+
+def scenes():
+    v, f = make_grid(12, 10, bump=0.15, jitter=0.2)
+    left, right = np.where(v[:, 0] <= 1e-9)[0], np.where(v[:, 0] >= 1 - 1e-9)[0]
+    row = np.where((v[:, 1] <= 1e-9) & (v[:, 0] > 1e-9) & (v[:, 0] < 1 - 1e-9))[0]
+    yield "grid", v, f, [left, right], row
+    v, f = make_icosphere(2)
+    cap, top = np.where(v[:, 2] <= -0.8)[0], np.where(v[:, 2] >= 0.8)[0]
+    yield "icosphere", v, f, [cap], top
+
+
+SCENES = list(scenes())
+CASES = [(m, s) for m in dk.METHODS for s in SCENES]
+IDS = ["%s-%s" % (m, s[0]) for m, s in CASES]
+
+
+def bind(name, scene, **kw):
+    _, v, f, handles, fixed = scene
+    return getattr(dk, name)(dk.Mesh(v, f), handles=handles, fixed=fixed, **kw)
+
+
+def test_registries_agree():
+    spec = importlib.util.spec_from_file_location("_addon_methods",
+                                                  os.path.join(ROOT, "addon", "methods.py"))
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    assert [m.native_class for m in mod.METHODS] == list(dk.METHODS)
+    for name in dk.METHODS:
+        assert isinstance(getattr(dk, name), type)
+        assert set(info(name)) == {"iterative", "transforms_as_positions",
+                                   "translation_invariant", "rigid_invariant"}
+    with pytest.raises(KeyError):
+        info("NoSuchMethod")
+
+
+@pytest.mark.parametrize("name,scene", CASES, ids=IDS)
+def test_zero_drag_is_rest(name, scene):
+    _, v, f, handles, fixed = scene
+    m = bind(name, scene)
+    r = m.solve(np.concatenate([v[h] for h in handles]), **cold(name))
+    np.testing.assert_allclose(r.positions, v, atol=1e-9)
+    r = m.solve(transforms=[np.eye(4)] * len(handles), **cold(name))
+    np.testing.assert_allclose(r.positions, v, atol=1e-9)
+
+
+@pytest.mark.parametrize("name,scene", CASES, ids=IDS)
+def test_positions_and_transforms_agree(name, scene):
+    _, v, f, handles, fixed = scene
+    R = rotation() if info(name)["transforms_as_positions"] else np.eye(3)
+    Ts = [transform(R, (0.1 + 0.05 * k, -0.05, 0.2)) for k in range(len(handles))]
+    targets = np.concatenate([v[h] @ T[:3, :3].T + T[:3, 3] for h, T in zip(handles, Ts)])
+    a = bind(name, scene).solve(targets, **cold(name))
+    b = bind(name, scene).solve(transforms=Ts, **cold(name))
+    np.testing.assert_allclose(a.positions, b.positions, atol=1e-7)
+    allh = np.concatenate(handles)
+    np.testing.assert_allclose(a.positions[allh], targets, atol=1e-9)
+    np.testing.assert_allclose(a.positions[fixed], v[fixed], atol=1e-9)
+
+
+@pytest.mark.parametrize("name,scene", CASES, ids=IDS)
+def test_rebind_equals_fresh_bind(name, scene):
+    _, v, f, handles, fixed = scene
+    T = [transform(rotation(0.3))] * len(handles)
+    m = bind(name, scene)
+    m.solve(transforms=T, **cold(name))
+    m.rebind(handles=handles, fixed=fixed)
+    a = m.solve(transforms=T, **cold(name))
+    b = bind(name, scene).solve(transforms=T, **cold(name))
+    np.testing.assert_allclose(a.positions, b.positions, atol=1e-12)
+    assert a.iterations == b.iterations
+
+
+@pytest.mark.parametrize("name,scene", CASES, ids=IDS)
+def test_rigid_motion_of_every_constraint(name, scene):
+    _, v, f, handles, fixed = scene
+    flags = info(name)
+    R = rotation() if flags["rigid_invariant"] else np.eye(3)
+    T = transform(R)
+    kw = {"max_iterations": 2000} if flags["iterative"] else {}   # see test_contract.c
+    m = getattr(dk, name)(dk.Mesh(v, f), handles=handles, **kw)
+    r = m.solve(transforms=[T] * len(handles), **cold(name))
+    want = v @ R.T + T[:3, 3]
+    allh = np.concatenate(handles)
+    np.testing.assert_allclose(r.positions[allh], want[allh], atol=1e-9)
+    if flags["rigid_invariant"] or flags["translation_invariant"]:
+        np.testing.assert_allclose(r.positions, want, atol=1e-6)
+
+
+@pytest.mark.parametrize("name,scene", CASES, ids=IDS)
+def test_cold_solves_are_deterministic(name, scene):
+    _, v, f, handles, fixed = scene
+    m = bind(name, scene)
+    T = [transform(rotation(0.5))] * len(handles)
+    a = m.solve(transforms=T, **cold(name))
+    m.solve(transforms=[transform(rotation(-0.2), (0.3, 0, 0))] * len(handles))
+    b = m.solve(transforms=T, **cold(name))
+    assert np.array_equal(a.positions, b.positions) and a.iterations == b.iterations
+
+
+BAD_SOLVES = [
+    ("NaN target", lambda n, hv: dict(targets=np.full((hv, 3), np.nan)), ValueError),
+    ("wrong target count", lambda n, hv: dict(targets=np.zeros((hv + 1, 3))), ValueError),
+    ("wrong transform count", lambda n, hv: dict(transforms=[np.eye(4)] * (n + 1)), ValueError),
+    ("non-affine transform", lambda n, hv: dict(transforms=[np.ones((4, 4))] * n), ValueError),
+    ("both targets and transforms",
+     lambda n, hv: dict(targets=np.zeros((hv, 3)), transforms=[np.eye(4)] * n), TypeError),
+    ("neither", lambda n, hv: dict(), TypeError),
+]
+
+
+@pytest.mark.parametrize("name", dk.METHODS)
+def test_bad_solves_raise_the_same_type_and_change_nothing(name):
+    scene = SCENES[0]
+    _, v, f, handles, fixed = scene
+    m = bind(name, scene)
+    T = [transform(rotation(0.2))] * len(handles)
+    before = m.solve(transforms=T, **cold(name)).positions
+    hv = sum(len(h) for h in handles)
+    for what, args, exc in BAD_SOLVES:
+        with pytest.raises(exc):
+            m.solve(**args(len(handles), hv))
+    after = m.solve(transforms=T, **cold(name)).positions
+    assert np.array_equal(before, after)
+
+
+BAD_BINDS = [
+    ("handle index out of range", lambda v, h, fx: dict(handles=[[len(v)]]), IndexError),
+    ("negative handle index", lambda v, h, fx: dict(handles=[[-1]]), IndexError),
+    ("no handle", lambda v, h, fx: dict(handles=[]), ValueError),
+    ("empty handle", lambda v, h, fx: dict(handles=[[]]), ValueError),
+    ("vertex in two handles", lambda v, h, fx: dict(handles=[h[0], h[0][:1]]), ValueError),
+    ("handle and fixed overlap", lambda v, h, fx: dict(handles=h, fixed=h[0][:1]), ValueError),
+    ("fixed index out of range", lambda v, h, fx: dict(handles=h, fixed=[len(v)]), IndexError),
+    ("handle weight out of (0, 1]",
+     lambda v, h, fx: dict(handles=h, handle_weights=[np.full(len(x), 1.5) for x in h]),
+     ValueError),
+]
+
+
+@pytest.mark.parametrize("name", dk.METHODS)
+def test_bad_binds_raise_the_same_type(name):
+    _, v, f, handles, fixed = SCENES[0]
+    mesh = dk.Mesh(v, f)
+    cls = getattr(dk, name)
+    for what, args, exc in BAD_BINDS:
+        with pytest.raises(exc):
+            cls(mesh, **args(v, handles, fixed))
