@@ -1,7 +1,7 @@
-/* DeformKit CPython module: helpers shared by the LaplacianEdit and Falloff bindings
- * (py_laplacian_edit.c, py_falloff.c; implemented in py_lap_common.c): reading the common
- * constraint keywords (handles, fixed, roi, handle_weights) into a dk_constraint_desc, and
- * the solve inputs (targets or transforms). */
+/* DeformKit CPython module: the readers of the method contract's inputs, used by the generic
+ * method type (py_method.c; implemented in py_lap_common.c): the common constraint keywords
+ * (handles, fixed, roi, handle_weights) into a dk_constraint_desc, the solve inputs (targets
+ * or transforms), and a keyword's choice among names. */
 #ifndef DK_PY_LAP_H
 #define DK_PY_LAP_H
 

@@ -1,5 +1,5 @@
-/* DeformKit CPython module: constraint and solve-input readers shared by the LaplacianEdit
- * and Falloff bindings. See dk_py_lap.h. */
+/* DeformKit CPython module: constraint and solve-input readers of the generic method type.
+ * See dk_py_lap.h. */
 #include "dk_py_lap.h"
 
 #include <stdio.h>

@@ -197,3 +197,27 @@ def test_bad_binds_raise_the_same_type(name):
     for what, args, exc in BAD_BINDS:
         with pytest.raises(exc):
             cls(mesh, **args(v, handles, fixed))
+
+
+class _Sentinel:
+    pass
+
+
+@pytest.mark.parametrize("name", dk.METHODS)
+def test_reference_cycles_are_collected(name):
+    """A method object in a reference cycle is freed by the garbage collector: here the
+    handle list it remembers holds a sentinel that holds the object. Without the object's
+    traverse support the collector cannot see the cycle, and the sentinel stays alive."""
+    import gc
+    import weakref
+    _, v, f, handles, fixed = SCENES[0]
+    h = list(handles)
+    m = getattr(dk, name)(dk.Mesh(v, f), handles=h, fixed=fixed)
+    m.solve(transforms=[np.eye(4)] * len(handles))
+    s = _Sentinel()
+    s.method = m
+    h.append(s)                 # m -> its remembered handles h -> s -> m
+    alive = weakref.ref(s)
+    del m, h, s
+    gc.collect()
+    assert alive() is None

@@ -1,0 +1,126 @@
+/* DeformKit CPython module: one generic Python type for every deformation method, driven by
+ * a per-method spec (implemented in py_method.c).
+ *
+ * The generic part is the method contract (native/methods/dk_method.h) as Python sees it:
+ *
+ *   Cls(mesh, handles, fixed=None, roi=None, handle_weights=None, stiffness=None, **options)
+ *       binds with the GIL released; `options` are the method's own keywords, read by its
+ *       spec's parse_options into its native options struct;
+ *   solve(targets=None, transforms=None, warm_start=True, max_iterations=None, resume=False,
+ *         energy=True, **extra) -> SolveResult
+ *       exactly one of targets / transforms; warm_start, resume and max_iterations matter for
+ *       iterative methods only; energy=False lets a method skip its energy (NaN); `extra`
+ *       are the method's own solve keywords (its spec's solve_extra);
+ *   rebind(handles=None, fixed=None, roi=None, handle_weights=None, stiffness=None)
+ *       arguments not given keep their bound value;
+ *   energy(positions) -> float;
+ *   mesh, n_vertices, n_handles, n_handle_vertices, stats.
+ *
+ * and the object's life: the Mesh kept alive, the constraint keywords remembered for rebind,
+ * one call at a time (a concurrent call from another thread gets RuntimeError: the native
+ * object reuses its buffers), garbage-collector support (a method object in a reference cycle
+ * is freed, with its helper thread).
+ *
+ * A method's binding file (py_<method>.c) keeps only what is its own: its option names and
+ * parse_options, its docs, any extra solve keywords, getters or methods, and a spec. */
+#ifndef DK_PY_METHOD_H
+#define DK_PY_METHOD_H
+
+#include "dk_py.h"
+#include "dk_py_lap.h"
+
+#include "dk_method.h"
+
+typedef struct dk_py_method_spec dk_py_method_spec;
+
+/** The Python object of every method. */
+typedef struct dk_py_method {
+    PyObject_HEAD
+    const dk_py_method_spec *spec;
+    PyObject *mesh_obj;
+    const dk_mesh *mesh;
+    void *native;                                              /* the bound method object */
+    PyObject *handles, *fixed, *roi, *handle_weights, *stiffness; /* as last bound         */
+    int busy;
+} dk_py_method;
+
+/** What is a method's own. */
+struct dk_py_method_spec {
+    const char *name;         /**< "ARAP": the class deformkit.ARAP, the native ops' name   */
+    const char *type_name;    /**< "deformkit.ARAP" (a literal: the type keeps pointing to it)*/
+    const dk_method_ops *ops; /**< the native contract                                      */
+    const char *doc;          /**< the class docstring (constructor signature first)         */
+    int takes_stiffness;      /**< 0: a non-None stiffness is a ValueError naming the method */
+    size_t options_size;      /**< sizeof the native options struct (<= 256)                  */
+    /** Fills `options` with the defaults. */
+    void (*default_options)(void *options);
+    /** Reads the method's own keywords from `kw` (a dict it may consume entries of, with the
+     *  dk_py_opt_* helpers) into `options`; what is left in `kw` afterwards is a TypeError.
+     *  Returns 0 or -1 with an exception set. */
+    int (*parse_options)(PyObject *kw, void *options, const char *context);
+    /** Optional: the method's own solve keywords, read from `kw` like parse_options and
+     *  applied to the bound object before the solve (called with the object entered). */
+    int (*solve_extra)(dk_py_method *self, PyObject *kw, const char *context);
+    /** Optional: the `stats` dict; default: the contract's counters. */
+    PyObject *(*stats)(dk_py_method *self);
+    PyGetSetDef *getset;   /**< the type's getters: DK_PY_METHOD_GETSET, then the method's
+                                own, NULL-terminated                                      */
+    PyMethodDef *methods;  /**< the type's methods: DK_PY_METHOD_METHODS(solve_doc), then the
+                                method's own, NULL-terminated                             */
+};
+
+/* The contract's methods and getters, for the start of a spec's tables (static data, so
+ * that nothing is written at run time). */
+PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs);
+PyObject *dk_py_method_rebind(PyObject *obj, PyObject *args, PyObject *kwargs);
+PyObject *dk_py_method_energy(PyObject *obj, PyObject *arg);
+PyObject *dk_py_method_get_mesh(PyObject *obj, void *closure);
+PyObject *dk_py_method_get_n_vertices(PyObject *obj, void *closure);
+PyObject *dk_py_method_get_n_handles(PyObject *obj, void *closure);
+PyObject *dk_py_method_get_n_handle_vertices(PyObject *obj, void *closure);
+PyObject *dk_py_method_get_stats(PyObject *obj, void *closure);
+extern const char dk_py_method_rebind_doc[];
+extern const char dk_py_method_energy_doc[];
+
+#define DK_PY_METHOD_METHODS(solve_doc)                                                    \
+    {"solve", (PyCFunction)(void (*)(void))dk_py_method_solve, METH_VARARGS | METH_KEYWORDS, \
+     solve_doc},                                                                           \
+        {"rebind", (PyCFunction)(void (*)(void))dk_py_method_rebind,                       \
+         METH_VARARGS | METH_KEYWORDS, dk_py_method_rebind_doc},                           \
+        {"energy", dk_py_method_energy, METH_O, dk_py_method_energy_doc}
+
+#define DK_PY_METHOD_GETSET                                                                \
+    {"mesh", dk_py_method_get_mesh, NULL, "the bound deformkit.Mesh", NULL},               \
+        {"n_vertices", dk_py_method_get_n_vertices, NULL, "number of mesh vertices", NULL}, \
+        {"n_handles", dk_py_method_get_n_handles, NULL, "number of handle groups", NULL},  \
+        {"n_handle_vertices", dk_py_method_get_n_handle_vertices, NULL,                    \
+         "rows expected in solve(targets)", NULL},                                         \
+        {"stats", dk_py_method_get_stats, NULL,                                            \
+         "dict of counters: n_unknowns, analysis_count, factorization_count, and the "    \
+         "method's own",                                                                   \
+         NULL}
+
+/** tp_new of a method's type: binds per `spec`. A method's binding file defines its tp_new
+ *  as a one-line call to this (the type reaches its spec through it). */
+PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
+                           const dk_py_method_spec *spec);
+
+/** Creates the type from `spec` with `tp_new`, adds it to the module as spec->name.
+ *  Returns 0 or -1. */
+int dk_py_method_register(PyObject *module, const dk_py_method_spec *spec, newfunc tp_new);
+
+/** Enters the object for one native call (RuntimeError when busy or unbound); leave with
+ *  self->busy = 0. For a spec's extra methods. */
+int dk_py_method_enter(dk_py_method *self);
+
+/* Reading options: each takes `key` out of the dict `kw` when present (absent: `*value`
+ * keeps its default) and converts it as PyArg_ParseTuple would ("i", "d", "p"), or matches
+ * a choice against `names` (NULL-terminated; ValueError naming the accepted values). Return
+ * 0, or -1 with an exception set. */
+int dk_py_opt_int(PyObject *kw, const char *key, int *value);
+int dk_py_opt_double(PyObject *kw, const char *key, double *value);
+int dk_py_opt_bool(PyObject *kw, const char *key, int *value);
+int dk_py_opt_choice(PyObject *kw, const char *key, const char *const *names, int *value,
+                     const char *context);
+
+#endif

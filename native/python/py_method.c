@@ -1,0 +1,558 @@
+/* DeformKit CPython module: the generic deformation-method type (dk_py_method.h). */
+#include "dk_py_method.h"
+
+#include <math.h>
+#include <stddef.h>
+#include <stdio.h>
+#include <string.h>
+
+#define OPTIONS_MAX 256
+
+/* ------------------------------------------------------------------ option helpers ------ */
+
+/* `key`'s value in `kw` (borrowed, taken out of the dict), or NULL when absent (no error). */
+static PyObject *take(PyObject *kw, const char *key, PyObject **owned)
+{
+    *owned = NULL;
+    if (!kw)
+        return NULL;
+    PyObject *v = PyDict_GetItemString(kw, key);
+    if (!v)
+        return NULL;
+    *owned = Py_NewRef(v);
+    if (PyDict_DelItemString(kw, key) < 0) {
+        Py_CLEAR(*owned);
+        return NULL;
+    }
+    return *owned;
+}
+
+int dk_py_opt_int(PyObject *kw, const char *key, int *value)
+{
+    PyObject *owned, *v = take(kw, key, &owned);
+    if (!v)
+        return PyErr_Occurred() ? -1 : 0;
+    long x = PyLong_AsLong(v);
+    Py_DECREF(owned);
+    if (x == -1 && PyErr_Occurred())
+        return -1;
+    if (x < INT32_MIN || x > INT32_MAX) {
+        PyErr_Format(PyExc_OverflowError, "%s is %ld, out of the range of an int", key, x);
+        return -1;
+    }
+    *value = (int)x;
+    return 0;
+}
+
+int dk_py_opt_double(PyObject *kw, const char *key, double *value)
+{
+    PyObject *owned, *v = take(kw, key, &owned);
+    if (!v)
+        return PyErr_Occurred() ? -1 : 0;
+    double x = PyFloat_AsDouble(v);
+    Py_DECREF(owned);
+    if (x == -1.0 && PyErr_Occurred())
+        return -1;
+    *value = x;
+    return 0;
+}
+
+int dk_py_opt_bool(PyObject *kw, const char *key, int *value)
+{
+    PyObject *owned, *v = take(kw, key, &owned);
+    if (!v)
+        return PyErr_Occurred() ? -1 : 0;
+    int x = PyObject_IsTrue(v);
+    Py_DECREF(owned);
+    if (x < 0)
+        return -1;
+    *value = x;
+    return 0;
+}
+
+int dk_py_opt_choice(PyObject *kw, const char *key, const char *const *names, int *value,
+                     const char *context)
+{
+    PyObject *owned, *v = take(kw, key, &owned);
+    if (!v)
+        return PyErr_Occurred() ? -1 : 0;
+    int c = dk_py_lap_choice(v, key, names, context);
+    Py_DECREF(owned);
+    if (c < 0)
+        return -1;
+    *value = c;
+    return 0;
+}
+
+/* A TypeError naming the first key left in `kw`, as for a function's unknown keyword. */
+static int refuse_leftovers(PyObject *kw, const char *where)
+{
+    Py_ssize_t pos = 0;
+    PyObject *key, *val;
+    if (kw && PyDict_Next(kw, &pos, &key, &val)) {
+        PyErr_Format(PyExc_TypeError, "%s got an unexpected keyword argument %R", where, key);
+        return -1;
+    }
+    return 0;
+}
+
+/* Splits `kwargs` into the keywords named in `common` (into *mine) and the rest (*rest). */
+static int split_keywords(PyObject *kwargs, char *const *common, PyObject **mine,
+                          PyObject **rest)
+{
+    *mine = PyDict_New();
+    *rest = PyDict_New();
+    if (!*mine || !*rest)
+        goto fail;
+    Py_ssize_t pos = 0;
+    PyObject *key, *val;
+    while (kwargs && PyDict_Next(kwargs, &pos, &key, &val)) {
+        int is_common = 0;
+        for (char *const *c = common; *c && !is_common; c++) {
+            PyObject *name = PyUnicode_FromString(*c);
+            if (!name)
+                goto fail;
+            is_common = PyObject_RichCompareBool(key, name, Py_EQ);
+            Py_DECREF(name);
+            if (is_common < 0)
+                goto fail;
+        }
+        if (PyDict_SetItem(is_common ? *mine : *rest, key, val) < 0)
+            goto fail;
+    }
+    return 0;
+fail:
+    Py_CLEAR(*mine);
+    Py_CLEAR(*rest);
+    return -1;
+}
+
+/* ------------------------------------------------------------------ the object --------- */
+
+int dk_py_method_enter(dk_py_method *self)
+{
+    if (self->busy) {
+        PyErr_Format(PyExc_RuntimeError, "%s: the object is in use by another thread",
+                     self->spec->name);
+        return -1;
+    }
+    if (!self->native) {
+        PyErr_Format(PyExc_RuntimeError, "%s: the object is not bound", self->spec->name);
+        return -1;
+    }
+    self->busy = 1;
+    return 0;
+}
+
+static void replace_ref(PyObject **slot, PyObject *value)
+{
+    PyObject *old = *slot;
+    *slot = Py_NewRef(value ? value : Py_None);
+    Py_XDECREF(old);
+}
+
+/* Constraints plus the optional per-vertex stiffness (n values). */
+static int read_all(const dk_py_method_spec *spec, PyObject *handles, PyObject *fixed,
+                    PyObject *roi, PyObject *hw, PyObject *stiffness, dk_index n,
+                    const char *context, dk_py_lap_constraints *con, dk_py_doubles *stiff)
+{
+    memset(stiff, 0, sizeof *stiff);
+    if (stiffness && stiffness != Py_None && !spec->takes_stiffness) {
+        PyErr_Format(PyExc_ValueError,
+                     "%s: stiffness is not supported by this method (its energy has no "
+                     "per-vertex weight); pass None",
+                     spec->name);
+        return -1;
+    }
+    if (dk_py_lap_read_constraints(handles, fixed, roi, hw, context, con) < 0)
+        return -1;
+    if (stiffness && stiffness != Py_None) {
+        if (dk_py_read_doubles(stiffness, n, 0, "stiffness", stiff) < 0) {
+            dk_py_lap_constraints_release(con);
+            return -1;
+        }
+        con->desc.stiffness = stiff->data;
+    }
+    return 0;
+}
+
+static void remember(dk_py_method *self, PyObject *handles, PyObject *fixed, PyObject *roi,
+                     PyObject *hw, PyObject *stiffness)
+{
+    replace_ref(&self->handles, handles);
+    replace_ref(&self->fixed, fixed);
+    replace_ref(&self->roi, roi);
+    replace_ref(&self->handle_weights, hw);
+    replace_ref(&self->stiffness, stiffness);
+}
+
+PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
+                           const dk_py_method_spec *spec)
+{
+    static char *kwlist[] = {"mesh", "handles", "fixed", "roi", "handle_weights", "stiffness",
+                             NULL};
+    PyObject *mesh_obj, *handles, *fixed = Py_None, *roi = Py_None, *hw = Py_None;
+    PyObject *stiffness = Py_None, *mine = NULL, *rest = NULL;
+    PyObject *module = PyType_GetModule(type);
+    union {
+        max_align_t align;
+        unsigned char bytes[OPTIONS_MAX];
+    } opt;
+    dk_py_lap_constraints con;
+    dk_py_doubles stiff;
+    void *native = NULL;
+    dk_error err = {0};
+    dk_status st;
+    char fmt[64], where[80];
+
+    if (!module)
+        return NULL;
+    if (spec->options_size > OPTIONS_MAX) {
+        PyErr_Format(PyExc_SystemError, "%s: options struct too large", spec->name);
+        return NULL;
+    }
+    snprintf(fmt, sizeof fmt, "OO|OOOO:%s", spec->name);
+    snprintf(where, sizeof where, "%s()", spec->name);
+    if (split_keywords(kwargs, kwlist, &mine, &rest) < 0)
+        return NULL;
+    spec->default_options(&opt);
+    int ok = PyArg_ParseTupleAndKeywords(args, mine, fmt, kwlist, &mesh_obj, &handles, &fixed,
+                                         &roi, &hw, &stiffness) &&
+             spec->parse_options(rest, &opt, spec->name) == 0 &&
+             refuse_leftovers(rest, where) == 0;
+    Py_DECREF(rest);
+    if (!ok) {
+        Py_DECREF(mine);
+        return NULL;
+    }
+    /* mesh_obj ... borrow from `mine`, which stays alive until the end */
+    const dk_mesh *mesh = dk_py_mesh_get(module, mesh_obj, "mesh");
+    if (!mesh || read_all(spec, handles, fixed, roi, hw, stiffness, mesh->n_vertices,
+                          spec->name, &con, &stiff) < 0) {
+        Py_DECREF(mine);
+        return NULL;
+    }
+    Py_BEGIN_ALLOW_THREADS
+    st = spec->ops->bind(mesh, &con.desc, &opt, &native, &err);
+    Py_END_ALLOW_THREADS
+    dk_py_lap_constraints_release(&con);
+    dk_py_doubles_release(&stiff);
+    if (st != DK_OK) {
+        Py_DECREF(mine);
+        return dk_py_raise(&err, spec->name);
+    }
+    allocfunc alloc = (allocfunc)PyType_GetSlot(type, Py_tp_alloc);
+    dk_py_method *self = alloc ? (dk_py_method *)alloc(type, 0) : NULL;
+    if (!self) {
+        spec->ops->free(native);
+        Py_DECREF(mine);
+        if (!PyErr_Occurred())
+            PyErr_NoMemory();
+        return NULL;
+    }
+    self->spec = spec;
+    self->native = native;
+    self->mesh = mesh;
+    self->mesh_obj = Py_NewRef(mesh_obj);
+    remember(self, handles, fixed, roi, hw, stiffness);
+    Py_DECREF(mine);
+    return (PyObject *)self;
+}
+
+static int method_traverse(PyObject *obj, visitproc visit, void *arg)
+{
+    dk_py_method *self = (dk_py_method *)obj;
+    Py_VISIT(Py_TYPE(obj)); /* a heap type is owned by its instances */
+    Py_VISIT(self->mesh_obj);
+    Py_VISIT(self->handles);
+    Py_VISIT(self->fixed);
+    Py_VISIT(self->roi);
+    Py_VISIT(self->handle_weights);
+    Py_VISIT(self->stiffness);
+    return 0;
+}
+
+static int method_clear(PyObject *obj)
+{
+    dk_py_method *self = (dk_py_method *)obj;
+    /* the native object borrows the mesh: free it before the mesh can go */
+    if (self->native && !self->busy) {
+        self->spec->ops->free(self->native);
+        self->native = NULL;
+    }
+    if (!self->native)
+        Py_CLEAR(self->mesh_obj);
+    Py_CLEAR(self->handles);
+    Py_CLEAR(self->fixed);
+    Py_CLEAR(self->roi);
+    Py_CLEAR(self->handle_weights);
+    Py_CLEAR(self->stiffness);
+    return 0;
+}
+
+static void method_dealloc(PyObject *obj)
+{
+    dk_py_method *self = (dk_py_method *)obj;
+    PyTypeObject *type = Py_TYPE(obj);
+    PyObject_GC_UnTrack(obj);
+    if (self->native) {
+        self->spec->ops->free(self->native);
+        self->native = NULL;
+    }
+    method_clear(obj);
+    Py_CLEAR(self->mesh_obj);
+    freefunc tp_free = (freefunc)PyType_GetSlot(type, Py_tp_free);
+    tp_free(obj);
+    Py_DECREF((PyObject *)type);
+}
+
+/* ------------------------------------------------------------------ solve -------------- */
+
+PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
+{
+    static char *kwlist[] = {"targets", "transforms", "warm_start", "max_iterations",
+                             "resume", "energy", NULL};
+    dk_py_method *self = (dk_py_method *)obj;
+    const dk_py_method_spec *spec = self->spec;
+    PyObject *targets = Py_None, *transforms = Py_None, *maxit_obj = Py_None;
+    PyObject *mine = NULL, *rest = NULL, *positions, *module;
+    int warm = 1, resume = 0, want_energy = 1, maxit = 0, mode;
+    dk_py_doubles in = {0};
+    dk_solve_info info;
+    dk_method_stats ms;
+    dk_error err = {0};
+    dk_status st;
+    double *out;
+    char fmt[64], ctx[80];
+
+    snprintf(fmt, sizeof fmt, "|OOpOpp:solve");
+    snprintf(ctx, sizeof ctx, "%s.solve", spec->name);
+    if (split_keywords(kwargs, kwlist, &mine, &rest) < 0)
+        return NULL;
+    int ok = PyArg_ParseTupleAndKeywords(args, mine, fmt, kwlist, &targets, &transforms,
+                                         &warm, &maxit_obj, &resume, &want_energy);
+    Py_INCREF(targets);
+    Py_INCREF(transforms);
+    Py_DECREF(mine);
+    if (ok && maxit_obj != Py_None) {
+        long v = PyLong_AsLong(maxit_obj);
+        if (v == -1 && PyErr_Occurred())
+            ok = 0;
+        else if (v < 1 || v > 1000000000L) {
+            PyErr_Format(PyExc_ValueError, "%s: max_iterations is %ld, must be >= 1", ctx, v);
+            ok = 0;
+        } else
+            maxit = (int)v;
+    }
+    module = ok ? PyType_GetModule(Py_TYPE(obj)) : NULL;
+    if (!module || dk_py_method_enter(self) < 0)
+        goto fail;
+    if ((spec->solve_extra && spec->solve_extra(self, rest, ctx) < 0) ||
+        refuse_leftovers(rest, "solve()") < 0)
+        goto fail_busy;
+    spec->ops->stats(self->native, &ms);
+    if (dk_py_lap_read_solve_input(targets, transforms, ms.n_handles, ms.n_handle_vertices,
+                                   ctx, &in, &mode) < 0)
+        goto fail_busy;
+    positions = dk_py_new_doubles(2, self->mesh->n_vertices, 3, &out);
+    if (!positions) {
+        dk_py_doubles_release(&in);
+        goto fail_busy;
+    }
+    const dk_solve_request rq = {
+        .targets = in.data,
+        .target_kind = (dk_target_kind)mode,
+        .start = resume ? DK_START_RESUME : warm ? DK_START_WARM : DK_START_COLD,
+        .max_iterations = maxit,
+        .skip_energy = !want_energy,
+    };
+    Py_BEGIN_ALLOW_THREADS
+    st = spec->ops->solve(self->native, &rq, out, &info, &err);
+    Py_END_ALLOW_THREADS
+    dk_py_doubles_release(&in);
+    self->busy = 0;
+    Py_DECREF(rest);
+    Py_DECREF(targets);
+    Py_DECREF(transforms);
+    if (st != DK_OK) {
+        Py_DECREF(positions);
+        return dk_py_raise(&err, ctx);
+    }
+    return dk_py_new_solve_result(module, positions, info.energy, info.iterations,
+                                  info.converged);
+fail_busy:
+    self->busy = 0;
+fail:
+    Py_XDECREF(rest);
+    Py_DECREF(targets);
+    Py_DECREF(transforms);
+    return NULL;
+}
+
+/* ------------------------------------------------------------------ rebind, energy ----- */
+
+PyObject *dk_py_method_rebind(PyObject *obj, PyObject *args, PyObject *kwargs)
+{
+    static char *kwlist[] = {"handles", "fixed", "roi", "handle_weights", "stiffness", NULL};
+    dk_py_method *self = (dk_py_method *)obj;
+    PyObject *handles = NULL, *fixed = NULL, *roi = NULL, *hw = NULL, *stiffness = NULL;
+    dk_py_lap_constraints con;
+    dk_py_doubles stiff;
+    dk_error err = {0};
+    dk_status st;
+    char ctx[80];
+
+    snprintf(ctx, sizeof ctx, "%s.rebind", self->spec->name);
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "|OOOOO:rebind", kwlist, &handles, &fixed,
+                                     &roi, &hw, &stiffness))
+        return NULL;
+    if (!handles)
+        handles = self->handles;
+    if (!fixed)
+        fixed = self->fixed;
+    if (!roi)
+        roi = self->roi;
+    if (!hw)
+        hw = handles == self->handles ? self->handle_weights : Py_None;
+    if (!stiffness)
+        stiffness = self->stiffness;
+    if (dk_py_method_enter(self) < 0)
+        return NULL;
+    if (read_all(self->spec, handles, fixed, roi, hw, stiffness, self->mesh->n_vertices, ctx,
+                 &con, &stiff) < 0) {
+        self->busy = 0;
+        return NULL;
+    }
+    Py_BEGIN_ALLOW_THREADS
+    st = self->spec->ops->rebind(self->native, &con.desc, &err);
+    Py_END_ALLOW_THREADS
+    dk_py_lap_constraints_release(&con);
+    dk_py_doubles_release(&stiff);
+    self->busy = 0;
+    if (st != DK_OK)
+        return dk_py_raise(&err, ctx);
+    remember(self, handles, fixed, roi, hw, stiffness);
+    Py_RETURN_NONE;
+}
+
+const char dk_py_method_rebind_doc[] =
+             "rebind(handles=None, fixed=None, roi=None, handle_weights=None, stiffness=None)\n\n"
+             "Changes the constraints (and stiffness, where the method takes it); arguments\n"
+             "not given keep their bound value (pass an empty list for fixed to clear it;\n"
+             "new handles without handle_weights get weight 1). What can be kept is kept:\n"
+             "the symbolic analysis when the set of unknowns is unchanged, the previous\n"
+             "solution as warm start. On error the previous constraints stay bound.";
+
+PyObject *dk_py_method_energy(PyObject *obj, PyObject *arg)
+{
+    dk_py_method *self = (dk_py_method *)obj;
+    dk_py_doubles x = {0};
+    dk_error err = {0};
+    double e = NAN;
+    dk_status st;
+    char ctx[80];
+
+    snprintf(ctx, sizeof ctx, "%s.energy", self->spec->name);
+    if (dk_py_method_enter(self) < 0)
+        return NULL;
+    if (dk_py_read_doubles(arg, self->mesh->n_vertices, 3, "positions", &x) < 0) {
+        self->busy = 0;
+        return NULL;
+    }
+    for (Py_ssize_t k = 0; k < 3 * x.rows; k++)
+        if (!isfinite(x.data[k])) {
+            PyErr_Format(PyExc_ValueError, "%s: positions of vertex %zd are not finite", ctx,
+                         k / 3);
+            dk_py_doubles_release(&x);
+            self->busy = 0;
+            return NULL;
+        }
+    Py_BEGIN_ALLOW_THREADS
+    st = self->spec->ops->energy(self->native, x.data, &e, &err);
+    Py_END_ALLOW_THREADS
+    dk_py_doubles_release(&x);
+    self->busy = 0;
+    if (st != DK_OK)
+        return dk_py_raise(&err, ctx);
+    return PyFloat_FromDouble(e);
+}
+
+const char dk_py_method_energy_doc[] =
+             "energy(positions) -> float\n\n"
+             "The method's energy of arbitrary n x 3 (finite) positions, for the handle\n"
+             "targets of the last solve (before any solve: the rest targets); the value a\n"
+             "solve reports for its own result.";
+
+/* ------------------------------------------------------------------ getters ------------ */
+
+PyObject *dk_py_method_get_mesh(PyObject *obj, void *c)
+{
+    (void)c;
+    return Py_NewRef(((dk_py_method *)obj)->mesh_obj);
+}
+
+PyObject *dk_py_method_get_n_vertices(PyObject *obj, void *c)
+{
+    (void)c;
+    return PyLong_FromSsize_t((Py_ssize_t)((dk_py_method *)obj)->mesh->n_vertices);
+}
+
+PyObject *dk_py_method_get_n_handles(PyObject *obj, void *c)
+{
+    dk_py_method *self = (dk_py_method *)obj;
+    dk_method_stats ms;
+    (void)c;
+    self->spec->ops->stats(self->native, &ms);
+    return PyLong_FromSsize_t((Py_ssize_t)ms.n_handles);
+}
+
+PyObject *dk_py_method_get_n_handle_vertices(PyObject *obj, void *c)
+{
+    dk_py_method *self = (dk_py_method *)obj;
+    dk_method_stats ms;
+    (void)c;
+    self->spec->ops->stats(self->native, &ms);
+    return PyLong_FromSsize_t((Py_ssize_t)ms.n_handle_vertices);
+}
+
+PyObject *dk_py_method_get_stats(PyObject *obj, void *c)
+{
+    dk_py_method *self = (dk_py_method *)obj;
+    dk_method_stats ms;
+    (void)c;
+    if (self->spec->stats)
+        return self->spec->stats(self);
+    self->spec->ops->stats(self->native, &ms);
+    return Py_BuildValue("{s:n,s:i,s:i}", "n_unknowns", (Py_ssize_t)ms.n_unknowns,
+                         "analysis_count", ms.analysis_count, "factorization_count",
+                         ms.factorization_count);
+}
+
+/* ------------------------------------------------------------------ registration ------- */
+
+int dk_py_method_register(PyObject *module, const dk_py_method_spec *spec, newfunc tp_new)
+{
+    PyType_Slot slots[] = {
+        {Py_tp_new, (void *)tp_new},
+        {Py_tp_dealloc, (void *)method_dealloc},
+        {Py_tp_traverse, (void *)method_traverse},
+        {Py_tp_clear, (void *)method_clear},
+        {Py_tp_getset, spec->getset},
+        {Py_tp_methods, spec->methods},
+        {Py_tp_doc, (void *)spec->doc},
+        {0, NULL},
+    };
+    PyType_Spec type_spec = {
+        spec->type_name,
+        (int)sizeof(dk_py_method),
+        0,
+        Py_TPFLAGS_DEFAULT | Py_TPFLAGS_IMMUTABLETYPE | Py_TPFLAGS_HAVE_GC,
+        slots,
+    };
+    PyObject *type = PyType_FromModuleAndSpec(module, &type_spec, NULL);
+    if (!type)
+        return -1;
+    int r = PyModule_AddObjectRef(module, spec->name, type);
+    Py_DECREF(type);
+    return r;
+}
