@@ -1,0 +1,322 @@
+/* DeformKit: As-Rigid-As-Possible deformation, the public verbs (dk_arap.h). See
+ * arap_internal.h for the layout and the files of this folder, docs/methods/arap.md for the
+ * choices and measurements. */
+#include "arap_internal.h"
+
+void dk_arap_default_options(dk_arap_options *o)
+{
+    if (!o)
+        return;
+    o->energy = DK_ARAP_SPOKES;
+    o->weights = DK_ARAP_WEIGHTS_CLAMPED_COTANGENT;
+    o->max_iterations = 100;
+    o->tolerance = 1e-6;
+    o->acceleration = DK_ARAP_ACCEL_NEWTON;
+    o->anderson_depth = 5;
+    o->cg_iterations = 12;
+    o->predict = 1;
+    o->on_iteration = NULL;
+    o->user = NULL;
+}
+
+static dk_status check_options(const dk_arap_options *o, dk_error *err)
+{
+    if (o->energy != DK_ARAP_SPOKES && o->energy != DK_ARAP_SPOKES_AND_RIMS)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP: unknown energy %d (spokes = 0, spokes_and_rims = 1)",
+                            (int)o->energy);
+    if (o->weights != DK_ARAP_WEIGHTS_COTANGENT &&
+        o->weights != DK_ARAP_WEIGHTS_CLAMPED_COTANGENT && o->weights != DK_ARAP_WEIGHTS_UNIFORM)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP: unknown weights %d (cotangent = 0, clamped_cotangent = 1, "
+                            "uniform = 2)", (int)o->weights);
+    if (o->max_iterations < 1)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP: max_iterations is %d, must be >= 1", o->max_iterations);
+    if (!(isfinite(o->tolerance) && o->tolerance >= 0.0))
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP: tolerance is %g, must be finite and >= 0", o->tolerance);
+    if (o->acceleration != DK_ARAP_ACCEL_NONE && o->acceleration != DK_ARAP_ACCEL_ANDERSON &&
+        o->acceleration != DK_ARAP_ACCEL_NEWTON)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP: unknown acceleration %d (none = 0, anderson = 1, newton = 2)",
+                            (int)o->acceleration);
+    if (o->cg_iterations < 1 || o->cg_iterations > 100)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP: cg_iterations is %d, must be in [1, 100]", o->cg_iterations);
+    if (o->predict != 0 && o->predict != 1)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "ARAP: predict is %d, must be 0 or 1",
+                            o->predict);
+    if (o->anderson_depth < 1 || o->anderson_depth > MAX_ANDERSON_DEPTH)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP: anderson_depth is %d, must be in [1, %d]", o->anderson_depth,
+                            MAX_ANDERSON_DEPTH);
+    return DK_OK;
+}
+
+/* ------------------------------------------------------------------ bind / free -------- */
+
+void dk_arap_free(dk_arap *ar)
+{
+    if (!ar)
+        return;
+    arap_system_free(&ar->sys);
+    free(ar->cell_start);
+    free(ar->ta);
+    free(ar->tb);
+    free(ar->tw);
+    free(ar->te);
+    free(ar->x);
+    free(ar->rot);
+    free(ar->prev);
+    free(ar->prev2);
+    dk_reorder_free(ar->ro);
+    dk_team_free(ar->team); /* after the factor, which used it */
+    free(ar);
+}
+
+dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraints,
+                       const dk_arap_options *options, dk_arap **out, dk_error *err)
+{
+    if (out)
+        *out = NULL;
+    if (!mesh || !constraints || !out)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP bind: mesh, constraints and output must not be NULL");
+    dk_arap_options opt;
+    if (options)
+        opt = *options;
+    else
+        dk_arap_default_options(&opt);
+    dk_status st = check_options(&opt, err);
+    if (st != DK_OK)
+        return st;
+    if (mesh->n_faces == 0)
+        return dk_error_set(err, DK_ERR_TOPOLOGY, "ARAP bind: the mesh has no triangle");
+    dk_arap *ar = calloc(1, sizeof *ar);
+    if (!ar)
+        return oom(err, "object");
+    ar->caller_mesh = mesh;
+    ar->team = dk_team_create(); /* NULL (no thread available) is fine: passes start threads */
+    ar->opt = opt;
+    ar->n = mesh->n_vertices;
+    st = dk_reorder_create(mesh, 0, &ar->ro, err);
+    if (st != DK_OK) {
+        dk_arap_free(ar);
+        return dk_error_prefix(err, "ARAP bind");
+    }
+    ar->mesh = ar->ro->mesh;
+    ar->x = malloc(((size_t)ar->n * 3 + 1) * sizeof *ar->x);
+    ar->rot = malloc(((size_t)ar->n * 9 + 1) * sizeof *ar->rot);
+    ar->prev = malloc(((size_t)ar->n * 3 + 1) * sizeof *ar->prev);
+    ar->prev2 = malloc(((size_t)ar->n * 3 + 1) * sizeof *ar->prev2);
+    if (!ar->x || !ar->rot || !ar->prev || !ar->prev2) {
+        dk_arap_free(ar);
+        return oom(err, "positions");
+    }
+    for (dk_index v = 0; v < ar->n; v++) /* rotations are always valid guesses */
+        for (int k = 0; k < 9; k++)
+            ar->rot[9 * (size_t)v + k] = k % 4 == 0 ? 1.0 : 0.0;
+    dk_reorder_desc rd;
+    st = dk_reorder_desc_create(ar->ro, mesh, constraints, &rd, err);
+    if (st != DK_OK) {
+        dk_arap_free(ar);
+        return dk_error_prefix(err, "ARAP");
+    }
+    st = arap_build_cells(ar, err);
+    if (st == DK_OK)
+        st = arap_system_build(ar, &rd.desc, NULL, &ar->sys, err);
+    dk_reorder_desc_free(&rd);
+    if (st != DK_OK) {
+        dk_arap_free(ar);
+        return st;
+    }
+    *out = ar;
+    return DK_OK;
+}
+
+dk_status dk_arap_rebind(dk_arap *ar, const dk_constraint_desc *constraints, dk_error *err)
+{
+    if (!ar || !constraints)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP rebind: object and constraints must not be NULL");
+    arap_system s;
+    dk_reorder_desc rd;
+    dk_status st = dk_reorder_desc_create(ar->ro, ar->caller_mesh, constraints, &rd, err);
+    if (st != DK_OK)
+        return dk_error_prefix(err, "ARAP");
+    st = arap_system_build(ar, &rd.desc, &ar->sys, &s, err);
+    dk_reorder_desc_free(&rd);
+    if (st != DK_OK)
+        return st;
+    arap_system_free(&ar->sys);
+    ar->sys = s;
+    ar->n_hist = 0; /* other constraints: the drag history no longer predicts */
+    return DK_OK;
+}
+
+/* One solve: the targets, where to start, the iterations, the end kept for the next one. */
+static dk_status solve_impl(dk_arap *ar, const dk_solve_request *rq, double *positions,
+                            dk_solve_info *info, dk_error *err)
+{
+    if (info)
+        memset(info, 0, sizeof *info);
+    if (!ar || !positions)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP solve: object and positions must not be NULL");
+    dk_status st = dk_solve_request_check(rq, "ARAP solve", err);
+    if (st != DK_OK)
+        return st;
+    arap_system *s = &ar->sys;
+    const int warm_start = rq->start != DK_START_COLD;
+    const int maxit = rq->max_iterations > 0 ? rq->max_iterations : ar->opt.max_iterations;
+
+    /* 1. the targets, expanded per handle vertex */
+    st = dk_constraints_targets(s->con, ar->mesh->positions, rq->targets, (int)rq->target_kind,
+                                s->targets, err);
+    s->have_targets = st == DK_OK;
+    if (st != DK_OK)
+        return dk_error_prefix(err, "ARAP solve");
+
+    /* 2. the start. Resume: the previous call's targets again, and nothing changed since:
+     * continue exactly where it stopped, acceleration history included, so that solves
+     * resumed in slices (the add-on's interactive time budget) equal one longer solve. */
+    const size_t nhv3 = 3 * (size_t)s->con->n_handle_vertices;
+    const int resume = rq->start == DK_START_RESUME && ar->have_prev && s->resumable &&
+                       memcmp(s->targets, s->targets_prev, nhv3 * sizeof(double)) == 0;
+    arap_progress p = {0};
+    if (resume)
+        p.energy = s->last_energy; /* ar->x, s->xu, s->rhs, ar->rot: as the last call left them */
+    else if ((st = arap_start(ar, s, warm_start && ar->have_prev, &p.energy, err)) != DK_OK)
+        return st;
+
+    /* 3. the iterations */
+    p.tiny = 1e-26 * s->escale;
+    p.converged = p.energy <= p.tiny;
+    s->resumable = 0; /* until this call ends normally */
+    st = ar->opt.acceleration == DK_ARAP_ACCEL_NEWTON
+             ? arap_iterate_newton(ar, s, maxit, &p, err)
+             : arap_iterate_local_global(ar, s, maxit, &p, err);
+    if (st != DK_OK)
+        return st;
+
+    /* 4. the result, and its end kept for the next warm start */
+    arap_keep_history(ar, s, warm_start);
+    dk_reorder_rows_out(ar->ro, ar->x, positions);
+    s->last_energy = p.energy;
+    s->resumable = 1;
+    if (info) {
+        info->energy = p.energy;
+        info->iterations = p.iterations;
+        info->converged = p.converged;
+        info->rejected = p.rejected;
+        info->predicted = !resume && s->predicted;
+        info->cg_iterations = p.cg_total;
+    }
+    return DK_OK;
+}
+
+dk_status dk_arap_solve(dk_arap *ar, const dk_solve_request *request, double *positions,
+                        dk_solve_info *info, dk_error *err)
+{
+    const dk_status st = solve_impl(ar, request, positions, info, err);
+    if (ar)
+        dk_team_park(ar->team); /* the helper sleeps until the next solve */
+    return st;
+}
+
+dk_status dk_arap_set_tolerance(dk_arap *ar, double tolerance, dk_error *err)
+{
+    if (!ar)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "ARAP: object is NULL");
+    if (!(isfinite(tolerance) && tolerance >= 0.0))
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP: tolerance is %g, must be finite and >= 0", tolerance);
+    ar->opt.tolerance = tolerance;
+    return DK_OK;
+}
+
+dk_status dk_arap_energy(const dk_arap *ar, const double *positions, double *energy,
+                         dk_error *err)
+{
+    if (energy)
+        *energy = NAN;
+    if (!ar || !positions || !energy)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP energy: object, positions and energy must not be NULL");
+    double *x = malloc(((size_t)ar->n * 3 + 1) * sizeof *x);
+    if (!x)
+        return oom(err, "ARAP energy");
+    dk_reorder_rows_in(ar->ro, positions, x);
+    *energy = arap_local_energy(ar, &ar->sys, x, NULL);
+    free(x);
+    return DK_OK;
+}
+
+const dk_constraints *dk_arap_constraints(const dk_arap *ar)
+{
+    return ar ? ar->sys.con : NULL;
+}
+
+void dk_arap_stats(const dk_arap *ar, dk_method_stats *stats)
+{
+    if (!stats)
+        return;
+    memset(stats, 0, sizeof *stats);
+    if (!ar)
+        return;
+    stats->n_vertices = ar->n;
+    stats->n_handles = ar->sys.con->n_handles;
+    stats->n_handle_vertices = ar->sys.con->n_handle_vertices;
+    stats->n_unknowns = ar->sys.nu;
+    stats->analysis_count = ar->analysis_count;
+    stats->factorization_count = ar->factorization_count;
+}
+
+/* ---------------------------------------------------------------- the method contract --- */
+
+static dk_status ops_bind(const dk_mesh *mesh, const dk_constraint_desc *c,
+                          const void *options, void **out, dk_error *err)
+{
+    return dk_arap_bind(mesh, c, (const dk_arap_options *)options, (dk_arap **)out, err);
+}
+
+static dk_status ops_rebind(void *self, const dk_constraint_desc *c, dk_error *err)
+{
+    return dk_arap_rebind((dk_arap *)self, c, err);
+}
+
+static dk_status ops_solve(void *self, const dk_solve_request *rq, double *positions,
+                           dk_solve_info *info, dk_error *err)
+{
+    return dk_arap_solve((dk_arap *)self, rq, positions, info, err);
+}
+
+static dk_status ops_energy(const void *self, const double *positions, double *energy,
+                            dk_error *err)
+{
+    return dk_arap_energy((const dk_arap *)self, positions, energy, err);
+}
+
+static void ops_stats(const void *self, dk_method_stats *stats)
+{
+    dk_arap_stats((const dk_arap *)self, stats);
+}
+
+static void ops_free(void *self)
+{
+    dk_arap_free((dk_arap *)self);
+}
+
+const dk_method_ops dk_arap_ops = {
+    .name = "ARAP",
+    .flags = DK_METHOD_ITERATIVE | DK_METHOD_TRANSFORMS_AS_POSITIONS |
+             DK_METHOD_TRANSLATION_INVARIANT | DK_METHOD_RIGID_INVARIANT,
+    .bind = ops_bind,
+    .rebind = ops_rebind,
+    .solve = ops_solve,
+    .energy = ops_energy,
+    .stats = ops_stats,
+    .free = ops_free,
+};
+

@@ -1,0 +1,222 @@
+/* DeformKit ARAP, internal: the object, its constraint system and the functions the files of
+ * native/methods/arap/ share. Not part of the public API (dk_arap.h is).
+ *
+ * Layout. The bind builds the cells once: for vertex i, terms cell_start[i] ..
+ * cell_start[i+1]-1, each an edge (ta, tb) with a base weight tw and its rest vector
+ * te = p_a - p_b. Everything that depends on the constraints lives in an arap_system (the
+ * validated constraints, the unknown map, the reduced matrix and its factor, the
+ * per-iteration buffers) that rebind replaces atomically.
+ *
+ * One iteration from positions x with rotations R (optimal for x) and energy E:
+ *   g = G(x): solve A g = rhs(R)                      (global step, 3 right-hand sides)
+ *   candidate = g, or the Anderson mix of the last m (x, g) pairs
+ *   R', E', rhs(R') = local step, energy and next right-hand side at the candidate (one
+ *                     pass over the cells; each R' refined from the previous rotation)
+ *   if accelerated and E' > E: candidate = g (plain step, E' <= E is guaranteed), history
+ *   is cleared; stop when E - E' <= tolerance * E.
+ * A warm solve starts from the previous solution with the move of the constrained vertices
+ * spread by one global step (previous rotations held); a cold one from the global step with
+ * identity rotations. Acceleration NEWTON replaces the iteration by inexact Newton steps on
+ * the same energy (newton_step), from the same starts.
+ *
+ * Files, one idea each:
+ *   arap.c        the public verbs: options, bind, rebind, solve (a driver naming its
+ *                 steps), energy, stats, the method-contract table
+ *   cells.c       the cells: each vertex's weighted rest edges
+ *   system.c      the constraint system: unknowns, component check, reduced matrix, its
+ *                 factor (analysis reused by rebind), the right-hand-side map
+ *   local_step.c  rotations (refined by Newton steps on SO(3)), energies, right-hand sides
+ *   warm_start.c  where a solve starts (cold, warm, predicted along the drag) and the
+ *                 history the predictor keeps
+ *   anderson.c    local/global iterations, plain or Anderson-accelerated
+ *   newton.c      inexact Newton steps with matrix-free Hessian products
+ */
+#ifndef DK_ARAP_INTERNAL_H
+#define DK_ARAP_INTERNAL_H
+
+#include "dk_arap.h"
+
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "dk_cholesky.h"
+#include "dk_operators.h"
+#include "dk_parallel.h"
+#include "dk_reorder.h"
+#include "dk_sparse.h"
+
+#define MAX_ANDERSON_DEPTH 20
+/* Below this many cell terms the local step runs on the calling thread only. */
+#define PARALLEL_TERMS 50000
+/* Newton takes a plain local/global step while that step's predicted decrease (at least
+ * r0.z0, see newton_step) exceeds this fraction of E. Far from a minimum (cold starts of big
+ * deformations: the naive start) the Hessian is indefinite, damped Newton steps can jump into
+ * another basin, and local/global steps, descending a majorizer, follow the energy downhill
+ * into the basin the local/global solvers find. Chosen on 8 cold solves (bumpy-plane bends of
+ * 1.2-2.4 rad, the three scenarios): pure Newton ended 23% above the local/global minimum on
+ * the 1.5 rad bend; 0.5, 0.3 and 0.1 fixed that but sent arm-lift 2e-3 higher; 0.03 and 0.01
+ * kept all eight in the local/global basin, 0.003 ran into max_iterations. Checked on 16
+ * other cold solves (other bends, tube twists with and without a lift, the scenarios at half
+ * and 1.5 times their translation): worst 2.3e-4 above Anderson's minimum with 0.03 (pure
+ * Newton: 0.19 and 3e-3 on two of them), and 10% less time in all. Warm drag starts are at
+ * ~5e-4, so drags are unaffected. */
+#define NEWTON_FAR 0.03
+
+typedef struct arap_system {
+    dk_constraints *con;
+    dk_index nu;          /* unknowns: free vertices and soft handle vertices            */
+    dk_index *unk;        /* n: unknown index or -1 (eliminated)                         */
+    dk_index *unknowns;   /* nu: the vertices                                            */
+    dk_index *target_of;  /* n: row into the expanded targets, or -1                     */
+    double *soft_k;       /* n: penalty k_v of a soft handle vertex, 0 otherwise         */
+    double *tws;          /* n_terms: stiffness x base weight                            */
+    int64_t *bterms;      /* the terms with one eliminated and one unknown end, ascending
+                             (the warm start's response reads only these)                */
+    int64_t n_bterms;
+    double escale;        /* sum over terms of tws |te|^2: the energy's natural scale    */
+    double lambda;        /* mean diagonal of the ARAP part of A                         */
+    dk_sparse a;          /* reduced matrix (both triangles), arrays owned               */
+    dk_cholesky *chol;
+    /* The global step's right-hand side is linear in the rotations: for unknown u (vertex
+     * v), b_u = rhs_const_u + sum over the cells c with a term touching v of R_c g_{v,c},
+     * g_{v,c} = sum of tws_t e_t over c's terms with ta = v minus those with tb = v. The
+     * entries of u are rg[rg_start[u] .. rg_start[u+1]-1] (the cells are v and its
+     * one-ring). A gather per unknown: each half of the pass writes its own rows, where
+     * scattering each term's R_c e_t to both ends had needed a second buffer for the helper
+     * thread and cost ~0.8 ms an iteration on the armadillo. */
+    int64_t *rg_start;    /* nu + 1                                                       */
+    struct rhs_entry { double g[3]; dk_index cell; } *rg;
+    /* per-solve / per-iteration buffers, N = 3 nu, column-major n x 3 layouts */
+    double *rhs_const, *rhs, *xu, *gu, *fu, *gprev, *fprev, *dg, *df;
+    double *targets;      /* n_handle_vertices x 3: last expanded targets                */
+    int have_targets;
+    /* where the last solve stopped, for a resumed solve (DK_START_RESUME, same targets) */
+    double *targets_prev; /* n_handle_vertices x 3: the targets it solved for            */
+    double *targets_prev2; /* n_handle_vertices x 3: the targets of dk_arap's prev2      */
+    double *warm;         /* 6 nu: the two warm-start responses (plain, predicted)       */
+    int resumable, aa_hist, aa_head, aa_have_pair;
+    int predicted;        /* the last warm start used the secant predictor                */
+    double last_energy;
+    double aa_gram[MAX_ANDERSON_DEPTH * MAX_ANDERSON_DEPTH];
+    /* Newton (acceleration NEWTON) only, see newton_step: per cell K_c^-1 at the current
+     * iterate (6: 00 01 02 11 12 22, zero where K_c is not safely positive definite) and
+     * omega_c (3); the PCG direction in the mesh layout (n x 3, zero on eliminated
+     * vertices); per right-hand-side entry R_c g_{v,c} (written with the right-hand side)
+     * and the cell terms packed for the Hessian products, both in single precision: the
+     * products only steer conjugate gradients (truncated far above that rounding), the
+     * gradient, energies and line search stay in double, and halving these streams made a
+     * product ~25% faster (memory-bound); the PCG vectors (N each) */
+    double *kinv, *omega, *vfull;
+    dk_index *a_vrow; /* per entry of a: the vertex of its row (products in the mesh layout) */
+    struct nt_entry { float h[3]; dk_index cell; } *nt;
+    struct nt_term { float e[3], w; dk_index a, b; } *ntt; /* the cell terms, packed */
+    double *nt_r, *nt_z, *nt_p, *nt_q, *nt_d, *nt_z0;
+} arap_system;
+
+struct dk_arap {
+    /* The mesh in the internal numbering (dk_reorder.h: breadth-first, for cache
+     * locality); every array below uses it. The API maps at its boundary: constraints in
+     * (rebind too), positions in and out, vertex numbers in messages (ro->perm). */
+    const dk_mesh *mesh;
+    const dk_mesh *caller_mesh;
+    dk_reorder *ro;
+    dk_arap_options opt;
+    dk_index n;
+    int64_t n_terms;
+    dk_index *cell_start, *ta, *tb;
+    double *tw, *te;
+    arap_system sys;
+    double *x;            /* n x 3 row-major current positions                           */
+    double *rot;          /* n x 9 rotations                                             */
+    double *prev;         /* n x 3 previous solution (warm start)                        */
+    int have_prev;
+    /* secant predictor of a warm start: prev2 (n x 3) is the end of the last call before
+     * the previous one with other targets; n_hist counts how many of prev (with
+     * sys.targets_prev) and prev2 (with sys.targets_prev2) hold ends of calls under the
+     * current constraints */
+    double *prev2;
+    int n_hist;
+    int analysis_count, factorization_count;
+    dk_team *team;        /* the passes' and the factor's helper thread (NULL: per pass)  */
+};
+
+/* The progress of one solve's iterations, handed from the start to the iteration loop. */
+typedef struct arap_progress {
+    double energy;  /* of the current iterate                                             */
+    double tiny;    /* an energy at or below this is a rigid motion: converged             */
+    int iterations, converged, rejected, cg_total;
+} arap_progress;
+
+static inline dk_status oom(dk_error *err, const char *what)
+{
+    return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ARAP: out of memory (%s)", what);
+}
+
+/* a . b (returned) and a . c (into *ac) in one pass over a, each with four partial sums: a
+ * single running sum is one floating-point add latency per element (~4 cycles), which made
+ * Anderson's dot products cost ~1 ms an iteration on the armadillo; four chains run at the
+ * loads' speed. The order of summation is fixed, so the results stay reproducible. */
+static inline double dot2(const double *a, const double *b, const double *c, size_t n, double *ac)
+{
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0, t0 = 0.0, t1 = 0.0, t2 = 0.0, t3 = 0.0;
+    size_t k = 0;
+    for (; k + 4 <= n; k += 4) {
+        s0 += a[k] * b[k];
+        s1 += a[k + 1] * b[k + 1];
+        s2 += a[k + 2] * b[k + 2];
+        s3 += a[k + 3] * b[k + 3];
+        t0 += a[k] * c[k];
+        t1 += a[k + 1] * c[k + 1];
+        t2 += a[k + 2] * c[k + 2];
+        t3 += a[k + 3] * c[k + 3];
+    }
+    for (; k < n; k++) {
+        s0 += a[k] * b[k];
+        t0 += a[k] * c[k];
+    }
+    *ac = (t0 + t1) + (t2 + t3);
+    return (s0 + s1) + (s2 + s3);
+}
+
+
+static inline double dist2(const double *p, const double *q)
+{
+    double d0 = p[0] - q[0], d1 = p[1] - q[1], d2 = p[2] - q[2];
+    return d0 * d0 + d1 * d1 + d2 * d2;
+}
+
+/* cells.c */
+dk_status arap_build_cells(dk_arap *ar, dk_error *err);
+
+/* system.c: builds a complete system for `desc`; `old` (may be NULL) lends its symbolic
+ * analysis when the unknown set is the same (it is then moved into the new system). */
+dk_status arap_system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_system *old,
+                            arap_system *s, dk_error *err);
+void arap_system_free(arap_system *s);
+
+/* local_step.c: the rotations optimal for x (refined from `rot`), into rot, and the energy
+ * at x (arap_local_energy; rot may be NULL: energy only); the right-hand side of the next
+ * global step from the rotations (arap_rotations_rhs); its part from the eliminated
+ * vertices (arap_build_rhs_const); unknowns <-> mesh layout (arap_scatter, arap_gather) */
+double arap_local_energy(const dk_arap *ar, const arap_system *s, const double *x,
+                         double *rot);
+void arap_rotations_rhs(const dk_arap *ar, arap_system *s, const double *rot);
+void arap_build_rhs_const(const dk_arap *ar, arap_system *s, const double *x);
+void arap_scatter(const arap_system *s, const double *xu, double *x);
+void arap_gather(const arap_system *s, const double *x, double *xu);
+
+/* warm_start.c: sets the iterate where a solve starts (ar->x, ar->rot, s->xu, s->rhs) and
+ * its energy; `warm`: from the previous solution (there must be one). After the solve,
+ * arap_keep_history records its end for the next warm start's predictor. */
+dk_status arap_start(dk_arap *ar, arap_system *s, int warm, double *energy, dk_error *err);
+void arap_keep_history(dk_arap *ar, arap_system *s, int warm_start);
+
+/* anderson.c, newton.c: iterate from p until converged or max_iterations in all */
+dk_status arap_iterate_local_global(dk_arap *ar, arap_system *s, int max_iterations,
+                                    arap_progress *p, dk_error *err);
+dk_status arap_iterate_newton(dk_arap *ar, arap_system *s, int max_iterations,
+                              arap_progress *p, dk_error *err);
+
+#endif

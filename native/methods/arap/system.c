@@ -1,0 +1,474 @@
+/* DeformKit ARAP: the constraint system: unknowns, component check, reduced matrix and
+ * factor, right-hand-side map (see arap_internal.h). */
+#include "arap_internal.h"
+
+static void sparse_release(dk_sparse *a)
+{
+    free(a->col_start);
+    free(a->row_index);
+    free(a->values);
+    memset(a, 0, sizeof *a);
+}
+
+void arap_system_free(arap_system *s)
+{
+    dk_constraints_free(s->con);
+    free(s->unk);
+    free(s->unknowns);
+    free(s->target_of);
+    free(s->soft_k);
+    free(s->tws);
+    free(s->bterms);
+    sparse_release(&s->a);
+    dk_cholesky_free(s->chol);
+    free(s->rhs_const);
+    free(s->rhs);
+    free(s->rg_start);
+    free(s->rg);
+    free(s->xu);
+    free(s->gu);
+    free(s->fu);
+    free(s->gprev);
+    free(s->fprev);
+    free(s->dg);
+    free(s->df);
+    free(s->targets);
+    free(s->targets_prev);
+    free(s->targets_prev2);
+    free(s->warm);
+    free(s->kinv);
+    free(s->omega);
+    free(s->vfull);
+    free(s->nt);
+    free(s->ntt);
+    free(s->a_vrow);
+    free(s->nt_r);
+    free(s->nt_z);
+    free(s->nt_p);
+    free(s->nt_q);
+    free(s->nt_d);
+    free(s->nt_z0);
+    memset(s, 0, sizeof *s);
+}
+
+static dk_index uf_find(dk_index *parent, dk_index v)
+{
+    while (parent[v] != v) {
+        parent[v] = parent[parent[v]];
+        v = parent[v];
+    }
+    return v;
+}
+
+/* Every connected component (and isolated vertex) holding an unknown must hold an anchor:
+ * an eliminated vertex or a soft handle vertex. */
+static dk_status check_components(const dk_arap *ar, const arap_system *s, dk_error *err)
+{
+    const dk_mesh *m = ar->mesh;
+    const dk_index n = ar->n;
+    dk_index *parent = malloc(((size_t)n + 1) * sizeof *parent);
+    unsigned char *anchored = calloc((size_t)n + 1, 1);
+    if (!parent || !anchored) {
+        free(parent);
+        free(anchored);
+        return oom(err, "component check");
+    }
+    for (dk_index v = 0; v < n; v++)
+        parent[v] = v;
+    for (dk_index f = 0; f < m->n_faces; f++)
+        for (int k = 1; k < 3; k++) {
+            dk_index a = uf_find(parent, m->faces[3 * f]);
+            dk_index b = uf_find(parent, m->faces[3 * f + k]);
+            if (a != b)
+                parent[a < b ? b : a] = a < b ? a : b;
+        }
+    for (dk_index v = 0; v < n; v++)
+        if (s->unk[v] < 0 || s->soft_k[v] > 0.0)
+            anchored[uf_find(parent, v)] = 1;
+    dk_status st = DK_OK;
+    /* in the caller's order, so that the message names the component's smallest vertex */
+    for (dk_index cv = 0; cv < n && st == DK_OK; cv++) {
+        const dk_index v = ar->ro->iperm[cv];
+        if (s->unk[v] >= 0 && !anchored[uf_find(parent, v)])
+            st = dk_error_set(err, DK_ERR_DEGENERATE,
+                              "ARAP: the connected component of vertex %d has free vertices "
+                              "but no handle or fixed vertex, so its position is undetermined",
+                              (int)cv);
+    }
+    free(parent);
+    free(anchored);
+    return st;
+}
+
+typedef struct entry {
+    dk_index row;
+    double val;
+} entry;
+
+/* Assembles the reduced matrix A (unknowns x unknowns, both triangles, every diagonal
+ * present, explicit zeros kept so that the pattern depends only on the unknown set). */
+static dk_status assemble(const dk_arap *ar, arap_system *s, dk_error *err)
+{
+    const dk_index nu = s->nu;
+    dk_index *count = calloc((size_t)nu + 1, sizeof *count);
+    if (!count)
+        return oom(err, "matrix assembly");
+    for (int64_t t = 0; t < ar->n_terms; t++) {
+        dk_index ua = s->unk[ar->ta[t]], ub = s->unk[ar->tb[t]];
+        if (ua >= 0)
+            count[ua + 1] += 1 + (ub >= 0);
+        if (ub >= 0)
+            count[ub + 1] += 1 + (ua >= 0);
+    }
+    for (dk_index u = 0; u < nu; u++)
+        count[u + 1] += count[u] + 1; /* + the diagonal */
+    int64_t total = count[nu];
+    entry *ent = malloc(((size_t)total + 1) * sizeof *ent);
+    dk_index *fill = malloc(((size_t)nu + 1) * sizeof *fill);
+    if (!ent || !fill) {
+        free(count);
+        free(ent);
+        free(fill);
+        return oom(err, "matrix assembly");
+    }
+    for (dk_index u = 0; u < nu; u++) {
+        fill[u] = count[u] + 1;
+        ent[count[u]].row = u;
+        ent[count[u]].val = s->soft_k[s->unknowns[u]];
+    }
+    for (int64_t t = 0; t < ar->n_terms; t++) {
+        dk_index ua = s->unk[ar->ta[t]], ub = s->unk[ar->tb[t]];
+        double w = s->tws[t];
+        if (ua >= 0) {
+            ent[fill[ua]++] = (entry){ua, w};
+            if (ub >= 0)
+                ent[fill[ua]++] = (entry){ub, -w};
+        }
+        if (ub >= 0) {
+            ent[fill[ub]++] = (entry){ub, w};
+            if (ua >= 0)
+                ent[fill[ub]++] = (entry){ua, -w};
+        }
+    }
+    free(fill);
+    /* Sort and merge each column in place. */
+    int64_t nnz = 0;
+    for (dk_index u = 0; u < nu; u++) {
+        entry *c = ent + count[u];
+        dk_index len = count[u + 1] - count[u];
+        for (dk_index i = 1; i < len; i++) {
+            entry key = c[i];
+            dk_index j = i - 1;
+            while (j >= 0 && c[j].row > key.row) {
+                c[j + 1] = c[j];
+                j--;
+            }
+            c[j + 1] = key;
+        }
+        int64_t col_start = nnz;
+        for (dk_index i = 0; i < len;) {
+            entry e = c[i++];
+            while (i < len && c[i].row == e.row)
+                e.val += c[i++].val;
+            ent[nnz++] = e;
+        }
+        count[u] = (dk_index)col_start;
+    }
+    count[nu] = (dk_index)nnz;
+    s->a.n_rows = s->a.n_cols = nu;
+    s->a.col_start = count;
+    s->a.row_index = malloc(((size_t)nnz + 1) * sizeof *s->a.row_index);
+    s->a.values = malloc(((size_t)nnz + 1) * sizeof *s->a.values);
+    if (!s->a.row_index || !s->a.values) {
+        free(ent);
+        sparse_release(&s->a);
+        return oom(err, "reduced matrix");
+    }
+    for (int64_t k = 0; k < nnz; k++) {
+        s->a.row_index[k] = ent[k].row;
+        s->a.values[k] = ent[k].val;
+    }
+    free(ent);
+    return DK_OK;
+}
+
+static int same_unknowns(const arap_system *x, const arap_system *y, dk_index n)
+{
+    if (!x->unk || x->nu != y->nu)
+        return 0;
+    return memcmp(x->unk, y->unk, (size_t)n * sizeof *x->unk) == 0;
+}
+
+/* arap_internal.h */
+/* g_{v,c} of cell c for vertex v (see arap_system.rg); returns whether a term touches v. */
+static int cell_gather_vector(const dk_arap *ar, const arap_system *s, dk_index c, dk_index v,
+                              double g[3])
+{
+    int touches = 0;
+    g[0] = g[1] = g[2] = 0.0;
+    for (dk_index t = ar->cell_start[c]; t < ar->cell_start[c + 1]; t++) {
+        const double sign = ar->ta[t] == v ? 1.0 : ar->tb[t] == v ? -1.0 : 0.0;
+        if (sign == 0.0)
+            continue;
+        touches = 1;
+        for (int d = 0; d < 3; d++)
+            g[d] += sign * s->tws[t] * ar->te[3 * t + d];
+    }
+    return touches;
+}
+
+/* The rotations-to-right-hand-side map s->rg (needs s->unknowns, s->tws). Every cell with a
+ * term touching v is v's own or one of its one-ring's (a spoke (c, v), or a rim of a
+ * triangle (c, v, k)), so candidates are scanned there: O(sum of one-ring cell sizes). */
+static dk_status build_rhs_map(const dk_arap *ar, arap_system *s, dk_error *err)
+{
+    const dk_mesh *m = ar->mesh;
+    const dk_index nu = s->nu;
+    double g[3];
+    s->rg_start = malloc(((size_t)nu + 1) * sizeof *s->rg_start);
+    if (!s->rg_start)
+        return oom(err, "right-hand-side map");
+    int64_t k = 0;
+    for (int pass = 0; pass < 2; pass++) {
+        k = 0;
+        for (dk_index u = 0; u < nu; u++) {
+            const dk_index v = s->unknowns[u];
+            if (pass == 0)
+                s->rg_start[u] = k;
+            for (dk_index q = m->ring_start[v] - 1; q < m->ring_start[v + 1]; q++) {
+                const dk_index c = q < m->ring_start[v] ? v : m->ring_index[q];
+                if (!cell_gather_vector(ar, s, c, v, g))
+                    continue;
+                if (pass == 1) {
+                    memcpy(s->rg[k].g, g, sizeof g);
+                    s->rg[k].cell = c;
+                }
+                k++;
+            }
+        }
+        if (pass == 0) {
+            s->rg_start[nu] = k;
+            s->rg = malloc(((size_t)k + 1) * sizeof *s->rg);
+            if (!s->rg)
+                return oom(err, "right-hand-side map");
+        }
+    }
+    return DK_OK;
+}
+
+/* The unknowns: free vertices and soft handle vertices (their penalty k_v into soft_k);
+ * each term's weight with the stiffness; the terms across the constraints' border. */
+static dk_status classify(const dk_arap *ar, arap_system *s, dk_error *err)
+{
+    const dk_index n = ar->n;
+    const dk_constraints *c = s->con;
+    for (dk_index v = 0; v < n; v++)
+        s->target_of[v] = -1;
+    for (dk_index k = 0; k < c->n_handle_vertices; k++)
+        s->target_of[c->handle_vertices[k]] = k;
+    /* Weights with stiffness, the ARAP diagonal, then the soft penalties. */
+    double diag = 0.0, escale = 0.0;
+    for (dk_index i = 0; i < n; i++)
+        for (dk_index t = ar->cell_start[i]; t < ar->cell_start[i + 1]; t++) {
+            s->tws[t] = c->stiffness[i] * ar->tw[t];
+            diag += 2.0 * s->tws[t];
+            const double *e = ar->te + 3 * t;
+            escale += s->tws[t] * (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
+        }
+    s->lambda = n > 0 ? diag / n : 0.0;
+    s->escale = escale;
+    dk_index nu = 0;
+    for (dk_index v = 0; v < n; v++) {
+        int soft = 0;
+        if (c->role[v] >= 0) {
+            double w = c->handle_weights[s->target_of[v]];
+            if (w < 1.0) {
+                soft = 1;
+                s->soft_k[v] = s->lambda * w / (1.0 - w);
+            }
+        }
+        s->unk[v] = (c->role[v] == DK_VERTEX_FREE || soft) ? nu++ : -1;
+    }
+    s->nu = nu;
+    s->n_bterms = 0;
+    for (int64_t t = 0; t < ar->n_terms; t++)
+        s->n_bterms += (s->unk[ar->ta[t]] >= 0) != (s->unk[ar->tb[t]] >= 0);
+    s->bterms = malloc(((size_t)s->n_bterms + 1) * sizeof *s->bterms);
+    if (!s->bterms)
+        return oom(err, "constraint system");
+    s->n_bterms = 0;
+    for (int64_t t = 0; t < ar->n_terms; t++)
+        if ((s->unk[ar->ta[t]] >= 0) != (s->unk[ar->tb[t]] >= 0))
+            s->bterms[s->n_bterms++] = t;
+    if (nu == 0)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP: no free vertex: every vertex is fixed, outside the ROI or "
+                            "a hard handle, so there is nothing to solve");
+    return DK_OK;
+}
+
+/* The per-solve buffers of the chosen solver (N = 3 nu each, column-major). */
+static dk_status solve_buffers(const dk_arap *ar, arap_system *s, dk_error *err)
+{
+    const dk_index n = ar->n, nu = s->nu;
+    s->unknowns = malloc((size_t)nu * sizeof *s->unknowns);
+    size_t N = 3 * (size_t)nu, m = (size_t)ar->opt.anderson_depth;
+    int accel = ar->opt.acceleration == DK_ARAP_ACCEL_ANDERSON;
+    s->rhs_const = malloc(N * sizeof(double));
+    s->rhs = malloc(N * sizeof(double));
+    s->xu = malloc(N * sizeof(double));
+    s->gu = malloc(N * sizeof(double));
+    s->warm = malloc(2 * N * sizeof(double) + sizeof(double));
+    if (accel) {
+        s->fu = malloc(N * sizeof(double));
+        s->gprev = malloc(N * sizeof(double));
+        s->fprev = malloc(N * sizeof(double));
+        s->dg = malloc(N * m * sizeof(double));
+        s->df = malloc(N * m * sizeof(double));
+    }
+    const int newton = ar->opt.acceleration == DK_ARAP_ACCEL_NEWTON;
+    if (newton) {
+        s->kinv = malloc(6 * (size_t)n * sizeof(double) + sizeof(double));
+        s->omega = malloc(3 * (size_t)n * sizeof(double) + sizeof(double));
+        s->vfull = calloc(3 * (size_t)n + 1, sizeof(double));
+        s->nt_r = malloc(N * sizeof(double));
+        s->nt_z = malloc(N * sizeof(double));
+        s->nt_p = malloc(N * sizeof(double));
+        s->nt_q = malloc(N * sizeof(double));
+        s->nt_d = malloc(N * sizeof(double));
+        s->nt_z0 = malloc(N * sizeof(double));
+    }
+    if (!s->unknowns || !s->rhs_const || !s->rhs || !s->xu || !s->gu || !s->warm ||
+        (accel && (!s->fu || !s->gprev || !s->fprev || !s->dg || !s->df)) ||
+        (newton && (!s->kinv || !s->omega || !s->vfull || !s->nt_r || !s->nt_z || !s->nt_p ||
+                    !s->nt_q || !s->nt_d || !s->nt_z0)))
+        return oom(err, "solve buffers");
+    for (dk_index v = 0; v < n; v++)
+        if (s->unk[v] >= 0)
+            s->unknowns[s->unk[v]] = v;
+    return DK_OK;
+}
+
+/* Newton: the right-hand-side entries' cells and the cell terms, packed in single
+ * precision for the Hessian products (see arap_system). */
+static dk_status newton_terms(const dk_arap *ar, arap_system *s, dk_error *err)
+{
+    const int64_t ne = s->rg_start[s->nu];
+    s->nt = malloc(((size_t)ne + 1) * sizeof *s->nt);
+    s->ntt = malloc(((size_t)ar->n_terms + 1) * sizeof *s->ntt);
+    if (!s->nt || !s->ntt)
+        return oom(err, "Newton buffers");
+    for (int64_t k = 0; k < ne; k++)
+        s->nt[k].cell = s->rg[k].cell;
+    for (int64_t t = 0; t < ar->n_terms; t++) {
+        struct nt_term *q = s->ntt + t;
+        for (int d = 0; d < 3; d++)
+            q->e[d] = (float)ar->te[3 * t + d];
+        q->w = (float)ar->tw[t];
+        q->a = ar->ta[t];
+        q->b = ar->tb[t];
+    }
+    return DK_OK;
+}
+
+/* Newton: the vertex of each matrix entry's row (the products run in the mesh layout). */
+static dk_status newton_rows(arap_system *s, dk_error *err)
+{
+    const dk_index nnz = s->a.col_start[s->nu];
+    s->a_vrow = malloc(((size_t)nnz + 1) * sizeof *s->a_vrow);
+    if (!s->a_vrow)
+        return oom(err, "Newton buffers");
+    for (dk_index k = 0; k < nnz; k++)
+        s->a_vrow[k] = s->unknowns[s->a.row_index[k]];
+    return DK_OK;
+}
+
+/* Factors s->a, taking the symbolic analysis from `old` when the unknown set is the same;
+ * when that numeric factorization fails, the analysis goes back to `old`, refactored with
+ * its own values, so that the object keeps working with its previous constraints. Frees
+ * s on failure. */
+static dk_status factor(dk_arap *ar, arap_system *old, arap_system *s, dk_error *err)
+{
+    const dk_index n = ar->n;
+    dk_status st;
+    int reused = 0;
+    if (old && old->chol && same_unknowns(old, s, n)) {
+        s->chol = old->chol; /* same pattern: keep the symbolic analysis */
+        old->chol = NULL;
+        reused = 1;
+    } else {
+        st = dk_cholesky_analyze(&s->a, &s->chol, err);
+        if (st != DK_OK) {
+            arap_system_free(s);
+            return dk_error_prefix(err, "ARAP: analysis of the reduced matrix");
+        }
+        dk_cholesky_set_team(s->chol, ar->team);
+        ar->analysis_count++;
+    }
+    st = dk_cholesky_factorize(s->chol, &s->a, err);
+    if (st == DK_OK) {
+        ar->factorization_count++;
+        return DK_OK;
+    }
+    if (reused) { /* give the analysis back, with the old values */
+        old->chol = s->chol;
+        s->chol = NULL;
+        dk_error ignored = {0};
+        if (dk_cholesky_factorize(old->chol, &old->a, &ignored) != DK_OK) {
+            dk_cholesky_free(old->chol);
+            old->chol = NULL;
+        }
+    }
+    arap_system_free(s);
+    if (st == DK_ERR_NOT_POSITIVE_DEFINITE) {
+        dk_error_prefix(err, "ARAP: the reduced matrix is not positive definite (degenerate "
+                             "triangles or negative cotangent weights; try "
+                             "weights=clamped_cotangent)");
+        if (err)
+            err->status = DK_ERR_DEGENERATE;
+        return DK_ERR_DEGENERATE;
+    }
+    return dk_error_prefix(err, "ARAP: factorization");
+}
+
+
+dk_status arap_system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_system *old,
+                            arap_system *s, dk_error *err)
+{
+    const dk_index n = ar->n;
+    memset(s, 0, sizeof *s);
+    dk_status st = dk_constraints_create(ar->mesh, desc, &s->con, err);
+    if (st != DK_OK)
+        return dk_error_prefix(err, "ARAP");
+    const dk_constraints *c = s->con;
+    s->unk = malloc(((size_t)n + 1) * sizeof *s->unk);
+    s->target_of = malloc(((size_t)n + 1) * sizeof *s->target_of);
+    s->soft_k = calloc((size_t)n + 1, sizeof *s->soft_k);
+    s->tws = malloc(((size_t)ar->n_terms + 1) * sizeof *s->tws);
+    s->targets = malloc(((size_t)c->n_handle_vertices * 3 + 1) * sizeof *s->targets);
+    s->targets_prev = malloc(((size_t)c->n_handle_vertices * 3 + 1) * sizeof *s->targets_prev);
+    s->targets_prev2 = malloc(((size_t)c->n_handle_vertices * 3 + 1) * sizeof *s->targets_prev2);
+    if (!s->unk || !s->target_of || !s->soft_k || !s->tws || !s->targets || !s->targets_prev ||
+        !s->targets_prev2)
+        st = oom(err, "constraint system");
+    const int newton = ar->opt.acceleration == DK_ARAP_ACCEL_NEWTON;
+    if (st == DK_OK)
+        st = classify(ar, s, err);
+    if (st == DK_OK)
+        st = solve_buffers(ar, s, err);
+    if (st == DK_OK)
+        st = build_rhs_map(ar, s, err);
+    if (st == DK_OK && newton)
+        st = newton_terms(ar, s, err);
+    if (st == DK_OK)
+        st = check_components(ar, s, err);
+    if (st == DK_OK)
+        st = assemble(ar, s, err);
+    if (st == DK_OK && newton)
+        st = newton_rows(s, err);
+    if (st != DK_OK) {
+        arap_system_free(s);
+        return st;
+    }
+    return factor(ar, old, s, err);
+}
