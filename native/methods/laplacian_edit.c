@@ -9,6 +9,7 @@
 #include <string.h>
 
 #include "dk_cholesky.h"
+#include "dk_csys.h"
 #include "dk_operators.h"
 #include "dk_parallel.h"
 #include "dk_reorder.h"
@@ -560,6 +561,19 @@ done:
     return st;
 }
 
+/* A component is anchored by an eliminated vertex (seen by dk_csys_check_components), a
+ * soft row, or an isolated vertex (its row A_ii = 1 pins it). */
+typedef struct le_anchor_ctx {
+    const dk_mesh *m;
+    const le_system *s;
+} le_anchor_ctx;
+
+static int le_anchor(const void *ctx, dk_index i)
+{
+    const le_anchor_ctx *c = ctx;
+    return c->s->soft_w2[i] > 0.0 || c->m->ring_start[i + 1] == c->m->ring_start[i];
+}
+
 static dk_status build_system(dk_laplacian_edit *le, const dk_constraint_desc *desc,
                               le_system *s, dk_error *err)
 {
@@ -567,7 +581,7 @@ static dk_status build_system(dk_laplacian_edit *le, const dk_constraint_desc *d
     const dk_index n = le->n;
     const int soft = le->opt.constraints == DK_LE_CONSTRAINTS_SOFT;
     const double lambda = le->opt.constraint_weight, mu2 = le->opt.tikhonov * le->opt.tikhonov;
-    unsigned char *in_roi = NULL, *pinned = NULL;
+    unsigned char *in_roi = NULL;
     dk_status st;
 
     memset(s, 0, sizeof *s);
@@ -631,29 +645,14 @@ static dk_status build_system(dk_laplacian_edit *le, const dk_constraint_desc *d
     /* Singular-system check: every component holding an unknown must be pinned by an
      * eliminated vertex, a soft row or an isolated vertex (its row A_ii = 1 pins it). */
     if (mu2 == 0.0) {
-        const dk_index nc = m->report.n_components > 0 ? m->report.n_components : 1;
-        pinned = calloc((size_t)nc, 1);
-        if (!pinned) {
-            st = oom(err, "component check");
+        const le_anchor_ctx ctx = {m, s};
+        st = dk_csys_check_components(m, s->unknown_index, le_anchor, &ctx, le->ro->iperm,
+                                      le->caller_mesh, "LaplacianEdit",
+                                      "constrain a vertex there, exclude it from the region of "
+                                      "interest or use tikhonov > 0",
+                                      err);
+        if (st != DK_OK)
             goto fail;
-        }
-        for (dk_index i = 0; i < n; i++)
-            if (s->unknown_index[i] < 0 || s->soft_w2[i] > 0.0 ||
-                m->ring_start[i + 1] == m->ring_start[i])
-                pinned[m->component[i]] = 1;
-        /* in the caller's order, naming the caller's first such vertex and its component */
-        for (dk_index v = 0; v < n; v++) {
-            const dk_index i = le->ro->iperm[v];
-            if (s->unknown_index[i] >= 0 && !pinned[m->component[i]]) {
-                st = dk_error_set(err, DK_ERR_DEGENERATE,
-                                  "LaplacianEdit: connected component %d (vertex %d) has no "
-                                  "handle or fixed vertex, so its position is undetermined; "
-                                  "constrain a vertex there, exclude it from the region of "
-                                  "interest or use tikhonov > 0",
-                                  (int)le->caller_mesh->component[v], (int)v);
-                goto fail;
-            }
-        }
     }
     st = assemble_normal(le, s, mu2, err);
     if (st != DK_OK)
@@ -665,11 +664,9 @@ static dk_status build_system(dk_laplacian_edit *le, const dk_constraint_desc *d
     }
     mark_active_rows(le, s);
     free(in_roi);
-    free(pinned);
     return DK_OK;
 fail:
     free(in_roi);
-    free(pinned);
     system_free(s);
     return st;
 }
@@ -691,29 +688,23 @@ static dk_status build_system_caller(dk_laplacian_edit *le, const dk_constraint_
     return st;
 }
 
-static int same_pattern(const dk_sparse *a, const dk_sparse *b)
+/* Factors s->normal: a new analysis, or (rebind) the previous system's when the unknowns
+ * and the pattern are the same, refactored only when the values changed (dk_csys_factor:
+ * on failure the previous factor is restored). */
+static dk_status factor(dk_laplacian_edit *le, le_system *old, le_system *s, const char *what,
+                        dk_error *err)
 {
-    if (a->n_rows != b->n_rows || a->n_cols != b->n_cols)
-        return 0;
-    if (memcmp(a->col_start, b->col_start, sizeof(dk_index) * ((size_t)a->n_cols + 1)) != 0)
-        return 0;
-    return memcmp(a->row_index, b->row_index,
-                  sizeof(dk_index) * (size_t)a->col_start[a->n_cols]) == 0;
-}
-
-static dk_status factor_new(dk_laplacian_edit *le, le_system *s, dk_error *err)
-{
-    dk_status st = dk_cholesky_analyze(s->normal, &s->chol, err);
-    if (st == DK_OK) {
-        dk_cholesky_set_team(s->chol, le->team);
-        le->analysis_count++;
-        st = dk_cholesky_factorize(s->chol, s->normal, err);
-        if (st == DK_OK)
-            le->factorization_count++;
-    }
-    if (st != DK_OK)
-        dk_error_prefix(err, "LaplacianEdit factorization");
-    return st;
+    const int same = old && old->chol && s->n_unknowns == old->n_unknowns &&
+                     memcmp(s->unknown_index, old->unknown_index,
+                            sizeof(dk_index) * (size_t)le->n) == 0 &&
+                     dk_csys_same_pattern(s->normal, old->normal);
+    dk_csys_counts counts = {le->analysis_count, le->factorization_count};
+    dk_status st = dk_csys_factor(s->normal, &s->chol, old ? &old->chol : NULL,
+                                  old ? old->normal : NULL, same, DK_CSYS_REFACTOR_IF_CHANGED,
+                                  le->team, &counts, err);
+    le->analysis_count = counts.analysis_count;
+    le->factorization_count = counts.factorization_count;
+    return st == DK_OK ? DK_OK : dk_error_prefix(err, "%s", what);
 }
 
 /* ------------------------------------------------------------------ bind / rebind ------- */
@@ -787,7 +778,7 @@ dk_status dk_laplacian_edit_bind(const dk_mesh *mesh, const dk_constraint_desc *
     st = build_system_caller(le, desc, &le->sys, err);
     if (st != DK_OK)
         goto fail;
-    st = factor_new(le, &le->sys, err);
+    st = factor(le, NULL, &le->sys, "LaplacianEdit factorization", err);
     if (st != DK_OK)
         goto fail;
     try_build_basis(le, &le->sys);
@@ -814,36 +805,10 @@ dk_status dk_laplacian_edit_rebind(dk_laplacian_edit *le, const dk_constraint_de
     st = build_system_caller(le, desc, &s, err);
     if (st != DK_OK)
         return st;
-    if (le->sys.chol && s.n_unknowns == le->sys.n_unknowns &&
-        memcmp(s.unknown_index, le->sys.unknown_index, sizeof(dk_index) * (size_t)le->n) == 0 &&
-        same_pattern(s.normal, le->sys.normal)) {
-        /* same unknowns: keep the symbolic analysis (and the factor if values agree) */
-        const int64_t nnz = dk_sparse_nnz(s.normal);
-        s.chol = le->sys.chol;
-        le->sys.chol = NULL;
-        if (memcmp(s.normal->values, le->sys.normal->values, sizeof(double) * (size_t)nnz)) {
-            st = dk_cholesky_factorize(s.chol, s.normal, err);
-            if (st != DK_OK) {
-                /* restore the previous factor so the object stays usable */
-                dk_error restore_err;
-                dk_error_clear(&restore_err);
-                le->sys.chol = s.chol;
-                s.chol = NULL;
-                if (dk_cholesky_factorize(le->sys.chol, le->sys.normal, &restore_err) != DK_OK) {
-                    dk_cholesky_free(le->sys.chol);
-                    le->sys.chol = NULL;
-                }
-                system_free(&s);
-                return dk_error_prefix(err, "LaplacianEdit rebind factorization");
-            }
-            le->factorization_count++;
-        }
-    } else {
-        st = factor_new(le, &s, err);
-        if (st != DK_OK) {
-            system_free(&s);
-            return st;
-        }
+    st = factor(le, &le->sys, &s, "LaplacianEdit rebind factorization", err);
+    if (st != DK_OK) {
+        system_free(&s);
+        return st;
     }
     try_build_basis(le, &s);
     dk_team_park(le->team);

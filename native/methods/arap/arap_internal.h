@@ -42,6 +42,7 @@
 #include <string.h>
 
 #include "dk_cholesky.h"
+#include "dk_csys.h"
 #include "dk_operators.h"
 #include "dk_parallel.h"
 #include "dk_reorder.h"

@@ -51,53 +51,20 @@ void arap_system_free(arap_system *s)
     memset(s, 0, sizeof *s);
 }
 
-static dk_index uf_find(dk_index *parent, dk_index v)
+/* A component is anchored by an eliminated vertex (dk_csys_check_components looks at those
+ * itself) or a soft handle vertex. */
+static int soft_anchor(const void *ctx, dk_index v)
 {
-    while (parent[v] != v) {
-        parent[v] = parent[parent[v]];
-        v = parent[v];
-    }
-    return v;
+    return ((const arap_system *)ctx)->soft_k[v] > 0.0;
 }
 
-/* Every connected component (and isolated vertex) holding an unknown must hold an anchor:
- * an eliminated vertex or a soft handle vertex. */
 static dk_status check_components(const dk_arap *ar, const arap_system *s, dk_error *err)
 {
-    const dk_mesh *m = ar->mesh;
-    const dk_index n = ar->n;
-    dk_index *parent = malloc(((size_t)n + 1) * sizeof *parent);
-    unsigned char *anchored = calloc((size_t)n + 1, 1);
-    if (!parent || !anchored) {
-        free(parent);
-        free(anchored);
-        return oom(err, "component check");
-    }
-    for (dk_index v = 0; v < n; v++)
-        parent[v] = v;
-    for (dk_index f = 0; f < m->n_faces; f++)
-        for (int k = 1; k < 3; k++) {
-            dk_index a = uf_find(parent, m->faces[3 * f]);
-            dk_index b = uf_find(parent, m->faces[3 * f + k]);
-            if (a != b)
-                parent[a < b ? b : a] = a < b ? a : b;
-        }
-    for (dk_index v = 0; v < n; v++)
-        if (s->unk[v] < 0 || s->soft_k[v] > 0.0)
-            anchored[uf_find(parent, v)] = 1;
-    dk_status st = DK_OK;
-    /* in the caller's order, so that the message names the component's smallest vertex */
-    for (dk_index cv = 0; cv < n && st == DK_OK; cv++) {
-        const dk_index v = ar->ro->iperm[cv];
-        if (s->unk[v] >= 0 && !anchored[uf_find(parent, v)])
-            st = dk_error_set(err, DK_ERR_DEGENERATE,
-                              "ARAP: the connected component of vertex %d has free vertices "
-                              "but no handle or fixed vertex, so its position is undetermined",
-                              (int)cv);
-    }
-    free(parent);
-    free(anchored);
-    return st;
+    return dk_csys_check_components(ar->mesh, s->unk, soft_anchor, s, ar->ro->iperm,
+                                    ar->caller_mesh, "ARAP",
+                                    "constrain a vertex there or exclude it from the region "
+                                    "of interest",
+                                    err);
 }
 
 typedef struct entry {
@@ -389,36 +356,15 @@ static dk_status newton_rows(arap_system *s, dk_error *err)
  * s on failure. */
 static dk_status factor(dk_arap *ar, arap_system *old, arap_system *s, dk_error *err)
 {
-    const dk_index n = ar->n;
-    dk_status st;
-    int reused = 0;
-    if (old && old->chol && same_unknowns(old, s, n)) {
-        s->chol = old->chol; /* same pattern: keep the symbolic analysis */
-        old->chol = NULL;
-        reused = 1;
-    } else {
-        st = dk_cholesky_analyze(&s->a, &s->chol, err);
-        if (st != DK_OK) {
-            arap_system_free(s);
-            return dk_error_prefix(err, "ARAP: analysis of the reduced matrix");
-        }
-        dk_cholesky_set_team(s->chol, ar->team);
-        ar->analysis_count++;
-    }
-    st = dk_cholesky_factorize(s->chol, &s->a, err);
-    if (st == DK_OK) {
-        ar->factorization_count++;
+    dk_csys_counts counts = {ar->analysis_count, ar->factorization_count};
+    const int same = old && same_unknowns(old, s, ar->n); /* explicit zeros: same pattern */
+    dk_status st = dk_csys_factor(&s->a, &s->chol, old ? &old->chol : NULL,
+                                  old ? &old->a : NULL, same, DK_CSYS_REFACTOR_ALWAYS,
+                                  ar->team, &counts, err);
+    ar->analysis_count = counts.analysis_count;
+    ar->factorization_count = counts.factorization_count;
+    if (st == DK_OK)
         return DK_OK;
-    }
-    if (reused) { /* give the analysis back, with the old values */
-        old->chol = s->chol;
-        s->chol = NULL;
-        dk_error ignored = {0};
-        if (dk_cholesky_factorize(old->chol, &old->a, &ignored) != DK_OK) {
-            dk_cholesky_free(old->chol);
-            old->chol = NULL;
-        }
-    }
     arap_system_free(s);
     if (st == DK_ERR_NOT_POSITIVE_DEFINITE) {
         dk_error_prefix(err, "ARAP: the reduced matrix is not positive definite (degenerate "
@@ -430,7 +376,6 @@ static dk_status factor(dk_arap *ar, arap_system *old, arap_system *s, dk_error 
     }
     return dk_error_prefix(err, "ARAP: factorization");
 }
-
 
 dk_status arap_system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_system *old,
                             arap_system *s, dk_error *err)
