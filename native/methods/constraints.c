@@ -35,15 +35,10 @@ static dk_status oom(dk_error *err, const char *what)
     return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "constraints: out of memory (%s)", what);
 }
 
-dk_status dk_constraints_create(const dk_mesh *mesh, const dk_constraint_desc *desc,
-                                dk_constraints **out, dk_error *err)
+/* The description's shape: counts, lists present, handle sizes (none empty, their total
+ * within the index type) into *total. */
+static dk_status check_shape(const dk_constraint_desc *desc, int64_t *total_out, dk_error *err)
 {
-    if (out)
-        *out = NULL;
-    if (!mesh || !desc || !out)
-        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
-                            "constraints: mesh, description and output must not be NULL");
-    const dk_index n = mesh->n_vertices;
     if (desc->n_handles < 0 || desc->n_fixed < 0 || desc->n_roi < 0)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "constraints: negative count (handles %d, fixed %d, roi %d)",
@@ -76,7 +71,15 @@ dk_status dk_constraints_create(const dk_mesh *mesh, const dk_constraint_desc *d
                                 "constraints: too many handle vertices");
     }
 
-    /* Ranges, naming the list and position. */
+    *total_out = total;
+    return DK_OK;
+}
+
+/* Every index in range and every weight and stiffness valid, naming the list and position. */
+static dk_status check_values(const dk_mesh *mesh, const dk_constraint_desc *desc,
+                              dk_error *err)
+{
+    const dk_index n = mesh->n_vertices;
     {
         int64_t k = 0;
         for (dk_index h = 0; h < desc->n_handles; h++)
@@ -120,23 +123,14 @@ dk_status dk_constraints_create(const dk_mesh *mesh, const dk_constraint_desc *d
                                     "and > 0", (int)v, s);
         }
 
-    dk_constraints *c = calloc(1, sizeof *c);
-    if (!c)
-        return oom(err, "object");
-    c->n_vertices = n;
-    c->n_handles = desc->n_handles;
-    c->n_handle_vertices = (dk_index)total;
-    c->handle_start = malloc(((size_t)c->n_handles + 1) * sizeof *c->handle_start);
-    c->handle_vertices = malloc((size_t)total * sizeof *c->handle_vertices);
-    c->handle_weights = malloc((size_t)total * sizeof *c->handle_weights);
-    c->role = malloc(((size_t)n + 1) * sizeof *c->role);
-    c->free_index = malloc(((size_t)n + 1) * sizeof *c->free_index);
-    c->stiffness = malloc(((size_t)n + 1) * sizeof *c->stiffness);
-    if (!c->handle_start || !c->handle_vertices || !c->handle_weights || !c->role ||
-        !c->free_index || !c->stiffness) {
-        dk_constraints_free(c);
-        return oom(err, "arrays");
-    }
+    return DK_OK;
+}
+
+/* Each vertex's role: a handle (refusing overlaps, naming both groups), fixed, or free;
+ * vertices outside a non-empty ROI become fixed. */
+static dk_status assign_roles(const dk_constraint_desc *desc, dk_constraints *c, dk_error *err)
+{
+    const dk_index n = c->n_vertices;
     for (dk_index v = 0; v < n; v++) {
         c->role[v] = DK_VERTEX_FREE;
         c->stiffness[v] = desc->stiffness ? desc->stiffness[v] : 1.0;
@@ -147,7 +141,6 @@ dk_status dk_constraints_create(const dk_mesh *mesh, const dk_constraint_desc *d
             dk_index v = desc->handle_vertices[k];
             if (c->role[v] >= 0) {
                 dk_index other = c->role[v];
-                dk_constraints_free(c);
                 if (other == h)
                     return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                                         "constraints: vertex %d appears twice in handle %d",
@@ -166,7 +159,6 @@ dk_status dk_constraints_create(const dk_mesh *mesh, const dk_constraint_desc *d
         dk_index v = desc->fixed_vertices[k];
         if (c->role[v] >= 0) {
             dk_index h = c->role[v];
-            dk_constraints_free(c);
             return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                                 "constraints: vertex %d is both in handle %d and in the fixed "
                                 "set", (int)v, (int)h);
@@ -183,18 +175,65 @@ dk_status dk_constraints_create(const dk_mesh *mesh, const dk_constraint_desc *d
             if (!c->free_index[v] && c->role[v] == DK_VERTEX_FREE)
                 c->role[v] = DK_VERTEX_FIXED;
     }
+    return DK_OK;
+}
+
+/* The free vertices' numbering, both ways. */
+static dk_status number_free(dk_constraints *c, dk_error *err)
+{
+    const dk_index n = c->n_vertices;
     dk_index nf = 0;
     for (dk_index v = 0; v < n; v++)
         c->free_index[v] = c->role[v] == DK_VERTEX_FREE ? nf++ : -1;
     c->n_free = nf;
     c->free_vertices = malloc(((size_t)nf + 1) * sizeof *c->free_vertices);
-    if (!c->free_vertices) {
-        dk_constraints_free(c);
+    if (!c->free_vertices)
         return oom(err, "free vertex map");
-    }
     for (dk_index v = 0; v < n; v++)
         if (c->free_index[v] >= 0)
             c->free_vertices[c->free_index[v]] = v;
+    return DK_OK;
+}
+
+dk_status dk_constraints_create(const dk_mesh *mesh, const dk_constraint_desc *desc,
+                                dk_constraints **out, dk_error *err)
+{
+    if (out)
+        *out = NULL;
+    if (!mesh || !desc || !out)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "constraints: mesh, description and output must not be NULL");
+    const dk_index n = mesh->n_vertices;
+    int64_t total = 0;
+    dk_status st = check_shape(desc, &total, err);
+    if (st == DK_OK)
+        st = check_values(mesh, desc, err);
+    if (st != DK_OK)
+        return st;
+    dk_constraints *c = calloc(1, sizeof *c);
+    if (!c)
+        return oom(err, "object");
+    c->n_vertices = n;
+    c->n_handles = desc->n_handles;
+    c->n_handle_vertices = (dk_index)total;
+    c->handle_start = malloc(((size_t)c->n_handles + 1) * sizeof *c->handle_start);
+    c->handle_vertices = malloc((size_t)total * sizeof *c->handle_vertices);
+    c->handle_weights = malloc((size_t)total * sizeof *c->handle_weights);
+    c->role = malloc(((size_t)n + 1) * sizeof *c->role);
+    c->free_index = malloc(((size_t)n + 1) * sizeof *c->free_index);
+    c->stiffness = malloc(((size_t)n + 1) * sizeof *c->stiffness);
+    if (!c->handle_start || !c->handle_vertices || !c->handle_weights || !c->role ||
+        !c->free_index || !c->stiffness) {
+        dk_constraints_free(c);
+        return oom(err, "arrays");
+    }
+    st = assign_roles(desc, c, err);
+    if (st == DK_OK)
+        st = number_free(c, err);
+    if (st != DK_OK) {
+        dk_constraints_free(c);
+        return st;
+    }
     *out = c;
     return DK_OK;
 }
