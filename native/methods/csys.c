@@ -4,6 +4,37 @@
 #include <stdlib.h>
 #include <string.h>
 
+void dk_csys_target_rows(const dk_constraints *c, dk_index *target_of)
+{
+    for (dk_index v = 0; v < c->n_vertices; v++)
+        target_of[v] = -1;
+    for (dk_index k = 0; k < c->n_handle_vertices; k++)
+        target_of[c->handle_vertices[k]] = k;
+}
+
+dk_index dk_csys_number_unknowns(dk_index n, dk_csys_classify_fn classify, const void *ctx,
+                                 dk_index *unknown_index, dk_index *unknowns, double *soft,
+                                 dk_index *n_soft)
+{
+    dk_index nu = 0, ns = 0;
+    for (dk_index v = 0; v < n; v++) {
+        double w = 0.0;
+        const int unknown = classify(ctx, v, &w);
+        if (soft)
+            soft[v] = w;
+        ns += w > 0.0;
+        unknown_index[v] = unknown ? nu : -1;
+        if (unknown) {
+            if (unknowns)
+                unknowns[nu] = v;
+            nu++;
+        }
+    }
+    if (n_soft)
+        *n_soft = ns;
+    return nu;
+}
+
 dk_status dk_csys_check_components(const dk_mesh *mesh, const dk_index *unknown_index,
                                    dk_csys_anchor_fn anchored, const void *ctx,
                                    const dk_index *iperm, const dk_mesh *caller_mesh,

@@ -2,15 +2,17 @@
  * (ARAP, Laplacian editing, and the methods to come): whether every part of the mesh that
  * has unknowns is anchored, and factoring a system whose pattern a rebind may keep.
  *
- * A method numbers its own unknowns (which vertices are unknown, and which constraints pin
- * them, differ per method: ARAP eliminates hard handles and keeps soft ones as penalised
+ * A method says which vertices are unknowns and how strongly a soft constraint pulls each
+ * (that differs per method: ARAP eliminates hard handles and keeps soft ones as penalised
  * unknowns; least-squares Laplacian editing keeps every vertex of the region unknown) and
- * assembles its own matrix; these functions then make the two checks and the one
- * factorization policy the same for all. */
+ * assembles its own matrix; these functions number the unknowns and the target rows, check
+ * that every part of the mesh with unknowns is anchored, and factor with one policy, the
+ * same for all. */
 #ifndef DK_CSYS_H
 #define DK_CSYS_H
 
 #include "dk_cholesky.h"
+#include "dk_constraints.h"
 #include "dk_mesh.h"
 #include "dk_parallel.h"
 #include "dk_sparse.h"
@@ -19,6 +21,22 @@
 #ifdef __cplusplus
 extern "C" {
 #endif
+
+/** Which rows of the constraints' expanded targets each vertex takes: target_of[v] = k for
+ *  the k-th handle vertex (in handle order), -1 for every other vertex (n_vertices). */
+void dk_csys_target_rows(const dk_constraints *c, dk_index *target_of);
+
+/** A method's choice for vertex v: returns 1 when v is an unknown of its system, 0 when it
+ *  is eliminated, and writes the weight of v's soft constraint (0 for none) to *soft. */
+typedef int (*dk_csys_classify_fn)(const void *ctx, dk_index v, double *soft);
+
+/** Numbers the unknowns in vertex order: unknown_index[v] = u or -1 (n entries), and, when
+ *  not NULL, unknowns[u] = v (room for n) and soft[v] = the classify weight (n). Returns
+ *  the number of unknowns; *n_soft (may be NULL) gets how many vertices have a soft
+ *  weight > 0. */
+dk_index dk_csys_number_unknowns(dk_index n, dk_csys_classify_fn classify, const void *ctx,
+                                 dk_index *unknown_index, dk_index *unknowns, double *soft,
+                                 dk_index *n_soft);
 
 /** Whether internal vertex v pins its connected component (an eliminated vertex, a soft
  *  constraint row, or whatever else makes the method's system definite there). */

@@ -561,6 +561,36 @@ done:
     return st;
 }
 
+/* Laplacian editing's unknowns. hard: free vertices, and handle vertices of weight w < 1
+ * with a soft row of weight (lambda w)^2; soft: also every handle vertex (same weight) and
+ * every fixed vertex inside the region (weight lambda^2). */
+typedef struct le_classify_ctx {
+    const le_system *s;
+    const unsigned char *in_roi;
+    int soft;
+    double lambda;
+} le_classify_ctx;
+
+static int le_classify(const void *ctx, dk_index i, double *w2)
+{
+    const le_classify_ctx *c = ctx;
+    const dk_index role = c->s->con->role[i];
+    if (role >= 0) {
+        const double hw = c->s->con->handle_weights[c->s->target_of[i]];
+        const int unknown = c->soft || hw < 1.0;
+        if (unknown)
+            *w2 = (c->lambda * hw) * (c->lambda * hw);
+        return unknown;
+    }
+    if (role == DK_VERTEX_FIXED) {
+        const int unknown = c->soft && c->in_roi[i];
+        if (unknown)
+            *w2 = c->lambda * c->lambda;
+        return unknown;
+    }
+    return 1;
+}
+
 /* A component is anchored by an eliminated vertex (seen by dk_csys_check_components), a
  * soft row, or an isolated vertex (its row A_ii = 1 pins it). */
 typedef struct le_anchor_ctx {
@@ -605,37 +635,15 @@ static dk_status build_system(dk_laplacian_edit *le, const dk_constraint_desc *d
     memset(in_roi, desc->n_roi > 0 ? 0 : 1, (size_t)n);
     for (dk_index k = 0; k < desc->n_roi; k++)
         in_roi[desc->roi_vertices[k]] = 1;
-    for (dk_index i = 0; i < n; i++)
-        s->target_of[i] = -1;
+    dk_csys_target_rows(s->con, s->target_of);
     for (dk_index k = 0; k < s->con->n_handle_vertices; k++) {
         const dk_index v = s->con->handle_vertices[k];
-        s->target_of[v] = k;
         for (int d = 0; d < 3; d++)
             s->targets[3 * k + d] = m->positions[3 * v + d];
     }
-    for (dk_index i = 0; i < n; i++) {
-        const dk_index role = s->con->role[i];
-        int unknown;
-        double w2 = 0.0;
-        if (role >= 0) {
-            const double hw = s->con->handle_weights[s->target_of[i]];
-            unknown = soft || hw < 1.0;
-            if (unknown)
-                w2 = (lambda * hw) * (lambda * hw);
-        } else if (role == DK_VERTEX_FIXED) {
-            unknown = soft && in_roi[i];
-            if (unknown)
-                w2 = lambda * lambda;
-        } else {
-            unknown = 1;
-        }
-        s->soft_w2[i] = w2;
-        if (w2 > 0.0)
-            s->n_soft++;
-        s->unknown_index[i] = unknown ? s->n_unknowns : -1;
-        if (unknown)
-            s->unknowns[s->n_unknowns++] = i;
-    }
+    const le_classify_ctx cc = {s, in_roi, soft, lambda};
+    s->n_unknowns = dk_csys_number_unknowns(n, le_classify, &cc, s->unknown_index, s->unknowns,
+                                            s->soft_w2, &s->n_soft);
     if (s->n_unknowns == 0) {
         st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                           "LaplacianEdit: no free vertices: every vertex is a handle, fixed "

@@ -223,16 +223,29 @@ static dk_status build_rhs_map(const dk_arap *ar, arap_system *s, dk_error *err)
     return DK_OK;
 }
 
+/* ARAP's unknowns: free vertices, and handle vertices of weight w < 1, pulled to their
+ * target by the penalty k = lambda w / (1 - w) (in the units of the ARAP energy). */
+static int classify_vertex(const void *ctx, dk_index v, double *soft)
+{
+    const arap_system *s = ctx;
+    const dk_constraints *c = s->con;
+    if (c->role[v] >= 0) {
+        const double w = c->handle_weights[s->target_of[v]];
+        if (w < 1.0) {
+            *soft = s->lambda * w / (1.0 - w);
+            return 1;
+        }
+    }
+    return c->role[v] == DK_VERTEX_FREE;
+}
+
 /* The unknowns: free vertices and soft handle vertices (their penalty k_v into soft_k);
  * each term's weight with the stiffness; the terms across the constraints' border. */
 static dk_status classify(const dk_arap *ar, arap_system *s, dk_error *err)
 {
     const dk_index n = ar->n;
     const dk_constraints *c = s->con;
-    for (dk_index v = 0; v < n; v++)
-        s->target_of[v] = -1;
-    for (dk_index k = 0; k < c->n_handle_vertices; k++)
-        s->target_of[c->handle_vertices[k]] = k;
+    dk_csys_target_rows(c, s->target_of);
     /* Weights with stiffness, the ARAP diagonal, then the soft penalties. */
     double diag = 0.0, escale = 0.0;
     for (dk_index i = 0; i < n; i++)
@@ -244,18 +257,8 @@ static dk_status classify(const dk_arap *ar, arap_system *s, dk_error *err)
         }
     s->lambda = n > 0 ? diag / n : 0.0;
     s->escale = escale;
-    dk_index nu = 0;
-    for (dk_index v = 0; v < n; v++) {
-        int soft = 0;
-        if (c->role[v] >= 0) {
-            double w = c->handle_weights[s->target_of[v]];
-            if (w < 1.0) {
-                soft = 1;
-                s->soft_k[v] = s->lambda * w / (1.0 - w);
-            }
-        }
-        s->unk[v] = (c->role[v] == DK_VERTEX_FREE || soft) ? nu++ : -1;
-    }
+    const dk_index nu = dk_csys_number_unknowns(n, classify_vertex, s, s->unk, NULL, s->soft_k,
+                                                NULL);
     s->nu = nu;
     s->n_bterms = 0;
     for (int64_t t = 0; t < ar->n_terms; t++)
