@@ -154,6 +154,40 @@ METHODS = [
     ),
 ]
 
+METHODS.append(Method(
+    id="EMBEDDED",
+    label="Embedded Deformation",
+    native_class="EmbeddedDeformation",
+    description="Deformation graph (Sumner et al. 2007): a few hundred nodes carry the "
+                "shape, each an affine transformation kept close to a rotation; handles "
+                "pull as soft constraints",
+    icon="MOD_LATTICE",
+    cold_solve={"warm_start": False},
+    warm_solve={"warm_start": True},
+    iterative=True,
+    iteration_cap="max_iterations",
+    options=[
+        Option("n_nodes", "INT", 200, "Nodes", "Graph nodes sampled on the surface",
+               min=5, max=100000),
+        Option("nodes", "ENUM", "surface", "Node Source",
+               "Where the graph's nodes come from",
+               items=(("surface", "Surface", "Uniform samples of the surface (the paper's)"),
+                      ("vertices", "Vertices", "Mesh vertices (a graph that rides along an "
+                                               "animated mesh)"))),
+        Option("k", "INT", 4, "Nearest Nodes", "Nodes that move each vertex", min=1, max=16),
+        Option("w_rot", "FLOAT", 1.0, "Rigidity", "Weight of the rotation term", min=1e-6,
+               max=1e6),
+        Option("w_reg", "FLOAT", 10.0, "Smoothness", "Weight of the regularization term",
+               min=1e-6, max=1e6),
+        Option("w_con", "FLOAT", 100.0, "Handle Pull", "Weight of the handle constraints",
+               min=1e-6, max=1e9),
+        Option("max_iterations", "INT", 30, "Max Iterations", "Gauss-Newton iterations",
+               min=1, max=10000),
+        Option("tolerance", "FLOAT", 1e-6, "Tolerance", "epsilon of the stopping tests",
+               min=1e-15, max=1.0),
+    ],
+))
+
 BY_ID = {m.id: m for m in METHODS}
 
 

@@ -528,7 +528,13 @@ def measure(scene, r, fixed, handles, translates, rest, edges, diag):
     if not all(np.isfinite([handle_err, fixed_err, edge])):
         raise DemoError("%s: non-finite result" % r["label"])
     tol = 1e-5 * diag
-    if handle_err > tol or fixed_err > tol:
+    # penalty handles (the native contract's flag: embedded deformation) go most of the way:
+    # within 2% of the drag
+    m = addon.methods.get(r["method"])
+    dk = addon.native.load()
+    penalty = dk._native._method_info(m.native_class)["penalty_handles"]
+    drag = max(float(np.linalg.norm(t)) for t in translates)
+    if (handle_err > (0.02 * drag if penalty else tol)) or fixed_err > tol:
         raise DemoError("%s: constraints not met (handle error %.3g, fixed drift %.3g, "
                         "tolerance %.3g)" % (r["label"], handle_err, fixed_err, tol))
 

@@ -92,8 +92,12 @@ typedef enum dk_method_flags {
     DK_METHOD_TRANSLATION_INVARIANT = 4,   /**< translating every constraint by t (handles,
                                                 and fixed vertices' rest) translates the
                                                 result by t                                */
-    DK_METHOD_RIGID_INVARIANT = 8          /**< the same for every rigid motion (ARAP; naive
+    DK_METHOD_RIGID_INVARIANT = 8,         /**< the same for every rigid motion (ARAP; naive
                                                 Laplacian editing does not rotate details) */
+    DK_METHOD_PENALTY_HANDLES = 16         /**< handles are penalty terms, met to the
+                                                solver's tolerance rather than exactly
+                                                (embedded deformation); fixed vertices are
+                                                still exact                               */
 } dk_method_flags;
 
 /** The functions of one method; every entry is set. `self` is the method's object. */

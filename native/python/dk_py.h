@@ -116,6 +116,7 @@ PyObject *dk_py_new_solve_result(PyObject *module, PyObject *positions, double e
     M(arap, "ARAP")                                                                        \
     M(laplacian_edit, "LaplacianEdit")                                                     \
     M(falloff, "Falloff")                                                                  \
+    M(embedded, "EmbeddedDeformation")                                                     \
     X(cholesky)
 
 #define DK_PY_DECLARE_PART(part) int dk_py_init_##part(PyObject *module);

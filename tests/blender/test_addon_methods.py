@@ -56,8 +56,12 @@ def one_method(mid):
                 err < TOL and moved > 0.1, "diff %g moved %g" % (err, moved))
     hv = got[handle]
     want_h = (np.c_[rest[handle], np.ones(len(handle))] @ Ts[-1][0].T)[:, :3]
+    # like a Hook: exactly, or for penalty handles (the native contract's flag) most of the way
+    m = S.methods.get(mid)
+    penalty = S.dk._native._method_info(m.native_class)["penalty_handles"]
+    herr, hmove = np.abs(hv - want_h).max(), np.abs(want_h - rest[handle]).max()
     R.check("%s handle vertices follow the target like a Hook" % mid,
-            np.abs(hv - want_h).max() < 1e-4, np.abs(hv - want_h).max())
+            herr < (0.05 * hmove if penalty else 1e-4), (herr, hmove))
     R.check("%s fixed vertices stay" % mid, np.abs(got[fixed] - rest[fixed]).max() < 1e-5)
     R.check("%s base mesh untouched" % mid, np.abs(S.rest_positions(obj) - rest).max() == 0)
     # Factor of the GN modifier scales the offset (keyframable modifier input)

@@ -172,8 +172,11 @@ def test_deform_end_to_end():
         bpy.context.view_layer.update()
         got = S.evaluated_positions(obj)
         want_h = rest[handle] + [0.0, 0.0, 0.4]
+        m = S.methods.get(mid)   # penalty handles (the native contract's flag): most of the way
+        penalty = S.native.module._native._method_info(m.native_class)["penalty_handles"]
         R.check("%s handle vertices follow the target" % mid,
-                np.abs(got[handle] - want_h).max() < 1e-4, np.abs(got[handle] - want_h).max())
+                np.abs(got[handle] - want_h).max() < (0.02 if penalty else 1e-4),
+                np.abs(got[handle] - want_h).max())
         R.check("%s fixed vertices stay" % mid, np.abs(got[fixed] - rest[fixed]).max() < 1e-5)
         free = [i for i in range(nx * ny) if i not in set(fixed) | set(handle)]
         dz = (got[free] - rest[free])[:, 2]

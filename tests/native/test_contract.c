@@ -157,9 +157,22 @@ static void check_method(const dk_method_ops *ops, scene *s)
     double d = max_diff(x, y, N);
     CHECK_MSG(d <= 1e-7 * s->diag, "%s on %s: positions vs transforms differ by %g", ops->name,
               s->name, d);
-    for (dk_index k = 0; k < s->n_hv; k++) /* handles of weight 1 are met */
-        CHECK_MSG(max_diff(x + 3 * s->hv[k], t + 3 * k, 3) <= tol, "%s: handle vertex %d off",
-                  ops->name, (int)s->hv[k]);
+    /* handles of weight 1 are met exactly; penalty handles (embedded deformation) only go
+     * most of the way, how far depending on the graph and the weights: on average within a
+     * quarter of the move here (the method's own tests hold it to the paper's figures) */
+    const int penalty = (ops->flags & DK_METHOD_PENALTY_HANDLES) != 0;
+    double move = 0.0, herr = 0.0, hsum = 0.0;
+    for (dk_index k = 0; k < s->n_hv; k++) {
+        move = fmax(move, max_diff(t + 3 * k, s->mesh->positions + 3 * s->hv[k], 3));
+        herr = fmax(herr, max_diff(x + 3 * s->hv[k], t + 3 * k, 3));
+        hsum += max_diff(x + 3 * s->hv[k], t + 3 * k, 3);
+    }
+    if (penalty)
+        CHECK_MSG(hsum / (double)s->n_hv <= 0.25 * move,
+                  "%s on %s: handles off by %g on average (move %g)", ops->name, s->name,
+                  hsum / (double)s->n_hv, move);
+    else
+        CHECK_MSG(herr <= tol, "%s on %s: handles off by %g", ops->name, s->name, herr);
     for (dk_index k = 0; k < s->n_fixed; k++)
         CHECK(max_diff(x + 3 * s->fixed[k], s->mesh->positions + 3 * s->fixed[k], 3) <= tol);
 
@@ -213,7 +226,7 @@ static void check_method(const dk_method_ops *ops, scene *s)
             for (dk_index v = 0; v < n; v++)
                 apply(R, s->mesh->positions + 3 * v, y + 3 * v);
             d = max_diff(x, y, N);
-            CHECK_MSG(d <= (rigid ? 1e-6 : 1e-9) * s->diag,
+            CHECK_MSG(d <= (penalty ? 1e-4 : rigid ? 1e-6 : 1e-9) * s->diag,
                       "%s on %s: a %s of every constraint is off by %g", ops->name, s->name,
                       rigid ? "rigid motion" : "translation", d);
             ops->free(r);

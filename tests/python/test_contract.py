@@ -80,7 +80,8 @@ def test_registries_agree():
     for name in dk.METHODS:
         assert isinstance(getattr(dk, name), type)
         assert set(info(name)) == {"iterative", "transforms_as_positions",
-                                   "translation_invariant", "rigid_invariant"}
+                                   "translation_invariant", "rigid_invariant",
+                                   "penalty_handles"}
     with pytest.raises(KeyError):
         info("NoSuchMethod")
 
@@ -105,7 +106,12 @@ def test_positions_and_transforms_agree(name, scene):
     b = bind(name, scene).solve(transforms=Ts, **cold(name))
     np.testing.assert_allclose(a.positions, b.positions, atol=1e-7)
     allh = np.concatenate(handles)
-    np.testing.assert_allclose(a.positions[allh], targets, atol=1e-9)
+    err = np.abs(a.positions[allh] - targets).max(axis=1)
+    if info(name)["penalty_handles"]:   # soft: most of the way (see test_contract.c)
+        move = np.abs(targets - v[allh]).max()
+        assert err.mean() <= 0.25 * move
+    else:
+        assert err.max() <= 1e-9
     np.testing.assert_allclose(a.positions[fixed], v[fixed], atol=1e-9)
 
 
@@ -133,9 +139,10 @@ def test_rigid_motion_of_every_constraint(name, scene):
     r = m.solve(transforms=[T] * len(handles), **cold(name))
     want = v @ R.T + T[:3, 3]
     allh = np.concatenate(handles)
-    np.testing.assert_allclose(r.positions[allh], want[allh], atol=1e-9)
+    tol = 1e-4 if flags["penalty_handles"] else 1e-9   # penalty: to the solver's tolerance
+    np.testing.assert_allclose(r.positions[allh], want[allh], atol=tol)
     if flags["rigid_invariant"] or flags["translation_invariant"]:
-        np.testing.assert_allclose(r.positions, want, atol=1e-6)
+        np.testing.assert_allclose(r.positions, want, atol=max(tol, 1e-6))
 
 
 @pytest.mark.parametrize("name,scene", CASES, ids=IDS)

@@ -1,0 +1,131 @@
+/* DeformKit: embedded deformation with a deformation graph (Sumner, Schmid & Pauly,
+ * "Embedded Deformation for Shape Manipulation", SIGGRAPH 2007). See
+ * docs/methods/embedded.md.
+ *
+ * The graph. m nodes g_j, each with an affine transformation (R_j, t_j) that maps a point p
+ * to R_j (p - g_j) + g_j + t_j (eq. 1). A point v of the embedded shape moves by the blend of
+ * its k nearest nodes (eq. 2),
+ *     v' = sum_j w_j(v) [R_j (v - g_j) + g_j + t_j],
+ *     w_j(v) = (1 - |v - g_j| / d_max)^2, normalised, d_max = distance to the (k+1)-th node
+ * (eq. 4). Two nodes are joined by an edge when they influence a common point.
+ * Nodes (DK_ED_NODES_SURFACE): uniform samples of the surface, as the paper does: dense
+ * random points on the triangles (area-weighted), then, in a random order, a point is kept
+ * when no kept point lies within the radius r (keep one at random, remove all others within
+ * r, again and again); r is given, or found by bisection for the requested node count. Or
+ * (DK_ED_NODES_VERTICES) the same elimination run over the mesh vertices, so that nodes are
+ * vertices and ride along an animated mesh. Seeded: the same options give the same graph.
+ *
+ * The energy (eq. 9), over the free nodes' 12 unknowns each:
+ *     F = w_rot E_rot + w_reg E_reg + w_con E_con
+ *     E_rot = sum_j Rot(R_j), Rot = the squared deviations of R's columns from orthonormal
+ *             (eqs. 5-6);
+ *     E_reg = sum_j sum_{k in N(j)} |R_j (g_k - g_j) + g_j + t_j - (g_k + t_k)|^2 (eq. 7,
+ *             alpha_jk = 1);
+ *     E_con = sum over handle vertices |v'_l - q_l|^2 (eq. 8): handles are penalty terms,
+ *             met to the solver's tolerance, not exactly (DK_METHOD_PENALTY_HANDLES).
+ * Fixed constraints, as the paper has them: every node that influences a fixed vertex is a
+ * constant (R = I, t = 0) and leaves the unknowns, so fixed vertices stay exactly at rest.
+ * (Issue 14 words it as the nodes that influence only fixed points; that would leave the
+ * fixed vertices next to the free region to a penalty and let them drift, so the paper's
+ * rule it is.) Nodes that influence no vertex at all are dropped.
+ * The solve: Gauss-Newton (eqs. 10-11) on the normal equations J^T J d = -J^T f, the pattern
+ * of J^T J analysed once per bind (CHOLMOD) and refactored per iteration, with
+ * Levenberg-Marquardt damping (mu I added, raised tenfold until F decreases, lowered after
+ * each accepted step) so that big drags never diverge. Stopping (eq. 12, after Gill et al.):
+ *     |F_k - F_{k-1}| < eps (1 + F_k) and |d_k|_inf < sqrt(eps) (1 + |x_k|_inf), or
+ *     |grad F_k|_inf < cbrt(eps) (1 + F_k)
+ * (the paper prints the last factor of the step test as 1 + |d_k|; Gill et al.'s is the
+ * iterate's norm, which we use). A warm start begins from the previous solution, a cold one
+ * from the identity.
+ */
+#ifndef DK_EMBEDDED_H
+#define DK_EMBEDDED_H
+
+#include <stdint.h>
+
+#include "dk_constraints.h"
+#include "dk_mesh.h"
+#include "dk_method.h"
+#include "dk_status.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/** Where the graph's nodes come from. */
+typedef enum dk_ed_node_source {
+    DK_ED_NODES_SURFACE = 0,  /**< uniform samples of the triangles (the paper's)           */
+    DK_ED_NODES_VERTICES = 1  /**< mesh vertices (a graph that rides an animated mesh)      */
+} dk_ed_node_source;
+
+typedef struct dk_embedded_options {
+    dk_ed_node_source nodes;  /**< default DK_ED_NODES_SURFACE                             */
+    int n_nodes;              /**< the node count wanted (the bisection meets it within
+                                   a few %), 1..100000; default 200; ignored when radius > 0 */
+    double radius;            /**< > 0: the sampling radius itself (mesh units)            */
+    int k;                    /**< nearest nodes per point, 1..16 (k+1 <= nodes); default 4 */
+    double w_rot, w_reg, w_con; /**< > 0; defaults 1, 10, 100 (the paper's)               */
+    double tolerance;         /**< eps of the stopping tests, > 0; default 1e-6            */
+    int max_iterations;       /**< Gauss-Newton iterations per solve, >= 1; default 30     */
+    uint64_t seed;            /**< the sampling's random seed; default 1                   */
+} dk_embedded_options;
+
+typedef struct dk_embedded dk_embedded;
+
+/** Fills the defaults above. */
+void dk_embedded_default_options(dk_embedded_options *options);
+
+/** Builds the graph (nodes, per-vertex weights, edges), the fixed nodes and the pattern of
+ *  J^T J, and analyses it. Refuses invalid options, a mesh without triangles for
+ *  DK_ED_NODES_SURFACE, fewer than k + 1 nodes, and constraints that leave no free node.
+ *  The mesh must outlive the object; `options` may be NULL (defaults). */
+dk_status dk_embedded_bind(const dk_mesh *mesh, const dk_constraint_desc *constraints,
+                           const dk_embedded_options *options, dk_embedded **out,
+                           dk_error *err);
+
+/** New constraints, same graph: the fixed nodes and the pattern are recomputed. On failure
+ *  the object keeps its previous constraints. */
+dk_status dk_embedded_rebind(dk_embedded *ed, const dk_constraint_desc *constraints,
+                             dk_error *err);
+
+/** Solves for the handle targets of `request` (dk_method.h: positions or one transform per
+ *  handle; DK_START_WARM / RESUME from the previous node transformations, COLD from the
+ *  identity; max_iterations > 0 overrides the option). Writes the deformed vertices
+ *  (n_vertices x 3, eq. 2) and info: energy F, iterations, converged (eq. 12).
+ *  Allocation-free. */
+dk_status dk_embedded_solve(dk_embedded *ed, const dk_solve_request *request,
+                            double *positions, dk_solve_info *info, dk_error *err);
+
+/** F is a function of the node transformations; as the contract's energy of positions
+ *  (n_vertices x 3) this is w_rot E_rot + w_reg E_reg of the current transformations plus
+ *  w_con times the positional terms evaluated at `positions` (handle vertices against the
+ *  last targets, held fixed vertices against rest). For a solve's own result it equals the
+ *  F that the solve reported. */
+dk_status dk_embedded_energy(const dk_embedded *ed, const double *positions, double *energy,
+                             dk_error *err);
+
+/** The contract's counters; n_unknowns = 12 x the free nodes. */
+void dk_embedded_stats(const dk_embedded *ed, dk_method_stats *stats);
+
+/** The graph: node count, node positions (n_nodes x 3), each node's current transformation
+ *  (n_nodes x 12: R row-major, then t; identity before any solve), whether it is a constant
+ *  (fixed), and the edges (n_edges x 2, each once with i < j). Pointers stay valid until the
+ *  next rebind or free. */
+dk_index dk_embedded_n_nodes(const dk_embedded *ed);
+const double *dk_embedded_nodes(const dk_embedded *ed);
+const double *dk_embedded_transforms(const dk_embedded *ed);
+int dk_embedded_node_is_fixed(const dk_embedded *ed, dk_index node);
+dk_index dk_embedded_n_edges(const dk_embedded *ed);
+const dk_index *dk_embedded_edges(const dk_embedded *ed);
+
+/** Frees; NULL allowed. */
+void dk_embedded_free(dk_embedded *ed);
+
+/** Embedded deformation's table of the method contract; options are a
+ *  dk_embedded_options. */
+extern const dk_method_ops dk_embedded_ops;
+
+#ifdef __cplusplus
+}
+#endif
+#endif

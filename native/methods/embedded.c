@@ -1,0 +1,1183 @@
+/* DeformKit: embedded deformation (dk_embedded.h).
+ *
+ * Layout of the unknowns: free node u owns columns 12 u + a, a = 3 d + e for R[d][e] (row
+ * major) and a = 9 + d for t[d]. J^T J is stored as dense 12 x 12 blocks, one per ordered
+ * pair of free nodes that share a residual (an edge, or a constrained vertex both
+ * influence); block (u, v) sits at position rank_u(v) among u's sorted block list, so the
+ * CSC matrix handed to CHOLMOD has, in column 12 u + a, the rows 12 v + b of every v in u's
+ * list: value index col_start[12 u + a] + 12 rank + b. Its pattern depends on the graph and
+ * the constrained vertices only, so it is analysed once per bind or rebind.
+ */
+#include "dk_embedded.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "dk_cholesky.h"
+#include "dk_operators.h"
+#include "dk_sparse.h"
+
+#define K_MAX 16
+
+typedef struct ed_system {
+    dk_constraints *con;
+    dk_index n_free;            /* free nodes                                               */
+    dk_index *node_unknown;     /* m: free index or -1 (a constant node)                    */
+    dk_index *free_nodes;       /* n_free: the nodes                                        */
+    /* the positional terms: handle vertices (targets from the request) and held fixed
+     * vertices (target: rest) */
+    dk_index n_pos;
+    dk_index *pos_vertex;       /* n_pos                                                    */
+    dk_index *pos_target_row;   /* n_pos: row in the expanded handle targets, or -1 (rest)  */
+    double *targets;            /* n_handle_vertices x 3                                    */
+    /* J^T J blocks: per free node u, blk_start[u] .. blk_start[u+1]-1 into blk_node (sorted
+     * free indices v) */
+    dk_index *blk_start, *blk_node;
+    int64_t n_blocks;
+    double *blocks;             /* n_blocks x 144, block b's entry (a, c) at 144 b + 12 a + c */
+    /* per ordered edge (j -> k, both free or not): the block indices (j,j), (j,k), (k,j),
+     * (k,k), -1 where a node is constant */
+    int64_t *edge_blk;          /* 4 per directed edge                                       */
+    /* per positional term, per pair (p, q) of its nodes: the block index, -1 if constant  */
+    int64_t *pos_blk;           /* n_pos x k x k                                             */
+    dk_sparse *a;               /* the CSC matrix, 12 n_free square                          */
+    int64_t *diag_pos;          /* 12 n_free: where each diagonal entry is                   */
+    dk_cholesky *chol;
+    double *grad, *step, *x_try; /* 12 n_free each; x_try: 12 m                             */
+} ed_system;
+
+struct dk_embedded {
+    const dk_mesh *mesh;
+    dk_embedded_options opt;
+    dk_index n, m, k;
+    double *g;                  /* m x 3 node positions                                     */
+    dk_index *nb;               /* n x k: each vertex's nodes                               */
+    double *w;                  /* n x k: their weights                                     */
+    dk_index n_edges;
+    dk_index *edges;            /* n_edges x 2, i < j                                       */
+    dk_index *adj_start, *adj;  /* directed adjacency (both directions), sorted              */
+    double *x;                  /* m x 12: the current transformations                      */
+    double energy;              /* F of x for the last solve's targets                      */
+    ed_system sys;
+    int analysis_count, factorization_count;
+};
+
+static dk_status oom(dk_error *err, const char *what)
+{
+    return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "EmbeddedDeformation: out of memory (%s)",
+                        what);
+}
+
+void dk_embedded_default_options(dk_embedded_options *o)
+{
+    memset(o, 0, sizeof *o);
+    o->nodes = DK_ED_NODES_SURFACE;
+    o->n_nodes = 200;
+    o->radius = 0.0;
+    o->k = 4;
+    o->w_rot = 1.0;
+    o->w_reg = 10.0;
+    o->w_con = 100.0;
+    o->tolerance = 1e-6;
+    o->max_iterations = 30;
+    o->seed = 1;
+}
+
+static dk_status check_options(const dk_embedded_options *o, dk_error *err)
+{
+    const char *bad = NULL;
+    if (o->nodes != DK_ED_NODES_SURFACE && o->nodes != DK_ED_NODES_VERTICES)
+        bad = "nodes must be surface (0) or vertices (1)";
+    else if (!(o->radius >= 0.0 && isfinite(o->radius)))
+        bad = "radius must be finite and >= 0";
+    else if (o->radius == 0.0 && (o->n_nodes < 1 || o->n_nodes > 100000))
+        bad = "n_nodes must be in 1..100000";
+    else if (o->k < 1 || o->k > K_MAX)
+        bad = "k must be in 1..16";
+    else if (!(o->w_rot > 0 && o->w_reg > 0 && o->w_con > 0 && isfinite(o->w_rot) &&
+               isfinite(o->w_reg) && isfinite(o->w_con)))
+        bad = "the weights w_rot, w_reg and w_con must be finite and > 0";
+    else if (!(o->tolerance > 0.0 && isfinite(o->tolerance)))
+        bad = "tolerance must be finite and > 0";
+    else if (o->max_iterations < 1)
+        bad = "max_iterations must be >= 1";
+    return bad ? dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "EmbeddedDeformation: %s", bad)
+               : DK_OK;
+}
+
+/* ------------------------------------------------------------------ sampling ----------- */
+
+/* splitmix64: the object's own generator state (no global state) */
+static uint64_t next_u64(uint64_t *s)
+{
+    uint64_t z = (*s += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+}
+
+static double next_unit(uint64_t *s)
+{
+    return (double)(next_u64(s) >> 11) * (1.0 / 9007199254740992.0);
+}
+
+/* Dense candidate points: `count` area-weighted uniform samples of the triangles. */
+static dk_status surface_samples(const dk_mesh *m, dk_index count, uint64_t *rng, double *out,
+                                 dk_error *err)
+{
+    double *cdf = malloc(((size_t)m->n_faces + 1) * sizeof *cdf);
+    if (!cdf)
+        return oom(err, "surface samples");
+    double total = 0.0;
+    for (dk_index f = 0; f < m->n_faces; f++) {
+        const double *a = m->positions + 3 * m->faces[3 * f];
+        const double *b = m->positions + 3 * m->faces[3 * f + 1];
+        const double *c = m->positions + 3 * m->faces[3 * f + 2];
+        const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+        const double v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+        const double n[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
+                             u[0] * v[1] - u[1] * v[0]};
+        total += 0.5 * sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        cdf[f] = total;
+    }
+    if (!(total > 0.0)) {
+        free(cdf);
+        return dk_error_set(err, DK_ERR_DEGENERATE,
+                            "EmbeddedDeformation: the mesh has no area to sample nodes on");
+    }
+    for (dk_index i = 0; i < count; i++) {
+        const double r = next_unit(rng) * total;
+        dk_index lo = 0, hi = m->n_faces - 1;
+        while (lo < hi) { /* the first face whose cumulative area exceeds r */
+            const dk_index mid = lo + (hi - lo) / 2;
+            if (cdf[mid] > r)
+                hi = mid;
+            else
+                lo = mid + 1;
+        }
+        double s = next_unit(rng), t = next_unit(rng);
+        if (s + t > 1.0) {
+            s = 1.0 - s;
+            t = 1.0 - t;
+        }
+        const double *a = m->positions + 3 * m->faces[3 * lo];
+        const double *b = m->positions + 3 * m->faces[3 * lo + 1];
+        const double *c = m->positions + 3 * m->faces[3 * lo + 2];
+        for (int d = 0; d < 3; d++)
+            out[3 * i + d] = a[d] + s * (b[d] - a[d]) + t * (c[d] - a[d]);
+    }
+    free(cdf);
+    return DK_OK;
+}
+
+/* Random sequential elimination over `pts` in the order `order`: keeps a point when no kept
+ * one lies within r (a uniform grid of cell r finds the candidates). Writes the kept
+ * indices into `kept` (room for n) and returns their count, or -1 when out of memory. */
+static dk_index eliminate(const double *pts, dk_index n, const dk_index *order, double r,
+                          const double lo[3], dk_index *kept, dk_index cap)
+{
+    /* hashed grid: cell id -> linked list of kept points */
+    const size_t nb = 1u << 16;
+    dk_index *head = malloc(nb * sizeof *head), *next = malloc(((size_t)n + 1) * sizeof *next);
+    if (!head || !next) {
+        free(head);
+        free(next);
+        return -1;
+    }
+    for (size_t i = 0; i < nb; i++)
+        head[i] = -1;
+    dk_index count = 0;
+    const double r2 = r * r;
+    for (dk_index o = 0; o < n && count < cap; o++) {
+        const dk_index i = order[o];
+        const double *p = pts + 3 * i;
+        int64_t c[3];
+        for (int d = 0; d < 3; d++)
+            c[d] = (int64_t)floor((p[d] - lo[d]) / r);
+        int ok = 1;
+        for (int dx = -1; dx <= 1 && ok; dx++)
+            for (int dy = -1; dy <= 1 && ok; dy++)
+                for (int dz = -1; dz <= 1 && ok; dz++) {
+                    const uint64_t h = ((uint64_t)(c[0] + dx) * 73856093u) ^
+                                       ((uint64_t)(c[1] + dy) * 19349663u) ^
+                                       ((uint64_t)(c[2] + dz) * 83492791u);
+                    for (dk_index q = head[h & (nb - 1)]; q >= 0 && ok; q = next[q]) {
+                        const double *pq = pts + 3 * kept[q];
+                        const double e0 = pq[0] - p[0], e1 = pq[1] - p[1], e2 = pq[2] - p[2];
+                        if (e0 * e0 + e1 * e1 + e2 * e2 < r2)
+                            ok = 0;
+                    }
+                }
+        if (!ok)
+            continue;
+        const uint64_t h = ((uint64_t)c[0] * 73856093u) ^ ((uint64_t)c[1] * 19349663u) ^
+                           ((uint64_t)c[2] * 83492791u);
+        kept[count] = i;
+        next[count] = head[h & (nb - 1)];
+        head[h & (nb - 1)] = count;
+        count++;
+    }
+    free(head);
+    free(next);
+    return count;
+}
+
+/* The nodes: candidates (surface samples or the vertices) thinned to radius r, r from the
+ * options or by bisection on the count. */
+static dk_status sample_nodes(dk_embedded *ed, dk_error *err)
+{
+    const dk_mesh *m = ed->mesh;
+    const dk_embedded_options *o = &ed->opt;
+    uint64_t rng = o->seed;
+    dk_index nc;
+    if (o->nodes == DK_ED_NODES_VERTICES) {
+        nc = m->n_vertices;
+    } else {
+        if (m->n_faces == 0)
+            return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                                "EmbeddedDeformation: surface nodes need triangles; use "
+                                "nodes=vertices for a point set");
+        const int64_t want = o->radius > 0.0 ? 200000 : (int64_t)o->n_nodes * 40 + 2000;
+        nc = (dk_index)(want < 2000000 ? want : 2000000);
+    }
+    double *cand = malloc(3 * ((size_t)nc + 1) * sizeof *cand);
+    dk_index *order = malloc(((size_t)nc + 1) * sizeof *order);
+    dk_index *kept = malloc(((size_t)nc + 1) * sizeof *kept);
+    dk_status st = DK_OK;
+    if (!cand || !order || !kept) {
+        st = oom(err, "node sampling");
+        goto done;
+    }
+    if (o->nodes == DK_ED_NODES_VERTICES)
+        memcpy(cand, m->positions, 3 * (size_t)nc * sizeof *cand);
+    else if ((st = surface_samples(m, nc, &rng, cand, err)) != DK_OK)
+        goto done;
+    for (dk_index i = 0; i < nc; i++) /* a random order (Fisher-Yates) */
+        order[i] = i;
+    for (dk_index i = nc - 1; i > 0; i--) {
+        const dk_index j = (dk_index)(next_u64(&rng) % (uint64_t)(i + 1));
+        const dk_index t = order[i];
+        order[i] = order[j];
+        order[j] = t;
+    }
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (dk_index i = 0; i < nc; i++)
+        for (int d = 0; d < 3; d++) {
+            lo[d] = fmin(lo[d], cand[3 * i + d]);
+            hi[d] = fmax(hi[d], cand[3 * i + d]);
+        }
+    const double diag = sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
+                             (hi[2] - lo[2]) * (hi[2] - lo[2]));
+    dk_index count;
+    if (o->radius > 0.0) {
+        count = eliminate(cand, nc, order, o->radius, lo, kept, nc);
+    } else { /* the smallest radius whose count does not exceed the request */
+        double a = diag * 1e-4, b = diag;
+        for (int it = 0; it < 40; it++) {
+            const double r = 0.5 * (a + b);
+            const dk_index c = eliminate(cand, nc, order, r, lo, kept, nc);
+            if (c < 0)
+                break;
+            if (c > o->n_nodes)
+                a = r;
+            else
+                b = r;
+        }
+        count = eliminate(cand, nc, order, b, lo, kept, nc);
+    }
+    if (count < 0) {
+        st = oom(err, "node sampling");
+        goto done;
+    }
+    ed->g = malloc(3 * ((size_t)count + 1) * sizeof *ed->g);
+    if (!ed->g) {
+        st = oom(err, "nodes");
+        goto done;
+    }
+    for (dk_index i = 0; i < count; i++)
+        memcpy(ed->g + 3 * i, cand + 3 * kept[i], 3 * sizeof(double));
+    ed->m = count;
+done:
+    free(cand);
+    free(order);
+    free(kept);
+    return st;
+}
+
+/* ------------------------------------------------------------------ weights, edges ----- */
+
+static int cmp_index(const void *a, const void *b)
+{
+    const dk_index x = *(const dk_index *)a, y = *(const dk_index *)b;
+    return (x > y) - (x < y);
+}
+
+static int cmp_i64(const void *a, const void *b)
+{
+    const int64_t x = *(const int64_t *)a, y = *(const int64_t *)b;
+    return (x > y) - (x < y);
+}
+
+/* Each vertex's k nearest nodes and weights (eq. 4); nodes that influence no vertex are
+ * dropped (renumbering the rest, in their order). */
+static dk_status weights(dk_embedded *ed, dk_error *err)
+{
+    const dk_index n = ed->n, k = ed->k;
+    if (ed->m < k + 1)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EmbeddedDeformation: %d nodes, but k = %d needs at least %d "
+                            "(raise n_nodes or lower the radius)",
+                            (int)ed->m, (int)k, (int)k + 1);
+    dk_kdtree *tree = NULL;
+    dk_index *idx = malloc(((size_t)n * (size_t)(k + 1) + 1) * sizeof *idx);
+    double *d2 = malloc(((size_t)n * (size_t)(k + 1) + 1) * sizeof *d2);
+    ed->nb = malloc(((size_t)n * (size_t)k + 1) * sizeof *ed->nb);
+    ed->w = malloc(((size_t)n * (size_t)k + 1) * sizeof *ed->w);
+    dk_index *map = malloc(((size_t)ed->m + 1) * sizeof *map);
+    dk_status st = DK_OK;
+    if (!idx || !d2 || !ed->nb || !ed->w || !map) {
+        st = oom(err, "weights");
+        goto done;
+    }
+    st = dk_kdtree_create(ed->g, ed->m, &tree, err);
+    if (st == DK_OK)
+        st = dk_kdtree_knn(tree, ed->mesh->positions, n, k + 1, idx, d2, err);
+    if (st != DK_OK)
+        goto done;
+    for (dk_index j = 0; j < ed->m; j++)
+        map[j] = -1;
+    for (dk_index v = 0; v < n; v++) {
+        const double dmax = sqrt(d2[(size_t)v * (size_t)(k + 1) + (size_t)k]);
+        double sum = 0.0;
+        for (dk_index q = 0; q < k; q++) {
+            const double d = sqrt(d2[(size_t)v * (size_t)(k + 1) + (size_t)q]);
+            const double s = dmax > 0.0 ? 1.0 - d / dmax : 0.0;
+            ed->w[(size_t)v * k + q] = s * s;
+            ed->nb[(size_t)v * k + q] = idx[(size_t)v * (size_t)(k + 1) + (size_t)q];
+            sum += s * s;
+        }
+        for (dk_index q = 0; q < k; q++) { /* d_max = d_k (ties): equal weights */
+            ed->w[(size_t)v * k + q] = sum > 0.0 ? ed->w[(size_t)v * k + q] / sum : 1.0 / k;
+            if (ed->w[(size_t)v * k + q] > 0.0)
+                map[ed->nb[(size_t)v * k + q]] = 0;
+        }
+    }
+    dk_index kept = 0;
+    for (dk_index j = 0; j < ed->m; j++)
+        if (map[j] == 0) {
+            map[j] = kept;
+            memmove(ed->g + 3 * kept, ed->g + 3 * j, 3 * sizeof(double));
+            kept++;
+        }
+    for (size_t q = 0; q < (size_t)n * (size_t)k; q++)
+        ed->nb[q] = ed->w[q] > 0.0 ? map[ed->nb[q]] : -1;
+    ed->m = kept;
+done:
+    dk_kdtree_free(tree);
+    free(idx);
+    free(d2);
+    free(map);
+    return st;
+}
+
+/* Edges between every two nodes influencing a common vertex; the directed adjacency. */
+static dk_status edges(dk_embedded *ed, dk_error *err)
+{
+    const dk_index n = ed->n, k = ed->k, m = ed->m;
+    const int64_t cap = (int64_t)n * k * (k - 1) / 2 + 1;
+    int64_t *pairs = malloc((size_t)cap * sizeof *pairs), np = 0;
+    if (!pairs)
+        return oom(err, "graph edges");
+    for (dk_index v = 0; v < n; v++)
+        for (dk_index p = 0; p < k; p++)
+            for (dk_index q = p + 1; q < k; q++) {
+                dk_index a = ed->nb[(size_t)v * k + p], b = ed->nb[(size_t)v * k + q];
+                if (a < 0 || b < 0 || a == b)
+                    continue;
+                if (a > b) {
+                    const dk_index t = a;
+                    a = b;
+                    b = t;
+                }
+                pairs[np++] = (int64_t)a * m + b;
+            }
+    qsort(pairs, (size_t)np, sizeof *pairs, cmp_i64);
+    int64_t ne = 0;
+    for (int64_t i = 0; i < np; i++)
+        if (i == 0 || pairs[i] != pairs[i - 1])
+            pairs[ne++] = pairs[i];
+    ed->n_edges = (dk_index)ne;
+    ed->edges = malloc(2 * ((size_t)ne + 1) * sizeof *ed->edges);
+    ed->adj_start = calloc((size_t)m + 1, sizeof *ed->adj_start);
+    ed->adj = malloc(2 * ((size_t)ne + 1) * sizeof *ed->adj);
+    if (!ed->edges || !ed->adj_start || !ed->adj) {
+        free(pairs);
+        return oom(err, "graph edges");
+    }
+    for (int64_t i = 0; i < ne; i++) {
+        ed->edges[2 * i] = (dk_index)(pairs[i] / m);
+        ed->edges[2 * i + 1] = (dk_index)(pairs[i] % m);
+        ed->adj_start[ed->edges[2 * i] + 1]++;
+        ed->adj_start[ed->edges[2 * i + 1] + 1]++;
+    }
+    for (dk_index j = 0; j < m; j++)
+        ed->adj_start[j + 1] += ed->adj_start[j];
+    dk_index *fill = malloc(((size_t)m + 1) * sizeof *fill);
+    if (!fill) {
+        free(pairs);
+        return oom(err, "graph edges");
+    }
+    memcpy(fill, ed->adj_start, (size_t)m * sizeof *fill);
+    for (int64_t i = 0; i < ne; i++) {
+        const dk_index a = ed->edges[2 * i], b = ed->edges[2 * i + 1];
+        ed->adj[fill[a]++] = b;
+        ed->adj[fill[b]++] = a;
+    }
+    for (dk_index j = 0; j < m; j++)
+        qsort(ed->adj + ed->adj_start[j], (size_t)(ed->adj_start[j + 1] - ed->adj_start[j]),
+              sizeof *ed->adj, cmp_index);
+    free(fill);
+    free(pairs);
+    return DK_OK;
+}
+
+/* ------------------------------------------------------------------ the system --------- */
+
+static void system_free(ed_system *s)
+{
+    dk_constraints_free(s->con);
+    free(s->node_unknown);
+    free(s->free_nodes);
+    free(s->pos_vertex);
+    free(s->pos_target_row);
+    free(s->targets);
+    free(s->blk_start);
+    free(s->blk_node);
+    free(s->blocks);
+    free(s->edge_blk);
+    free(s->pos_blk);
+    dk_sparse_free(s->a);
+    free(s->diag_pos);
+    dk_cholesky_free(s->chol);
+    free(s->grad);
+    free(s->step);
+    free(s->x_try);
+    memset(s, 0, sizeof *s);
+}
+
+/* The block of free nodes (u, v), or -1 when either is constant or they share no residual. */
+static int64_t block_of(const ed_system *s, dk_index u, dk_index v)
+{
+    if (u < 0 || v < 0)
+        return -1;
+    dk_index lo = s->blk_start[u], hi = s->blk_start[u + 1] - 1;
+    while (lo <= hi) {
+        const dk_index mid = lo + (hi - lo) / 2;
+        if (s->blk_node[mid] == v)
+            return mid;
+        if (s->blk_node[mid] < v)
+            lo = mid + 1;
+        else
+            hi = mid - 1;
+    }
+    return -1;
+}
+
+/* Which nodes are constants, the free numbering, and the positional terms. */
+static dk_status classify(const dk_embedded *ed, ed_system *s, dk_error *err)
+{
+    const dk_index n = ed->n, m = ed->m, k = ed->k;
+    const dk_constraints *c = s->con;
+    unsigned char *moves = calloc((size_t)m + 1, 1);
+    dk_index *target_of = malloc(((size_t)n + 1) * sizeof *target_of);
+    s->node_unknown = malloc(((size_t)m + 1) * sizeof *s->node_unknown);
+    s->free_nodes = malloc(((size_t)m + 1) * sizeof *s->free_nodes);
+    s->pos_vertex = malloc(((size_t)n + 1) * sizeof *s->pos_vertex);
+    s->pos_target_row = malloc(((size_t)n + 1) * sizeof *s->pos_target_row);
+    s->targets = malloc((3 * (size_t)c->n_handle_vertices + 1) * sizeof *s->targets);
+    dk_status st = DK_OK;
+    if (!moves || !target_of || !s->node_unknown || !s->free_nodes || !s->pos_vertex ||
+        !s->pos_target_row || !s->targets) {
+        st = oom(err, "constraint system");
+        goto done;
+    }
+    /* the paper's rule: a node that influences a fixed vertex is a constant, so fixed
+     * vertices stay exactly at rest (all their nodes are the identity) */
+    unsigned char *held = moves; /* reused: 1 = influences a fixed vertex */
+    for (dk_index v = 0; v < n; v++)
+        if (c->role[v] == DK_VERTEX_FIXED)
+            for (dk_index q = 0; q < k; q++)
+                if (ed->nb[(size_t)v * k + q] >= 0)
+                    held[ed->nb[(size_t)v * k + q]] = 1;
+    s->n_free = 0;
+    for (dk_index j = 0; j < m; j++) {
+        s->node_unknown[j] = !held[j] ? s->n_free : -1;
+        if (!held[j])
+            s->free_nodes[s->n_free++] = j;
+    }
+    if (s->n_free == 0) {
+        st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                          "EmbeddedDeformation: every node influences a fixed vertex, so "
+                          "every node is a constant and nothing can move (fix fewer "
+                          "vertices or use more nodes)");
+        goto done;
+    }
+    for (dk_index v = 0; v < n; v++)
+        target_of[v] = -1;
+    for (dk_index i = 0; i < c->n_handle_vertices; i++)
+        target_of[c->handle_vertices[i]] = i;
+    s->n_pos = 0;
+    for (dk_index v = 0; v < n; v++) {
+        if (c->role[v] >= 0) {
+            s->pos_vertex[s->n_pos] = v;
+            s->pos_target_row[s->n_pos] = target_of[v];
+            s->n_pos++;
+        }
+    }
+done:
+    free(moves);
+    free(target_of);
+    return st;
+}
+
+/* The blocks of J^T J: every free node with itself, its free graph neighbours, and the free
+ * nodes it shares a positional term with. */
+static dk_status block_pattern(const dk_embedded *ed, ed_system *s, dk_error *err)
+{
+    const dk_index k = ed->k, nf = s->n_free;
+    int64_t cap = nf + 2 * (int64_t)ed->n_edges + (int64_t)s->n_pos * k * k + 1;
+    int64_t *pairs = malloc((size_t)cap * sizeof *pairs), np = 0;
+    if (!pairs)
+        return oom(err, "matrix pattern");
+    for (dk_index u = 0; u < nf; u++)
+        pairs[np++] = (int64_t)u * nf + u;
+    for (dk_index e = 0; e < ed->n_edges; e++) {
+        const dk_index a = s->node_unknown[ed->edges[2 * e]];
+        const dk_index b = s->node_unknown[ed->edges[2 * e + 1]];
+        if (a >= 0 && b >= 0) {
+            pairs[np++] = (int64_t)a * nf + b;
+            pairs[np++] = (int64_t)b * nf + a;
+        }
+    }
+    for (dk_index l = 0; l < s->n_pos; l++) {
+        const dk_index *nb = ed->nb + (size_t)s->pos_vertex[l] * k;
+        for (dk_index p = 0; p < k; p++)
+            for (dk_index q = 0; q < k; q++) {
+                const dk_index a = nb[p] >= 0 ? s->node_unknown[nb[p]] : -1;
+                const dk_index b = nb[q] >= 0 ? s->node_unknown[nb[q]] : -1;
+                if (a >= 0 && b >= 0)
+                    pairs[np++] = (int64_t)a * nf + b;
+            }
+    }
+    qsort(pairs, (size_t)np, sizeof *pairs, cmp_i64);
+    int64_t nb = 0;
+    for (int64_t i = 0; i < np; i++)
+        if (i == 0 || pairs[i] != pairs[i - 1])
+            pairs[nb++] = pairs[i];
+    s->n_blocks = nb;
+    s->blk_start = calloc((size_t)nf + 1, sizeof *s->blk_start);
+    s->blk_node = malloc(((size_t)nb + 1) * sizeof *s->blk_node);
+    s->blocks = malloc(((size_t)nb * 144 + 1) * sizeof *s->blocks);
+    if (!s->blk_start || !s->blk_node || !s->blocks) {
+        free(pairs);
+        return oom(err, "matrix pattern");
+    }
+    for (int64_t i = 0; i < nb; i++) {
+        s->blk_node[i] = (dk_index)(pairs[i] % nf);
+        s->blk_start[pairs[i] / nf + 1]++;
+    }
+    for (dk_index u = 0; u < nf; u++)
+        s->blk_start[u + 1] += s->blk_start[u];
+    free(pairs);
+    return DK_OK;
+}
+
+/* The CSC matrix over the blocks (rows of each column: the blocks' rows in order), the
+ * diagonal positions, the per-residual block indices, and the analysis. */
+static dk_status matrix(dk_embedded *ed, ed_system *s, dk_error *err)
+{
+    const dk_index nf = s->n_free, N = 12 * nf, k = ed->k;
+    dk_status st = dk_sparse_alloc(N, N, s->n_blocks * 144, &s->a, err);
+    if (st != DK_OK)
+        return st;
+    s->diag_pos = malloc(((size_t)N + 1) * sizeof *s->diag_pos);
+    s->edge_blk = malloc((4 * 2 * (size_t)ed->n_edges + 1) * sizeof *s->edge_blk);
+    s->pos_blk = malloc(((size_t)s->n_pos * k * k + 1) * sizeof *s->pos_blk);
+    s->grad = malloc(((size_t)N + 1) * sizeof *s->grad);
+    s->step = malloc(((size_t)N + 1) * sizeof *s->step);
+    s->x_try = malloc((12 * (size_t)ed->m + 1) * sizeof *s->x_try);
+    if (!s->diag_pos || !s->edge_blk || !s->pos_blk || !s->grad || !s->step || !s->x_try)
+        return oom(err, "matrix");
+    int64_t at = 0;
+    for (dk_index u = 0; u < nf; u++)
+        for (int a = 0; a < 12; a++) {
+            s->a->col_start[12 * u + a] = (dk_index)at;
+            for (dk_index b = s->blk_start[u]; b < s->blk_start[u + 1]; b++) {
+                if (s->blk_node[b] == u)
+                    s->diag_pos[12 * u + a] = at + a;
+                for (int c = 0; c < 12; c++)
+                    s->a->row_index[at++] = 12 * s->blk_node[b] + c;
+            }
+        }
+    s->a->col_start[N] = (dk_index)at;
+    memset(s->a->values, 0, (size_t)at * sizeof(double));
+    for (dk_index u = 0; u < nf; u++) /* a definite placeholder for the analysis */
+        for (int a = 0; a < 12; a++)
+            s->a->values[s->diag_pos[12 * u + a]] = 1.0;
+    for (dk_index e = 0; e < ed->n_edges; e++)
+        for (int dir = 0; dir < 2; dir++) {
+            const dk_index j = s->node_unknown[ed->edges[2 * e + dir]];
+            const dk_index q = s->node_unknown[ed->edges[2 * e + 1 - dir]];
+            int64_t *b = s->edge_blk + 8 * (size_t)e + 4 * dir;
+            b[0] = block_of(s, j, j);
+            b[1] = block_of(s, j, q);
+            b[2] = block_of(s, q, j);
+            b[3] = block_of(s, q, q);
+        }
+    for (dk_index l = 0; l < s->n_pos; l++) {
+        const dk_index *nb = ed->nb + (size_t)s->pos_vertex[l] * k;
+        for (dk_index p = 0; p < k; p++)
+            for (dk_index q = 0; q < k; q++)
+                s->pos_blk[((size_t)l * k + p) * k + q] =
+                    block_of(s, nb[p] >= 0 ? s->node_unknown[nb[p]] : -1,
+                             nb[q] >= 0 ? s->node_unknown[nb[q]] : -1);
+    }
+    st = dk_cholesky_analyze(s->a, &s->chol, err);
+    if (st != DK_OK)
+        return dk_error_prefix(err, "EmbeddedDeformation: analysis");
+    ed->analysis_count++;
+    return DK_OK;
+}
+
+static dk_status system_build(dk_embedded *ed, const dk_constraint_desc *desc, ed_system *s,
+                              dk_error *err)
+{
+    memset(s, 0, sizeof *s);
+    dk_status st = dk_constraints_create(ed->mesh, desc, &s->con, err);
+    if (st != DK_OK)
+        return dk_error_prefix(err, "EmbeddedDeformation");
+    st = classify(ed, s, err);
+    if (st == DK_OK)
+        st = block_pattern(ed, s, err);
+    if (st == DK_OK)
+        st = matrix(ed, s, err);
+    if (st != DK_OK)
+        system_free(s);
+    return st;
+}
+
+/* ------------------------------------------------------------------ energy, J^T J ------ */
+
+/* One residual's Jacobian row: up to 2 K_MAX nodes' entries, each a free index u (-1: a
+ * constant node, no unknowns), its 4 slots of coordinate d (R[d][0..2], t[d]) or 6 of a
+ * rotation residual, and their coefficients. */
+typedef struct jrow {
+    int n;
+    dk_index u[2 * K_MAX];
+    int64_t blk[2 * K_MAX][2 * K_MAX];
+    int ns;
+    int slot[2 * K_MAX][6];
+    double coef[2 * K_MAX][6];
+} jrow;
+
+/* Adds r^2 to *F, and, when `s` is given, the row's part of J^T f (into grad) and J^T J
+ * (into the blocks). */
+static void add_row(ed_system *s, const jrow *j, double r, double *F)
+{
+    *F += r * r;
+    if (!s)
+        return;
+    for (int p = 0; p < j->n; p++) {
+        if (j->u[p] < 0)
+            continue;
+        for (int i = 0; i < j->ns; i++)
+            s->grad[12 * j->u[p] + j->slot[p][i]] += j->coef[p][i] * r;
+        for (int q = 0; q < j->n; q++) {
+            const int64_t b = j->blk[p][q];
+            if (b < 0)
+                continue;
+            double *B = s->blocks + 144 * (size_t)b;
+            for (int i = 0; i < j->ns; i++)
+                for (int c = 0; c < j->ns; c++)
+                    B[12 * j->slot[p][i] + j->slot[q][c]] += j->coef[p][i] * j->coef[q][c];
+        }
+    }
+}
+
+/* F(x) (eq. 9); with `s`, also J^T f (s->grad) and J^T J (s->blocks, then s->a). */
+static double evaluate(const dk_embedded *ed, ed_system *s, const ed_system *sys,
+                       const double *x)
+{
+    const dk_index k = ed->k, m = ed->m;
+    const double wr = sqrt(ed->opt.w_rot), wg = sqrt(ed->opt.w_reg), wc = sqrt(ed->opt.w_con);
+    double F = 0.0;
+    jrow jr;
+    if (s) {
+        memset(s->grad, 0, 12 * (size_t)s->n_free * sizeof(double));
+        memset(s->blocks, 0, 144 * (size_t)s->n_blocks * sizeof(double));
+    }
+    /* rotation (eqs. 5-6): six residuals per free node over its 9 R entries */
+    static const int pairs[6][2] = {{0, 1}, {0, 2}, {1, 2}, {0, 0}, {1, 1}, {2, 2}};
+    for (dk_index j = 0; j < m; j++) {
+        const dk_index u = sys->node_unknown[j];
+        if (u < 0)
+            continue; /* R = I: Rot = 0 */
+        const double *R = x + 12 * (size_t)j;
+        for (int r = 0; r < 6; r++) {
+            const int a = pairs[r][0], b = pairs[r][1];
+            double dot = 0.0;
+            for (int d = 0; d < 3; d++)
+                dot += R[3 * d + a] * R[3 * d + b];
+            if (a == b)
+                dot -= 1.0;
+            jr.n = 1;
+            jr.u[0] = u;
+            jr.blk[0][0] = s ? block_of(sys, u, u) : -1;
+            jr.ns = 6;
+            for (int d = 0; d < 3; d++) { /* d(c_a . c_b)/dR[d][a] = R[d][b] and vice versa */
+                jr.slot[0][2 * d] = 3 * d + a;
+                jr.slot[0][2 * d + 1] = 3 * d + b;
+                jr.coef[0][2 * d] = wr * (a == b ? R[3 * d + a] : R[3 * d + b]);
+                jr.coef[0][2 * d + 1] = wr * (a == b ? R[3 * d + a] : R[3 * d + a]);
+            }
+            add_row(s, &jr, wr * dot, &F);
+        }
+    }
+    /* regularization (eq. 7), both directions of each edge, one residual per coordinate */
+    for (dk_index e = 0; e < ed->n_edges; e++)
+        for (int dir = 0; dir < 2; dir++) {
+            const dk_index j = ed->edges[2 * e + dir], q = ed->edges[2 * e + 1 - dir];
+            const double *Rj = x + 12 * (size_t)j, *tj = Rj + 9, *tq = x + 12 * (size_t)q + 9;
+            const double *gj = ed->g + 3 * j, *gq = ed->g + 3 * q;
+            const double dg[3] = {gq[0] - gj[0], gq[1] - gj[1], gq[2] - gj[2]};
+            const int64_t *b = sys->edge_blk + 8 * (size_t)e + 4 * dir;
+            for (int d = 0; d < 3; d++) {
+                const double r = Rj[3 * d] * dg[0] + Rj[3 * d + 1] * dg[1] +
+                                 Rj[3 * d + 2] * dg[2] + gj[d] + tj[d] - gq[d] - tq[d];
+                jr.n = 2;
+                jr.u[0] = sys->node_unknown[j];
+                jr.u[1] = sys->node_unknown[q];
+                jr.blk[0][0] = b[0];
+                jr.blk[0][1] = b[1];
+                jr.blk[1][0] = b[2];
+                jr.blk[1][1] = b[3];
+                jr.ns = 4;
+                for (int c = 0; c < 3; c++) {
+                    jr.slot[0][c] = 3 * d + c;
+                    jr.coef[0][c] = wg * dg[c];
+                    jr.slot[1][c] = 3 * d + c;
+                    jr.coef[1][c] = 0.0; /* t_q only: its R does not enter */
+                }
+                jr.slot[0][3] = 9 + d;
+                jr.coef[0][3] = wg;
+                jr.slot[1][3] = 9 + d;
+                jr.coef[1][3] = -wg;
+                add_row(s, &jr, wg * r, &F);
+            }
+        }
+    /* positional terms (eq. 8): handles to their targets, held fixed vertices to rest */
+    for (dk_index l = 0; l < sys->n_pos; l++) {
+        const dk_index v = sys->pos_vertex[l];
+        const double *p = ed->mesh->positions + 3 * v;
+        const dk_index *nb = ed->nb + (size_t)v * k;
+        const double *wv = ed->w + (size_t)v * k;
+        const double *tg = sys->pos_target_row[l] >= 0 ? sys->targets + 3 * sys->pos_target_row[l]
+                                                       : p;
+        for (int d = 0; d < 3; d++) {
+            double r = -tg[d];
+            jr.n = 0;
+            jr.ns = 4;
+            for (dk_index q = 0; q < k; q++) {
+                const dk_index j = nb[q];
+                if (j < 0)
+                    continue;
+                const double *R = x + 12 * (size_t)j, *g = ed->g + 3 * j;
+                const double dv[3] = {p[0] - g[0], p[1] - g[1], p[2] - g[2]};
+                r += wv[q] * (R[3 * d] * dv[0] + R[3 * d + 1] * dv[1] + R[3 * d + 2] * dv[2] +
+                              g[d] + R[9 + d]);
+                const int c = jr.n++;
+                jr.u[c] = sys->node_unknown[j];
+                for (int e = 0; e < 3; e++) {
+                    jr.slot[c][e] = 3 * d + e;
+                    jr.coef[c][e] = wc * wv[q] * dv[e];
+                }
+                jr.slot[c][3] = 9 + d;
+                jr.coef[c][3] = wc * wv[q];
+            }
+            if (s) { /* the blocks of this vertex's node pairs (valid entries only) */
+                int c = 0;
+                int idx[K_MAX];
+                for (dk_index q = 0; q < k; q++)
+                    if (nb[q] >= 0)
+                        idx[c++] = (int)q;
+                for (int a = 0; a < jr.n; a++)
+                    for (int b2 = 0; b2 < jr.n; b2++)
+                        jr.blk[a][b2] = sys->pos_blk[((size_t)l * k + idx[a]) * k + idx[b2]];
+            }
+            add_row(s, &jr, wc * r, &F);
+        }
+    }
+    if (s) /* the blocks into the CSC values: block (u, v) entry (a, c) = row 12v+c, col 12u+a */
+        for (dk_index u = 0; u < s->n_free; u++)
+            for (int a = 0; a < 12; a++) {
+                int64_t at = s->a->col_start[12 * u + a];
+                for (dk_index b = s->blk_start[u]; b < s->blk_start[u + 1]; b++)
+                    for (int c = 0; c < 12; c++)
+                        s->a->values[at++] = s->blocks[144 * (size_t)b + 12 * a + c];
+            }
+    return F;
+}
+
+/* ------------------------------------------------------------------ solve -------------- */
+
+static void identity(double *x, dk_index m)
+{
+    static const double id[12] = {1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0};
+    for (dk_index j = 0; j < m; j++)
+        memcpy(x + 12 * (size_t)j, id, sizeof id);
+}
+
+/* eq. 2 for every vertex; a vertex whose nodes are all constants is copied (the blend of
+ * identities would give it back only to rounding) */
+static void apply(const dk_embedded *ed, const double *x, double *out)
+{
+    const dk_index k = ed->k;
+    for (dk_index v = 0; v < ed->n; v++) {
+        const double *p = ed->mesh->positions + 3 * v;
+        int moving = 0;
+        for (dk_index q = 0; q < k; q++) {
+            const dk_index j = ed->nb[(size_t)v * k + q];
+            moving |= j >= 0 && ed->sys.node_unknown[j] >= 0;
+        }
+        if (!moving) {
+            memcpy(out + 3 * v, p, 3 * sizeof(double));
+            continue;
+        }
+        double o[3] = {0.0, 0.0, 0.0};
+        for (dk_index q = 0; q < k; q++) {
+            const dk_index j = ed->nb[(size_t)v * k + q];
+            if (j < 0)
+                continue;
+            const double w = ed->w[(size_t)v * k + q], *R = x + 12 * (size_t)j;
+            const double *g = ed->g + 3 * j;
+            const double d[3] = {p[0] - g[0], p[1] - g[1], p[2] - g[2]};
+            for (int c = 0; c < 3; c++)
+                o[c] += w * (R[3 * c] * d[0] + R[3 * c + 1] * d[1] + R[3 * c + 2] * d[2] +
+                             g[c] + R[9 + c]);
+        }
+        memcpy(out + 3 * v, o, sizeof o);
+    }
+}
+
+static double inf_norm(const double *a, size_t n)
+{
+    double m = 0.0;
+    for (size_t i = 0; i < n; i++)
+        m = fmax(m, fabs(a[i]));
+    return m;
+}
+
+/* One damped Gauss-Newton step: solves (J^T J + mu I) d = -J^T f, tries x + d, raises mu
+ * until F decreases (at most 30 times). *accepted: whether a step was taken. */
+static dk_status gn_step(dk_embedded *ed, double F, double *mu, double *F_new, double *dnorm,
+                         int *accepted, dk_error *err)
+{
+    ed_system *s = &ed->sys;
+    const size_t N = 12 * (size_t)s->n_free;
+    double trace = 0.0;
+    for (size_t i = 0; i < N; i++)
+        trace += s->a->values[s->diag_pos[i]];
+    const double floor_mu = 1e-12 * (trace / (double)N + 1e-300);
+    *accepted = 0;
+    for (int attempt = 0; attempt < 30 && !*accepted; attempt++) {
+        for (size_t i = 0; i < N; i++)
+            s->a->values[s->diag_pos[i]] += *mu;
+        dk_status st = dk_cholesky_factorize(s->chol, s->a, err);
+        for (size_t i = 0; i < N; i++)
+            s->a->values[s->diag_pos[i]] -= *mu;
+        if (st == DK_OK) {
+            ed->factorization_count++;
+            for (size_t i = 0; i < N; i++)
+                s->step[i] = -s->grad[i];
+            st = dk_cholesky_solve(s->chol, s->step, 1, s->step, err);
+            if (st != DK_OK)
+                return dk_error_prefix(err, "EmbeddedDeformation solve");
+            memcpy(s->x_try, ed->x, 12 * (size_t)ed->m * sizeof(double));
+            for (dk_index u = 0; u < s->n_free; u++)
+                for (int a = 0; a < 12; a++)
+                    s->x_try[12 * (size_t)s->free_nodes[u] + a] += s->step[12 * u + a];
+            const double Ft = evaluate(ed, NULL, s, s->x_try);
+            if (Ft < F || (Ft == F && inf_norm(s->step, N) == 0.0)) {
+                memcpy(ed->x, s->x_try, 12 * (size_t)ed->m * sizeof(double));
+                *F_new = Ft;
+                *dnorm = inf_norm(s->step, N);
+                *accepted = 1;
+                *mu = *mu * 0.1 < floor_mu ? 0.0 : *mu * 0.1;
+                return DK_OK;
+            }
+        } else if (st != DK_ERR_NOT_POSITIVE_DEFINITE) {
+            return dk_error_prefix(err, "EmbeddedDeformation solve");
+        }
+        *mu = *mu > 0.0 ? *mu * 10.0 : fmax(1e-6 * trace / (double)N, floor_mu);
+    }
+    *F_new = F;
+    *dnorm = 0.0;
+    return DK_OK;
+}
+
+dk_status dk_embedded_solve(dk_embedded *ed, const dk_solve_request *rq, double *positions,
+                            dk_solve_info *info, dk_error *err)
+{
+    if (info)
+        memset(info, 0, sizeof *info);
+    if (!ed || !positions)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EmbeddedDeformation solve: object and positions must not be NULL");
+    dk_status st = dk_solve_request_check(rq, "EmbeddedDeformation solve", err);
+    if (st != DK_OK)
+        return st;
+    ed_system *s = &ed->sys;
+    st = dk_constraints_targets(s->con, ed->mesh->positions, rq->targets, (int)rq->target_kind,
+                                s->targets, err);
+    if (st != DK_OK)
+        return dk_error_prefix(err, "EmbeddedDeformation solve");
+    if (rq->start == DK_START_COLD)
+        identity(ed->x, ed->m);
+    const int maxit = rq->max_iterations > 0 ? rq->max_iterations : ed->opt.max_iterations;
+    const double eps = ed->opt.tolerance;
+    const size_t N = 12 * (size_t)s->n_free;
+    double F = evaluate(ed, s, s, ed->x), mu = 0.0;
+    int it = 0, converged = 0;
+    while (it < maxit) {
+        /* the gradient test at the current iterate (grad F = 2 J^T f) */
+        if (2.0 * inf_norm(s->grad, N) < cbrt(eps) * (1.0 + F)) {
+            converged = 1;
+            break;
+        }
+        double F_new, dnorm;
+        int accepted;
+        st = gn_step(ed, F, &mu, &F_new, &dnorm, &accepted, err);
+        if (st != DK_OK)
+            return st;
+        if (!accepted)
+            break; /* no descent even with heavy damping: a stationary point for all we see */
+        it++;
+        const double change = fabs(F - F_new);
+        F = evaluate(ed, s, s, ed->x);
+        if (change < eps * (1.0 + F) &&
+            dnorm < sqrt(eps) * (1.0 + inf_norm(ed->x, 12 * (size_t)ed->m))) {
+            converged = 1;
+            break;
+        }
+    }
+    ed->energy = F;
+    apply(ed, ed->x, positions);
+    if (info) {
+        info->energy = F;
+        info->iterations = it;
+        info->converged = converged;
+    }
+    return DK_OK;
+}
+
+/* ------------------------------------------------------------------ bind, rebind ------- */
+
+void dk_embedded_free(dk_embedded *ed)
+{
+    if (!ed)
+        return;
+    system_free(&ed->sys);
+    free(ed->g);
+    free(ed->nb);
+    free(ed->w);
+    free(ed->edges);
+    free(ed->adj_start);
+    free(ed->adj);
+    free(ed->x);
+    free(ed);
+}
+
+dk_status dk_embedded_bind(const dk_mesh *mesh, const dk_constraint_desc *constraints,
+                           const dk_embedded_options *options, dk_embedded **out,
+                           dk_error *err)
+{
+    if (out)
+        *out = NULL;
+    if (!mesh || !constraints || !out)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EmbeddedDeformation: mesh, constraints and output must not be "
+                            "NULL");
+    dk_embedded *ed = calloc(1, sizeof *ed);
+    if (!ed)
+        return oom(err, "object");
+    if (options)
+        ed->opt = *options;
+    else
+        dk_embedded_default_options(&ed->opt);
+    ed->mesh = mesh;
+    ed->n = mesh->n_vertices;
+    ed->k = ed->opt.k;
+    dk_status st = check_options(&ed->opt, err);
+    if (st == DK_OK) /* 1. the nodes */
+        st = sample_nodes(ed, err);
+    if (st == DK_OK) /* 2. each vertex's nodes and weights (eq. 4) */
+        st = weights(ed, err);
+    if (st == DK_OK) /* 3. the graph's edges */
+        st = edges(ed, err);
+    if (st == DK_OK) { /* 4. the transformations, identity */
+        ed->x = malloc((12 * (size_t)ed->m + 1) * sizeof *ed->x);
+        if (!ed->x)
+            st = oom(err, "transformations");
+        else
+            identity(ed->x, ed->m);
+    }
+    if (st == DK_OK) /* 5. the constraints: fixed nodes, positional terms, J^T J's pattern */
+        st = system_build(ed, constraints, &ed->sys, err);
+    if (st != DK_OK) {
+        dk_embedded_free(ed);
+        return st;
+    }
+    ed->energy = 0.0;
+    *out = ed;
+    return DK_OK;
+}
+
+dk_status dk_embedded_rebind(dk_embedded *ed, const dk_constraint_desc *constraints,
+                             dk_error *err)
+{
+    if (!ed || !constraints)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EmbeddedDeformation rebind: object and constraints must not be "
+                            "NULL");
+    ed_system s;
+    dk_status st = system_build(ed, constraints, &s, err);
+    if (st != DK_OK)
+        return st;
+    system_free(&ed->sys);
+    ed->sys = s;
+    return DK_OK;
+}
+
+/* ------------------------------------------------------------------ accessors ---------- */
+
+dk_status dk_embedded_energy(const dk_embedded *ed, const double *positions, double *energy,
+                             dk_error *err)
+{
+    if (energy)
+        *energy = NAN;
+    if (!ed || !positions || !energy)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EmbeddedDeformation energy: object, positions and energy must "
+                            "not be NULL");
+    const ed_system *s = &ed->sys;
+    /* the graph terms: F of x without the positional terms */
+    ed_system graph_only = *s;
+    graph_only.n_pos = 0;
+    double F = evaluate(ed, NULL, &graph_only, ed->x);
+    for (dk_index l = 0; l < s->n_pos; l++) {
+        const dk_index v = s->pos_vertex[l];
+        const double *tg = s->pos_target_row[l] >= 0 ? s->targets + 3 * s->pos_target_row[l]
+                                                     : ed->mesh->positions + 3 * v;
+        for (int d = 0; d < 3; d++) {
+            const double r = positions[3 * v + d] - tg[d];
+            F += ed->opt.w_con * r * r;
+        }
+    }
+    *energy = F;
+    return DK_OK;
+}
+
+void dk_embedded_stats(const dk_embedded *ed, dk_method_stats *st)
+{
+    if (!st)
+        return;
+    memset(st, 0, sizeof *st);
+    if (!ed)
+        return;
+    st->n_vertices = ed->n;
+    st->n_handles = ed->sys.con->n_handles;
+    st->n_handle_vertices = ed->sys.con->n_handle_vertices;
+    st->n_unknowns = 12 * ed->sys.n_free;
+    st->analysis_count = ed->analysis_count;
+    st->factorization_count = ed->factorization_count;
+}
+
+dk_index dk_embedded_n_nodes(const dk_embedded *ed)
+{
+    return ed ? ed->m : 0;
+}
+
+const double *dk_embedded_nodes(const dk_embedded *ed)
+{
+    return ed ? ed->g : NULL;
+}
+
+const double *dk_embedded_transforms(const dk_embedded *ed)
+{
+    return ed ? ed->x : NULL;
+}
+
+int dk_embedded_node_is_fixed(const dk_embedded *ed, dk_index node)
+{
+    return ed && node >= 0 && node < ed->m && ed->sys.node_unknown[node] < 0;
+}
+
+dk_index dk_embedded_n_edges(const dk_embedded *ed)
+{
+    return ed ? ed->n_edges : 0;
+}
+
+const dk_index *dk_embedded_edges(const dk_embedded *ed)
+{
+    return ed ? ed->edges : NULL;
+}
+
+/* ---------------------------------------------------------------- the method contract --- */
+
+static dk_status ops_bind(const dk_mesh *mesh, const dk_constraint_desc *c,
+                          const void *options, void **out, dk_error *err)
+{
+    return dk_embedded_bind(mesh, c, (const dk_embedded_options *)options,
+                            (dk_embedded **)out, err);
+}
+
+static dk_status ops_rebind(void *self, const dk_constraint_desc *c, dk_error *err)
+{
+    return dk_embedded_rebind((dk_embedded *)self, c, err);
+}
+
+static dk_status ops_solve(void *self, const dk_solve_request *rq, double *positions,
+                           dk_solve_info *info, dk_error *err)
+{
+    return dk_embedded_solve((dk_embedded *)self, rq, positions, info, err);
+}
+
+static dk_status ops_energy(const void *self, const double *positions, double *energy,
+                            dk_error *err)
+{
+    return dk_embedded_energy((const dk_embedded *)self, positions, energy, err);
+}
+
+static void ops_stats(const void *self, dk_method_stats *stats)
+{
+    dk_embedded_stats((const dk_embedded *)self, stats);
+}
+
+static void ops_free(void *self)
+{
+    dk_embedded_free((dk_embedded *)self);
+}
+
+const dk_method_ops dk_embedded_ops = {
+    .name = "EmbeddedDeformation",
+    .flags = DK_METHOD_ITERATIVE | DK_METHOD_TRANSFORMS_AS_POSITIONS |
+             DK_METHOD_TRANSLATION_INVARIANT | DK_METHOD_RIGID_INVARIANT |
+             DK_METHOD_PENALTY_HANDLES,
+    .bind = ops_bind,
+    .rebind = ops_rebind,
+    .solve = ops_solve,
+    .energy = ops_energy,
+    .stats = ops_stats,
+    .free = ops_free,
+};

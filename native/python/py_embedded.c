@@ -1,0 +1,136 @@
+/* DeformKit CPython module: deformkit.EmbeddedDeformation (native/methods/dk_embedded.h), on
+ * the generic method type (dk_py_method.h). What is its own: its options and the graph. */
+#include "dk_py_method.h"
+
+#include "dk_embedded.h"
+
+#include <string.h>
+
+static const char *const node_names[] = {"surface", "vertices", NULL};
+
+static void default_options(void *o)
+{
+    dk_embedded_default_options((dk_embedded_options *)o);
+}
+
+static int parse_options(PyObject *kw, void *o, const char *context)
+{
+    dk_embedded_options *opt = (dk_embedded_options *)o;
+    int nodes = (int)opt->nodes;
+    double seed = (double)opt->seed;
+    if (dk_py_opt_choice(kw, "nodes", node_names, &nodes, context) < 0 ||
+        dk_py_opt_int(kw, "n_nodes", &opt->n_nodes) < 0 ||
+        dk_py_opt_double(kw, "radius", &opt->radius) < 0 ||
+        dk_py_opt_int(kw, "k", &opt->k) < 0 ||
+        dk_py_opt_double(kw, "w_rot", &opt->w_rot) < 0 ||
+        dk_py_opt_double(kw, "w_reg", &opt->w_reg) < 0 ||
+        dk_py_opt_double(kw, "w_con", &opt->w_con) < 0 ||
+        dk_py_opt_double(kw, "tolerance", &opt->tolerance) < 0 ||
+        dk_py_opt_int(kw, "max_iterations", &opt->max_iterations) < 0 ||
+        dk_py_opt_double(kw, "seed", &seed) < 0)
+        return -1;
+    if (!(seed >= 0.0 && seed < 9007199254740992.0 && seed == (double)(uint64_t)seed)) {
+        PyErr_Format(PyExc_ValueError, "%s: seed must be a whole number in [0, 2^53)", context);
+        return -1;
+    }
+    opt->nodes = (dk_ed_node_source)nodes;
+    opt->seed = (uint64_t)seed;
+    return 0;
+}
+
+static PyObject *get_nodes(PyObject *obj, void *c)
+{
+    dk_py_method *self = (dk_py_method *)obj;
+    const dk_index m = dk_embedded_n_nodes(self->native);
+    double *out;
+    (void)c;
+    PyObject *a = dk_py_new_doubles(2, m, 3, &out);
+    if (a)
+        memcpy(out, dk_embedded_nodes(self->native), 3 * (size_t)m * sizeof(double));
+    return a;
+}
+
+static PyObject *get_transforms(PyObject *obj, void *c)
+{
+    dk_py_method *self = (dk_py_method *)obj;
+    const dk_index m = dk_embedded_n_nodes(self->native);
+    double *out;
+    (void)c;
+    PyObject *a = dk_py_new_doubles(2, m, 12, &out);
+    if (a)
+        memcpy(out, dk_embedded_transforms(self->native), 12 * (size_t)m * sizeof(double));
+    return a;
+}
+
+static PyObject *get_edges(PyObject *obj, void *c)
+{
+    dk_py_method *self = (dk_py_method *)obj;
+    const dk_index ne = dk_embedded_n_edges(self->native);
+    dk_index *out;
+    (void)c;
+    PyObject *a = dk_py_new_indices(2, ne, 2, &out);
+    if (a)
+        memcpy(out, dk_embedded_edges(self->native), 2 * (size_t)ne * sizeof(dk_index));
+    return a;
+}
+
+static PyObject *get_fixed_nodes(PyObject *obj, void *c)
+{
+    dk_py_method *self = (dk_py_method *)obj;
+    const dk_index m = dk_embedded_n_nodes(self->native);
+    (void)c;
+    PyObject *t = PyTuple_New(m);
+    for (dk_index j = 0; t && j < m; j++)
+        PyTuple_SetItem(t, j, PyBool_FromLong(dk_embedded_node_is_fixed(self->native, j)));
+    return t;
+}
+
+PyDoc_STRVAR(solve_doc,
+             "solve(targets=None, transforms=None, warm_start=True, max_iterations=None,\n"
+             "      resume=False, energy=True) -> SolveResult\n\n"
+             "Gauss-Newton with Levenberg-Marquardt damping on the node transformations.\n"
+             "Returns the deformed vertices (eq. 2), F = w_rot E_rot + w_reg E_reg + w_con\n"
+             "E_con, the iterations and whether the tests of eq. 12 held.");
+
+PyDoc_STRVAR(ed_doc,
+             "EmbeddedDeformation(mesh, handles, fixed=None, roi=None, handle_weights=None,\n"
+             "    stiffness=None, nodes='surface', n_nodes=200, radius=0.0, k=4, w_rot=1.0,\n"
+             "    w_reg=10.0, w_con=100.0, tolerance=1e-6, max_iterations=30, seed=1)\n\n"
+             "Embedded deformation (Sumner, Schmid & Pauly 2007): a deformation graph of\n"
+             "nodes sampled uniformly on the surface (or among the vertices), one affine\n"
+             "transformation per node, each vertex moved by its k nearest nodes. Handles are\n"
+             "positional constraints (weight w_con); nodes that influence fixed vertices only\n"
+             "are constants. See docs/methods/embedded.md.");
+
+static PyGetSetDef ed_getset[] = {
+    DK_PY_METHOD_GETSET,
+    {"nodes", get_nodes, NULL, "n_nodes x 3 node positions g_j", NULL},
+    {"transforms", get_transforms, NULL, "n_nodes x 12: each node's R (row-major) and t", NULL},
+    {"edges", get_edges, NULL, "n_edges x 2 node pairs (i < j)", NULL},
+    {"fixed_nodes", get_fixed_nodes, NULL, "tuple of bool: the constant nodes", NULL},
+    {NULL, NULL, NULL, NULL, NULL},
+};
+
+static PyMethodDef ed_methods[] = {DK_PY_METHOD_METHODS(solve_doc), {NULL, NULL, 0, NULL}};
+
+static const dk_py_method_spec ed_spec = {
+    .name = "EmbeddedDeformation",
+    .type_name = "deformkit.EmbeddedDeformation",
+    .ops = &dk_embedded_ops,
+    .doc = ed_doc,
+    .options_size = sizeof(dk_embedded_options),
+    .default_options = default_options,
+    .parse_options = parse_options,
+    .getset = ed_getset,
+    .methods = ed_methods,
+};
+
+static PyObject *ed_new(PyTypeObject *type, PyObject *args, PyObject *kwargs)
+{
+    return dk_py_method_new(type, args, kwargs, &ed_spec);
+}
+
+int dk_py_init_embedded(PyObject *module)
+{
+    return dk_py_method_register(module, &ed_spec, ed_new);
+}

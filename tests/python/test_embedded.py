@@ -1,0 +1,163 @@
+"""Embedded deformation (deformkit.EmbeddedDeformation; Sumner, Schmid & Pauly 2007): what is
+its own beyond the contract tests (tests/python/test_contract.py): the graph, the paper's
+bumpy plane (Figure 3), exact rigid motions, fixed nodes, several components, bad input."""
+import numpy as np
+import pytest
+
+import deformkit as dk
+from conftest import make_icosphere
+
+
+def bumpy_plane(n=60, bumps=6, seed=3):
+    """An n x n-cell grid on [0, 1]^2 with smooth Gaussian bumps (Figure 3's setting)."""
+    xs, ys = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1), indexing="ij")
+    x, y = xs.ravel(), ys.ravel()
+    z = np.zeros_like(x)
+    centres = np.random.default_rng(seed).uniform(0.25, 0.75, (bumps, 2))
+    for cx, cy in centres:
+        z += 0.04 * np.exp(-((x - cx) ** 2 + (y - cy) ** 2) / (2 * 0.04 ** 2))
+    v = np.stack([x, y, z], 1)
+    faces = []
+    for i in range(n):
+        for j in range(n):
+            a, b = i * (n + 1) + j, (i + 1) * (n + 1) + j
+            faces += [(a, b, b + 1), (a, b + 1, a + 1)]
+    return v, np.array(faces), centres
+
+
+def kabsch_rms(p, q):
+    """RMS residual of the best rigid fit of point set p onto q."""
+    pc, qc = p - p.mean(0), q - q.mean(0)
+    u, _, vt = np.linalg.svd(pc.T @ qc)
+    d = np.sign(np.linalg.det(u @ vt))
+    r = u @ np.diag([1, 1, d]) @ vt
+    return np.sqrt(np.mean(np.sum((pc @ r - qc) ** 2, axis=1)))
+
+
+def test_graph_is_seeded_and_sized():
+    v, f = make_icosphere(3)
+    mesh = dk.Mesh(v, f)
+    a = dk.EmbeddedDeformation(mesh, handles=[[0]], n_nodes=80)
+    b = dk.EmbeddedDeformation(mesh, handles=[[0]], n_nodes=80)
+    c = dk.EmbeddedDeformation(mesh, handles=[[0]], n_nodes=80, seed=7)
+    assert np.array_equal(a.nodes, b.nodes) and np.array_equal(a.edges, b.edges)
+    assert not np.array_equal(a.nodes, c.nodes)
+    assert 60 <= len(a.nodes) <= 80                      # the bisection lands just under
+    # nodes lie on the surface (the unit sphere, within its chord error) and are spread out
+    r = np.linalg.norm(a.nodes, axis=1)
+    assert np.all(r > 0.97) and np.all(r <= 1.0 + 1e-12)
+    d = np.linalg.norm(a.nodes[:, None] - a.nodes[None], axis=2) + np.eye(len(a.nodes)) * 9
+    assert d.min() > 0.5 * np.median(d.min(axis=1))
+    e = a.edges
+    assert e.shape[1] == 2 and np.all(e[:, 0] < e[:, 1]) and len(np.unique(e, axis=0)) == len(e)
+    # vertex nodes: the nodes are mesh vertices
+    g = dk.EmbeddedDeformation(mesh, handles=[[0]], n_nodes=80, nodes="vertices")
+    assert all(np.abs(v - p).sum(axis=1).min() == 0.0 for p in g.nodes)
+
+
+def test_zero_drag_returns_the_input():
+    v, f, _ = bumpy_plane(30)
+    fixed = np.where(v[:, 0] <= 1e-9)[0]
+    handle = np.where(v[:, 0] >= 1 - 1e-9)[0]
+    ed = dk.EmbeddedDeformation(dk.Mesh(v, f), handles=[handle], fixed=fixed, n_nodes=100)
+    r = ed.solve(v[handle], warm_start=False)
+    assert np.abs(r.positions - v).max() <= 1e-12
+    assert r.energy <= 1e-20
+
+
+def test_rigid_motion_of_all_handles_is_exact():
+    v, f = make_icosphere(3)
+    mesh = dk.Mesh(v, f)
+    caps = [np.where(v[:, 2] < -0.6)[0], np.where(v[:, 2] > 0.6)[0]]
+    ed = dk.EmbeddedDeformation(mesh, handles=caps, n_nodes=100, tolerance=1e-12,
+                                max_iterations=100)
+    a = 0.7
+    R = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, (0.3, -0.2, 0.5)
+    r = ed.solve(transforms=[T, T], warm_start=False)
+    assert np.abs(r.positions - (v @ R.T + T[:3, 3])).max() <= 1e-8
+    assert r.energy <= 1e-12
+    X = ed.transforms            # every node: the same rotation, t = the motion of its node
+    assert np.abs(X[:, :9] - R.ravel()).max() <= 1e-8
+    g = ed.nodes
+    assert np.abs(X[:, 9:] - (g @ R.T + T[:3, 3] - g)).max() <= 1e-8
+
+
+def test_bumpy_plane_figure_3():
+    """Left edge fixed, right edge lifted: a purely translational edit. Gauss-Newton converges
+    in a few iterations (the paper: about six), the handles meet their targets within 1% of
+    the drag, and the bumps keep their shape: each bump's region is a rigid motion of its
+    rest shape to within a few % of the bump's height (no shearing)."""
+    v, f, centres = bumpy_plane(200)      # 40,401 vertices and ~300 nodes, as in the paper
+    fixed = np.where(v[:, 0] <= 1e-9)[0]
+    handle = np.where(v[:, 0] >= 1 - 1e-9)[0]
+    ed = dk.EmbeddedDeformation(dk.Mesh(v, f), handles=[handle], fixed=fixed, n_nodes=300)
+    lift = 0.4
+    r = ed.solve(v[handle] + [0, 0, lift], warm_start=False)
+    assert r.converged and 2 <= r.iterations <= 10, r.iterations
+    err = np.abs(r.positions[handle] - (v[handle] + [0, 0, lift])).max()
+    assert err <= 0.01 * lift, err
+    assert np.abs(r.positions[fixed] - v[fixed]).max() == 0.0
+    x = np.asarray(r.positions)
+    for cx, cy in centres:
+        near = np.where((v[:, 0] - cx) ** 2 + (v[:, 1] - cy) ** 2 < 0.06 ** 2)[0]
+        assert kabsch_rms(v[near], x[near]) <= 0.1 * 0.04, (cx, cy)
+
+
+def test_fixed_nodes_are_constants():
+    v, f, _ = bumpy_plane(30)
+    fixed = np.where(v[:, 0] <= 0.3)[0]
+    handle = np.where(v[:, 0] >= 1 - 1e-9)[0]
+    ed = dk.EmbeddedDeformation(dk.Mesh(v, f), handles=[handle], fixed=fixed, n_nodes=100)
+    ed.solve(v[handle] + [0, 0, 0.3], warm_start=False)
+    const = np.array(ed.fixed_nodes)
+    assert const.any() and not const.all()
+    assert ed.stats["n_unknowns"] == 12 * int((~const).sum())
+    X = ed.transforms[const]
+    assert np.array_equal(X[:, :9], np.tile(np.eye(3).ravel(), (len(X), 1)))
+    assert np.array_equal(X[:, 9:], np.zeros((len(X), 3)))
+    # a fixed vertex's nodes are all constants: it stays exactly in place
+    r = ed.solve(v[handle] + [0, 0, 0.3])
+    assert np.array_equal(np.asarray(r.positions)[fixed], v[fixed])
+
+
+def test_several_components_and_a_soup():
+    a, fa = make_icosphere(2)
+    b = a + [3.0, 0.0, 0.0]
+    v = np.vstack([a, b])
+    f = np.vstack([fa, fa + len(a)])
+    handle = np.where(v[:, 0] > 3.8)[0]              # on the second sphere
+    fixed = np.where(v[:, 0] < -0.5)[0]              # on the first
+    ed = dk.EmbeddedDeformation(dk.Mesh(v, f), handles=[handle], fixed=fixed, n_nodes=120)
+    r = ed.solve(v[handle] + [0.5, 0, 0], warm_start=False)
+    x = np.asarray(r.positions)
+    assert np.abs(x[handle] - (v[handle] + [0.5, 0, 0])).max() < 0.05
+    assert np.array_equal(x[fixed], v[fixed])
+    # a polygon soup: every triangle on its own vertices
+    soup_v = v[f.ravel()]
+    soup_f = np.arange(len(soup_v)).reshape(-1, 3)
+    hs = np.where(soup_v[:, 0] > 3.8)[0]
+    ed = dk.EmbeddedDeformation(dk.Mesh(soup_v, soup_f), handles=[hs], n_nodes=120)
+    r = ed.solve(soup_v[hs] + [0.5, 0, 0], warm_start=False)
+    assert np.abs(np.asarray(r.positions)[hs] - (soup_v[hs] + [0.5, 0, 0])).max() < 0.05
+
+
+def test_bad_input():
+    v, f = make_icosphere(2)
+    mesh = dk.Mesh(v, f)
+    with pytest.raises(ValueError, match="n_nodes"):
+        dk.EmbeddedDeformation(mesh, handles=[[0]], n_nodes=0)
+    with pytest.raises(ValueError, match="k"):
+        dk.EmbeddedDeformation(mesh, handles=[[0]], n_nodes=3, k=4)
+    with pytest.raises(ValueError, match="k must"):
+        dk.EmbeddedDeformation(mesh, handles=[[0]], k=17)
+    with pytest.raises(ValueError, match="w_rot"):
+        dk.EmbeddedDeformation(mesh, handles=[[0]], w_rot=-1.0)
+    with pytest.raises(ValueError, match="nothing can move"):
+        dk.EmbeddedDeformation(mesh, handles=[[0]], fixed=np.arange(1, len(v)))
+    with pytest.raises(ValueError, match="nodes"):
+        dk.EmbeddedDeformation(mesh, handles=[[0]], nodes="volume")
+    ed = dk.EmbeddedDeformation(mesh, handles=[[0]], n_nodes=30)
+    with pytest.raises(ValueError):
+        ed.solve([[np.nan, 0.0, 0.0]])
