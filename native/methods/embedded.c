@@ -16,6 +16,7 @@
 
 #include "dk_cholesky.h"
 #include "dk_operators.h"
+#include "dk_parallel.h"
 #include "dk_sparse.h"
 
 #define K_MAX 16
@@ -61,6 +62,8 @@ struct dk_embedded {
     double energy;              /* F of x for the last solve's targets                      */
     ed_system sys;
     int analysis_count, factorization_count;
+    dk_team *team;              /* the factor's two-thread substitutions' helper (NULL: per
+                                   sweep)                                                   */
 };
 
 static dk_status oom(dk_error *err, const char *what)
@@ -466,6 +469,21 @@ static void system_free(ed_system *s)
     memset(s, 0, sizeof *s);
 }
 
+/* A slot's coordinate d (R[d][e] at 3 d + e, t[d] at 9 + d), and the c-th slot (0..3, in
+ * ascending order) of coordinate d. The regularization and positional residuals of
+ * coordinate d involve only those slots, so blocks between different nodes are nonzero only
+ * between slots of the same coordinate; the rotation residuals couple the coordinates, but
+ * within one node. */
+static int slot_coord(int a)
+{
+    return a < 9 ? a / 3 : a - 9;
+}
+
+static int coord_slot(int d, int c)
+{
+    return c < 3 ? 3 * d + c : 9 + d;
+}
+
 /* The block of free nodes (u, v), or -1 when either is constant or they share no residual. */
 static int64_t block_of(const ed_system *s, dk_index u, dk_index v)
 {
@@ -598,7 +616,9 @@ static dk_status block_pattern(const dk_embedded *ed, ed_system *s, dk_error *er
 static dk_status matrix(dk_embedded *ed, ed_system *s, dk_error *err)
 {
     const dk_index nf = s->n_free, N = 12 * nf, k = ed->k;
-    dk_status st = dk_sparse_alloc(N, N, s->n_blocks * 144, &s->a, err);
+    /* entries: a dense block per node, 3 x 16 for each pair of different nodes */
+    const int64_t nnz = 144 * (int64_t)nf + 48 * (s->n_blocks - nf);
+    dk_status st = dk_sparse_alloc(N, N, nnz, &s->a, err);
     if (st != DK_OK)
         return st;
     s->diag_pos = malloc(((size_t)N + 1) * sizeof *s->diag_pos);
@@ -612,12 +632,18 @@ static dk_status matrix(dk_embedded *ed, ed_system *s, dk_error *err)
     int64_t at = 0;
     for (dk_index u = 0; u < nf; u++)
         for (int a = 0; a < 12; a++) {
+            const int d = slot_coord(a);
             s->a->col_start[12 * u + a] = (dk_index)at;
             for (dk_index b = s->blk_start[u]; b < s->blk_start[u + 1]; b++) {
-                if (s->blk_node[b] == u)
+                const dk_index v = s->blk_node[b];
+                if (v == u) { /* the node's own block: dense (the rotation term) */
                     s->diag_pos[12 * u + a] = at + a;
-                for (int c = 0; c < 12; c++)
-                    s->a->row_index[at++] = 12 * s->blk_node[b] + c;
+                    for (int c = 0; c < 12; c++)
+                        s->a->row_index[at++] = 12 * v + c;
+                } else { /* between nodes: the same coordinate only (R[d][.], t[d]) */
+                    for (int c = 0; c < 4; c++)
+                        s->a->row_index[at++] = 12 * v + coord_slot(d, c);
+                }
             }
         }
     s->a->col_start[N] = (dk_index)at;
@@ -646,6 +672,7 @@ static dk_status matrix(dk_embedded *ed, ed_system *s, dk_error *err)
     st = dk_cholesky_analyze(s->a, &s->chol, err);
     if (st != DK_OK)
         return dk_error_prefix(err, "EmbeddedDeformation: analysis");
+    dk_cholesky_set_team(s->chol, ed->team);
     ed->analysis_count++;
     return DK_OK;
 }
@@ -818,13 +845,21 @@ static double evaluate(const dk_embedded *ed, ed_system *s, const ed_system *sys
             add_row(s, &jr, wc * r, &F);
         }
     }
-    if (s) /* the blocks into the CSC values: block (u, v) entry (a, c) = row 12v+c, col 12u+a */
+    if (s) /* the blocks into the CSC values: block (u, v) entry (a, c) = row 12v+c, col 12u+a;
+            * between different nodes only the entries of one coordinate exist (matrix()) */
         for (dk_index u = 0; u < s->n_free; u++)
             for (int a = 0; a < 12; a++) {
+                const int d = slot_coord(a);
                 int64_t at = s->a->col_start[12 * u + a];
-                for (dk_index b = s->blk_start[u]; b < s->blk_start[u + 1]; b++)
-                    for (int c = 0; c < 12; c++)
-                        s->a->values[at++] = s->blocks[144 * (size_t)b + 12 * a + c];
+                for (dk_index b = s->blk_start[u]; b < s->blk_start[u + 1]; b++) {
+                    const double *B = s->blocks + 144 * (size_t)b + 12 * a;
+                    if (s->blk_node[b] == u)
+                        for (int c = 0; c < 12; c++)
+                            s->a->values[at++] = B[c];
+                    else
+                        for (int c = 0; c < 4; c++)
+                            s->a->values[at++] = B[coord_slot(d, c)];
+                }
             }
     return F;
 }
@@ -971,6 +1006,7 @@ dk_status dk_embedded_solve(dk_embedded *ed, const dk_solve_request *rq, double 
             break;
         }
     }
+    dk_team_park(ed->team); /* the helper sleeps until the next solve */
     ed->energy = F;
     apply(ed, ed->x, positions);
     if (info) {
@@ -988,6 +1024,7 @@ void dk_embedded_free(dk_embedded *ed)
     if (!ed)
         return;
     system_free(&ed->sys);
+    dk_team_free(ed->team); /* after the factor, which used it */
     free(ed->g);
     free(ed->nb);
     free(ed->w);
@@ -1018,6 +1055,7 @@ dk_status dk_embedded_bind(const dk_mesh *mesh, const dk_constraint_desc *constr
     ed->mesh = mesh;
     ed->n = mesh->n_vertices;
     ed->k = ed->opt.k;
+    ed->team = dk_team_create(); /* NULL (no thread available) is fine */
     dk_status st = check_options(&ed->opt, err);
     if (st == DK_OK) /* 1. the nodes */
         st = sample_nodes(ed, err);
