@@ -112,11 +112,28 @@ void dk_embedded_stats(const dk_embedded *ed, dk_method_stats *stats);
  *  (fixed), and the edges (n_edges x 2, each once with i < j). Pointers stay valid until the
  *  next rebind or free. */
 dk_index dk_embedded_n_nodes(const dk_embedded *ed);
+dk_index dk_embedded_k(const dk_embedded *ed); /**< nodes per point */
 const double *dk_embedded_nodes(const dk_embedded *ed);
 const double *dk_embedded_transforms(const dk_embedded *ed);
 int dk_embedded_node_is_fixed(const dk_embedded *ed, dk_index node);
 dk_index dk_embedded_n_edges(const dk_embedded *ed);
 const dk_index *dk_embedded_edges(const dk_embedded *ed);
+
+/** Normals deformed by the current transformations (eq. 3): for vertex v,
+ *  n' = sum_j w_j(v) R_j^-T n_v, renormalised. `normals` (n_vertices x 3) are the rest
+ *  normals, or NULL for the mesh's area-weighted vertex normals. A node whose R is singular
+ *  is left out of the sum (its inverse transpose does not exist). Writes `out`
+ *  (n_vertices x 3; a zero vector where nothing is left). */
+dk_status dk_embedded_normals(const dk_embedded *ed, const double *normals, double *out,
+                              dk_error *err);
+
+/** The deformation at arbitrary points (n_points x 3, any points in space: the embedded
+ *  points need not be the graph's source): each point's k nearest nodes and weights
+ *  (eq. 4) are computed as for the vertices, then eq. 2 with the current transformations.
+ *  `nodes` (n_points x k) and `weights` (n_points x k) receive the embedding when not NULL;
+ *  `out` (n_points x 3) the deformed points when not NULL. */
+dk_status dk_embedded_embed(const dk_embedded *ed, const double *points, dk_index n_points,
+                            dk_index *nodes, double *weights, double *out, dk_error *err);
 
 /** Frees; NULL allowed. */
 void dk_embedded_free(dk_embedded *ed);

@@ -322,6 +322,37 @@ static int cmp_i64(const void *a, const void *b)
     return (x > y) - (x < y);
 }
 
+/* The k nearest of the tree's nodes for `n` points, with the weights of eq. 4 (normalised;
+ * equal weights when the k-th and (k+1)-th nodes tie), into nb and w (n x k each; a node
+ * with weight 0 gets -1). Needs k + 1 <= the tree's nodes. */
+static dk_status embed_points(const dk_kdtree *tree, const double *points, dk_index n,
+                              dk_index k, dk_index *nb, double *w, dk_error *err)
+{
+    dk_index *idx = malloc(((size_t)n * (size_t)(k + 1) + 1) * sizeof *idx);
+    double *d2 = malloc(((size_t)n * (size_t)(k + 1) + 1) * sizeof *d2);
+    dk_status st = idx && d2 ? dk_kdtree_knn(tree, points, n, k + 1, idx, d2, err)
+                             : oom(err, "weights");
+    for (dk_index v = 0; st == DK_OK && v < n; v++) {
+        const double dmax = sqrt(d2[(size_t)v * (size_t)(k + 1) + (size_t)k]);
+        double sum = 0.0;
+        for (dk_index q = 0; q < k; q++) {
+            const double d = sqrt(d2[(size_t)v * (size_t)(k + 1) + (size_t)q]);
+            const double s = dmax > 0.0 ? 1.0 - d / dmax : 0.0;
+            w[(size_t)v * k + q] = s * s;
+            nb[(size_t)v * k + q] = idx[(size_t)v * (size_t)(k + 1) + (size_t)q];
+            sum += s * s;
+        }
+        for (dk_index q = 0; q < k; q++) {
+            w[(size_t)v * k + q] = sum > 0.0 ? w[(size_t)v * k + q] / sum : 1.0 / (double)k;
+            if (!(w[(size_t)v * k + q] > 0.0))
+                nb[(size_t)v * k + q] = -1;
+        }
+    }
+    free(idx);
+    free(d2);
+    return st;
+}
+
 /* Each vertex's k nearest nodes and weights (eq. 4); nodes that influence no vertex are
  * dropped (renumbering the rest, in their order). */
 static dk_status weights(dk_embedded *ed, dk_error *err)
@@ -333,39 +364,24 @@ static dk_status weights(dk_embedded *ed, dk_error *err)
                             "(raise n_nodes or lower the radius)",
                             (int)ed->m, (int)k, (int)k + 1);
     dk_kdtree *tree = NULL;
-    dk_index *idx = malloc(((size_t)n * (size_t)(k + 1) + 1) * sizeof *idx);
-    double *d2 = malloc(((size_t)n * (size_t)(k + 1) + 1) * sizeof *d2);
     ed->nb = malloc(((size_t)n * (size_t)k + 1) * sizeof *ed->nb);
     ed->w = malloc(((size_t)n * (size_t)k + 1) * sizeof *ed->w);
     dk_index *map = malloc(((size_t)ed->m + 1) * sizeof *map);
     dk_status st = DK_OK;
-    if (!idx || !d2 || !ed->nb || !ed->w || !map) {
+    if (!ed->nb || !ed->w || !map) {
         st = oom(err, "weights");
         goto done;
     }
     st = dk_kdtree_create(ed->g, ed->m, &tree, err);
     if (st == DK_OK)
-        st = dk_kdtree_knn(tree, ed->mesh->positions, n, k + 1, idx, d2, err);
+        st = embed_points(tree, ed->mesh->positions, n, k, ed->nb, ed->w, err);
     if (st != DK_OK)
         goto done;
     for (dk_index j = 0; j < ed->m; j++)
         map[j] = -1;
-    for (dk_index v = 0; v < n; v++) {
-        const double dmax = sqrt(d2[(size_t)v * (size_t)(k + 1) + (size_t)k]);
-        double sum = 0.0;
-        for (dk_index q = 0; q < k; q++) {
-            const double d = sqrt(d2[(size_t)v * (size_t)(k + 1) + (size_t)q]);
-            const double s = dmax > 0.0 ? 1.0 - d / dmax : 0.0;
-            ed->w[(size_t)v * k + q] = s * s;
-            ed->nb[(size_t)v * k + q] = idx[(size_t)v * (size_t)(k + 1) + (size_t)q];
-            sum += s * s;
-        }
-        for (dk_index q = 0; q < k; q++) { /* d_max = d_k (ties): equal weights */
-            ed->w[(size_t)v * k + q] = sum > 0.0 ? ed->w[(size_t)v * k + q] / sum : 1.0 / k;
-            if (ed->w[(size_t)v * k + q] > 0.0)
-                map[ed->nb[(size_t)v * k + q]] = 0;
-        }
-    }
+    for (size_t q = 0; q < (size_t)n * (size_t)k; q++)
+        if (ed->nb[q] >= 0)
+            map[ed->nb[q]] = 0;
     dk_index kept = 0;
     for (dk_index j = 0; j < ed->m; j++)
         if (map[j] == 0) {
@@ -374,12 +390,10 @@ static dk_status weights(dk_embedded *ed, dk_error *err)
             kept++;
         }
     for (size_t q = 0; q < (size_t)n * (size_t)k; q++)
-        ed->nb[q] = ed->w[q] > 0.0 ? map[ed->nb[q]] : -1;
+        ed->nb[q] = ed->nb[q] >= 0 ? map[ed->nb[q]] : -1;
     ed->m = kept;
 done:
     dk_kdtree_free(tree);
-    free(idx);
-    free(d2);
     free(map);
     return st;
 }
@@ -1097,6 +1111,133 @@ dk_status dk_embedded_rebind(dk_embedded *ed, const dk_constraint_desc *constrai
     return DK_OK;
 }
 
+/* ------------------------------------------------------------------ normals, points --- */
+
+/* The inverse transpose of a 3 x 3 (row-major) into it, or 0 when singular. */
+static int inverse_transpose(const double *R, double *o)
+{
+    const double c00 = R[4] * R[8] - R[5] * R[7], c01 = R[5] * R[6] - R[3] * R[8];
+    const double c02 = R[3] * R[7] - R[4] * R[6];
+    const double det = R[0] * c00 + R[1] * c01 + R[2] * c02;
+    if (!(fabs(det) > 1e-300) || !isfinite(det))
+        return 0;
+    /* (R^-1)^T = cofactor matrix / det */
+    o[0] = c00 / det;
+    o[1] = c01 / det;
+    o[2] = c02 / det;
+    o[3] = (R[2] * R[7] - R[1] * R[8]) / det;
+    o[4] = (R[0] * R[8] - R[2] * R[6]) / det;
+    o[5] = (R[1] * R[6] - R[0] * R[7]) / det;
+    o[6] = (R[1] * R[5] - R[2] * R[4]) / det;
+    o[7] = (R[2] * R[3] - R[0] * R[5]) / det;
+    o[8] = (R[0] * R[4] - R[1] * R[3]) / det;
+    return 1;
+}
+
+dk_status dk_embedded_normals(const dk_embedded *ed, const double *normals, double *out,
+                              dk_error *err)
+{
+    if (!ed || !out)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EmbeddedDeformation normals: object and output must not be NULL");
+    const dk_index n = ed->n, k = ed->k;
+    const dk_mesh *m = ed->mesh;
+    double *rest = NULL;
+    if (!normals) { /* area-weighted vertex normals: the sum of the faces' cross products */
+        rest = calloc(3 * (size_t)n + 1, sizeof *rest);
+        if (!rest)
+            return oom(err, "normals");
+        for (dk_index f = 0; f < m->n_faces; f++) {
+            const dk_index *t = m->faces + 3 * f;
+            const double *a = m->positions + 3 * t[0], *b = m->positions + 3 * t[1];
+            const double *c = m->positions + 3 * t[2];
+            const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+            const double v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+            const double x[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
+                                 u[0] * v[1] - u[1] * v[0]};
+            for (int q = 0; q < 3; q++)
+                for (int d = 0; d < 3; d++)
+                    rest[3 * t[q] + d] += x[d];
+        }
+        normals = rest;
+    }
+    double *itr = malloc((9 * (size_t)ed->m + 1) * sizeof *itr);
+    unsigned char *ok = malloc((size_t)ed->m + 1);
+    if (!itr || !ok) {
+        free(rest);
+        free(itr);
+        free(ok);
+        return oom(err, "normals");
+    }
+    for (dk_index j = 0; j < ed->m; j++)
+        ok[j] = (unsigned char)inverse_transpose(ed->x + 12 * (size_t)j, itr + 9 * (size_t)j);
+    for (dk_index v = 0; v < n; v++) {
+        const double *nv = normals + 3 * v;
+        double o[3] = {0.0, 0.0, 0.0};
+        for (dk_index q = 0; q < k; q++) {
+            const dk_index j = ed->nb[(size_t)v * k + q];
+            if (j < 0 || !ok[j])
+                continue;
+            const double w = ed->w[(size_t)v * k + q], *M = itr + 9 * (size_t)j;
+            for (int d = 0; d < 3; d++)
+                o[d] += w * (M[3 * d] * nv[0] + M[3 * d + 1] * nv[1] + M[3 * d + 2] * nv[2]);
+        }
+        const double len = sqrt(o[0] * o[0] + o[1] * o[1] + o[2] * o[2]);
+        for (int d = 0; d < 3; d++)
+            out[3 * v + d] = len > 0.0 ? o[d] / len : 0.0;
+    }
+    free(rest);
+    free(itr);
+    free(ok);
+    return DK_OK;
+}
+
+dk_status dk_embedded_embed(const dk_embedded *ed, const double *points, dk_index n_points,
+                            dk_index *nodes, double *weights, double *out, dk_error *err)
+{
+    if (!ed || !points || n_points < 0)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EmbeddedDeformation embed: object and points must be given");
+    for (size_t i = 0; i < 3 * (size_t)n_points; i++)
+        if (!isfinite(points[i]))
+            return dk_error_set(err, DK_ERR_NONFINITE,
+                                "EmbeddedDeformation embed: point %d is not finite",
+                                (int)(i / 3));
+    const dk_index k = ed->k;
+    if (ed->m < k + 1)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EmbeddedDeformation embed: the graph has %d nodes, fewer than "
+                            "k + 1 = %d", (int)ed->m, (int)k + 1);
+    dk_index *nb = nodes ? nodes : malloc(((size_t)n_points * k + 1) * sizeof *nb);
+    double *w = weights ? weights : malloc(((size_t)n_points * k + 1) * sizeof *w);
+    dk_kdtree *tree = NULL;
+    dk_status st = nb && w ? dk_kdtree_create(ed->g, ed->m, &tree, err) : oom(err, "embed");
+    if (st == DK_OK)
+        st = embed_points(tree, points, n_points, k, nb, w, err);
+    for (dk_index p = 0; st == DK_OK && out && p < n_points; p++) {
+        const double *x0 = points + 3 * p;
+        double o[3] = {0.0, 0.0, 0.0};
+        for (dk_index q = 0; q < k; q++) {
+            const dk_index j = nb[(size_t)p * k + q];
+            if (j < 0)
+                continue;
+            const double *R = ed->x + 12 * (size_t)j, *g = ed->g + 3 * j;
+            const double d[3] = {x0[0] - g[0], x0[1] - g[1], x0[2] - g[2]};
+            for (int c = 0; c < 3; c++)
+                o[c] += w[(size_t)p * k + q] *
+                        (R[3 * c] * d[0] + R[3 * c + 1] * d[1] + R[3 * c + 2] * d[2] + g[c] +
+                         R[9 + c]);
+        }
+        memcpy(out + 3 * p, o, sizeof o);
+    }
+    dk_kdtree_free(tree);
+    if (!nodes)
+        free(nb);
+    if (!weights)
+        free(w);
+    return st;
+}
+
 /* ------------------------------------------------------------------ accessors ---------- */
 
 dk_status dk_embedded_energy(const dk_embedded *ed, const double *positions, double *energy,
@@ -1144,6 +1285,11 @@ void dk_embedded_stats(const dk_embedded *ed, dk_method_stats *st)
 dk_index dk_embedded_n_nodes(const dk_embedded *ed)
 {
     return ed ? ed->m : 0;
+}
+
+dk_index dk_embedded_k(const dk_embedded *ed)
+{
+    return ed ? ed->k : 0;
 }
 
 const double *dk_embedded_nodes(const dk_embedded *ed)

@@ -85,6 +85,85 @@ static PyObject *get_fixed_nodes(PyObject *obj, void *c)
     return t;
 }
 
+PyDoc_STRVAR(normals_doc,
+             "normals(normals=None) -> n x 3 array\n\n"
+             "The vertex normals deformed by the current node transformations (eq. 3:\n"
+             "the blend of R^-T n, renormalised). normals: the rest normals (n x 3), or None\n"
+             "for the mesh's area-weighted vertex normals.");
+
+static PyObject *ed_normals(PyObject *obj, PyObject *args, PyObject *kwargs)
+{
+    static char *kwlist[] = {"normals", NULL};
+    dk_py_method *self = (dk_py_method *)obj;
+    PyObject *in_obj = Py_None;
+    dk_py_doubles in = {0};
+    dk_error err = {0};
+    double *out;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "|O:normals", kwlist, &in_obj))
+        return NULL;
+    if (dk_py_method_enter(self) < 0)
+        return NULL;
+    if (in_obj != Py_None &&
+        dk_py_read_doubles(in_obj, self->mesh->n_vertices, 3, "normals", &in) < 0) {
+        self->busy = 0;
+        return NULL;
+    }
+    PyObject *res = dk_py_new_doubles(2, self->mesh->n_vertices, 3, &out);
+    dk_status st = DK_OK;
+    if (res) {
+        Py_BEGIN_ALLOW_THREADS
+        st = dk_embedded_normals(self->native, in.data, out, &err);
+        Py_END_ALLOW_THREADS
+    }
+    dk_py_doubles_release(&in);
+    self->busy = 0;
+    if (res && st != DK_OK) {
+        Py_DECREF(res);
+        return dk_py_raise(&err, "EmbeddedDeformation.normals");
+    }
+    return res;
+}
+
+PyDoc_STRVAR(embed_doc,
+             "embed(points) -> (nodes, weights, deformed)\n\n"
+             "Any points in space (m x 3) in the graph: each point's k nearest nodes\n"
+             "(m x k int32, -1 where a weight is 0), their weights (m x k, eq. 4) and the\n"
+             "points moved by the current node transformations (m x 3, eq. 2).");
+
+static PyObject *ed_embed(PyObject *obj, PyObject *arg)
+{
+    dk_py_method *self = (dk_py_method *)obj;
+    dk_py_doubles pts = {0};
+    dk_error err = {0};
+    if (dk_py_method_enter(self) < 0)
+        return NULL;
+    if (dk_py_read_doubles(arg, -1, 3, "points", &pts) < 0) {
+        self->busy = 0;
+        return NULL;
+    }
+    dk_index *nb;
+    double *w, *out;
+    const dk_index np = (dk_index)pts.rows, kk = dk_embedded_k(self->native);
+    PyObject *a = dk_py_new_indices(2, np, kk, &nb);
+    PyObject *b = a ? dk_py_new_doubles(2, np, kk, &w) : NULL;
+    PyObject *c = b ? dk_py_new_doubles(2, np, 3, &out) : NULL;
+    dk_status st = DK_OK;
+    if (c) {
+        Py_BEGIN_ALLOW_THREADS
+        st = dk_embedded_embed(self->native, pts.data, np, nb, w, out, &err);
+        Py_END_ALLOW_THREADS
+    }
+    dk_py_doubles_release(&pts);
+    self->busy = 0;
+    if (!c || st != DK_OK) {
+        Py_XDECREF(a);
+        Py_XDECREF(b);
+        Py_XDECREF(c);
+        return c ? dk_py_raise(&err, "EmbeddedDeformation.embed") : NULL;
+    }
+    return Py_BuildValue("(NNN)", a, b, c);
+}
+
 PyDoc_STRVAR(solve_doc,
              "solve(targets=None, transforms=None, warm_start=True, max_iterations=None,\n"
              "      resume=False, energy=True) -> SolveResult\n\n"
@@ -111,7 +190,13 @@ static PyGetSetDef ed_getset[] = {
     {NULL, NULL, NULL, NULL, NULL},
 };
 
-static PyMethodDef ed_methods[] = {DK_PY_METHOD_METHODS(solve_doc), {NULL, NULL, 0, NULL}};
+static PyMethodDef ed_methods[] = {
+    DK_PY_METHOD_METHODS(solve_doc),
+    {"normals", (PyCFunction)(void (*)(void))ed_normals, METH_VARARGS | METH_KEYWORDS,
+     normals_doc},
+    {"embed", ed_embed, METH_O, embed_doc},
+    {NULL, NULL, 0, NULL},
+};
 
 static const dk_py_method_spec ed_spec = {
     .name = "EmbeddedDeformation",

@@ -161,3 +161,65 @@ def test_bad_input():
     ed = dk.EmbeddedDeformation(mesh, handles=[[0]], n_nodes=30)
     with pytest.raises(ValueError):
         ed.solve([[np.nan, 0.0, 0.0]])
+
+
+def test_normals_follow_the_transformations():
+    """eq. 3: the rest normals before any solve; a rigid motion rotates them (to the solver's
+    convergence of the node rotations); given normals are used as given."""
+    v, f = make_icosphere(3)
+    mesh = dk.Mesh(v, f)
+    caps = [np.where(v[:, 2] < -0.6)[0], np.where(v[:, 2] > 0.6)[0]]
+    ed = dk.EmbeddedDeformation(mesh, handles=caps, n_nodes=100, tolerance=1e-12,
+                                max_iterations=100)
+    rest = ed.normals()
+    assert np.allclose(np.linalg.norm(rest, axis=1), 1.0)
+    assert np.all(np.sum(rest * v, axis=1) > 0.99)        # a sphere's normals are radial
+    a = 0.9
+    R = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    T = np.eye(4)
+    T[:3, :3] = R
+    ed.solve(transforms=[T, T], warm_start=False)
+    assert np.abs(ed.normals() - rest @ R.T).max() <= 1e-6
+    given = np.tile([0.0, 0.0, 1.0], (len(v), 1))
+    assert np.abs(ed.normals(given) - given @ R.T).max() <= 1e-6
+
+
+def test_embed_new_points():
+    """Any points can be embedded: the mesh's own vertices get back exactly the solve's
+    result, and points off the surface move with the graph."""
+    v, f, _ = bumpy_plane(30)
+    fixed = np.where(v[:, 0] <= 1e-9)[0]
+    handle = np.where(v[:, 0] >= 1 - 1e-9)[0]
+    ed = dk.EmbeddedDeformation(dk.Mesh(v, f), handles=[handle], fixed=fixed, n_nodes=80)
+    r = ed.solve(v[handle] + [0, 0, 0.3], warm_start=False)
+    nodes, w, moved = ed.embed(v)
+    assert nodes.shape == (len(v), 4) and w.shape == (len(v), 4)
+    assert np.allclose(np.where(nodes >= 0, w, 0).sum(axis=1), 1.0)
+    assert np.abs(moved - np.asarray(r.positions)).max() <= 1e-12
+    above = v[handle] + [0, 0, 0.05]                       # points in space near the handle
+    _, _, up = ed.embed(above)
+    assert np.abs((up - above)[:, 2] - 0.3).max() < 0.05
+    with pytest.raises(ValueError):
+        ed.embed([[np.nan, 0, 0]])
+
+
+def test_normals_use_the_inverse_transpose():
+    """Under a stretch (every node the same affine map A, reached with a tiny w_rot), the
+    normals are A^-T n renormalised: perpendicular to the stretched surface, unlike A n."""
+    v, f = make_icosphere(3)
+    mesh = dk.Mesh(v, f)
+    caps = [np.where(v[:, 2] < -0.6)[0], np.where(v[:, 2] > 0.6)[0]]
+    ed = dk.EmbeddedDeformation(mesh, handles=caps, n_nodes=100, w_rot=1e-9,
+                                tolerance=1e-14, max_iterations=200)
+    A = np.diag([2.0, 1.0, 0.5])
+    T = np.eye(4)
+    T[:3, :3] = A
+    r = ed.solve(transforms=[T, T], warm_start=False)
+    assert np.abs(np.asarray(r.positions) - v @ A.T).max() < 1e-3
+    rest = v / np.linalg.norm(v, axis=1)[:, None]
+    want = rest @ np.linalg.inv(A)          # (A^-T n) as rows: n^T A^-1
+    want /= np.linalg.norm(want, axis=1)[:, None]
+    assert np.abs(ed.normals(rest) - want).max() < 1e-3
+    wrong = rest @ A.T
+    wrong /= np.linalg.norm(wrong, axis=1)[:, None]
+    assert np.abs(ed.normals(rest) - wrong).max() > 0.1
