@@ -927,17 +927,21 @@ static double inf_norm(const double *a, size_t n)
     return m;
 }
 
-/* One damped Gauss-Newton step: solves (J^T J + mu I) d = -J^T f, tries x + d, raises mu
- * until F decreases (at most 30 times). *accepted: whether a step was taken. */
-static dk_status gn_step(dk_embedded *ed, double F, double *mu, double *F_new, double *dnorm,
-                         int *accepted, dk_error *err)
+/* One damped Gauss-Newton step (Levenberg-Marquardt with Nielsen's damping update, Madsen,
+ * Nielsen & Tingleff 2004, the reference the paper gives): solves (J^T J + mu I) d = -J^T f
+ * and compares the decrease of F with the one the linear model predicts,
+ * rho = (F - F(x + d)) / (d . (mu d - J^T f)). A step with rho > 0 is taken and mu scaled by
+ * max(1/3, 1 - (2 rho - 1)^3); otherwise mu grows by nu, which doubles on every refusal (at
+ * most 30). mu starts at 0 (the plain Gauss-Newton step of eq. 11) and, at the first
+ * refusal, at 1e-6 of J^T J's mean diagonal. *accepted: whether a step was taken. */
+static dk_status gn_step(dk_embedded *ed, double F, double *mu, double *nu, double *F_new,
+                         double *dnorm, int *accepted, dk_error *err)
 {
     ed_system *s = &ed->sys;
     const size_t N = 12 * (size_t)s->n_free;
     double trace = 0.0;
     for (size_t i = 0; i < N; i++)
         trace += s->a->values[s->diag_pos[i]];
-    const double floor_mu = 1e-12 * (trace / (double)N + 1e-300);
     *accepted = 0;
     for (int attempt = 0; attempt < 30 && !*accepted; attempt++) {
         for (size_t i = 0; i < N; i++)
@@ -953,22 +957,34 @@ static dk_status gn_step(dk_embedded *ed, double F, double *mu, double *F_new, d
             if (st != DK_OK)
                 return dk_error_prefix(err, "EmbeddedDeformation solve");
             memcpy(s->x_try, ed->x, 12 * (size_t)ed->m * sizeof(double));
+            double pred = 0.0;
             for (dk_index u = 0; u < s->n_free; u++)
-                for (int a = 0; a < 12; a++)
-                    s->x_try[12 * (size_t)s->free_nodes[u] + a] += s->step[12 * u + a];
+                for (int a = 0; a < 12; a++) {
+                    const double d = s->step[12 * u + a];
+                    s->x_try[12 * (size_t)s->free_nodes[u] + a] += d;
+                    pred += d * (*mu * d - s->grad[12 * u + a]);
+                }
             const double Ft = evaluate(ed, NULL, s, s->x_try);
-            if (Ft < F || (Ft == F && inf_norm(s->step, N) == 0.0)) {
+            const double rho = pred > 0.0 ? (F - Ft) / pred : (Ft < F ? 1.0 : -1.0);
+            if (rho > 0.0 || (Ft == F && inf_norm(s->step, N) == 0.0)) {
                 memcpy(ed->x, s->x_try, 12 * (size_t)ed->m * sizeof(double));
                 *F_new = Ft;
                 *dnorm = inf_norm(s->step, N);
                 *accepted = 1;
-                *mu = *mu * 0.1 < floor_mu ? 0.0 : *mu * 0.1;
+                const double c = 2.0 * rho - 1.0;
+                *mu *= fmax(1.0 / 3.0, 1.0 - c * c * c);
+                *nu = 2.0;
                 return DK_OK;
             }
         } else if (st != DK_ERR_NOT_POSITIVE_DEFINITE) {
             return dk_error_prefix(err, "EmbeddedDeformation solve");
         }
-        *mu = *mu > 0.0 ? *mu * 10.0 : fmax(1e-6 * trace / (double)N, floor_mu);
+        if (*mu > 0.0) {
+            *mu *= *nu;
+            *nu *= 2.0;
+        } else {
+            *mu = fmax(1e-6 * trace / (double)N, 1e-300);
+        }
     }
     *F_new = F;
     *dnorm = 0.0;
@@ -996,7 +1012,7 @@ dk_status dk_embedded_solve(dk_embedded *ed, const dk_solve_request *rq, double 
     const int maxit = rq->max_iterations > 0 ? rq->max_iterations : ed->opt.max_iterations;
     const double eps = ed->opt.tolerance;
     const size_t N = 12 * (size_t)s->n_free;
-    double F = evaluate(ed, s, s, ed->x), mu = 0.0;
+    double F = evaluate(ed, s, s, ed->x), mu = 0.0, nu = 2.0;
     int it = 0, converged = 0;
     while (it < maxit) {
         /* the gradient test at the current iterate (grad F = 2 J^T f) */
@@ -1006,7 +1022,7 @@ dk_status dk_embedded_solve(dk_embedded *ed, const dk_solve_request *rq, double 
         }
         double F_new, dnorm;
         int accepted;
-        st = gn_step(ed, F, &mu, &F_new, &dnorm, &accepted, err);
+        st = gn_step(ed, F, &mu, &nu, &F_new, &dnorm, &accepted, err);
         if (st != DK_OK)
             return st;
         if (!accepted)
