@@ -119,6 +119,10 @@ int dk_embedded_node_is_fixed(const dk_embedded *ed, dk_index node);
 dk_index dk_embedded_n_edges(const dk_embedded *ed);
 const dk_index *dk_embedded_edges(const dk_embedded *ed);
 
+/** The vertices (n_vertices x 3) under the current node transformations (eq. 2): what the
+ *  last solve returned, computed again (allocation-free). */
+dk_status dk_embedded_deformed(const dk_embedded *ed, double *positions, dk_error *err);
+
 /** Normals deformed by the current transformations (eq. 3): for vertex v,
  *  n' = sum_j w_j(v) R_j^-T n_v, renormalised. `normals` (n_vertices x 3) are the rest
  *  normals, or NULL for the mesh's area-weighted vertex normals. A node whose R is singular

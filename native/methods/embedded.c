@@ -1129,6 +1129,15 @@ dk_status dk_embedded_rebind(dk_embedded *ed, const dk_constraint_desc *constrai
 
 /* ------------------------------------------------------------------ normals, points --- */
 
+dk_status dk_embedded_deformed(const dk_embedded *ed, double *positions, dk_error *err)
+{
+    if (!ed || !positions)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EmbeddedDeformation deformed: object and output must not be NULL");
+    apply(ed, ed->x, positions);
+    return DK_OK;
+}
+
 /* The inverse transpose of a 3 x 3 (row-major) into it, or 0 when singular. */
 static int inverse_transpose(const double *R, double *o)
 {

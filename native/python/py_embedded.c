@@ -124,6 +124,34 @@ static PyObject *ed_normals(PyObject *obj, PyObject *args, PyObject *kwargs)
     return res;
 }
 
+PyDoc_STRVAR(deformed_doc,
+             "deformed() -> n x 3 array\n\n"
+             "The vertices under the current node transformations (eq. 2): what the last\n"
+             "solve returned, computed again.");
+
+static PyObject *ed_deformed(PyObject *obj, PyObject *unused)
+{
+    dk_py_method *self = (dk_py_method *)obj;
+    dk_error err = {0};
+    double *out;
+    (void)unused;
+    if (dk_py_method_enter(self) < 0)
+        return NULL;
+    PyObject *res = dk_py_new_doubles(2, self->mesh->n_vertices, 3, &out);
+    dk_status st = DK_OK;
+    if (res) {
+        Py_BEGIN_ALLOW_THREADS
+        st = dk_embedded_deformed(self->native, out, &err);
+        Py_END_ALLOW_THREADS
+    }
+    self->busy = 0;
+    if (res && st != DK_OK) {
+        Py_DECREF(res);
+        return dk_py_raise(&err, "EmbeddedDeformation.deformed");
+    }
+    return res;
+}
+
 PyDoc_STRVAR(embed_doc,
              "embed(points) -> (nodes, weights, deformed)\n\n"
              "Any points in space (m x 3) in the graph: each point's k nearest nodes\n"
@@ -195,6 +223,7 @@ static PyMethodDef ed_methods[] = {
     {"normals", (PyCFunction)(void (*)(void))ed_normals, METH_VARARGS | METH_KEYWORDS,
      normals_doc},
     {"embed", ed_embed, METH_O, embed_doc},
+    {"deformed", ed_deformed, METH_NOARGS, deformed_doc},
     {NULL, NULL, 0, NULL},
 };
 

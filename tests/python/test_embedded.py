@@ -223,3 +223,12 @@ def test_normals_use_the_inverse_transpose():
     wrong = rest @ A.T
     wrong /= np.linalg.norm(wrong, axis=1)[:, None]
     assert np.abs(ed.normals(rest) - wrong).max() > 0.1
+
+
+def test_deformed_repeats_the_solve():
+    v, f, _ = bumpy_plane(20)
+    handle = np.where(v[:, 0] >= 1 - 1e-9)[0]
+    ed = dk.EmbeddedDeformation(dk.Mesh(v, f), handles=[handle], n_nodes=40)
+    assert np.abs(ed.deformed() - v).max() <= 1e-12         # identity before any solve
+    r = ed.solve(v[handle] + [0, 0, 0.2], warm_start=False)
+    assert np.array_equal(ed.deformed(), r.positions)
