@@ -60,6 +60,8 @@ class Method:
     # iterative methods: the option capping the iterations of one solve (the budgeted
     # slices of an interactive solve add up to at most that many)
     iteration_cap: Optional[str] = None
+    # False: the method also deforms meshes without faces (vertex clouds)
+    needs_faces: bool = True
 
 
 def _e(*ids):
@@ -166,6 +168,7 @@ METHODS.append(Method(
     warm_solve={"warm_start": True},
     iterative=True,
     iteration_cap="max_iterations",
+    needs_faces=False,
     options=[
         Option("n_nodes", "INT", 200, "Nodes", "Graph nodes sampled on the surface",
                min=5, max=100000),

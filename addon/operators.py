@@ -59,9 +59,10 @@ class DEFORMKIT_OT_add_deformer(_Base, bpy.types.Operator):
 
     def run(self, context):
         obj = _get_object(self, context)
-        if len(obj.data.polygons) == 0:
-            raise solver.DeformKitError("mesh '%s' has no faces: DeformKit needs a surface"
-                                        % obj.data.name)
+        if len(obj.data.polygons) == 0 and methods.get(self.method).needs_faces:
+            raise solver.DeformKitError("mesh '%s' has no faces: %s needs a surface (Embedded "
+                                        "Deformation also deforms vertex clouds)"
+                                        % (obj.data.name, methods.get(self.method).label))
         d = properties.new_deformer(obj, self.method)
         geonodes.ensure_modifier(obj, d)
         solver.set_status(d, "not bound: add handles, then Bind", False)

@@ -64,7 +64,7 @@ def drop(obj_name, uid):
 
 # ------------------------------------------------------------------ reading Blender data ----
 
-def check_object(obj):
+def check_object(obj, d=None):
     if obj is None:
         raise DeformKitError("no active object")
     if obj.type != "MESH":
@@ -73,8 +73,10 @@ def check_object(obj):
     me = obj.data
     if len(me.vertices) == 0:
         raise DeformKitError("mesh '%s' has no vertices" % me.name)
-    if len(me.polygons) == 0:
-        raise DeformKitError("mesh '%s' has no faces: DeformKit needs a surface" % me.name)
+    needs_faces = d is None or methods.get(d.method).needs_faces
+    if len(me.polygons) == 0 and needs_faces:
+        raise DeformKitError("mesh '%s' has no faces: this method needs a surface (Embedded "
+                             "Deformation also deforms vertex clouds)" % me.name)
     if obj.mode == "EDIT":
         raise DeformKitError("'%s' is in Edit Mode: leave it to bind or solve" % obj.name)
 
@@ -194,7 +196,7 @@ def _settings_key(d):
 
 def collect(obj, d):
     """Validated constraint arrays from the deformer's vertex groups (raises DeformKitError)."""
-    check_object(obj)
+    check_object(obj, d)
     m = methods.get(d.method)
     if len(d.handles) == 0:
         raise DeformKitError("no handles: add one (Add Handle from Selection in Edit Mode)")
@@ -362,7 +364,7 @@ def bind_begin(obj, d, depsgraph=None):
     """Explicit bind, first half (main thread): validates the set-up and reads the groups and
     the targets' current placement (which becomes the handles' rest pose at bind_end).
     Returns (job, bind matrices); nothing is changed until bind_end."""
-    check_object(obj)
+    check_object(obj, d)
     kw, key = collect(obj, d)
     mats = [bind_matrix(obj, h, depsgraph) for h in d.handles]
     return BindJob(obj, d, kw, key), mats
@@ -498,7 +500,7 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
     long solve would) with further interactive solves."""
     if not d.bound:
         raise DeformKitError("not bound: press Bind")
-    check_object(obj)
+    check_object(obj, d)
     e = _entry_for(obj, d, check_groups)
     T = snap_identity(transforms(obj, d, depsgraph), e.extent)
     inputs = T.tobytes()

@@ -13,7 +13,8 @@
  * when no kept point lies within the radius r (keep one at random, remove all others within
  * r, again and again); r is given, or found by bisection for the requested node count. Or
  * (DK_ED_NODES_VERTICES) the same elimination run over the mesh vertices, so that nodes are
- * vertices and ride along an animated mesh. Seeded: the same options give the same graph.
+ * vertices and ride along an animated mesh; a point set (a mesh without faces) always takes
+ * its nodes from its points. Seeded: the same options give the same graph.
  *
  * The energy (eq. 9), over the free nodes' 12 unknowns each:
  *     F = w_rot E_rot + w_reg E_reg + w_con E_con
@@ -76,8 +77,8 @@ typedef struct dk_embedded dk_embedded;
 void dk_embedded_default_options(dk_embedded_options *options);
 
 /** Builds the graph (nodes, per-vertex weights, edges), the fixed nodes and the pattern of
- *  J^T J, and analyses it. Refuses invalid options, a mesh without triangles for
- *  DK_ED_NODES_SURFACE, fewer than k + 1 nodes, and constraints that leave no free node.
+ *  J^T J, and analyses it. Refuses invalid options, a surface without area, fewer than
+ *  k + 1 nodes, and constraints that leave no free node.
  *  The mesh must outlive the object; `options` may be NULL (defaults). */
 dk_status dk_embedded_bind(const dk_mesh *mesh, const dk_constraint_desc *constraints,
                            const dk_embedded_options *options, dk_embedded **out,

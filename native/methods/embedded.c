@@ -234,13 +234,11 @@ static dk_status sample_nodes(dk_embedded *ed, dk_error *err)
     const dk_embedded_options *o = &ed->opt;
     uint64_t rng = o->seed;
     dk_index nc;
-    if (o->nodes == DK_ED_NODES_VERTICES) {
+    /* a point set (no faces) is its own surface sample: its points are the candidates */
+    const int from_vertices = o->nodes == DK_ED_NODES_VERTICES || m->n_faces == 0;
+    if (from_vertices) {
         nc = m->n_vertices;
     } else {
-        if (m->n_faces == 0)
-            return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
-                                "EmbeddedDeformation: surface nodes need triangles; use "
-                                "nodes=vertices for a point set");
         const int64_t want = o->radius > 0.0 ? 200000 : (int64_t)o->n_nodes * 40 + 2000;
         nc = (dk_index)(want < 2000000 ? want : 2000000);
     }
@@ -252,7 +250,7 @@ static dk_status sample_nodes(dk_embedded *ed, dk_error *err)
         st = oom(err, "node sampling");
         goto done;
     }
-    if (o->nodes == DK_ED_NODES_VERTICES)
+    if (from_vertices)
         memcpy(cand, m->positions, 3 * (size_t)nc * sizeof *cand);
     else if ((st = surface_samples(m, nc, &rng, cand, err)) != DK_OK)
         goto done;

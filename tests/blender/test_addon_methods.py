@@ -276,7 +276,46 @@ def test_skip_when_unchanged():
     R.check("exactly one solve per handle move", len(calls) == 1, len(calls))
 
 
-for t in (test_registry_drives_ui, test_methods, test_stiffness_map, test_soft_handles,
+def test_vertex_cloud():
+    """A mesh without faces: the methods that need a surface refuse it at Add, by name;
+    those whose registry entry says needs_faces=False (embedded deformation) deform it."""
+    S.reset_scene()
+    rng = np.random.default_rng(1)
+    pts = np.c_[rng.uniform(-1, 1, (800, 2)), np.zeros(800)]
+    me = bpy.data.meshes.new("Cloud")
+    me.from_pydata(pts.tolist(), [], [])
+    obj = bpy.data.objects.new("Cloud", me)
+    bpy.context.scene.collection.objects.link(obj)
+    bpy.context.view_layer.objects.active = obj
+    for m in S.methods.METHODS:
+        if m.needs_faces:
+            try:
+                bpy.ops.deformkit.add_deformer(method=m.id)
+                refused = False
+            except RuntimeError as ex:
+                refused = "no faces" in str(ex) and m.label in str(ex)
+            R.check("%s refuses a vertex cloud at Add" % m.id, refused)
+    cloud = [m for m in S.methods.METHODS if not m.needs_faces]
+    R.check("some method deforms vertex clouds", len(cloud) > 0)
+    for m in cloud:
+        S.group(obj, "fixed", np.where(pts[:, 0] < -0.9)[0])
+        S.group(obj, "tip", np.where(pts[:, 0] > 0.9)[0])
+        e = S.empty("CloudTip", (1.0, 0.0, 0.0))
+        bpy.ops.deformkit.add_deformer(method=m.id)
+        d = obj.deformkit.deformers[-1]
+        d.fixed_group = "fixed"
+        bpy.ops.deformkit.add_handle(vertex_group="tip", target=e.name)
+        bpy.ops.deformkit.bind()
+        R.check("%s binds a vertex cloud" % m.id, d.bound and not d.status_is_error, d.status)
+        e.location.z += 0.3
+        bpy.context.view_layer.update()
+        got = S.evaluated_positions(obj)
+        tip = np.where(pts[:, 0] > 0.9)[0]
+        R.check("%s moves the cloud's handle points" % m.id,
+                np.abs(got[tip, 2] - 0.3).max() < 0.03, np.abs(got[tip, 2] - 0.3).max())
+
+
+for t in (test_vertex_cloud, test_registry_drives_ui, test_methods, test_stiffness_map, test_soft_handles,
           test_bone_target, test_auto_rebind_on_group_change, test_skip_when_unchanged,
           test_bind_pose_of_transformed_object):
     R.run(t)

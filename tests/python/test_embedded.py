@@ -143,6 +143,23 @@ def test_several_components_and_a_soup():
     assert np.abs(np.asarray(r.positions)[hs] - (soup_v[hs] + [0.5, 0, 0])).max() < 0.05
 
 
+def test_point_set():
+    """A point cloud (no faces) deforms; its nodes come from its points."""
+    rng = np.random.default_rng(0)
+    u = rng.uniform(0, 1, (3000, 2))
+    v = np.c_[u, 0.05 * np.sin(6 * u[:, 0])]
+    fixed, handle = np.where(v[:, 0] < 0.05)[0], np.where(v[:, 0] > 0.95)[0]
+    mesh = dk.Mesh(v, np.zeros((0, 3), dtype=np.int32))
+    ed = dk.EmbeddedDeformation(mesh, handles=[handle], fixed=fixed, n_nodes=100)
+    assert all(np.abs(v - p).sum(axis=1).min() == 0.0 for p in ed.nodes)
+    r = ed.solve(v[handle] + [0, 0, 0.3], warm_start=False)
+    x = np.asarray(r.positions)
+    assert np.abs(x[handle] - (v[handle] + [0, 0, 0.3])).max() < 0.01 * 0.3 * 3
+    assert np.array_equal(x[fixed], v[fixed])
+    mid = np.where(np.abs(v[:, 0] - 0.5) < 0.05)[0]
+    assert 0.05 < np.median(x[mid, 2] - v[mid, 2]) < 0.25   # the middle follows part way
+
+
 def test_bad_input():
     v, f = make_icosphere(2)
     mesh = dk.Mesh(v, f)
