@@ -178,6 +178,13 @@ METHODS.append(Method(
                       ("vertices", "Vertices", "Mesh vertices (a graph that rides along an "
                                                "animated mesh)"))),
         Option("k", "INT", 4, "Nearest Nodes", "Nodes that move each vertex", min=1, max=16),
+        Option("distance", "ENUM", "euclidean", "Influence",
+               "How a vertex's nearest nodes are found",
+               items=(("euclidean", "Euclidean", "Straight-line distance in space (the "
+                                                 "paper's)"),
+                      ("geodesic", "Geodesic", "Distance along the surface, so that a hand "
+                                               "node does not move the leg it lies against "
+                                               "(needs faces)"))),
         Option("w_rot", "FLOAT", 1.0, "Rigidity", "Weight of the rotation term", min=1e-6,
                max=1e6),
         Option("w_reg", "FLOAT", 10.0, "Smoothness", "Weight of the regularization term",

@@ -8,6 +8,15 @@
  *     v' = sum_j w_j(v) [R_j (v - g_j) + g_j + t_j],
  *     w_j(v) = (1 - |v - g_j| / d_max)^2, normalised, d_max = distance to the (k+1)-th node
  * (eq. 4). Two nodes are joined by an edge when they influence a common point.
+ * Geodesic influence (DK_ED_DISTANCE_GEODESIC, section 7's remedy for a hand node that
+ * influences the leg): the k + 1 nearest nodes and the distances of eq. 4 are measured along
+ * the mesh's edges instead, by one Dijkstra that carries k + 1 labels per vertex. Each node
+ * enters at its nearest vertex, at the straight distance to it. The paper does not say how
+ * to measure geodesics; edge paths overestimate them by a few % (metrication) but rank the
+ * nodes the same way on any sensible mesh and, unlike the heat method, cost one pass rather
+ * than one solve per node. A vertex that reaches fewer than k + 1 nodes along the surface (a
+ * small component with too few nodes) falls back to Euclidean distance. Points given to
+ * dk_embedded_embed are not on the mesh and always use Euclidean distance.
  * Nodes (DK_ED_NODES_SURFACE): uniform samples of the surface, as the paper does: dense
  * random points on the triangles (area-weighted), then, in a random order, a point is kept
  * when no kept point lies within the radius r (keep one at random, remove all others within
@@ -59,12 +68,21 @@ typedef enum dk_ed_node_source {
     DK_ED_NODES_VERTICES = 1  /**< mesh vertices (a graph that rides an animated mesh)      */
 } dk_ed_node_source;
 
+/** Which distance ranks a point's nearest nodes and enters the weights of eq. 4. */
+typedef enum dk_ed_distance {
+    DK_ED_DISTANCE_EUCLIDEAN = 0, /**< straight-line distance in space (the paper's)       */
+    DK_ED_DISTANCE_GEODESIC = 1   /**< shortest paths along the mesh's edges (the paper's
+                                       remedy for a hand node influencing the leg); needs
+                                       faces                                              */
+} dk_ed_distance;
+
 typedef struct dk_embedded_options {
     dk_ed_node_source nodes;  /**< default DK_ED_NODES_SURFACE                             */
     int n_nodes;              /**< the node count wanted (the bisection meets it within
                                    a few %), 1..100000; default 200; ignored when radius > 0 */
     double radius;            /**< > 0: the sampling radius itself (mesh units)            */
     int k;                    /**< nearest nodes per point, 1..16 (k+1 <= nodes); default 4 */
+    dk_ed_distance distance;  /**< default DK_ED_DISTANCE_EUCLIDEAN                        */
     double w_rot, w_reg, w_con; /**< > 0; defaults 1, 10, 100 (the paper's)               */
     double tolerance;         /**< eps of the stopping tests, > 0; default 1e-6            */
     int max_iterations;       /**< Gauss-Newton iterations per solve, >= 1; default 30     */

@@ -79,6 +79,7 @@ void dk_embedded_default_options(dk_embedded_options *o)
     o->n_nodes = 200;
     o->radius = 0.0;
     o->k = 4;
+    o->distance = DK_ED_DISTANCE_EUCLIDEAN;
     o->w_rot = 1.0;
     o->w_reg = 10.0;
     o->w_con = 100.0;
@@ -98,6 +99,8 @@ static dk_status check_options(const dk_embedded_options *o, dk_error *err)
         bad = "n_nodes must be in 1..100000";
     else if (o->k < 1 || o->k > K_MAX)
         bad = "k must be in 1..16";
+    else if (o->distance != DK_ED_DISTANCE_EUCLIDEAN && o->distance != DK_ED_DISTANCE_GEODESIC)
+        bad = "distance must be euclidean (0) or geodesic (1)";
     else if (!(o->w_rot > 0 && o->w_reg > 0 && o->w_con > 0 && isfinite(o->w_rot) &&
                isfinite(o->w_reg) && isfinite(o->w_con)))
         bad = "the weights w_rot, w_reg and w_con must be finite and > 0";
@@ -320,34 +323,153 @@ static int cmp_i64(const void *a, const void *b)
     return (x > y) - (x < y);
 }
 
-/* The k nearest of the tree's nodes for `n` points, with the weights of eq. 4 (normalised;
- * equal weights when the k-th and (k+1)-th nodes tie), into nb and w (n x k each; a node
- * with weight 0 gets -1). Needs k + 1 <= the tree's nodes. */
-static dk_status embed_points(const dk_kdtree *tree, const double *points, dk_index n,
-                              dk_index k, dk_index *nb, double *w, dk_error *err)
+/* Eq. 4 for one point from its k + 1 nearest nodes `idx` at distances `dist` (ascending):
+ * the k weights, normalised (equal weights when the k-th and (k+1)-th nodes tie), into nb
+ * and w (k each; a node with weight 0 gets -1). */
+static void eq4(const dk_index *idx, const double *dist, dk_index k, dk_index *nb, double *w)
 {
-    dk_index *idx = malloc(((size_t)n * (size_t)(k + 1) + 1) * sizeof *idx);
-    double *d2 = malloc(((size_t)n * (size_t)(k + 1) + 1) * sizeof *d2);
+    const double dmax = dist[k];
+    double sum = 0.0;
+    for (dk_index q = 0; q < k; q++) {
+        const double s = dmax > 0.0 ? 1.0 - dist[q] / dmax : 0.0;
+        w[q] = s * s;
+        nb[q] = idx[q];
+        sum += s * s;
+    }
+    for (dk_index q = 0; q < k; q++) {
+        w[q] = sum > 0.0 ? w[q] / sum : 1.0 / (double)k;
+        if (!(w[q] > 0.0))
+            nb[q] = -1;
+    }
+}
+
+/* The k nearest of the tree's nodes for `n` points, with the weights of eq. 4, into nb and w
+ * (n x k each). Needs k + 1 <= the tree's nodes. `only` (n, or NULL for all) skips the
+ * points where it is 0. */
+static dk_status embed_points(const dk_kdtree *tree, const double *points, dk_index n,
+                              dk_index k, const unsigned char *only, dk_index *nb, double *w,
+                              dk_error *err)
+{
+    const size_t k1 = (size_t)k + 1;
+    dk_index *idx = malloc(((size_t)n * k1 + 1) * sizeof *idx);
+    double *d2 = malloc(((size_t)n * k1 + 1) * sizeof *d2);
     dk_status st = idx && d2 ? dk_kdtree_knn(tree, points, n, k + 1, idx, d2, err)
                              : oom(err, "weights");
     for (dk_index v = 0; st == DK_OK && v < n; v++) {
-        const double dmax = sqrt(d2[(size_t)v * (size_t)(k + 1) + (size_t)k]);
-        double sum = 0.0;
-        for (dk_index q = 0; q < k; q++) {
-            const double d = sqrt(d2[(size_t)v * (size_t)(k + 1) + (size_t)q]);
-            const double s = dmax > 0.0 ? 1.0 - d / dmax : 0.0;
-            w[(size_t)v * k + q] = s * s;
-            nb[(size_t)v * k + q] = idx[(size_t)v * (size_t)(k + 1) + (size_t)q];
-            sum += s * s;
-        }
-        for (dk_index q = 0; q < k; q++) {
-            w[(size_t)v * k + q] = sum > 0.0 ? w[(size_t)v * k + q] / sum : 1.0 / (double)k;
-            if (!(w[(size_t)v * k + q] > 0.0))
-                nb[(size_t)v * k + q] = -1;
-        }
+        if (only && !only[v])
+            continue;
+        double dist[K_MAX + 1];
+        for (size_t q = 0; q < k1; q++)
+            dist[q] = sqrt(d2[(size_t)v * k1 + q]);
+        eq4(idx + (size_t)v * k1, dist, k, nb + (size_t)v * k, w + (size_t)v * k);
     }
     free(idx);
     free(d2);
+    return st;
+}
+
+/* A label of the multi-source Dijkstra: node `node` reaches vertex `v` at distance d. */
+typedef struct ed_label {
+    double d;
+    dk_index v, node;
+} ed_label;
+
+static void label_push(ed_label *h, size_t *size, ed_label x)
+{
+    size_t i = (*size)++;
+    while (i > 0) {
+        const size_t p = (i - 1) / 2;
+        if (!(x.d < h[p].d))
+            break;
+        h[i] = h[p];
+        i = p;
+    }
+    h[i] = x;
+}
+
+static ed_label label_pop(ed_label *h, size_t *size)
+{
+    const ed_label top = h[0], last = h[--*size];
+    size_t i = 0;
+    for (;;) {
+        size_t c = 2 * i + 1;
+        if (c >= *size)
+            break;
+        if (c + 1 < *size && h[c + 1].d < h[c].d)
+            c++;
+        if (!(h[c].d < last.d))
+            break;
+        h[i] = h[c];
+        i = c;
+    }
+    if (*size > 0)
+        h[i] = last;
+    return top;
+}
+
+/* Geodesic influence: each vertex's k + 1 nearest nodes along the mesh's edges, by one
+ * Dijkstra whose labels are (vertex, node) pairs; a vertex settles at most k + 1 distinct
+ * nodes, the first ones to reach it, so they are its nearest in edge-path distance. Node j
+ * starts at its nearest vertex, at the straight distance to it. Fills nb and w for the
+ * vertices that settle k + 1 nodes and sets short[v] for the others (to be done in
+ * Euclidean distance). Labels pushed: at most k + 1 per vertex and edge end. */
+static dk_status geodesic_weights(dk_embedded *ed, unsigned char *short_, dk_error *err)
+{
+    const dk_mesh *mesh = ed->mesh;
+    const dk_index n = ed->n, k = ed->k, m = ed->m;
+    const size_t k1 = (size_t)k + 1;
+    const size_t cap = (size_t)m + k1 * 2 * (size_t)mesh->n_edges + 1;
+    dk_kdtree *vtree = NULL;
+    dk_index *anchor = malloc(((size_t)m + 1) * sizeof *anchor);
+    double *ad2 = malloc(((size_t)m + 1) * sizeof *ad2);
+    ed_label *heap = malloc(cap * sizeof *heap);
+    dk_index *cnt = calloc((size_t)n + 1, sizeof *cnt);
+    dk_index *lab = malloc(((size_t)n * k1 + 1) * sizeof *lab);
+    double *dist = malloc(((size_t)n * k1 + 1) * sizeof *dist);
+    dk_status st = anchor && ad2 && heap && cnt && lab && dist ? DK_OK
+                                                               : oom(err, "geodesic influence");
+    if (st == DK_OK)
+        st = dk_kdtree_create(mesh->positions, n, &vtree, err);
+    if (st == DK_OK) /* each node enters at its nearest vertex */
+        st = dk_kdtree_knn(vtree, ed->g, m, 1, anchor, ad2, err);
+    size_t size = 0;
+    for (dk_index j = 0; st == DK_OK && j < m; j++)
+        label_push(heap, &size, (ed_label){sqrt(ad2[j]), anchor[j], j});
+    while (st == DK_OK && size > 0) {
+        const ed_label x = label_pop(heap, &size);
+        dk_index *mine = lab + (size_t)x.v * k1;
+        int seen = cnt[x.v] == (dk_index)k1;
+        for (dk_index c = 0; !seen && c < cnt[x.v]; c++)
+            seen = mine[c] == x.node;
+        if (seen)
+            continue;
+        mine[cnt[x.v]] = x.node;
+        dist[(size_t)x.v * k1 + (size_t)cnt[x.v]] = x.d;
+        cnt[x.v]++;
+        const double *p = mesh->positions + 3 * (size_t)x.v;
+        for (dk_index r = mesh->ring_start[x.v]; r < mesh->ring_start[x.v + 1]; r++) {
+            const dk_index u = mesh->ring_index[r];
+            if (cnt[u] == (dk_index)k1 || size == cap)
+                continue;
+            const double *q = mesh->positions + 3 * (size_t)u;
+            const double e = sqrt((p[0] - q[0]) * (p[0] - q[0]) + (p[1] - q[1]) * (p[1] - q[1]) +
+                                  (p[2] - q[2]) * (p[2] - q[2]));
+            label_push(heap, &size, (ed_label){x.d + e, u, x.node});
+        }
+    }
+    for (dk_index v = 0; st == DK_OK && v < n; v++) {
+        short_[v] = cnt[v] < (dk_index)k1;
+        if (!short_[v])
+            eq4(lab + (size_t)v * k1, dist + (size_t)v * k1, k, ed->nb + (size_t)v * k,
+                ed->w + (size_t)v * k);
+    }
+    dk_kdtree_free(vtree);
+    free(anchor);
+    free(ad2);
+    free(heap);
+    free(cnt);
+    free(lab);
+    free(dist);
     return st;
 }
 
@@ -365,14 +487,30 @@ static dk_status weights(dk_embedded *ed, dk_error *err)
     ed->nb = malloc(((size_t)n * (size_t)k + 1) * sizeof *ed->nb);
     ed->w = malloc(((size_t)n * (size_t)k + 1) * sizeof *ed->w);
     dk_index *map = malloc(((size_t)ed->m + 1) * sizeof *map);
+    unsigned char *euclid = NULL; /* the vertices still to weigh in Euclidean distance */
     dk_status st = DK_OK;
     if (!ed->nb || !ed->w || !map) {
         st = oom(err, "weights");
         goto done;
     }
+    if (ed->opt.distance == DK_ED_DISTANCE_GEODESIC) {
+        if (ed->mesh->n_faces == 0) {
+            st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                              "EmbeddedDeformation: distance=geodesic needs a mesh with faces "
+                              "(paths along its edges); this one has none (a point set): use "
+                              "distance=euclidean");
+            goto done;
+        }
+        if (!(euclid = malloc((size_t)n + 1))) {
+            st = oom(err, "weights");
+            goto done;
+        }
+        if ((st = geodesic_weights(ed, euclid, err)) != DK_OK)
+            goto done;
+    }
     st = dk_kdtree_create(ed->g, ed->m, &tree, err);
     if (st == DK_OK)
-        st = embed_points(tree, ed->mesh->positions, n, k, ed->nb, ed->w, err);
+        st = embed_points(tree, ed->mesh->positions, n, k, euclid, ed->nb, ed->w, err);
     if (st != DK_OK)
         goto done;
     for (dk_index j = 0; j < ed->m; j++)
@@ -393,6 +531,7 @@ static dk_status weights(dk_embedded *ed, dk_error *err)
 done:
     dk_kdtree_free(tree);
     free(map);
+    free(euclid);
     return st;
 }
 
@@ -1236,7 +1375,7 @@ dk_status dk_embedded_embed(const dk_embedded *ed, const double *points, dk_inde
     dk_kdtree *tree = NULL;
     dk_status st = nb && w ? dk_kdtree_create(ed->g, ed->m, &tree, err) : oom(err, "embed");
     if (st == DK_OK)
-        st = embed_points(tree, points, n_points, k, nb, w, err);
+        st = embed_points(tree, points, n_points, k, NULL, nb, w, err);
     for (dk_index p = 0; st == DK_OK && out && p < n_points; p++) {
         const double *x0 = points + 3 * p;
         double o[3] = {0.0, 0.0, 0.0};

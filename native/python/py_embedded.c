@@ -7,6 +7,7 @@
 #include <string.h>
 
 static const char *const node_names[] = {"surface", "vertices", NULL};
+static const char *const distance_names[] = {"euclidean", "geodesic", NULL};
 
 static void default_options(void *o)
 {
@@ -16,12 +17,13 @@ static void default_options(void *o)
 static int parse_options(PyObject *kw, void *o, const char *context)
 {
     dk_embedded_options *opt = (dk_embedded_options *)o;
-    int nodes = (int)opt->nodes;
+    int nodes = (int)opt->nodes, distance = (int)opt->distance;
     double seed = (double)opt->seed;
     if (dk_py_opt_choice(kw, "nodes", node_names, &nodes, context) < 0 ||
         dk_py_opt_int(kw, "n_nodes", &opt->n_nodes) < 0 ||
         dk_py_opt_double(kw, "radius", &opt->radius) < 0 ||
         dk_py_opt_int(kw, "k", &opt->k) < 0 ||
+        dk_py_opt_choice(kw, "distance", distance_names, &distance, context) < 0 ||
         dk_py_opt_double(kw, "w_rot", &opt->w_rot) < 0 ||
         dk_py_opt_double(kw, "w_reg", &opt->w_reg) < 0 ||
         dk_py_opt_double(kw, "w_con", &opt->w_con) < 0 ||
@@ -34,6 +36,7 @@ static int parse_options(PyObject *kw, void *o, const char *context)
         return -1;
     }
     opt->nodes = (dk_ed_node_source)nodes;
+    opt->distance = (dk_ed_distance)distance;
     opt->seed = (uint64_t)seed;
     return 0;
 }
@@ -201,13 +204,15 @@ PyDoc_STRVAR(solve_doc,
 
 PyDoc_STRVAR(ed_doc,
              "EmbeddedDeformation(mesh, handles, fixed=None, roi=None, handle_weights=None,\n"
-             "    stiffness=None, nodes='surface', n_nodes=200, radius=0.0, k=4, w_rot=1.0,\n"
-             "    w_reg=10.0, w_con=100.0, tolerance=1e-6, max_iterations=30, seed=1)\n\n"
+             "    stiffness=None, nodes='surface', n_nodes=200, radius=0.0, k=4,\n"
+             "    distance='euclidean', w_rot=1.0, w_reg=10.0, w_con=100.0, tolerance=1e-6,\n"
+             "    max_iterations=30, seed=1)\n\n"
              "Embedded deformation (Sumner, Schmid & Pauly 2007): a deformation graph of\n"
              "nodes sampled uniformly on the surface (or among the vertices), one affine\n"
-             "transformation per node, each vertex moved by its k nearest nodes. Handles are\n"
-             "positional constraints (weight w_con); nodes that influence fixed vertices only\n"
-             "are constants. See docs/methods/embedded.md.");
+             "transformation per node, each vertex moved by its k nearest nodes (in space, or\n"
+             "along the surface with distance='geodesic'). Handles are positional constraints\n"
+             "(weight w_con); every node that influences a fixed vertex is a constant, so\n"
+             "fixed vertices stay exactly at rest. See docs/methods/embedded.md.");
 
 static PyGetSetDef ed_getset[] = {
     DK_PY_METHOD_GETSET,

@@ -315,7 +315,55 @@ def test_vertex_cloud():
                 np.abs(got[tip, 2] - 0.3).max() < 0.03, np.abs(got[tip, 2] - 0.3).max())
 
 
-for t in (test_vertex_cloud, test_registry_drives_ui, test_methods, test_stiffness_map, test_soft_handles,
+def test_geodesic_influence():
+    """Embedded deformation's Influence option reaches the solver: on a strip folded into a
+    hairpin (a "hand" arm lying 0.2 above a "leg" arm, joined through a fixed bend), lifting
+    the hand's tip drags the leg below it in Euclidean distance and leaves it in place along
+    the surface (the behaviour is tested in depth in tests/python/test_embedded.py)."""
+    S.reset_scene()
+    arm, gap, width, step = 4.0, 0.2, 0.5, 0.05
+    r = gap / 2
+    length = 2 * arm + np.pi * r
+    s = np.linspace(0, length, int(round(length / step)) + 1)
+    x = np.where(s <= arm, s, np.where(s >= arm + np.pi * r, 2 * arm + np.pi * r - s,
+                                       arm + r * np.sin((s - arm) / r)))
+    z = np.where(s <= arm, 0.0, np.where(s >= arm + np.pi * r, gap,
+                                         r - r * np.cos((s - arm) / r)))
+    nw = int(round(width / step)) + 1
+    pts = [(x[i], y, z[i]) for i in range(len(s)) for y in np.linspace(0, width, nw)]
+    quads = [(i * nw + j, (i + 1) * nw + j, (i + 1) * nw + j + 1, i * nw + j + 1)
+             for i in range(len(s) - 1) for j in range(nw - 1)]
+    me = bpy.data.meshes.new("Hairpin")
+    me.from_pydata(pts, [], quads)
+    obj = bpy.data.objects.new("Hairpin", me)
+    bpy.context.scene.collection.objects.link(obj)
+    bpy.context.view_layer.objects.active = obj
+    arc = np.repeat(s, nw)
+    leg, tip = np.where(arc < 0.5)[0], np.where(arc > length - 0.25)[0]
+    S.group(obj, "bend", np.where(np.abs(arc - (arm + 0.16)) < 0.6)[0])
+    S.group(obj, "tip", tip)
+    e = S.empty("HandTip", (0.0, 0.0, 0.0))
+    bpy.ops.deformkit.add_deformer(method="EMBEDDED")
+    d = obj.deformkit.deformers[-1]
+    d.fixed_group = "bend"
+    d.options_embedded.n_nodes = 120
+    bpy.ops.deformkit.add_handle(vertex_group="tip", target=e.name)
+    moved = {}
+    for distance in ("euclidean", "geodesic"):
+        d.options_embedded.distance = distance
+        e.location = (0.0, 0.0, 0.0)
+        bpy.ops.deformkit.bind()
+        R.check("binds with %s influence" % distance, d.bound and not d.status_is_error,
+                d.status)
+        e.location.z = 0.5
+        bpy.context.view_layer.update()
+        got = S.evaluated_positions(obj)
+        moved[distance] = np.abs(got[leg] - np.asarray(pts)[leg]).max()
+    R.check("Euclidean influence drags the leg", moved["euclidean"] > 0.1, moved)
+    R.check("geodesic influence leaves the leg", moved["geodesic"] < 1e-3, moved)
+
+
+for t in (test_vertex_cloud, test_geodesic_influence, test_registry_drives_ui, test_methods, test_stiffness_map, test_soft_handles,
           test_bone_target, test_auto_rebind_on_group_change, test_skip_when_unchanged,
           test_bind_pose_of_transformed_object):
     R.run(t)

@@ -249,3 +249,57 @@ def test_deformed_repeats_the_solve():
     assert np.abs(ed.deformed() - v).max() <= 1e-12         # identity before any solve
     r = ed.solve(v[handle] + [0, 0, 0.2], warm_start=False)
     assert np.array_equal(ed.deformed(), r.positions)
+
+
+def hairpin(step=0.05, arm=4.0, width=0.5, gap=0.2):
+    """A strip folded into a hairpin: the lower arm (the "leg", z = 0) and the upper arm (the
+    "hand", z = gap) run side by side, a gap apart, and meet only through the bend at x = arm.
+    Returns vertices, faces and each vertex's arc length s along the strip."""
+    r = gap / 2
+    length = 2 * arm + np.pi * r
+    ns, nw = int(round(length / step)) + 1, int(round(width / step)) + 1
+    s = np.linspace(0, length, ns)
+    x = np.where(s <= arm, s, np.where(s >= arm + np.pi * r, 2 * arm + np.pi * r - s,
+                                       arm + r * np.sin((s - arm) / r)))
+    z = np.where(s <= arm, 0.0, np.where(s >= arm + np.pi * r, gap,
+                                         r - r * np.cos((s - arm) / r)))
+    y = np.linspace(0, width, nw)
+    v = np.array([(x[i], y[j], z[i]) for i in range(ns) for j in range(nw)])
+    arc = np.repeat(s, nw)
+    faces = []
+    for i in range(ns - 1):
+        for j in range(nw - 1):
+            a, b = i * nw + j, (i + 1) * nw + j
+            faces += [(a, b, b + 1), (a, b + 1, a + 1)]
+    return v, np.array(faces), arc
+
+
+def test_geodesic_influence_keeps_the_hand_off_the_leg():
+    """Section 7: a hand lying next to the leg. In Euclidean distance the nodes at the hand's
+    tip also move the leg below it (a gap of 0.2, nodes ~0.3 apart); along the surface the leg
+    is 8 units away from the hand's tip, so it stays put."""
+    v, f, s = hairpin()
+    arm = 4.0
+    leg_tip, hand_tip = np.where(s < 0.5)[0], np.where(s > s.max() - 0.25)[0]
+    bend = np.where(np.abs(s - (arm + 0.16)) < 0.6)[0]          # fixed: the bend
+    lift = 0.5
+    moved, crossing = {}, {}     # crossing: graph edges across the gap, away from the bend
+    for distance in ("euclidean", "geodesic"):
+        ed = dk.EmbeddedDeformation(dk.Mesh(v, f), handles=[hand_tip], fixed=bend,
+                                    n_nodes=120, distance=distance)
+        r = ed.solve(v[hand_tip] + [0, 0, lift], warm_start=False)
+        x = np.asarray(r.positions)
+        assert np.abs(x[hand_tip, 2] - v[hand_tip, 2] - lift).max() < 0.02 * lift
+        moved[distance] = np.abs(x[leg_tip] - v[leg_tip]).max()
+        g, e = np.asarray(ed.nodes), np.asarray(ed.edges)
+        crossing[distance] = int(np.sum((np.abs(g[e[:, 0], 2] - g[e[:, 1], 2]) > 0.19)
+                                        & (g[e[:, 0], 0] < arm - 0.5) & (g[e[:, 1], 0] < arm - 0.5)))
+    assert moved["euclidean"] > 0.2 * lift       # the leg follows the hand
+    assert moved["geodesic"] < 1e-3 * lift       # it does not
+    assert crossing["euclidean"] > 0 and crossing["geodesic"] == 0
+    # a point set has no surface to measure along
+    with pytest.raises(ValueError, match="geodesic"):
+        dk.EmbeddedDeformation(dk.Mesh(v, np.zeros((0, 3), dtype=np.int32)),
+                               handles=[hand_tip], distance="geodesic")
+    with pytest.raises(ValueError, match="distance"):
+        dk.EmbeddedDeformation(dk.Mesh(v, f), handles=[hand_tip], distance="manhattan")
