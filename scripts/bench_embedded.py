@@ -47,17 +47,17 @@ def best(fn, repeat):
     return out, t
 
 
-def run(label, v, mesh, fixed, centre, nodes_list, csts_list, repeat):
+def run(label, v, mesh, fixed, centre, nodes_list, csts_list, repeat, distance):
     diag = float(np.linalg.norm(v.max(0) - v.min(0)))
     order = np.argsort(np.linalg.norm(v - centre, axis=1))
-    print("%s: %d vertices, %d fixed" % (label, len(v), len(fixed)))
+    print("%s: %d vertices, %d fixed, %s influence" % (label, len(v), len(fixed), distance))
     print("  %6s %6s %9s %10s %5s %9s %12s" % ("nodes", "csts", "Bind ms", "Solve ms", "Its",
                                               "Def ms", "handle err"))
     for n_nodes in nodes_list:
         for csts in csts_list:
             handle = np.setdiff1d(order[:csts], fixed)
             ed, tb = best(lambda: dk.EmbeddedDeformation(mesh, handles=[handle], fixed=fixed,
-                                                         n_nodes=n_nodes), 1)
+                                                         n_nodes=n_nodes, distance=distance), 1)
             tg = v[handle] + [0.0, 0.05 * diag, 0.0]
             full, tn = best(lambda: ed.solve(tg, warm_start=False), repeat)
             _, t1 = best(lambda: ed.solve(tg, warm_start=False, max_iterations=1), repeat)
@@ -74,6 +74,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--shared", default=os.path.join(HERE, "..", "..", "shared"))
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--distance", choices=("euclidean", "geodesic"), default="euclidean",
+                    help="how vertices find their nodes (geodesic: along the surface)")
     a = ap.parse_args()
     print(PAPER)
     print()
@@ -82,11 +84,11 @@ def main():
     v, mesh = load(a.shared, "armadillo.obj")
     hand = v[sc["handles"][0]["vertices"]].mean(axis=0)
     run("armadillo", v, mesh, np.asarray(sc["fixed"]), hand, (220, 1000),
-        (10, 100, 1000, 5000), a.repeat)
+        (10, 100, 1000, 5000), a.repeat, a.distance)
     v, mesh = load(a.shared, "ogre.obj")
     low = np.where(v[:, 1] <= np.quantile(v[:, 1], 0.05))[0]
     top = v[np.argmax(v[:, 1])]
-    run("ogre", v, mesh, low, top, (220, 1000), (10, 100, 1000, 5000), a.repeat)
+    run("ogre", v, mesh, low, top, (220, 1000), (10, 100, 1000, 5000), a.repeat, a.distance)
 
 
 if __name__ == "__main__":
