@@ -14,7 +14,8 @@ from typing import Any, Callable, Optional
 @dataclass
 class Option:
     name: str                    # property name (and constructor keyword unless kw given)
-    type: str                    # 'ENUM' | 'INT' | 'FLOAT' | 'BOOL'
+    type: str                    # 'ENUM' | 'INT' | 'FLOAT' | 'BOOL' | 'GROUP' (a vertex
+                                 # group's name, read by the add-on: kw must be None)
     default: Any
     label: str = ""
     description: str = ""
@@ -42,8 +43,11 @@ class Method:
     # What the method consumes from Blender, beyond the mesh, the handles' groups and targets
     # and the Region and Fixed groups that every method takes:
     # which vertex-group maps: 'stiffness' (the material group's weights become the
-    # per-vertex `stiffness` keyword) and/or 'handle_weights' (soft handles).
+    # per-vertex `stiffness` keyword), 'handle_weights' (soft handles) and/or 'cut' (two
+    # GROUP options become the `cut=(group_a, group_b)` keyword: section 7 of Sumner et al.)
     maps: tuple = ()
+    # 'cut' map: the two GROUP options holding the cut's sides
+    cut_options: Optional[tuple] = None
     # 'stiffness' map: the option holding the stiffness where the material weight is 1
     # (weight 0 gives 1, linear in between)
     stiffness_option: Optional[str] = None
@@ -164,6 +168,8 @@ METHODS.append(Method(
                 "shape, each an affine transformation kept close to a rotation; handles "
                 "pull as soft constraints",
     icon="MOD_LATTICE",
+    maps=("cut",),
+    cut_options=("cut_a", "cut_b"),
     cold_solve={"warm_start": False},
     warm_solve={"warm_start": True},
     iterative=True,
@@ -185,6 +191,10 @@ METHODS.append(Method(
                       ("geodesic", "Geodesic", "Distance along the surface, so that a hand "
                                                "node does not move the leg it lies against "
                                                "(needs faces)"))),
+        Option("cut_a", "GROUP", "", "Cut Side A",
+               "With Cut Side B: no node near this vertex group moves the other, and no "
+               "graph edge joins them (the paper's stroke between a hand and a leg)", kw=None),
+        Option("cut_b", "GROUP", "", "Cut Side B", "The other side of the cut", kw=None),
         Option("w_rot", "FLOAT", 1.0, "Rigidity", "Weight of the rotation term", min=1e-6,
                max=1e6),
         Option("w_reg", "FLOAT", 10.0, "Smoothness", "Weight of the regularization term",
@@ -212,6 +222,14 @@ def _check_registry():
                                  % (m.id, field_name, ref))
         if ("stiffness" in m.maps) != (m.stiffness_option is not None):
             raise ValueError("%s: a 'stiffness' map needs a stiffness_option" % m.id)
+        groups = {o.name for o in m.options if o.type == "GROUP"}
+        if any(o.type == "GROUP" and o.kw is not None for o in m.options):
+            raise ValueError("%s: GROUP options are read by the add-on (kw=None)" % m.id)
+        if ("cut" in m.maps) != (m.cut_options is not None) or (
+                m.cut_options is not None and (len(m.cut_options) != 2
+                                               or not set(m.cut_options) <= groups)):
+            raise ValueError("%s: a 'cut' map needs cut_options naming two GROUP options"
+                             % m.id)
         if m.iterative and m.iteration_cap is None:
             raise ValueError("%s: an iterative method needs an iteration_cap option" % m.id)
 

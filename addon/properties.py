@@ -60,6 +60,8 @@ def _make_options_group(method):
             ann[o.name] = FloatProperty(default=o.default, precision=prec, **kw, **common)
         elif o.type == "BOOL":
             ann[o.name] = BoolProperty(default=o.default, **common)
+        elif o.type == "GROUP":
+            ann[o.name] = StringProperty(default=o.default, **common)
         else:
             raise ValueError("unknown option type %r" % o.type)
     return type("DeformKitOptions_" + method.id, (bpy.types.PropertyGroup,),

@@ -215,6 +215,19 @@ def collect(obj, d):
             if obj.vertex_groups.get(g) is None:
                 raise DeformKitError("%s vertex group '%s' does not exist" % (label, g))
             names.add(g)
+    cut = [getattr(d.options, o) for o in m.cut_options] if "cut" in m.maps else []
+    if any(cut):
+        labels = [next(o.label for o in m.options if o.name == n) for n in m.cut_options]
+        for label, g in zip(labels, cut):
+            if not g:
+                raise DeformKitError("%s is set but %s is not: a cut needs both vertex groups"
+                                     % (labels[1 - labels.index(label)], label))
+            if obj.vertex_groups.get(g) is None:
+                raise DeformKitError("%s: vertex group '%s' does not exist" % (label, g))
+        if cut[0] == cut[1]:
+            raise DeformKitError("%s and %s are the same vertex group '%s'"
+                                 % (labels[0], labels[1], cut[0]))
+        names.update(cut)
     groups = read_groups(obj, names)
     handles, weights = [], []
     seen = {}
@@ -261,9 +274,14 @@ def collect(obj, d):
         kw["stiffness"] = s
     if "handle_weights" in m.maps and any(h.use_weights for h in d.handles):
         kw["handle_weights"] = weights
+    if any(cut):
+        kw["cut"] = tuple(groups[g][0] for g in cut)
+        for label, g, idx in zip(labels, cut, kw["cut"]):
+            if len(idx) == 0:
+                raise DeformKitError("%s: vertex group '%s' is empty" % (label, g))
     key = b"".join(np.ascontiguousarray(a).tobytes() for a in handles) + b"|" + b"|".join(
         b"" if x is None else np.ascontiguousarray(x).tobytes()
-        for x in (fixed, roi, kw.get("stiffness")))
+        for x in (fixed, roi, kw.get("stiffness")) + kw.get("cut", ()))
     key += b"|" + b"".join(w.tobytes() for w in kw.get("handle_weights", []))
     return kw, key
 

@@ -36,7 +36,7 @@ class DEFORMKIT_UL_handles(bpy.types.UIList):
         row.label(text=tgt, icon="ERROR" if bad else "OBJECT_DATA")
 
 
-def draw_options(layout, d):
+def draw_options(layout, d, obj=None):
     m = methods.get(d.method)
     opts = d.options
     if m.draw is not None:
@@ -46,7 +46,10 @@ def draw_options(layout, d):
     for o in m.options:
         if o.shown_with and not getattr(d, o.shown_with):
             continue
-        col.prop(opts, o.name)
+        if o.type == "GROUP" and obj is not None:
+            col.prop_search(opts, o.name, obj, "vertex_groups")
+        else:
+            col.prop(opts, o.name)
 
 
 class DEFORMKIT_PT_modifiers(bpy.types.Panel):
@@ -125,7 +128,7 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
         box = layout.box()
         box.label(text="%s Options" % m.label, icon=m.icon)
         box.use_property_split = True
-        draw_options(box, d)
+        draw_options(box, d, obj)
 
         row = layout.row(align=True)
         if d.bound:

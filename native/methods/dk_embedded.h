@@ -17,6 +17,11 @@
  * than one solve per node. A vertex that reaches fewer than k + 1 nodes along the surface (a
  * small component with too few nodes) falls back to Euclidean distance. Points given to
  * dk_embedded_embed are not on the mesh and always use Euclidean distance.
+ * The cut (options cut_a, cut_b; section 7 leaves the "simple user interface" open): the
+ * user gives the two sides as vertex sets; each node takes the side of its nearest vertex;
+ * vertices of one side ignore the other side's nodes (in Euclidean distance their nearest
+ * nodes come from a k-d tree without them; in geodesic distance labels do not enter the
+ * other side), and edges between the two sides' nodes are dropped.
  * Nodes (DK_ED_NODES_SURFACE): uniform samples of the surface, as the paper does: dense
  * random points on the triangles (area-weighted), then, in a random order, a point is kept
  * when no kept point lies within the radius r (keep one at random, remove all others within
@@ -83,6 +88,13 @@ typedef struct dk_embedded_options {
     double radius;            /**< > 0: the sampling radius itself (mesh units)            */
     int k;                    /**< nearest nodes per point, 1..16 (k+1 <= nodes); default 4 */
     dk_ed_distance distance;  /**< default DK_ED_DISTANCE_EUCLIDEAN                        */
+    /** The cut (section 7's stroke between the leg and the hand): two disjoint vertex sets,
+     *  n_cut_a and n_cut_b indices (read during bind only; both empty = no cut). A node is
+     *  on side A or B when its nearest vertex is in that set; no vertex of A is influenced
+     *  by a node of side B nor the other way round, along the surface no path crosses from
+     *  one set into the other, and no graph edge joins a node of side A to one of side B. */
+    const dk_index *cut_a, *cut_b;
+    dk_index n_cut_a, n_cut_b;
     double w_rot, w_reg, w_con; /**< > 0; defaults 1, 10, 100 (the paper's)               */
     double tolerance;         /**< eps of the stopping tests, > 0; default 1e-6            */
     int max_iterations;       /**< Gauss-Newton iterations per solve, >= 1; default 30     */

@@ -54,6 +54,8 @@ struct dk_embedded {
     dk_index n, m, k;
     double *g;                  /* m x 3 node positions                                     */
     dk_index *nb;               /* n x k: each vertex's nodes                               */
+    unsigned char *vside;       /* n: 0, 1 (cut group A) or 2 (B); NULL without a cut       */
+    unsigned char *nside;       /* m: the side of each node's nearest vertex                */
     double *w;                  /* n x k: their weights                                     */
     dk_index n_edges;
     dk_index *edges;            /* n_edges x 2, i < j                                       */
@@ -101,6 +103,11 @@ static dk_status check_options(const dk_embedded_options *o, dk_error *err)
         bad = "k must be in 1..16";
     else if (o->distance != DK_ED_DISTANCE_EUCLIDEAN && o->distance != DK_ED_DISTANCE_GEODESIC)
         bad = "distance must be euclidean (0) or geodesic (1)";
+    else if (o->n_cut_a < 0 || o->n_cut_b < 0 || (o->n_cut_a > 0 && !o->cut_a) ||
+             (o->n_cut_b > 0 && !o->cut_b))
+        bad = "the cut groups must be index arrays with their counts";
+    else if ((o->n_cut_a > 0) != (o->n_cut_b > 0))
+        bad = "a cut needs both groups (cut_a and cut_b), or neither";
     else if (!(o->w_rot > 0 && o->w_reg > 0 && o->w_con > 0 && isfinite(o->w_rot) &&
                isfinite(o->w_reg) && isfinite(o->w_con)))
         bad = "the weights w_rot, w_reg and w_con must be finite and > 0";
@@ -407,34 +414,36 @@ static ed_label label_pop(ed_label *h, size_t *size)
     return top;
 }
 
+/* Sides of a cut: 0 none, 1 group A, 2 group B; two sides are across when both are set
+ * and differ. */
+static int across(unsigned char a, unsigned char b)
+{
+    return a && b && a != b;
+}
+
 /* Geodesic influence: each vertex's k + 1 nearest nodes along the mesh's edges, by one
  * Dijkstra whose labels are (vertex, node) pairs; a vertex settles at most k + 1 distinct
  * nodes, the first ones to reach it, so they are its nearest in edge-path distance. Node j
- * starts at its nearest vertex, at the straight distance to it. Fills nb and w for the
- * vertices that settle k + 1 nodes and sets short[v] for the others (to be done in
- * Euclidean distance). Labels pushed: at most k + 1 per vertex and edge end. */
-static dk_status geodesic_weights(dk_embedded *ed, unsigned char *short_, dk_error *err)
+ * starts at its nearest vertex `anchor[j]`, at the straight distance `anchor_d[j]` to it.
+ * With a cut, a label does not enter a vertex of the other side (and so does not pass
+ * through it). Fills nb and w for the vertices that settle k + 1 nodes and sets short[v]
+ * for the others (to be done in Euclidean distance). Labels pushed: at most k + 1 per vertex
+ * and edge end. */
+static dk_status geodesic_weights(dk_embedded *ed, const dk_index *anchor,
+                                  const double *anchor_d, unsigned char *short_, dk_error *err)
 {
     const dk_mesh *mesh = ed->mesh;
     const dk_index n = ed->n, k = ed->k, m = ed->m;
     const size_t k1 = (size_t)k + 1;
     const size_t cap = (size_t)m + k1 * 2 * (size_t)mesh->n_edges + 1;
-    dk_kdtree *vtree = NULL;
-    dk_index *anchor = malloc(((size_t)m + 1) * sizeof *anchor);
-    double *ad2 = malloc(((size_t)m + 1) * sizeof *ad2);
     ed_label *heap = malloc(cap * sizeof *heap);
     dk_index *cnt = calloc((size_t)n + 1, sizeof *cnt);
     dk_index *lab = malloc(((size_t)n * k1 + 1) * sizeof *lab);
     double *dist = malloc(((size_t)n * k1 + 1) * sizeof *dist);
-    dk_status st = anchor && ad2 && heap && cnt && lab && dist ? DK_OK
-                                                               : oom(err, "geodesic influence");
-    if (st == DK_OK)
-        st = dk_kdtree_create(mesh->positions, n, &vtree, err);
-    if (st == DK_OK) /* each node enters at its nearest vertex */
-        st = dk_kdtree_knn(vtree, ed->g, m, 1, anchor, ad2, err);
+    dk_status st = heap && cnt && lab && dist ? DK_OK : oom(err, "geodesic influence");
     size_t size = 0;
     for (dk_index j = 0; st == DK_OK && j < m; j++)
-        label_push(heap, &size, (ed_label){sqrt(ad2[j]), anchor[j], j});
+        label_push(heap, &size, (ed_label){anchor_d[j], anchor[j], j});
     while (st == DK_OK && size > 0) {
         const ed_label x = label_pop(heap, &size);
         dk_index *mine = lab + (size_t)x.v * k1;
@@ -449,7 +458,8 @@ static dk_status geodesic_weights(dk_embedded *ed, unsigned char *short_, dk_err
         const double *p = mesh->positions + 3 * (size_t)x.v;
         for (dk_index r = mesh->ring_start[x.v]; r < mesh->ring_start[x.v + 1]; r++) {
             const dk_index u = mesh->ring_index[r];
-            if (cnt[u] == (dk_index)k1 || size == cap)
+            if (cnt[u] == (dk_index)k1 || size == cap ||
+                (ed->vside && across(ed->nside[x.node], ed->vside[u])))
                 continue;
             const double *q = mesh->positions + 3 * (size_t)u;
             const double e = sqrt((p[0] - q[0]) * (p[0] - q[0]) + (p[1] - q[1]) * (p[1] - q[1]) +
@@ -463,9 +473,6 @@ static dk_status geodesic_weights(dk_embedded *ed, unsigned char *short_, dk_err
             eq4(lab + (size_t)v * k1, dist + (size_t)v * k1, k, ed->nb + (size_t)v * k,
                 ed->w + (size_t)v * k);
     }
-    dk_kdtree_free(vtree);
-    free(anchor);
-    free(ad2);
     free(heap);
     free(cnt);
     free(lab);
@@ -473,47 +480,143 @@ static dk_status geodesic_weights(dk_embedded *ed, unsigned char *short_, dk_err
     return st;
 }
 
-/* Each vertex's k nearest nodes and weights (eq. 4); nodes that influence no vertex are
- * dropped (renumbering the rest, in their order). */
+/* The cut's sides: vside from the two groups (disjoint), nside from each node's nearest
+ * vertex. */
+static dk_status cut_sides(dk_embedded *ed, const dk_index *anchor, dk_error *err)
+{
+    const dk_embedded_options *o = &ed->opt;
+    dk_status st = dk_check_indices(o->cut_a, o->n_cut_a, ed->n, "cut group A vertex", err);
+    if (st == DK_OK)
+        st = dk_check_indices(o->cut_b, o->n_cut_b, ed->n, "cut group B vertex", err);
+    if (st != DK_OK) {
+        dk_error_prefix(err, "EmbeddedDeformation");
+        return st;
+    }
+    ed->vside = calloc((size_t)ed->n + 1, 1);
+    ed->nside = malloc((size_t)ed->m + 1);
+    if (!ed->vside || !ed->nside)
+        return oom(err, "the cut");
+    for (dk_index i = 0; i < o->n_cut_a; i++)
+        ed->vside[o->cut_a[i]] = 1;
+    for (dk_index i = 0; i < o->n_cut_b; i++) {
+        if (ed->vside[o->cut_b[i]] == 1)
+            return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                                "EmbeddedDeformation: vertex %d is in both cut groups; the "
+                                "two sides of a cut must not overlap",
+                                (int)o->cut_b[i]);
+        ed->vside[o->cut_b[i]] = 2;
+    }
+    for (dk_index j = 0; j < ed->m; j++)
+        ed->nside[j] = ed->vside[anchor[j]];
+    return DK_OK;
+}
+
+/* Eq. 4 in Euclidean distance for the vertices of side `side` (0: those of no side) that
+ * `todo` marks (NULL: all): their nearest nodes among those not across the cut. */
+static dk_status euclidean_weights(dk_embedded *ed, const unsigned char *todo,
+                                   unsigned char side, dk_error *err)
+{
+    const dk_index n = ed->n, m = ed->m, k = ed->k;
+    unsigned char *only = NULL;
+    double *sub = NULL;
+    dk_index *glob = NULL, ns = 0;
+    dk_kdtree *tree = NULL;
+    dk_status st = DK_OK;
+    if (ed->vside) { /* the nodes allowed, and the vertices to do */
+        only = malloc((size_t)n + 1);
+        sub = malloc(3 * ((size_t)m + 1) * sizeof *sub);
+        glob = malloc(((size_t)m + 1) * sizeof *glob);
+        if (!only || !sub || !glob) {
+            st = oom(err, "weights");
+            goto done;
+        }
+        for (dk_index j = 0; j < m; j++)
+            if (!across(ed->nside[j], side)) {
+                memcpy(sub + 3 * (size_t)ns, ed->g + 3 * (size_t)j, 3 * sizeof *sub);
+                glob[ns++] = j;
+            }
+        dk_index count = 0;
+        for (dk_index v = 0; v < n; v++) {
+            only[v] = ed->vside[v] == side && (!todo || todo[v]);
+            count += only[v];
+        }
+        if (count == 0)
+            goto done;
+        if (ns < k + 1) {
+            st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                              "EmbeddedDeformation: the cut leaves %d nodes to the vertices of "
+                              "group %c, but k = %d needs at least %d (raise n_nodes or widen "
+                              "the groups)",
+                              (int)ns, side == 1 ? 'A' : 'B', (int)k, (int)k + 1);
+            goto done;
+        }
+    }
+    st = dk_kdtree_create(sub ? sub : ed->g, sub ? ns : m, &tree, err);
+    if (st == DK_OK)
+        st = embed_points(tree, ed->mesh->positions, n, k, only ? only : todo, ed->nb, ed->w,
+                          err);
+    for (dk_index v = 0; st == DK_OK && glob && v < n; v++)
+        if (only[v])
+            for (dk_index q = 0; q < k; q++) {
+                dk_index *c = ed->nb + (size_t)v * (size_t)k + (size_t)q;
+                *c = *c >= 0 ? glob[*c] : -1;
+            }
+done:
+    dk_kdtree_free(tree);
+    free(only);
+    free(sub);
+    free(glob);
+    return st;
+}
+
+/* Each vertex's k nearest nodes and weights (eq. 4), in Euclidean or geodesic distance and
+ * across no cut; nodes that influence no vertex are dropped (renumbering the rest, in their
+ * order). */
 static dk_status weights(dk_embedded *ed, dk_error *err)
 {
     const dk_index n = ed->n, k = ed->k;
+    const dk_embedded_options *o = &ed->opt;
     if (ed->m < k + 1)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "EmbeddedDeformation: %d nodes, but k = %d needs at least %d "
                             "(raise n_nodes or lower the radius)",
                             (int)ed->m, (int)k, (int)k + 1);
-    dk_kdtree *tree = NULL;
+    const int geodesic = o->distance == DK_ED_DISTANCE_GEODESIC, cut = o->n_cut_a > 0;
+    if (geodesic && ed->mesh->n_faces == 0)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EmbeddedDeformation: distance=geodesic needs a mesh with faces "
+                            "(paths along its edges); this one has none (a point set): use "
+                            "distance=euclidean");
+    dk_kdtree *vtree = NULL;
+    dk_index *anchor = NULL;    /* m: each node's nearest vertex (geodesic or cut)     */
+    double *anchor_d = NULL;    /* m: the distance to it                               */
+    unsigned char *euclid = NULL; /* n: the vertices still to weigh in Euclidean distance */
     ed->nb = malloc(((size_t)n * (size_t)k + 1) * sizeof *ed->nb);
     ed->w = malloc(((size_t)n * (size_t)k + 1) * sizeof *ed->w);
     dk_index *map = malloc(((size_t)ed->m + 1) * sizeof *map);
-    unsigned char *euclid = NULL; /* the vertices still to weigh in Euclidean distance */
-    dk_status st = DK_OK;
-    if (!ed->nb || !ed->w || !map) {
-        st = oom(err, "weights");
-        goto done;
+    dk_status st = ed->nb && ed->w && map ? DK_OK : oom(err, "weights");
+    if (st == DK_OK && (geodesic || cut)) { /* 1. the nodes' nearest vertices */
+        anchor = malloc(((size_t)ed->m + 1) * sizeof *anchor);
+        anchor_d = malloc(((size_t)ed->m + 1) * sizeof *anchor_d);
+        st = anchor && anchor_d ? dk_kdtree_create(ed->mesh->positions, n, &vtree, err)
+                                : oom(err, "weights");
+        if (st == DK_OK)
+            st = dk_kdtree_knn(vtree, ed->g, ed->m, 1, anchor, anchor_d, err);
+        for (dk_index j = 0; st == DK_OK && j < ed->m; j++)
+            anchor_d[j] = sqrt(anchor_d[j]);
     }
-    if (ed->opt.distance == DK_ED_DISTANCE_GEODESIC) {
-        if (ed->mesh->n_faces == 0) {
-            st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
-                              "EmbeddedDeformation: distance=geodesic needs a mesh with faces "
-                              "(paths along its edges); this one has none (a point set): use "
-                              "distance=euclidean");
-            goto done;
-        }
-        if (!(euclid = malloc((size_t)n + 1))) {
-            st = oom(err, "weights");
-            goto done;
-        }
-        if ((st = geodesic_weights(ed, euclid, err)) != DK_OK)
-            goto done;
+    if (st == DK_OK && cut) /* 2. the cut's sides */
+        st = cut_sides(ed, anchor, err);
+    if (st == DK_OK && geodesic) { /* 3. along the surface */
+        euclid = malloc((size_t)n + 1);
+        st = euclid ? geodesic_weights(ed, anchor, anchor_d, euclid, err) : oom(err, "weights");
     }
-    st = dk_kdtree_create(ed->g, ed->m, &tree, err);
-    if (st == DK_OK)
-        st = embed_points(tree, ed->mesh->positions, n, k, euclid, ed->nb, ed->w, err);
+    /* 4. in space: every vertex, or those the surface left short; per side of a cut */
+    for (unsigned char side = 0; st == DK_OK && side <= (cut ? 2 : 0); side++)
+        st = euclidean_weights(ed, euclid, side, err);
     if (st != DK_OK)
         goto done;
-    for (dk_index j = 0; j < ed->m; j++)
+    for (dk_index j = 0; j < ed->m; j++) /* 5. drop the nodes that influence nothing */
         map[j] = -1;
     for (size_t q = 0; q < (size_t)n * (size_t)k; q++)
         if (ed->nb[q] >= 0)
@@ -523,13 +626,17 @@ static dk_status weights(dk_embedded *ed, dk_error *err)
         if (map[j] == 0) {
             map[j] = kept;
             memmove(ed->g + 3 * kept, ed->g + 3 * j, 3 * sizeof(double));
+            if (ed->nside)
+                ed->nside[kept] = ed->nside[j];
             kept++;
         }
     for (size_t q = 0; q < (size_t)n * (size_t)k; q++)
         ed->nb[q] = ed->nb[q] >= 0 ? map[ed->nb[q]] : -1;
     ed->m = kept;
 done:
-    dk_kdtree_free(tree);
+    dk_kdtree_free(vtree);
+    free(anchor);
+    free(anchor_d);
     free(map);
     free(euclid);
     return st;
@@ -547,7 +654,7 @@ static dk_status edges(dk_embedded *ed, dk_error *err)
         for (dk_index p = 0; p < k; p++)
             for (dk_index q = p + 1; q < k; q++) {
                 dk_index a = ed->nb[(size_t)v * k + p], b = ed->nb[(size_t)v * k + q];
-                if (a < 0 || b < 0 || a == b)
+                if (a < 0 || b < 0 || a == b || (ed->nside && across(ed->nside[a], ed->nside[b])))
                     continue;
                 if (a > b) {
                     const dk_index t = a;
@@ -1195,6 +1302,8 @@ void dk_embedded_free(dk_embedded *ed)
     free(ed->g);
     free(ed->nb);
     free(ed->w);
+    free(ed->vside);
+    free(ed->nside);
     free(ed->edges);
     free(ed->adj_start);
     free(ed->adj);

@@ -58,6 +58,10 @@ struct dk_py_method_spec {
      *  dk_py_opt_* helpers) into `options`; what is left in `kw` afterwards is a TypeError.
      *  Returns 0 or -1 with an exception set. */
     int (*parse_options)(PyObject *kw, void *options, const char *context);
+    /** Optional: frees what parse_options allocated into `options` (arrays the native
+     *  options point to during bind); called once after the bind, and after a failed
+     *  parse, so parse_options must leave `options` releasable at every exit. */
+    void (*release_options)(void *options);
     /** Optional: the method's own solve keywords, read from `kw` like parse_options and
      *  applied to the bound object before the solve (called with the object entered). */
     int (*solve_extra)(dk_py_method *self, PyObject *kw, const char *context);
@@ -118,6 +122,9 @@ int dk_py_method_enter(dk_py_method *self);
  * a choice against `names` (NULL-terminated; ValueError naming the accepted values). Return
  * 0, or -1 with an exception set. */
 int dk_py_opt_int(PyObject *kw, const char *key, int *value);
+/** Takes `key` out of `kw`: a new reference, or NULL when absent (or with an exception set:
+ *  check PyErr_Occurred). */
+PyObject *dk_py_opt_object(PyObject *kw, const char *key);
 int dk_py_opt_double(PyObject *kw, const char *key, double *value);
 int dk_py_opt_bool(PyObject *kw, const char *key, int *value);
 int dk_py_opt_choice(PyObject *kw, const char *key, const char *const *names, int *value,

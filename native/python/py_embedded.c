@@ -14,6 +14,58 @@ static void default_options(void *o)
     dk_embedded_default_options((dk_embedded_options *)o);
 }
 
+/* cut=(group_a, group_b): two index arrays, copied into options until release_options */
+static int parse_cut(PyObject *kw, dk_embedded_options *opt, const char *context)
+{
+    PyObject *cut = dk_py_opt_object(kw, "cut");
+    if (!cut)
+        return PyErr_Occurred() ? -1 : 0;
+    int rc = -1;
+    if (cut == Py_None) {
+        rc = 0;
+    } else if (!PySequence_Check(cut) || PySequence_Size(cut) != 2) {
+        PyErr_Format(PyExc_ValueError,
+                     "%s: cut must be a pair (group_a, group_b) of vertex index arrays",
+                     context);
+    } else {
+        dk_py_indices side[2] = {{0}, {0}};
+        rc = 0;
+        for (int i = 0; i < 2 && rc == 0; i++) {
+            PyObject *item = PySequence_GetItem(cut, i);
+            rc = item ? dk_py_read_indices(item, -1, 0, i ? "cut group B" : "cut group A",
+                                           &side[i])
+                      : -1;
+            Py_XDECREF(item);
+        }
+        if (rc == 0 && (side[0].rows == 0 || side[1].rows == 0)) {
+            PyErr_Format(PyExc_ValueError,
+                         "%s: cut group %c is empty; a cut needs vertices on both sides",
+                         context, side[0].rows == 0 ? 'A' : 'B');
+            rc = -1;
+        }
+        if (rc == 0) {
+            opt->cut_a = side[0].data;
+            opt->n_cut_a = (dk_index)side[0].rows;
+            opt->cut_b = side[1].data;
+            opt->n_cut_b = (dk_index)side[1].rows;
+        } else {
+            dk_py_indices_release(&side[0]);
+            dk_py_indices_release(&side[1]);
+        }
+    }
+    Py_DECREF(cut);
+    return rc;
+}
+
+static void release_options(void *o)
+{
+    dk_embedded_options *opt = (dk_embedded_options *)o;
+    PyMem_Free((void *)opt->cut_a);
+    PyMem_Free((void *)opt->cut_b);
+    opt->cut_a = opt->cut_b = NULL;
+    opt->n_cut_a = opt->n_cut_b = 0;
+}
+
 static int parse_options(PyObject *kw, void *o, const char *context)
 {
     dk_embedded_options *opt = (dk_embedded_options *)o;
@@ -29,7 +81,7 @@ static int parse_options(PyObject *kw, void *o, const char *context)
         dk_py_opt_double(kw, "w_con", &opt->w_con) < 0 ||
         dk_py_opt_double(kw, "tolerance", &opt->tolerance) < 0 ||
         dk_py_opt_int(kw, "max_iterations", &opt->max_iterations) < 0 ||
-        dk_py_opt_double(kw, "seed", &seed) < 0)
+        dk_py_opt_double(kw, "seed", &seed) < 0 || parse_cut(kw, opt, context) < 0)
         return -1;
     if (!(seed >= 0.0 && seed < 9007199254740992.0 && seed == (double)(uint64_t)seed)) {
         PyErr_Format(PyExc_ValueError, "%s: seed must be a whole number in [0, 2^53)", context);
@@ -205,14 +257,16 @@ PyDoc_STRVAR(solve_doc,
 PyDoc_STRVAR(ed_doc,
              "EmbeddedDeformation(mesh, handles, fixed=None, roi=None, handle_weights=None,\n"
              "    stiffness=None, nodes='surface', n_nodes=200, radius=0.0, k=4,\n"
-             "    distance='euclidean', w_rot=1.0, w_reg=10.0, w_con=100.0, tolerance=1e-6,\n"
-             "    max_iterations=30, seed=1)\n\n"
+             "    distance='euclidean', cut=None, w_rot=1.0, w_reg=10.0, w_con=100.0,\n"
+             "    tolerance=1e-6, max_iterations=30, seed=1)\n\n"
              "Embedded deformation (Sumner, Schmid & Pauly 2007): a deformation graph of\n"
              "nodes sampled uniformly on the surface (or among the vertices), one affine\n"
              "transformation per node, each vertex moved by its k nearest nodes (in space, or\n"
              "along the surface with distance='geodesic'). Handles are positional constraints\n"
              "(weight w_con); every node that influences a fixed vertex is a constant, so\n"
-             "fixed vertices stay exactly at rest. See docs/methods/embedded.md.");
+             "fixed vertices stay exactly at rest. cut=(group_a, group_b) separates two\n"
+             "vertex sets: no node of one side influences the other, and no graph edge\n"
+             "joins them. See docs/methods/embedded.md.");
 
 static PyGetSetDef ed_getset[] = {
     DK_PY_METHOD_GETSET,
@@ -240,6 +294,7 @@ static const dk_py_method_spec ed_spec = {
     .options_size = sizeof(dk_embedded_options),
     .default_options = default_options,
     .parse_options = parse_options,
+    .release_options = release_options,
     .getset = ed_getset,
     .methods = ed_methods,
 };

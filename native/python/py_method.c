@@ -27,6 +27,12 @@ static PyObject *take(PyObject *kw, const char *key, PyObject **owned)
     return *owned;
 }
 
+PyObject *dk_py_opt_object(PyObject *kw, const char *key)
+{
+    PyObject *owned;
+    return take(kw, key, &owned);
+}
+
 int dk_py_opt_int(PyObject *kw, const char *key, int *value)
 {
     PyObject *owned, *v = take(kw, key, &owned);
@@ -221,20 +227,20 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
              spec->parse_options(rest, &opt, spec->name) == 0 &&
              refuse_leftovers(rest, where) == 0;
     Py_DECREF(rest);
-    if (!ok) {
-        Py_DECREF(mine);
-        return NULL;
-    }
     /* mesh_obj ... borrow from `mine`, which stays alive until the end */
-    const dk_mesh *mesh = dk_py_mesh_get(module, mesh_obj, "mesh");
+    const dk_mesh *mesh = ok ? dk_py_mesh_get(module, mesh_obj, "mesh") : NULL;
     if (!mesh || read_all(spec, handles, fixed, roi, hw, stiffness, mesh->n_vertices,
                           spec->name, &con, &stiff) < 0) {
+        if (spec->release_options)
+            spec->release_options(&opt);
         Py_DECREF(mine);
         return NULL;
     }
     Py_BEGIN_ALLOW_THREADS
     st = spec->ops->bind(mesh, &con.desc, &opt, &native, &err);
     Py_END_ALLOW_THREADS
+    if (spec->release_options)
+        spec->release_options(&opt);
     dk_py_lap_constraints_release(&con);
     dk_py_doubles_release(&stiff);
     if (st != DK_OK) {

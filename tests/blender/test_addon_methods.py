@@ -316,7 +316,7 @@ def test_vertex_cloud():
 
 
 def test_geodesic_influence():
-    """Embedded deformation's Influence option reaches the solver: on a strip folded into a
+    """Embedded deformation's Influence option and cut groups reach the solver: on a strip folded into a
     hairpin (a "hand" arm lying 0.2 above a "leg" arm, joined through a fixed bend), lifting
     the hand's tip drags the leg below it in Euclidean distance and leaves it in place along
     the surface (the behaviour is tested in depth in tests/python/test_embedded.py)."""
@@ -361,6 +361,27 @@ def test_geodesic_influence():
         moved[distance] = np.abs(got[leg] - np.asarray(pts)[leg]).max()
     R.check("Euclidean influence drags the leg", moved["euclidean"] > 0.1, moved)
     R.check("geodesic influence leaves the leg", moved["geodesic"] < 1e-3, moved)
+    # the cut groups (Euclidean influence): a cut between the arms does what geodesics do
+    S.group(obj, "leg", np.where(arc < arm - 0.3)[0])
+    S.group(obj, "hand", np.where(arc > arm + np.pi * r + 0.3)[0])
+    d.options_embedded.distance = "euclidean"
+    d.options_embedded.cut_a = "leg"
+    e.location = (0.0, 0.0, 0.0)
+    try:
+        bpy.ops.deformkit.bind()
+        msg = ""
+    except RuntimeError as ex:
+        msg = str(ex)
+    R.check("one cut group alone is refused by name", "needs both" in msg and
+            "Cut Side B" in msg, msg)
+    d.options_embedded.cut_b = "hand"
+    bpy.ops.deformkit.bind()
+    R.check("binds with a cut", d.bound and not d.status_is_error, d.status)
+    e.location.z = 0.5
+    bpy.context.view_layer.update()
+    got = S.evaluated_positions(obj)
+    cut_moved = np.abs(got[leg] - np.asarray(pts)[leg]).max()
+    R.check("the cut leaves the leg", cut_moved < 1e-3, cut_moved)
 
 
 for t in (test_vertex_cloud, test_geodesic_influence, test_registry_drives_ui, test_methods, test_stiffness_map, test_soft_handles,

@@ -102,4 +102,89 @@ static void test_geodesic_influence(void)
     dk_mesh_free(points);
 }
 
-DK_TEST_MAIN(test_geodesic_influence)
+/* a cut between the upper and the lower cap of a sphere, in both distances: binds, solves,
+ * and no vertex of one side is influenced by a node that the other side's vertices use */
+static void test_cut(void)
+{
+    dk_mesh *m = sphere(0, 1);
+    CHECK(m != NULL);
+    if (!m)
+        return;
+    const dk_index n = m->n_vertices;
+    dk_index *a = malloc((size_t)n * sizeof *a), *b = malloc((size_t)n * sizeof *b);
+    unsigned char *side = calloc((size_t)n, 1);
+    double *x = malloc(3 * (size_t)n * sizeof *x);
+    if (!a || !b || !side || !x)
+        abort();
+    dk_index na = 0, nb = 0;
+    for (dk_index v = 0; v < n; v++) {
+        if (m->positions[3 * v + 2] > 0.2) {
+            a[na++] = v;
+            side[v] = 1;
+        } else if (m->positions[3 * v + 2] < -0.2) {
+            b[nb++] = v;
+            side[v] = 2;
+        }
+    }
+    dk_index handle = a[0], size = 1;
+    dk_constraint_desc d = {.n_handles = 1, .handle_sizes = &size, .handle_vertices = &handle};
+    for (int dist = 0; dist < 2; dist++) {
+        dk_embedded_options o;
+        dk_embedded_default_options(&o);
+        o.n_nodes = 60;
+        o.distance = dist ? DK_ED_DISTANCE_GEODESIC : DK_ED_DISTANCE_EUCLIDEAN;
+        o.cut_a = a;
+        o.n_cut_a = na;
+        o.cut_b = b;
+        o.n_cut_b = nb;
+        dk_embedded *ed = NULL;
+        dk_error e;
+        CHECK_MSG(dk_embedded_bind(m, &d, &o, &ed, &e) == DK_OK, "bind: %s", e.message);
+        if (!ed)
+            continue;
+        /* no edge joins a node nearest to side A with one nearest to side B */
+        const dk_index mm = dk_embedded_n_nodes(ed), ne = dk_embedded_n_edges(ed);
+        const double *g = dk_embedded_nodes(ed);
+        const dk_index *edges = dk_embedded_edges(ed);
+        unsigned char *ns = malloc((size_t)mm + 1);
+        if (!ns)
+            abort();
+        for (dk_index j = 0; j < mm; j++) {
+            double best = INFINITY;
+            for (dk_index v = 0; v < n; v++) {
+                const double *p = m->positions + 3 * v, *q = g + 3 * j;
+                const double dd = (p[0] - q[0]) * (p[0] - q[0]) + (p[1] - q[1]) * (p[1] - q[1]) +
+                                  (p[2] - q[2]) * (p[2] - q[2]);
+                if (dd < best) {
+                    best = dd;
+                    ns[j] = side[v];
+                }
+            }
+        }
+        int crossing = 0;
+        for (dk_index i = 0; i < ne; i++)
+            crossing += ns[edges[2 * i]] * ns[edges[2 * i + 1]] == 2;
+        CHECK_MSG(crossing == 0, "%d edges cross the cut (distance %d)", crossing, dist);
+        double t[3] = {m->positions[3 * handle], m->positions[3 * handle + 1],
+                       m->positions[3 * handle + 2] + 0.2};
+        dk_solve_info info;
+        CHECK(dk_embedded_solve(ed, &(dk_solve_request){.targets = t}, x, &info, &e) == DK_OK);
+        free(ns);
+        dk_embedded_free(ed);
+        /* the refusals: overlapping sides, one side only */
+        o.n_cut_b = nb + 1;
+        b[nb] = a[0];
+        CHECK(dk_embedded_bind(m, &d, &o, &ed, &e) == DK_ERR_INVALID_ARGUMENT);
+        CHECK(strstr(e.message, "both cut groups") != NULL);
+        o.n_cut_b = 0;
+        CHECK(dk_embedded_bind(m, &d, &o, &ed, &e) == DK_ERR_INVALID_ARGUMENT);
+        CHECK(ed == NULL);
+    }
+    free(a);
+    free(b);
+    free(side);
+    free(x);
+    dk_mesh_free(m);
+}
+
+DK_TEST_MAIN(test_geodesic_influence, test_cut)

@@ -303,3 +303,46 @@ def test_geodesic_influence_keeps_the_hand_off_the_leg():
                                handles=[hand_tip], distance="geodesic")
     with pytest.raises(ValueError, match="distance"):
         dk.EmbeddedDeformation(dk.Mesh(v, f), handles=[hand_tip], distance="manhattan")
+
+
+def test_cut_separates_the_hand_from_the_leg():
+    """Section 7's stroke, as two vertex groups: in Euclidean distance, a cut between the
+    hairpin's arms keeps the hand's nodes off the leg (as geodesic influence does) and leaves
+    no graph edge between the two sides; without it the leg follows."""
+    v, f, s = hairpin()
+    arm, r = 4.0, 0.1
+    leg_tip, hand_tip = np.where(s < 0.5)[0], np.where(s > s.max() - 0.25)[0]
+    bend = np.where(np.abs(s - (arm + 0.16)) < 0.6)[0]
+    leg, hand = np.where(s < arm - 0.3)[0], np.where(s > arm + np.pi * r + 0.3)[0]
+    mesh = dk.Mesh(v, f)
+    target = v[hand_tip] + [0, 0, 0.5]
+    plain = dk.EmbeddedDeformation(mesh, handles=[hand_tip], fixed=bend, n_nodes=120)
+    cut = dk.EmbeddedDeformation(mesh, handles=[hand_tip], fixed=bend, n_nodes=120,
+                                 cut=(leg, hand))
+    moved = {}
+    for name, ed in (("plain", plain), ("cut", cut)):
+        x = np.asarray(ed.solve(target, warm_start=False).positions)
+        assert np.abs(x[hand_tip, 2] - target[:, 2]).max() < 0.02 * 0.5
+        moved[name] = np.abs(x[leg_tip] - v[leg_tip]).max()
+    assert moved["plain"] > 0.1 and moved["cut"] < 1e-3 * 0.5
+    # no edge joins a node nearest to the leg group with one nearest to the hand group
+    g = np.asarray(cut.nodes)
+    near = np.argmin(np.linalg.norm(g[:, None] - v[None], axis=2), axis=1)
+    side = np.zeros(len(v), int)
+    side[leg], side[hand] = 1, 2
+    e = np.asarray(cut.edges)
+    a, b = side[near[e[:, 0]]], side[near[e[:, 1]]]
+    assert not np.any((a * b == 2))
+    # the cut reaches geodesic influence too, and bad cuts are refused by name
+    dk.EmbeddedDeformation(mesh, handles=[hand_tip], n_nodes=120, distance="geodesic",
+                           cut=(leg, hand))
+    with pytest.raises(ValueError, match="both cut groups"):
+        dk.EmbeddedDeformation(mesh, handles=[hand_tip], cut=(leg, leg[:5]))
+    with pytest.raises(ValueError, match="cut group B is empty"):
+        dk.EmbeddedDeformation(mesh, handles=[hand_tip], cut=(leg, []))
+    with pytest.raises(ValueError, match="pair"):
+        dk.EmbeddedDeformation(mesh, handles=[hand_tip], cut=leg)
+    with pytest.raises(IndexError, match="cut group B"):
+        dk.EmbeddedDeformation(mesh, handles=[hand_tip], cut=(leg, [len(v)]))
+    with pytest.raises(ValueError, match="cut leaves"):
+        dk.EmbeddedDeformation(mesh, handles=[hand_tip], n_nodes=8, cut=(leg, hand))
