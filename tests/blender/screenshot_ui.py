@@ -13,6 +13,9 @@ import sys
 HERE = os.path.dirname(os.path.abspath(__file__))
 OUT = os.path.join(HERE, "output")
 PNG = os.path.join(OUT, "modifiers_tab.png")
+# the second deformer (the registry's last method) made active, its options drawn: for the
+# embedded deformation, the Influence enum and the Cut Side vertex-group search fields
+PNG2 = os.path.join(OUT, "modifiers_tab_last_method.png")
 
 try:
     import bpy  # noqa: F401
@@ -26,7 +29,7 @@ def launch():
     if len(sys.argv) > 1:
         env["PYTHONPATH"] = sys.argv[1]
     os.makedirs(OUT, exist_ok=True)
-    for p in (PNG,):
+    for p in (PNG, PNG2):
         if os.path.exists(p):
             os.remove(p)
     cmd = ["xvfb-run", "-a", "-s", "-screen 0 1600x1000x24", "blender", "--factory-startup",
@@ -39,7 +42,7 @@ def launch():
            if "Traceback" in ln or "Error: Python" in ln or "Error" in ln and "rna_uiItem" in ln
            or ln.startswith(("AttributeError", "TypeError", "KeyError", "NameError", "ValueError",
                              "RuntimeError"))]
-    ok = r.returncode == 0 and os.path.exists(PNG) and not bad
+    ok = r.returncode == 0 and os.path.exists(PNG) and os.path.exists(PNG2) and not bad
     print(log[-3000:])
     for ln in bad:
         print("PYTHON ERROR IN CONSOLE:", ln)
@@ -95,6 +98,17 @@ def in_blender():
             with bpy.context.temp_override(window=win, screen=win.screen):
                 bpy.ops.screen.screenshot(filepath=PNG)
             R.check("screenshot saved", os.path.exists(PNG))
+            obj = bpy.context.view_layer.objects.active
+            obj.deformkit.active_index = 1
+            opts = obj.deformkit.deformers[1].options
+            for o in S.methods.get(obj.deformkit.deformers[1].method).options:
+                if o.type == "GROUP":
+                    setattr(opts, o.name, "fixed")
+            with bpy.context.temp_override(window=win, area=area, screen=win.screen):
+                bpy.ops.wm.redraw_timer(type="DRAW_WIN_SWAP", iterations=2)
+            with bpy.context.temp_override(window=win, screen=win.screen):
+                bpy.ops.screen.screenshot(filepath=PNG2)
+            R.check("second screenshot saved", os.path.exists(PNG2))
         except Exception:
             import traceback
             traceback.print_exc()
