@@ -53,6 +53,9 @@ struct dk_embedded {
     dk_embedded_options opt;
     dk_index n, m, k;
     double *g;                  /* m x 3 node positions                                     */
+    double *p;                  /* n x 3 the source's positions: the mesh's at bind, then
+                                   what dk_embedded_update_source gave                      */
+    dk_index *node_vertex;      /* m: the vertex each node sits on; NULL for surface samples */
     dk_index *nb;               /* n x k: each vertex's nodes                               */
     unsigned char *vside;       /* n: 0, 1 (cut group A) or 2 (B); NULL without a cut       */
     unsigned char *nside;       /* m: the side of each node's nearest vertex                */
@@ -308,6 +311,13 @@ static dk_status sample_nodes(dk_embedded *ed, dk_error *err)
     }
     for (dk_index i = 0; i < count; i++)
         memcpy(ed->g + 3 * i, cand + 3 * kept[i], 3 * sizeof(double));
+    if (from_vertices) { /* candidates are the vertices: remember which */
+        if (!(ed->node_vertex = malloc(((size_t)count + 1) * sizeof *ed->node_vertex))) {
+            st = oom(err, "nodes");
+            goto done;
+        }
+        memcpy(ed->node_vertex, kept, (size_t)count * sizeof *kept);
+    }
     ed->m = count;
 done:
     free(cand);
@@ -628,6 +638,8 @@ static dk_status weights(dk_embedded *ed, dk_error *err)
             memmove(ed->g + 3 * kept, ed->g + 3 * j, 3 * sizeof(double));
             if (ed->nside)
                 ed->nside[kept] = ed->nside[j];
+            if (ed->node_vertex)
+                ed->node_vertex[kept] = ed->node_vertex[j];
             kept++;
         }
     for (size_t q = 0; q < (size_t)n * (size_t)k; q++)
@@ -1064,7 +1076,7 @@ static double evaluate(const dk_embedded *ed, ed_system *s, const ed_system *sys
     /* positional terms (eq. 8): handles to their targets, held fixed vertices to rest */
     for (dk_index l = 0; l < sys->n_pos; l++) {
         const dk_index v = sys->pos_vertex[l];
-        const double *p = ed->mesh->positions + 3 * v;
+        const double *p = ed->p + 3 * v;
         const dk_index *nb = ed->nb + (size_t)v * k;
         const double *wv = ed->w + (size_t)v * k;
         const double *tg = sys->pos_target_row[l] >= 0 ? sys->targets + 3 * sys->pos_target_row[l]
@@ -1137,7 +1149,7 @@ static void apply(const dk_embedded *ed, const double *x, double *out)
 {
     const dk_index k = ed->k;
     for (dk_index v = 0; v < ed->n; v++) {
-        const double *p = ed->mesh->positions + 3 * v;
+        const double *p = ed->p + 3 * v;
         int moving = 0;
         for (dk_index q = 0; q < k; q++) {
             const dk_index j = ed->nb[(size_t)v * k + q];
@@ -1247,7 +1259,7 @@ dk_status dk_embedded_solve(dk_embedded *ed, const dk_solve_request *rq, double 
     if (st != DK_OK)
         return st;
     ed_system *s = &ed->sys;
-    st = dk_constraints_targets(s->con, ed->mesh->positions, rq->targets, (int)rq->target_kind,
+    st = dk_constraints_targets(s->con, ed->p, rq->targets, (int)rq->target_kind,
                                 s->targets, err);
     if (st != DK_OK)
         return dk_error_prefix(err, "EmbeddedDeformation solve");
@@ -1304,6 +1316,8 @@ void dk_embedded_free(dk_embedded *ed)
     free(ed->w);
     free(ed->vside);
     free(ed->nside);
+    free(ed->p);
+    free(ed->node_vertex);
     free(ed->edges);
     free(ed->adj_start);
     free(ed->adj);
@@ -1333,6 +1347,13 @@ dk_status dk_embedded_bind(const dk_mesh *mesh, const dk_constraint_desc *constr
     ed->k = ed->opt.k;
     ed->team = dk_team_create(); /* NULL (no thread available) is fine */
     dk_status st = check_options(&ed->opt, err);
+    if (st == DK_OK) { /* 0. the source's positions, the mesh's until updated */
+        ed->p = malloc((3 * (size_t)ed->n + 1) * sizeof *ed->p);
+        if (ed->p)
+            memcpy(ed->p, mesh->positions, 3 * (size_t)ed->n * sizeof *ed->p);
+        else
+            st = oom(err, "positions");
+    }
     if (st == DK_OK) /* 1. the nodes */
         st = sample_nodes(ed, err);
     if (st == DK_OK) /* 2. each vertex's nodes and weights (eq. 4) */
@@ -1374,6 +1395,26 @@ dk_status dk_embedded_rebind(dk_embedded *ed, const dk_constraint_desc *constrai
 }
 
 /* ------------------------------------------------------------------ normals, points --- */
+
+dk_status dk_embedded_update_source(dk_embedded *ed, const double *positions, dk_error *err)
+{
+    if (!ed || !positions)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EmbeddedDeformation update_source: object and positions must not "
+                            "be NULL");
+    if (!ed->node_vertex)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EmbeddedDeformation update_source: the graph's nodes are surface "
+                            "samples, which do not follow a moving mesh; bind with "
+                            "nodes=vertices (section 5: nodes on vertices ride along)");
+    dk_status st = dk_check_positions(positions, ed->n, err);
+    if (st != DK_OK)
+        return dk_error_prefix(err, "EmbeddedDeformation update_source");
+    memcpy(ed->p, positions, 3 * (size_t)ed->n * sizeof *ed->p);
+    for (dk_index j = 0; j < ed->m; j++)
+        memcpy(ed->g + 3 * (size_t)j, ed->p + 3 * (size_t)ed->node_vertex[j], 3 * sizeof *ed->g);
+    return DK_OK;
+}
 
 dk_status dk_embedded_deformed(const dk_embedded *ed, double *positions, dk_error *err)
 {
@@ -1420,8 +1461,8 @@ dk_status dk_embedded_normals(const dk_embedded *ed, const double *normals, doub
             return oom(err, "normals");
         for (dk_index f = 0; f < m->n_faces; f++) {
             const dk_index *t = m->faces + 3 * f;
-            const double *a = m->positions + 3 * t[0], *b = m->positions + 3 * t[1];
-            const double *c = m->positions + 3 * t[2];
+            const double *a = ed->p + 3 * t[0], *b = ed->p + 3 * t[1];
+            const double *c = ed->p + 3 * t[2];
             const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
             const double v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
             const double x[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
@@ -1528,7 +1569,7 @@ dk_status dk_embedded_energy(const dk_embedded *ed, const double *positions, dou
     for (dk_index l = 0; l < s->n_pos; l++) {
         const dk_index v = s->pos_vertex[l];
         const double *tg = s->pos_target_row[l] >= 0 ? s->targets + 3 * s->pos_target_row[l]
-                                                     : ed->mesh->positions + 3 * v;
+                                                     : ed->p + 3 * v;
         for (int d = 0; d < 3; d++) {
             const double r = positions[3 * v + d] - tg[d];
             F += ed->opt.w_con * r * r;

@@ -207,6 +207,38 @@ static PyObject *ed_deformed(PyObject *obj, PyObject *unused)
     return res;
 }
 
+PyDoc_STRVAR(update_source_doc,
+             "update_source(positions)\n\n"
+             "Section 5, an animated source: the mesh's positions on a new frame (n x 3).\n"
+             "The nodes (which must sit on vertices: nodes='vertices', or a point set) move\n"
+             "with their vertices; the graph, the weights and the constraints stay as bound,\n"
+             "and the node transformations stay as a warm start. Later solves, targets given\n"
+             "as transforms, held fixed vertices, deformed(), normals() and energy() take\n"
+             "these positions as the rest. The same handle offsets solved on every frame\n"
+             "carry one edit through an animation.");
+
+static PyObject *ed_update_source(PyObject *obj, PyObject *arg)
+{
+    dk_py_method *self = (dk_py_method *)obj;
+    dk_error err = {0};
+    dk_py_doubles in = {0};
+    if (dk_py_method_enter(self) < 0)
+        return NULL;
+    if (dk_py_read_doubles(arg, self->mesh->n_vertices, 3, "positions", &in) < 0) {
+        self->busy = 0;
+        return NULL;
+    }
+    dk_status st;
+    Py_BEGIN_ALLOW_THREADS
+    st = dk_embedded_update_source(self->native, in.data, &err);
+    Py_END_ALLOW_THREADS
+    self->busy = 0;
+    dk_py_doubles_release(&in);
+    if (st != DK_OK)
+        return dk_py_raise(&err, "EmbeddedDeformation.update_source");
+    Py_RETURN_NONE;
+}
+
 PyDoc_STRVAR(embed_doc,
              "embed(points) -> (nodes, weights, deformed)\n\n"
              "Any points in space (m x 3) in the graph: each point's k nearest nodes\n"
@@ -283,6 +315,7 @@ static PyMethodDef ed_methods[] = {
      normals_doc},
     {"embed", ed_embed, METH_O, embed_doc},
     {"deformed", ed_deformed, METH_NOARGS, deformed_doc},
+    {"update_source", ed_update_source, METH_O, update_source_doc},
     {NULL, NULL, 0, NULL},
 };
 

@@ -187,4 +187,58 @@ static void test_cut(void)
     dk_mesh_free(m);
 }
 
-DK_TEST_MAIN(test_geodesic_influence, test_cut)
+/* section 5: a translated source with translated targets gives the translated result;
+ * surface nodes refuse an update, and a refused update changes nothing */
+static void test_update_source(void)
+{
+    dk_mesh *m = sphere(0, 1);
+    CHECK(m != NULL);
+    if (!m)
+        return;
+    const dk_index n = m->n_vertices;
+    double *p = malloc(3 * (size_t)n * sizeof *p), *x = malloc(3 * (size_t)n * sizeof *x),
+           *y = malloc(3 * (size_t)n * sizeof *y);
+    if (!p || !x || !y)
+        abort();
+    dk_index handle = 0, size = 1;
+    dk_constraint_desc d = {.n_handles = 1, .handle_sizes = &size, .handle_vertices = &handle};
+    dk_embedded_options o;
+    dk_embedded_default_options(&o);
+    o.n_nodes = 60;
+    o.nodes = DK_ED_NODES_VERTICES;
+    dk_embedded *ed = NULL, *surf = NULL;
+    dk_error e;
+    CHECK(dk_embedded_bind(m, &d, &o, &ed, &e) == DK_OK);
+    o.nodes = DK_ED_NODES_SURFACE;
+    CHECK(dk_embedded_bind(m, &d, &o, &surf, &e) == DK_OK);
+    if (ed && surf) {
+        dk_solve_info info;
+        double t[3] = {m->positions[0] + 0.3, m->positions[1], m->positions[2]};
+        CHECK(dk_embedded_solve(ed, &(dk_solve_request){.targets = t}, x, &info, &e) == DK_OK);
+        for (size_t i = 0; i < 3 * (size_t)n; i++)
+            p[i] = m->positions[i] + (i % 3 == 2 ? 2.0 : 0.0);
+        CHECK(dk_embedded_update_source(ed, p, &e) == DK_OK);
+        t[2] += 2.0;
+        CHECK(dk_embedded_solve(ed, &(dk_solve_request){.targets = t}, y, &info, &e) == DK_OK);
+        double dev = 0.0;
+        for (size_t i = 0; i < 3 * (size_t)n; i++)
+            dev = fmax(dev, fabs(y[i] - x[i] - (i % 3 == 2 ? 2.0 : 0.0)));
+        CHECK_MSG(dev < 1e-8, "translated source: off by %g", dev);
+        CHECK(dk_embedded_update_source(surf, p, &e) == DK_ERR_INVALID_ARGUMENT);
+        p[4] = NAN;
+        CHECK(dk_embedded_update_source(ed, p, &e) != DK_OK);
+        CHECK(dk_embedded_deformed(ed, x, &e) == DK_OK);
+        dev = 0.0;
+        for (size_t i = 0; i < 3 * (size_t)n; i++)
+            dev = fmax(dev, fabs(x[i] - y[i]));
+        CHECK_MSG(dev == 0.0, "a refused update changed the result by %g", dev);
+    }
+    dk_embedded_free(ed);
+    dk_embedded_free(surf);
+    free(p);
+    free(x);
+    free(y);
+    dk_mesh_free(m);
+}
+
+DK_TEST_MAIN(test_geodesic_influence, test_cut, test_update_source)

@@ -346,3 +346,55 @@ def test_cut_separates_the_hand_from_the_leg():
         dk.EmbeddedDeformation(mesh, handles=[hand_tip], cut=(leg, [len(v)]))
     with pytest.raises(ValueError, match="cut leaves"):
         dk.EmbeddedDeformation(mesh, handles=[hand_tip], n_nodes=8, cut=(leg, hand))
+
+
+def test_update_source_follows_an_animated_mesh():
+    """Section 5: a graph on vertices rides along the source. After update_source(P), the
+    object solves what a fresh bind on P (same graph: same radius) solves; a translated source
+    with translated targets gives the translated result; going back to the rest gives the
+    first result again, bit for bit; surface-sampled nodes and bad positions are refused and
+    change nothing. (A rotated source is compared with a fresh bind, not with the rotated
+    first result: eq. 6 counts each off-diagonal entry of R^T R once, so E_rot, and a
+    non-rigid result, depend on the orientation in space.)"""
+    v, f, _ = bumpy_plane(30)
+    fixed = np.where(v[:, 0] <= 1e-9)[0]
+    handle = np.where(v[:, 0] >= 1 - 1e-9)[0]
+    # jittered, so that no two nodes tie for a vertex (a tie is broken by rounding, which
+    # differs between the two frames)
+    v = v + np.c_[np.random.default_rng(5).uniform(-0.004, 0.004, (len(v), 2)), np.zeros(len(v))]
+    opts = dict(handles=[handle], fixed=fixed, radius=0.12, nodes="vertices")
+    ed = dk.EmbeddedDeformation(dk.Mesh(v, f), **opts)
+    target = v[handle] + [0.0, 0.0, 0.3]
+    first = np.array(ed.solve(target, warm_start=False).positions)
+    c, s = np.cos(0.7), np.sin(0.7)
+    q = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]) @ np.array([[1, 0, 0], [0, c, s],
+                                                                 [0, -s, c]])
+    vr = v @ q.T + [0.3, -1.0, 2.0]
+    ed.update_source(vr)
+    assert np.abs(np.asarray(ed.nodes) - vr[np.argmin(
+        np.linalg.norm(vr[None] - np.asarray(ed.nodes)[:, None], axis=2), axis=1)]).max() == 0
+    tr = vr[handle] + (target - v[handle]) @ q.T
+    moved = np.array(ed.solve(tr, warm_start=False).positions)
+    fresh = dk.EmbeddedDeformation(dk.Mesh(vr, f), **opts)
+    assert len(fresh.nodes) == len(ed.nodes)
+    want = np.array(fresh.solve(tr, warm_start=False).positions)
+    assert np.abs(moved - want).max() < 1e-8
+    assert np.array_equal(moved[fixed], vr[fixed])                      # fixed ride along
+    assert np.abs(moved - (first @ q.T + [0.3, -1.0, 2.0])).max() > 1e-6  # eq. 6, see above
+    # a translated frame with the same offsets: the translated result
+    ed.update_source(v + [0, 0, 1.0])
+    r = np.array(ed.solve(target + [0, 0, 1.0], warm_start=False).positions)
+    assert np.abs(r - (first + [0, 0, 1.0])).max() < 1e-8
+    ed.update_source(v)
+    again = np.array(ed.solve(target, warm_start=False).positions)
+    assert np.array_equal(again, first)
+    with pytest.raises(ValueError, match="positions"):
+        ed.update_source(v[:-1])
+    bad = v.copy()
+    bad[5, 1] = np.nan
+    with pytest.raises(ValueError):
+        ed.update_source(bad)
+    assert np.array_equal(np.array(ed.solve(target, warm_start=False).positions), first)
+    surf = dk.EmbeddedDeformation(dk.Mesh(v, f), handles=[handle], n_nodes=80)
+    with pytest.raises(ValueError, match="nodes=vertices"):
+        surf.update_source(v)
