@@ -21,9 +21,9 @@ if "bpy" in locals():  # script reload
 import bpy  # noqa: E402
 
 from . import compat, methods, native, properties, geonodes, solver, handlers, pc2, bake  # noqa: E402
-from . import operators, ui  # noqa: E402
+from . import operators, overlay, ui  # noqa: E402
 
-_modules = (properties, operators, ui, handlers)
+_modules = (properties, operators, ui, handlers, overlay)
 
 
 def register():

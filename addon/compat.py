@@ -3,6 +3,8 @@ each behind one small function, so that the rest of the add-on reads the same ev
 
 - Node-group sockets: `NodeTree.inputs` / `outputs` until 3.6; `NodeTree.interface`
   (`new_socket`, `items_tree`) from 4.0, which removed the old collections.
+- Built-in shader names: `UNIFORM_COLOR` in current releases; older ones know it only as
+  `3D_UNIFORM_COLOR` (the prefixed names were deprecated, then removed in 4.0).
 
 Checked and needing nothing here (docs/addon.md, "Blender versions"): the add-on reads no
 F-curves (4.4's slotted actions, 5.0's removal of `Action.fcurves`), imports no OBJ through
@@ -32,3 +34,14 @@ def group_sockets(ng, in_out="INPUT"):
         return [it for it in ng.interface.items_tree
                 if getattr(it, "item_type", "SOCKET") == "SOCKET" and it.in_out == in_out]
     return list(ng.inputs if in_out == "INPUT" else ng.outputs)
+
+
+def uniform_color_shader():
+    """The built-in flat-colour shader for 3D lines and points (Show Graph)."""
+    import gpu
+    for name in ("UNIFORM_COLOR", "3D_UNIFORM_COLOR"):
+        try:
+            return gpu.shader.from_builtin(name)
+        except (ValueError, TypeError):
+            continue
+    raise RuntimeError("no built-in uniform-colour shader in this Blender")

@@ -66,6 +66,9 @@ class Method:
     iteration_cap: Optional[str] = None
     # False: the method also deforms meshes without faces (vertex clouds)
     needs_faces: bool = True
+    # True: the native object has `nodes`, `edges` and `transforms` (a deformation graph)
+    # and a BOOL option `show_graph` lets the viewport draw it (overlay.py)
+    graph: bool = False
 
 
 def _e(*ids):
@@ -175,6 +178,7 @@ METHODS.append(Method(
     iterative=True,
     iteration_cap="max_iterations",
     needs_faces=False,
+    graph=True,
     options=[
         Option("n_nodes", "INT", 200, "Nodes", "Graph nodes sampled on the surface",
                min=5, max=100000),
@@ -205,6 +209,9 @@ METHODS.append(Method(
                min=1, max=10000),
         Option("tolerance", "FLOAT", 1e-6, "Tolerance", "epsilon of the stopping tests",
                min=1e-15, max=1.0),
+        Option("show_graph", "BOOL", False, "Show Graph",
+               "Draw the deformation graph's nodes and edges in the viewport",
+               kw=None, bind_time=False),
     ],
 ))
 
@@ -230,6 +237,8 @@ def _check_registry():
                                                or not set(m.cut_options) <= groups)):
             raise ValueError("%s: a 'cut' map needs cut_options naming two GROUP options"
                              % m.id)
+        if m.graph and "show_graph" not in {o.name for o in m.options if o.type == "BOOL"}:
+            raise ValueError("%s: a method that draws a graph needs a BOOL show_graph" % m.id)
         if m.iterative and m.iteration_cap is None:
             raise ValueError("%s: an iterative method needs an iteration_cap option" % m.id)
 

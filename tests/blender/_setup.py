@@ -192,7 +192,7 @@ if FROM_ZIP:
 else:
     import addon  # noqa: E402
     addon.register()
-from addon import solver, geonodes, native, handlers, methods  # noqa: E402,F401
+from addon import solver, geonodes, native, handlers, methods, overlay  # noqa: E402,F401
 
 dk = native.load()
 

@@ -16,6 +16,9 @@ PNG = os.path.join(OUT, "modifiers_tab.png")
 # the second deformer (the registry's last method) made active, its options drawn: for the
 # embedded deformation, the Influence enum and the Cut Side vertex-group search fields
 PNG2 = os.path.join(OUT, "modifiers_tab_last_method.png")
+# a 3D viewport with a bound embedded deformation and Show Graph on (overlay.py), in a second
+# Blender run (DEFORMKIT_SHOT=graph): the graph's nodes and edges drawn over the mesh
+PNG3 = os.path.join(OUT, "viewport_show_graph.png")
 
 try:
     import bpy  # noqa: F401
@@ -29,20 +32,23 @@ def launch():
     if len(sys.argv) > 1:
         env["PYTHONPATH"] = sys.argv[1]
     os.makedirs(OUT, exist_ok=True)
-    for p in (PNG, PNG2):
+    for p in (PNG, PNG2, PNG3):
         if os.path.exists(p):
             os.remove(p)
     cmd = ["xvfb-run", "-a", "-s", "-screen 0 1600x1000x24", "blender", "--factory-startup",
            "--python", os.path.abspath(__file__)]
     r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
-    log = r.stdout + r.stderr
+    r2 = subprocess.run(cmd, env=dict(env, DEFORMKIT_SHOT="graph"), capture_output=True,
+                        text=True, timeout=300)
+    log = r.stdout + r.stderr + "\n--- Show Graph run ---\n" + r2.stdout + r2.stderr
     with open(os.path.join(OUT, "screenshot_ui.log"), "w") as f:
         f.write(log)
     bad = [ln for ln in log.splitlines()
            if "Traceback" in ln or "Error: Python" in ln or "Error" in ln and "rna_uiItem" in ln
            or ln.startswith(("AttributeError", "TypeError", "KeyError", "NameError", "ValueError",
                              "RuntimeError"))]
-    ok = r.returncode == 0 and os.path.exists(PNG) and os.path.exists(PNG2) and not bad
+    ok = (r.returncode == 0 and r2.returncode == 0 and not bad and
+          all(os.path.exists(p) for p in (PNG, PNG2, PNG3)))
     print(log[-3000:])
     for ln in bad:
         print("PYTHON ERROR IN CONSOLE:", ln)
@@ -54,6 +60,7 @@ def in_blender():
     sys.path.insert(0, HERE)
     import _setup as S
     import bpy
+    from mathutils import Euler
     R = S.Results("screenshot_ui")
     MID = next((m.id for m in S.methods.METHODS if S.native.has_class(m.native_class)), "ARAP")
 
@@ -117,14 +124,54 @@ def in_blender():
         sys.stdout.flush()
         os._exit(1 if R.failed or not R.passed else 0)
 
-    def first():
+    def setup_graph():
+        S.reset_scene()
+        with bpy.context.temp_override(**S.ui_context()):
+            obj, d, e, _, _ = S.grid_setup("EMBEDDED")
+            d.options_embedded.n_nodes = 40
+            bpy.ops.deformkit.bind()
+            e.location.z += 0.5
+            d.options_embedded.show_graph = True
+            bpy.context.view_layer.update()
+        win = bpy.context.window_manager.windows[0]
+        area = max(win.screen.areas, key=lambda a: a.width * a.height)
+        area.type = "VIEW_3D"
+        r3d = area.spaces.active.region_3d
+        r3d.view_location = obj.location
+        r3d.view_distance = 4.0
+        r3d.view_rotation = Euler((1.0, 0.0, 0.6)).to_quaternion()
+        R.check("embedded deformation bound", d.bound and not d.status_is_error, d.status)
+
+    def shoot_graph():
         try:
-            setup()
+            win = bpy.context.window_manager.windows[0]
+            area = max(win.screen.areas, key=lambda a: a.width * a.height)
+            before = S.overlay._state["draws"]
+            with bpy.context.temp_override(window=win, area=area, screen=win.screen):
+                bpy.ops.wm.redraw_timer(type="DRAW_WIN_SWAP", iterations=2)
+            with bpy.context.temp_override(window=win, screen=win.screen):
+                bpy.ops.screen.screenshot(filepath=PNG3)
+            R.check("Show Graph drew the graph", S.overlay._state["draws"] > before and
+                    S.overlay._state["error"] is None, S.overlay._state)
+            R.check("viewport screenshot saved", os.path.exists(PNG3))
         except Exception:
             import traceback
             traceback.print_exc()
             R.failed += 1
-        bpy.app.timers.register(shoot, first_interval=1.5)
+        print("%s: %d passed, %d failed" % (R.name, R.passed, R.failed))
+        sys.stdout.flush()
+        os._exit(1 if R.failed or not R.passed else 0)
+
+    graph_run = os.environ.get("DEFORMKIT_SHOT") == "graph"
+
+    def first():
+        try:
+            setup_graph() if graph_run else setup()
+        except Exception:
+            import traceback
+            traceback.print_exc()
+            R.failed += 1
+        bpy.app.timers.register(shoot_graph if graph_run else shoot, first_interval=1.5)
         return None
 
     bpy.app.timers.register(first, first_interval=1.0)

@@ -384,7 +384,45 @@ def test_geodesic_influence():
     R.check("the cut leaves the leg", cut_moved < 1e-3, cut_moved)
 
 
-for t in (test_vertex_cloud, test_geodesic_influence, test_registry_drives_ui, test_methods, test_stiffness_map, test_soft_handles,
+def test_show_graph():
+    """Show Graph: the overlay's draw handler is registered; a bound deformer with the
+    toggle on gives its nodes where eq. 1 takes them (g + factor t, in world space) and its
+    edges; toggling it neither rebinds nor changes the mesh; off, or unbound, draws nothing."""
+    R.check("the viewport draw handler is registered", S.overlay._state["handle"] is not None)
+    S.reset_scene()
+    obj, d, e, fixed, handle = S.grid_setup("EMBEDDED")
+    obj.location = (0.5, -2.0, 1.0)
+    bpy.context.view_layer.update()
+    R.check("unbound: nothing to draw", S.overlay.graph_lines(obj, d) is None)
+    bpy.ops.deformkit.bind()
+    e.location.z += 0.3
+    bpy.context.view_layer.update()
+    before = S.evaluated_positions(obj)
+    native = S.solver._cache[(obj.name, d.uid)].native
+    R.check("toggle off: nothing to draw", S.overlay.graph_lines(obj, d) is None)
+    d.options_embedded.show_graph = True
+    bpy.context.view_layer.update()
+    r = S.overlay.graph_lines(obj, d)
+    R.check("toggle on: the graph", r is not None)
+    if r is not None:
+        pts, edges = r
+        g = np.asarray(native.nodes)
+        t = np.asarray(native.transforms)[:, 9:12]
+        fac = S.geonodes.factor(obj, d)
+        mw = np.array(obj.matrix_world)
+        want = (g + fac * t) @ mw[:3, :3].T + mw[:3, 3]
+        R.check("nodes at g + factor t in world space", pts.shape == g.shape and
+                np.abs(pts - want).max() < 1e-12, np.abs(pts - want).max())
+        R.check("the graph's edges", np.array_equal(edges, np.asarray(native.edges)) and
+                len(edges) > 0)
+        R.check("the nodes moved with the drag", np.abs(t).max() > 1e-3)
+    R.check("toggling does not rebind", S.solver._cache[(obj.name, d.uid)].native is native)
+    R.check("toggling does not change the mesh",
+            np.abs(S.evaluated_positions(obj) - before).max() < 1e-7)
+    d.options_embedded.show_graph = False
+
+
+for t in (test_vertex_cloud, test_geodesic_influence, test_show_graph, test_registry_drives_ui, test_methods, test_stiffness_map, test_soft_handles,
           test_bone_target, test_auto_rebind_on_group_change, test_skip_when_unchanged,
           test_bind_pose_of_transformed_object):
     R.run(t)

@@ -1,0 +1,83 @@
+"""Show Graph: a bound deformer's graph drawn in the 3D viewport, as Blender draws a lattice
+cage (embedded deformation's nodes and edges; a method opts in with `Method.graph`).
+
+Each node is drawn where eq. 1 takes it, g_j + factor t_j (at the deformer's current Factor,
+so the graph sits on the mesh as shown), in world space, on top of the mesh. The drawing
+reads the solver's cached native object only; it never binds or solves, and a deformer
+that is not bound draws nothing. A failure while drawing is printed once, never raised
+(a draw callback that raises would repeat on every redraw).
+"""
+import bpy
+import numpy as np
+
+from . import compat, geonodes, methods, solver
+
+NODE_COLOR = (1.0, 0.55, 0.1, 1.0)
+EDGE_COLOR = (1.0, 0.8, 0.3, 0.8)
+_state = {"handle": None, "draws": 0, "error": None}
+
+
+def graph_lines(obj, d):
+    """(points, edges) of a bound deformer whose method draws a graph and whose Show Graph
+    is on: points (n_nodes x 3, world space) and edges (n_edges x 2 int32); else None."""
+    m = methods.get(d.method)
+    if not m.graph or not getattr(d.options, "show_graph", False) or not d.bound:
+        return None
+    e = solver._cache.get((obj.name, d.uid))
+    if e is None or e.native is None:
+        return None
+    g = np.asarray(e.native.nodes, dtype=np.float64)
+    t = np.asarray(e.native.transforms, dtype=np.float64)[:, 9:12]
+    local = g + geonodes.factor(obj, d) * t
+    mw = np.array(obj.matrix_world, dtype=np.float64)
+    return local @ mw[:3, :3].T + mw[:3, 3], np.asarray(e.native.edges, dtype=np.int32)
+
+
+def _draw():
+    try:
+        import gpu
+        from gpu_extras.batch import batch_for_shader
+        lines = []
+        for obj in bpy.context.visible_objects:
+            if obj.type != "MESH" or not hasattr(obj, "deformkit"):
+                continue
+            for d in obj.deformkit.deformers:
+                r = graph_lines(obj, d)
+                if r is not None and len(r[0]):
+                    lines.append(r)
+        if not lines:
+            return
+        shader = compat.uniform_color_shader()
+        gpu.state.depth_test_set("NONE")
+        gpu.state.blend_set("ALPHA")
+        for pts, edges in lines:
+            pos = pts.astype(np.float32).tolist()
+            shader.bind()
+            if len(edges):
+                gpu.state.line_width_set(1.5)
+                shader.uniform_float("color", EDGE_COLOR)
+                batch_for_shader(shader, "LINES", {"pos": pos},
+                                 indices=edges.tolist()).draw(shader)
+            gpu.state.point_size_set(7.0)
+            shader.uniform_float("color", NODE_COLOR)
+            batch_for_shader(shader, "POINTS", {"pos": pos}).draw(shader)
+        gpu.state.point_size_set(1.0)
+        gpu.state.line_width_set(1.0)
+        gpu.state.blend_set("NONE")
+        _state["draws"] += 1
+    except Exception as ex:  # noqa: BLE001 (never raise from a draw callback)
+        if _state["error"] is None:
+            _state["error"] = "%s: %s" % (type(ex).__name__, ex)
+            print("DeformKit: Show Graph could not draw:", _state["error"])
+
+
+def register():
+    if _state["handle"] is None:
+        _state["handle"] = bpy.types.SpaceView3D.draw_handler_add(_draw, (), "WINDOW",
+                                                                  "POST_VIEW")
+
+
+def unregister():
+    if _state["handle"] is not None:
+        bpy.types.SpaceView3D.draw_handler_remove(_state["handle"], "WINDOW")
+        _state["handle"] = None
