@@ -94,16 +94,25 @@ def in_blender():
             area.type = "PROPERTIES"
             R.check("deformer bound", d.bound and not d.status_is_error, d.status)
 
+    def window_shot(win, area, path):
+        """Redraws, then saves the whole window (screen.screenshot_area gives a 1x1 image
+        under Xvfb; the window shot works)."""
+        with bpy.context.temp_override(window=win, area=area, screen=win.screen):
+            bpy.ops.wm.redraw_timer(type="DRAW_WIN_SWAP", iterations=2)
+        with bpy.context.temp_override(window=win, screen=win.screen):
+            bpy.ops.screen.screenshot(filepath=path)
+
+    def finish():
+        print("%s: %d passed, %d failed" % (R.name, R.passed, R.failed))
+        sys.stdout.flush()
+        os._exit(1 if R.failed or not R.passed else 0)
+
     def shoot():
         try:
             win = bpy.context.window_manager.windows[0]
             area = max(win.screen.areas, key=lambda a: a.width * a.height)
             area.spaces.active.context = "MODIFIER"
-            with bpy.context.temp_override(window=win, area=area, screen=win.screen):
-                bpy.ops.wm.redraw_timer(type="DRAW_WIN_SWAP", iterations=2)
-            # (screen.screenshot_area gives a 1x1 image under Xvfb; the window shot works)
-            with bpy.context.temp_override(window=win, screen=win.screen):
-                bpy.ops.screen.screenshot(filepath=PNG)
+            window_shot(win, area, PNG)
             R.check("screenshot saved", os.path.exists(PNG))
             obj = bpy.context.view_layer.objects.active
             obj.deformkit.active_index = 1
@@ -111,18 +120,13 @@ def in_blender():
             for o in S.methods.get(obj.deformkit.deformers[1].method).options:
                 if o.type == "GROUP":
                     setattr(opts, o.name, "fixed")
-            with bpy.context.temp_override(window=win, area=area, screen=win.screen):
-                bpy.ops.wm.redraw_timer(type="DRAW_WIN_SWAP", iterations=2)
-            with bpy.context.temp_override(window=win, screen=win.screen):
-                bpy.ops.screen.screenshot(filepath=PNG2)
+            window_shot(win, area, PNG2)
             R.check("second screenshot saved", os.path.exists(PNG2))
         except Exception:
             import traceback
             traceback.print_exc()
             R.failed += 1
-        print("%s: %d passed, %d failed" % (R.name, R.passed, R.failed))
-        sys.stdout.flush()
-        os._exit(1 if R.failed or not R.passed else 0)
+        finish()
 
     def setup_graph():
         S.reset_scene()
@@ -147,10 +151,7 @@ def in_blender():
             win = bpy.context.window_manager.windows[0]
             area = max(win.screen.areas, key=lambda a: a.width * a.height)
             before = S.overlay._state["draws"]
-            with bpy.context.temp_override(window=win, area=area, screen=win.screen):
-                bpy.ops.wm.redraw_timer(type="DRAW_WIN_SWAP", iterations=2)
-            with bpy.context.temp_override(window=win, screen=win.screen):
-                bpy.ops.screen.screenshot(filepath=PNG3)
+            window_shot(win, area, PNG3)
             R.check("Show Graph drew the graph", S.overlay._state["draws"] > before and
                     S.overlay._state["error"] is None, S.overlay._state)
             R.check("viewport screenshot saved", os.path.exists(PNG3))
@@ -158,9 +159,7 @@ def in_blender():
             import traceback
             traceback.print_exc()
             R.failed += 1
-        print("%s: %d passed, %d failed" % (R.name, R.passed, R.failed))
-        sys.stdout.flush()
-        os._exit(1 if R.failed or not R.passed else 0)
+        finish()
 
     graph_run = os.environ.get("DEFORMKIT_SHOT") == "graph"
 
