@@ -125,6 +125,49 @@ typedef struct dk_method_ops {
  *  table here (methods.c). */
 const dk_method_ops *const *dk_methods(void);
 
+/** Defines `const dk_method_ops VAR` for a method whose public functions follow the
+ *  contract's names and argument order: PREFIX_bind(mesh, constraints, const OPTS *, TYPE **,
+ *  err), PREFIX_rebind, PREFIX_solve, PREFIX_energy, PREFIX_stats and PREFIX_free, where TYPE
+ *  is the method's object and OPTS its options struct. The generated adapters only convert
+ *  `void *` to those types, so the table cannot drift from the typed functions. Use it once,
+ *  at file scope, after the functions are declared; NAME and FLAGS as in dk_method_ops. */
+#define DK_METHOD_OPS(VAR, NAME, FLAGS, PREFIX, TYPE, OPTS)                                   \
+    static dk_status VAR##_bind(const dk_mesh *mesh, const dk_constraint_desc *c,              \
+                                const void *options, void **out, dk_error *err)                \
+    {                                                                                         \
+        return PREFIX##_bind(mesh, c, (const OPTS *)options, (TYPE **)out, err);               \
+    }                                                                                         \
+    static dk_status VAR##_rebind(void *self, const dk_constraint_desc *c, dk_error *err)      \
+    {                                                                                         \
+        return PREFIX##_rebind((TYPE *)self, c, err);                                          \
+    }                                                                                         \
+    static dk_status VAR##_solve(void *self, const dk_solve_request *rq, double *positions,   \
+                                 dk_solve_info *info, dk_error *err)                          \
+    {                                                                                         \
+        return PREFIX##_solve((TYPE *)self, rq, positions, info, err);                         \
+    }                                                                                         \
+    static dk_status VAR##_energy(const void *self, const double *positions, double *energy,  \
+                                  dk_error *err)                                              \
+    {                                                                                         \
+        return PREFIX##_energy((const TYPE *)self, positions, energy, err);                    \
+    }                                                                                         \
+    static void VAR##_stats(const void *self, dk_method_stats *stats)                         \
+    {                                                                                         \
+        PREFIX##_stats((const TYPE *)self, stats);                                             \
+    }                                                                                         \
+    static void VAR##_free(void *self)                                                        \
+    {                                                                                         \
+        PREFIX##_free((TYPE *)self);                                                           \
+    }                                                                                         \
+    const dk_method_ops VAR = {.name = NAME,                                                  \
+                               .flags = FLAGS,                                                \
+                               .bind = VAR##_bind,                                            \
+                               .rebind = VAR##_rebind,                                        \
+                               .solve = VAR##_solve,                                          \
+                               .energy = VAR##_energy,                                        \
+                               .stats = VAR##_stats,                                          \
+                               .free = VAR##_free}
+
 /** The registered method called `name`, or NULL. */
 const dk_method_ops *dk_method_find(const char *name);
 

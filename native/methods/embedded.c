@@ -1631,49 +1631,9 @@ const dk_index *dk_embedded_edges(const dk_embedded *ed)
 
 /* ---------------------------------------------------------------- the method contract --- */
 
-static dk_status ops_bind(const dk_mesh *mesh, const dk_constraint_desc *c,
-                          const void *options, void **out, dk_error *err)
-{
-    return dk_embedded_bind(mesh, c, (const dk_embedded_options *)options,
-                            (dk_embedded **)out, err);
-}
-
-static dk_status ops_rebind(void *self, const dk_constraint_desc *c, dk_error *err)
-{
-    return dk_embedded_rebind((dk_embedded *)self, c, err);
-}
-
-static dk_status ops_solve(void *self, const dk_solve_request *rq, double *positions,
-                           dk_solve_info *info, dk_error *err)
-{
-    return dk_embedded_solve((dk_embedded *)self, rq, positions, info, err);
-}
-
-static dk_status ops_energy(const void *self, const double *positions, double *energy,
-                            dk_error *err)
-{
-    return dk_embedded_energy((const dk_embedded *)self, positions, energy, err);
-}
-
-static void ops_stats(const void *self, dk_method_stats *stats)
-{
-    dk_embedded_stats((const dk_embedded *)self, stats);
-}
-
-static void ops_free(void *self)
-{
-    dk_embedded_free((dk_embedded *)self);
-}
-
-const dk_method_ops dk_embedded_ops = {
-    .name = "EmbeddedDeformation",
-    .flags = DK_METHOD_ITERATIVE | DK_METHOD_TRANSFORMS_AS_POSITIONS |
-             DK_METHOD_TRANSLATION_INVARIANT | DK_METHOD_RIGID_INVARIANT |
-             DK_METHOD_PENALTY_HANDLES,
-    .bind = ops_bind,
-    .rebind = ops_rebind,
-    .solve = ops_solve,
-    .energy = ops_energy,
-    .stats = ops_stats,
-    .free = ops_free,
-};
+/* the contract's table (dk_method.h): the adapters cast to this method's types */
+DK_METHOD_OPS(dk_embedded_ops, "EmbeddedDeformation",
+              DK_METHOD_ITERATIVE | DK_METHOD_TRANSFORMS_AS_POSITIONS |
+              DK_METHOD_TRANSLATION_INVARIANT | DK_METHOD_RIGID_INVARIANT |
+              DK_METHOD_PENALTY_HANDLES,
+              dk_embedded, dk_embedded, dk_embedded_options);

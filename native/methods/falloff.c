@@ -520,47 +520,7 @@ void dk_falloff_free(dk_falloff *f)
 
 /* ---------------------------------------------------------------- the method contract --- */
 
-static dk_status ops_bind(const dk_mesh *mesh, const dk_constraint_desc *c,
-                          const void *options, void **out, dk_error *err)
-{
-    return dk_falloff_bind(mesh, c, (const dk_falloff_options *)options, (dk_falloff **)out,
-                           err);
-}
-
-static dk_status ops_rebind(void *self, const dk_constraint_desc *c, dk_error *err)
-{
-    return dk_falloff_rebind((dk_falloff *)self, c, err);
-}
-
-static dk_status ops_solve(void *self, const dk_solve_request *rq, double *positions,
-                           dk_solve_info *info, dk_error *err)
-{
-    return dk_falloff_solve((dk_falloff *)self, rq, positions, info, err);
-}
-
-static dk_status ops_energy(const void *self, const double *positions, double *energy,
-                            dk_error *err)
-{
-    return dk_falloff_energy((const dk_falloff *)self, positions, energy, err);
-}
-
-static void ops_stats(const void *self, dk_method_stats *stats)
-{
-    dk_falloff_stats((const dk_falloff *)self, stats);
-}
-
-static void ops_free(void *self)
-{
-    dk_falloff_free((dk_falloff *)self);
-}
-
-const dk_method_ops dk_falloff_ops = {
-    .name = "Falloff",
-    .flags = 0,
-    .bind = ops_bind,
-    .rebind = ops_rebind,
-    .solve = ops_solve,
-    .energy = ops_energy,
-    .stats = ops_stats,
-    .free = ops_free,
-};
+/* the contract's table (dk_method.h): the adapters cast to this method's types */
+DK_METHOD_OPS(dk_falloff_ops, "Falloff",
+              0,
+              dk_falloff, dk_falloff, dk_falloff_options);

@@ -1354,47 +1354,7 @@ void dk_laplacian_edit_free(dk_laplacian_edit *le)
 
 /* ---------------------------------------------------------------- the method contract --- */
 
-static dk_status ops_bind(const dk_mesh *mesh, const dk_constraint_desc *c,
-                          const void *options, void **out, dk_error *err)
-{
-    return dk_laplacian_edit_bind(mesh, c, (const dk_laplacian_edit_options *)options,
-                                  (dk_laplacian_edit **)out, err);
-}
-
-static dk_status ops_rebind(void *self, const dk_constraint_desc *c, dk_error *err)
-{
-    return dk_laplacian_edit_rebind((dk_laplacian_edit *)self, c, err);
-}
-
-static dk_status ops_solve(void *self, const dk_solve_request *rq, double *positions,
-                           dk_solve_info *info, dk_error *err)
-{
-    return dk_laplacian_edit_solve((dk_laplacian_edit *)self, rq, positions, info, err);
-}
-
-static dk_status ops_energy(const void *self, const double *positions, double *energy,
-                            dk_error *err)
-{
-    return dk_laplacian_edit_energy((const dk_laplacian_edit *)self, positions, energy, err);
-}
-
-static void ops_stats(const void *self, dk_method_stats *stats)
-{
-    dk_laplacian_edit_stats((const dk_laplacian_edit *)self, stats);
-}
-
-static void ops_free(void *self)
-{
-    dk_laplacian_edit_free((dk_laplacian_edit *)self);
-}
-
-const dk_method_ops dk_laplacian_edit_ops = {
-    .name = "LaplacianEdit",
-    .flags = DK_METHOD_TRANSFORMS_AS_POSITIONS | DK_METHOD_TRANSLATION_INVARIANT,
-    .bind = ops_bind,
-    .rebind = ops_rebind,
-    .solve = ops_solve,
-    .energy = ops_energy,
-    .stats = ops_stats,
-    .free = ops_free,
-};
+/* the contract's table (dk_method.h): the adapters cast to this method's types */
+DK_METHOD_OPS(dk_laplacian_edit_ops, "LaplacianEdit",
+              DK_METHOD_TRANSFORMS_AS_POSITIONS | DK_METHOD_TRANSLATION_INVARIANT,
+              dk_laplacian_edit, dk_laplacian_edit, dk_laplacian_edit_options);

@@ -275,48 +275,9 @@ void dk_arap_stats(const dk_arap *ar, dk_method_stats *stats)
 
 /* ---------------------------------------------------------------- the method contract --- */
 
-static dk_status ops_bind(const dk_mesh *mesh, const dk_constraint_desc *c,
-                          const void *options, void **out, dk_error *err)
-{
-    return dk_arap_bind(mesh, c, (const dk_arap_options *)options, (dk_arap **)out, err);
-}
-
-static dk_status ops_rebind(void *self, const dk_constraint_desc *c, dk_error *err)
-{
-    return dk_arap_rebind((dk_arap *)self, c, err);
-}
-
-static dk_status ops_solve(void *self, const dk_solve_request *rq, double *positions,
-                           dk_solve_info *info, dk_error *err)
-{
-    return dk_arap_solve((dk_arap *)self, rq, positions, info, err);
-}
-
-static dk_status ops_energy(const void *self, const double *positions, double *energy,
-                            dk_error *err)
-{
-    return dk_arap_energy((const dk_arap *)self, positions, energy, err);
-}
-
-static void ops_stats(const void *self, dk_method_stats *stats)
-{
-    dk_arap_stats((const dk_arap *)self, stats);
-}
-
-static void ops_free(void *self)
-{
-    dk_arap_free((dk_arap *)self);
-}
-
-const dk_method_ops dk_arap_ops = {
-    .name = "ARAP",
-    .flags = DK_METHOD_ITERATIVE | DK_METHOD_TRANSFORMS_AS_POSITIONS |
-             DK_METHOD_TRANSLATION_INVARIANT | DK_METHOD_RIGID_INVARIANT,
-    .bind = ops_bind,
-    .rebind = ops_rebind,
-    .solve = ops_solve,
-    .energy = ops_energy,
-    .stats = ops_stats,
-    .free = ops_free,
-};
+/* the contract's table (dk_method.h): the adapters cast to this method's types */
+DK_METHOD_OPS(dk_arap_ops, "ARAP",
+              DK_METHOD_ITERATIVE | DK_METHOD_TRANSFORMS_AS_POSITIONS |
+              DK_METHOD_TRANSLATION_INVARIANT | DK_METHOD_RIGID_INVARIANT,
+              dk_arap, dk_arap, dk_arap_options);
 
