@@ -150,14 +150,15 @@ int dk_embedded_node_is_fixed(const dk_embedded *ed, dk_index node);
 dk_index dk_embedded_n_edges(const dk_embedded *ed);
 const dk_index *dk_embedded_edges(const dk_embedded *ed);
 
-/** Section 5, an animated source: the source's new positions (n_vertices x 3, finite), for
- *  a graph whose nodes sit on vertices (DK_ED_NODES_VERTICES, or a point set). The nodes
- *  move with their vertices; the graph's structure, the weights, the constraints and J^T J's
- *  pattern stay as bound (the paper: "the graph structure and weighting remains fixed
- *  throughout the animation"), and the node transformations stay as a warm start. From then
- *  on solve, deformed, normals (NULL: from these positions), energy, transform targets and
- *  held fixed vertices use these positions as the rest. Refused for surface-sampled nodes,
- *  which have no vertex to follow; on failure nothing changes. Allocation-free. */
+/** Section 5, an animated source: the source's new positions (n_vertices x 3, finite).
+ *  The nodes move with the source: a node on a vertex (DK_ED_NODES_VERTICES, or a point
+ *  set) with its vertex, as in the paper; a surface sample keeps its triangle and its
+ *  barycentric coordinates there (our generalisation, so that the paper's uniform graph
+ *  follows too). The graph's structure, the weights, the constraints and J^T J's pattern
+ *  stay as bound (the paper: "the graph structure and weighting remains fixed throughout the
+ *  animation"), and the node transformations stay as a warm start. From then on solve,
+ *  deformed, normals (NULL: from these positions), energy, transform targets and held fixed
+ *  vertices use these positions as the rest. On failure nothing changes. Allocation-free. */
 dk_status dk_embedded_update_source(dk_embedded *ed, const double *positions, dk_error *err);
 
 /** The vertices (n_vertices x 3) under the current node transformations (eq. 2): what the

@@ -56,6 +56,8 @@ struct dk_embedded {
     double *p;                  /* n x 3 the source's positions: the mesh's at bind, then
                                    what dk_embedded_update_source gave                      */
     dk_index *node_vertex;      /* m: the vertex each node sits on; NULL for surface samples */
+    dk_index *node_face;        /* m: surface samples: the triangle each node lies on       */
+    double *node_bary;          /* m x 2: and its coordinates (s, t): a + s(b - a) + t(c - a)  */
     dk_index *nb;               /* n x k: each vertex's nodes                               */
     unsigned char *vside;       /* n: 0, 1 (cut group A) or 2 (B); NULL without a cut       */
     unsigned char *nside;       /* m: the side of each node's nearest vertex                */
@@ -138,9 +140,10 @@ static double next_unit(uint64_t *s)
     return (double)(next_u64(s) >> 11) * (1.0 / 9007199254740992.0);
 }
 
-/* Dense candidate points: `count` area-weighted uniform samples of the triangles. */
+/* Dense candidate points: `count` area-weighted uniform samples of the triangles, with each
+ * one's triangle (`face`, count) and coordinates (`bary`, count x 2) in it. */
 static dk_status surface_samples(const dk_mesh *m, dk_index count, uint64_t *rng, double *out,
-                                 dk_error *err)
+                                 dk_index *face, double *bary, dk_error *err)
 {
     double *cdf = malloc(((size_t)m->n_faces + 1) * sizeof *cdf);
     if (!cdf)
@@ -182,6 +185,9 @@ static dk_status surface_samples(const dk_mesh *m, dk_index count, uint64_t *rng
         const double *c = m->positions + 3 * m->faces[3 * lo + 2];
         for (int d = 0; d < 3; d++)
             out[3 * i + d] = a[d] + s * (b[d] - a[d]) + t * (c[d] - a[d]);
+        face[i] = lo;
+        bary[2 * i] = s;
+        bary[2 * i + 1] = t;
     }
     free(cdf);
     return DK_OK;
@@ -258,14 +264,16 @@ static dk_status sample_nodes(dk_embedded *ed, dk_error *err)
     double *cand = malloc(3 * ((size_t)nc + 1) * sizeof *cand);
     dk_index *order = malloc(((size_t)nc + 1) * sizeof *order);
     dk_index *kept = malloc(((size_t)nc + 1) * sizeof *kept);
+    dk_index *cface = from_vertices ? NULL : malloc(((size_t)nc + 1) * sizeof *cface);
+    double *cbary = from_vertices ? NULL : malloc(2 * ((size_t)nc + 1) * sizeof *cbary);
     dk_status st = DK_OK;
-    if (!cand || !order || !kept) {
+    if (!cand || !order || !kept || (!from_vertices && (!cface || !cbary))) {
         st = oom(err, "node sampling");
         goto done;
     }
     if (from_vertices)
         memcpy(cand, m->positions, 3 * (size_t)nc * sizeof *cand);
-    else if ((st = surface_samples(m, nc, &rng, cand, err)) != DK_OK)
+    else if ((st = surface_samples(m, nc, &rng, cand, cface, cbary, err)) != DK_OK)
         goto done;
     for (dk_index i = 0; i < nc; i++) /* a random order (Fisher-Yates) */
         order[i] = i;
@@ -317,12 +325,25 @@ static dk_status sample_nodes(dk_embedded *ed, dk_error *err)
             goto done;
         }
         memcpy(ed->node_vertex, kept, (size_t)count * sizeof *kept);
+    } else { /* surface samples: remember where, so that they ride along a moving mesh */
+        ed->node_face = malloc(((size_t)count + 1) * sizeof *ed->node_face);
+        ed->node_bary = malloc(2 * ((size_t)count + 1) * sizeof *ed->node_bary);
+        if (!ed->node_face || !ed->node_bary) {
+            st = oom(err, "nodes");
+            goto done;
+        }
+        for (dk_index i = 0; i < count; i++) {
+            ed->node_face[i] = cface[kept[i]];
+            memcpy(ed->node_bary + 2 * i, cbary + 2 * (size_t)kept[i], 2 * sizeof(double));
+        }
     }
     ed->m = count;
 done:
     free(cand);
     free(order);
     free(kept);
+    free(cface);
+    free(cbary);
     return st;
 }
 
@@ -640,6 +661,10 @@ static dk_status weights(dk_embedded *ed, dk_error *err)
                 ed->nside[kept] = ed->nside[j];
             if (ed->node_vertex)
                 ed->node_vertex[kept] = ed->node_vertex[j];
+            if (ed->node_face) {
+                ed->node_face[kept] = ed->node_face[j];
+                memmove(ed->node_bary + 2 * kept, ed->node_bary + 2 * j, 2 * sizeof(double));
+            }
             kept++;
         }
     for (size_t q = 0; q < (size_t)n * (size_t)k; q++)
@@ -1318,6 +1343,8 @@ void dk_embedded_free(dk_embedded *ed)
     free(ed->nside);
     free(ed->p);
     free(ed->node_vertex);
+    free(ed->node_face);
+    free(ed->node_bary);
     free(ed->edges);
     free(ed->adj_start);
     free(ed->adj);
@@ -1402,17 +1429,25 @@ dk_status dk_embedded_update_source(dk_embedded *ed, const double *positions, dk
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "EmbeddedDeformation update_source: object and positions must not "
                             "be NULL");
-    if (!ed->node_vertex)
-        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
-                            "EmbeddedDeformation update_source: the graph's nodes are surface "
-                            "samples, which do not follow a moving mesh; bind with "
-                            "nodes=vertices (section 5: nodes on vertices ride along)");
     dk_status st = dk_check_positions(positions, ed->n, err);
     if (st != DK_OK)
         return dk_error_prefix(err, "EmbeddedDeformation update_source");
     memcpy(ed->p, positions, 3 * (size_t)ed->n * sizeof *ed->p);
-    for (dk_index j = 0; j < ed->m; j++)
-        memcpy(ed->g + 3 * (size_t)j, ed->p + 3 * (size_t)ed->node_vertex[j], 3 * sizeof *ed->g);
+    for (dk_index j = 0; j < ed->m; j++) {
+        double *g = ed->g + 3 * (size_t)j;
+        if (ed->node_vertex) { /* section 5: a node on a vertex rides along with it */
+            memcpy(g, ed->p + 3 * (size_t)ed->node_vertex[j], 3 * sizeof *g);
+            continue;
+        }
+        /* a surface sample keeps its place in its triangle: the paper's nodes on vertices,
+         * generalised to its uniform samples, so that the default graph also follows */
+        const dk_index *f = ed->mesh->faces + 3 * (size_t)ed->node_face[j];
+        const double *a = ed->p + 3 * (size_t)f[0], *b = ed->p + 3 * (size_t)f[1];
+        const double *c = ed->p + 3 * (size_t)f[2];
+        const double s = ed->node_bary[2 * (size_t)j], t = ed->node_bary[2 * (size_t)j + 1];
+        for (int d = 0; d < 3; d++)
+            g[d] = a[d] + s * (b[d] - a[d]) + t * (c[d] - a[d]);
+    }
     return DK_OK;
 }
 

@@ -210,8 +210,9 @@ static PyObject *ed_deformed(PyObject *obj, PyObject *unused)
 PyDoc_STRVAR(update_source_doc,
              "update_source(positions)\n\n"
              "Section 5, an animated source: the mesh's positions on a new frame (n x 3).\n"
-             "The nodes (which must sit on vertices: nodes='vertices', or a point set) move\n"
-             "with their vertices; the graph, the weights and the constraints stay as bound,\n"
+             "The nodes move with the source: a node on a vertex with its vertex (section 5),\n"
+             "a surface sample at its place in its triangle. The graph, the weights and the\n"
+             "constraints stay as bound,\n"
              "and the node transformations stay as a warm start. Later solves, targets given\n"
              "as transforms, held fixed vertices, deformed(), normals() and energy() take\n"
              "these positions as the rest. The same handle offsets solved on every frame\n"

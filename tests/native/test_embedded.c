@@ -187,8 +187,9 @@ static void test_cut(void)
     dk_mesh_free(m);
 }
 
-/* section 5: a translated source with translated targets gives the translated result;
- * surface nodes refuse an update, and a refused update changes nothing */
+/* section 5: a translated source with translated targets gives the translated result, for
+ * nodes on vertices and for surface samples (which keep their place in their triangles);
+ * a refused update changes nothing */
 static void test_update_source(void)
 {
     dk_mesh *m = sphere(0, 1);
@@ -224,7 +225,6 @@ static void test_update_source(void)
         for (size_t i = 0; i < 3 * (size_t)n; i++)
             dev = fmax(dev, fabs(y[i] - x[i] - (i % 3 == 2 ? 2.0 : 0.0)));
         CHECK_MSG(dev < 1e-8, "translated source: off by %g", dev);
-        CHECK(dk_embedded_update_source(surf, p, &e) == DK_ERR_INVALID_ARGUMENT);
         p[4] = NAN;
         CHECK(dk_embedded_update_source(ed, p, &e) != DK_OK);
         CHECK(dk_embedded_deformed(ed, x, &e) == DK_OK);
@@ -232,6 +232,26 @@ static void test_update_source(void)
         for (size_t i = 0; i < 3 * (size_t)n; i++)
             dev = fmax(dev, fabs(x[i] - y[i]));
         CHECK_MSG(dev == 0.0, "a refused update changed the result by %g", dev);
+        t[2] -= 2.0;
+        p[4] = m->positions[4];
+        CHECK(dk_embedded_solve(surf, &(dk_solve_request){.targets = t}, x, &info, &e) == DK_OK);
+        const dk_index ms = dk_embedded_n_nodes(surf);
+        double *g0 = malloc(3 * (size_t)ms * sizeof *g0);
+        if (!g0)
+            abort();
+        memcpy(g0, dk_embedded_nodes(surf), 3 * (size_t)ms * sizeof *g0);
+        CHECK(dk_embedded_update_source(surf, p, &e) == DK_OK);
+        dev = 0.0;
+        for (size_t i = 0; i < 3 * (size_t)ms; i++)
+            dev = fmax(dev, fabs(dk_embedded_nodes(surf)[i] - g0[i] - (i % 3 == 2 ? 2.0 : 0.0)));
+        CHECK_MSG(dev < 1e-12, "surface nodes did not ride along: off by %g", dev);
+        free(g0);
+        t[2] += 2.0;
+        CHECK(dk_embedded_solve(surf, &(dk_solve_request){.targets = t}, y, &info, &e) == DK_OK);
+        dev = 0.0;
+        for (size_t i = 0; i < 3 * (size_t)n; i++)
+            dev = fmax(dev, fabs(y[i] - x[i] - (i % 3 == 2 ? 2.0 : 0.0)));
+        CHECK_MSG(dev < 1e-8, "translated source, surface nodes: off by %g", dev);
     }
     dk_embedded_free(ed);
     dk_embedded_free(surf);

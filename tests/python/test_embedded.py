@@ -352,8 +352,8 @@ def test_update_source_follows_an_animated_mesh():
     """Section 5: a graph on vertices rides along the source. After update_source(P), the
     object solves what a fresh bind on P (same graph: same radius) solves; a translated source
     with translated targets gives the translated result; going back to the rest gives the
-    first result again, bit for bit; surface-sampled nodes and bad positions are refused and
-    change nothing. (A rotated source is compared with a fresh bind, not with the rotated
+    first result again, bit for bit; bad positions are refused and change nothing; surface
+    samples keep their places in their triangles. (A rotated source is compared with a fresh bind, not with the rotated
     first result: eq. 6 counts each off-diagonal entry of R^T R once, so E_rot, and a
     non-rigid result, depend on the orientation in space.)"""
     v, f, _ = bumpy_plane(30)
@@ -395,6 +395,15 @@ def test_update_source_follows_an_animated_mesh():
     with pytest.raises(ValueError):
         ed.update_source(bad)
     assert np.array_equal(np.array(ed.solve(target, warm_start=False).positions), first)
-    surf = dk.EmbeddedDeformation(dk.Mesh(v, f), handles=[handle], n_nodes=80)
-    with pytest.raises(ValueError, match="nodes=vertices"):
-        surf.update_source(v)
+    surf = dk.EmbeddedDeformation(dk.Mesh(v, f), handles=[handle], fixed=fixed, n_nodes=80)
+    g0 = np.array(surf.nodes)
+    # a smooth non-rigid motion of the source: every node stays on the moved surface, at
+    # the same barycentric place (so a node's image is the map of the node, up to the
+    # map's curvature inside one triangle)
+    bend = lambda x: np.c_[x[:, 0], x[:, 1], x[:, 2] + 0.5 * x[:, 0] ** 2]
+    surf.update_source(bend(v))
+    g1 = np.array(surf.nodes)
+    assert np.abs(g1 - bend(g0)).max() < 0.5 * (1 / 29) ** 2
+    assert np.abs(g1 - g0).max() > 0.1
+    first = np.array(surf.solve(bend(v)[handle]).positions)    # no motion: the new source
+    assert np.abs(first - bend(v)).max() < 1e-12
