@@ -123,6 +123,7 @@ def bake_pc2(context, obj, d, frame_start, frame_end, path, progress=None):
 
 def bake_shape_keys(context, obj, d, frame_start, frame_end, progress=None):
     """One shape key per frame, keyed to 1 on its frame and 0 on the neighbours."""
+    solver.check_input_is_rest(obj, d, "bake to shape keys")
     fb = FrameBaker(context, obj, d, frame_start, frame_end)
     results = []
     try:

@@ -1,12 +1,18 @@
 """The Geometry Nodes modifier each deformer owns.
 
 One shared node group, saved in the .blend (so files render without the add-on):
-    Group Input (Geometry, Factor, Attribute name)
-      -> Named Attribute (FLOAT_VECTOR, name = input) -> Vector Math SCALE by Factor
-      -> Set Position (Offset) -> Group Output
-Each deformer writes its offset (result - rest) into its own point attribute
+    Group Input (Geometry, Factor, Attribute name, Input name)
+      -> Store Named Attribute (Position as "Input name")      (version 2)
+      -> Set Position (Offset = Named Attribute "Attribute name" SCALE by Factor) -> Output
+Each deformer writes its offset (result - input) into its own point attribute
 "dk_<uid>_offset" of the base mesh; its modifier's Attribute input names it, which is also how
 the add-on finds the modifier again (modifiers may be renamed and reordered freely).
+
+The stored input ("dk_<uid>_input" on the evaluated mesh) is what reaches the modifier: the
+base mesh moved by the modifiers and shape keys above it. A method that follows an animated
+input (Embedded Deformation, section 5 of Sumner et al.) reads it back from the evaluated
+object each update (solver.moved_input). Version 1 groups (files saved before) are upgraded
+in place: the three first sockets keep their identifiers, so values and keyframes survive.
 """
 
 import bpy
@@ -14,7 +20,7 @@ import bpy
 from . import compat
 
 GROUP_NAME = "DeformKit Offset"
-GROUP_VERSION = 1
+GROUP_VERSION = 2
 
 
 def _socket_id(ng, name):
@@ -26,8 +32,14 @@ def _socket_id(ng, name):
 
 def ensure_node_group():
     ng = bpy.data.node_groups.get(GROUP_NAME)
-    if ng is not None and ng.get("deformkit_version") == GROUP_VERSION and ng.bl_idname == "GeometryNodeTree":
-        return ng
+    if ng is not None and ng.bl_idname == "GeometryNodeTree":
+        version = ng.get("deformkit_version")
+        if version == GROUP_VERSION:
+            return ng
+        if version == 1:
+            _add_input_capture(ng)
+            ng["deformkit_version"] = GROUP_VERSION
+            return ng
     if ng is not None:  # a foreign group with our name: leave it, make ours under a new name
         ng.name = GROUP_NAME + ".old"
     ng = bpy.data.node_groups.new(GROUP_NAME, "GeometryNodeTree")
@@ -59,7 +71,28 @@ def ensure_node_group():
     links.new(gin.outputs["Geometry"], setpos.inputs["Geometry"])
     links.new(scale.outputs["Vector"], setpos.inputs["Offset"])
     links.new(setpos.outputs["Geometry"], gout.inputs["Geometry"])
+    _add_input_capture(ng)
     return ng
+
+
+def _add_input_capture(ng):
+    """Version 2: the "Input" socket, and a Store Named Attribute of the incoming positions
+    between the Group Input and the Set Position."""
+    compat.new_group_socket(ng, "Input", "INPUT", "NodeSocketString")
+    nodes, links = ng.nodes, ng.links
+    gin = next(n for n in nodes if n.bl_idname == "NodeGroupInput")
+    setpos = next(n for n in nodes if n.bl_idname == "GeometryNodeSetPosition")
+    store = nodes.new("GeometryNodeStoreNamedAttribute")
+    store.data_type = "FLOAT_VECTOR"
+    store.domain = "POINT"
+    store.location = (-150, 150)
+    position = nodes.new("GeometryNodeInputPosition")
+    position.location = (-350, 250)
+    value = [i for i in store.inputs if i.name == "Value" and i.type == "VECTOR" and i.enabled][0]
+    links.new(gin.outputs["Geometry"], store.inputs["Geometry"])
+    links.new(gin.outputs["Input"], store.inputs["Name"])
+    links.new(position.outputs[0], value)
+    links.new(store.outputs["Geometry"], setpos.inputs["Geometry"])
 
 
 def factor_key(ng=None):
@@ -70,6 +103,11 @@ def factor_key(ng=None):
 def attribute_key(ng=None):
     ng = ng or ensure_node_group()
     return _socket_id(ng, "Attribute")
+
+
+def input_key(ng=None):
+    ng = ng or ensure_node_group()
+    return _socket_id(ng, "Input")
 
 
 def is_ours(mod):
@@ -92,14 +130,29 @@ def find_modifier(obj, deformer):
 
 def ensure_modifier(obj, deformer):
     mod = find_modifier(obj, deformer)
-    if mod is not None:
-        return mod
-    ng = ensure_node_group()
-    mod = obj.modifiers.new(deformer.name, "NODES")
-    mod.node_group = ng
-    mod[factor_key(ng)] = 1.0
-    mod[attribute_key(ng)] = deformer.attribute_name
+    if mod is None:
+        ng = ensure_node_group()
+        mod = obj.modifiers.new(deformer.name, "NODES")
+        mod.node_group = ng
+        mod[factor_key(ng)] = 1.0
+        mod[attribute_key(ng)] = deformer.attribute_name
+    ensure_input_name(mod, deformer)
     return mod
+
+
+def ensure_input_name(mod, deformer):
+    """Sets the modifier's Input name (upgrading a version 1 group first). True when the
+    modifier now stores its input."""
+    ng = mod.node_group
+    if ng.get("deformkit_version") != GROUP_VERSION:
+        if ng.name != GROUP_NAME:
+            return False  # a renamed or foreign copy: leave it
+        ng = ensure_node_group()
+    key = input_key(ng)
+    if mod.get(key) != deformer.input_attribute_name:
+        mod[key] = deformer.input_attribute_name
+        mod.id_data.update_tag()  # an ID property changed behind RNA: re-evaluate
+    return True
 
 
 def factor(obj, deformer):

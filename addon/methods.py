@@ -69,6 +69,11 @@ class Method:
     # True: the native object has `nodes`, `edges` and `transforms` (a deformation graph)
     # and a BOOL option `show_graph` lets the viewport draw it (overlay.py)
     graph: bool = False
+    # True: the native object has `update_source(positions)`; the method follows an input
+    # that the modifiers and shape keys above it animate (solver.moved_input): each update
+    # re-solves on that input, with the handles' edit (their displacement since the bind)
+    # added to where the input puts the handle vertices (section 5 of Sumner et al.)
+    follows_input: bool = False
 
 
 def _e(*ids):
@@ -179,6 +184,7 @@ METHODS.append(Method(
     iteration_cap="max_iterations",
     needs_faces=False,
     graph=True,
+    follows_input=True,
     options=[
         Option("n_nodes", "INT", 200, "Nodes", "Graph nodes sampled on the surface",
                min=5, max=100000),

@@ -351,6 +351,7 @@ class DEFORMKIT_OT_apply(_Base, bpy.types.Operator):
                                         "instead" % me.name)
         # what the artist sees: the shown result, brought up to date first
         dg = context.evaluated_depsgraph_get()
+        solver.check_input_is_rest(obj, d, "apply", dg)
         solver.finish(obj, d, dg)
         pos = solver.shown_positions(obj, d)
         flat = np.ascontiguousarray(pos, dtype=np.float32).ravel()

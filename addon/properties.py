@@ -106,11 +106,16 @@ def _deformer_attribute(self):
     return "dk_%s_offset" % self.uid
 
 
+def _deformer_input_attribute(self):
+    return "dk_%s_input" % self.uid
+
+
 def _deformer_options(self):
     return getattr(self, methods.options_attr(self.method))
 
 
 DeformKitDeformer.attribute_name = property(_deformer_attribute)
+DeformKitDeformer.input_attribute_name = property(_deformer_input_attribute)
 DeformKitDeformer.options = property(_deformer_options)
 
 

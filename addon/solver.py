@@ -37,7 +37,8 @@ running_binds = {}
 
 class _Entry:
     __slots__ = ("native", "dkmesh", "rest", "extent", "n_vertices", "n_faces", "settings",
-                 "groups", "last_inputs", "method_id", "verified", "pending", "pending_its")
+                 "groups", "last_inputs", "method_id", "verified", "pending", "pending_its",
+                 "handles", "source")
 
 
 def mark_settings_changed():
@@ -331,6 +332,7 @@ class BindJob:
             if args.get(k) is None:
                 args.pop(k, None)
         self._args = args
+        self.handles = list(kw["handles"])
         self.native, self.error, self.seconds = None, None, 0.0
 
     def run(self):
@@ -357,6 +359,7 @@ class BindJob:
         e.n_vertices, e.n_faces = self.n_vertices, self.n_faces
         e.settings, e.groups, e.method_id = self.settings, self.groups, self.method_id
         e.last_inputs, e.verified, e.pending, e.pending_its = None, True, False, 0
+        e.handles, e.source = self.handles, self.rest
         _cache[(obj.name, d.uid)] = e
         return e
 
@@ -368,6 +371,9 @@ def _build(obj, d, kw, groups_key, entry=None):
         try:
             entry.native.rebind(handles=kw["handles"], fixed=kw["fixed"], roi=kw["roi"])
             entry.groups = groups_key
+            entry.handles = list(kw["handles"])
+            # a follower's native source after a rebind: pushed again by the next solve
+            entry.source = None if methods.get(d.method).follows_input else entry.rest
             entry.verified = True
             entry.last_inputs = None
             return entry
@@ -509,6 +515,78 @@ def drop_pending(key):
         e.pending = False
 
 
+def modifiers_above(obj, d, depsgraph=None):
+    """The modifiers above d's own in the stack that are enabled for the depsgraph's mode
+    (viewport or render)."""
+    mod = geonodes.find_modifier(obj, d)
+    render = depsgraph is not None and depsgraph.mode == "RENDER"
+    out = []
+    for mm in obj.modifiers:
+        if mm == mod:
+            break
+        if mm.show_render if render else mm.show_viewport:
+            out.append(mm)
+    return out
+
+
+def moved_input(obj, d, depsgraph=None):
+    """What reaches d's modifier (n x 3, object space) when shape keys or modifiers above it
+    can move the base mesh, or None when the input is the base mesh itself. Read from the
+    evaluated object, where the modifier stores its input (geonodes, version 2)."""
+    above = modifiers_above(obj, d, depsgraph)
+    keys = obj.data.shape_keys
+    if not above and (keys is None or len(keys.key_blocks) < 2):
+        return None
+    mod = geonodes.find_modifier(obj, d)
+    if mod is None or not geonodes.ensure_input_name(mod, d):
+        raise DeformKitError("%s: its Geometry Nodes modifier is missing or not DeformKit's: "
+                             "bind again" % d.name)
+    dg = depsgraph if depsgraph is not None else bpy.context.evaluated_depsgraph_get()
+    a = obj.evaluated_get(dg).data.attributes.get(d.input_attribute_name)
+    if a is None:  # the Input name was just set (bind): evaluate the stack with it
+        dg.update()
+        a = obj.evaluated_get(dg).data.attributes.get(d.input_attribute_name)
+    what = ", ".join("'%s'" % mm.name for mm in above) or "shape keys"
+    if a is None:
+        raise DeformKitError("%s cannot read what %s gives it: its modifier is disabled or a "
+                             "modifier below it drops attributes" % (d.name, what))
+    n = len(obj.data.vertices)
+    if len(a.data) != n:
+        raise DeformKitError("%s follows %s, but the final mesh has %d vertices, not %d: a "
+                             "modifier below it (Subdivision?) changes the vertex count; "
+                             "disable it while editing, or move it above %s"
+                             % (d.name, what, len(a.data), n, d.name))
+    co = np.empty(n * 3, dtype=np.float32)
+    a.data.foreach_get("vector", co)
+    return co.reshape(-1, 3).astype(np.float64)
+
+
+def check_input_is_rest(obj, d, what, depsgraph=None):
+    """Refuses writing a follower's result into the mesh or its shape keys (`what`: "apply",
+    "bake to shape keys") while something above moves its input: the modifiers and keys
+    that moved it would move the written shape again."""
+    if not methods.get(d.method).follows_input:
+        return
+    above = modifiers_above(obj, d, depsgraph)
+    keys = obj.data.shape_keys
+    if above or (keys is not None and len(keys.key_blocks) >= 2):
+        by = ", ".join("'%s'" % mm.name for mm in above) or "shape keys"
+        raise DeformKitError("cannot %s %s: its input is moved by %s above it, which would "
+                             "move the written shape again; bake to Point Cache instead"
+                             % (what, d.name, by))
+
+
+def edit_targets(e, T, source):
+    """Section 5 of Sumner et al.: each handle vertex's edit (its displacement by the handle's
+    transform T at its bind-time rest position) added to where `source` (the animated input)
+    puts it. Equal to T applied to the rest when the input is the rest."""
+    out = []
+    for h, t in zip(e.handles, T):
+        r = e.rest[h]
+        out.append(source[h] + (r @ t[:3, :3].T + t[:3, 3] - r))
+    return np.concatenate(out)
+
+
 def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_groups=False,
           interactive=False, resume=False):
     """Solves `d` for the targets' current placement. Returns the n x 3 positions, or None when
@@ -521,11 +599,20 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
     check_object(obj, d)
     e = _entry_for(obj, d, check_groups)
     T = snap_identity(transforms(obj, d, depsgraph), e.extent)
-    inputs = T.tobytes()
+    m = methods.get(d.method)
+    source = moved_input(obj, d, depsgraph) if m.follows_input else None
+    inputs = T.tobytes() + (b"" if source is None else source.tobytes())
     if not force and e.last_inputs == inputs:
         return None
-    m = methods.get(d.method)
     key = (obj.name, d.uid)
+    goal = dict(transforms=T)
+    if m.follows_input:
+        want = e.rest if source is None else source
+        if e.source is None or not np.array_equal(e.source, want):
+            _native_call(m.label + " input", e.native.update_source, want)
+            e.source = want
+        if source is not None:
+            goal = dict(targets=edit_targets(e, T, source))
     kw = methods.solve_kwargs(m, d.options, cold)
     budgeted = interactive and m.iterative and not cold
     cap = int(getattr(d.options, m.iteration_cap)) if m.iteration_cap else 0
@@ -539,7 +626,7 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
         if resume:
             kw["resume"] = True
     t0 = time.perf_counter()
-    res = _native_call(m.label + " solve", e.native.solve, transforms=T, **kw)
+    res = _native_call(m.label + " solve", e.native.solve, **goal, **kw)
     ms = (time.perf_counter() - t0) * 1000.0
     pos = np.asarray(res.positions, dtype=np.float64).reshape(-1, 3)
     runtime[key] = dict(ms=ms, iterations=int(res.iterations), converged=bool(res.converged),
@@ -551,7 +638,7 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
     if write:
         # the offset computed in float64 and rounded once, straight into float32 (one pass)
         off = np.empty(pos.shape, dtype=np.float32)
-        np.subtract(pos, e.rest, out=off, casting="unsafe")
+        np.subtract(pos, e.source, out=off, casting="unsafe")
         write_offset(obj, d, off, retime=cold)
         e.last_inputs = inputs
     return pos
@@ -587,7 +674,8 @@ def finish(obj, d, depsgraph=None):
 
 
 def shown_positions(obj, d):
-    """rest + factor * the offset attribute: exactly what the modifier shows."""
+    """rest + factor * the offset attribute: exactly what the modifier shows (for a method
+    following an animated input: that input + factor * the offset)."""
     e = _cache.get((obj.name, d.uid))
     me = obj.data
     a = me.attributes.get(d.attribute_name)
@@ -595,15 +683,17 @@ def shown_positions(obj, d):
         raise DeformKitError("%s has no result to apply: bind it first" % d.name)
     off = np.empty(len(me.vertices) * 3, dtype=np.float32)
     a.data.foreach_get("vector", off)
-    return e.rest + geonodes.factor(obj, d) * off.reshape(-1, 3).astype(np.float64)
+    src = e.rest if e.source is None else e.source
+    return src + geonodes.factor(obj, d) * off.reshape(-1, 3).astype(np.float64)
 
 
 def deformed_positions(obj, d, depsgraph=None, cold=True):
-    """rest + factor * (solved - rest) for the current frame (what the modifier shows)."""
+    """input + factor * (solved - input) for the current frame (what the modifier shows; the
+    input is the rest unless the method follows an animated input)."""
     pos = solve(obj, d, depsgraph, cold=cold, write=False, force=True)
     e = _cache[(obj.name, d.uid)]
     f = geonodes.factor(obj, d)
-    return e.rest + f * (pos - e.rest)
+    return e.source + f * (pos - e.source)
 
 
 def evaluate_object(obj, depsgraph=None, check_groups=False, cold=False, interactive=False,

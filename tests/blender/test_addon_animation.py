@@ -1,6 +1,7 @@
 """Animation: keyframed handle targets re-solve per frame (compared with direct solves); bake to
 PC2 (operator and headless batch), chunked bakes joined equal one bake, the Mesh Cache modifier
-plays the cache back; bake to shape keys; batch failures exit non-zero."""
+plays the cache back; bake to shape keys; batch failures exit non-zero; Embedded Deformation
+on a mesh animated by an Armature modifier above it (section 5 of Sumner et al.)."""
 import os
 import subprocess
 import sys
@@ -243,7 +244,138 @@ def test_every_method_plays_and_bakes_in_chunks():
                     len(f1) == len(f2) == 20 and diff == 0.0, diff)
 
 
+def rigged_arm(nodes):
+    """A 24 x 6 grid bent by a two-bone Armature modifier (first in the stack), the bones
+    keyed over frames 1-20; an Embedded Deformation deformer after it, fixed on the left
+    end, with a handle on the right tip moved by a static edit after the bind at frame 1."""
+    S.reset_scene()
+    nx, ny = 24, 6
+    obj = S.make_grid(nx=nx, ny=ny)
+    rest = S.rest_positions(obj)
+    fixed = np.array([j * nx + i for j in range(ny) for i in range(2)])
+    handle = np.array([j * nx + i for j in range(ny) for i in range(nx - 2, nx)])
+    S.group(obj, "fixed", fixed)
+    S.group(obj, "tip", handle)
+    w = np.clip((rest[:, 0] + 0.2) / 0.4, 0.0, 1.0)   # blend across the elbow at x = 0
+    S.group(obj, "lower", range(len(rest)), w)
+    S.group(obj, "upper", range(len(rest)), 1.0 - w)
+    arm = bpy.data.armatures.new("Rig")
+    ao = bpy.data.objects.new("Rig", arm)
+    bpy.context.scene.collection.objects.link(ao)
+    bpy.context.view_layer.objects.active = ao
+    bpy.ops.object.mode_set(mode="EDIT")
+    up = arm.edit_bones.new("upper")
+    up.head, up.tail = (-1.0, 0, 0), (0.0, 0, 0)
+    lo = arm.edit_bones.new("lower")
+    lo.head, lo.tail = (0.0, 0, 0), (1.0, 0, 0)
+    lo.parent, lo.use_connect = up, True
+    bpy.ops.object.mode_set(mode="OBJECT")
+    for name, keys in (("upper", ((1, (0, 0, 0)), (10, (0, 0, 0.25)), (20, (0.2, 0, 0.1)))),
+                       ("lower", ((1, (0, 0, 0)), (10, (0.5, 0, 0)), (20, (0.3, 0.2, -0.6))))):
+        pb = ao.pose.bones[name]
+        pb.rotation_mode = "XYZ"
+        for f, rot in keys:
+            pb.rotation_euler = rot
+            pb.keyframe_insert("rotation_euler", frame=f)
+    mod = obj.modifiers.new("Armature", "ARMATURE")
+    mod.object = ao
+    bpy.context.view_layer.objects.active = obj
+    e = S.empty("Tip", (1.0, 0.0, 0.0))
+    bpy.ops.deformkit.add_deformer(method="EMBEDDED")
+    d = obj.deformkit.deformers[0]
+    d.fixed_group = "fixed"
+    d.options.nodes = nodes
+    d.options.n_nodes = 40
+    bpy.ops.deformkit.add_handle(vertex_group="tip", target=e.name)
+    sc = bpy.context.scene
+    sc.frame_start, sc.frame_end = 1, 20
+    sc.frame_set(1)
+    bpy.ops.deformkit.bind()
+    bind_world = e.matrix_world.copy()
+    e.location = (1.0, 0.1, 0.25)    # the edit, made on the pose of frame 1
+    bpy.context.view_layer.update()
+    return obj, d, e, fixed, handle, bind_world
+
+
+def armature_input(obj, d):
+    """What the Armature modifier gives the deformer: the stack with DeformKit's modifier off."""
+    mod = S.geonodes.find_modifier(obj, d)
+    mod.show_viewport = False
+    S.handlers.enabled[0] = False
+    try:
+        return S.evaluated_positions(obj)
+    finally:
+        mod.show_viewport = True
+        S.handlers.enabled[0] = True
+        bpy.context.view_layer.update()
+
+
+def test_embedded_follows_an_armature():
+    """Section 5: the graph rides along the armature's output, and the artist's edit (the
+    handle's displacement at the bind pose) is kept on every frame. Each frame's playback
+    equals the direct API on that frame's evaluated input: update_source(input), then a cold
+    solve with targets input[handle] + edit. For both node sources (surface samples keep
+    their places in their triangles; vertex nodes ride with their vertices)."""
+    for nodes in ("surface", "vertices"):
+        obj, d, e, fixed, handle, bind_world = rigged_arm(nodes)
+        m = S.methods.get("EMBEDDED")
+        rest = S.rest_positions(obj)
+        native = S.dk.EmbeddedDeformation(
+            S.dk.Mesh(rest, S.solver.triangles(obj.data)), handles=[handle], fixed=fixed,
+            **S.methods.constructor_kwargs(m, d.options))
+        T = np.array(e.matrix_world @ bind_world.inverted())
+        edit = rest[handle] @ T[:3, :3].T + T[:3, 3] - rest[handle]
+        sc = bpy.context.scene
+        for f in (1, 7, 10, 16, 20):
+            sc.frame_set(f)
+            got = S.evaluated_positions(obj)
+            inp = armature_input(obj, d)
+            native.update_source(inp)
+            want = np.asarray(native.solve(inp[handle] + edit,
+                                           **S.methods.solve_kwargs(m, d.options, True)).positions)
+            R.check("%s nodes, frame %d: playback = direct API on the armature's output"
+                    % (nodes, f), np.abs(got - want).max() < TOL, np.abs(got - want).max())
+            R.check("%s nodes, frame %d: fixed vertices stay where the armature puts them"
+                    % (nodes, f), np.abs(got[fixed] - inp[fixed]).max() < TOL,
+                    np.abs(got[fixed] - inp[fixed]).max())
+            kept = np.linalg.norm((got[handle] - inp[handle]).mean(0) - edit.mean(0))
+            R.check("%s nodes, frame %d: the edit is kept (tip off by %.2g%% of the drag)"
+                    % (nodes, f, 100 * kept / np.linalg.norm(edit.mean(0))),
+                    kept < 0.03 * np.linalg.norm(edit.mean(0)))
+            if f == 16:
+                R.check("frame 16: the armature moves the arm (the test means something)",
+                        np.abs(inp - rest).max() > 0.3, np.abs(inp - rest).max())
+    # writing the result into the mesh would let the armature move it again: refused
+    for op, kw in ((bpy.ops.deformkit.apply, dict(mode="SHAPE_KEY")),
+                   (bpy.ops.deformkit.bake, dict(mode="SHAPE_KEYS", frame_start=1, frame_end=2))):
+        try:
+            op(**kw)
+            msg = ""
+        except RuntimeError as ex:
+            msg = str(ex)
+        R.check("%s refused with a reason" % op.idname_py(),
+                "by 'Armature' above it" in msg and "Point Cache" in msg, msg)
+    R.check("nothing written into the mesh", obj.data.shape_keys is None)
+    # a Point Cache bake holds what playback shows
+    want = {}
+    for f in (5, 12, 20):
+        sc.frame_set(f)
+        want[f] = S.evaluated_positions(obj)
+    path = os.path.join(S.OUTPUT, "anim_armature.pc2")
+    bpy.ops.deformkit.bake(mode="PC2", frame_start=1, frame_end=20, filepath=path)
+    S.handlers.enabled[0] = False
+    try:
+        for f in (5, 12, 20):
+            sc.frame_set(f)
+            got = S.evaluated_positions(obj)
+            R.check("Point Cache of the armature-driven edit plays frame %d" % f,
+                    np.abs(got - want[f]).max() < TOL, np.abs(got - want[f]).max())
+    finally:
+        S.handlers.enabled[0] = True
+
+
 for t in (test_playback, test_render_sees_each_frame, test_chunked_bake_equals_single, test_batch_failures, test_mesh_cache_modifier,
-          test_shape_key_bake, test_every_method_plays_and_bakes_in_chunks):
+          test_shape_key_bake, test_every_method_plays_and_bakes_in_chunks,
+          test_embedded_follows_an_armature):
     R.run(t)
 R.finish()
