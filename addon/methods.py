@@ -221,6 +221,24 @@ METHODS.append(Method(
     ],
 ))
 
+METHODS.append(Method(
+    id="EIGEN",
+    label="Eigen Deformation",
+    native_class="EigenDeformation",
+    description="Eigen deformation (Dey, Ranjan & Wang): a smooth fit with the mesh's "
+                "Laplace-Beltrami eigenvectors moves the handle's region, and the details "
+                "are added back in local frames",
+    icon="MOD_WAVE",
+    options=[
+        Option("n_eigenvectors", "INT", 0, "Eigenvectors",
+               "Eigenvectors of the fit (0: automatic, 8, 50 or 300 from the region's size; "
+               "fewer bend more globally)", min=0, max=2000),
+        Option("refine", "INT", 300, "Refinement",
+               "Eigenvectors of the second iteration that rebuilds the details when fewer "
+               "are used (0: one iteration)", min=0, max=2000),
+    ],
+))
+
 BY_ID = {m.id: m for m in METHODS}
 
 

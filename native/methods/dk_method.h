@@ -94,10 +94,16 @@ typedef enum dk_method_flags {
                                                 result by t                                */
     DK_METHOD_RIGID_INVARIANT = 8,         /**< the same for every rigid motion (ARAP; naive
                                                 Laplacian editing does not rotate details) */
-    DK_METHOD_PENALTY_HANDLES = 16         /**< handles are penalty terms, met to the
+    DK_METHOD_PENALTY_HANDLES = 16,        /**< handles are penalty terms, met to the
                                                 solver's tolerance rather than exactly
                                                 (embedded deformation); fixed vertices are
                                                 still exact                               */
+    DK_METHOD_SOFT_REGIONS = 32            /**< handles are regions that guide a smooth
+                                                least-squares fit (eigen deformation): met
+                                                approximately, and every vertex outside them
+                                                is held approximately, fixed or not; a
+                                                handle covering the whole mesh moves it
+                                                exactly                                   */
 } dk_method_flags;
 
 /** The functions of one method; every entry is set. `self` is the method's object. */

@@ -65,6 +65,14 @@ struct dk_py_method_spec {
     /** Optional: the method's own solve keywords, read from `kw` like parse_options and
      *  applied to the bound object before the solve (called with the object entered). */
     int (*solve_extra)(dk_py_method *self, PyObject *kw, const char *context);
+    /** Optional: the method's own forms of the motion (e.g. translation=, rotation=, pivot=),
+     *  read from `kw` like solve_extra: returns the equivalent `transforms` (n_handles x 4 x
+     *  4, a new reference), Py_None (a new reference) when none of its keywords is given,
+     *  or NULL with an exception set. Combining them with targets or transforms is a
+     *  TypeError. */
+    PyObject *(*solve_motion)(dk_py_method *self, PyObject *kw, const char *context);
+    /** 1: the bind runs under the module's ARPACK lock (ARPACK is not reentrant). */
+    int serialise_bind;
     /** Optional: the `stats` dict; default: the contract's counters. */
     PyObject *(*stats)(dk_py_method *self);
     PyGetSetDef *getset;   /**< the type's getters: DK_PY_METHOD_GETSET, then the method's

@@ -236,8 +236,13 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
         Py_DECREF(mine);
         return NULL;
     }
+    dk_py_state *state = spec->serialise_bind ? dk_py_get_state(module) : NULL;
     Py_BEGIN_ALLOW_THREADS
+    if (state)
+        PyThread_acquire_lock(state->arpack_lock, WAIT_LOCK);
     st = spec->ops->bind(mesh, &con.desc, &opt, &native, &err);
+    if (state)
+        PyThread_release_lock(state->arpack_lock);
     Py_END_ALLOW_THREADS
     if (spec->release_options)
         spec->release_options(&opt);
@@ -353,6 +358,23 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
     module = ok ? PyType_GetModule(Py_TYPE(obj)) : NULL;
     if (!module || dk_py_method_enter(self) < 0)
         goto fail;
+    if (spec->solve_motion) {
+        PyObject *motion = spec->solve_motion(self, rest, ctx);
+        if (!motion)
+            goto fail_busy;
+        if (motion != Py_None) {
+            if (targets != Py_None || transforms != Py_None) {
+                Py_DECREF(motion);
+                PyErr_Format(PyExc_TypeError, "%s: give targets, transforms, or the motion "
+                             "(translation / rotation / pivot), not several", ctx);
+                goto fail_busy;
+            }
+            Py_DECREF(transforms);
+            transforms = motion;
+        } else {
+            Py_DECREF(motion);
+        }
+    }
     if ((spec->solve_extra && spec->solve_extra(self, rest, ctx) < 0) ||
         refuse_leftovers(rest, "solve()") < 0)
         goto fail_busy;

@@ -58,11 +58,16 @@ def one_method(mid):
     want_h = (np.c_[rest[handle], np.ones(len(handle))] @ Ts[-1][0].T)[:, :3]
     # like a Hook: exactly, or for penalty handles (the native contract's flag) most of the way
     m = S.methods.get(mid)
-    penalty = S.dk._native._method_info(m.native_class)["penalty_handles"]
+    flags = S.dk._native._method_info(m.native_class)
+    penalty, soft = flags["penalty_handles"], flags["soft_regions"]
     herr, hmove = np.abs(hv - want_h).max(), np.abs(want_h - rest[handle]).max()
+    if soft:  # a least-squares fit (eigen deformation): most of the way, on average
+        herr = np.abs(hv - want_h).max(axis=1).mean()
     R.check("%s handle vertices follow the target like a Hook" % mid,
-            herr < (0.05 * hmove if penalty else 1e-4), (herr, hmove))
-    R.check("%s fixed vertices stay" % mid, np.abs(got[fixed] - rest[fixed]).max() < 1e-5)
+            herr < (0.25 * hmove if soft else 0.05 * hmove if penalty else 1e-4), (herr, hmove))
+    ferr = np.abs(got[fixed] - rest[fixed]).max(axis=1)
+    R.check("%s fixed vertices stay" % mid,
+            ferr.mean() < 0.25 * hmove if soft else ferr.max() < 1e-5, ferr.max())
     R.check("%s base mesh untouched" % mid, np.abs(S.rest_positions(obj) - rest).max() == 0)
     # Factor of the GN modifier scales the offset (keyframable modifier input)
     mod = S.geonodes.find_modifier(obj, d)

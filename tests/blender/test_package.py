@@ -173,15 +173,19 @@ def test_deform_end_to_end():
         got = S.evaluated_positions(obj)
         want_h = rest[handle] + [0.0, 0.0, 0.4]
         m = S.methods.get(mid)   # penalty handles (the native contract's flag): most of the way
-        penalty = S.native.module._native._method_info(m.native_class)["penalty_handles"]
+        flags = S.native.module._native._method_info(m.native_class)
+        soft = flags["soft_regions"]   # a least-squares fit: most of the way, on average
+        herr = np.abs(got[handle] - want_h).max(axis=1)
         R.check("%s handle vertices follow the target" % mid,
-                np.abs(got[handle] - want_h).max() < (0.02 if penalty else 1e-4),
-                np.abs(got[handle] - want_h).max())
-        R.check("%s fixed vertices stay" % mid, np.abs(got[fixed] - rest[fixed]).max() < 1e-5)
+                herr.mean() < 0.1 if soft else
+                herr.max() < (0.02 if flags["penalty_handles"] else 1e-4), herr.max())
+        ferr = np.abs(got[fixed] - rest[fixed]).max(axis=1)
+        R.check("%s fixed vertices stay" % mid,
+                ferr.mean() < 0.1 if soft else ferr.max() < 1e-5, ferr.max())
         free = [i for i in range(nx * ny) if i not in set(fixed) | set(handle)]
         dz = (got[free] - rest[free])[:, 2]
         R.check("%s the rest of the mesh moved in between" % mid,
-                dz.max() > 0.1 and dz.max() < 0.4 + 1e-6 and dz.min() > -1e-3,
+                dz.max() > 0.1 and dz.max() < 0.4 + 1e-6 and dz.min() > (-0.05 if soft else -1e-3),
                 (dz.min(), dz.max()))
         R.check("%s base mesh untouched" % mid, np.abs(S.rest_positions(obj) - rest).max() == 0)
 

@@ -1,0 +1,780 @@
+/* DeformKit: eigen deformation (Dey, Ranjan & Wang). See dk_eigen.h for the method, and
+ * docs/methods/eigen.md for the choices the paper leaves open. */
+#include "dk_eigen.h"
+
+#include <cblas.h>
+#include <lapacke.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "dk_eigs.h"
+#include "dk_operators.h"
+#include "dk_sparse.h"
+
+/* Below this many vertices (or when K is a large share of n) the eigenpairs come from a dense
+ * solve: ARPACK wants K well below n, and the tests need all n of them. */
+#define DENSE_MAX 600
+
+/* One level of the scheme: a skeleton with m eigenvectors, and the detail vectors that lead
+ * from it to the next level (the mesh, or K_n' in the two-iteration scheme). */
+typedef struct level {
+    int m;
+    double *p;       /* n x 3: the rest skeleton K_m                                       */
+    double *b0;      /* m x 3: U_m^T p, eq. 1's right-hand side when nothing moves         */
+    double *detail;  /* n x 3: to the next level, in world coordinates (d = next - p)       */
+    double *coord;   /* n x 3: d in the rest skeleton's local frame (edge, cross, normal)   */
+    dk_index *frame_nb; /* n: the neighbour whose edge gives the frame, -1: no valid frame */
+} level;
+
+struct dk_eigen {
+    const dk_mesh *mesh;
+    dk_eigen_options opt;
+    dk_index n;
+    int K, m, n_levels;      /* n_levels 1 (one iteration) or 2 (section 4.3)              */
+    double *evals, *U;       /* K; n x K column-major                                      */
+    double *chol;            /* K x K column-major, upper: Phi_K = R^T R                   */
+    level lv[2];
+    /* the regions */
+    dk_constraints *con;
+    dk_index *region;        /* n: handle group, or -1 outside R                           */
+    double *g, *w;           /* n: distance to the boundary of R; interpolation weight     */
+    double delta3;
+    /* the last request: per handle, the linear part and translation (transforms), and the
+     * Step-1 targets of R's vertices (for the energy) */
+    double *lin;             /* n_handles x 9                                               */
+    int per_vertex;          /* 1: targets were positions (translation-type per vertex)    */
+    double *target;          /* n_handle_vertices x 3                                       */
+    int preview;             /* dk_eigen_set_preview                                        */
+    /* scratch, allocated at bind */
+    double *ptil, *pstar, *normals, *b, *next;
+};
+
+static dk_status oom(dk_error *err, const char *what)
+{
+    return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "EigenDeformation: out of memory (%s)", what);
+}
+
+void dk_eigen_default_options(dk_eigen_options *o)
+{
+    memset(o, 0, sizeof *o);
+    o->n_eigenvectors = 0;
+    o->refine = 300;
+    o->laplacian = DK_EIGEN_COTANGENT;
+}
+
+/* ------------------------------------------------------------------ eigenpairs --------- */
+
+/* The K smallest pairs of L phi = lambda M phi, densely: C = M^-1/2 L M^-1/2, phi = M^-1/2 y. */
+static dk_status dense_eigenpairs(const dk_sparse *l, const double *mass, dk_index n, int K,
+                                  double *evals, double *U, dk_error *err)
+{
+    double *c = calloc((size_t)n * (size_t)n, sizeof *c), *ev = malloc((size_t)n * sizeof *ev);
+    if (!c || !ev) {
+        free(c);
+        free(ev);
+        return oom(err, "dense eigenproblem");
+    }
+    for (dk_index j = 0; j < n; j++)
+        for (dk_index q = l->col_start[j]; q < l->col_start[j + 1]; q++) {
+            const dk_index i = l->row_index[q];
+            c[(size_t)j * n + i] = l->values[q] / sqrt(mass[i] * mass[j]);
+        }
+    const lapack_int info = LAPACKE_dsyevd(LAPACK_COL_MAJOR, 'V', 'U', n, c, n, ev);
+    dk_status st = DK_OK;
+    if (info != 0) {
+        st = dk_error_set(err, DK_ERR_NUMERIC, "EigenDeformation: dense eigensolver failed "
+                          "(LAPACK dsyevd info %d)", (int)info);
+    } else {
+        memcpy(evals, ev, (size_t)K * sizeof *evals);
+        for (int k = 0; k < K; k++)
+            for (dk_index i = 0; i < n; i++)
+                U[(size_t)k * n + i] = c[(size_t)k * n + i] / sqrt(mass[i]);
+    }
+    free(c);
+    free(ev);
+    return st;
+}
+
+/* 1. the eigenvectors of the mesh Laplacian, and Phi's factor */
+static dk_status eigenvectors(dk_eigen *e, dk_error *err)
+{
+    const dk_index n = e->n;
+    dk_sparse *l = NULL;
+    double *mass = malloc((size_t)n * sizeof *mass);
+    e->evals = malloc((size_t)e->K * sizeof *e->evals);
+    e->U = malloc((size_t)n * (size_t)e->K * sizeof *e->U);
+    e->chol = malloc((size_t)e->K * (size_t)e->K * sizeof *e->chol);
+    dk_status st = (!mass || !e->evals || !e->U || !e->chol) ? oom(err, "eigenvectors") : DK_OK;
+    if (st == DK_OK)
+        st = dk_laplacian_cotangent(e->mesh, &l, err);
+    if (st == DK_OK)
+        st = dk_mass_matrix(e->mesh, DK_MASS_VORONOI, mass, err);
+    for (dk_index i = 0; st == DK_OK && i < n; i++)
+        if (!(mass[i] > 0.0))
+            st = dk_error_set(err, DK_ERR_DEGENERATE,
+                              "EigenDeformation: vertex %d has no area (isolated, or only on "
+                              "degenerate triangles): the Laplacian's mass matrix needs every "
+                              "vertex on a face with area", (int)i);
+    if (st == DK_OK) {
+        if (n <= DENSE_MAX || e->K > n / 4) {
+            st = dense_eigenpairs(l, mass, n, e->K, e->evals, e->U, err);
+        } else {
+            dk_eigs_options eo;
+            dk_eigs_options_default(&eo);
+            eo.progress = e->opt.progress;
+            eo.progress_user = e->opt.progress_user;
+            st = dk_eigs_smallest(l, mass, e->K, &eo, e->evals, e->U, NULL, err);
+        }
+        if (st != DK_OK)
+            dk_error_prefix(err, "EigenDeformation: eigenvectors");
+    }
+    if (st == DK_OK) { /* Phi = U^T U (the sum over the vertices of eq. 1), and its factor */
+        cblas_dsyrk(CblasColMajor, CblasUpper, CblasTrans, e->K, (int)n, 1.0, e->U, (int)n, 0.0,
+                    e->chol, e->K);
+        const lapack_int info = LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'U', e->K, e->chol, e->K);
+        if (info != 0)
+            st = dk_error_set(err, DK_ERR_NOT_POSITIVE_DEFINITE,
+                              "EigenDeformation: Phi = U^T U is singular at eigenvector %d "
+                              "(LAPACK dpotrf info %d)", (int)info, (int)info);
+    }
+    dk_sparse_free(l);
+    free(mass);
+    return st;
+}
+
+/* ------------------------------------------------------------------ eq. 1 -------------- */
+
+/* b (m x 3, column-major) = U_m^T x, for x n x 3 row-major. */
+static void project(const dk_eigen *e, int m, const double *x, double *b)
+{
+    cblas_dgemm(CblasColMajor, CblasTrans, CblasTrans, m, 3, (int)e->n, 1.0, e->U, (int)e->n, x,
+                3, 0.0, b, m);
+}
+
+/* Step 2: A = Phi_m^-1 b in place (b m x 3), then out = U_m A (n x 3 row-major). The factor
+ * of Phi_m is the leading block of Phi_K's. */
+static void fit(const dk_eigen *e, int m, double *b, double *out)
+{
+    LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'U', m, 3, e->chol, e->K, b, m);
+    cblas_dgemm(CblasColMajor, CblasTrans, CblasTrans, 3, (int)e->n, m, 1.0, b, m, e->U,
+                (int)e->n, 0.0, out, 3);
+}
+
+/* ------------------------------------------------------------------ local frames ------- */
+
+/* Area-weighted vertex normals of the mesh's connectivity at positions p (not normalised). */
+static void vertex_normals(const dk_mesh *mesh, const double *p, double *nrm)
+{
+    memset(nrm, 0, 3 * (size_t)mesh->n_vertices * sizeof *nrm);
+    for (dk_index f = 0; f < mesh->n_faces; f++) {
+        const dk_index *t = mesh->faces + 3 * (size_t)f;
+        const double *a = p + 3 * (size_t)t[0], *b = p + 3 * (size_t)t[1];
+        const double *c = p + 3 * (size_t)t[2];
+        const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+        const double v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+        const double x[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
+                             u[0] * v[1] - u[1] * v[0]};
+        for (int k = 0; k < 3; k++)
+            for (int d = 0; d < 3; d++)
+                nrm[3 * (size_t)t[k] + d] += x[d];
+    }
+}
+
+/* The frame of vertex i at positions p with normal nrm_i, from the edge to neighbour j:
+ * rows F[0] = the edge projected on the tangent plane, F[1] = normal x F[0], F[2] = normal.
+ * Returns 0 when the normal or the projected edge is too short to define it. */
+static int frame(const double *p, const double *nrm, dk_index i, dk_index j, double F[9])
+{
+    const double *ni = nrm + 3 * (size_t)i;
+    const double nl = sqrt(ni[0] * ni[0] + ni[1] * ni[1] + ni[2] * ni[2]);
+    const double ed[3] = {p[3 * (size_t)j] - p[3 * (size_t)i],
+                          p[3 * (size_t)j + 1] - p[3 * (size_t)i + 1],
+                          p[3 * (size_t)j + 2] - p[3 * (size_t)i + 2]};
+    const double el = sqrt(ed[0] * ed[0] + ed[1] * ed[1] + ed[2] * ed[2]);
+    if (!(nl > 0.0) || !(el > 0.0) || !isfinite(nl) || !isfinite(el))
+        return 0;
+    double z[3] = {ni[0] / nl, ni[1] / nl, ni[2] / nl};
+    const double dn = ed[0] * z[0] + ed[1] * z[1] + ed[2] * z[2];
+    double x[3] = {ed[0] - dn * z[0], ed[1] - dn * z[1], ed[2] - dn * z[2]};
+    const double xl = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
+    if (!(xl > 1e-6 * el)) /* the edge (nearly) along the normal */
+        return 0;
+    for (int d = 0; d < 3; d++)
+        x[d] /= xl;
+    F[0] = x[0], F[1] = x[1], F[2] = x[2];
+    F[3] = z[1] * x[2] - z[2] * x[1];
+    F[4] = z[2] * x[0] - z[0] * x[2];
+    F[5] = z[0] * x[1] - z[1] * x[0];
+    F[6] = z[0], F[7] = z[1], F[8] = z[2];
+    return 1;
+}
+
+/* Chooses each vertex's frame edge on the rest skeleton (the first neighbour that gives a
+ * valid frame) and records the detail vectors' coordinates in it. */
+static void record_frames(const dk_eigen *e, level *L, double *nrm)
+{
+    const dk_mesh *mesh = e->mesh;
+    vertex_normals(mesh, L->p, nrm);
+    for (dk_index i = 0; i < e->n; i++) {
+        double F[9];
+        L->frame_nb[i] = -1;
+        for (dk_index q = mesh->ring_start[i]; q < mesh->ring_start[i + 1]; q++)
+            if (frame(L->p, nrm, i, mesh->ring_index[q], F)) {
+                L->frame_nb[i] = mesh->ring_index[q];
+                break;
+            }
+        const double *d = L->detail + 3 * (size_t)i;
+        double *c = L->coord + 3 * (size_t)i;
+        if (L->frame_nb[i] < 0) {
+            c[0] = c[1] = c[2] = 0.0;
+            continue;
+        }
+        for (int r = 0; r < 3; r++)
+            c[r] = F[3 * r] * d[0] + F[3 * r + 1] * d[1] + F[3 * r + 2] * d[2];
+    }
+}
+
+/* ------------------------------------------------------------------ regions ------------ */
+
+/* 2. R, its boundary, g (Dijkstra from the boundary), w (section 4.1) and delta_3 (4.2). */
+static dk_status regions(dk_eigen *e, const dk_constraint_desc *desc, dk_constraints **con,
+                         dk_index *region, double *g, double *w, double *delta3, dk_error *err)
+{
+    const dk_mesh *mesh = e->mesh;
+    const dk_index n = e->n;
+    if (desc && desc->n_roi > 0)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EigenDeformation: no region of interest (roi) is used: the region "
+                            "R is the handle groups, the part that moves");
+    if (desc && desc->handle_weights)
+        for (int64_t i = 0, tot = 0; i < desc->n_handles; tot += desc->handle_sizes[i], i++)
+            for (dk_index k = 0; k < desc->handle_sizes[i]; k++)
+                if (desc->handle_weights[tot + k] != 1.0)
+                    return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                                        "EigenDeformation: handle weights are not used (a "
+                                        "region moves as a whole): leave them at 1");
+    dk_status st = dk_constraints_create(mesh, desc, con, err);
+    if (st != DK_OK)
+        return dk_error_prefix(err, "EigenDeformation");
+    const dk_constraints *c = *con;
+    dk_index *src = malloc(((size_t)n + 1) * sizeof *src), ns = 0;
+    if (!src)
+        return oom(err, "regions");
+    for (dk_index v = 0; v < n; v++) {
+        region[v] = c->role[v] >= 0 ? c->role[v] : -1;
+    }
+    for (dk_index v = 0; v < n; v++) { /* in R, with a neighbour outside: the boundary */
+        if (region[v] < 0)
+            continue;
+        for (dk_index q = mesh->ring_start[v]; q < mesh->ring_start[v + 1]; q++)
+            if (region[mesh->ring_index[q]] < 0) {
+                src[ns++] = v;
+                break;
+            }
+    }
+    if (ns > 0) {
+        st = dk_geodesic_dijkstra(mesh, src, ns, g, err);
+    } else {
+        for (dk_index v = 0; v < n; v++)
+            g[v] = INFINITY;
+    }
+    free(src);
+    if (st != DK_OK)
+        return dk_error_prefix(err, "EigenDeformation: distances to the boundary of R");
+    double diam_r = 0.0, diam_out = 0.0;
+    for (dk_index v = 0; v < n; v++)
+        if (isfinite(g[v])) {
+            if (region[v] >= 0)
+                diam_r = fmax(diam_r, g[v]);
+            else
+                diam_out = fmax(diam_out, g[v]);
+        }
+    /* section 4.1: w = 1 within diam R / 8 of the boundary, 0 beyond diam R / 4 */
+    const double d1 = diam_r / 8.0, d2 = diam_r / 4.0;
+    for (dk_index v = 0; v < n; v++) {
+        if (!isfinite(g[v]) || !(diam_r > 0.0))
+            w[v] = 0.0;
+        else if (g[v] < d1)
+            w[v] = 1.0;
+        else if (g[v] > d2)
+            w[v] = 0.0;
+        else
+            w[v] = (d2 - g[v]) / (d2 - d1);
+    }
+    *delta3 = diam_out > 0.0 ? diam_r / diam_out : INFINITY;
+    return DK_OK;
+}
+
+/* section 4.2 */
+static int automatic_m(double delta3)
+{
+    return delta3 >= 0.75 ? 8 : delta3 >= 0.1 ? 50 : 300;
+}
+
+/* ------------------------------------------------------------------ bind --------------- */
+
+static void level_free(level *L)
+{
+    free(L->p);
+    free(L->b0);
+    free(L->detail);
+    free(L->coord);
+    free(L->frame_nb);
+    memset(L, 0, sizeof *L);
+}
+
+void dk_eigen_free(dk_eigen *e)
+{
+    if (!e)
+        return;
+    free(e->evals);
+    free(e->U);
+    free(e->chol);
+    level_free(&e->lv[0]);
+    level_free(&e->lv[1]);
+    dk_constraints_free(e->con);
+    free(e->region);
+    free(e->g);
+    free(e->w);
+    free(e->lin);
+    free(e->target);
+    free(e->ptil);
+    free(e->pstar);
+    free(e->normals);
+    free(e->b);
+    free(e->next);
+    free(e);
+}
+
+static dk_status level_alloc(level *L, int m, dk_index n)
+{
+    L->m = m;
+    L->p = malloc(3 * (size_t)n * sizeof *L->p);
+    L->b0 = malloc(3 * (size_t)m * sizeof *L->b0);
+    L->detail = malloc(3 * (size_t)n * sizeof *L->detail);
+    L->coord = malloc(3 * (size_t)n * sizeof *L->coord);
+    L->frame_nb = malloc((size_t)n * sizeof *L->frame_nb);
+    return (L->p && L->b0 && L->detail && L->coord && L->frame_nb) ? DK_OK
+                                                                   : DK_ERR_OUT_OF_MEMORY;
+}
+
+/* 3. the skeletons of the levels for m (and n'), their details and frames */
+static dk_status skeletons(dk_eigen *e, int m, dk_error *err)
+{
+    const dk_index n = e->n;
+    const int two = e->opt.refine > m && e->K > m;
+    level_free(&e->lv[0]);
+    level_free(&e->lv[1]);
+    e->m = m;
+    e->n_levels = two ? 2 : 1;
+    for (int k = 0; k < e->n_levels; k++)
+        if (level_alloc(&e->lv[k], k == 0 ? m : e->K, n) != DK_OK)
+            return oom(err, "skeletons");
+    for (int k = 0; k < e->n_levels; k++) { /* eq. 1 fitted to the mesh: K_m */
+        level *L = &e->lv[k];
+        project(e, L->m, e->mesh->positions, e->b);
+        fit(e, L->m, e->b, L->p);
+        project(e, L->m, L->p, L->b0);
+    }
+    for (int k = 0; k < e->n_levels; k++) { /* details to the next level, in frames */
+        level *L = &e->lv[k];
+        const double *next = k + 1 < e->n_levels ? e->lv[k + 1].p : e->mesh->positions;
+        for (size_t i = 0; i < 3 * (size_t)n; i++)
+            L->detail[i] = next[i] - L->p[i];
+        record_frames(e, L, e->normals);
+    }
+    return DK_OK;
+}
+
+static dk_status check_options(const dk_eigen_options *o, dk_index n, dk_error *err)
+{
+    if (o->laplacian != DK_EIGEN_COTANGENT)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EigenDeformation: laplacian must be cotangent (0)");
+    if (o->n_eigenvectors < 0 || o->n_eigenvectors > n)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EigenDeformation: n_eigenvectors is %d; it must be 0 (automatic) "
+                            "to %d (the vertex count)", o->n_eigenvectors, (int)n);
+    if (o->refine < 0)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EigenDeformation: refine is %d; it must be >= 0 (0: one iteration)",
+                            o->refine);
+    return DK_OK;
+}
+
+/* The eigenvector count for the regions: the option (at most n), or section 4.2's rule
+ * capped at n / 4 (at least 4): on a small mesh the rule's 50 or 300 would be most of the
+ * spectrum, and a fit with that many no longer smooths the cut of Step 1 (with n of them it
+ * reproduces the cut exactly). */
+static int choose_m(const dk_eigen *e, double delta3)
+{
+    if (e->opt.n_eigenvectors > 0)
+        return e->opt.n_eigenvectors < e->n ? e->opt.n_eigenvectors : (int)e->n;
+    const int m = automatic_m(delta3), cap = (int)(e->n / 4) > 4 ? (int)(e->n / 4) : 4;
+    return m < cap ? m : cap;
+}
+
+dk_status dk_eigen_bind(const dk_mesh *mesh, const dk_constraint_desc *desc,
+                        const dk_eigen_options *options, dk_eigen **out, dk_error *err)
+{
+    if (!out)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "EigenDeformation: out is NULL");
+    *out = NULL;
+    if (!mesh || !desc)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EigenDeformation: mesh and constraints must not be NULL");
+    if (mesh->n_faces == 0 || mesh->n_vertices < 4)
+        return dk_error_set(err, DK_ERR_TOPOLOGY,
+                            "EigenDeformation: needs a surface (faces and at least 4 vertices); "
+                            "this mesh has %d vertices and %d faces", (int)mesh->n_vertices,
+                            (int)mesh->n_faces);
+    dk_eigen *e = calloc(1, sizeof *e);
+    if (!e)
+        return oom(err, "object");
+    e->mesh = mesh;
+    e->n = mesh->n_vertices;
+    if (options)
+        e->opt = *options;
+    else
+        dk_eigen_default_options(&e->opt);
+    const dk_index n = e->n;
+    dk_status st = check_options(&e->opt, n, err);
+    if (st != DK_OK) {
+        free(e);
+        return st;
+    }
+    e->region = malloc((size_t)n * sizeof *e->region);
+    e->g = malloc((size_t)n * sizeof *e->g);
+    e->w = malloc((size_t)n * sizeof *e->w);
+    e->ptil = malloc(3 * (size_t)n * sizeof *e->ptil);
+    e->pstar = malloc(3 * (size_t)n * sizeof *e->pstar);
+    e->normals = malloc(3 * (size_t)n * sizeof *e->normals);
+    e->next = malloc(3 * (size_t)n * sizeof *e->next);
+    if (!e->region || !e->g || !e->w || !e->ptil || !e->pstar || !e->normals || !e->next) {
+        dk_eigen_free(e);
+        return oom(err, "buffers");
+    }
+    /* 1. the regions; 2. the eigenvectors (K = max(m, n') so that a later rebind, whose
+     * automatic m may differ, needs none); 3. the skeletons; 4. the request buffers */
+    st = regions(e, desc, &e->con, e->region, e->g, e->w, &e->delta3, err);
+    if (st == DK_OK) {
+        const int m = choose_m(e, e->delta3);
+        int K = m;
+        if (e->opt.refine > K)
+            K = e->opt.refine;
+        if (e->opt.n_eigenvectors == 0 && K < 300) /* the automatic rule may ask for 300 */
+            K = 300;
+        e->K = K < n ? K : (int)n;
+        e->b = malloc(3 * (size_t)e->K * sizeof *e->b);
+        st = e->b ? eigenvectors(e, err) : oom(err, "buffers");
+        if (st == DK_OK)
+            st = skeletons(e, m, err);
+    }
+    if (st == DK_OK) {
+        e->lin = malloc(9 * ((size_t)e->con->n_handles + 1) * sizeof *e->lin);
+        e->target = malloc(3 * ((size_t)e->con->n_handle_vertices + 1) * sizeof *e->target);
+        if (!e->lin || !e->target)
+            st = oom(err, "buffers");
+    }
+    if (st != DK_OK) {
+        dk_eigen_free(e);
+        return st;
+    }
+    for (dk_index i = 0; i < e->con->n_handle_vertices; i++) /* before any solve: the rest */
+        memcpy(e->target + 3 * (size_t)i,
+               mesh->positions + 3 * (size_t)e->con->handle_vertices[i], 3 * sizeof(double));
+    *out = e;
+    return DK_OK;
+}
+
+dk_status dk_eigen_rebind(dk_eigen *e, const dk_constraint_desc *desc, dk_error *err)
+{
+    if (!e || !desc)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EigenDeformation rebind: object and constraints must not be NULL");
+    const dk_index n = e->n;
+    dk_constraints *con = NULL;
+    dk_index *region = malloc((size_t)n * sizeof *region);
+    double *g = malloc((size_t)n * sizeof *g), *w = malloc((size_t)n * sizeof *w), delta3;
+    double *lin = NULL, *target = NULL;
+    dk_status st = (!region || !g || !w) ? oom(err, "rebind") : DK_OK;
+    if (st == DK_OK)
+        st = regions(e, desc, &con, region, g, w, &delta3, err);
+    const int m = st == DK_OK ? choose_m(e, delta3) : 0;
+    if (st == DK_OK && m > e->K)
+        st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                          "EigenDeformation rebind: these regions need %d eigenvectors and %d "
+                          "were computed at bind: bind again", m, e->K);
+    if (st == DK_OK) {
+        lin = malloc(9 * ((size_t)con->n_handles + 1) * sizeof *lin);
+        target = malloc(3 * ((size_t)con->n_handle_vertices + 1) * sizeof *target);
+        if (!lin || !target)
+            st = oom(err, "rebind");
+    }
+    if (st == DK_OK && m != e->m) { /* a new m: new skeletons (the eigenvectors stay) */
+        level keep[2] = {e->lv[0], e->lv[1]};
+        const int keep_m = e->m, keep_levels = e->n_levels;
+        memset(e->lv, 0, sizeof e->lv);
+        st = skeletons(e, m, err);
+        if (st != DK_OK) {
+            level_free(&e->lv[0]);
+            level_free(&e->lv[1]);
+            e->lv[0] = keep[0];
+            e->lv[1] = keep[1];
+            e->m = keep_m;
+            e->n_levels = keep_levels;
+        } else {
+            level_free(&keep[0]);
+            level_free(&keep[1]);
+        }
+    }
+    if (st != DK_OK) {
+        dk_constraints_free(con);
+        free(region);
+        free(g);
+        free(w);
+        free(lin);
+        free(target);
+        return st;
+    }
+    dk_constraints_free(e->con);
+    free(e->region);
+    free(e->g);
+    free(e->w);
+    free(e->lin);
+    free(e->target);
+    e->con = con, e->region = region, e->g = g, e->w = w, e->delta3 = delta3;
+    e->lin = lin, e->target = target;
+    for (dk_index i = 0; i < con->n_handle_vertices; i++)
+        memcpy(target + 3 * (size_t)i, e->mesh->positions + 3 * (size_t)con->handle_vertices[i],
+               3 * sizeof(double));
+    return DK_OK;
+}
+
+/* ------------------------------------------------------------------ solve -------------- */
+
+/* Reads the request: the Step-1 targets of R's vertices (for the energy), and per handle the
+ * linear part (identity for positions) into e->lin. */
+static dk_status read_request(dk_eigen *e, const dk_solve_request *rq, dk_error *err)
+{
+    dk_status st = dk_solve_request_check(rq, "EigenDeformation solve", err);
+    if (st != DK_OK)
+        return st;
+    const dk_constraints *c = e->con;
+    st = dk_constraints_targets(c, e->mesh->positions, rq->targets, (int)rq->target_kind,
+                                e->target, err);
+    if (st != DK_OK)
+        return dk_error_prefix(err, "EigenDeformation solve");
+    e->per_vertex = rq->target_kind == DK_TARGETS_POSITIONS;
+    for (dk_index h = 0; h < c->n_handles; h++)
+        for (int r = 0; r < 3; r++)
+            for (int q = 0; q < 3; q++)
+                e->lin[9 * (size_t)h + 3 * r + q] =
+                    e->per_vertex ? (r == q) : rq->targets[16 * (size_t)h + 4 * r + q];
+    return DK_OK;
+}
+
+/* Step 1 on level L's skeleton into e->ptil, and Step 2's right-hand side from R's rows
+ * alone: b = b0 + U_m^T (p~ - p), the change being zero outside R. */
+static void step1_step2_rhs(dk_eigen *e, const level *L)
+{
+    const dk_constraints *c = e->con;
+    const dk_index n = e->n;
+    memcpy(e->ptil, L->p, 3 * (size_t)n * sizeof(double));
+    memcpy(e->b, L->b0, 3 * (size_t)L->m * sizeof(double));
+    for (dk_index h = 0; h < c->n_handles; h++)
+        for (dk_index q = c->handle_start[h]; q < c->handle_start[h + 1]; q++) {
+            const dk_index i = c->handle_vertices[q];
+            const double *p = L->p + 3 * (size_t)i, *v = e->mesh->positions + 3 * (size_t)i;
+            const double *tg = e->target + 3 * (size_t)q, *A = e->lin + 9 * (size_t)h;
+            double *pt = e->ptil + 3 * (size_t)i;
+            for (int r = 0; r < 3; r++) /* transforms: T p = T v - A (v - p); positions: */
+                pt[r] = e->per_vertex    /* p + (target - v)                              */
+                            ? p[r] + tg[r] - v[r]
+                            : tg[r] - (A[3 * r] * (v[0] - p[0]) + A[3 * r + 1] * (v[1] - p[1]) +
+                                       A[3 * r + 2] * (v[2] - p[2]));
+            for (int r = 0; r < 3; r++) {
+                const double dp = pt[r] - p[r];
+                if (dp != 0.0)
+                    cblas_daxpy(L->m, dp, e->U + i, (int)n, e->b + (size_t)r * L->m, 1);
+            }
+        }
+}
+
+/* Step 3 on level L: out = p* + d~, with d~ the local-frame detail (frames of p*) blended
+ * with the transformation-based one by w (blend = 1) or the local-frame one alone. A vertex
+ * whose frame is undefined (on the rest or the deformed skeleton) takes the
+ * transformation-based detail. */
+static void step3(dk_eigen *e, const level *L, const double *pstar, int blend, double *out)
+{
+    const dk_mesh *mesh = e->mesh;
+    vertex_normals(mesh, pstar, e->normals);
+    for (dk_index i = 0; i < e->n; i++) {
+        const double *d = L->detail + 3 * (size_t)i, *c = L->coord + 3 * (size_t)i;
+        const dk_index h = e->region[i];
+        double d2[3];
+        if (h >= 0) { /* the Step-1 transformation's linear part applied to d */
+            const double *A = e->lin + 9 * (size_t)h;
+            for (int r = 0; r < 3; r++)
+                d2[r] = A[3 * r] * d[0] + A[3 * r + 1] * d[1] + A[3 * r + 2] * d[2];
+        } else {
+            memcpy(d2, d, sizeof d2);
+        }
+        double F[9], d1[3];
+        const int ok = L->frame_nb[i] >= 0 && frame(pstar, e->normals, i, L->frame_nb[i], F);
+        if (ok)
+            for (int r = 0; r < 3; r++)
+                d1[r] = F[r] * c[0] + F[3 + r] * c[1] + F[6 + r] * c[2];
+        double *o = out + 3 * (size_t)i;
+        const double *ps = pstar + 3 * (size_t)i;
+        if (!ok) {
+            for (int r = 0; r < 3; r++)
+                o[r] = ps[r] + d2[r];
+            continue;
+        }
+        const double wi = blend ? e->w[i] : 1.0;
+        if (wi >= 1.0) {
+            for (int r = 0; r < 3; r++)
+                o[r] = ps[r] + d1[r];
+            continue;
+        }
+        /* section 4.1: interpolate the directions, keep the local-frame length. The paper's
+         * formula leaves the blend of two unit vectors unnormalised (shorter where they
+         * differ); we renormalise it, as "interpolates their directions" intends */
+        const double l1 = sqrt(d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2]);
+        const double l2 = sqrt(d2[0] * d2[0] + d2[1] * d2[1] + d2[2] * d2[2]);
+        double dir[3];
+        for (int r = 0; r < 3; r++)
+            dir[r] = (l1 > 0.0 ? wi * d1[r] / l1 : 0.0) + (l2 > 0.0 ? (1.0 - wi) * d2[r] / l2 : 0.0);
+        const double dl = sqrt(dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]);
+        for (int r = 0; r < 3; r++)
+            o[r] = ps[r] + (dl > 1e-12 ? dir[r] / dl * l1 : d1[r]);
+    }
+}
+
+void dk_eigen_set_preview(dk_eigen *e, int preview)
+{
+    if (e)
+        e->preview = preview != 0;
+}
+
+dk_status dk_eigen_energy(const dk_eigen *e, const double *positions, double *energy,
+                          dk_error *err)
+{
+    if (!e || !positions || !energy)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EigenDeformation energy: arguments must not be NULL");
+    const dk_constraints *c = e->con;
+    double E = 0.0;
+    /* R's vertices against their targets, the others against the rest */
+    for (dk_index i = 0; i < e->n; i++)
+        if (c->role[i] < 0)
+            for (int r = 0; r < 3; r++) {
+                const double d = positions[3 * (size_t)i + r] - e->mesh->positions[3 * (size_t)i + r];
+                E += d * d;
+            }
+    for (dk_index q = 0; q < c->n_handle_vertices; q++) {
+        const dk_index i = c->handle_vertices[q];
+        for (int r = 0; r < 3; r++) {
+            const double d = positions[3 * (size_t)i + r] - e->target[3 * (size_t)q + r];
+            E += d * d;
+        }
+    }
+    *energy = E;
+    return DK_OK;
+}
+
+dk_status dk_eigen_solve(dk_eigen *e, const dk_solve_request *rq, double *positions,
+                         dk_solve_info *info, dk_error *err)
+{
+    if (info)
+        memset(info, 0, sizeof *info);
+    if (!e || !positions)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EigenDeformation solve: object and positions must not be NULL");
+    dk_status st = read_request(e, rq, err);
+    if (st != DK_OK)
+        return st;
+    /* Steps 1-2 on the first level */
+    const level *L = &e->lv[0];
+    step1_step2_rhs(e, L);
+    fit(e, L->m, e->b, e->pstar);
+    if (e->preview) { /* the skeleton's motion, details unrotated */
+        for (size_t i = 0; i < 3 * (size_t)e->n; i++)
+            positions[i] = e->mesh->positions[i] + (e->pstar[i] - L->p[i]);
+    } else if (e->n_levels == 1) {
+        /* Step 3, interpolation-based (Algorithm 1 with section 4.1) */
+        step3(e, L, e->pstar, 1, positions);
+    } else {
+        /* section 4.3, iteration 1: interpolation-based recovery to K~_n' */
+        step3(e, L, e->pstar, 1, e->next);
+        /* iteration 2: K~_n' as the coarse target, a re-fit with n' eigenvectors, and
+         * local-frame recovery of the mesh */
+        const level *L2 = &e->lv[1];
+        project(e, L2->m, e->next, e->b);
+        fit(e, L2->m, e->b, e->pstar);
+        step3(e, L2, e->pstar, 0, positions);
+    }
+    if (info) {
+        info->iterations = e->preview ? 0 : e->n_levels;
+        info->converged = 1;
+        if (rq->skip_energy)
+            info->energy = NAN;
+        else
+            dk_eigen_energy(e, positions, &info->energy, err);
+    }
+    return DK_OK;
+}
+
+/* ------------------------------------------------------------------ queries ------------ */
+
+const double *dk_eigen_skeleton(const dk_eigen *e)
+{
+    return e ? e->lv[0].p : NULL;
+}
+
+int dk_eigen_m(const dk_eigen *e)
+{
+    return e ? e->m : 0;
+}
+
+int dk_eigen_k(const dk_eigen *e)
+{
+    return e ? e->K : 0;
+}
+
+const double *dk_eigen_eigenvalues(const dk_eigen *e)
+{
+    return e ? e->evals : NULL;
+}
+
+const double *dk_eigen_eigenvectors(const dk_eigen *e)
+{
+    return e ? e->U : NULL;
+}
+
+double dk_eigen_delta3(const dk_eigen *e)
+{
+    return e ? e->delta3 : NAN;
+}
+
+const double *dk_eigen_weights(const dk_eigen *e)
+{
+    return e ? e->w : NULL;
+}
+
+void dk_eigen_stats(const dk_eigen *e, dk_method_stats *st)
+{
+    memset(st, 0, sizeof *st);
+    if (!e)
+        return;
+    st->n_vertices = e->n;
+    st->n_handles = e->con->n_handles;
+    st->n_handle_vertices = e->con->n_handle_vertices;
+    st->n_unknowns = 3 * e->m;
+    st->factorization_count = 1;
+}
+
+DK_METHOD_OPS(dk_eigen_ops, "EigenDeformation", DK_METHOD_SOFT_REGIONS, dk_eigen, dk_eigen,
+              dk_eigen_options);
