@@ -324,6 +324,17 @@ static void level_free(level *L)
     memset(L, 0, sizeof *L);
 }
 
+/* What the regions own (replaced as a whole by rebind). */
+static void regions_free(dk_eigen *e)
+{
+    dk_constraints_free(e->con);
+    free(e->region);
+    free(e->g);
+    free(e->w);
+    free(e->lin);
+    free(e->target);
+}
+
 void dk_eigen_free(dk_eigen *e)
 {
     if (!e)
@@ -333,12 +344,7 @@ void dk_eigen_free(dk_eigen *e)
     free(e->chol);
     level_free(&e->lv[0]);
     level_free(&e->lv[1]);
-    dk_constraints_free(e->con);
-    free(e->region);
-    free(e->g);
-    free(e->w);
-    free(e->lin);
-    free(e->target);
+    regions_free(e);
     free(e->ptil);
     free(e->pstar);
     free(e->normals);
@@ -538,12 +544,7 @@ dk_status dk_eigen_rebind(dk_eigen *e, const dk_constraint_desc *desc, dk_error 
         free(target);
         return st;
     }
-    dk_constraints_free(e->con);
-    free(e->region);
-    free(e->g);
-    free(e->w);
-    free(e->lin);
-    free(e->target);
+    regions_free(e);
     e->con = con, e->region = region, e->g = g, e->w = w, e->delta3 = delta3;
     e->lin = lin, e->target = target;
     for (dk_index i = 0; i < con->n_handle_vertices; i++)
