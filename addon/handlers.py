@@ -81,6 +81,9 @@ def refine():
     keys = solver.pending()
     if not keys:
         return None
+    if all(solver.settling(k) for k in keys):
+        return 0.05  # previews only, the handles still moving: their full results wait
+    keys = [k for k in keys if not solver.settling(k)]
     _busy[0] = True
     try:
         try:
@@ -94,7 +97,8 @@ def refine():
                     if k[0] == name:
                         solver.drop_pending(k)
                 continue
-            solver.evaluate_object(obj, depsgraph, interactive=True, refine=True)
+            solver.evaluate_object(obj, depsgraph, interactive=True, refine=True,
+                                   only={k[1] for k in keys if k[0] == name})
     except Exception as ex:  # a timer must never raise either
         print("DeformKit refine error: %s: %s" % (type(ex).__name__, ex))
         return None

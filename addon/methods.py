@@ -74,6 +74,13 @@ class Method:
     # re-solves on that input, with the handles' edit (their displacement since the bind)
     # added to where the input puts the handle vertices (section 5 of Sumner et al.)
     follows_input: bool = False
+    # solve keywords of a fast preview (eigen deformation's Steps 1-2): interactive updates
+    # solve with them and stay pending; the timer in handlers.py gives the full result once
+    # the handles have stopped for PREVIEW_SETTLE_S
+    preview: dict = field(default_factory=dict)
+    # True: the Region group, when set, is the region the handle moves (eigen deformation's
+    # R) and goes to the native handles, with the first handle's transform
+    region_is_handle: bool = False
 
 
 def _e(*ids):
@@ -229,6 +236,8 @@ METHODS.append(Method(
                 "Laplace-Beltrami eigenvectors moves the handle's region, and the details "
                 "are added back in local frames",
     icon="MOD_WAVE",
+    preview={"preview": True},
+    region_is_handle=True,
     options=[
         Option("n_eigenvectors", "INT", 0, "Eigenvectors",
                "Eigenvectors of the fit (0: automatic, 8, 50 or 300 from the region's size; "

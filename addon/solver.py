@@ -38,7 +38,7 @@ running_binds = {}
 class _Entry:
     __slots__ = ("native", "dkmesh", "rest", "extent", "n_vertices", "n_faces", "settings",
                  "groups", "last_inputs", "method_id", "verified", "pending", "pending_its",
-                 "handles", "source")
+                 "handles", "source", "preview_at")
 
 
 def mark_settings_changed():
@@ -267,6 +267,16 @@ def collect(obj, d):
         roi = groups[d.roi_group][0]
         if len(roi) == 0:
             raise DeformKitError("region vertex group '%s' is empty" % d.roi_group)
+    if m.region_is_handle and roi is not None:
+        # the Region group is the region that moves (eigen deformation's R), with the
+        # first handle's motion
+        if len(d.handles) > 1:
+            raise DeformKitError("%s moves the Region group with one handle: remove the "
+                                 "other handles or clear the Region group" % m.label)
+        if fixed is not None and len(np.intersect1d(roi, fixed)):
+            raise DeformKitError("the Region group '%s' overlaps the fixed group '%s'"
+                                 % (d.roi_group, d.fixed_group))
+        handles, roi = [roi], None
     kw = dict(handles=handles, fixed=fixed, roi=roi)
     if "stiffness" in m.maps and d.material_group:
         idx, w = groups[d.material_group]
@@ -359,7 +369,7 @@ class BindJob:
         e.n_vertices, e.n_faces = self.n_vertices, self.n_faces
         e.settings, e.groups, e.method_id = self.settings, self.groups, self.method_id
         e.last_inputs, e.verified, e.pending, e.pending_its = None, True, False, 0
-        e.handles, e.source = self.handles, self.rest
+        e.handles, e.source, e.preview_at = self.handles, self.rest, 0.0
         _cache[(obj.name, d.uid)] = e
         return e
 
@@ -504,9 +514,22 @@ def _budget_iterations(key, cap):
     return max(1, min(cap, int(INTERACTIVE_BUDGET_MS / max(per_it, 1e-3))))
 
 
+# A preview (methods.Method.preview) is replaced by the full result once the handles have
+# not moved for this long.
+PREVIEW_SETTLE_S = 0.15
+
+
 def pending():
     """(object name, deformer uid) of the interactive solves left unconverged."""
     return [k for k, e in _cache.items() if e.pending]
+
+
+def settling(key):
+    """True while `key` shows a preview younger than PREVIEW_SETTLE_S (the handles may still
+    be moving: its full result waits)."""
+    e = _cache.get(key)
+    return e is not None and e.preview_at > 0.0 and \
+        time.monotonic() - e.preview_at < PREVIEW_SETTLE_S
 
 
 def drop_pending(key):
@@ -600,6 +623,8 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
     e = _entry_for(obj, d, check_groups)
     T = snap_identity(transforms(obj, d, depsgraph), e.extent)
     m = methods.get(d.method)
+    if len(T) > len(e.handles):  # region_is_handle: the Region group moves with the first
+        T = T[:len(e.handles)]
     source = moved_input(obj, d, depsgraph) if m.follows_input else None
     inputs = T.tobytes() + (b"" if source is None else source.tobytes())
     if not force and e.last_inputs == inputs:
@@ -615,6 +640,9 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
             goal = dict(targets=edit_targets(e, T, source))
     kw = methods.solve_kwargs(m, d.options, cold)
     budgeted = interactive and m.iterative and not cold
+    previewing = interactive and bool(m.preview) and not cold and not resume
+    if previewing:
+        kw.update(m.preview)
     cap = int(getattr(d.options, m.iteration_cap)) if m.iteration_cap else 0
     if budgeted:
         # slices of one solve: together at most the method's Max Iterations, so the sliced
@@ -635,6 +663,10 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
     if budgeted:
         e.pending_its += int(res.iterations)
     e.pending = bool(budgeted and not res.converged and (not cap or e.pending_its < cap))
+    if previewing:  # the full result follows from the timer once the handles stop
+        e.pending, e.preview_at = True, time.monotonic()
+    else:
+        e.preview_at = 0.0
     if write:
         # the offset computed in float64 and rounded once, straight into float32 (one pass)
         off = np.empty(pos.shape, dtype=np.float32)
@@ -697,12 +729,13 @@ def deformed_positions(obj, d, depsgraph=None, cold=True):
 
 
 def evaluate_object(obj, depsgraph=None, check_groups=False, cold=False, interactive=False,
-                    refine=False):
+                    refine=False, only=None):
     """Handler entry: solves every bound deformer of `obj` whose inputs changed; errors go to
     the deformer's status (and its offset is zeroed), never raised. `refine`: only the
-    deformers with a pending interactive solve, continued for another budget."""
+    deformers with a pending interactive solve, continued for another budget (or, for a
+    preview, solved in full); `only`: a set of deformer uids to consider."""
     for d in obj.deformkit.deformers:
-        if not d.bound:
+        if not d.bound or (only is not None and d.uid not in only):
             continue
         mod = geonodes.find_modifier(obj, d)
         if mod is None or not (mod.show_viewport or mod.show_render):

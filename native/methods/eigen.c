@@ -48,6 +48,7 @@ struct dk_eigen {
     int preview;             /* dk_eigen_set_preview                                        */
     /* scratch, allocated at bind */
     double *ptil, *pstar, *normals, *b, *next;
+    double *cm;              /* n x 3 column-major, for the products with U                 */
 };
 
 static dk_status oom(dk_error *err, const char *what)
@@ -145,20 +146,30 @@ static dk_status eigenvectors(dk_eigen *e, dk_error *err)
 
 /* ------------------------------------------------------------------ eq. 1 -------------- */
 
-/* b (m x 3, column-major) = U_m^T x, for x n x 3 row-major. */
+/* b (m x 3, column-major) = U_m^T x, for x n x 3 row-major: x is first copied into
+ * column-major scratch, so that both operands are read along their columns. */
 static void project(const dk_eigen *e, int m, const double *x, double *b)
 {
-    cblas_dgemm(CblasColMajor, CblasTrans, CblasTrans, m, 3, (int)e->n, 1.0, e->U, (int)e->n, x,
-                3, 0.0, b, m);
+    const dk_index n = e->n;
+    for (dk_index i = 0; i < n; i++)
+        for (int r = 0; r < 3; r++)
+            e->cm[(size_t)r * n + i] = x[3 * (size_t)i + r];
+    cblas_dgemm(CblasColMajor, CblasTrans, CblasNoTrans, m, 3, (int)n, 1.0, e->U, (int)n, e->cm,
+                (int)n, 0.0, b, m);
 }
 
-/* Step 2: A = Phi_m^-1 b in place (b m x 3), then out = U_m A (n x 3 row-major). The factor
- * of Phi_m is the leading block of Phi_K's. */
+/* Step 2: A = Phi_m^-1 b in place (b m x 3), then out = U_m A (n x 3 row-major), computed
+ * column-major (U_m read along its columns) and transposed. The factor of Phi_m is the
+ * leading block of Phi_K's. */
 static void fit(const dk_eigen *e, int m, double *b, double *out)
 {
+    const dk_index n = e->n;
     LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'U', m, 3, e->chol, e->K, b, m);
-    cblas_dgemm(CblasColMajor, CblasTrans, CblasTrans, 3, (int)e->n, m, 1.0, b, m, e->U,
-                (int)e->n, 0.0, out, 3);
+    cblas_dgemm(CblasColMajor, CblasNoTrans, CblasNoTrans, (int)n, 3, m, 1.0, e->U, (int)n, b, m,
+                0.0, e->cm, (int)n);
+    for (dk_index i = 0; i < n; i++)
+        for (int r = 0; r < 3; r++)
+            out[3 * (size_t)i + r] = e->cm[(size_t)r * n + i];
 }
 
 /* ------------------------------------------------------------------ local frames ------- */
@@ -350,6 +361,7 @@ void dk_eigen_free(dk_eigen *e)
     free(e->normals);
     free(e->b);
     free(e->next);
+    free(e->cm);
     free(e);
 }
 
@@ -457,7 +469,9 @@ dk_status dk_eigen_bind(const dk_mesh *mesh, const dk_constraint_desc *desc,
     e->pstar = malloc(3 * (size_t)n * sizeof *e->pstar);
     e->normals = malloc(3 * (size_t)n * sizeof *e->normals);
     e->next = malloc(3 * (size_t)n * sizeof *e->next);
-    if (!e->region || !e->g || !e->w || !e->ptil || !e->pstar || !e->normals || !e->next) {
+    e->cm = malloc(3 * (size_t)n * sizeof *e->cm);
+    if (!e->region || !e->g || !e->w || !e->ptil || !e->pstar || !e->normals || !e->next ||
+        !e->cm) {
         dk_eigen_free(e);
         return oom(err, "buffers");
     }

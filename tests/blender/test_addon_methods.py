@@ -427,7 +427,59 @@ def test_show_graph():
     d.options_embedded.show_graph = False
 
 
-for t in (test_vertex_cloud, test_geodesic_influence, test_show_graph, test_registry_drives_ui, test_methods, test_stiffness_map, test_soft_handles,
+def test_eigen_region_and_preview():
+    """Eigen deformation in the add-on: the Region group is R, moved by the handle's target;
+    while dragging (UI-style updates) the viewport shows the fast preview (Steps 1-2), and
+    the timer replaces it by the full result once the handle has stopped; both equal the
+    direct API. A second handle with a Region group is refused in the panel."""
+    import time
+    S.reset_scene()
+    obj, d, e, fixed, handle = S.grid_setup("EIGEN", nx=24, ny=8)
+    rest = S.rest_positions(obj)
+    half = np.where(rest[:, 0] > 0.3)[0]
+    S.group(obj, "half", half)
+    d.roi_group = "half"
+    bind_world = e.matrix_world.copy()
+    bpy.ops.deformkit.bind()
+    R.check("EIGEN with a Region group binds", d.bound and not d.status_is_error, d.status)
+    m = S.methods.get("EIGEN")
+    native = S.dk.EigenDeformation(S.dk.Mesh(rest, S.solver.triangles(obj.data)),
+                                   handles=[half], fixed=fixed,
+                                   **S.methods.constructor_kwargs(m, d.options))
+    S.handlers.force_interactive[0] = True
+    try:
+        e.location = (1.0, 0.0, 0.3)
+        e.rotation_euler = Euler((0.4, 0.0, 0.0))
+        bpy.context.view_layer.update()
+        T = np.array(e.matrix_world @ bind_world.inverted())[None]
+        got = S.evaluated_positions(obj)
+        want = np.asarray(native.solve(transforms=T, preview=True).positions)
+        R.check("EIGEN drag shows the preview (Steps 1-2)", np.abs(got - want).max() < TOL,
+                np.abs(got - want).max())
+        key = (obj.name, d.uid)
+        R.check("EIGEN preview is pending", key in S.solver.pending())
+        S.handlers.refine()
+        R.check("EIGEN full result waits while the handle may still move",
+                key in S.solver.pending())
+        time.sleep(S.solver.PREVIEW_SETTLE_S + 0.05)
+        while S.handlers.refine() is not None:
+            pass
+        got = S.evaluated_positions(obj)
+        want = np.asarray(native.solve(transforms=T).positions)
+        R.check("EIGEN full result once the handle stops", np.abs(got - want).max() < TOL
+                and np.abs(want - rest).max() > 0.1, np.abs(got - want).max())
+    finally:
+        S.handlers.force_interactive[0] = False
+    S.group(obj, "tip2", handle[:3])
+    e2 = S.empty("Tip2", (1.0, 0.0, 0.0))
+    bpy.ops.deformkit.add_handle(vertex_group="tip2", target=e2.name)
+    bpy.context.view_layer.update()
+    S.solver.evaluate_object(obj, check_groups=True)
+    R.check("EIGEN: two handles with a Region group are refused in the panel",
+            d.status_is_error and "one handle" in d.status, d.status)
+
+
+for t in (test_eigen_region_and_preview, test_vertex_cloud, test_geodesic_influence, test_show_graph, test_registry_drives_ui, test_methods, test_stiffness_map, test_soft_handles,
           test_bone_target, test_auto_rebind_on_group_change, test_skip_when_unchanged,
           test_bind_pose_of_transformed_object):
     R.run(t)
