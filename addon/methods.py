@@ -245,6 +245,14 @@ METHODS.append(Method(
         Option("refine", "INT", 300, "Refinement",
                "Eigenvectors of the second iteration that rebuilds the details when fewer "
                "are used (0: one iteration)", min=0, max=2000),
+        # item order is stored in files: new items go last
+        Option("laplacian", "ENUM", "cotangent", "Laplacian",
+               "Whose eigenvectors carry the deformation",
+               items=(("cotangent", "Cotangent", "Cotangent weights with Voronoi areas: "
+                                                 "binds fastest (the default)"),
+                      ("belkin_sun_wang", "Belkin-Sun-Wang",
+                       "The paper's mesh-Laplacian: a heat kernel over nearby vertices in "
+                       "space; slower to bind, about the same shapes"))),
     ],
 ))
 

@@ -47,7 +47,15 @@ extern "C" {
 
 /** Which Laplacian's eigenvectors. */
 typedef enum dk_eigen_laplacian {
-    DK_EIGEN_COTANGENT = 0 /**< cotangent weights, mixed-Voronoi mass (Meyer et al.)      */
+    DK_EIGEN_COTANGENT = 0,       /**< cotangent weights, mixed-Voronoi mass (Meyer et al.) */
+    DK_EIGEN_BELKIN_SUN_WANG = 1  /**< the mesh-Laplacian of Belkin, Sun & Wang 2008, the
+                                       paper's: (L f)(w) = 1 / (4 pi h^2) sum_p a_p
+                                       exp(-|p - w|^2 / 4h) (f(p) - f(w)), a_p a third of the
+                                       areas around p; solved as the symmetric generalized
+                                       problem with stiffness a_w a_p exp(..) / (4 pi h^2)
+                                       and mass a. The kernel is cut where it falls below
+                                       e^-9 (|p - w| > 6 sqrt(h)), over each vertex's 64
+                                       nearest vertices in space                            */
 } dk_eigen_laplacian;
 
 /** Options; fill with dk_eigen_default_options. */
@@ -57,6 +65,8 @@ typedef struct dk_eigen_options {
     int refine;              /**< n' of the two-iteration scheme (section 4.3), used when
                                   m < n'; 0 = one iteration always. Default 300           */
     dk_eigen_laplacian laplacian; /**< default DK_EIGEN_COTANGENT                         */
+    double bsw_width;        /**< Belkin-Sun-Wang: sqrt(4h), the kernel's width, in mean edge
+                                  lengths (> 0; default 1)                                */
     dk_progress_fn progress; /**< bind progress (eigenvectors found); may be NULL; a
                                   non-zero return cancels the bind                       */
     void *progress_user;

@@ -62,6 +62,7 @@ void dk_eigen_default_options(dk_eigen_options *o)
     o->n_eigenvectors = 0;
     o->refine = 300;
     o->laplacian = DK_EIGEN_COTANGENT;
+    o->bsw_width = 1.0;
 }
 
 /* ------------------------------------------------------------------ eigenpairs --------- */
@@ -97,6 +98,69 @@ static dk_status dense_eigenpairs(const dk_sparse *l, const double *mass, dk_ind
     return st;
 }
 
+/* The Belkin-Sun-Wang mesh-Laplacian as a symmetric pair: stiffness
+ * S_wp = -a_w a_p G(w, p) / (4 pi h^2) off the diagonal (rows summing to 0) and the mass a
+ * (barycentric, `mass`), so that M^-1 S is the operator of dk_eigen.h. Each vertex's pairs
+ * come from its 64 nearest vertices within the cut; a pair seen from both ends gets half
+ * from each, so S is symmetric whatever the neighbour lists. */
+#define BSW_NEIGHBOURS 64
+static dk_status bsw_laplacian(const dk_mesh *mesh, double width, const double *mass,
+                               dk_sparse **out, dk_error *err)
+{
+    const dk_index n = mesh->n_vertices;
+    const dk_index k = n < BSW_NEIGHBOURS + 1 ? n : BSW_NEIGHBOURS + 1; /* + itself */
+    const double four_h = (width * mesh->mean_edge_length) * (width * mesh->mean_edge_length);
+    const double pi = 3.14159265358979323846;
+    const double h = 0.25 * four_h, cut2 = 9.0 * four_h, scale = 1.0 / (4.0 * pi * h * h);
+    dk_kdtree *tree = NULL;
+    dk_index *nb = malloc((size_t)n * (size_t)k * sizeof *nb);
+    double *d2 = malloc((size_t)n * (size_t)k * sizeof *d2);
+    const int64_t cap = 2 * (int64_t)n * k + n;
+    dk_index *ri = malloc((size_t)cap * sizeof *ri), *ci = malloc((size_t)cap * sizeof *ci);
+    double *val = malloc((size_t)cap * sizeof *val);
+    dk_status st = (!nb || !d2 || !ri || !ci || !val) ? oom(err, "Belkin-Sun-Wang Laplacian")
+                                                       : DK_OK;
+    if (st == DK_OK && !(four_h > 0.0))
+        st = dk_error_set(err, DK_ERR_DEGENERATE,
+                          "EigenDeformation: the mesh has no edge length for the "
+                          "Belkin-Sun-Wang kernel");
+    if (st == DK_OK)
+        st = dk_kdtree_create(mesh->positions, n, &tree, err);
+    if (st == DK_OK)
+        st = dk_kdtree_knn(tree, mesh->positions, n, k, nb, d2, err);
+    int64_t t = 0;
+    for (dk_index w = 0; st == DK_OK && w < n; w++)
+        for (dk_index q = 0; q < k; q++) {
+            const dk_index p = nb[(size_t)w * k + q];
+            const double dd = d2[(size_t)w * k + q];
+            if (p == w || dd > cut2)
+                continue;
+            const double x = 0.5 * scale * mass[w] * mass[p] * exp(-dd / four_h);
+            ri[t] = w, ci[t] = p, val[t++] = -x; /* half from each end */
+            ri[t] = p, ci[t] = w, val[t++] = -x;
+        }
+    if (st == DK_OK) { /* the diagonal: minus the row sums (each pair added to both rows) */
+        double *diag = calloc((size_t)n, sizeof *diag);
+        if (!diag) {
+            st = oom(err, "Belkin-Sun-Wang Laplacian");
+        } else {
+            for (int64_t q = 0; q < t; q++)
+                diag[ri[q]] -= val[q];
+            for (dk_index w = 0; w < n; w++)
+                ri[t] = w, ci[t] = w, val[t++] = diag[w];
+            free(diag);
+            st = dk_sparse_from_triplets(n, n, t, ri, ci, val, out, err);
+        }
+    }
+    dk_kdtree_free(tree);
+    free(nb);
+    free(d2);
+    free(ri);
+    free(ci);
+    free(val);
+    return st;
+}
+
 /* 1. the eigenvectors of the mesh Laplacian, and Phi's factor */
 static dk_status eigenvectors(dk_eigen *e, dk_error *err)
 {
@@ -107,10 +171,12 @@ static dk_status eigenvectors(dk_eigen *e, dk_error *err)
     e->U = malloc((size_t)n * (size_t)e->K * sizeof *e->U);
     e->chol = malloc((size_t)e->K * (size_t)e->K * sizeof *e->chol);
     dk_status st = (!mass || !e->evals || !e->U || !e->chol) ? oom(err, "eigenvectors") : DK_OK;
+    const int bsw = e->opt.laplacian == DK_EIGEN_BELKIN_SUN_WANG;
     if (st == DK_OK)
-        st = dk_laplacian_cotangent(e->mesh, &l, err);
+        st = dk_mass_matrix(e->mesh, bsw ? DK_MASS_BARYCENTRIC : DK_MASS_VORONOI, mass, err);
     if (st == DK_OK)
-        st = dk_mass_matrix(e->mesh, DK_MASS_VORONOI, mass, err);
+        st = bsw ? bsw_laplacian(e->mesh, e->opt.bsw_width, mass, &l, err)
+                 : dk_laplacian_cotangent(e->mesh, &l, err);
     for (dk_index i = 0; st == DK_OK && i < n; i++)
         if (!(mass[i] > 0.0))
             st = dk_error_set(err, DK_ERR_DEGENERATE,
@@ -407,9 +473,13 @@ static dk_status skeletons(dk_eigen *e, int m, dk_error *err)
 
 static dk_status check_options(const dk_eigen_options *o, dk_index n, dk_error *err)
 {
-    if (o->laplacian != DK_EIGEN_COTANGENT)
+    if (o->laplacian != DK_EIGEN_COTANGENT && o->laplacian != DK_EIGEN_BELKIN_SUN_WANG)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
-                            "EigenDeformation: laplacian must be cotangent (0)");
+                            "EigenDeformation: laplacian must be cotangent (0) or "
+                            "belkin_sun_wang (1)");
+    if (!(o->bsw_width > 0.0) || !isfinite(o->bsw_width))
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EigenDeformation: bsw_width must be finite and > 0");
     if (o->n_eigenvectors < 0 || o->n_eigenvectors > n)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "EigenDeformation: n_eigenvectors is %d; it must be 0 (automatic) "

@@ -9,7 +9,7 @@
 #include <math.h>
 #include <string.h>
 
-static const char *const laplacian_names[] = {"cotangent", NULL};
+static const char *const laplacian_names[] = {"cotangent", "belkin_sun_wang", NULL};
 
 static void default_options(void *o)
 {
@@ -45,6 +45,7 @@ static int parse_options(PyObject *kw, void *o, const char *context)
         }
     }
     if (dk_py_opt_int(kw, "refine", &opt->refine) < 0 ||
+        dk_py_opt_double(kw, "bsw_width", &opt->bsw_width) < 0 ||
         dk_py_opt_choice(kw, "laplacian", laplacian_names, &lap, context) < 0)
         return -1;
     opt->laplacian = (dk_eigen_laplacian)lap;
@@ -199,7 +200,7 @@ PyDoc_STRVAR(solve_doc,
 
 PyDoc_STRVAR(eig_doc,
              "EigenDeformation(mesh, handles, fixed=None, n_eigenvectors='auto', refine=300,\n"
-             "    laplacian='cotangent')\n\n"
+             "    laplacian='cotangent' | 'belkin_sun_wang', bsw_width=1.0)\n\n"
              "Eigen deformation (Dey, Ranjan & Wang): the mesh's eigen-skeleton (its\n"
              "coordinates fitted with the first m Laplace-Beltrami eigenvectors) is deformed\n"
              "by a least-squares fit to the handle regions' motion, and the details are\n"

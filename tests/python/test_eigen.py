@@ -197,3 +197,27 @@ def test_bad_input():
     with pytest.raises(ValueError):
         e.solve(translation=[np.nan, 0, 0])
     assert np.abs(np.asarray(e.solve(v[end]).positions) - v).max() < 1e-10
+
+
+def test_belkin_sun_wang_laplacian():
+    """The paper's mesh-Laplacian (Belkin, Sun & Wang): on the unit sphere its spectrum is
+    the Laplace-Beltrami one, l (l + 1) with multiplicity 2 l + 1, as the cotangent
+    Laplacian's is; and it deforms like the cotangent one (zero drag exact, whole-mesh
+    motion exact)."""
+    v, f = make_icosphere(3)
+    mesh = dk.Mesh(v, f)
+    top = np.where(v[:, 2] > 0.5)[0]
+    want = np.repeat([0.0, 2.0, 6.0, 12.0], [1, 3, 5, 7])
+    for lap in ("cotangent", "belkin_sun_wang"):
+        e = dk.EigenDeformation(mesh, handles=[top], laplacian=lap, n_eigenvectors=16,
+                                refine=0)
+        lam = np.asarray(e.eigenvalues)[:16]
+        np.testing.assert_allclose(lam, want, rtol=0.04, atol=1e-8, err_msg=lap)   # 642 vertices
+        assert np.abs(np.asarray(e.solve(v[top]).positions) - v).max() < 1e-10
+    e = dk.EigenDeformation(mesh, handles=[np.arange(len(v))], laplacian="belkin_sun_wang",
+                            n_eigenvectors=8)
+    R = rot([1, 1, 0], 0.7)
+    r = np.asarray(e.solve(rotation=R, translation=[1, 0, 0]).positions)
+    assert np.abs(r - (v @ R.T + [1, 0, 0])).max() < 1e-9
+    with pytest.raises(ValueError, match="bsw_width"):
+        dk.EigenDeformation(mesh, handles=[top], laplacian="belkin_sun_wang", bsw_width=0.0)
