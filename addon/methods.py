@@ -256,6 +256,23 @@ METHODS.append(Method(
     ],
 ))
 
+METHODS.append(Method(
+    id="LINEAR_RECONSTRUCTION",
+    label="Linear Reconstruction",
+    native_class="LinearReconstruction",
+    description="Linear reconstruction from discrete fundamental forms (Wang, Liu & Tong; "
+                "Li): edge lengths and dihedral angles kept by one linear solve for positions "
+                "and triangle frames",
+    icon="MOD_TRIANGULATE",
+    options=[
+        Option("w", "FLOAT", 1.0, "Bending Weight",
+               "Weight of the frame (bending) term against the edge (stretching) term",
+               min=1e-6, max=1e6),
+        Option("orientation", "BOOL", False, "Turn Handle Faces",
+               "A rotated handle target also turns the faces of its group"),
+    ],
+))
+
 BY_ID = {m.id: m for m in METHODS}
 
 

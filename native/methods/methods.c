@@ -8,12 +8,13 @@
 #include "dk_eigen.h"
 #include "dk_embedded.h"
 #include "dk_falloff.h"
+#include "dk_fundamental.h"
 #include "dk_laplacian_edit.h"
 
 /* Adding a method: its table here, in the order the Python module lists its classes. */
 static const dk_method_ops *const registry[] = {&dk_arap_ops, &dk_laplacian_edit_ops,
                                                 &dk_falloff_ops, &dk_embedded_ops, &dk_eigen_ops,
-                                                NULL};
+                                                &dk_fundamental_ops, NULL};
 
 const dk_method_ops *const *dk_methods(void)
 {

@@ -1,0 +1,868 @@
+/* DeformKit: linear reconstruction from discrete fundamental forms with a material map.
+ * See dk_fundamental.h for the method and docs/methods/fundamental.md for the choices. */
+#include "dk_fundamental.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <lapacke.h>
+
+#include "dk_cholesky.h"
+#include "dk_operators.h"
+#include "dk_sparse.h"
+
+#define COT_MIN 1e-2
+#define COT_MAX 1e2
+#define PI 3.14159265358979323846
+
+struct dk_fundamental {
+    const dk_mesh *mesh;
+    dk_fundamental_options opt;
+    double *material;          /* n_edges                                                    */
+    /* the fundamental forms, per face and per interior edge */
+    unsigned char *degenerate; /* F                                                          */
+    double *coord;             /* F x 6: the corners' 2-D coordinates in the face's frame    */
+    double *cot;               /* F x 3: clamped cot of the angle at corner k                */
+    double *rest_frame;        /* F x 9                                                      */
+    double *R;                 /* n_edges x 9                                                */
+    unsigned char *has_R;      /* n_edges                                                    */
+    /* the elimination */
+    dk_constraints *con;
+    dk_index n_unk, n_con;     /* per coordinate                                             */
+    dk_index *vu, *vc;         /* n: free / constrained index of each vertex, or -1          */
+    dk_index *fu, *fc;         /* F: first of the frame's 3 free / constrained indices, or -1 */
+    dk_index *face_handle;     /* F: the handle prescribing the frame, -2 fixed, -1 none     */
+    dk_index *fa;              /* F: first of the 3 constrained slots holding the rest frame
+                                  row a regularized face is drawn to, or -1                  */
+    dk_sparse *A, *B;          /* n_unk x n_unk; n_unk x n_con                               */
+    dk_cholesky *chol;
+    /* solve buffers */
+    double *zc, *rhs, *lin, *tgt, *frames;
+    double *comp_fit;          /* n_components x 25: per component, the sums for the
+                                  rotation that best fits its constrained vertices (count,
+                                  rest sum 3, target sum 3, cross moments 9) and R (9)       */
+    int any_anchor;            /* some face is regularized (fa >= 0)                         */
+    double w_scaled;           /* w times the mean edge length squared: E_f is dimensionless
+                                  and E_x a squared length, so this keeps w scale-free      */
+};
+
+static dk_status oom(dk_error *err, const char *what)
+{
+    return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "LinearReconstruction: out of memory (%s)",
+                        what);
+}
+
+void dk_fundamental_default_options(dk_fundamental_options *o)
+{
+    memset(o, 0, sizeof *o);
+    o->w = 1.0;
+}
+
+/* ------------------------------------------------------------------ fundamental forms -- */
+
+static double clamp_cot(double c)
+{
+    return !(c >= COT_MIN) ? COT_MIN : c > COT_MAX ? COT_MAX : c;
+}
+
+/* Rz(a) or Rx(a) into r (row-major). */
+static void rot_z(double a, double r[9])
+{
+    const double c = cos(a), s = sin(a);
+    const double m[9] = {c, -s, 0, s, c, 0, 0, 0, 1};
+    memcpy(r, m, sizeof m);
+}
+
+static void rot_x(double a, double r[9])
+{
+    const double c = cos(a), s = sin(a);
+    const double m[9] = {1, 0, 0, 0, c, -s, 0, s, c};
+    memcpy(r, m, sizeof m);
+}
+
+static void mat_mul(const double a[9], const double b[9], double o[9])
+{
+    double t[9];
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            t[3 * i + j] = a[3 * i] * b[j] + a[3 * i + 1] * b[3 + j] + a[3 * i + 2] * b[6 + j];
+    memcpy(o, t, sizeof t);
+}
+
+/* Per face: angles by the law of cosines, 2-D corner coordinates, clamped cotangents, and
+ * the rest frame (columns: first edge, normal x first edge, normal). */
+static void faces(dk_fundamental *f)
+{
+    const dk_mesh *m = f->mesh;
+    for (dk_index t = 0; t < m->n_faces; t++) {
+        const dk_index *c = m->faces + 3 * (size_t)t;
+        const double *p0 = m->positions + 3 * (size_t)c[0], *p1 = m->positions + 3 * (size_t)c[1];
+        const double *p2 = m->positions + 3 * (size_t)c[2];
+        double u[3], v[3], w[3], n[3];
+        for (int d = 0; d < 3; d++)
+            u[d] = p1[d] - p0[d], v[d] = p2[d] - p0[d], w[d] = p2[d] - p1[d];
+        const double l01 = sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+        const double l02 = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+        const double l12 = sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+        n[0] = u[1] * v[2] - u[2] * v[1], n[1] = u[2] * v[0] - u[0] * v[2];
+        n[2] = u[0] * v[1] - u[1] * v[0];
+        const double nl = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        const double lmax = fmax(l01, fmax(l02, l12));
+        double *co = f->coord + 6 * (size_t)t, *ct = f->cot + 3 * (size_t)t;
+        double *F = f->rest_frame + 9 * (size_t)t;
+        f->degenerate[t] = !(0.5 * nl > 1e-14 * lmax * lmax) || !(l01 > 0.0) || !(l02 > 0.0);
+        if (f->degenerate[t]) {
+            memset(co, 0, 6 * sizeof *co);
+            memset(ct, 0, 3 * sizeof *ct);
+            memset(F, 0, 9 * sizeof *F);
+            continue;
+        }
+        /* from the lengths alone: cosines by the law of cosines, sines from the area by
+         * Kahan's stable Heron formula, angles by atan2 (acos alone loses half the digits
+         * of small angles, which the reconstruction would show as 1e-8 errors) */
+        double sa = l01, sb = l02, sc = l12, tmp;
+        if (sa < sb) tmp = sa, sa = sb, sb = tmp;
+        if (sb < sc) tmp = sb, sb = sc, sc = tmp;
+        if (sa < sb) tmp = sa, sa = sb, sb = tmp;
+        const double h2 = (sa + (sb + sc)) * (sc - (sa - sb)) * (sc + (sa - sb)) * (sa + (sb - sc));
+        const double area = 0.25 * sqrt(h2 > 0.0 ? h2 : 0.0);
+        const double a0 = atan2(2.0 * area, 0.5 * (l01 * l01 + l02 * l02 - l12 * l12));
+        const double a1 = atan2(2.0 * area, 0.5 * (l01 * l01 + l12 * l12 - l02 * l02));
+        const double a2 = PI - a0 - a1;
+        co[0] = 0.0, co[1] = 0.0, co[2] = l01, co[3] = 0.0;
+        co[4] = l02 * cos(a0), co[5] = l02 * sin(a0);
+        ct[0] = clamp_cot(1.0 / tan(a0));
+        ct[1] = clamp_cot(1.0 / tan(a1));
+        ct[2] = clamp_cot(a2 > 0.0 ? 1.0 / tan(a2) : COT_MAX);
+        double e1[3] = {u[0] / l01, u[1] / l01, u[2] / l01}, e3[3] = {n[0] / nl, n[1] / nl, n[2] / nl};
+        double e2[3] = {e3[1] * e1[2] - e3[2] * e1[1], e3[2] * e1[0] - e3[0] * e1[2],
+                        e3[0] * e1[1] - e3[1] * e1[0]};
+        for (int d = 0; d < 3; d++)
+            F[3 * d] = e1[d], F[3 * d + 1] = e2[d], F[3 * d + 2] = e3[d];
+    }
+}
+
+/* The local corner of vertex v in face t, or -1. */
+static int corner_of(const dk_mesh *m, dk_index t, dk_index v)
+{
+    for (int k = 0; k < 3; k++)
+        if (m->faces[3 * (size_t)t + k] == v)
+            return k;
+    return -1;
+}
+
+/* The direction angle, in face t's frame, of the edge from corner a to corner b. */
+static double edge_angle(const dk_fundamental *f, dk_index t, int a, int b)
+{
+    const double *co = f->coord + 6 * (size_t)t;
+    return atan2(co[2 * b + 1] - co[2 * a + 1], co[2 * b] - co[2 * a]);
+}
+
+/* Per interior edge: R_ij = Rz(theta_i) Rx(phi) Rz(-theta_j), the paper's three rotations:
+ * theta_i aligns i's e_1 with the shared edge (m -> n as in face i), phi is the dihedral
+ * angle turning i's normal into j's about the edge, theta_j is the edge's angle in j. */
+static void edge_rotations(dk_fundamental *f)
+{
+    const dk_mesh *m = f->mesh;
+    for (dk_index e = 0; e < m->n_edges; e++) {
+        const dk_index ti = m->edge_faces[2 * (size_t)e], tj = m->edge_faces[2 * (size_t)e + 1];
+        f->has_R[e] = 0;
+        if (ti < 0 || tj < 0 || m->edge_face_count[e] != 2 || f->degenerate[ti] ||
+            f->degenerate[tj])
+            continue;
+        const dk_index a = m->edges[2 * (size_t)e], b = m->edges[2 * (size_t)e + 1];
+        int pa = corner_of(m, ti, a), pb = corner_of(m, ti, b);
+        /* m -> n in face i's own order */
+        const int forward = (pa + 1) % 3 == pb;
+        const dk_index vm = forward ? a : b, vn = forward ? b : a;
+        const int im = forward ? pa : pb, in = forward ? pb : pa;
+        const int jm = corner_of(m, tj, vm), jn = corner_of(m, tj, vn);
+        const double th_i = edge_angle(f, ti, im, in), th_j = edge_angle(f, tj, jm, jn);
+        const double *Fi = f->rest_frame + 9 * (size_t)ti, *Fj = f->rest_frame + 9 * (size_t)tj;
+        const double *xm = m->positions + 3 * (size_t)vm, *xn = m->positions + 3 * (size_t)vn;
+        double ed[3] = {xn[0] - xm[0], xn[1] - xm[1], xn[2] - xm[2]};
+        const double el = sqrt(ed[0] * ed[0] + ed[1] * ed[1] + ed[2] * ed[2]);
+        for (int d = 0; d < 3; d++)
+            ed[d] /= el;
+        const double ni[3] = {Fi[2], Fi[5], Fi[8]}, nj[3] = {Fj[2], Fj[5], Fj[8]};
+        const double e2[3] = {ni[1] * ed[2] - ni[2] * ed[1], ni[2] * ed[0] - ni[0] * ed[2],
+                              ni[0] * ed[1] - ni[1] * ed[0]};
+        const double phi = atan2(-(nj[0] * e2[0] + nj[1] * e2[1] + nj[2] * e2[2]),
+                                 nj[0] * ni[0] + nj[1] * ni[1] + nj[2] * ni[2]);
+        double r1[9], r2[9], r3[9], *R = f->R + 9 * (size_t)e;
+        rot_z(th_i, r1);
+        rot_x(phi, r2);
+        rot_z(-th_j, r3);
+        mat_mul(r1, r2, R);
+        mat_mul(R, r3, R);
+        f->has_R[e] = 1;
+    }
+}
+
+/* ------------------------------------------------------------------ residuals ---------- */
+
+/* One residual of one coordinate: weight and up to 4 terms, each a vertex (frame < 0) or
+ * entry k of a face's frame row. */
+typedef struct term {
+    dk_index id;
+    int k; /* -1: vertex id; 0..2: entry k of face id's frame row; 3..5: entry k - 3 of its
+              rest frame row (a constant: the regularization's anchor) */
+    double c;
+} term;
+
+/* The weight, relative to w, that draws the frames of an under-constrained component to
+ * their rest frames (see eliminate). */
+#define REGULARIZATION 1e-8
+
+typedef void (*visit_fn)(void *ctx, double weight, const term *t, int nt);
+
+/* Every residual of E = w E_f + E_x (eqs. 5-7), the same for each coordinate. */
+static void for_each_residual(const dk_fundamental *f, visit_fn visit, void *ctx)
+{
+    const dk_mesh *m = f->mesh;
+    for (dk_index t = 0; t < m->n_faces; t++) { /* E_x: each edge of each face */
+        if (f->degenerate[t])
+            continue;
+        const dk_index *c = m->faces + 3 * (size_t)t;
+        const double *co = f->coord + 6 * (size_t)t;
+        for (int k = 0; k < 3; k++) {
+            const int a = (k + 1) % 3, b = (k + 2) % 3; /* the edge opposite corner k */
+            const dk_index e = m->face_edges[3 * (size_t)t + k];
+            const double wgt = f->material[e] * f->cot[3 * (size_t)t + k];
+            const term tt[4] = {{c[b], -1, 1.0}, {c[a], -1, -1.0},
+                                {t, 0, -(co[2 * b] - co[2 * a])},
+                                {t, 1, -(co[2 * b + 1] - co[2 * a + 1])}};
+            visit(ctx, wgt, tt, 4);
+        }
+    }
+    for (dk_index e = 0; e < m->n_edges; e++) { /* E_f: f_j - f_i R_ij, per entry k */
+        if (!f->has_R[e])
+            continue;
+        const dk_index ti = m->edge_faces[2 * (size_t)e], tj = m->edge_faces[2 * (size_t)e + 1];
+        /* cot alpha + cot beta: the angles opposite the edge in both faces */
+        const int ki = corner_of(m, ti, m->edges[2 * (size_t)e]) ^
+                       corner_of(m, ti, m->edges[2 * (size_t)e + 1]) ^ 3;
+        const int kj = corner_of(m, tj, m->edges[2 * (size_t)e]) ^
+                       corner_of(m, tj, m->edges[2 * (size_t)e + 1]) ^ 3;
+        const double we = f->cot[3 * (size_t)ti + ki] + f->cot[3 * (size_t)tj + kj];
+        const double wgt = f->w_scaled / (f->material[e] * we);
+        const double *R = f->R + 9 * (size_t)e;
+        for (int k = 0; k < 3; k++) {
+            const term tt[4] = {{tj, k, 1.0}, {ti, 0, -R[k]}, {ti, 1, -R[3 + k]},
+                                {ti, 2, -R[6 + k]}};
+            visit(ctx, wgt, tt, 4);
+        }
+    }
+    for (dk_index t = 0; f->fa && t < m->n_faces; t++) /* the regularization, where needed */
+        if (f->fa[t] >= 0)
+            for (int k = 0; k < 3; k++) {
+                const term tt[2] = {{t, k, 1.0}, {t, 3 + k, -1.0}};
+                visit(ctx, REGULARIZATION * f->w_scaled, tt, 2);
+            }
+}
+
+/* The unknown (free >= 0) or constraint (encoded -2 - index) index of a term. */
+static dk_index slot(const dk_fundamental *f, const term *t)
+{
+    if (t->k < 0)
+        return f->vu[t->id] >= 0 ? f->vu[t->id] : -2 - f->vc[t->id];
+    if (t->k >= 3)
+        return -2 - (f->fa[t->id] + t->k - 3);
+    return f->fu[t->id] >= 0 ? f->fu[t->id] + t->k : -2 - (f->fc[t->id] + t->k);
+}
+
+typedef struct assembly {
+    const dk_fundamental *f;
+    dk_index *ar, *ac, *br, *bc;
+    double *av, *bv;
+    int64_t na, nb;
+} assembly;
+
+static void assemble_visit(void *ctx, double w, const term *t, int nt)
+{
+    assembly *s = ctx;
+    dk_index idx[4];
+    for (int i = 0; i < nt; i++)
+        idx[i] = slot(s->f, t + i);
+    for (int i = 0; i < nt; i++) {
+        if (idx[i] < 0)
+            continue;
+        for (int j = 0; j < nt; j++) {
+            if (t[i].c == 0.0 || t[j].c == 0.0)
+                continue;
+            if (idx[j] >= 0) {
+                s->ar[s->na] = idx[i], s->ac[s->na] = idx[j];
+                s->av[s->na++] = w * t[i].c * t[j].c;
+            } else {
+                s->br[s->nb] = idx[i], s->bc[s->nb] = -2 - idx[j];
+                s->bv[s->nb++] = w * t[i].c * t[j].c;
+            }
+        }
+    }
+}
+
+typedef struct evaluation {
+    const dk_fundamental *f;
+    const double *x, *frames;
+    double E;
+} evaluation;
+
+static void energy_visit(void *ctx, double w, const term *t, int nt)
+{
+    evaluation *s = ctx;
+    for (int d = 0; d < 3; d++) {
+        double r = 0.0;
+        for (int i = 0; i < nt; i++)
+            r += t[i].c * (t[i].k < 0    ? s->x[3 * (size_t)t[i].id + d]
+                           : t[i].k < 3 ? s->frames[9 * (size_t)t[i].id + 3 * d + t[i].k]
+                                        : s->f->zc[(size_t)d * s->f->n_con + s->f->fa[t[i].id] +
+                                                   t[i].k - 3]);
+        s->E += 0.5 * w * r * r;
+    }
+}
+
+/* ------------------------------------------------------------------ elimination -------- */
+
+typedef struct elim {
+    dk_constraints *con;
+    dk_index n_unk, n_con;
+    int any_anchor;
+    dk_index *vu, *vc, *fu, *fc, *face_handle, *fa;
+    dk_sparse *A, *B;
+    dk_cholesky *chol;
+    double *zc, *rhs, *lin, *tgt;
+} elim;
+
+static void elim_free(elim *s)
+{
+    dk_constraints_free(s->con);
+    free(s->vu);
+    free(s->vc);
+    free(s->fu);
+    free(s->fc);
+    free(s->face_handle);
+    free(s->fa);
+    dk_sparse_free(s->A);
+    dk_sparse_free(s->B);
+    dk_cholesky_free(s->chol);
+    free(s->zc);
+    free(s->rhs);
+    free(s->lin);
+    free(s->tgt);
+    memset(s, 0, sizeof *s);
+}
+
+/* Before any solve the anchors are the rest frames (for the energy). */
+static void rest_anchors(dk_fundamental *f)
+{
+    const size_t nc = (size_t)f->n_con;
+    for (dk_index t = 0; t < f->mesh->n_faces; t++)
+        if (f->fa[t] >= 0)
+            for (int d = 0; d < 3; d++)
+                for (int k = 0; k < 3; k++)
+                    f->zc[(size_t)d * nc + f->fa[t] + k] = f->rest_frame[9 * (size_t)t + 3 * d + k];
+}
+
+static void elim_install(dk_fundamental *f, elim *s)
+{
+    elim old = {f->con, f->n_unk, f->n_con, f->any_anchor, f->vu, f->vc, f->fu, f->fc,
+                f->face_handle, f->fa, f->A, f->B, f->chol, f->zc, f->rhs, f->lin, f->tgt};
+    elim_free(&old);
+    f->con = s->con, f->n_unk = s->n_unk, f->n_con = s->n_con, f->vu = s->vu, f->vc = s->vc;
+    f->fu = s->fu, f->fc = s->fc, f->face_handle = s->face_handle, f->fa = s->fa;
+    f->any_anchor = s->any_anchor;
+    f->A = s->A, f->B = s->B;
+    f->chol = s->chol, f->zc = s->zc, f->rhs = s->rhs, f->lin = s->lin, f->tgt = s->tgt;
+    memset(s, 0, sizeof *s);
+    rest_anchors(f);
+}
+
+/* Every component must be held by a constraint (else its translation is free). The
+ * frames are linear unknowns, so the energy is invariant under any affine map of positions
+ * and frames together: constraints pin that map only when the component's constrained
+ * vertices span space (four not in a plane) or a face's frame is prescribed. A component
+ * held more thinly (a planar rim, a line, one vertex) gets `thin` = 1: eliminate() then
+ * draws its frames weakly (REGULARIZATION) to their rest frames turned by the rotation that
+ * best fits the component's constrained vertices to their targets (solve), which picks,
+ * among the equally good results, the one without a free shear, and keeps a rigid motion
+ * of every constraint exact. */
+static dk_status check_components(const dk_fundamental *f, const elim *s, unsigned char *thin,
+                                  dk_error *err)
+{
+    const dk_mesh *m = f->mesh;
+    const dk_index nc = m->report.n_components > 0 ? m->report.n_components : 1;
+    dk_index *cv = calloc((size_t)nc, sizeof *cv), *cf = calloc((size_t)nc, sizeof *cf);
+    dk_index *rep = malloc((size_t)nc * sizeof *rep);
+    double *mom = calloc(9 * (size_t)nc, sizeof *mom), *mean = calloc(3 * (size_t)nc, sizeof *mean);
+    if (!cv || !cf || !rep || !mom || !mean) {
+        free(cv), free(cf), free(rep), free(mom), free(mean);
+        return oom(err, "components");
+    }
+    for (dk_index c = 0; c < nc; c++)
+        rep[c] = -1;
+    for (dk_index v = 0; v < m->n_vertices; v++) {
+        const dk_index c = m->component[v];
+        if (rep[c] < 0)
+            rep[c] = v;
+        if (s->vc[v] < 0)
+            continue;
+        cv[c]++;
+        for (int d = 0; d < 3; d++)
+            mean[3 * (size_t)c + d] += m->positions[3 * (size_t)v + d];
+    }
+    for (dk_index v = 0; v < m->n_vertices; v++) { /* the constrained vertices' covariance */
+        const dk_index c = m->component[v];
+        if (s->vc[v] < 0)
+            continue;
+        double q[3];
+        for (int d = 0; d < 3; d++)
+            q[d] = m->positions[3 * (size_t)v + d] - mean[3 * (size_t)c + d] / (double)cv[c];
+        for (int a = 0; a < 3; a++)
+            for (int b = 0; b < 3; b++)
+                mom[9 * (size_t)c + 3 * a + b] += q[a] * q[b];
+    }
+    for (dk_index t = 0; t < m->n_faces; t++)
+        cf[m->component[m->faces[3 * (size_t)t]]] += s->fc[t] >= 0;
+    dk_status st = DK_OK;
+    for (dk_index c = 0; c < nc && st == DK_OK; c++) {
+        if (cv[c] == 0 && cf[c] == 0) {
+            st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                              "LinearReconstruction: the component containing vertex %d has no "
+                              "constraint: every component needs a handle or fixed vertices",
+                              (int)rep[c]);
+            break;
+        }
+        double ev[3];
+        const lapack_int info = LAPACKE_dsyev(LAPACK_ROW_MAJOR, 'N', 'U', 3, mom + 9 * (size_t)c,
+                                              3, ev);
+        /* spanning space: the smallest spread at least 1e-3 of the largest */
+        const int flat = info != 0 || !(ev[0] > 1e-6 * ev[2]);
+        thin[c] = cf[c] == 0 && (cv[c] < 4 || flat);
+    }
+    free(cv), free(cf), free(rep), free(mom), free(mean);
+    return st;
+}
+
+/* The constraints' roles, the numbering, the matrices and the factor. */
+static dk_status eliminate(const dk_fundamental *f, const dk_constraint_desc *desc, elim *s,
+                           dk_error *err)
+{
+    const dk_mesh *m = f->mesh;
+    const dk_index n = m->n_vertices, F = m->n_faces;
+    memset(s, 0, sizeof *s);
+    dk_status st = dk_constraints_create(m, desc, &s->con, err);
+    if (st != DK_OK)
+        return dk_error_prefix(err, "LinearReconstruction");
+    const dk_constraints *c = s->con;
+    s->vu = malloc((size_t)n * sizeof *s->vu), s->vc = malloc((size_t)n * sizeof *s->vc);
+    s->fu = malloc(((size_t)F + 1) * sizeof *s->fu), s->fc = malloc(((size_t)F + 1) * sizeof *s->fc);
+    s->face_handle = malloc(((size_t)F + 1) * sizeof *s->face_handle);
+    if (!s->vu || !s->vc || !s->fu || !s->fc || !s->face_handle)
+        return oom(err, "numbering");
+    dk_index nu = 0, ncon = 0;
+    for (dk_index v = 0; v < n; v++) {
+        const int held = c->role[v] != DK_VERTEX_FREE;
+        s->vu[v] = held ? -1 : nu++;
+        s->vc[v] = held ? ncon++ : -1;
+    }
+    for (dk_index t = 0; t < F; t++) {
+        const dk_index *fv = m->faces + 3 * (size_t)t;
+        dk_index h = -1;
+        if (f->opt.orientation && !f->degenerate[t] && c->role[fv[0]] != DK_VERTEX_FREE &&
+            c->role[fv[0]] == c->role[fv[1]] && c->role[fv[0]] == c->role[fv[2]])
+            h = c->role[fv[0]] == DK_VERTEX_FIXED ? -2 : c->role[fv[0]];
+        s->face_handle[t] = h;
+        if (f->degenerate[t]) {
+            s->fu[t] = s->fc[t] = -1;
+        } else if (h != -1) {
+            s->fu[t] = -1, s->fc[t] = ncon, ncon += 3;
+        } else {
+            s->fu[t] = nu, s->fc[t] = -1, nu += 3;
+        }
+    }
+    s->n_unk = nu;
+    {
+        const dk_index ncomp = m->report.n_components > 0 ? m->report.n_components : 1;
+        unsigned char *thin = calloc((size_t)ncomp, 1);
+        s->fa = malloc(((size_t)F + 1) * sizeof *s->fa);
+        if (!thin || !s->fa) {
+            free(thin);
+            return oom(err, "numbering");
+        }
+        st = check_components(f, s, thin, err);
+        for (dk_index t = 0; t < F; t++) { /* anchors of the thinly held components' frames */
+            const int reg = st == DK_OK && s->fu[t] >= 0 && thin[m->component[m->faces[3 * (size_t)t]]];
+            s->fa[t] = reg ? ncon : -1;
+            ncon += reg ? 3 : 0;
+            s->any_anchor |= reg;
+        }
+        free(thin);
+        if (st != DK_OK)
+            return st;
+    }
+    s->n_con = ncon;
+    for (dk_index v = 0; v < n; v++) /* a vertex on degenerate faces only has no energy */
+        if (s->vu[v] >= 0 && m->vf_start[v + 1] > m->vf_start[v]) {
+            int any = 0;
+            for (dk_index q = m->vf_start[v]; q < m->vf_start[v + 1]; q++)
+                any |= !f->degenerate[m->vf_index[q]];
+            if (!any)
+                return dk_error_set(err, DK_ERR_DEGENERATE,
+                                    "LinearReconstruction: vertex %d lies on degenerate "
+                                    "triangles only, so nothing places it: fix the mesh or "
+                                    "constrain it", (int)v);
+        }
+    /* the residual count: 3 per face (E_x) and 3 per interior edge (E_f), 16 pairs each */
+    const int64_t cap = 16 * (3 * (int64_t)F + 3 * (int64_t)m->n_edges) + 1;
+    assembly a = {f, malloc((size_t)cap * sizeof(dk_index)), malloc((size_t)cap * sizeof(dk_index)),
+                  malloc((size_t)cap * sizeof(dk_index)), malloc((size_t)cap * sizeof(dk_index)),
+                  malloc((size_t)cap * sizeof(double)), malloc((size_t)cap * sizeof(double)), 0, 0};
+    /* (a scratch view of the numbering for slot()) */
+    dk_fundamental view = *f;
+    view.vu = s->vu, view.vc = s->vc, view.fu = s->fu, view.fc = s->fc, view.fa = s->fa;
+    a.f = &view;
+    if (!a.ar || !a.ac || !a.br || !a.bc || !a.av || !a.bv) {
+        st = oom(err, "assembly");
+    } else {
+        for_each_residual(&view, assemble_visit, &a);
+        st = dk_sparse_from_triplets(nu, nu, a.na, a.ar, a.ac, a.av, &s->A, err);
+        if (st == DK_OK)
+            st = dk_sparse_from_triplets(nu, ncon > 0 ? ncon : 1, a.nb, a.br, a.bc, a.bv, &s->B,
+                                         err);
+    }
+    free(a.ar), free(a.ac), free(a.br), free(a.bc), free(a.av), free(a.bv);
+    if (st == DK_OK && nu > 0)
+        st = dk_cholesky_analyze(s->A, &s->chol, err);
+    if (st == DK_OK && nu > 0) {
+        st = dk_cholesky_factorize(s->chol, s->A, err);
+        if (st == DK_ERR_NOT_POSITIVE_DEFINITE)
+            dk_error_prefix(err, "LinearReconstruction: the system is singular (constrained "
+                                 "vertices on a line, or a part held by nothing?)");
+        else if (st != DK_OK)
+            dk_error_prefix(err, "LinearReconstruction");
+    }
+    if (st == DK_OK) {
+        s->zc = malloc((3 * (size_t)ncon + 1) * sizeof *s->zc);
+        s->rhs = malloc((3 * (size_t)nu + 1) * sizeof *s->rhs);
+        s->lin = malloc((9 * (size_t)c->n_handles + 1) * sizeof *s->lin);
+        s->tgt = malloc((3 * (size_t)c->n_handle_vertices + 1) * sizeof *s->tgt);
+        if (!s->zc || !s->rhs || !s->lin || !s->tgt)
+            st = oom(err, "buffers");
+    }
+    return st;
+}
+
+/* ------------------------------------------------------------------ bind ---------------- */
+
+void dk_fundamental_free(dk_fundamental *f)
+{
+    if (!f)
+        return;
+    elim s = {f->con, f->n_unk, f->n_con, f->any_anchor, f->vu, f->vc, f->fu, f->fc,
+              f->face_handle, f->fa, f->A, f->B, f->chol, f->zc, f->rhs, f->lin, f->tgt};
+    elim_free(&s);
+    free(f->material);
+    free(f->degenerate);
+    free(f->coord);
+    free(f->cot);
+    free(f->rest_frame);
+    free(f->R);
+    free(f->has_R);
+    free(f->frames);
+    free(f->comp_fit);
+    free(f);
+}
+
+dk_status dk_fundamental_bind(const dk_mesh *mesh, const dk_constraint_desc *desc,
+                              const dk_fundamental_options *options, dk_fundamental **out,
+                              dk_error *err)
+{
+    if (!out)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "LinearReconstruction: out is NULL");
+    *out = NULL;
+    if (!mesh || !desc)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "LinearReconstruction: mesh and constraints must not be NULL");
+    if (mesh->n_faces == 0)
+        return dk_error_set(err, DK_ERR_TOPOLOGY, "LinearReconstruction: the mesh has no faces");
+    if (mesh->report.n_nonmanifold_edges > 0) {
+        const dk_index e = mesh->report.first_nonmanifold_edge;
+        return dk_error_set(err, DK_ERR_TOPOLOGY,
+                            "LinearReconstruction: %d non-manifold edges (the first joins "
+                            "vertices %d and %d): a frame equation needs two faces per edge",
+                            (int)mesh->report.n_nonmanifold_edges,
+                            e >= 0 ? (int)mesh->edges[2 * (size_t)e] : -1,
+                            e >= 0 ? (int)mesh->edges[2 * (size_t)e + 1] : -1);
+    }
+    dk_fundamental_options opt;
+    if (options)
+        opt = *options;
+    else
+        dk_fundamental_default_options(&opt);
+    if (!(opt.w > 0.0) || !isfinite(opt.w))
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "LinearReconstruction: w must be finite and > 0");
+    if (opt.orientation != 0 && opt.orientation != 1)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "LinearReconstruction: orientation must be 0 or 1");
+    if (opt.material && opt.n_material != mesh->n_edges)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "LinearReconstruction: the material map has %d entries; the mesh "
+                            "has %d edges (one value per edge, in Mesh.edges order)",
+                            (int)opt.n_material, (int)mesh->n_edges);
+    for (dk_index e = 0; opt.material && e < mesh->n_edges; e++)
+        if (!(opt.material[e] > 0.0) || !isfinite(opt.material[e]))
+            return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                                "LinearReconstruction: the material map must be finite and > 0; "
+                                "edge %d (vertices %d-%d) has %g", (int)e,
+                                (int)mesh->edges[2 * (size_t)e],
+                                (int)mesh->edges[2 * (size_t)e + 1], opt.material[e]);
+    dk_fundamental *f = calloc(1, sizeof *f);
+    if (!f)
+        return oom(err, "object");
+    f->mesh = mesh;
+    f->opt = opt;
+    f->w_scaled = opt.w * mesh->mean_edge_length * mesh->mean_edge_length;
+    if (!(f->w_scaled > 0.0)) {
+        free(f);
+        return dk_error_set(err, DK_ERR_DEGENERATE, "LinearReconstruction: the mesh has no "
+                            "edge length");
+    }
+    const size_t F = (size_t)mesh->n_faces, E = (size_t)mesh->n_edges;
+    f->material = malloc((E + 1) * sizeof *f->material);
+    f->degenerate = malloc(F + 1);
+    f->coord = malloc(6 * F * sizeof *f->coord);
+    f->cot = malloc(3 * F * sizeof *f->cot);
+    f->rest_frame = malloc(9 * F * sizeof *f->rest_frame);
+    f->frames = malloc(9 * F * sizeof *f->frames);
+    f->R = malloc((9 * E + 1) * sizeof *f->R);
+    f->has_R = malloc(E + 1);
+    f->comp_fit = malloc(25 * ((size_t)(mesh->report.n_components > 0 ? mesh->report.n_components
+                                                                        : 1)) * sizeof *f->comp_fit);
+    if (!f->material || !f->degenerate || !f->coord || !f->cot || !f->rest_frame || !f->frames ||
+        !f->R || !f->has_R || !f->comp_fit) {
+        dk_fundamental_free(f);
+        return oom(err, "fundamental forms");
+    }
+    for (size_t e = 0; e < E; e++)
+        f->material[e] = opt.material ? opt.material[e] : 1.0;
+    f->opt.material = NULL; /* the copy is ours */
+    f->opt.n_material = 0;
+    /* 1. the first fundamental form per face; 2. the second per interior edge (R_ij);
+     * 3. the elimination of the constraints, the energy's matrices and their factor */
+    faces(f);
+    edge_rotations(f);
+    memcpy(f->frames, f->rest_frame, 9 * F * sizeof *f->frames);
+    elim s;
+    dk_status st = eliminate(f, desc, &s, err);
+    if (st != DK_OK) {
+        elim_free(&s);
+        dk_fundamental_free(f);
+        return st;
+    }
+    elim_install(f, &s);
+    *out = f;
+    return DK_OK;
+}
+
+dk_status dk_fundamental_rebind(dk_fundamental *f, const dk_constraint_desc *desc, dk_error *err)
+{
+    if (!f || !desc)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "LinearReconstruction rebind: object and constraints must not be "
+                            "NULL");
+    elim s;
+    dk_status st = eliminate(f, desc, &s, err);
+    if (st != DK_OK) {
+        elim_free(&s);
+        return st;
+    }
+    elim_install(f, &s);
+    return DK_OK;
+}
+
+/* ------------------------------------------------------------------ solve -------------- */
+
+/* Per handle, the linear part that turns its faces' frames: the transform's, or the
+ * rotation that best fits the rest handle vertices to the targets (Kabsch). */
+static void handle_rotations(dk_fundamental *f, int transforms, const double *targets)
+{
+    const dk_constraints *c = f->con;
+    const double *p = f->mesh->positions;
+    for (dk_index h = 0; h < c->n_handles; h++) {
+        double *L = f->lin + 9 * (size_t)h;
+        if (transforms) {
+            for (int r = 0; r < 3; r++)
+                for (int q = 0; q < 3; q++)
+                    L[3 * r + q] = targets[16 * (size_t)h + 4 * r + q];
+            continue;
+        }
+        double cp[3] = {0, 0, 0}, cq[3] = {0, 0, 0}, A[9] = {0};
+        const dk_index a = c->handle_start[h], b = c->handle_start[h + 1];
+        for (dk_index q = a; q < b; q++)
+            for (int d = 0; d < 3; d++) {
+                cp[d] += p[3 * (size_t)c->handle_vertices[q] + d] / (double)(b - a);
+                cq[d] += f->tgt[3 * (size_t)q + d] / (double)(b - a);
+            }
+        for (dk_index q = a; q < b; q++) /* A = sum (q - cq)(p - cp)^T: R maximises tr(R^T A) */
+            for (int r = 0; r < 3; r++)
+                for (int s = 0; s < 3; s++)
+                    A[3 * r + s] += (f->tgt[3 * (size_t)q + r] - cq[r]) *
+                                    (p[3 * (size_t)c->handle_vertices[q] + s] - cp[s]);
+        dk_closest_rotation(A, L);
+    }
+}
+
+dk_status dk_fundamental_solve(dk_fundamental *f, const dk_solve_request *rq, double *positions,
+                               dk_solve_info *info, dk_error *err)
+{
+    if (info)
+        memset(info, 0, sizeof *info);
+    if (!f || !positions)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "LinearReconstruction solve: object and positions must not be NULL");
+    dk_status st = dk_solve_request_check(rq, "LinearReconstruction solve", err);
+    if (st != DK_OK)
+        return st;
+    const dk_mesh *m = f->mesh;
+    const dk_constraints *c = f->con;
+    st = dk_constraints_targets(c, m->positions, rq->targets, (int)rq->target_kind, f->tgt, err);
+    if (st != DK_OK)
+        return dk_error_prefix(err, "LinearReconstruction solve");
+    if (f->opt.orientation)
+        handle_rotations(f, rq->target_kind == DK_TARGETS_TRANSFORMS, rq->targets);
+    /* the constraint values, per coordinate (column-major n_con x 3) */
+    const size_t nc = (size_t)f->n_con, nu = (size_t)f->n_unk;
+    for (dk_index v = 0; v < m->n_vertices; v++) {
+        if (f->vc[v] < 0)
+            continue;
+        const double *src = m->positions + 3 * (size_t)v;
+        if (c->role[v] >= 0) /* a handle vertex: its target */
+            for (dk_index q = c->handle_start[c->role[v]]; q < c->handle_start[c->role[v] + 1]; q++)
+                if (c->handle_vertices[q] == v) {
+                    src = f->tgt + 3 * (size_t)q;
+                    break;
+                }
+        for (int d = 0; d < 3; d++)
+            f->zc[(size_t)d * nc + f->vc[v]] = src[d];
+    }
+    for (dk_index t = 0; t < m->n_faces; t++) {
+        if (f->fc[t] < 0)
+            continue;
+        const double *F0 = f->rest_frame + 9 * (size_t)t;
+        double Ft[9];
+        if (f->face_handle[t] >= 0)
+            mat_mul(f->lin + 9 * (size_t)f->face_handle[t], F0, Ft);
+        else
+            memcpy(Ft, F0, sizeof Ft);
+        for (int d = 0; d < 3; d++)
+            for (int k = 0; k < 3; k++)
+                f->zc[(size_t)d * nc + f->fc[t] + k] = Ft[3 * d + k];
+        memcpy(f->frames + 9 * (size_t)t, Ft, sizeof Ft);
+    }
+    if (f->any_anchor) { /* the regularization's anchors: rest frames, turned per component */
+        const dk_index ncomp = m->report.n_components > 0 ? m->report.n_components : 1;
+        memset(f->comp_fit, 0, 25 * (size_t)ncomp * sizeof *f->comp_fit);
+        for (int pass = 0; pass < 2; pass++)
+            for (dk_index v = 0; v < m->n_vertices; v++) {
+                if (f->vc[v] < 0)
+                    continue;
+                double *cf = f->comp_fit + 25 * (size_t)m->component[v];
+                const double *p = m->positions + 3 * (size_t)v;
+                double q[3];
+                for (int d = 0; d < 3; d++)
+                    q[d] = f->zc[(size_t)d * nc + f->vc[v]];
+                if (pass == 0) { /* the centroids' sums */
+                    cf[0] += 1.0;
+                    for (int d = 0; d < 3; d++)
+                        cf[1 + d] += p[d], cf[4 + d] += q[d];
+                    continue;
+                }
+                for (int a = 0; a < 3; a++) /* sum (q - cq)(p - cp)^T */
+                    for (int b = 0; b < 3; b++)
+                        cf[7 + 3 * a + b] += (q[a] - cf[4 + a] / cf[0]) * (p[b] - cf[1 + b] / cf[0]);
+            }
+        for (dk_index c = 0; c < ncomp; c++)
+            dk_closest_rotation(f->comp_fit + 25 * (size_t)c + 7, f->comp_fit + 25 * (size_t)c + 16);
+        for (dk_index t = 0; t < m->n_faces; t++)
+            if (f->fa[t] >= 0) {
+                double Ft[9];
+                mat_mul(f->comp_fit + 25 * (size_t)m->component[m->faces[3 * (size_t)t]] + 16,
+                        f->rest_frame + 9 * (size_t)t, Ft);
+                for (int d = 0; d < 3; d++)
+                    for (int k = 0; k < 3; k++)
+                        f->zc[(size_t)d * nc + f->fa[t] + k] = Ft[3 * d + k];
+            }
+    }
+    /* A z = -B z_c, three coordinates at once */
+    if (nu > 0) {
+        for (int d = 0; d < 3; d++) {
+            dk_sparse_matvec(f->B, f->zc + (size_t)d * nc, f->rhs + (size_t)d * nu);
+            for (size_t i = 0; i < nu; i++)
+                f->rhs[(size_t)d * nu + i] = -f->rhs[(size_t)d * nu + i];
+        }
+        st = dk_cholesky_solve(f->chol, f->rhs, 3, f->rhs, err);
+        if (st != DK_OK)
+            return dk_error_prefix(err, "LinearReconstruction solve");
+    }
+    for (dk_index v = 0; v < m->n_vertices; v++)
+        for (int d = 0; d < 3; d++)
+            positions[3 * (size_t)v + d] = f->vu[v] >= 0 ? f->rhs[(size_t)d * nu + f->vu[v]]
+                                                         : f->zc[(size_t)d * nc + f->vc[v]];
+    for (dk_index t = 0; t < m->n_faces; t++)
+        if (f->fu[t] >= 0)
+            for (int d = 0; d < 3; d++)
+                for (int k = 0; k < 3; k++)
+                    f->frames[9 * (size_t)t + 3 * d + k] = f->rhs[(size_t)d * nu + f->fu[t] + k];
+    if (info) {
+        info->iterations = info->converged = 1;
+        if (rq->skip_energy)
+            info->energy = NAN;
+        else
+            dk_fundamental_energy(f, positions, &info->energy, err);
+    }
+    return DK_OK;
+}
+
+dk_status dk_fundamental_energy(const dk_fundamental *f, const double *positions,
+                                double *energy, dk_error *err)
+{
+    if (!f || !positions || !energy)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "LinearReconstruction energy: arguments must not be NULL");
+    evaluation ev = {f, positions, f->frames, 0.0};
+    for_each_residual(f, energy_visit, &ev);
+    *energy = ev.E;
+    return DK_OK;
+}
+
+const double *dk_fundamental_frames(const dk_fundamental *f)
+{
+    return f ? f->frames : NULL;
+}
+
+int dk_fundamental_edge_rotation(const dk_fundamental *f, dk_index edge, double r[9])
+{
+    if (!f || edge < 0 || edge >= f->mesh->n_edges || !f->has_R[edge])
+        return 0;
+    memcpy(r, f->R + 9 * (size_t)edge, 9 * sizeof *r);
+    return 1;
+}
+
+void dk_fundamental_stats(const dk_fundamental *f, dk_method_stats *st)
+{
+    memset(st, 0, sizeof *st);
+    if (!f)
+        return;
+    st->n_vertices = f->mesh->n_vertices;
+    st->n_handles = f->con->n_handles;
+    st->n_handle_vertices = f->con->n_handle_vertices;
+    st->n_unknowns = f->n_unk;
+    st->analysis_count = st->factorization_count = f->n_unk > 0;
+}
+
+DK_METHOD_OPS(dk_fundamental_ops, "LinearReconstruction",
+              DK_METHOD_TRANSFORMS_AS_POSITIONS | DK_METHOD_TRANSLATION_INVARIANT |
+                  DK_METHOD_RIGID_INVARIANT,
+              dk_fundamental, dk_fundamental, dk_fundamental_options);

@@ -1,0 +1,188 @@
+"""Linear reconstruction from discrete fundamental forms (Li, after Wang, Liu & Tong 2012;
+docs/methods/fundamental.md): reconstruction from a seed (Figure 5), rigid motions, the
+cylinder "arm" folded with and without a soft material at the elbow (Figures 8-10),
+orientation constraints, robustness and bad input."""
+import os
+
+import numpy as np
+import pytest
+
+import deformkit as dk
+from conftest import make_grid, make_icosphere
+
+SHARED = os.path.join(os.path.dirname(__file__), "..", "..", "..", "shared")
+
+
+def random_rigid(seed):
+    rng = np.random.default_rng(seed)
+    Q = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    Q *= np.sign(np.linalg.det(Q))
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = Q, rng.normal(size=3)
+    return T
+
+
+def cylinder(n_around=32, n_along=60, length=6.0, radius=0.5):
+    """An open tube along x (the paper's arm), rings of n_around vertices."""
+    a = 2 * np.pi * np.arange(n_around) / n_around
+    v = np.array([[length * j / (n_along - 1), radius * np.cos(t), radius * np.sin(t)]
+                  for j in range(n_along) for t in a])
+    f = []
+    for j in range(n_along - 1):
+        for i in range(n_around):
+            p, q = j * n_around + i, j * n_around + (i + 1) % n_around
+            f += [[p, q, q + n_around], [p, q + n_around, p + n_around]]
+    return v, np.array(f)
+
+
+def rot_y(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+
+@pytest.mark.parametrize("mesh_name", ["icosphere", "arm"])
+def test_reconstruction_from_a_seed(mesh_name):
+    """Figure 5: one seed face's vertices and frame (a handle with orientation constraints)
+    reproduce the rest mesh up to that rigid motion."""
+    if mesh_name == "icosphere":
+        v, f = make_icosphere(3)
+        mesh = dk.Mesh(v, f)
+    else:
+        path = os.path.join(SHARED, "meshes", "arm.obj")
+        if not os.path.exists(path):
+            pytest.skip("no shared arm mesh")
+        v, sizes, idx = dk.load_mesh_file(path)
+        mesh = dk.Mesh.from_polygons(v, sizes, idx)
+        v, f = np.asarray(v), np.asarray(mesh.triangles)
+    T = random_rigid(3)
+    lr = dk.LinearReconstruction(mesh, handles=[f[0]], orientation=True)
+    r = np.asarray(lr.solve(transforms=[T]).positions)
+    scale = np.linalg.norm(v.max(0) - v.min(0))
+    # 1e-9 on the sphere; on the 8k-vertex arm, seeded by one triangle, the low-frequency
+    # modes (a slowly varying scale of the frames) are stiff only through long chains of
+    # frame equations, and rounding leaves 1e-8 to 1e-7 of the size (the rest's energy is 1e-30, the
+    # solution's 1e-20: conditioning, not an inconsistency; iterative refinement does not
+    # change it)
+    tol = 1e-9 if mesh_name == "icosphere" else 2e-7   # measured 6e-8
+    assert np.abs(r - (v @ T[:3, :3].T + T[:3, 3])).max() < tol * scale
+    fr = np.asarray(lr.frames).reshape(-1, 3, 3)
+    # every frame is the seed's rigid motion of its rest frame
+    lr0 = dk.LinearReconstruction(mesh, handles=[f[0]], orientation=True)
+    lr0.solve(transforms=[np.eye(4)])
+    fr0 = np.asarray(lr0.frames).reshape(-1, 3, 3)
+    assert np.abs(fr - T[:3, :3] @ fr0).max() < 1e-6
+    ortho = np.abs(fr0 @ fr0.transpose(0, 2, 1) - np.eye(3)).max()   # the solved rest frames
+    assert ortho < (1e-9 if mesh_name == "icosphere" else 1e-6), ortho
+
+
+def test_rigid_motion_of_all_handles_moves_the_mesh_rigidly():
+    v, f = make_icosphere(3)
+    mesh = dk.Mesh(v, f)
+    cap, top = np.where(v[:, 2] < -0.7)[0], np.where(v[:, 2] > 0.7)[0]
+    T = random_rigid(5)
+    lr = dk.LinearReconstruction(mesh, handles=[cap, top])
+    r = np.asarray(lr.solve(transforms=[T, T]).positions)
+    assert np.abs(r - (v @ T[:3, :3].T + T[:3, 3])).max() < 1e-9
+    # coplanar constraints (a grid's two straight sides): the free shear is regularized
+    # towards the best-fit rotation, so a rigid motion still comes out rigid
+    g, gf = make_grid(12, 10, bump=0.15)
+    left, right = np.where(g[:, 0] <= 1e-9)[0], np.where(g[:, 0] >= 1 - 1e-9)[0]
+    lr = dk.LinearReconstruction(dk.Mesh(g, gf), handles=[left, right])
+    r = np.asarray(lr.solve(transforms=[T, T]).positions)
+    assert np.abs(r - (g @ T[:3, :3].T + T[:3, 3])).max() < 1e-6
+
+
+def bend_profile(x, n_around=32):
+    """The turning angle (degrees) of the tube's axis between consecutive rings."""
+    c = x.reshape(-1, n_around, 3).mean(axis=1)
+    t = np.diff(c, axis=0)
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    return np.degrees(np.arccos(np.clip((t[1:] * t[:-1]).sum(1), -1, 1)))
+
+
+def test_folded_arm_meets_its_constraints_and_feels_the_material():
+    """Figures 6-10's set-up: a tube fixed at one end, its other end turned 90 degrees about
+    the elbow. The hand and the fixed end are met exactly, the axis turns by the full 90
+    degrees, and a soft ring at the elbow (a smooth map, 0.2 there) changes how the fold is
+    distributed. Measured (docs/methods/fundamental.md): with the paper's mapping (soft =
+    lower stretching, higher bending weight) the fold spreads away from the soft ring here
+    (24% of the turning in the middle 10 rings without it, 11% with it), the opposite of
+    the paper's elbow; the calibration of issue 16 is still to be done."""
+    v, f = cylinder()
+    mesh = dk.Mesh(v, f)
+    fixed, hand = np.where(v[:, 0] < 0.5)[0], np.where(v[:, 0] > 5.5)[0]
+    T = np.eye(4)
+    T[:3, :3] = rot_y(-np.pi / 2)
+    T[:3, 3] = [3, 0, 0] - rot_y(-np.pi / 2) @ [3, 0, 0]
+    edges = np.asarray(mesh.edges)
+    mid = 0.5 * (v[edges[:, 0], 0] + v[edges[:, 1], 0])
+    soft = 1.0 - 0.8 * np.exp(-((mid - 3.0) / 0.5) ** 2)
+    out = {}
+    for name, mat in (("plain", None), ("soft", soft)):
+        lr = dk.LinearReconstruction(mesh, handles=[hand], fixed=fixed, material=mat)
+        r = np.asarray(lr.solve(transforms=[T]).positions)
+        assert np.abs(r[hand] - (v[hand] @ T[:3, :3].T + T[:3, 3])).max() < 1e-12
+        assert np.abs(r[fixed] - v[fixed]).max() == 0.0
+        b = bend_profile(r)
+        assert abs(b.sum() - 90.0) < 0.5, b.sum()
+        out[name] = b[24:34].sum() / b.sum()
+    assert abs(out["plain"] - out["soft"]) > 0.05, out
+
+
+def test_orientation_constraints_turn_the_handle_faces():
+    v, f = make_icosphere(3)
+    mesh = dk.Mesh(v, f)
+    top, cap = np.where(v[:, 2] > 0.7)[0], np.where(v[:, 2] < -0.7)[0]
+    T = np.eye(4)
+    T[:3, :3] = rot_y(0.6)
+    T[:3, 3] = [0.2, 0, 0.3]
+    lr = dk.LinearReconstruction(mesh, handles=[top], fixed=cap, orientation=True)
+    rest = dk.LinearReconstruction(mesh, handles=[top], fixed=cap, orientation=True)
+    rest.solve(transforms=[np.eye(4)])
+    lr.solve(transforms=[T])
+    F0 = np.asarray(rest.frames).reshape(-1, 3, 3)
+    F1 = np.asarray(lr.frames).reshape(-1, 3, 3)
+    inside = np.all(np.isin(f, top), axis=1)
+    fixed_faces = np.all(np.isin(f, cap), axis=1)
+    assert inside.sum() > 10
+    np.testing.assert_allclose(F1[inside], T[:3, :3] @ F0[inside], atol=1e-12)
+    np.testing.assert_allclose(F1[fixed_faces], F0[fixed_faces], atol=1e-12)
+    # without the option the frames come out of the solve (close to, not exactly, turned)
+    free = dk.LinearReconstruction(mesh, handles=[top], fixed=cap)
+    free.solve(transforms=[T])
+    F2 = np.asarray(free.frames).reshape(-1, 3, 3)
+    assert np.abs(F2[inside] - T[:3, :3] @ F0[inside]).max() > 1e-6
+
+
+def test_robustness_and_bad_input():
+    v, f = make_icosphere(2)
+    top, cap = np.where(v[:, 2] > 0.7)[0], np.where(v[:, 2] < -0.7)[0]
+    # a degenerate triangle (a vertex moved onto its neighbour's edge) gives no NaN
+    w = v.copy()
+    a, b, c = f[5]
+    w[c] = 0.5 * (w[a] + w[b])
+    lr = dk.LinearReconstruction(dk.Mesh(w, f), handles=[top], fixed=cap)
+    r = np.asarray(lr.solve(w[top] + [0, 0, 0.2]).positions)
+    assert np.isfinite(r).all()
+    # two components, one without a constraint: the error names it
+    v2 = np.r_[v, v + [3, 0, 0]]
+    f2 = np.r_[f, f + len(v)]
+    with pytest.raises(ValueError, match="component containing vertex %d" % len(v)):
+        dk.LinearReconstruction(dk.Mesh(v2, f2), handles=[top], fixed=cap)
+    r = np.asarray(dk.LinearReconstruction(dk.Mesh(v2, f2), handles=[top, top + len(v)],
+                                           fixed=np.r_[cap, cap + len(v)])
+                   .solve(np.r_[v[top], v[top] + [3, 0, 0]] + [0, 0, 0.1]).positions)
+    assert np.isfinite(r).all()
+    # a non-manifold edge is refused
+    fn = np.r_[f, [[f[0][0], f[0][1], len(v)]]]
+    vn = np.r_[v, [[2.0, 2.0, 2.0]]]
+    with pytest.raises(ValueError, match="non-manifold"):
+        dk.LinearReconstruction(dk.Mesh(vn, fn), handles=[top], fixed=cap)
+    mesh = dk.Mesh(v, f)
+    ne = len(np.asarray(mesh.edges))
+    with pytest.raises(ValueError, match="material map has"):
+        dk.LinearReconstruction(mesh, handles=[top], material=np.ones(ne - 1))
+    with pytest.raises(ValueError, match="material map must be"):
+        dk.LinearReconstruction(mesh, handles=[top], material=np.r_[0.0, np.ones(ne - 1)])
+    with pytest.raises(ValueError, match="w must be"):
+        dk.LinearReconstruction(mesh, handles=[top], w=0.0)
