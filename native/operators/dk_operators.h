@@ -38,6 +38,19 @@ dk_status dk_laplacian_cotangent(const dk_mesh *mesh, dk_sparse **out, dk_error 
 dk_status dk_laplacian_from_edge_weights(const dk_mesh *mesh, const double *weights,
                                          dk_sparse **out, dk_error *err);
 
+/* ---------------------------------------------------------------- harmonic maps -------- */
+
+/** Harmonic interpolation of a few painted values (the material map of Li's future work):
+ *  u = values at the `n_painted` vertices `painted`, and L u = 0 at every other vertex,
+ *  with L the cotangent Laplacian whose weights are clamped to >= 1e-2 of the mean weight
+ *  (non-negative weights give the maximum principle: u stays between the painted minimum
+ *  and maximum, so a positive material stays positive). A component with no painted vertex
+ *  gets `fallback`. Writes `u_vertex` (n_vertices) and, when not NULL, `u_edge` (n_edges:
+ *  the mean of each edge's two ends). Duplicate painted vertices are refused. */
+dk_status dk_harmonic_interpolation(const dk_mesh *mesh, const dk_index *painted,
+                                    const double *values, dk_index n_painted, double fallback,
+                                    double *u_vertex, double *u_edge, dk_error *err);
+
 /* ---------------------------------------------------------------- mass matrices -------- */
 
 /** Lumped mass matrix kinds (diagonal, one entry per vertex). */

@@ -787,6 +787,66 @@ static PyObject *py_closest_rotation(PyObject *module, PyObject *arg)
     return result;
 }
 
+/* ------------------------------------------------------------------ harmonic maps ------- */
+
+PyDoc_STRVAR(harmonic_material_doc,
+             "harmonic_material(mesh, vertices, values, fallback=1.0, per='edge') -> array\n\n"
+             "A smooth material map from a few painted values (the future work of Li's\n"
+             "paper): u = values at `vertices`, L u = 0 elsewhere (cotangent weights clamped\n"
+             "non-negative, so u stays between the painted extremes). A component with no\n"
+             "painted vertex gets `fallback`. per='edge' returns one value per edge\n"
+             "(Mesh.edges order: the mean of its ends), as LinearReconstruction's material\n"
+             "takes it; per='vertex' the per-vertex u.");
+
+static PyObject *py_harmonic_material(PyObject *module, PyObject *args, PyObject *kwargs)
+{
+    static char *kwlist[] = {"mesh", "vertices", "values", "fallback", "per", NULL};
+    PyObject *mobj, *vobj, *valobj, *result = NULL;
+    double fallback = 1.0, *out, *uv = NULL;
+    const char *per = "edge";
+    dk_py_indices idx = {0};
+    dk_py_doubles val = {0};
+    dk_error err = {0};
+    dk_status st;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|ds:harmonic_material", kwlist, &mobj,
+                                     &vobj, &valobj, &fallback, &per))
+        return NULL;
+    const dk_mesh *mesh = dk_py_mesh_get(module, mobj, "mesh");
+    if (!mesh)
+        return NULL;
+    const int by_edge = strcmp(per, "edge") == 0;
+    if (!by_edge && strcmp(per, "vertex") != 0) {
+        PyErr_Format(PyExc_ValueError, "harmonic_material: per must be 'edge' or 'vertex', "
+                     "not '%s'", per);
+        return NULL;
+    }
+    if (dk_py_read_indices(vobj, -1, 0, "vertices", &idx) < 0)
+        return NULL;
+    if (dk_py_read_doubles(valobj, idx.rows, 0, "values", &val) < 0) {
+        dk_py_indices_release(&idx);
+        return NULL;
+    }
+    result = dk_py_new_doubles(1, by_edge ? mesh->n_edges : mesh->n_vertices, 0, &out);
+    uv = by_edge ? PyMem_Malloc(((size_t)mesh->n_vertices + 1) * sizeof *uv) : NULL;
+    if (result && (!by_edge || uv)) {
+        Py_BEGIN_ALLOW_THREADS
+        st = dk_harmonic_interpolation(mesh, idx.data, val.data, (dk_index)idx.rows, fallback,
+                                       by_edge ? uv : out, by_edge ? out : NULL, &err);
+        Py_END_ALLOW_THREADS
+        if (st != DK_OK) {
+            Py_CLEAR(result);
+            dk_py_raise(&err, "harmonic_material");
+        }
+    } else if (result) {
+        Py_CLEAR(result);
+        PyErr_NoMemory();
+    }
+    PyMem_Free(uv);
+    dk_py_indices_release(&idx);
+    dk_py_doubles_release(&val);
+    return result;
+}
+
 /* ------------------------------------------------------------------ registration -------- */
 
 static PyMethodDef operator_functions[] = {
@@ -804,6 +864,8 @@ static PyMethodDef operator_functions[] = {
      METH_VARARGS | METH_KEYWORDS, eigenpairs_doc},
     {"knn", (PyCFunction)(void (*)(void))py_knn, METH_VARARGS | METH_KEYWORDS, knn_doc},
     {"closest_rotation", py_closest_rotation, METH_O, closest_rotation_doc},
+    {"harmonic_material", (PyCFunction)(void (*)(void))py_harmonic_material,
+     METH_VARARGS | METH_KEYWORDS, harmonic_material_doc},
     {NULL, NULL, 0, NULL},
 };
 

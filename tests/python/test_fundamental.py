@@ -186,3 +186,46 @@ def test_robustness_and_bad_input():
         dk.LinearReconstruction(mesh, handles=[top], material=np.r_[0.0, np.ones(ne - 1)])
     with pytest.raises(ValueError, match="w must be"):
         dk.LinearReconstruction(mesh, handles=[top], w=0.0)
+
+
+def test_harmonic_material_is_harmonic_and_takes_the_painted_values():
+    """The paper's future work: a smooth map from a few painted values. L u = 0 away from
+    the painted vertices (to 1e-10, with the clamped non-negative cotangent weights the
+    function documents), the painted values exact, the maximum principle, the edge form
+    the mean of the ends, and an unpainted component at the fallback."""
+    v, f = cylinder(16, 30)
+    mesh = dk.Mesh(v, f)
+    ring = np.where(np.abs(v[:, 0] - 3.0) < 0.11)[0]
+    ends = np.where((v[:, 0] < 0.01) | (v[:, 0] > 5.99))[0]
+    painted = np.r_[ring, ends]
+    values = np.r_[np.full(len(ring), 0.2), np.ones(len(ends))]
+    u = np.asarray(dk.harmonic_material(mesh, painted, values, per="vertex"))
+    np.testing.assert_array_equal(u[painted], values)
+    assert u.min() >= 0.2 - 1e-12 and u.max() <= 1.0 + 1e-12
+    w = np.asarray(dk.cotangent_weights(mesh))
+    E = np.asarray(mesh.edges)
+    w = np.maximum(w, 1e-2 * np.abs(w).mean())
+    Lu = np.zeros(len(v))
+    np.add.at(Lu, E[:, 0], w * (u[E[:, 0]] - u[E[:, 1]]))
+    np.add.at(Lu, E[:, 1], w * (u[E[:, 1]] - u[E[:, 0]]))
+    free = np.setdiff1d(np.arange(len(v)), painted)
+    assert np.abs(Lu[free]).max() < 1e-10
+    ue = np.asarray(dk.harmonic_material(mesh, painted, values))
+    np.testing.assert_allclose(ue, 0.5 * (u[E[:, 0]] + u[E[:, 1]]), atol=1e-15)
+    # smooth: no jump across the ring's border, unlike a step map
+    step = np.where(np.abs(v[:, 0] - 3.0) < 0.6, 0.2, 1.0)
+    order = np.argsort(v[:, 0])
+    assert np.abs(np.diff(u[order])).max() < 0.5 * np.abs(np.diff(step[order])).max()
+    # a second component without paint: the fallback
+    v2, f2 = np.r_[v, v + [0, 5, 0]], np.r_[f, f + len(v)]
+    u2 = np.asarray(dk.harmonic_material(dk.Mesh(v2, f2), painted, values, fallback=0.7,
+                                         per="vertex"))
+    assert np.all(u2[len(v):] == 0.7)
+    with pytest.raises(ValueError, match="painted twice"):
+        dk.harmonic_material(mesh, [0, 0], [1.0, 1.0])
+    with pytest.raises(ValueError, match="per must be"):
+        dk.harmonic_material(mesh, [0], [1.0], per="face")
+    # the map feeds LinearReconstruction
+    lr = dk.LinearReconstruction(mesh, handles=[np.where(v[:, 0] > 5.5)[0]],
+                                 fixed=np.where(v[:, 0] < 0.5)[0], material=ue)
+    assert np.isfinite(np.asarray(lr.solve(transforms=[np.eye(4)]).positions)).all()
