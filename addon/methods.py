@@ -43,7 +43,9 @@ class Method:
     # What the method consumes from Blender, beyond the mesh, the handles' groups and targets
     # and the Region and Fixed groups that every method takes:
     # which vertex-group maps: 'stiffness' (the material group's weights become the
-    # per-vertex `stiffness` keyword), 'handle_weights' (soft handles) and/or 'cut' (two
+    # per-vertex `stiffness` keyword), 'material' (they become the per-edge `material` map
+    # of linear reconstruction: solver.material_map), 'handle_weights' (soft handles) and/or
+    # 'cut' (two
     # GROUP options become the `cut=(group_a, group_b)` keyword: section 7 of Sumner et al.)
     maps: tuple = ()
     # 'cut' map: the two GROUP options holding the cut's sides
@@ -264,7 +266,21 @@ METHODS.append(Method(
                 "Li): edge lengths and dihedral angles kept by one linear solve for positions "
                 "and triangle frames",
     icon="MOD_TRIANGULATE",
+    maps=("material",),
     options=[
+        Option("softness", "FLOAT", 1.0, "Softness",
+               "How much easier to fold the painted material is (0: as built, 1: softest)",
+               min=0.0, max=1.0, kw=None, shown_with="material_group"),
+        Option("material_mode", "ENUM", "interpolate", "Material Paint",
+               "How the Material group's weight paint becomes the material map",
+               items=(("interpolate", "Interpolate", "A smooth (harmonic) map through the "
+                                                     "painted vertices, as built at the "
+                                                     "handles and the fixed part"),
+                      ("smooth", "Smooth", "The raw paint, smoothed along the surface")),
+               kw=None, shown_with="material_group"),
+        Option("smooth_iterations", "INT", 10, "Smoothing",
+               "Smooth: averaging passes over the raw paint", min=0, max=1000, kw=None,
+               shown_with="material_group"),
         Option("w", "FLOAT", 1.0, "Bending Weight",
                "Weight of the frame (bending) term against the edge (stretching) term",
                min=1e-6, max=1e6),

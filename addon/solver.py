@@ -283,6 +283,9 @@ def collect(obj, d):
         s = np.ones(len(obj.data.vertices))
         s[idx] = 1.0 + (getattr(d.options, m.stiffness_option) - 1.0) * w
         kw["stiffness"] = s
+    if "material" in m.maps and d.material_group:
+        idx, w = groups[d.material_group]
+        kw["material_paint"] = (idx, w)
     if "handle_weights" in m.maps and any(h.use_weights for h in d.handles):
         kw["handle_weights"] = weights
     if any(cut):
@@ -292,7 +295,8 @@ def collect(obj, d):
                 raise DeformKitError("%s: vertex group '%s' is empty" % (label, g))
     key = b"".join(np.ascontiguousarray(a).tobytes() for a in handles) + b"|" + b"|".join(
         b"" if x is None else np.ascontiguousarray(x).tobytes()
-        for x in (fixed, roi, kw.get("stiffness")) + kw.get("cut", ()))
+        for x in (fixed, roi, kw.get("stiffness")) + kw.get("cut", ())
+        + kw.get("material_paint", ()))
     key += b"|" + b"".join(w.tobytes() for w in kw.get("handle_weights", []))
     return kw, key
 
@@ -319,6 +323,44 @@ def _native_class(m):
     return dk, cls
 
 
+# Softness 1 multiplies the painted edges' weights by this (the material map of
+# docs/methods/fundamental.md): E_x's by MATERIAL_SOFTEST, E_f's by its inverse.
+MATERIAL_SOFTEST = 20.0
+
+
+def material_map(dk, dkmesh, paint, kw, opts):
+    """The per-edge material of linear reconstruction from the Material group's paint
+    (vertex indices, weights in (0, 1]): each painted vertex's value is
+    MATERIAL_SOFTEST ** (softness * weight). Interpolate: a harmonic map through the painted
+    vertices, the handles and fixed vertices held at 1 (as built); Smooth: the raw values
+    (1 where unpainted) averaged `smooth_iterations` times over the edges. The direction
+    (soft = a higher stretching and a lower bending weight) is the one measured to
+    concentrate a fold at the paint (docs/methods/fundamental.md, "Measured")."""
+    idx, w = paint
+    n = dkmesh.n_vertices
+    val = MATERIAL_SOFTEST ** (float(opts.softness) * np.asarray(w, dtype=np.float64))
+    edges = np.asarray(dkmesh.edges)
+    if opts.material_mode == "interpolate":
+        held = [np.asarray(h) for h in kw["handles"]]
+        if kw.get("fixed") is not None:
+            held.append(np.asarray(kw["fixed"]))
+        held = np.setdiff1d(np.concatenate(held) if held else np.zeros(0, np.int64), idx)
+        painted = np.concatenate([np.asarray(idx, dtype=np.int64), held.astype(np.int64)])
+        values = np.concatenate([val, np.ones(len(held))])
+        return np.asarray(_native_call("material", dk.harmonic_material, dkmesh, painted, values))
+    u = np.ones(n)
+    u[idx] = val
+    for _ in range(int(opts.smooth_iterations)):  # Jacobi averaging over the neighbours
+        acc = np.zeros(n)
+        deg = np.zeros(n)
+        np.add.at(acc, edges[:, 0], u[edges[:, 1]])
+        np.add.at(acc, edges[:, 1], u[edges[:, 0]])
+        np.add.at(deg, edges[:, 0], 1.0)
+        np.add.at(deg, edges[:, 1], 1.0)
+        u = np.where(deg > 0, 0.5 * u + 0.5 * acc / np.maximum(deg, 1.0), u)
+    return 0.5 * (u[edges[:, 0]] + u[edges[:, 1]])
+
+
 class BindJob:
     """One full bind, split so that the native precomputation (factorizations: seconds on big
     meshes) can run off the main thread while the UI stays live:
@@ -337,6 +379,9 @@ class BindJob:
         self.n_vertices, self.n_faces = len(me.vertices), len(me.polygons)
         self.dkmesh = _native_call("mesh", dk.Mesh, self.rest, triangles(me))
         args = dict(kw)
+        paint = args.pop("material_paint", None)
+        if paint is not None:
+            args["material"] = material_map(dk, self.dkmesh, paint, kw, d.options)
         args.update(methods.constructor_kwargs(m, d.options))
         for k in ("fixed", "roi"):
             if args.get(k) is None:
