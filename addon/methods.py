@@ -281,6 +281,10 @@ METHODS.append(Method(
         Option("smooth_iterations", "INT", 10, "Smoothing",
                "Smooth: averaging passes over the raw paint", min=0, max=1000, kw=None,
                shown_with="material_group"),
+        Option("show_material", "BOOL", False, "Show Material",
+               "Show the material map as the mesh's active colour attribute (Solid mode, "
+               "Attribute colouring): grey as built, yellow softest",
+               kw=None, bind_time=False, shown_with="material_group"),
         Option("w", "FLOAT", 1.0, "Bending Weight",
                "Weight of the frame (bending) term against the edge (stretching) term",
                min=1e-6, max=1e6),

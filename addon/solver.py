@@ -38,7 +38,7 @@ running_binds = {}
 class _Entry:
     __slots__ = ("native", "dkmesh", "rest", "extent", "n_vertices", "n_faces", "settings",
                  "groups", "last_inputs", "method_id", "verified", "pending", "pending_its",
-                 "handles", "source", "preview_at")
+                 "handles", "source", "preview_at", "material", "material_shown")
 
 
 def mark_settings_changed():
@@ -380,8 +380,10 @@ class BindJob:
         self.dkmesh = _native_call("mesh", dk.Mesh, self.rest, triangles(me))
         args = dict(kw)
         paint = args.pop("material_paint", None)
+        self.material = None
         if paint is not None:
-            args["material"] = material_map(dk, self.dkmesh, paint, kw, d.options)
+            args["material"] = self.material = material_map(dk, self.dkmesh, paint, kw,
+                                                            d.options)
         args.update(methods.constructor_kwargs(m, d.options))
         for k in ("fixed", "roi"):
             if args.get(k) is None:
@@ -415,6 +417,7 @@ class BindJob:
         e.settings, e.groups, e.method_id = self.settings, self.groups, self.method_id
         e.last_inputs, e.verified, e.pending, e.pending_its = None, True, False, 0
         e.handles, e.source, e.preview_at = self.handles, self.rest, 0.0
+        e.material, e.material_shown = self.material, None
         _cache[(obj.name, d.uid)] = e
         return e
 
@@ -713,12 +716,50 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
     else:
         e.preview_at = 0.0
     if write:
+        show_material(obj, d, e)
         # the offset computed in float64 and rounded once, straight into float32 (one pass)
         off = np.empty(pos.shape, dtype=np.float32)
         np.subtract(pos, e.source, out=off, casting="unsafe")
         write_offset(obj, d, off, retime=cold)
         e.last_inputs = inputs
     return pos
+
+
+def show_material(obj, d, e):
+    """Show Material (methods with a 'material' map): the map as the colour attribute
+    "dk_<uid>_material" (grey where as built, yellow where softest; the viewport shows it
+    in Solid mode with Attribute colouring), made the active colour; removed when off or
+    when nothing is painted. Writes only on a change."""
+    m = methods.get(d.method)
+    if "material" not in m.maps:
+        return
+    want = bool(getattr(d.options, "show_material", False)) and e.material is not None
+    key = (want, id(e.material))
+    if e.material_shown == key:
+        return
+    me = obj.data
+    name = "dk_%s_material" % d.uid
+    old = me.color_attributes.get(name) if hasattr(me, "color_attributes") else None
+    if not want:
+        if old is not None:
+            me.color_attributes.remove(old)
+        e.material_shown = key
+        return
+    edges = np.asarray(e.dkmesh.edges)
+    acc = np.zeros(e.n_vertices)
+    deg = np.zeros(e.n_vertices)
+    np.add.at(acc, edges.ravel(), np.repeat(e.material, 2))
+    np.add.at(deg, edges.ravel(), 1.0)
+    u = np.where(deg > 0, acc / np.maximum(deg, 1.0), 1.0)
+    t = np.clip(np.log(np.maximum(u, 1e-12)) / np.log(MATERIAL_SOFTEST), 0.0, 1.0)[:, None]
+    rgba = (1.0 - t) * np.array([0.5, 0.5, 0.5, 1.0]) + t * np.array([1.0, 0.85, 0.1, 1.0])
+    if old is None or old.domain != "POINT" or old.data_type != "FLOAT_COLOR":
+        if old is not None:
+            me.color_attributes.remove(old)
+        old = me.color_attributes.new(name, "FLOAT_COLOR", "POINT")
+    old.data.foreach_set("color", np.ascontiguousarray(rgba, dtype=np.float32).ravel())
+    me.color_attributes.active_color = old
+    e.material_shown = key
 
 
 def write_offset(obj, d, offset, retime=False):

@@ -539,6 +539,28 @@ def test_linear_reconstruction_material_paint():
         return b[10:18].sum() / b.sum()
     R.check("LINEAR_RECONSTRUCTION: the soft elbow takes more of the fold (%.0f%% -> %.0f%%)"
             % (100 * share(plain), 100 * share(got)), share(got) > share(plain) + 0.1)
+    # Show Material: the map as the active colour attribute, yellow at the elbow
+    name = "dk_%s_material" % d.uid
+    d.options.show_material = True
+    e.location = (3.0, 0.0, 0.05)
+    bpy.context.view_layer.update()
+    ca = obj.data.color_attributes.get(name)
+    ok = ca is not None and obj.data.color_attributes.active_color.name == name
+    if ok:
+        col = np.empty(len(obj.data.vertices) * 4, np.float32)
+        ca.data.foreach_get("color", col)
+        col = col.reshape(-1, 4)
+        ok = np.median(col[elbow, 2]) < 0.2 and np.median(col[fixed, 2]) > 0.4
+        detail = (np.median(col[elbow, 2]), np.median(col[fixed, 2]))
+    else:
+        detail = "no attribute" if ca is None else "not active"
+    R.check("LINEAR_RECONSTRUCTION Show Material paints the map (elbow yellow, ends grey)",
+            ok, detail)
+    d.options.show_material = False
+    e.location = (3.0, 0.0, 0.0)
+    bpy.context.view_layer.update()
+    R.check("LINEAR_RECONSTRUCTION Show Material off removes the colours",
+            obj.data.color_attributes.get(name) is None)
 
 
 for t in (test_linear_reconstruction_material_paint, test_eigen_region_and_preview, test_vertex_cloud, test_geodesic_influence, test_show_graph, test_registry_drives_ui, test_methods, test_stiffness_map, test_soft_handles,
