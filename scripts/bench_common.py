@@ -1,11 +1,23 @@
 #!/usr/bin/python3
-"""Mesh/scenario loading helpers for the DeformKit benchmarks (numpy only)."""
+"""Mesh/scenario loading and timing helpers for the DeformKit benchmarks (numpy only)."""
 import json
 import os
+import time
+
 import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SHARED = os.path.normpath(os.path.join(HERE, "..", "..", "shared"))
+
+
+def best(fn, repeat):
+    """(fn()'s last result, its best wall time in seconds over `repeat` calls)."""
+    out, t = None, float("inf")
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        out = fn()
+        t = min(t, time.perf_counter() - t0)
+    return out, t
 
 
 def load_obj(path):

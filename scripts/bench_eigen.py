@@ -17,11 +17,15 @@ for m = 8, 50 and 300. Prints the paper's rows beside ours. A script, not a test
 """
 import argparse
 import os
+import sys
 import time
 
 import numpy as np
 
 import deformkit as dk
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from bench_common import best  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 PAPER = """paper (Table 1; seconds on its machine, 2012):
@@ -32,13 +36,6 @@ PAPER = """paper (Table 1; seconds on its machine, 2012):
   plane 10k      n_ev 50   Step 1&2 0.016  Step 3 0.061"""
 
 
-def best(fn, repeat):
-    out, t = None, float("inf")
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        out = fn()
-        t = min(t, time.perf_counter() - t0)
-    return out, t
 
 
 def scipy_eigsh(mesh, k):

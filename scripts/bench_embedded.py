@@ -19,11 +19,15 @@ Prints the paper's rows beside ours. A script, not a test: timings swing with th
 import argparse
 import json
 import os
+import sys
 import time
 
 import numpy as np
 
 import deformkit as dk
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from bench_common import best  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 PAPER = """paper (2.4 GHz Core 2 Duo, 2007):
@@ -38,13 +42,6 @@ def load(shared, name):
     return np.asarray(v), dk.Mesh.from_polygons(v, sizes, idx)
 
 
-def best(fn, repeat):
-    out, t = None, float("inf")
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        out = fn()
-        t = min(t, time.perf_counter() - t0)
-    return out, t
 
 
 def run(label, v, mesh, fixed, centre, nodes_list, csts_list, repeat, distance):

@@ -11,22 +11,19 @@ diagonal. Prints bind (assembly, analysis and factorization) and the solve per d
 """
 import argparse
 import os
+import sys
 import time
 
 import numpy as np
 
 import deformkit as dk
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from bench_common import best  # noqa: E402
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 
 
-def best(fn, repeat):
-    t = float("inf")
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        t = min(t, time.perf_counter() - t0)
-    return t
 
 
 def run(label, path, repeat):
@@ -44,7 +41,7 @@ def run(label, path, repeat):
         t0 = time.perf_counter()
         lr = dk.LinearReconstruction(mesh, handles=[hand], fixed=fixed, orientation=ori)
         tb = time.perf_counter() - t0
-        ts = best(lambda: lr.solve(tg, energy=False), repeat)
+        _, ts = best(lambda: lr.solve(tg, energy=False), repeat)
         print("  orientation %-5s bind %7.1f ms   solve %6.2f ms   unknowns %d"
               % (ori, tb * 1e3, ts * 1e3, lr.stats["n_unknowns"]))
 
