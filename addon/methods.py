@@ -83,6 +83,9 @@ class Method:
     # True: the Region group, when set, is the region the handle moves (eigen deformation's
     # R) and goes to the native handles, with the first handle's transform
     region_is_handle: bool = False
+    # True: the native constructor takes progress=callable(fraction) -> stop; the UI bind
+    # shows the fraction and Esc stops the native work (solver.BindJob)
+    bind_progress: bool = False
 
 
 def _e(*ids):
@@ -240,6 +243,7 @@ METHODS.append(Method(
     icon="MOD_WAVE",
     preview={"preview": True},
     region_is_handle=True,
+    bind_progress=True,
     options=[
         Option("n_eigenvectors", "INT", 0, "Eigenvectors",
                "Eigenvectors of the fit (0: automatic, 8, 50 or 300 from the region's size; "

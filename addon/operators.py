@@ -286,6 +286,7 @@ class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
 
     def modal(self, context, event):
         if event.type == "ESC":
+            self._job.cancelled = True  # methods with bind progress stop their native work
             self._end(context)  # the worker finishes on its own; its result is dropped
             self.report({"WARNING"}, "bind of %s cancelled: the previous state is kept"
                         % self._name)
@@ -293,9 +294,13 @@ class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
         if self._thread.is_alive():
+            frac = self._job.fraction
             context.workspace.status_text_set(
-                "DeformKit: binding %s (%d vertices) %.1f s, Esc to cancel"
-                % (self._name, self._job.n_vertices, time.perf_counter() - self._t0))
+                "DeformKit: binding %s (%d vertices) %.1f s%s, Esc to cancel"
+                % (self._name, self._job.n_vertices, time.perf_counter() - self._t0,
+                   "" if frac is None else ", eigenvectors %.0f%%" % (100 * frac)))
+            if frac is not None:
+                context.window_manager.progress_update(frac)
             return {"RUNNING_MODAL"}
         self._end(context)
         obj = bpy.data.objects.get(self._obj)

@@ -385,12 +385,19 @@ class BindJob:
             args["material"] = self.material = material_map(dk, self.dkmesh, paint, kw,
                                                             d.options)
         args.update(methods.constructor_kwargs(m, d.options))
+        self.fraction, self.cancelled = None, False
+        if m.bind_progress:  # called from the worker thread: plain attribute writes only
+            args["progress"] = self._progress
         for k in ("fixed", "roi"):
             if args.get(k) is None:
                 args.pop(k, None)
         self._args = args
         self.handles = list(kw["handles"])
         self.native, self.error, self.seconds = None, None, 0.0
+
+    def _progress(self, fraction):
+        self.fraction = fraction
+        return self.cancelled
 
     def run(self):
         t0 = time.perf_counter()

@@ -574,6 +574,8 @@ dk_status dk_eigen_bind(const dk_mesh *mesh, const dk_constraint_desc *desc,
     for (dk_index i = 0; i < e->con->n_handle_vertices; i++) /* before any solve: the rest */
         memcpy(e->target + 3 * (size_t)i,
                mesh->positions + 3 * (size_t)e->con->handle_vertices[i], 3 * sizeof(double));
+    e->opt.progress = NULL; /* the caller's callback is for this bind only */
+    e->opt.progress_user = NULL;
     *out = e;
     return DK_OK;
 }

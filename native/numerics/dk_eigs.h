@@ -35,7 +35,10 @@ typedef struct dk_eigs_options {
     int max_iterations;  /**< ARPACK restarts per band (default 1000)                      */
     int band_size;       /**< eigenpairs per band (default 50; values below 16 are raised
                               to 16); k <= band_size: one band                            */
-    dk_progress_fn progress; /**< may be NULL                                             */
+    dk_progress_fn progress; /**< may be NULL. Called after each band with the fraction of
+                                  the k pairs found, and again with the same fraction every
+                                  16 operator applications within a band, so that a non-zero
+                                  return (cancel) takes effect within a few solves          */
     void *progress_user;
 } dk_eigs_options;
 

@@ -90,7 +90,15 @@ typedef struct eig_ctx {
     double *ritz;           /* Ritz step: theta, e, S (ncv x ncv), selected S columns   */
     int *order;             /* ncv                                                       */
     int ws_ncv, ws_nev;
+    /* cancellation inside a band: the progress callback is asked again every
+     * CANCEL_CHECK_OPS operator applications, with the fraction of the last report */
+    dk_progress_fn progress;
+    void *progress_user;
+    double fraction;
+    long ops;
 } eig_ctx;
+
+#define CANCEL_CHECK_OPS 16
 
 static void ctx_free(eig_ctx *c)
 {
@@ -342,6 +350,9 @@ static dk_status arpack_run(eig_ctx *c, dk_cholesky *chol, double sigma, int nev
             }
             st = dk_cholesky_solve(chol, scratch, 1, y, err);
             if (st != DK_OK) return dk_error_prefix(err, "eigs");
+            if (c->progress && ++c->ops % CANCEL_CHECK_OPS == 0 &&
+                c->progress(c->progress_user, c->fraction))
+                return dk_error_set(err, DK_ERR_CANCELLED, "eigs: cancelled during a band");
             if (ndefl > 0) deflate(c->mass, defl, ndefl, n, y);
         } else if (ido == 2) {
             double *x = c->workd + ipntr[0] - 1, *y = c->workd + ipntr[1] - 1;
@@ -774,6 +785,8 @@ dk_status dk_eigs_smallest(const dk_sparse *l, const double *mass, int k,
     c.tol = o.tolerance;
     c.max_iterations = o.max_iterations;
     c.seed = 0x9E3779B97F4A7C15ull;
+    c.progress = o.progress;
+    c.progress_user = o.progress_user;
     store s = {0}, bd = {0};
     double *scratch = NULL;
     st = ctx_build_shifted(&c, err);
@@ -829,7 +842,8 @@ dk_status dk_eigs_smallest(const dk_sparse *l, const double *mass, int k,
     memcpy(s.vec, bd.vec, (size_t)n * bd.m * sizeof(double));
     s.m = bd.m;
     if (st != DK_OK) goto partial;
-    if (o.progress && o.progress(o.progress_user, fmin(1.0, (double)s.m / k))) {
+    c.fraction = fmin(1.0, (double)s.m / k);
+    if (o.progress && o.progress(o.progress_user, c.fraction)) {
         st = dk_error_set(err, DK_ERR_CANCELLED, "eigs: cancelled after %d of %d eigenpairs",
                           s.m < k ? s.m : k, k);
         goto partial;
@@ -910,7 +924,8 @@ dk_status dk_eigs_smallest(const dk_sparse *l, const double *mass, int k,
                 st = dk_error_set(err, DK_ERR_INTERNAL, "eigs: band %d not accepted", band);
             goto partial;
         }
-        if (o.progress && o.progress(o.progress_user, fmin(1.0, (double)s.m / k))) {
+        c.fraction = fmin(1.0, (double)s.m / k);
+        if (o.progress && o.progress(o.progress_user, c.fraction)) {
             st = dk_error_set(err, DK_ERR_CANCELLED, "eigs: cancelled after %d of %d eigenpairs",
                               s.m < k ? s.m : k, k);
             goto partial;

@@ -16,6 +16,33 @@ static void default_options(void *o)
     dk_eigen_default_options((dk_eigen_options *)o);
 }
 
+/* progress=callable: called (from the binding thread, with the GIL taken for the call) with
+ * the fraction of eigenvectors found; a true return value cancels the bind, and so does an
+ * exception (reported as unraisable: the bind then fails with its own RuntimeError). */
+static int progress_trampoline(void *user, double fraction)
+{
+    PyGILState_STATE g = PyGILState_Ensure();
+    PyObject *r = PyObject_CallFunction((PyObject *)user, "d", fraction);
+    int stop;
+    if (!r) {
+        PyErr_WriteUnraisable((PyObject *)user);
+        stop = 1;
+    } else {
+        stop = PyObject_IsTrue(r) == 1;
+        Py_DECREF(r);
+    }
+    PyGILState_Release(g);
+    return stop;
+}
+
+static void release_options(void *o)
+{
+    dk_eigen_options *opt = (dk_eigen_options *)o;
+    Py_XDECREF((PyObject *)opt->progress_user);
+    opt->progress_user = NULL;
+    opt->progress = NULL;
+}
+
 static int parse_options(PyObject *kw, void *o, const char *context)
 {
     dk_eigen_options *opt = (dk_eigen_options *)o;
@@ -43,6 +70,21 @@ static int parse_options(PyObject *kw, void *o, const char *context)
                          context);
             return -1;
         }
+    }
+    PyObject *cb = dk_py_opt_object(kw, "progress");
+    if (!cb && PyErr_Occurred())
+        return -1;
+    if (cb == Py_None)
+        Py_CLEAR(cb);
+    if (cb && !PyCallable_Check(cb)) {
+        Py_DECREF(cb);
+        PyErr_Format(PyExc_TypeError, "%s: progress must be callable (fraction) -> bool",
+                     context);
+        return -1;
+    }
+    if (cb) { /* owned until release_options */
+        opt->progress = progress_trampoline;
+        opt->progress_user = cb;
     }
     if (dk_py_opt_int(kw, "refine", &opt->refine) < 0 ||
         dk_py_opt_double(kw, "bsw_width", &opt->bsw_width) < 0 ||
@@ -200,13 +242,15 @@ PyDoc_STRVAR(solve_doc,
 
 PyDoc_STRVAR(eig_doc,
              "EigenDeformation(mesh, handles, fixed=None, n_eigenvectors='auto', refine=300,\n"
-             "    laplacian='cotangent' | 'belkin_sun_wang', bsw_width=1.0)\n\n"
+             "    laplacian='cotangent' | 'belkin_sun_wang', bsw_width=1.0, progress=None)\n\n"
              "Eigen deformation (Dey, Ranjan & Wang): the mesh's eigen-skeleton (its\n"
              "coordinates fitted with the first m Laplace-Beltrami eigenvectors) is deformed\n"
              "by a least-squares fit to the handle regions' motion, and the details are\n"
              "added back in local frames. Each handle group is a region R that moves; every\n"
              "other vertex is held by the fit (fixed vertices are no different). m 'auto':\n"
-             "8, 50 or 300 from the regions' size (section 4.2). See docs/methods/eigen.md.");
+             "8, 50 or 300 from the regions' size (section 4.2). progress(fraction) is called\n"
+             "as eigenvectors are found; returning True cancels the bind (RuntimeError).\n"
+             "It must not start another eigen computation. See docs/methods/eigen.md.");
 
 static PyGetSetDef eig_getset[] = {
     DK_PY_METHOD_GETSET,
@@ -232,6 +276,7 @@ static const dk_py_method_spec eig_spec = {
     .options_size = sizeof(dk_eigen_options),
     .default_options = default_options,
     .parse_options = parse_options,
+    .release_options = release_options,
     .solve_motion = solve_motion,
     .solve_extra = solve_extra,
     .serialise_bind = 1,

@@ -157,6 +157,32 @@ def bind_tests():
     R.check("... and binds", d.bound and d.status.startswith("bound"), d.status)
 
 
+def eigen_bind_cancel_tests():
+    """Eigen deformation's bind reports its progress to the worker, and Esc stops the native
+    work itself (the eigensolver is told to cancel), not just the wait for it."""
+    if not S.native.has_class("EigenDeformation"):
+        return
+    S.reset_scene()
+    with bpy.context.temp_override(**S.ui_context()):
+        obj, d, e, fixed, handle = S.grid_setup("EIGEN", nx=200, ny=100)
+        t0 = time.perf_counter()
+        bpy.ops.deformkit.bind()
+        full = time.perf_counter() - t0
+        bpy.ops.deformkit.bind("INVOKE_DEFAULT")
+    worker = S.solver.running_binds.get((obj.name, d.uid))
+    yield 0.3
+    esc()
+    t1 = time.perf_counter()
+    while worker is not None and worker.is_alive() and time.perf_counter() - t1 < 30:
+        yield 0.02
+    stopped = time.perf_counter() - t1
+    # (a simulated Esc reaches the modal handler a few tenths of a second later; the native
+    # work then stops within about 0.1 s: the eigensolver asks every 16 solves)
+    R.check("EIGEN: Esc stops the bind's native work (%.2f s after Esc; a bind takes %.2f s)"
+            % (stopped, full), worker is not None and stopped < 0.6 * full, (stopped, full))
+    R.check("EIGEN: the cancelled bind keeps the previous binding", d.bound)
+
+
 def refine_tests():
     if not S.native.has_class("ARAP"):
         return
@@ -202,6 +228,7 @@ def refine_tests():
 def all_tests():
     yield from main()
     yield from bind_tests()
+    yield from eigen_bind_cancel_tests()
     yield from refine_tests()
 
 

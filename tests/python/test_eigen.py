@@ -249,3 +249,21 @@ def test_eigenpairs_match_scipy_on_the_armadillo():
     r = e.solve(translation=[0, 0.05, 0])
     moved = np.linalg.norm(np.asarray(r.positions) - v, axis=1)
     assert moved[top].mean() > 5 * np.median(moved) and np.median(moved) < 0.005
+
+
+def test_bind_reports_progress_and_can_be_cancelled():
+    """progress(fraction) sees the eigenvectors found so far, rising to 1; a true return
+    value cancels the bind with a RuntimeError; a bad callback is refused."""
+    v, f = bar(120, 6)      # 2,882 vertices: ARPACK's path (K = 300, bands of 50)
+    mesh = dk.Mesh(v, f)
+    end = np.where(v[:, 0] > 4.5)[0]
+    seen = []
+    e = dk.EigenDeformation(mesh, handles=[end], progress=lambda x: seen.append(x))
+    assert len(seen) >= 2 and seen[-1] == 1.0 and all(a <= b for a, b in zip(seen, seen[1:]))
+    assert np.abs(np.asarray(e.solve(v[end]).positions) - v).max() < 1e-10
+    calls = []
+    with pytest.raises(RuntimeError, match="cancel"):
+        dk.EigenDeformation(mesh, handles=[end], progress=lambda x: calls.append(x) or True)
+    assert len(calls) == 1
+    with pytest.raises(TypeError, match="progress must be callable"):
+        dk.EigenDeformation(mesh, handles=[end], progress=3)
