@@ -549,18 +549,22 @@ static void test_bands_equal_single(void)
 }
 
 typedef struct progress_log {
-    int calls, cancel_at;
+    int calls, cancel_at; /* cancel at the cancel_at-th report of a new fraction (0: never) */
     double last;
-    int monotone;
+    int monotone, reports;
 } progress_log;
 
+/* The solver reports after each band and repeats the same fraction within a band (so that
+ * a cancel lands quickly); `reports` counts the new fractions. */
 static int progress_cb(void *user, double fraction)
 {
     progress_log *pl = user;
     if (fraction < pl->last || fraction < 0 || fraction > 1) pl->monotone = 0;
+    if (pl->calls == 0 || fraction != pl->last)
+        pl->reports++;
     pl->last = fraction;
     pl->calls++;
-    return pl->cancel_at > 0 && pl->calls >= pl->cancel_at;
+    return pl->cancel_at > 0 && pl->reports >= pl->cancel_at;
 }
 
 static void test_progress_and_cancel(void)
@@ -574,18 +578,23 @@ static void test_progress_and_cancel(void)
         dk_eigs_options opt;
         dk_eigs_options_default(&opt);
         opt.band_size = 20;
-        progress_log pl = {0, 0, 0.0, 1};
+        progress_log pl = {0, 0, 0.0, 1, 0};
         opt.progress = progress_cb;
         opt.progress_user = &pl;
         dk_error err = {0};
         int conv = 0;
         CHECK(dk_eigs_smallest(p.l, p.mass, k, &opt, val, vec, &conv, &err) == DK_OK);
-        CHECK(pl.calls >= 3 && pl.monotone && pl.last == 1.0);
-        progress_log cancel = {0, 2, 0.0, 1};
+        CHECK(pl.reports >= 3 && pl.monotone && pl.last == 1.0);
+        progress_log cancel = {0, 2, 0.0, 1, 0};
         opt.progress_user = &cancel;
         CHECK(dk_eigs_smallest(p.l, p.mass, k, &opt, val, vec, &conv, &err) == DK_ERR_CANCELLED);
         CHECK(err.status == DK_ERR_CANCELLED);
         CHECK(conv > 0 && conv < k);
+        /* cancelled at the first question, inside the first band: nothing converged */
+        progress_log early = {0, 1, 0.0, 1, 0};
+        opt.progress_user = &early;
+        CHECK(dk_eigs_smallest(p.l, p.mass, k, &opt, val, vec, &conv, &err) == DK_ERR_CANCELLED);
+        CHECK(early.calls == 1 && early.last == 0.0 && conv == 0);
     }
     free(val); free(vec);
     problem_free(&p);
