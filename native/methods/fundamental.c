@@ -16,6 +16,21 @@
 #define COT_MAX 1e2
 #define PI 3.14159265358979323846
 
+/* What depends on the constraints, replaced as a whole by rebind. */
+typedef struct elim {
+    dk_constraints *con;
+    dk_index n_unk, n_con;     /* per coordinate                                             */
+    int any_anchor;            /* some face is regularized (fa >= 0)                         */
+    dk_index *vu, *vc;         /* n: free / constrained index of each vertex, or -1          */
+    dk_index *fu, *fc;         /* F: first of the frame's 3 free / constrained indices, or -1 */
+    dk_index *face_handle;     /* F: the handle prescribing the frame, -2 fixed, -1 none     */
+    dk_index *fa;              /* F: first of the 3 constrained slots holding the anchor
+                                  frame row a regularized face is drawn to, or -1            */
+    dk_sparse *A, *B;          /* n_unk x n_unk; n_unk x n_con                               */
+    dk_cholesky *chol;
+    double *zc, *rhs, *lin, *tgt; /* solve buffers                                           */
+} elim;
+
 struct dk_fundamental {
     const dk_mesh *mesh;
     dk_fundamental_options opt;
@@ -27,22 +42,11 @@ struct dk_fundamental {
     double *rest_frame;        /* F x 9                                                      */
     double *R;                 /* n_edges x 9                                                */
     unsigned char *has_R;      /* n_edges                                                    */
-    /* the elimination */
-    dk_constraints *con;
-    dk_index n_unk, n_con;     /* per coordinate                                             */
-    dk_index *vu, *vc;         /* n: free / constrained index of each vertex, or -1          */
-    dk_index *fu, *fc;         /* F: first of the frame's 3 free / constrained indices, or -1 */
-    dk_index *face_handle;     /* F: the handle prescribing the frame, -2 fixed, -1 none     */
-    dk_index *fa;              /* F: first of the 3 constrained slots holding the rest frame
-                                  row a regularized face is drawn to, or -1                  */
-    dk_sparse *A, *B;          /* n_unk x n_unk; n_unk x n_con                               */
-    dk_cholesky *chol;
-    /* solve buffers */
-    double *zc, *rhs, *lin, *tgt, *frames;
+    elim el;                   /* the elimination of the current constraints             */
+    double *frames;            /* F x 9: the last solve's frames                          */
     double *comp_fit;          /* n_components x 25: per component, the sums for the
                                   rotation that best fits its constrained vertices (count,
                                   rest sum 3, target sum 3, cross moments 9) and R (9)       */
-    int any_anchor;            /* some face is regularized (fa >= 0)                         */
     double w_scaled;           /* w times the mean edge length squared: E_f is dimensionless
                                   and E_x a squared length, so this keeps w scale-free      */
 };
@@ -254,8 +258,8 @@ static void for_each_residual(const dk_fundamental *f, visit_fn visit, void *ctx
             visit(ctx, wgt, tt, 4);
         }
     }
-    for (dk_index t = 0; f->fa && t < m->n_faces; t++) /* the regularization, where needed */
-        if (f->fa[t] >= 0)
+    for (dk_index t = 0; f->el.fa && t < m->n_faces; t++) /* the regularization, where needed */
+        if (f->el.fa[t] >= 0)
             for (int k = 0; k < 3; k++) {
                 const term tt[2] = {{t, k, 1.0}, {t, 3 + k, -1.0}};
                 visit(ctx, REGULARIZATION * f->w_scaled, tt, 2);
@@ -266,10 +270,10 @@ static void for_each_residual(const dk_fundamental *f, visit_fn visit, void *ctx
 static dk_index slot(const dk_fundamental *f, const term *t)
 {
     if (t->k < 0)
-        return f->vu[t->id] >= 0 ? f->vu[t->id] : -2 - f->vc[t->id];
+        return f->el.vu[t->id] >= 0 ? f->el.vu[t->id] : -2 - f->el.vc[t->id];
     if (t->k >= 3)
-        return -2 - (f->fa[t->id] + t->k - 3);
-    return f->fu[t->id] >= 0 ? f->fu[t->id] + t->k : -2 - (f->fc[t->id] + t->k);
+        return -2 - (f->el.fa[t->id] + t->k - 3);
+    return f->el.fu[t->id] >= 0 ? f->el.fu[t->id] + t->k : -2 - (f->el.fc[t->id] + t->k);
 }
 
 typedef struct assembly {
@@ -316,7 +320,7 @@ static void energy_visit(void *ctx, double w, const term *t, int nt)
         for (int i = 0; i < nt; i++)
             r += t[i].c * (t[i].k < 0    ? s->x[3 * (size_t)t[i].id + d]
                            : t[i].k < 3 ? s->frames[9 * (size_t)t[i].id + 3 * d + t[i].k]
-                                        : s->f->zc[(size_t)d * s->f->n_con + s->f->fa[t[i].id] +
+                                        : s->f->el.zc[(size_t)d * s->f->el.n_con + s->f->el.fa[t[i].id] +
                                                    t[i].k - 3]);
         s->E += 0.5 * w * r * r;
     }
@@ -324,15 +328,6 @@ static void energy_visit(void *ctx, double w, const term *t, int nt)
 
 /* ------------------------------------------------------------------ elimination -------- */
 
-typedef struct elim {
-    dk_constraints *con;
-    dk_index n_unk, n_con;
-    int any_anchor;
-    dk_index *vu, *vc, *fu, *fc, *face_handle, *fa;
-    dk_sparse *A, *B;
-    dk_cholesky *chol;
-    double *zc, *rhs, *lin, *tgt;
-} elim;
 
 static void elim_free(elim *s)
 {
@@ -356,24 +351,18 @@ static void elim_free(elim *s)
 /* Before any solve the anchors are the rest frames (for the energy). */
 static void rest_anchors(dk_fundamental *f)
 {
-    const size_t nc = (size_t)f->n_con;
+    const size_t nc = (size_t)f->el.n_con;
     for (dk_index t = 0; t < f->mesh->n_faces; t++)
-        if (f->fa[t] >= 0)
+        if (f->el.fa[t] >= 0)
             for (int d = 0; d < 3; d++)
                 for (int k = 0; k < 3; k++)
-                    f->zc[(size_t)d * nc + f->fa[t] + k] = f->rest_frame[9 * (size_t)t + 3 * d + k];
+                    f->el.zc[(size_t)d * nc + f->el.fa[t] + k] = f->rest_frame[9 * (size_t)t + 3 * d + k];
 }
 
 static void elim_install(dk_fundamental *f, elim *s)
 {
-    elim old = {f->con, f->n_unk, f->n_con, f->any_anchor, f->vu, f->vc, f->fu, f->fc,
-                f->face_handle, f->fa, f->A, f->B, f->chol, f->zc, f->rhs, f->lin, f->tgt};
-    elim_free(&old);
-    f->con = s->con, f->n_unk = s->n_unk, f->n_con = s->n_con, f->vu = s->vu, f->vc = s->vc;
-    f->fu = s->fu, f->fc = s->fc, f->face_handle = s->face_handle, f->fa = s->fa;
-    f->any_anchor = s->any_anchor;
-    f->A = s->A, f->B = s->B;
-    f->chol = s->chol, f->zc = s->zc, f->rhs = s->rhs, f->lin = s->lin, f->tgt = s->tgt;
+    elim_free(&f->el);
+    f->el = *s;
     memset(s, 0, sizeof *s);
     rest_anchors(f);
 }
@@ -520,7 +509,7 @@ static dk_status eliminate(const dk_fundamental *f, const dk_constraint_desc *de
                   malloc((size_t)cap * sizeof(double)), malloc((size_t)cap * sizeof(double)), 0, 0};
     /* (a scratch view of the numbering for slot()) */
     dk_fundamental view = *f;
-    view.vu = s->vu, view.vc = s->vc, view.fu = s->fu, view.fc = s->fc, view.fa = s->fa;
+    view.el = *s;
     a.f = &view;
     if (!a.ar || !a.ac || !a.br || !a.bc || !a.av || !a.bv) {
         st = oom(err, "assembly");
@@ -559,9 +548,7 @@ void dk_fundamental_free(dk_fundamental *f)
 {
     if (!f)
         return;
-    elim s = {f->con, f->n_unk, f->n_con, f->any_anchor, f->vu, f->vc, f->fu, f->fc,
-              f->face_handle, f->fa, f->A, f->B, f->chol, f->zc, f->rhs, f->lin, f->tgt};
-    elim_free(&s);
+    elim_free(&f->el);
     free(f->material);
     free(f->degenerate);
     free(f->coord);
@@ -688,10 +675,10 @@ dk_status dk_fundamental_rebind(dk_fundamental *f, const dk_constraint_desc *des
  * rotation that best fits the rest handle vertices to the targets (Kabsch). */
 static void handle_rotations(dk_fundamental *f, int transforms, const double *targets)
 {
-    const dk_constraints *c = f->con;
+    const dk_constraints *c = f->el.con;
     const double *p = f->mesh->positions;
     for (dk_index h = 0; h < c->n_handles; h++) {
-        double *L = f->lin + 9 * (size_t)h;
+        double *L = f->el.lin + 9 * (size_t)h;
         if (transforms) {
             for (int r = 0; r < 3; r++)
                 for (int q = 0; q < 3; q++)
@@ -703,12 +690,12 @@ static void handle_rotations(dk_fundamental *f, int transforms, const double *ta
         for (dk_index q = a; q < b; q++)
             for (int d = 0; d < 3; d++) {
                 cp[d] += p[3 * (size_t)c->handle_vertices[q] + d] / (double)(b - a);
-                cq[d] += f->tgt[3 * (size_t)q + d] / (double)(b - a);
+                cq[d] += f->el.tgt[3 * (size_t)q + d] / (double)(b - a);
             }
         for (dk_index q = a; q < b; q++) /* A = sum (q - cq)(p - cp)^T: R maximises tr(R^T A) */
             for (int r = 0; r < 3; r++)
                 for (int s = 0; s < 3; s++)
-                    A[3 * r + s] += (f->tgt[3 * (size_t)q + r] - cq[r]) *
+                    A[3 * r + s] += (f->el.tgt[3 * (size_t)q + r] - cq[r]) *
                                     (p[3 * (size_t)c->handle_vertices[q] + s] - cp[s]);
         dk_closest_rotation(A, L);
     }
@@ -726,53 +713,53 @@ dk_status dk_fundamental_solve(dk_fundamental *f, const dk_solve_request *rq, do
     if (st != DK_OK)
         return st;
     const dk_mesh *m = f->mesh;
-    const dk_constraints *c = f->con;
-    st = dk_constraints_targets(c, m->positions, rq->targets, (int)rq->target_kind, f->tgt, err);
+    const dk_constraints *c = f->el.con;
+    st = dk_constraints_targets(c, m->positions, rq->targets, (int)rq->target_kind, f->el.tgt, err);
     if (st != DK_OK)
         return dk_error_prefix(err, "LinearReconstruction solve");
     if (f->opt.orientation)
         handle_rotations(f, rq->target_kind == DK_TARGETS_TRANSFORMS, rq->targets);
     /* the constraint values, per coordinate (column-major n_con x 3) */
-    const size_t nc = (size_t)f->n_con, nu = (size_t)f->n_unk;
+    const size_t nc = (size_t)f->el.n_con, nu = (size_t)f->el.n_unk;
     for (dk_index v = 0; v < m->n_vertices; v++) {
-        if (f->vc[v] < 0)
+        if (f->el.vc[v] < 0)
             continue;
         const double *src = m->positions + 3 * (size_t)v;
         if (c->role[v] >= 0) /* a handle vertex: its target */
             for (dk_index q = c->handle_start[c->role[v]]; q < c->handle_start[c->role[v] + 1]; q++)
                 if (c->handle_vertices[q] == v) {
-                    src = f->tgt + 3 * (size_t)q;
+                    src = f->el.tgt + 3 * (size_t)q;
                     break;
                 }
         for (int d = 0; d < 3; d++)
-            f->zc[(size_t)d * nc + f->vc[v]] = src[d];
+            f->el.zc[(size_t)d * nc + f->el.vc[v]] = src[d];
     }
     for (dk_index t = 0; t < m->n_faces; t++) {
-        if (f->fc[t] < 0)
+        if (f->el.fc[t] < 0)
             continue;
         const double *F0 = f->rest_frame + 9 * (size_t)t;
         double Ft[9];
-        if (f->face_handle[t] >= 0)
-            mat_mul(f->lin + 9 * (size_t)f->face_handle[t], F0, Ft);
+        if (f->el.face_handle[t] >= 0)
+            mat_mul(f->el.lin + 9 * (size_t)f->el.face_handle[t], F0, Ft);
         else
             memcpy(Ft, F0, sizeof Ft);
         for (int d = 0; d < 3; d++)
             for (int k = 0; k < 3; k++)
-                f->zc[(size_t)d * nc + f->fc[t] + k] = Ft[3 * d + k];
+                f->el.zc[(size_t)d * nc + f->el.fc[t] + k] = Ft[3 * d + k];
         memcpy(f->frames + 9 * (size_t)t, Ft, sizeof Ft);
     }
-    if (f->any_anchor) { /* the regularization's anchors: rest frames, turned per component */
+    if (f->el.any_anchor) { /* the regularization's anchors: rest frames, turned per component */
         const dk_index ncomp = m->report.n_components > 0 ? m->report.n_components : 1;
         memset(f->comp_fit, 0, 25 * (size_t)ncomp * sizeof *f->comp_fit);
         for (int pass = 0; pass < 2; pass++)
             for (dk_index v = 0; v < m->n_vertices; v++) {
-                if (f->vc[v] < 0)
+                if (f->el.vc[v] < 0)
                     continue;
                 double *cf = f->comp_fit + 25 * (size_t)m->component[v];
                 const double *p = m->positions + 3 * (size_t)v;
                 double q[3];
                 for (int d = 0; d < 3; d++)
-                    q[d] = f->zc[(size_t)d * nc + f->vc[v]];
+                    q[d] = f->el.zc[(size_t)d * nc + f->el.vc[v]];
                 if (pass == 0) { /* the centroids' sums */
                     cf[0] += 1.0;
                     for (int d = 0; d < 3; d++)
@@ -786,35 +773,35 @@ dk_status dk_fundamental_solve(dk_fundamental *f, const dk_solve_request *rq, do
         for (dk_index c = 0; c < ncomp; c++)
             dk_closest_rotation(f->comp_fit + 25 * (size_t)c + 7, f->comp_fit + 25 * (size_t)c + 16);
         for (dk_index t = 0; t < m->n_faces; t++)
-            if (f->fa[t] >= 0) {
+            if (f->el.fa[t] >= 0) {
                 double Ft[9];
                 mat_mul(f->comp_fit + 25 * (size_t)m->component[m->faces[3 * (size_t)t]] + 16,
                         f->rest_frame + 9 * (size_t)t, Ft);
                 for (int d = 0; d < 3; d++)
                     for (int k = 0; k < 3; k++)
-                        f->zc[(size_t)d * nc + f->fa[t] + k] = Ft[3 * d + k];
+                        f->el.zc[(size_t)d * nc + f->el.fa[t] + k] = Ft[3 * d + k];
             }
     }
     /* A z = -B z_c, three coordinates at once */
     if (nu > 0) {
         for (int d = 0; d < 3; d++) {
-            dk_sparse_matvec(f->B, f->zc + (size_t)d * nc, f->rhs + (size_t)d * nu);
+            dk_sparse_matvec(f->el.B, f->el.zc + (size_t)d * nc, f->el.rhs + (size_t)d * nu);
             for (size_t i = 0; i < nu; i++)
-                f->rhs[(size_t)d * nu + i] = -f->rhs[(size_t)d * nu + i];
+                f->el.rhs[(size_t)d * nu + i] = -f->el.rhs[(size_t)d * nu + i];
         }
-        st = dk_cholesky_solve(f->chol, f->rhs, 3, f->rhs, err);
+        st = dk_cholesky_solve(f->el.chol, f->el.rhs, 3, f->el.rhs, err);
         if (st != DK_OK)
             return dk_error_prefix(err, "LinearReconstruction solve");
     }
     for (dk_index v = 0; v < m->n_vertices; v++)
         for (int d = 0; d < 3; d++)
-            positions[3 * (size_t)v + d] = f->vu[v] >= 0 ? f->rhs[(size_t)d * nu + f->vu[v]]
-                                                         : f->zc[(size_t)d * nc + f->vc[v]];
+            positions[3 * (size_t)v + d] = f->el.vu[v] >= 0 ? f->el.rhs[(size_t)d * nu + f->el.vu[v]]
+                                                         : f->el.zc[(size_t)d * nc + f->el.vc[v]];
     for (dk_index t = 0; t < m->n_faces; t++)
-        if (f->fu[t] >= 0)
+        if (f->el.fu[t] >= 0)
             for (int d = 0; d < 3; d++)
                 for (int k = 0; k < 3; k++)
-                    f->frames[9 * (size_t)t + 3 * d + k] = f->rhs[(size_t)d * nu + f->fu[t] + k];
+                    f->frames[9 * (size_t)t + 3 * d + k] = f->el.rhs[(size_t)d * nu + f->el.fu[t] + k];
     if (info) {
         info->iterations = info->converged = 1;
         if (rq->skip_energy)
@@ -856,10 +843,10 @@ void dk_fundamental_stats(const dk_fundamental *f, dk_method_stats *st)
     if (!f)
         return;
     st->n_vertices = f->mesh->n_vertices;
-    st->n_handles = f->con->n_handles;
-    st->n_handle_vertices = f->con->n_handle_vertices;
-    st->n_unknowns = f->n_unk;
-    st->analysis_count = st->factorization_count = f->n_unk > 0;
+    st->n_handles = f->el.con->n_handles;
+    st->n_handle_vertices = f->el.con->n_handle_vertices;
+    st->n_unknowns = f->el.n_unk;
+    st->analysis_count = st->factorization_count = f->el.n_unk > 0;
 }
 
 DK_METHOD_OPS(dk_fundamental_ops, "LinearReconstruction",
