@@ -607,13 +607,22 @@ def modifiers_above(obj, d, depsgraph=None):
     return out
 
 
+def input_movers(obj, d, depsgraph=None):
+    """What may move the mesh before d's modifier sees it, for messages ("'Armature'",
+    "shape keys"), or None when its input is the base mesh."""
+    above = modifiers_above(obj, d, depsgraph)
+    keys = obj.data.shape_keys
+    if not above and (keys is None or len(keys.key_blocks) < 2):
+        return None
+    return ", ".join("'%s'" % mm.name for mm in above) or "shape keys"
+
+
 def moved_input(obj, d, depsgraph=None):
     """What reaches d's modifier (n x 3, object space) when shape keys or modifiers above it
     can move the base mesh, or None when the input is the base mesh itself. Read from the
     evaluated object, where the modifier stores its input (geonodes, version 2)."""
-    above = modifiers_above(obj, d, depsgraph)
-    keys = obj.data.shape_keys
-    if not above and (keys is None or len(keys.key_blocks) < 2):
+    what = input_movers(obj, d, depsgraph)
+    if what is None:
         return None
     mod = geonodes.find_modifier(obj, d)
     if mod is None or not geonodes.ensure_input_name(mod, d):
@@ -624,7 +633,6 @@ def moved_input(obj, d, depsgraph=None):
     if a is None:  # the Input name was just set (bind): evaluate the stack with it
         dg.update()
         a = obj.evaluated_get(dg).data.attributes.get(d.input_attribute_name)
-    what = ", ".join("'%s'" % mm.name for mm in above) or "shape keys"
     if a is None:
         raise DeformKitError("%s cannot read what %s gives it: its modifier is disabled or a "
                              "modifier below it drops attributes" % (d.name, what))
@@ -645,10 +653,8 @@ def check_input_is_rest(obj, d, what, depsgraph=None):
     that moved it would move the written shape again."""
     if not methods.get(d.method).follows_input:
         return
-    above = modifiers_above(obj, d, depsgraph)
-    keys = obj.data.shape_keys
-    if above or (keys is not None and len(keys.key_blocks) >= 2):
-        by = ", ".join("'%s'" % mm.name for mm in above) or "shape keys"
+    by = input_movers(obj, d, depsgraph)
+    if by is not None:
         raise DeformKitError("cannot %s %s: its input is moved by %s above it, which would "
                              "move the written shape again; bake to Point Cache instead"
                              % (what, d.name, by))
