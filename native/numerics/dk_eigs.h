@@ -13,8 +13,9 @@
  * below tau), and copies of multiple eigenvalues that Lanczos missed are recovered by a
  * deflated run, so no eigenvalue below the k-th is skipped or duplicated. Results are
  * deterministic (fixed start vectors). Measured on the 43k-vertex armadillo (2 cores):
- * 50 pairs ~0.6-0.75 s, 300 pairs ~3.3-4.5 s with the default band_size
- * (scripts/bench_core.py).
+ * 50 pairs ~0.6-1.0 s, 300 pairs ~4.8-6.5 s with the default band_size
+ * (scripts/bench_core.py, scripts/bench_eigen.py). A block Lanczos method of our own was
+ * measured against ARPACK here and lost (docs/methods/eigen.md): ARPACK it stays.
  *
  * ARPACK keeps internal SAVE variables: calls are not reentrant across threads. Callers that
  * may run concurrently (the Python module) serialise eigen computations themselves.
