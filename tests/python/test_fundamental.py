@@ -107,7 +107,7 @@ def test_folded_arm_meets_its_constraints_and_feels_the_material():
     distributed. Measured (docs/methods/fundamental.md): with the paper's mapping (soft =
     lower stretching, higher bending weight) the fold spreads away from the soft ring here
     (24% of the turning in the middle 10 rings without it, 11% with it), the opposite of
-    the paper's elbow; the calibration of issue 16 is still to be done."""
+    the paper's elbow. The shared arm agrees (scripts/calibrate_material.py)."""
     v, f = cylinder()
     mesh = dk.Mesh(v, f)
     fixed, hand = np.where(v[:, 0] < 0.5)[0], np.where(v[:, 0] > 5.5)[0]
