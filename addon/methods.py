@@ -142,9 +142,6 @@ METHODS = [
         description="Laplacian surface editing: one linear solve per update",
         icon="MOD_SMOOTH",
         maps=("handle_weights",),
-        # the add-on never shows the energy: skip its pass over the operator (~0.4 ms a drag)
-        cold_solve={"energy": False},
-        warm_solve={"energy": False},
         options=[
             Option("weights", "ENUM", "cotangent", "Weights", "Laplacian weights",
                    items=_e("cotangent", "uniform")),
@@ -351,7 +348,11 @@ def constructor_kwargs(method, opts):
 
 
 def solve_kwargs(method, opts, cold):
-    kw = dict(method.cold_solve if cold else method.warm_solve)
+    # The add-on never shows a method's energy: every solve skips its evaluation (a pass
+    # over the operator: ~0.4 ms for Laplacian editing, ~35 ms for linear reconstruction's
+    # 300k unknowns on the armadillo, ten times its drag).
+    kw = {"energy": False}
+    kw.update(method.cold_solve if cold else method.warm_solve)
     for o in method.options:
         if o.keyword is not None and not o.bind_time:
             kw[o.keyword] = getattr(opts, o.name)

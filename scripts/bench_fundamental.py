@@ -6,8 +6,10 @@
 
 On the shared arm (8k) and the armadillo (43k): the lowest 10% of the vertices fixed, the
 vertices within 10% of the diagonal of the highest point a handle moved by 5% of the
-diagonal. Prints bind (assembly, analysis and factorization) and the solve per drag (best of
---repeat), with and without orientation constraints. A script, not a test.
+diagonal. Prints bind (assembly, analysis, factorization and the transform basis) and the
+solve per drag (best of --repeat), with and without orientation constraints, for the drag
+given as a transform (what the add-on sends: the combination of the transform basis) and
+as positions (two triangular solves). A script, not a test.
 """
 import argparse
 import os
@@ -35,6 +37,8 @@ def run(label, path, repeat):
     top = int(np.argmax(v[:, 1]))
     hand = np.setdiff1d(np.where(np.linalg.norm(v - v[top], axis=1) < 0.1 * diag)[0], fixed)
     tg = v[hand] + [0.0, 0.05 * diag, 0.0]
+    T = np.eye(4)
+    T[1, 3] = 0.05 * diag
     print("%s: %d vertices, %d faces, %d fixed, %d handle" % (label, len(v), mesh.n_faces,
                                                              len(fixed), len(hand)))
     for ori in (False, True):
@@ -42,8 +46,10 @@ def run(label, path, repeat):
         lr = dk.LinearReconstruction(mesh, handles=[hand], fixed=fixed, orientation=ori)
         tb = time.perf_counter() - t0
         _, ts = best(lambda: lr.solve(tg, energy=False), repeat)
-        print("  orientation %-5s bind %7.1f ms   solve %6.2f ms   unknowns %d"
-              % (ori, tb * 1e3, ts * 1e3, lr.stats["n_unknowns"]))
+        _, tt = best(lambda: lr.solve(transforms=[T], energy=False), repeat)
+        print("  orientation %-5s bind %7.1f ms   solve: transform %6.2f ms, positions %6.2f ms"
+              "   unknowns %d%s" % (ori, tb * 1e3, tt * 1e3, ts * 1e3, lr.stats["n_unknowns"],
+                                    "" if lr.transform_basis else " (no transform basis)"))
 
 
 def main():

@@ -19,7 +19,8 @@
  *     one handle (or are all fixed). The system is the same for the three coordinates: it is
  *     factored once (CHOLMOD) and solved with three right-hand sides.
  * Solve: the right-hand side from the constraint values (one sparse product), two
- * triangular solves. Allocation-free.
+ * triangular solves; with transforms, a combination of solutions precomputed at bind (see
+ * dk_fundamental_has_transform_basis). Allocation-free.
  *
  * Frames of faces the user prescribes (orientation constraints): a handle's transform
  * gives its linear part; positions give the rotation that best fits the handle's rest
@@ -101,6 +102,13 @@ void dk_fundamental_stats(const dk_fundamental *f, dk_method_stats *stats);
 
 /** Frees; NULL allowed. */
 void dk_fundamental_free(dk_fundamental *f);
+
+/** 1 when solves with transforms combine precomputed solutions (the transform basis: the
+ *  result is affine in the transforms' entries, so bind solves once per entry and a solve
+ *  is one n_unknowns x 4 n_handles x 3 product). Built at bind and rebind unless a
+ *  component is regularized (not affine), or it would take more than 256 MB. Solves with
+ *  positions, and without the basis, take the two triangular solves. */
+int dk_fundamental_has_transform_basis(const dk_fundamental *f);
 
 /** The method's table of the contract; options are a dk_fundamental_options. */
 extern const dk_method_ops dk_fundamental_ops;

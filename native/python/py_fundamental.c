@@ -55,6 +55,12 @@ static PyObject *get_frames(PyObject *obj, void *c)
     return a;
 }
 
+static PyObject *get_transform_basis(PyObject *obj, void *c)
+{
+    (void)c;
+    return PyBool_FromLong(dk_fundamental_has_transform_basis(((dk_py_method *)obj)->native));
+}
+
 PyDoc_STRVAR(solve_doc,
              "solve(targets=None, transforms=None, energy=True) -> SolveResult\n\n"
              "One linear solve for positions and frames together (eq. 7 with the handle and\n"
@@ -77,6 +83,11 @@ static PyGetSetDef lr_getset[] = {
     {"frames", get_frames, NULL,
      "n_faces x 9: each face's frame (row-major 3 x 3, columns e1, e2, normal) of the last "
      "solve",
+     NULL},
+    {"transform_basis", get_transform_basis, NULL,
+     "True when solve(transforms=...) combines solutions precomputed at bind (the result is "
+     "affine in the transforms' entries): one small product per drag instead of two "
+     "triangular solves. False when a component is regularized or it would take > 256 MB",
      NULL},
     {NULL, NULL, NULL, NULL, NULL},
 };

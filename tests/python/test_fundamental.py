@@ -129,6 +129,54 @@ def test_folded_arm_meets_its_constraints_and_feels_the_material():
     assert abs(out["plain"] - out["soft"]) > 0.05, out
 
 
+def test_transform_basis_equals_the_direct_solve():
+    """Solves with transforms combine solutions precomputed at bind (the transform basis);
+    solves with positions take the triangular solves. Both must give the same positions and
+    frames, with and without orientation constraints, for one and for two handles, for
+    rigid and for non-rigid (scaled, sheared) transforms, and after a rebind."""
+    v, f = cylinder()
+    mesh = dk.Mesh(v, f)
+    fixed, hand = np.where(v[:, 0] < 0.5)[0], np.where(v[:, 0] > 5.5)[0]
+    mid = np.where(np.abs(v[:, 0] - 3.0) < 0.15)[0]
+    rng = np.random.default_rng(7)
+    for orientation in (False, True):
+        for handles in ([hand], [hand, mid]):
+            lr = dk.LinearReconstruction(mesh, handles=handles, fixed=fixed,
+                                         orientation=orientation)
+            assert lr.transform_basis
+            for rigid in (True, False):
+                Ts = []
+                for _ in handles:
+                    T = random_rigid(int(rng.integers(1000)))
+                    if not rigid:
+                        T[:3, :3] = T[:3, :3] @ (np.eye(3) + 0.2 * rng.normal(size=(3, 3)))
+                    Ts.append(T)
+                a = np.asarray(lr.solve(transforms=Ts).positions)
+                fa = np.asarray(lr.frames)
+                tg = np.concatenate([v[h] @ T[:3, :3].T + T[:3, 3] for h, T in zip(handles, Ts)])
+                b = np.asarray(lr.solve(targets=tg).positions)
+                fb = np.asarray(lr.frames)
+                if rigid or not orientation:
+                    # (with orientation, positions turn the faces by their Kabsch rotation
+                    # and a transform by its linear part: the same only for a rigid one)
+                    np.testing.assert_allclose(a, b, atol=1e-10)
+                    np.testing.assert_allclose(fa, fb, atol=1e-10)
+                np.testing.assert_array_equal(a[fixed], v[fixed])
+                np.testing.assert_allclose(a[hand], v[hand] @ Ts[0][:3, :3].T + Ts[0][:3, 3],
+                                           atol=1e-12)
+            lr.rebind(handles=[hand], fixed=fixed)
+            T = random_rigid(3)
+            a = np.asarray(lr.solve(transforms=[T]).positions)
+            b = np.asarray(lr.solve(targets=v[hand] @ T[:3, :3].T + T[:3, 3]).positions)
+            np.testing.assert_allclose(a, b, atol=1e-10)
+    # a regularized (thinly held) component: the anchors are not affine in the transforms,
+    # so there is no basis, and the direct path serves transforms too
+    g, gf = make_grid(12, 10, bump=0.15)
+    left, right = np.where(g[:, 0] <= 1e-9)[0], np.where(g[:, 0] >= 1 - 1e-9)[0]
+    lr = dk.LinearReconstruction(dk.Mesh(g, gf), handles=[left, right])
+    assert not lr.transform_basis
+
+
 def test_orientation_constraints_turn_the_handle_faces():
     v, f = make_icosphere(3)
     mesh = dk.Mesh(v, f)
