@@ -9,7 +9,7 @@ import os
 import bpy
 import numpy as np
 
-from . import geonodes, handlers, pc2, solver
+from . import compat, geonodes, handlers, pc2, solver
 
 
 def resolve_path(path, obj, d):
@@ -67,9 +67,9 @@ class FrameBaker:
             self.scene.frame_set(self.saved_frame)
 
 
-def add_mesh_cache(obj, d, path, frame_start):
+def add_mesh_cache(obj, d, path, frame_start, frame_end=None):
     """Adds (or updates) a Mesh Cache modifier reading `path`, in place of the deformer's GN
-    modifier, which is hidden (kept for re-baking)."""
+    modifier, which is hidden (kept for re-baking), and records the bake on `d`."""
     name = "%s Cache" % d.name
     mc = obj.modifiers.get(name)
     if mc is None or mc.type != "MESH_CACHE":
@@ -97,11 +97,153 @@ def add_mesh_cache(obj, d, path, frame_start):
                     bpy.ops.object.modifier_move_to_index(modifier=mc.name, index=gi + 1 if mi > gi else gi)
             except Exception:
                 pass
+    _record(d, "PC2", mc.name, frame_start, frame_end if frame_end is not None else frame_start,
+            mc.filepath)
     return mc
+
+
+def _record(d, kind, target, start, end, path=""):
+    d.bake_kind = kind
+    d.bake_target = target
+    d.bake_start, d.bake_end = start, end
+    if path:
+        d.bake_file = path
+
+
+def _key_name(d, prefix, f):
+    return "%s f%04d" % (prefix or d.name, f)
+
+
+def state(obj, d):
+    """What shows in place of the live result: None when nothing is baked, else a dict
+    kind ('PC2' or 'SHAPE_KEYS'), text (a sentence for the panel) and broken (the bake's
+    modifier or keys were deleted by hand: Free Bake brings the live result back). Files
+    saved before bakes were recorded are recognised by their Mesh Cache modifier's name."""
+    kind, target = d.bake_kind, d.bake_target
+    if kind == "NONE":
+        legacy = obj.modifiers.get("%s Cache" % d.name)
+        if legacy is None or legacy.type != "MESH_CACHE":
+            return None
+        kind, target = "PC2", legacy.name
+    frames = "frames %d-%d" % (d.bake_start, d.bake_end) if d.bake_kind != "NONE" else "frames"
+    if kind == "PC2":
+        mc = obj.modifiers.get(target)
+        if mc is None or mc.type != "MESH_CACHE":
+            return dict(kind=kind, broken=True,
+                        text="its Mesh Cache modifier '%s' was removed" % target)
+        return dict(kind=kind, broken=False,
+                    text="baked to %s (%s): edits don't show until you free the bake"
+                    % (mc.filepath or "a point cache", frames))
+    keys = obj.data.shape_keys
+    n = 0 if keys is None else sum(1 for k in keys.key_blocks
+                                   if k.name.startswith(target + " f"))
+    if n == 0:
+        return dict(kind=kind, broken=True, text="its baked shape keys were removed")
+    return dict(kind=kind, broken=False,
+                text="baked to %d shape keys (%s): edits don't show until you free the bake"
+                % (n, frames))
+
+
+def free(obj, d):
+    """Removes the bake (the Mesh Cache modifier, or the baked shape keys and their keyframes;
+    a cache file on disk is kept) and shows the live result again. Returns what was freed."""
+    st = state(obj, d)
+    kind = st["kind"] if st else "NONE"
+    target = d.bake_target or ("%s Cache" % d.name if kind == "PC2" else d.name)
+    if kind == "PC2":
+        mc = obj.modifiers.get(target)
+        if mc is not None and mc.type == "MESH_CACHE":
+            obj.modifiers.remove(mc)
+    elif kind == "SHAPE_KEYS":
+        keys = obj.data.shape_keys
+        if keys is not None:
+            names = [k.name for k in keys.key_blocks if k.name.startswith(target + " f")]
+            for name in names:
+                kb = keys.key_blocks[name]
+                # its keyframes first (f-1, f, f+1, as bake_shape_keys keyed them): a removed
+                # key block would leave its value curve behind; the last one deleted takes
+                # the curve with it
+                try:
+                    f = int(name.rsplit(" f", 1)[1])
+                except ValueError:
+                    f = None
+                for ff in (() if f is None else (f - 1, f, f + 1)):
+                    try:
+                        kb.keyframe_delete("value", frame=ff)
+                    except RuntimeError:  # no keyframe there (edited by hand)
+                        pass
+                obj.shape_key_remove(kb)
+            keys = obj.data.shape_keys
+            if keys is not None and len(keys.key_blocks) == 1:
+                obj.shape_key_clear()  # only the Basis the bake added is left
+    gn = geonodes.find_modifier(obj, d)
+    if gn is not None:
+        gn.show_viewport = True
+        gn.show_render = True
+    d.bake_kind, d.bake_target = "NONE", ""
+    solver.mark_settings_changed()
+    return kind
+
+
+def _animated(idd):
+    """True when the ID has an action or drivers, or (objects) a parent that does."""
+    seen = 0
+    while idd is not None and seen < 64:
+        ad = getattr(idd, "animation_data", None)
+        if ad is not None and (ad.action is not None or len(ad.drivers)):
+            return True
+        idd = getattr(idd, "parent", None)
+        seen += 1
+    return False
+
+
+def animated_reason(obj, d):
+    """Why the deformer's result changes over time without a bake, or None: a keyed (or
+    driven) handle target, the object itself, or its Factor. A file opened without the
+    add-on shows one frozen pose then (the last solve stays in its attribute), so the panel
+    asks for a bake before the file goes to a render farm."""
+    for h in d.handles:
+        if h.target is not None and _animated(h.target):
+            return "handle '%s' follows the animated '%s'" % (h.name, h.target.name)
+    mod = geonodes.find_modifier(obj, d)
+    ad = obj.animation_data
+    if mod is not None and ad is not None:
+        path = 'modifiers["%s"]%s' % (mod.name, geonodes.factor_path(mod))
+        if any(fc.data_path == path for fc in ad.drivers):
+            return "its Factor is driven"
+        try:
+            if ad.action is not None and compat.action_animates(ad.action, path):
+                return "its Factor is keyed"
+        except (AttributeError, TypeError):  # an action layout this code does not know
+            pass
+    if _animated(obj):
+        return "'%s' itself is animated" % obj.name
+    return None
+
+
+def hidden_reason(obj, d):
+    """Why nothing shows the deformer's live result although no bake replaced it, or None:
+    its modifier is missing, or off in both the viewport and renders."""
+    mod = geonodes.find_modifier(obj, d)
+    if mod is None:
+        return "its Geometry Nodes modifier was removed: press Restore Modifier"
+    if not (mod.show_viewport or mod.show_render) and state(obj, d) is None:
+        return "its modifier '%s' is off in the viewport and in renders" % mod.name
+    return None
+
+
+def prepare(obj, d, kind):
+    """Before a bake to `kind`: frees an earlier bake of `d` that would be in the way (shape
+    keys shape the deformer's input; a Mesh Cache would hide new shape keys). A point cache
+    baked again to a point cache keeps its modifier, which the new file then replaces."""
+    st = state(obj, d)
+    if st is not None and not (st["kind"] == "PC2" and kind == "PC2" and not st["broken"]):
+        free(obj, d)
 
 
 def bake_pc2(context, obj, d, frame_start, frame_end, path, progress=None):
     """Synchronous bake of frames [start, end] to `path`; progress(i, n, frame) per frame."""
+    prepare(obj, d, "PC2")
     fb = FrameBaker(context, obj, d, frame_start, frame_end)
     n_points = len(obj.data.vertices)
     os.makedirs(os.path.dirname(os.path.abspath(path)) or ".", exist_ok=True)
@@ -123,6 +265,7 @@ def bake_pc2(context, obj, d, frame_start, frame_end, path, progress=None):
 
 def bake_shape_keys(context, obj, d, frame_start, frame_end, progress=None):
     """One shape key per frame, keyed to 1 on its frame and 0 on the neighbours."""
+    prepare(obj, d, "SHAPE_KEYS")
     solver.check_input_is_rest(obj, d, "bake to shape keys")
     fb = FrameBaker(context, obj, d, frame_start, frame_end)
     results = []
@@ -135,10 +278,11 @@ def bake_shape_keys(context, obj, d, frame_start, frame_end, progress=None):
     finally:
         fb.finish()
     obj, d = fb._objects()
+    prefix = d.name
     if obj.data.shape_keys is None:
         obj.shape_key_add(name="Basis", from_mix=False)
     for f, pos in results:
-        kname = "%s f%04d" % (d.name, f)
+        kname = _key_name(d, prefix, f)
         old = obj.data.shape_keys.key_blocks.get(kname)
         if old is not None:
             obj.shape_key_remove(old)
@@ -151,4 +295,8 @@ def bake_shape_keys(context, obj, d, frame_start, frame_end, progress=None):
     if gn is not None:
         gn.show_viewport = False
         gn.show_render = False
+    _record(d, "SHAPE_KEYS", prefix, frame_start, frame_end)
+    # the keyframes were inserted after this frame was evaluated: evaluate it again, or the
+    # mesh shows no key (the rest shape) until the frame changes, as if the bake had failed
+    context.scene.frame_set(context.scene.frame_current)
     return len(results)

@@ -3,11 +3,16 @@ each behind one small function, so that the rest of the add-on reads the same ev
 
 - Node-group sockets: `NodeTree.inputs` / `outputs` until 3.6; `NodeTree.interface`
   (`new_socket`, `items_tree`) from 4.0, which removed the old collections.
+- File-path properties holding "//" paths: the PATH_SUPPORTS_BLEND_RELATIVE option, known
+  from 4.5 (BLEND_RELATIVE_PATH).
 - Built-in shader names: `UNIFORM_COLOR` in current releases; older ones know it only as
   `3D_UNIFORM_COLOR` (the prefixed names were deprecated, then removed in 4.0).
 
-Checked and needing nothing here (docs/addon.md, "Blender versions"): the add-on reads no
-F-curves (4.4's slotted actions, 5.0's removal of `Action.fcurves`), imports no OBJ through
+- F-curves: `Action.fcurves` until 4.4; from 4.4 the slotted layout (layers, strips, channel
+  bags), and 5.0 removed `Action.fcurves` (the panel's "animated, not baked" warning reads
+  which paths an action animates).
+
+Checked and needing nothing here (docs/addon.md, "Blender versions"): the add-on imports no OBJ through
 Blender (4.0 removed `import_scene.obj`), and its materials name no renamed BSDF input.
 """
 
@@ -15,6 +20,10 @@ import bpy
 
 VERSION = tuple(bpy.app.version)
 HAS_INTERFACE = hasattr(bpy.types, "NodeTreeInterface")          # 4.0+
+# File-path properties that may hold "//" (relative to the .blend) say so from 4.5 on (5.0
+# warns on every such value without it); 4.2 and 3.4 do not know the flag and silently drop
+# a property that names it.
+BLEND_RELATIVE_PATH = {"PATH_SUPPORTS_BLEND_RELATIVE"} if VERSION >= (4, 5, 0) else set()
 
 
 def new_group_socket(ng, name, in_out, socket_type):
@@ -45,3 +54,16 @@ def uniform_color_shader():
         except (ValueError, TypeError):
             continue
     raise RuntimeError("no built-in uniform-colour shader in this Blender")
+
+
+def action_animates(action, path):
+    """Whether `action` has an F-curve for the RNA `path` (any array index)."""
+    fcs = getattr(action, "fcurves", None)
+    if fcs is not None:
+        return any(fc.data_path == path for fc in fcs)
+    for layer in getattr(action, "layers", ()):
+        for strip in layer.strips:
+            for bag in getattr(strip, "channelbags", ()):
+                if any(fc.data_path == path for fc in bag.fcurves):
+                    return True
+    return False

@@ -30,15 +30,30 @@ def _socket_id(ng, name):
     raise KeyError(name)
 
 
+def _hide_plumbing(ng):
+    """Keeps the group's inputs out of the modifier's panel where Blender can (4.0+:
+    hide_in_modifier). Editing the attribute names there would unlink the deformer, and the
+    Factor is the DeformKit panel's. Blender 3.4-3.6 have no such flag: the inputs show
+    there, and a deformer whose Attribute was edited is found again by its modifier's name
+    (find_modifier) and repaired (repair). Idempotent; the group's version is unchanged, so
+    files stay readable in every supported Blender."""
+    for sock in compat.group_sockets(ng, "INPUT"):
+        if hasattr(sock, "hide_in_modifier") and sock.name in ("Factor", "Attribute", "Input") \
+                and not sock.hide_in_modifier:
+            sock.hide_in_modifier = True
+
+
 def ensure_node_group():
     ng = bpy.data.node_groups.get(GROUP_NAME)
     if ng is not None and ng.bl_idname == "GeometryNodeTree":
         version = ng.get("deformkit_version")
         if version == GROUP_VERSION:
+            _hide_plumbing(ng)
             return ng
         if version == 1:
             _add_input_capture(ng)
             ng["deformkit_version"] = GROUP_VERSION
+            _hide_plumbing(ng)
             return ng
     if ng is not None:  # a foreign group with our name: leave it, make ours under a new name
         ng.name = GROUP_NAME + ".old"
@@ -72,6 +87,7 @@ def ensure_node_group():
     links.new(scale.outputs["Vector"], setpos.inputs["Offset"])
     links.new(setpos.outputs["Geometry"], gout.inputs["Geometry"])
     _add_input_capture(ng)
+    _hide_plumbing(ng)
     return ng
 
 
@@ -115,20 +131,46 @@ def is_ours(mod):
     return (mod.type == "NODES" and ng is not None and ng.get("deformkit_version") is not None)
 
 
+def _attribute_of(mod):
+    try:
+        return mod[_socket_id(mod.node_group, "Attribute")]
+    except KeyError:
+        return None
+
+
 def find_modifier(obj, deformer):
-    """The GN modifier owned by `deformer` (matched by attribute name), or None."""
+    """The GN modifier owned by `deformer`: matched by its Attribute input, else (that input
+    edited by hand) by the modifier name recorded at creation, when that modifier's
+    Attribute names no deformer of `obj`. None when there is none. Read-only (panels call
+    it): repair() puts an edited Attribute back."""
     want = deformer.attribute_name
+    by_name = None
     for mod in obj.modifiers:
         if is_ours(mod):
-            try:
-                if mod[_socket_id(mod.node_group, "Attribute")] == want:
-                    return mod
-            except KeyError:
-                continue
-    return None
+            a = _attribute_of(mod)
+            if a == want:
+                return mod
+            if deformer.modifier_name and mod.name == deformer.modifier_name:
+                by_name = mod
+    if by_name is not None:
+        if _attribute_of(by_name) in {x.attribute_name for x in obj.deformkit.deformers}:
+            return None  # another deformer's modifier that took the name
+    return by_name
+
+
+def repair(mod, deformer):
+    """Puts the modifier's Attribute input back if it was edited, and records the
+    modifier's current name (the user may rename it). Not for draw code (it writes)."""
+    key = attribute_key(mod.node_group)
+    if mod.get(key) != deformer.attribute_name:
+        mod[key] = deformer.attribute_name
+        mod.id_data.update_tag()
+    if deformer.modifier_name != mod.name:
+        deformer.modifier_name = mod.name
 
 
 def ensure_modifier(obj, deformer):
+    """The deformer's modifier, created (at the end of the stack) or repaired."""
     mod = find_modifier(obj, deformer)
     if mod is None:
         ng = ensure_node_group()
@@ -136,6 +178,9 @@ def ensure_modifier(obj, deformer):
         mod.node_group = ng
         mod[factor_key(ng)] = 1.0
         mod[attribute_key(ng)] = deformer.attribute_name
+    elif mod.node_group.name == GROUP_NAME:
+        _hide_plumbing(mod.node_group)
+    repair(mod, deformer)
     ensure_input_name(mod, deformer)
     return mod
 

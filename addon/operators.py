@@ -8,7 +8,7 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 
-from . import bake, geonodes, methods, native, properties, solver
+from . import bake, compat, geonodes, methods, native, properties, solver
 
 
 def _get_object(op, context):
@@ -222,6 +222,18 @@ class DEFORMKIT_OT_remove_handle(_Base, bpy.types.Operator):
 
 
 
+def _report_bound(op, obj, d, e, ms):
+    """The bind's report: a warning when nothing can show the result."""
+    msg = "%s bound: %d vertices, %d handles (%.0f ms)" % (d.name, e.n_vertices,
+                                                           len(d.handles), ms)
+    hidden = bake.hidden_reason(obj, d)
+    baked = bake.state(obj, d)
+    if hidden or baked:
+        op.report({"WARNING"}, "%s, but %s" % (msg, hidden or baked["text"]))
+    else:
+        op.report({"INFO"}, msg)
+
+
 class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
     """Bind: precompute the solver for the current mesh, groups and target placement"""
     bl_idname = "deformkit.bind"
@@ -237,13 +249,12 @@ class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
         try:
             e = solver.bind(obj, d, context.evaluated_depsgraph_get())
         except solver.DeformKitError as ex:
-            solver.set_status(d, str(ex), True)
+            solver.set_status(d, ex, True)
             raise
         finally:
             wm.progress_end()
         ms = (time.perf_counter() - t0) * 1000
-        self.report({"INFO"}, "%s bound: %d vertices, %d handles (%.0f ms)"
-                    % (d.name, e.n_vertices, len(d.handles), ms))
+        _report_bound(self, obj, d, e, ms)
 
     # ---- UI version: the native precomputation runs in a worker thread (it releases the
     # GIL), the window stays live with the elapsed time in the status bar, Esc cancels and
@@ -262,7 +273,7 @@ class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
             self._job, self._mats = solver.bind_begin(obj, d, context.evaluated_depsgraph_get())
         except solver.DeformKitError as ex:
             if "d" in locals():
-                solver.set_status(d, str(ex), True)
+                solver.set_status(d, ex, True)
             self.report({"ERROR"}, str(ex))
             return {"CANCELLED"}
         self._obj, self._uid, self._name = obj.name, d.uid, d.name
@@ -313,12 +324,10 @@ class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
         try:
             e = solver.bind_end(obj, d, self._job, self._mats, context.evaluated_depsgraph_get())
         except solver.DeformKitError as ex:
-            solver.set_status(d, str(ex), True)
+            solver.set_status(d, ex, True)
             self.report({"ERROR"}, str(ex))
             return {"CANCELLED"}
-        self.report({"INFO"}, "%s bound: %d vertices, %d handles (%.0f ms)"
-                    % (d.name, e.n_vertices, len(d.handles),
-                       (time.perf_counter() - self._t0) * 1000))
+        _report_bound(self, obj, d, e, (time.perf_counter() - self._t0) * 1000)
         return {"FINISHED"}
 
 
@@ -395,6 +404,7 @@ class DEFORMKIT_OT_bake(_Base, bpy.types.Operator):
     frame_start: IntProperty(name="Start", default=-1, description="-1: the scene's start")
     frame_end: IntProperty(name="End", default=-1, description="-1: the scene's end")
     filepath: StringProperty(name="File", subtype="FILE_PATH",
+                             options=compat.BLEND_RELATIVE_PATH,
                              description="PC2 path (default: //<object>_<deformer>.pc2)")
 
     def _range(self, context):
@@ -412,9 +422,9 @@ class DEFORMKIT_OT_bake(_Base, bpy.types.Operator):
             def prog(i, n, f):
                 wm.progress_update(i)
             if self.mode == "PC2":
-                path = bake.resolve_path(self.filepath, obj, d)
+                path = bake.resolve_path(self.filepath or d.bake_file, obj, d)
                 bake.bake_pc2(context, obj, d, s, e, path, prog)
-                bake.add_mesh_cache(obj, d, path, s)
+                bake.add_mesh_cache(obj, d, path, s, e)
                 self.report({"INFO"}, "baked frames %d-%d to %s" % (s, e, path))
             else:
                 n = bake.bake_shape_keys(context, obj, d, s, e, prog)
@@ -430,7 +440,8 @@ class DEFORMKIT_OT_bake(_Base, bpy.types.Operator):
             obj = _get_object(self, context)
             d = _get_deformer(self, context, obj)
             s, e = self._range(context)
-            self._path = bake.resolve_path(self.filepath, obj, d)
+            self._path = bake.resolve_path(self.filepath or d.bake_file, obj, d)
+            bake.prepare(obj, d, "PC2")
             self._fb = bake.FrameBaker(context, obj, d, s, e)
             from . import pc2
             self._tmp = self._path + ".part"
@@ -438,7 +449,7 @@ class DEFORMKIT_OT_bake(_Base, bpy.types.Operator):
         except solver.DeformKitError as ex:
             self.report({"ERROR"}, str(ex))
             return {"CANCELLED"}
-        self._start = s
+        self._start, self._end = s, e
         self._obj, self._uid = obj.name, d.uid
         wm = context.window_manager
         self._timer = wm.event_timer_add(0.001, window=context.window)
@@ -460,7 +471,7 @@ class DEFORMKIT_OT_bake(_Base, bpy.types.Operator):
             os.replace(self._tmp, self._path)
             obj = bpy.data.objects.get(self._obj)
             d = next((x for x in obj.deformkit.deformers if x.uid == self._uid), None)
-            bake.add_mesh_cache(obj, d, self._path, self._start)
+            bake.add_mesh_cache(obj, d, self._path, self._start, self._end)
             self.report({"INFO"}, msg)
             return {"FINISHED"}
         if os.path.exists(self._tmp):
@@ -487,10 +498,136 @@ class DEFORMKIT_OT_bake(_Base, bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
 
+class DEFORMKIT_OT_free_bake(_Base, bpy.types.Operator):
+    """Remove the deformer's bake (its Mesh Cache modifier, or its baked shape keys) and show
+    the live result again; a cache file on disk is kept"""
+    bl_idname = "deformkit.free_bake"
+    bl_label = "Free Bake"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def run(self, context):
+        obj = _get_object(self, context)
+        d = _get_deformer(self, context, obj)
+        if bake.state(obj, d) is None:
+            raise solver.DeformKitError("'%s' has no bake to free" % d.name)
+        kind = bake.free(obj, d)
+        self.report({"INFO"}, "%s: %s bake freed, the live result shows again"
+                    % (d.name, "point cache" if kind == "PC2" else "shape key"))
+
+
+class DEFORMKIT_OT_rebake(_Base, bpy.types.Operator):
+    """Bake again, to the same kind, frame range and file as the last bake"""
+    bl_idname = "deformkit.rebake"
+    bl_label = "Re-bake"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def _args(self, context):
+        obj = _get_object(self, context)
+        d = _get_deformer(self, context, obj)
+        st = bake.state(obj, d)
+        if st is None:
+            raise solver.DeformKitError("'%s' has no bake to redo: use Bake" % d.name)
+        i = list(obj.deformkit.deformers).index(d)
+        kw = dict(mode=st["kind"], object_name=obj.name, deformer_index=i)
+        if d.bake_kind != "NONE":
+            kw.update(frame_start=d.bake_start, frame_end=d.bake_end)
+        if st["kind"] == "PC2":
+            mc = obj.modifiers.get(d.bake_target or "%s Cache" % d.name)
+            if mc is not None and mc.type == "MESH_CACHE" and mc.filepath:
+                kw["filepath"] = mc.filepath
+        return kw
+
+    def _bake(self, context, *how):
+        try:
+            return bpy.ops.deformkit.bake(*how, **self._args(context))
+        except RuntimeError as e:  # the bake reported its error: pass it on as ours
+            raise solver.DeformKitError(str(e).replace("Error:", "").strip()) from e
+
+    def run(self, context):
+        return self._bake(context)
+
+    def invoke(self, context, event):
+        try:
+            return self._bake(context, "INVOKE_DEFAULT")
+        except solver.DeformKitError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+
+
+class DEFORMKIT_OT_restore_modifier(_Base, bpy.types.Operator):
+    """Give the deformer a Geometry Nodes modifier again (it was deleted), at the end of the
+    stack, keeping its handles and options"""
+    bl_idname = "deformkit.restore_modifier"
+    bl_label = "Restore Modifier"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def run(self, context):
+        obj = _get_object(self, context)
+        d = _get_deformer(self, context, obj)
+        if geonodes.find_modifier(obj, d) is not None:
+            raise solver.DeformKitError("%s already has its modifier" % d.name)
+        mod = geonodes.ensure_modifier(obj, d)
+        if d.bound:
+            geonodes.ensure_attribute(obj.data, d.attribute_name)
+            solver.mark_all_dirty()
+        self.report({"INFO"}, "%s: modifier '%s' restored" % (d.name, mod.name))
+
+
+class DEFORMKIT_OT_overlap(_Base, bpy.types.Operator):
+    """Select the vertices two of the deformer's groups share (in Edit Mode), or remove them
+    from one of the groups"""
+    bl_idname = "deformkit.overlap"
+    bl_label = "Shared Vertices"
+    bl_options = {"REGISTER", "UNDO"}
+    action: EnumProperty(items=(("SELECT", "Select Shared", "Select the shared vertices in "
+                                 "Edit Mode"),
+                                ("REMOVE", "Remove", "Remove the shared vertices from "
+                                 "`group`")))
+    group: StringProperty(name="Group", description="The group to remove them from")
+    other: StringProperty(name="Other Group")
+
+    def run(self, context):
+        obj = _get_object(self, context)
+        _get_deformer(self, context, obj)
+        names = (self.group, self.other)
+        vgs = [obj.vertex_groups.get(n) for n in names]
+        for n, vg in zip(names, vgs):
+            if vg is None:
+                raise solver.DeformKitError("vertex group '%s' does not exist" % n)
+        groups = solver.read_groups(obj, names)
+        shared = np.intersect1d(groups[names[0]][0], groups[names[1]][0])
+        if len(shared) == 0:
+            raise solver.DeformKitError("'%s' and '%s' share no vertices" % names)
+        if self.action == "REMOVE":
+            if obj.mode == "EDIT":
+                bpy.ops.object.mode_set(mode="OBJECT")
+            vgs[0].remove([int(i) for i in shared])
+            self.report({"INFO"}, "removed %d vertices from '%s'" % (len(shared), names[0]))
+            return
+        if context.view_layer.objects.active != obj:
+            context.view_layer.objects.active = obj
+        if obj.mode != "EDIT":
+            bpy.ops.object.mode_set(mode="EDIT")
+        # through bmesh in Edit Mode (writing the mesh's edge selection with foreach_set
+        # crashed Blender 5.0 as a module)
+        bm = bmesh.from_edit_mesh(obj.data)
+        want = set(int(i) for i in shared)
+        for seq in (bm.faces, bm.edges):
+            for x in seq:
+                x.select = False
+        for v in bm.verts:
+            v.select = v.index in want
+        bm.select_flush(False)
+        bmesh.update_edit_mesh(obj.data)
+        self.report({"INFO"}, "%d shared vertices selected" % len(shared))
+
+
 CLASSES = [
     DEFORMKIT_OT_add_deformer, DEFORMKIT_OT_remove_deformer, DEFORMKIT_OT_move_deformer,
     DEFORMKIT_OT_add_handle, DEFORMKIT_OT_add_handle_from_selection, DEFORMKIT_OT_remove_handle,
     DEFORMKIT_OT_bind, DEFORMKIT_OT_unbind, DEFORMKIT_OT_apply, DEFORMKIT_OT_bake,
+    DEFORMKIT_OT_free_bake, DEFORMKIT_OT_rebake, DEFORMKIT_OT_restore_modifier,
+    DEFORMKIT_OT_overlap,
 ]
 
 

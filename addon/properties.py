@@ -10,7 +10,7 @@ import bpy
 from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty,
                        FloatVectorProperty, IntProperty, PointerProperty, StringProperty)
 
-from . import methods
+from . import compat, methods
 
 IDENTITY16 = (1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0)
 
@@ -92,8 +92,29 @@ _deformer_ann = {
     "bind_n_faces": IntProperty(name="Faces at Bind", default=0),
     "status": StringProperty(name="Status"),
     "status_is_error": BoolProperty(default=False),
+    "status_overlap": StringProperty(name="Overlapping Groups",
+                                     description="The two vertex groups of an overlap error, "
+                                                 "tab-separated"),
     "last_solve_ms": FloatProperty(name="Last Solve (ms)", default=0.0),
     "show_expanded": BoolProperty(default=True),
+    # the bake that replaced the live result (bake.py): what, where, which frames
+    "modifier_name": StringProperty(name="Modifier",
+                                    description="Name of the deformer's Geometry Nodes "
+                                                "modifier (found again by it if its Attribute "
+                                                "input is edited)"),
+    "bake_kind": EnumProperty(name="Baked", default="NONE", items=(
+        ("NONE", "Not Baked", "The deformer's live result shows"),
+        ("PC2", "Point Cache", "A Mesh Cache modifier plays a PC2 file in its place"),
+        ("SHAPE_KEYS", "Shape Keys", "One keyed shape key per frame plays in its place"))),
+    "bake_target": StringProperty(name="Bake Target",
+                                  description="The Mesh Cache modifier's name, or the shape "
+                                              "keys' name prefix"),
+    "bake_file": StringProperty(name="Cache File", subtype="FILE_PATH",
+                                options=compat.BLEND_RELATIVE_PATH,
+                                description="Where Bake to Point Cache writes (empty: "
+                                            "//<object>_<deformer>.pc2 next to the .blend)"),
+    "bake_start": IntProperty(name="Baked From", default=0),
+    "bake_end": IntProperty(name="Baked To", default=0),
 }
 for _m, _cls in zip(methods.METHODS, OPTION_CLASSES):
     _deformer_ann[methods.options_attr(_m.id)] = PointerProperty(type=_cls)

@@ -24,6 +24,15 @@ class DeformKitError(Exception):
     """A setup problem or a native failure, with a message for the user."""
 
 
+class OverlapError(DeformKitError):
+    """Two of a deformer's vertex groups share vertices that may belong to one only. The
+    panel offers Select Shared and Remove from <group> (operators.DEFORMKIT_OT_overlap)."""
+
+    def __init__(self, msg, group_a, group_b):
+        super().__init__(msg)
+        self.groups = (group_a, group_b)
+
+
 NATIVE_ERRORS = (ValueError, IndexError, TypeError, RuntimeError, MemoryError, OverflowError)
 
 _cache = {}            # (object name, deformer uid) -> _Entry
@@ -248,10 +257,11 @@ def collect(obj, d):
         u, c = np.unique(allh, return_counts=True)
         if (c > 1).any():
             v = int(u[c > 1][0])
-            owners = [h.name for h, idx in zip(d.handles, handles) if v in idx]
-            raise DeformKitError("handles '%s' and '%s' share %d vertices (first: vertex %d): "
-                                 "a vertex can follow one handle only"
-                                 % (owners[0], owners[1], int((c > 1).sum()), v))
+            owners = [h for h, idx in zip(d.handles, handles) if v in idx]
+            raise OverlapError("handles '%s' and '%s' share %d vertices: a vertex can follow "
+                               "one handle only" % (owners[0].name, owners[1].name,
+                                                    int((c > 1).sum())),
+                               owners[0].vertex_group, owners[1].vertex_group)
     fixed = roi = None
     if d.fixed_group:
         fixed = groups[d.fixed_group][0]
@@ -260,9 +270,10 @@ def collect(obj, d):
         for h, idx in zip(d.handles, handles):
             both = np.intersect1d(idx, fixed)
             if len(both):
-                raise DeformKitError("handle '%s' overlaps the fixed group '%s' in %d vertices "
-                                     "(first: vertex %d): remove them from one group"
-                                     % (h.name, d.fixed_group, len(both), both[0]))
+                raise OverlapError("handle '%s' overlaps the fixed group '%s' in %d vertices: "
+                                   "remove them from one group"
+                                   % (h.name, d.fixed_group, len(both)),
+                                   h.vertex_group, d.fixed_group)
     if d.roi_group:
         roi = groups[d.roi_group][0]
         if len(roi) == 0:
@@ -273,9 +284,12 @@ def collect(obj, d):
         if len(d.handles) > 1:
             raise DeformKitError("%s moves the Region group with one handle: remove the "
                                  "other handles or clear the Region group" % m.label)
-        if fixed is not None and len(np.intersect1d(roi, fixed)):
-            raise DeformKitError("the Region group '%s' overlaps the fixed group '%s'"
-                                 % (d.roi_group, d.fixed_group))
+        both = np.intersect1d(roi, fixed) if fixed is not None else ()
+        if len(both):
+            raise OverlapError("the Region group '%s' overlaps the fixed group '%s' in %d "
+                               "vertices: remove them from one group"
+                               % (d.roi_group, d.fixed_group, len(both)),
+                               d.roi_group, d.fixed_group)
         handles, roi = [roi], None
     kw = dict(handles=handles, fixed=fixed, roi=roi)
     if "stiffness" in m.maps and d.material_group:
@@ -501,10 +515,16 @@ def unbind(obj, d):
 
 
 def set_status(d, msg, is_error):
-    if d.status != msg:
-        d.status = msg
+    """The deformer's status line; an OverlapError also records its two groups (the panel
+    offers to select or remove the shared vertices), any other status clears them."""
+    text = str(msg)
+    if d.status != text:
+        d.status = text
     if d.status_is_error != is_error:
         d.status_is_error = is_error
+    groups = "\t".join(msg.groups) if isinstance(msg, OverlapError) else ""
+    if d.status_overlap != groups:
+        d.status_overlap = groups
 
 
 def _entry_for(obj, d, check_groups):
@@ -839,6 +859,7 @@ def evaluate_object(obj, depsgraph=None, check_groups=False, cold=False, interac
         mod = geonodes.find_modifier(obj, d)
         if mod is None or not (mod.show_viewport or mod.show_render):
             continue  # nothing would show it (e.g. replaced by a baked cache)
+        geonodes.repair(mod, d)  # an Attribute input edited in the modifier's panel
         key = (obj.name, d.uid)
         if refine and not (key in _cache and _cache[key].pending):
             continue
@@ -852,6 +873,6 @@ def evaluate_object(obj, depsgraph=None, check_groups=False, cold=False, interac
             if d.status != str(ex):
                 zero_offset(obj, d)
                 drop(obj.name, d.uid)
-            set_status(d, str(ex), True)
+            set_status(d, ex, True)
         except Exception as ex:  # never let a handler raise
             set_status(d, "internal error: %s: %s" % (type(ex).__name__, ex), True)

@@ -3,7 +3,7 @@ view. Drawing only reads settings and the solver's runtime figures; it never sol
 
 import bpy
 
-from . import geonodes, methods, native, solver
+from . import bake, geonodes, methods, native, solver
 
 
 class DEFORMKIT_UL_deformers(bpy.types.UIList):
@@ -60,7 +60,10 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
 
     @classmethod
     def poll(cls, context):
-        return context.object is not None and context.object.type == "MESH"
+        # only meshes that have a deformer: the others get the Add DeformKit Deformer menu
+        # at the top of the Modifiers tab, not a whole panel
+        obj = context.object
+        return obj is not None and obj.type == "MESH" and len(obj.deformkit.deformers) > 0
 
     def draw(self, context):
         layout = self.layout
@@ -97,8 +100,8 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
         else:
             r = col.row()
             r.alert = True
-            r.label(text="its Geometry Nodes modifier was removed: re-add the deformer",
-                    icon="ERROR")
+            r.label(text="its Geometry Nodes modifier was removed", icon="ERROR")
+            col.operator("deformkit.restore_modifier", icon="MODIFIER")
         col.prop_search(d, "roi_group", obj, "vertex_groups", text="Region")
         col.prop_search(d, "fixed_group", obj, "vertex_groups", text="Fixed")
         if "stiffness" in m.maps or "material" in m.maps:
@@ -140,6 +143,19 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
         if d.status:
             r.alert = d.status_is_error
             r.label(text=d.status, icon="ERROR" if d.status_is_error else "INFO")
+        draw_overlap(layout, d)
+        hidden = bake.hidden_reason(obj, d) if mod is not None and d.bound else None
+        if hidden:
+            r = layout.row()
+            r.alert = True
+            r.label(text="%s: nothing shows the result" % hidden, icon="HIDE_ON")
+        why = bake.animated_reason(obj, d) if d.bound and bake.state(obj, d) is None else None
+        if why:
+            box = layout.box()
+            for i, line in enumerate(_wrap("Animated (%s) and not baked: without DeformKit, "
+                                           "this file shows one frozen pose on every frame. "
+                                           "Bake before rendering elsewhere." % why, 56)):
+                box.label(text=line, icon="ERROR" if i == 0 else "BLANK1")
         rt = solver.runtime.get((obj.name, d.uid))
         if rt and d.bound and not d.status_is_error:
             layout.label(text="last solve %.1f ms, %d iterations%s" % (
@@ -148,9 +164,42 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
         row = layout.row(align=True)
         row.operator("deformkit.apply", text="Apply").mode = "MESH"
         row.operator("deformkit.apply", text="Apply as Shape Key").mode = "SHAPE_KEY"
-        row = layout.row(align=True)
-        row.operator("deformkit.bake", text="Bake to Point Cache", icon="FILE_CACHE").mode = "PC2"
-        row.operator("deformkit.bake", text="Bake to Shape Keys").mode = "SHAPE_KEYS"
+        draw_bake(layout, obj, d)
+
+
+def draw_overlap(layout, d):
+    """The ways out of an overlap error: select the shared vertices, or remove them from
+    either group."""
+    if not d.status_overlap or not d.status_is_error:
+        return
+    a, b = d.status_overlap.split("\t")
+    row = layout.row(align=True)
+    op = row.operator("deformkit.overlap", text="Select Shared", icon="RESTRICT_SELECT_OFF")
+    op.action, op.group, op.other = "SELECT", a, b
+    for g, other in ((a, b), (b, a)):
+        op = row.operator("deformkit.overlap", text="Remove from '%s'" % g, icon="REMOVE")
+        op.action, op.group, op.other = "REMOVE", g, other
+
+
+def draw_bake(layout, obj, d):
+    """The bake buttons, or the bake that shows in place of the live result with the ways
+    out (Free Bake, Re-bake)."""
+    st = bake.state(obj, d)
+    if st is not None:
+        box = layout.box()
+        box.alert = True
+        for i, line in enumerate(_wrap(st["text"], 56)):
+            box.label(text=line, icon=("FILE_CACHE" if st["kind"] == "PC2" else
+                                       "SHAPEKEY_DATA") if i == 0 else "BLANK1")
+        row = box.row(align=True)
+        row.operator("deformkit.free_bake", icon="TRASH")
+        if not st["broken"]:
+            row.operator("deformkit.rebake", icon="FILE_REFRESH")
+        return
+    row = layout.row(align=True)
+    row.operator("deformkit.bake", text="Bake to Point Cache", icon="FILE_CACHE").mode = "PC2"
+    row.operator("deformkit.bake", text="Bake to Shape Keys").mode = "SHAPE_KEYS"
+    layout.prop(d, "bake_file", text="Cache File")
 
 
 def _wrap(text, width):
@@ -164,6 +213,94 @@ def _wrap(text, width):
     if cur:
         lines.append(cur)
     return lines or [""]
+
+
+def driven_by(target):
+    """(mesh object, deformer index, deformer, handle) of every handle that `target` moves."""
+    out = []
+    for obj in bpy.data.objects:
+        if obj.type != "MESH":
+            continue
+        for i, d in enumerate(obj.deformkit.deformers):
+            for h in d.handles:
+                if h.target == target:
+                    out.append((obj, i, d, h))
+    return out
+
+
+def draw_deformer_summary(layout, obj, i, d, handle=None):
+    """One deformer in brief: its name (and the handle), status, Bind / Rebind, its bake."""
+    box = layout.box()
+    m = methods.BY_ID.get(d.method)
+    title = "%s: %s" % (obj.name, d.name) if handle is None else \
+        "%s: %s, handle '%s'" % (obj.name, d.name, handle.name)
+    box.label(text=title, icon=m.icon if m else "QUESTION")
+    if d.status:
+        for j, line in enumerate(_wrap(d.status, 40)):
+            r = box.row()
+            r.alert = d.status_is_error
+            r.label(text=line, icon=("ERROR" if d.status_is_error else "INFO") if j == 0
+                    else "BLANK1")
+    st = bake.state(obj, d)
+    if st is not None:
+        r = box.row()
+        r.alert = True
+        r.label(text="baked: edits don't show", icon="FILE_CACHE")
+    row = box.row(align=True)
+    op = row.operator("deformkit.bind", text="Rebind" if d.bound else "Bind",
+                      icon="FILE_REFRESH" if d.bound else "LINKED")
+    op.object_name, op.deformer_index = obj.name, i
+    if st is not None:
+        op = row.operator("deformkit.free_bake", icon="TRASH")
+        op.object_name, op.deformer_index = obj.name, i
+
+
+class DEFORMKIT_PT_sidebar(bpy.types.Panel):
+    """The 3D View's sidebar (N) tab: the deformers of the active mesh, or those that the
+    active object (a handle's empty or armature) drives, with their status and Bind, so that
+    selecting the handle to move it does not take them out of view."""
+    bl_label = "DeformKit"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "DeformKit"
+
+    @classmethod
+    def poll(cls, context):
+        return True
+
+    def draw(self, context):
+        layout = self.layout
+        obj = context.object
+        if obj is not None and obj.type == "MESH" and len(obj.deformkit.deformers):
+            for i, d in enumerate(obj.deformkit.deformers):
+                draw_deformer_summary(layout, obj, i, d)
+            return
+        drives = driven_by(obj) if obj is not None else []
+        if drives:
+            layout.label(text="%s moves:" % obj.name, icon="HOOK")
+            for mesh, i, d, h in drives:
+                draw_deformer_summary(layout, mesh, i, d, h)
+            return
+        for line in _wrap("Select a mesh with a DeformKit deformer, or a handle's target. "
+                          "Add a deformer from the Modifiers tab or the Object menu.", 40):
+            layout.label(text=line)
+
+
+class DEFORMKIT_PT_handle_target(bpy.types.Panel):
+    """A line on a handle target's Object tab saying what it drives."""
+    bl_label = "DeformKit Handle"
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "object"
+
+    @classmethod
+    def poll(cls, context):
+        return context.object is not None and bool(driven_by(context.object))
+
+    def draw(self, context):
+        for mesh, i, d, h in driven_by(context.object):
+            self.layout.label(text="moves handle '%s' of %s (%s)" % (h.name, mesh.name, d.name),
+                              icon="HOOK")
 
 
 class DEFORMKIT_MT_add(bpy.types.Menu):
@@ -181,6 +318,8 @@ def _draw_modifier_tab(self, context):
 
 
 def _draw_object_menu(self, context):
+    if context.object is None or context.object.type != "MESH":
+        return  # DeformKit deforms meshes: no entry for empties, cameras, armatures...
     self.layout.separator()
     self.layout.menu("DEFORMKIT_MT_add", icon="MOD_MESHDEFORM")
 
@@ -190,7 +329,8 @@ def _draw_edit_menu(self, context):
     self.layout.operator("deformkit.add_handle_from_selection", icon="HOOK")
 
 
-CLASSES = [DEFORMKIT_UL_deformers, DEFORMKIT_UL_handles, DEFORMKIT_PT_modifiers, DEFORMKIT_MT_add]
+CLASSES = [DEFORMKIT_UL_deformers, DEFORMKIT_UL_handles, DEFORMKIT_PT_modifiers, DEFORMKIT_MT_add,
+           DEFORMKIT_PT_sidebar, DEFORMKIT_PT_handle_target]
 
 _APPENDS = [
     ("DATA_PT_modifiers", _draw_modifier_tab),

@@ -1,0 +1,241 @@
+"""The artist's workflow (issue 17): baked states that show and can be undone, the panel
+that stays with the handle, errors with a way out, plumbing out of view.
+
+- Bake to Point Cache: the panel names the cache and says edits don't show; Free Bake removes
+  the Mesh Cache and brings the live result back (an edit shows again); Re-bake bakes the same
+  range again. Bake to Shape Keys shows the baked pose at once (it showed the rest shape until
+  the frame changed); Free Bake removes its keys, their keyframes and the lone Basis.
+- The sidebar (N) tab lists the active mesh's deformers, or those the selected handle target
+  drives, with Bind; the target's Object tab says what it moves.
+- An overlap error offers Select Shared and Remove from either group, which work; a deleted
+  modifier gets Restore Modifier; an Attribute input edited in the modifier is found again by
+  the modifier's name and repaired; Bind with the modifier off warns.
+- Animated and not baked: the panel warns (a keyed target, a keyed Factor), and not once baked.
+- No DeformKit panel on meshes without a deformer; no deformer entry in the Object menu for
+  empties; the point cache's file is a field of the panel.
+"""
+import os
+import sys
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import _setup as S  # noqa: E402
+import bpy  # noqa: E402
+import numpy as np  # noqa: E402
+
+R = S.Results("test_addon_workflow")
+ui, bake = S.addon.ui, S.addon.bake
+
+
+class Rec:
+    """A layout that records the operators and labels a draw function asks for."""
+
+    def __init__(self, out):
+        self.__dict__["out"] = out
+
+    def __setattr__(self, k, v):
+        pass
+
+    def _sub(self, *a, **kw):
+        return Rec(self.out)
+
+    row = column = box = split = _sub
+
+    def label(self, text="", **kw):
+        self.out.append(("label", text))
+
+    def operator(self, idname, text="", **kw):
+        self.out.append(("operator", idname, text))
+        return type("Op", (), {})()
+
+    def __getattr__(self, name):  # prop, prop_search, menu, separator, template_list ...
+        return lambda *a, **kw: None
+
+
+def draw(panel_cls, obj):
+    out = []
+    ctx = type("Ctx", (), {"object": obj, "scene": bpy.context.scene,
+                           "region": None})()
+    if panel_cls.poll(ctx):
+        panel_cls.draw(type("P", (), {"layout": Rec(out)})(), ctx)
+    else:
+        out.append(("hidden",))
+    return out
+
+
+def ops(out):
+    return {o[1] for o in out if o[0] == "operator"}
+
+
+def text(out):
+    return " ".join(o[1] for o in out if o[0] == "label")
+
+
+def scene(method="ARAP"):
+    S.reset_scene()
+    bpy.ops.wm.save_as_mainfile(filepath=os.path.join(S.OUTPUT, "workflow.blend"))
+    obj, d, e, fixed, handle = S.grid_setup(method)
+    bpy.ops.deformkit.bind()
+    return obj, d, e, handle
+
+
+def test_point_cache_bake_shows_and_frees():
+    obj, d, e, handle = scene()
+    sc = bpy.context.scene
+    e.location.z = 0.0
+    e.keyframe_insert("location", frame=1)
+    e.location.z = 0.3
+    e.keyframe_insert("location", frame=10)
+    sc.frame_set(5)
+    out = draw(ui.DEFORMKIT_PT_modifiers, obj)
+    R.check("animated, not baked: the panel warns", "frozen pose" in text(out), text(out))
+    R.check("the cache file is a field next to Bake", d.bake_file == "" and
+            "deformkit.bake" in ops(out))
+    d.bake_file = "//workflow_cache.pc2"
+    bpy.ops.deformkit.bake(mode="PC2", frame_start=1, frame_end=10)
+    st = bake.state(obj, d)
+    R.check("the bake is recorded", st is not None and st["kind"] == "PC2" and
+            (d.bake_start, d.bake_end) == (1, 10), st)
+    out = draw(ui.DEFORMKIT_PT_modifiers, obj)
+    R.check("baked: the panel names the cache and says edits don't show",
+            "workflow_cache.pc2" in text(out) and "edits don't show" in text(out), text(out))
+    R.check("baked: Free Bake and Re-bake offered, no animation warning",
+            {"deformkit.free_bake", "deformkit.rebake"} <= ops(out)
+            and "frozen pose" not in text(out), ops(out))
+    R.check("the cache went to the panel's file",
+            os.path.exists(bpy.path.abspath("//workflow_cache.pc2")))
+    baked = S.evaluated_positions(obj)
+    e.location.x += 0.4  # an edit while baked: invisible (the cache overwrites)
+    bpy.context.view_layer.update()
+    R.check("an edit does not show while baked",
+            np.abs(S.evaluated_positions(obj) - baked).max() < 1e-6)
+    bpy.ops.deformkit.free_bake()
+    R.check("Free Bake removes the Mesh Cache and shows the deformer's modifier again",
+            not [m for m in obj.modifiers if m.type == "MESH_CACHE"]
+            and S.geonodes.find_modifier(obj, d).show_viewport and bake.state(obj, d) is None)
+    bpy.context.view_layer.update()
+    live = S.evaluated_positions(obj)
+    R.check("after Free Bake the edit shows", np.abs(live - baked)[handle].max() > 0.1,
+            np.abs(live - baked).max())
+    e.location.x -= 0.4
+    bpy.ops.deformkit.bake(mode="PC2", frame_start=2, frame_end=6)
+    bpy.ops.deformkit.rebake()
+    R.check("Re-bake keeps the kind and range",
+            bake.state(obj, d)["kind"] == "PC2" and (d.bake_start, d.bake_end) == (2, 6)
+            and len([m for m in obj.modifiers if m.type == "MESH_CACHE"]) == 1)
+
+
+def test_shape_key_bake_shows_at_once_and_frees():
+    obj, d, e, handle = scene()
+    sc = bpy.context.scene
+    e.location.z = 0.0
+    e.keyframe_insert("location", frame=1)
+    e.location.z = 0.3
+    e.keyframe_insert("location", frame=6)
+    sc.frame_set(4)
+    want = S.evaluated_positions(obj)
+    bpy.ops.deformkit.bake(mode="SHAPE_KEYS", frame_start=1, frame_end=6)
+    S.handlers.enabled[0] = False  # what the keys alone show
+    try:
+        got = S.evaluated_positions(obj)
+    finally:
+        S.handlers.enabled[0] = True
+    R.check("right after Bake to Shape Keys the mesh shows this frame's key (not the rest)",
+            np.abs(got - want).max() < 1e-4, np.abs(got - want).max())
+    R.check("shape key bake recorded", bake.state(obj, d)["kind"] == "SHAPE_KEYS")
+    bpy.ops.deformkit.free_bake()
+    keys = obj.data.shape_keys
+    R.check("Free Bake removes the keys and the lone Basis", keys is None,
+            keys and [k.name for k in keys.key_blocks])
+    R.check("the live result shows again",
+            S.geonodes.find_modifier(obj, d).show_viewport and bake.state(obj, d) is None)
+
+
+def test_sidebar_and_handle_target():
+    obj, d, e, handle = scene()
+    out = draw(ui.DEFORMKIT_PT_sidebar, obj)
+    R.check("sidebar: the mesh's deformer with Bind", "deformkit.bind" in ops(out)
+            and d.name in text(out), out)
+    out = draw(ui.DEFORMKIT_PT_sidebar, e)
+    R.check("sidebar with the handle's empty selected: what it moves, with Bind",
+            "deformkit.bind" in ops(out) and "Tip moves" in text(out) and "Grid" in text(out),
+            out)
+    out = draw(ui.DEFORMKIT_PT_handle_target, e)
+    R.check("the empty's Object tab says what it moves", "moves handle 'tip' of Grid"
+            in text(out), out)
+    R.check("no handle line on an unrelated empty",
+            draw(ui.DEFORMKIT_PT_handle_target, S.empty("Other")) == [("hidden",)])
+    plain = S.make_grid("Plain")
+    R.check("no DeformKit panel on a mesh without a deformer",
+            draw(ui.DEFORMKIT_PT_modifiers, plain) == [("hidden",)])
+    out = []
+    ctx = type("Ctx", (), {"object": e})()
+    ui._draw_object_menu(type("M", (), {"layout": Rec(out)})(), ctx)
+    R.check("no deformer entry in the Object menu for an empty", out == [], out)
+
+
+def test_errors_with_a_way_out():
+    obj, d, e, handle = scene()
+    S.group(obj, "fixed", [int(handle[0]), int(handle[1])])  # now overlaps the handle
+    bpy.context.view_layer.update()
+    S.addon.solver.evaluate_object(obj, bpy.context.evaluated_depsgraph_get(),
+                                   check_groups=True)
+    R.check("overlap error records its groups", d.status_is_error and
+            d.status_overlap == "tip\tfixed", (d.status, d.status_overlap))
+    out = draw(ui.DEFORMKIT_PT_modifiers, obj)
+    R.check("overlap: Select Shared and Remove offered", "deformkit.overlap" in ops(out)
+            and "Remove from 'fixed'" in [o[2] for o in out if o[0] == "operator"], out)
+    bpy.ops.deformkit.overlap(action="SELECT", group="tip", other="fixed")
+    R.check("Select Shared: Edit Mode with the shared vertices", obj.mode == "EDIT")
+    bpy.ops.object.mode_set(mode="OBJECT")
+    sel = [v.index for v in obj.data.vertices if v.select]
+    R.check("exactly the shared vertices selected", sorted(sel) == sorted(handle[:2].tolist()),
+            sel)
+    bpy.ops.deformkit.overlap(action="REMOVE", group="fixed", other="tip")
+    bpy.ops.deformkit.bind()
+    R.check("after Remove from 'fixed' the bind works", d.bound and not d.status_is_error,
+            d.status)
+    # a deleted modifier: Restore Modifier, the deformer and its handles kept
+    obj.modifiers.remove(S.geonodes.find_modifier(obj, d))
+    out = draw(ui.DEFORMKIT_PT_modifiers, obj)
+    R.check("a removed modifier offers Restore Modifier",
+            "deformkit.restore_modifier" in ops(out))
+    bpy.ops.deformkit.restore_modifier()
+    R.check("Restore Modifier: the modifier is back, the handles kept",
+            S.geonodes.find_modifier(obj, d) is not None and len(d.handles) == 1)
+    e.location.z += 0.2
+    bpy.context.view_layer.update()
+    R.check("the restored modifier shows the result",
+            np.abs(S.evaluated_positions(obj) - S.rest_positions(obj))[handle].max() > 0.1)
+    # the Attribute input edited by hand: found by the modifier's name, repaired
+    mod = S.geonodes.find_modifier(obj, d)
+    mod[S.geonodes.attribute_key(mod.node_group)] = "typo"
+    R.check("an edited Attribute input: the modifier is still found",
+            S.geonodes.find_modifier(obj, d) == mod)
+    e.location.z += 0.1
+    bpy.context.view_layer.update()
+    R.check("and repaired by the next update",
+            mod[S.geonodes.attribute_key(mod.node_group)] == d.attribute_name)
+    if hasattr(S.geonodes.compat.group_sockets(mod.node_group)[0], "hide_in_modifier"):
+        hidden = {s.name for s in S.geonodes.compat.group_sockets(mod.node_group)
+                  if getattr(s, "hide_in_modifier", False)}
+        R.check("the modifier's plumbing inputs are hidden from its panel",
+                hidden == {"Factor", "Attribute", "Input"}, hidden)
+    # Bind with the modifier off everywhere: a warning, not a plain success
+    mod.show_viewport = mod.show_render = False
+    bpy.ops.deformkit.bind()
+    out = draw(ui.DEFORMKIT_PT_modifiers, obj)
+    R.check("a modifier that is off: the panel says nothing shows",
+            "nothing shows the result" in text(out), text(out))
+
+
+def test_keyed_factor_warns():
+    obj, d, e, handle = scene()
+    mod = S.geonodes.find_modifier(obj, d)
+    obj.keyframe_insert('modifiers["%s"]%s' % (mod.name, S.geonodes.factor_path(mod)), frame=1)
+    R.check("a keyed Factor: animated", bake.animated_reason(obj, d) == "its Factor is keyed",
+            bake.animated_reason(obj, d))
+
+
+for t in (test_point_cache_bake_shows_and_frees, test_shape_key_bake_shows_at_once_and_frees,
+          test_sidebar_and_handle_target, test_errors_with_a_way_out, test_keyed_factor_warns):
+    R.run(t)
+R.finish()
