@@ -9,6 +9,7 @@ import numpy as np
 from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 
 from . import bake, geonodes, methods, native, properties, solver
+from .text import plural
 
 
 def _get_object(op, context):
@@ -20,9 +21,7 @@ def _get_object(op, context):
     if obj is None:
         raise solver.DeformKitError("no active object" if not name else
                                     "object '%s' not found" % name)
-    if obj.type != "MESH":
-        raise solver.DeformKitError("DeformKit deforms mesh objects; '%s' is a %s"
-                                    % (obj.name, obj.type.lower()))
+    solver.check_mesh_type(obj)
     return obj
 
 
@@ -201,7 +200,7 @@ class DEFORMKIT_OT_add_handle_from_selection(_Base, bpy.types.Operator):
                 solver.set_bind_matrix(obj, h)
         finally:
             bpy.ops.object.mode_set(mode="EDIT")
-        self.report({"INFO"}, "handle '%s': %d vertices" % (name, len(sel)))
+        self.report({"INFO"}, "handle '%s': %s" % (name, plural(len(sel), "vertex")))
 
 
 class DEFORMKIT_OT_remove_handle(_Base, bpy.types.Operator):
@@ -296,8 +295,9 @@ class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
         if self._thread.is_alive():
             frac = self._job.fraction
             context.workspace.status_text_set(
-                "DeformKit: binding %s (%d vertices) %.1f s%s, Esc to cancel"
-                % (self._name, self._job.n_vertices, time.perf_counter() - self._t0,
+                "DeformKit: binding %s (%s) %.1f s%s, Esc to cancel"
+                % (self._name, plural(self._job.n_vertices, "vertex"),
+                   time.perf_counter() - self._t0,
                    "" if frac is None else ", eigenvectors %.0f%%" % (100 * frac)))
             if frac is not None:
                 context.window_manager.progress_update(frac)
@@ -418,7 +418,7 @@ class DEFORMKIT_OT_bake(_Base, bpy.types.Operator):
                 self.report({"INFO"}, "baked frames %d-%d to %s" % (s, e, path))
             else:
                 n = bake.bake_shape_keys(context, obj, d, s, e, prog)
-                self.report({"INFO"}, "baked %d frames to shape keys" % n)
+                self.report({"INFO"}, "baked %s to shape keys" % plural(n, "frame"))
         finally:
             wm.progress_end()
 
@@ -483,7 +483,7 @@ class DEFORMKIT_OT_bake(_Base, bpy.types.Operator):
         context.workspace.status_text_set("DeformKit bake: frame %d (%d/%d), Esc to cancel"
                                           % (f, self._fb.i, n))
         if self._fb.done:
-            return self._end(context, True, "baked %d frames to %s" % (n, self._path))
+            return self._end(context, True, "baked %s to %s" % (plural(n, "frame"), self._path))
         return {"RUNNING_MODAL"}
 
 

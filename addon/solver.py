@@ -18,6 +18,7 @@ import numpy as np
 from mathutils import Matrix
 
 from . import geonodes, methods, native
+from .text import article, plural
 
 
 class DeformKitError(Exception):
@@ -65,12 +66,16 @@ def drop(obj_name, uid):
 
 # ------------------------------------------------------------------ reading Blender data ----
 
+def check_mesh_type(obj):
+    if obj.type != "MESH":
+        raise DeformKitError("DeformKit deforms mesh objects; '%s' is %s"
+                             % (obj.name, article(obj.type.lower().replace("_", " "))))
+
+
 def check_object(obj, d=None):
     if obj is None:
         raise DeformKitError("no active object")
-    if obj.type != "MESH":
-        raise DeformKitError("DeformKit deforms mesh objects; '%s' is a %s"
-                             % (obj.name, obj.type.lower()))
+    check_mesh_type(obj)
     me = obj.data
     if len(me.vertices) == 0:
         raise DeformKitError("mesh '%s' has no vertices" % me.name)
@@ -249,9 +254,10 @@ def collect(obj, d):
         if (c > 1).any():
             v = int(u[c > 1][0])
             owners = [h.name for h, idx in zip(d.handles, handles) if v in idx]
-            raise DeformKitError("handles '%s' and '%s' share %d vertices (first: vertex %d): "
+            raise DeformKitError("handles '%s' and '%s' share %s (first: vertex %d): "
                                  "a vertex can follow one handle only"
-                                 % (owners[0], owners[1], int((c > 1).sum()), v))
+                                 % (owners[0], owners[1], plural(int((c > 1).sum()), "vertex"),
+                                    v))
     fixed = roi = None
     if d.fixed_group:
         fixed = groups[d.fixed_group][0]
@@ -260,9 +266,10 @@ def collect(obj, d):
         for h, idx in zip(d.handles, handles):
             both = np.intersect1d(idx, fixed)
             if len(both):
-                raise DeformKitError("handle '%s' overlaps the fixed group '%s' in %d vertices "
+                raise DeformKitError("handle '%s' overlaps the fixed group '%s' in %s "
                                      "(first: vertex %d): remove them from one group"
-                                     % (h.name, d.fixed_group, len(both), both[0]))
+                                     % (h.name, d.fixed_group, plural(len(both), "vertex"),
+                                        both[0]))
     if d.roi_group:
         roi = groups[d.roi_group][0]
         if len(roi) == 0:
@@ -415,8 +422,8 @@ class BindJob:
             raise self.error
         me = obj.data
         if (len(me.vertices), len(me.polygons)) != (self.n_vertices, self.n_faces):
-            raise DeformKitError("mesh changed from %d to %d vertices during the bind: bind "
-                                 "again" % (self.n_vertices, len(me.vertices)))
+            raise DeformKitError("mesh changed from %d to %s during the bind: bind "
+                                 "again" % (self.n_vertices, plural(len(me.vertices), "vertex")))
         e = _Entry()
         e.native, e.dkmesh, e.rest = self.native, self.dkmesh, self.rest
         e.extent = float(np.linalg.norm(self.rest.max(axis=0) - self.rest.min(axis=0)))
@@ -511,10 +518,11 @@ def _entry_for(obj, d, check_groups):
     me = obj.data
     n, f = len(me.vertices), len(me.polygons)
     if n != d.bind_n_vertices:
-        raise DeformKitError("mesh changed from %d to %d vertices: bind again"
-                             % (d.bind_n_vertices, n))
+        raise DeformKitError("mesh changed from %d to %s: bind again"
+                             % (d.bind_n_vertices, plural(n, "vertex")))
     if f != d.bind_n_faces:
-        raise DeformKitError("mesh changed from %d to %d faces: bind again" % (d.bind_n_faces, f))
+        raise DeformKitError("mesh changed from %d to %s: bind again"
+                             % (d.bind_n_faces, plural(f, "face")))
     e = _cache.get((obj.name, d.uid))
     settings = _settings_key(d)
     same = e is not None and e.method_id == d.method and e.settings == settings
@@ -638,10 +646,10 @@ def moved_input(obj, d, depsgraph=None):
                              "modifier below it drops attributes" % (d.name, what))
     n = len(obj.data.vertices)
     if len(a.data) != n:
-        raise DeformKitError("%s follows %s, but the final mesh has %d vertices, not %d: a "
+        raise DeformKitError("%s follows %s, but the final mesh has %s, not %d: a "
                              "modifier below it (Subdivision?) changes the vertex count; "
                              "disable it while editing, or move it above %s"
-                             % (d.name, what, len(a.data), n, d.name))
+                             % (d.name, what, plural(len(a.data), "vertex"), n, d.name))
     co = np.empty(n * 3, dtype=np.float32)
     a.data.foreach_get("vector", co)
     return co.reshape(-1, 3).astype(np.float64)
