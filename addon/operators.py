@@ -64,7 +64,7 @@ class DEFORMKIT_OT_add_deformer(_Base, bpy.types.Operator):
                                         % (obj.data.name, methods.get(self.method).label))
         d = properties.new_deformer(obj, self.method)
         geonodes.ensure_modifier(obj, d)
-        solver.set_status(d, "not bound: add handles, then Bind", False)
+        solver.reset_status(d)
         if not native.has_class(methods.get(self.method).native_class):
             self.report({"WARNING"}, "the native module lacks deformkit.%s: %s"
                         % (methods.get(self.method).native_class, native.error or "old build"))
@@ -119,6 +119,13 @@ class DEFORMKIT_OT_move_deformer(_Base, bpy.types.Operator):
                 bpy.ops.object.modifier_move_to_index(modifier=m1.name, index=k)
 
 
+def _handles_changed(d):
+    """An unbound deformer's status after a handle came or went: the error of a bind tried
+    before (e.g. "no handles") no longer holds. A bound one is re-checked by the handler."""
+    if not d.bound:
+        solver.reset_status(d)
+
+
 class DEFORMKIT_OT_add_handle(_Base, bpy.types.Operator):
     """Add an empty handle entry (choose its vertex group and target)"""
     bl_idname = "deformkit.add_handle"
@@ -143,6 +150,7 @@ class DEFORMKIT_OT_add_handle(_Base, bpy.types.Operator):
         d.active_handle = len(d.handles) - 1
         if d.bound and h.target is not None:
             solver.set_bind_matrix(obj, h)
+        _handles_changed(d)
 
 
 class DEFORMKIT_OT_add_handle_from_selection(_Base, bpy.types.Operator):
@@ -198,6 +206,7 @@ class DEFORMKIT_OT_add_handle_from_selection(_Base, bpy.types.Operator):
             if d.bound:
                 context.view_layer.update()
                 solver.set_bind_matrix(obj, h)
+            _handles_changed(d)
         finally:
             bpy.ops.object.mode_set(mode="EDIT")
         self.report({"INFO"}, "handle '%s': %s" % (name, plural(len(sel), "vertex")))
@@ -218,6 +227,7 @@ class DEFORMKIT_OT_remove_handle(_Base, bpy.types.Operator):
             raise solver.DeformKitError("no handle at index %d" % i)
         d.handles.remove(i)
         d.active_handle = min(d.active_handle, max(0, len(d.handles) - 1))
+        _handles_changed(d)
 
 
 
@@ -234,15 +244,14 @@ class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
         wm = context.window_manager
         wm.progress_begin(0, 1)  # a busy cursor while the factorizations run
         try:
-            e = solver.bind(obj, d, context.evaluated_depsgraph_get())
+            solver.bind(obj, d, context.evaluated_depsgraph_get())
         except solver.DeformKitError as ex:
             solver.set_status(d, str(ex), True)
             raise
         finally:
             wm.progress_end()
         ms = (time.perf_counter() - t0) * 1000
-        self.report({"INFO"}, "%s bound: %d vertices, %d handles (%.0f ms)"
-                    % (d.name, e.n_vertices, len(d.handles), ms))
+        self.report({"INFO"}, "%s %s (%.0f ms)" % (d.name, solver.idle_status(d), ms))
 
     # ---- UI version: the native precomputation runs in a worker thread (it releases the
     # GIL), the window stays live with the elapsed time in the status bar, Esc cancels and
@@ -311,14 +320,13 @@ class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
                         % self._name)
             return {"CANCELLED"}
         try:
-            e = solver.bind_end(obj, d, self._job, self._mats, context.evaluated_depsgraph_get())
+            solver.bind_end(obj, d, self._job, self._mats, context.evaluated_depsgraph_get())
         except solver.DeformKitError as ex:
             solver.set_status(d, str(ex), True)
             self.report({"ERROR"}, str(ex))
             return {"CANCELLED"}
-        self.report({"INFO"}, "%s bound: %d vertices, %d handles (%.0f ms)"
-                    % (d.name, e.n_vertices, len(d.handles),
-                       (time.perf_counter() - self._t0) * 1000))
+        self.report({"INFO"}, "%s %s (%.0f ms)" % (d.name, solver.idle_status(d),
+                                                   (time.perf_counter() - self._t0) * 1000))
         return {"FINISHED"}
 
 

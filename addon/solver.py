@@ -483,7 +483,7 @@ def bind_end(obj, d, job, mats, depsgraph=None):
     geonodes.ensure_modifier(obj, d)
     geonodes.ensure_attribute(obj.data, d.attribute_name)
     solve(obj, d, depsgraph, force=True)
-    set_status(d, "bound: %d vertices, %d handles" % (e.n_vertices, len(d.handles)), False)
+    reset_status(d)
     return e
 
 
@@ -504,7 +504,7 @@ def unbind(obj, d):
     if a is not None:
         a.data.foreach_set("vector", np.zeros(len(a.data) * 3, dtype=np.float32))
         obj.data.update_tag()
-    set_status(d, "not bound", False)
+    reset_status(d)
 
 
 def set_status(d, msg, is_error):
@@ -512,6 +512,28 @@ def set_status(d, msg, is_error):
         d.status = msg
     if d.status_is_error != is_error:
         d.status_is_error = is_error
+
+
+def idle_status(d):
+    """A deformer's status when nothing is wrong, composed from its state now (bound or not,
+    its handles): the one place that words it. The panel draws it at draw time, so it follows
+    handles added or removed since it was stored."""
+    if d.bound:
+        return "bound: %s, %s" % (plural(d.bind_n_vertices, "vertex"),
+                                  plural(len(d.handles), "handle"))
+    if len(d.handles) == 0:
+        return "not bound: add a handle, then Bind"
+    return "not bound: press Bind"
+
+
+def reset_status(d):
+    """Stores the idle status, clearing an error."""
+    set_status(d, idle_status(d), False)
+
+
+def status_text(d):
+    """What the panel shows: the stored error, else the idle status of the state now."""
+    return d.status if d.status_is_error else idle_status(d)
 
 
 def _entry_for(obj, d, check_groups):
@@ -853,9 +875,7 @@ def evaluate_object(obj, depsgraph=None, check_groups=False, cold=False, interac
         try:
             if solve(obj, d, depsgraph, cold=cold, check_groups=check_groups,
                      interactive=interactive, force=refine, resume=refine) is not None:
-                if d.status_is_error or not d.status.startswith("bound"):
-                    set_status(d, "bound: %d vertices, %d handles"
-                               % (len(obj.data.vertices), len(d.handles)), False)
+                reset_status(d)
         except DeformKitError as ex:
             if d.status != str(ex):
                 zero_offset(obj, d)

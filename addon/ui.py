@@ -137,9 +137,8 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
         else:
             row.operator("deformkit.bind", text="Bind", icon="LINKED")
         r = layout.row()
-        if d.status:
-            r.alert = d.status_is_error
-            r.label(text=d.status, icon="ERROR" if d.status_is_error else "INFO")
+        r.alert = d.status_is_error
+        r.label(text=solver.status_text(d), icon="ERROR" if d.status_is_error else "INFO")
         rt = solver.runtime.get((obj.name, d.uid))
         if rt and d.bound and not d.status_is_error:
             layout.label(text="last solve %.1f ms, %d iterations%s" % (
