@@ -28,7 +28,9 @@ class DeformKitError(Exception):
 NATIVE_ERRORS = (ValueError, IndexError, TypeError, RuntimeError, MemoryError, OverflowError)
 
 _cache = {}            # (object name, deformer uid) -> _Entry
-runtime = {}           # (object name, deformer uid) -> dict(ms=..., iterations=..., converged=...)
+# (object name, deformer uid) -> the last solve: dict(ms=..., iterations=..., converged=...,
+# energy=..., slices=...); the slices of one interactive solve add up (solve(), resume)
+runtime = {}
 _settings_serial = [0]
 # (object name, deformer uid) -> worker thread of a UI bind (operators.DEFORMKIT_OT_bind),
 # from its invoke until its modal part ends. A file load drops modal handlers without ending
@@ -748,8 +750,16 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
     res = _native_call(m.label + " solve", e.native.solve, **goal, **kw)
     ms = (time.perf_counter() - t0) * 1000.0
     pos = np.asarray(res.positions, dtype=np.float64).reshape(-1, 3)
-    runtime[key] = dict(ms=ms, iterations=int(res.iterations), converged=bool(res.converged),
-                        energy=float(res.energy))
+    rt = dict(ms=ms, iterations=int(res.iterations), converged=bool(res.converged),
+              energy=float(res.energy), slices=1)
+    last = runtime.get(key)
+    if budgeted and resume and e.pending and last is not None:
+        # a further slice of the interactive solve left pending: the figures are the whole
+        # solve's (its time and iterations so far), not this slice's
+        rt["ms"] += last["ms"]
+        rt["iterations"] += last["iterations"]
+        rt["slices"] += last["slices"]
+    runtime[key] = rt
     # unconverged only because of the budget: finish from the timer
     if budgeted:
         e.pending_its += int(res.iterations)
@@ -766,6 +776,27 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
         write_offset(obj, d, off, retime=cold)
         e.last_inputs = inputs
     return pos
+
+
+def solve_summary(obj, d):
+    """The panel's line about the last solve, or None before one (or while the status is an
+    error). Iterative methods: the time and iterations of the whole solve, its interactive
+    slices summed, and "(not converged)" when it stopped at Max Iterations short of its
+    tolerance (not while the timer is still refining it). Direct methods: the time only;
+    they never say "not converged" (Laplacian editing's local-frame passes are a fixed
+    count, not an iteration to convergence)."""
+    key = (obj.name, d.uid)
+    rt = runtime.get(key)
+    if not rt or not d.bound or d.status_is_error:
+        return None
+    m = methods.get(d.method)
+    if not m.iterative:
+        return "last solve %.1f ms" % rt["ms"]
+    e = _cache.get(key)
+    refining = e is not None and e.pending
+    return "last solve %.1f ms, %s%s" % (
+        rt["ms"], plural(rt["iterations"], "iteration"),
+        "" if rt["converged"] or refining else " (not converged)")
 
 
 def show_material(obj, d, e):

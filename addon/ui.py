@@ -139,11 +139,9 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
         r = layout.row()
         r.alert = d.status_is_error
         r.label(text=solver.status_text(d), icon="ERROR" if d.status_is_error else "INFO")
-        rt = solver.runtime.get((obj.name, d.uid))
-        if rt and d.bound and not d.status_is_error:
-            layout.label(text="last solve %.1f ms, %d iterations%s" % (
-                rt["ms"], rt["iterations"], "" if rt["converged"] else " (not converged)"),
-                icon="TIME")
+        summary = solver.solve_summary(obj, d)
+        if summary:
+            layout.label(text=summary, icon="TIME")
         row = layout.row(align=True)
         row.operator("deformkit.apply", text="Apply").mode = "MESH"
         row.operator("deformkit.apply", text="Apply as Shape Key").mode = "SHAPE_KEY"

@@ -78,7 +78,84 @@ def test_status_follows_handles():
     R.check("unbound with handles: press Bind", s == "not bound: press Bind", s)
 
 
+def test_sliced_solve_totals():
+    """An interactive ARAP solve cut into one-iteration slices (the budget shrunk; under -b
+    handlers.refine() stands in for the timer): the panel's line gives the whole solve's
+    iterations, equal to one uninterrupted solve's, and its summed time."""
+    S.reset_scene()
+    obj, d, e, fixed, handle = S.grid_setup("ARAP", nx=30, ny=15)
+    bpy.ops.deformkit.bind()
+    key = (obj.name, d.uid)
+    bind_T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
+    budget = S.solver.INTERACTIVE_BUDGET_MS
+    S.handlers.force_interactive[0] = True
+    S.solver.INTERACTIVE_BUDGET_MS = 1e-9   # one iteration a slice
+    try:
+        e.location = (1.0, 0.1, 0.4)
+        e.rotation_euler = (0.0, -0.3, 0.0)
+        bpy.context.view_layer.update()
+        seen = [dict(S.solver.runtime[key])]
+        while S.solver.pending() and len(seen) < 500:
+            S.handlers.refine()
+            seen.append(dict(S.solver.runtime[key]))
+    finally:
+        S.solver.INTERACTIVE_BUDGET_MS = budget
+        S.handlers.force_interactive[0] = False
+    rt = seen[-1]
+    T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
+    mesh = S.dk.Mesh(S.rest_positions(obj), S.solver.triangles(obj.data))
+    ref = S.dk.ARAP(mesh, [handle], fixed=fixed, weights=d.options.weights,
+                    energy=d.options.energy, tolerance=d.options.tolerance,
+                    max_iterations=d.options.max_iterations,
+                    acceleration=d.options.acceleration)
+    ref.solve(transforms=bind_T, warm_start=False)
+    r = ref.solve(transforms=T, warm_start=True)
+    R.check("the solve took several slices (%d)" % len(seen),
+            len(seen) > 2 and seen[0]["iterations"] == 1 and rt["slices"] == len(seen),
+            [x["iterations"] for x in seen])
+    R.check("summed iterations of the slices = one uninterrupted solve's (%d)" % r.iterations,
+            rt["iterations"] == r.iterations and rt["converged"], (rt, r.iterations))
+    R.check("the time is summed over the slices",
+            all(b["ms"] > a["ms"] for a, b in zip(seen, seen[1:])), [x["ms"] for x in seen])
+    line = S.solver.solve_summary(obj, d)
+    R.check("the panel's line gives the total", line == "last solve %.1f ms, %s"
+            % (rt["ms"], text.plural(r.iterations, "iteration")), line)
+    # the next drag starts a new solve: its own figures, not added to the last one's
+    e.location = (1.0, 0.1, 0.45)
+    bpy.context.view_layer.update()
+    R.check("a new solve starts its own count", S.solver.runtime[key]["slices"] == 1,
+            S.solver.runtime[key])
+
+
+def test_convergence_wording():
+    """'(not converged)' only for iterative methods that stopped at their cap; a direct
+    method's line has no iterations and never says it."""
+    for m in S.methods.METHODS:
+        if m.iterative or not S.native.has_class(m.native_class):
+            continue
+        S.reset_scene()
+        obj, d, e, fixed, handle = S.grid_setup(m.id)
+        bpy.ops.deformkit.bind()
+        e.location = (1.2, 0.0, 0.5)
+        bpy.context.view_layer.update()
+        line = S.solver.solve_summary(obj, d) or ""
+        R.check("%s (direct): '%s' has a time, no iterations, no convergence" % (m.id, line),
+                line.startswith("last solve") and "iteration" not in line
+                and "converged" not in line, line)
+    S.reset_scene()
+    obj, d, e, fixed, handle = S.grid_setup("ARAP")
+    d.options.max_iterations = 1
+    bpy.ops.deformkit.bind()
+    e.location = (1.0, 0.1, 0.6)
+    bpy.context.view_layer.update()
+    line = S.solver.solve_summary(obj, d) or ""
+    R.check("ARAP capped at 1 iteration: '%s'" % line,
+            line.endswith("1 iteration (not converged)"), line)
+
+
 R.run(test_plural_and_article)
 R.run(test_not_a_mesh_article)
 R.run(test_status_follows_handles)
+R.run(test_sliced_solve_totals)
+R.run(test_convergence_wording)
 R.finish()
