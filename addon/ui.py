@@ -65,11 +65,9 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         obj = context.object
+        width = wrap_width(context)
         if native.load() is None:
-            box = layout.box()
-            box.alert = True
-            for i, line in enumerate(_wrap(native.error, 60)):
-                box.label(text=line, icon="ERROR" if i == 0 else "BLANK1")
+            draw_wrapped(layout.box(), native.error, "ERROR", width, alert=True)
         dks = obj.deformkit
         row = layout.row()
         row.template_list("DEFORMKIT_UL_deformers", "", dks, "deformers", dks, "active_index",
@@ -136,9 +134,8 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
             row.operator("deformkit.unbind", text="Unbind", icon="UNLINKED")
         else:
             row.operator("deformkit.bind", text="Bind", icon="LINKED")
-        r = layout.row()
-        r.alert = d.status_is_error
-        r.label(text=solver.status_text(d), icon="ERROR" if d.status_is_error else "INFO")
+        draw_wrapped(layout, solver.status_text(d), "ERROR" if d.status_is_error else "INFO",
+                     width, alert=d.status_is_error)
         summary = solver.solve_summary(obj, d)
         if summary:
             layout.label(text=summary, icon="TIME")
@@ -148,6 +145,28 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
         row = layout.row(align=True)
         row.operator("deformkit.bake", text="Bake to Point Cache", icon="FILE_CACHE").mode = "PC2"
         row.operator("deformkit.bake", text="Bake to Shape Keys").mode = "SHAPE_KEYS"
+
+
+def wrap_width(context):
+    """How many characters of label text fit one line of the region being drawn: its width
+    less the icon and the panel's margins, at about 6.5 px a character at UI scale 1 (Blender's
+    default font); 60 when there is no region (scripts, tests)."""
+    region = getattr(context, "region", None)
+    width = getattr(region, "width", 0) or 0
+    if width <= 0:
+        return 60
+    prefs = bpy.context.preferences  # system.ui_scale has the display's DPI (0 without one)
+    scale = prefs.system.ui_scale or prefs.view.ui_scale or 1.0
+    return max(20, int((width - 60 * scale) / (6.5 * scale)))
+
+
+def draw_wrapped(layout, text, icon, width, alert=False):
+    """`text` over as many label lines as it needs at `width` characters, the icon on the
+    first (long errors were cut off at the panel's edge)."""
+    col = layout.column(align=True)
+    col.alert = alert
+    for i, line in enumerate(_wrap(text, width)):
+        col.label(text=line, icon=icon if i == 0 else "BLANK1")
 
 
 def _wrap(text, width):

@@ -15,6 +15,63 @@ R = S.Results("test_addon_texts")
 text = S.addon.text
 
 
+class Layout:
+    """A stand-in UILayout that records what is drawn: `calls` holds (container path, kind,
+    name) with kind 'prop', 'prop_search', 'label', 'operator', ...; containers (row, column,
+    box, split) get their own path, so a test can tell where something was drawn."""
+
+    def __init__(self, calls, path="root"):
+        object.__setattr__(self, "calls", calls)
+        object.__setattr__(self, "path", path)
+        object.__setattr__(self, "n", 0)
+
+    def __setattr__(self, name, value):
+        object.__setattr__(self, name, value)
+
+    def _sub(self, *a, **kw):
+        object.__setattr__(self, "n", self.n + 1)
+        return Layout(self.calls, "%s/%d" % (self.path, self.n))
+
+    row = column = box = split = column_flow = grid_flow = _sub
+
+    def label(self, text="", icon=None, **kw):
+        self.calls.append((self.path, "label", text))
+
+    def prop(self, data, path, text=None, **kw):
+        self.calls.append((self.path, "prop", path))
+
+    def prop_search(self, data, path, *a, **kw):
+        self.calls.append((self.path, "prop_search", path))
+
+    def operator(self, idname, **kw):
+        self.calls.append((self.path, "operator", idname))
+        return type("Props", (), {})()
+
+    def menu(self, idname, **kw):
+        self.calls.append((self.path, "menu", idname))
+
+    def template_list(self, *a, **kw):
+        self.calls.append((self.path, "template_list", a[0]))
+
+    def separator(self, *a, **kw):
+        pass
+
+
+class Context:
+    def __init__(self, obj, region_width=None):
+        self.object = self.active_object = obj
+        self.scene = bpy.context.scene
+        self.region = None if region_width is None else type("Region", (), {
+            "width": region_width})()
+
+
+def draw_panel(obj, region_width=None):
+    calls = []
+    fake = type("Fake", (), {"layout": Layout(calls)})()
+    S.addon.ui.DEFORMKIT_PT_modifiers.draw(fake, Context(obj, region_width))
+    return calls
+
+
 def test_plural_and_article():
     R.check("plural: 1 handle, 2 handles, 0 handles",
             (text.plural(1, "handle"), text.plural(2, "handle"), text.plural(0, "handle"))
@@ -153,9 +210,37 @@ def test_convergence_wording():
             line.endswith("1 iteration (not converged)"), line)
 
 
+def test_long_status_wraps():
+    """A long error is drawn over several label lines, none longer than the region holds, and
+    a wider region takes fewer lines; nothing is lost."""
+    S.reset_scene()
+    obj, d, e, fixed, handle = S.grid_setup("ARAP")
+    long = ("handle 'DK Handle 1' overlaps the fixed group 'fixed' in 12 vertices (first: "
+            "vertex 0): remove them from one group, or pick another Fixed group, then bind "
+            "again; the modifier shows the rest shape until then")
+    S.solver.set_status(d, long, True)
+    lines = {}
+    for w in (320, 900):
+        labels = [c for c in draw_panel(obj, w) if c[1] == "label"]
+        start = next(i for i, c in enumerate(labels) if long.startswith(c[2]))
+        got = []
+        for c in labels[start:]:
+            got.append(c[2])
+            if " ".join(got) == long:
+                break
+        lines[w] = got
+        chars = S.addon.ui.wrap_width(Context(obj, w))
+        R.check("region %d px: the status over %d lines of at most %d characters, all of it"
+                % (w, len(got), chars), " ".join(got) == long
+                and all(len(x) <= chars for x in got), got)
+    R.check("a narrow region takes more lines (%d) than a wide one (%d)"
+            % (len(lines[320]), len(lines[900])), len(lines[320]) > len(lines[900]) >= 1)
+
+
 R.run(test_plural_and_article)
 R.run(test_not_a_mesh_article)
 R.run(test_status_follows_handles)
 R.run(test_sliced_solve_totals)
 R.run(test_convergence_wording)
+R.run(test_long_status_wraps)
 R.finish()
