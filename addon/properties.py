@@ -4,6 +4,7 @@ Only names and values are stored (vertex-group names, a target object pointer, m
 solver state lives in solver.py and is rebuilt on demand.
 """
 
+import re
 import uuid
 
 import bpy
@@ -19,6 +20,44 @@ def _touch(self, context):
     """Any settings change: mark solver inputs dirty (the handler re-checks and re-solves)."""
     from . import solver
     solver.mark_settings_changed()
+
+
+# A deformer's name as the add-on gives it: "DeformKit <method label>", with ".NNN" when taken
+AUTO_NAME = "DeformKit %s"
+_AUTO_NAME_RE = re.compile(r"DeformKit (.+?)(\.\d{3})?")
+
+
+def _auto_named(name):
+    """True for a name the add-on gave (after any method's label), False for a typed one."""
+    m = _AUTO_NAME_RE.fullmatch(name)
+    return m is not None and m.group(1) in {x.label for x in methods.METHODS}
+
+
+def unique_name(dks, label, skip=None):
+    """AUTO_NAME for `label`, with the first free ".NNN" when another deformer of `dks` (but
+    `skip`) has it."""
+    names = {x.name for x in dks.deformers if skip is None or x.uid != skip.uid}
+    name, i = AUTO_NAME % label, 1
+    while name in names:
+        i += 1
+        name = "%s.%03d" % (AUTO_NAME % label, i)
+    return name
+
+
+def _method_changed(self, context):
+    """The method switched: re-solve, and a name the add-on gave follows the new method
+    ("DeformKit ARAP" becomes "DeformKit Laplacian Edit"), its modifier too when it still
+    carries the deformer's name; a name the user typed stays."""
+    _touch(self, context)
+    label = methods.get(self.method).label
+    if not _auto_named(self.name) or _AUTO_NAME_RE.fullmatch(self.name).group(1) == label:
+        return
+    from . import geonodes
+    old = self.name
+    self.name = unique_name(self.id_data.deformkit, label, skip=self)
+    mod = geonodes.find_modifier(self.id_data, self)
+    if mod is not None and mod.name == old:
+        mod.name = self.name
 
 
 class DeformKitHandle(bpy.types.PropertyGroup):
@@ -77,7 +116,7 @@ def _new_uid():
 
 _deformer_ann = {
     "uid": StringProperty(name="UID", description="Stable id: attribute and cache key"),
-    "method": EnumProperty(name="Method", items=methods.enum_items(), update=_touch),
+    "method": EnumProperty(name="Method", items=methods.enum_items(), update=_method_changed),
     "roi_group": StringProperty(name="Region", update=_touch,
                                 description="Vertex group: only these vertices move (empty: all)"),
     "fixed_group": StringProperty(name="Fixed", update=_touch,
@@ -132,13 +171,7 @@ def new_deformer(obj, method_id):
     d = dks.deformers.add()
     d.uid = _new_uid()
     d.method = method_id
-    label = methods.get(method_id).label
-    names = {x.name for x in dks.deformers}
-    name, i = "DeformKit " + label, 1
-    while name in names:
-        i += 1
-        name = "DeformKit %s.%03d" % (label, i)
-    d.name = name
+    d.name = unique_name(dks, methods.get(method_id).label, skip=d)
     dks.active_index = len(dks.deformers) - 1
     return d
 

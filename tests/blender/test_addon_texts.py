@@ -237,10 +237,41 @@ def test_long_status_wraps():
             % (len(lines[320]), len(lines[900])), len(lines[320]) > len(lines[900]) >= 1)
 
 
+def test_name_follows_method():
+    S.reset_scene()
+    obj = S.make_grid()
+    bpy.ops.deformkit.add_deformer(method="ARAP")
+    bpy.ops.deformkit.add_deformer(method="ARAP")
+    a, b = obj.deformkit.deformers
+    mod = lambda d: S.geonodes.find_modifier(obj, d)  # noqa: E731
+    R.check("two ARAP deformers: DeformKit ARAP and DeformKit ARAP.002",
+            (a.name, b.name) == ("DeformKit ARAP", "DeformKit ARAP.002"), (a.name, b.name))
+    b.method = "LAPLACIAN"
+    R.check("ARAP -> Laplacian Edit renames the deformer and its modifier",
+            b.name == "DeformKit Laplacian Edit" and mod(b).name == b.name,
+            (b.name, mod(b).name))
+    b.method = "FALLOFF"
+    a.method = "FALLOFF"
+    R.check("the new name is unique: DeformKit Falloff, DeformKit Falloff.002",
+            (b.name, a.name) == ("DeformKit Falloff", "DeformKit Falloff.002")
+            and mod(a).name == a.name, (b.name, a.name, mod(a).name))
+    a.method = "ARAP"
+    R.check("and back: DeformKit ARAP", a.name == "DeformKit ARAP", a.name)
+    a.name = "Elbow bend"
+    a.method = "LAPLACIAN"
+    R.check("a name the user typed stays after a switch", a.name == "Elbow bend", a.name)
+    mod(b).name = "My modifier"
+    b.method = "EIGEN"
+    R.check("the deformer's auto name follows; a modifier the user renamed keeps its name",
+            b.name == "DeformKit Eigen Deformation" and mod(b).name == "My modifier",
+            (b.name, mod(b).name))
+
+
 R.run(test_plural_and_article)
 R.run(test_not_a_mesh_article)
 R.run(test_status_follows_handles)
 R.run(test_sliced_solve_totals)
 R.run(test_convergence_wording)
 R.run(test_long_status_wraps)
+R.run(test_name_follows_method)
 R.finish()
