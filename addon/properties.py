@@ -122,8 +122,10 @@ _deformer_ann = {
     "fixed_group": StringProperty(name="Fixed", update=_touch,
                                   description="Vertex group: these vertices stay at rest"),
     "material_group": StringProperty(name="Material", update=_touch,
-                                     description="Weight-painted vertex group: per-vertex "
-                                                 "stiffness (methods that support it)"),
+                                     description="Weight-painted vertex group: where ARAP is "
+                                                 "stiffer (its Stiffness group), where Linear "
+                                                 "Reconstruction folds more easily (its "
+                                                 "Material group)"),
     "handles": CollectionProperty(type=DeformKitHandle),
     "active_handle": IntProperty(name="Active Handle", default=0),
     "bound": BoolProperty(name="Bound", default=False),

@@ -218,7 +218,7 @@ def collect(obj, d):
         names.add(h.vertex_group)
         target_world(h)  # raises for a missing/deleted target or bone
     for label, g in (("region", d.roi_group), ("fixed", d.fixed_group),
-                     ("material", d.material_group)):
+                     (m.material_label.lower(), d.material_group)):
         if g:
             if obj.vertex_groups.get(g) is None:
                 raise DeformKitError("%s vertex group '%s' does not exist" % (label, g))

@@ -100,7 +100,7 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
         col.prop_search(d, "roi_group", obj, "vertex_groups", text="Region")
         col.prop_search(d, "fixed_group", obj, "vertex_groups", text="Fixed")
         if "stiffness" in m.maps or "material" in m.maps:
-            col.prop_search(d, "material_group", obj, "vertex_groups", text="Material")
+            col.prop_search(d, "material_group", obj, "vertex_groups", text=m.material_label)
 
         layout.label(text="Handles")
         row = layout.row()

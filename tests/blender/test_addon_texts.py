@@ -40,8 +40,8 @@ class Layout:
     def prop(self, data, path, text=None, **kw):
         self.calls.append((self.path, "prop", path))
 
-    def prop_search(self, data, path, *a, **kw):
-        self.calls.append((self.path, "prop_search", path))
+    def prop_search(self, data, path, *a, text=None, **kw):
+        self.calls.append((self.path, "prop_search", path, text))
 
     def operator(self, idname, **kw):
         self.calls.append((self.path, "operator", idname))
@@ -267,6 +267,93 @@ def test_name_follows_method():
             (b.name, mod(b).name))
 
 
+# The stored identifiers of every enum option: files saved before keep loading only while
+# these stay (labels and descriptions may change).
+STORED_IDS = {
+    ("ARAP", "energy"): ("spokes", "spokes_and_rims"),
+    ("ARAP", "weights"): ("cotangent", "clamped_cotangent", "uniform"),
+    ("ARAP", "acceleration"): ("anderson", "none", "newton"),
+    ("LAPLACIAN", "weights"): ("cotangent", "uniform"),
+    ("LAPLACIAN", "detail"): ("fixed", "membrane", "local_frame"),
+    ("LAPLACIAN", "constraints"): ("hard", "soft"),
+    ("FALLOFF", "distance"): ("hops", "euclidean", "geodesic", "dijkstra"),
+    ("EMBEDDED", "nodes"): ("surface", "vertices"),
+    ("EMBEDDED", "distance"): ("euclidean", "geodesic"),
+    ("EIGEN", "laplacian"): ("cotangent", "belkin_sun_wang"),
+    ("LINEAR_RECONSTRUCTION", "material_mode"): ("interpolate", "smooth"),
+}
+# the solver's words the issue found in the UI, which an artist cannot act on
+SOLVER_WORDS = ("Tikhonov", "Regularization", "Material Stiffness", "CG Iterations",
+                "Frame Iterations", "Constraint Weight", "Eigenvectors")
+
+
+def test_descriptions_and_labels():
+    """From the registered properties (what the UI shows): every option and every enum item
+    of every method has a label and a real description; no solver word is a label; enum
+    identifiers are the stored ones."""
+    S.reset_scene()
+    obj = S.make_grid()
+    bpy.ops.deformkit.add_deformer(method="ARAP")
+    d = obj.deformkit.deformers[0]
+    missing, solver_words, ids = [], [], {}
+    for m in S.methods.METHODS:
+        rna = getattr(d, S.methods.options_attr(m.id)).bl_rna
+        for o in m.options:
+            p = rna.properties[o.name]
+            if not p.name or len(p.description.split()) < 4:
+                missing.append("%s.%s" % (m.id, o.name))
+            if any(w in p.name for w in SOLVER_WORDS):
+                solver_words.append("%s.%s %r" % (m.id, o.name, p.name))
+            if o.type == "ENUM":
+                ids[(m.id, o.name)] = tuple(i.identifier for i in p.enum_items)
+                for i in p.enum_items:
+                    if not i.name or len(i.description.split()) < 4:
+                        missing.append("%s.%s item %s" % (m.id, o.name, i.identifier))
+                    if i.name in ("None", "") or any(w in i.name for w in SOLVER_WORDS):
+                        solver_words.append("%s.%s item %r" % (m.id, o.name, i.name))
+    R.check("every option and enum item of every method has a description", not missing,
+            missing)
+    R.check("no label or item name in the solver's words ('Tikhonov', 'None', ...)",
+            not solver_words, solver_words)
+    R.check("enum identifiers unchanged (saved files still load)", ids == STORED_IDS, ids)
+    items = d.bl_rna.properties["method"].enum_items
+    R.check("every method has a description", all(i.description for i in items))
+    arap = d.options_arap.bl_rna.properties["acceleration"].enum_items
+    R.check("ARAP's plain solver is not called 'None'", arap["none"].name == "Basic",
+            arap["none"].name)
+
+
+def test_material_group_label():
+    """The Material group's label in the panel speaks the method's language."""
+    S.reset_scene()
+    obj, d, e, fixed, handle = S.grid_setup("ARAP")
+    want = {"ARAP": "Stiffness", "LINEAR_RECONSTRUCTION": "Material"}
+    for m in S.methods.METHODS:
+        d.method = m.id
+        got = [c[3] for c in draw_panel(obj) if c[1:3] == ("prop_search", "material_group")]
+        uses = "stiffness" in m.maps or "material" in m.maps
+        R.check("%s: the material group is %s" % (
+            m.id, "labelled %r" % want.get(m.id) if uses else "not drawn"),
+            got == ([want[m.id]] if uses else []), got)
+
+
+def test_no_unplural_counts_in_source():
+    """No user-facing string of the add-on formats a count before a plural noun ("%d handles"
+    says "1 handles") or writes "a %s" before a word that may start with a vowel: counts go
+    through text.plural, articles through text.article."""
+    here = os.path.dirname(S.addon.__file__)
+    bad = []
+    for f in sorted(os.listdir(here)):
+        if not f.endswith(".py") or f == "pc2.py":  # pc2: the file format's own errors
+            continue
+        src = open(os.path.join(here, f), encoding="utf-8").read()
+        for mt in re.finditer(r"%d (handles|vertices|iterations|frames|faces|nodes|values|"
+                              r"points|samples|groups|edges)\b|\b(is|as) a %s", src):
+            line = src.count("\n", 0, mt.start()) + 1
+            bad.append("%s:%d: %s" % (f, line, mt.group(0)))
+    R.check("no '%d <plural>' or 'is a %s' in the add-on's strings", not bad, bad)
+
+
 R.run(test_plural_and_article)
 R.run(test_not_a_mesh_article)
 R.run(test_status_follows_handles)
@@ -274,4 +361,7 @@ R.run(test_sliced_solve_totals)
 R.run(test_convergence_wording)
 R.run(test_long_status_wraps)
 R.run(test_name_follows_method)
+R.run(test_descriptions_and_labels)
+R.run(test_material_group_label)
+R.run(test_no_unplural_counts_in_source)
 R.finish()
