@@ -28,6 +28,9 @@ class Option:
     # the deformer setting (a group name) that must be set for the option to matter; the
     # panel hides the option otherwise (e.g. the material stiffness without a material group)
     shown_with: Optional[str] = None
+    # True: an expert knob (tolerances, iteration caps, solver internals, energy weights),
+    # drawn in the options box's collapsed Advanced section (ui.draw_options)
+    advanced: bool = False
 
     @property
     def keyword(self):
@@ -130,15 +133,16 @@ METHODS = [
                            "mesh"),
                           ("uniform", "Uniform",
                            "Every edge counts the same, whatever the triangles' shapes: a "
-                           "rougher result that shifts with the mesh's density"))),
+                           "rougher result that shifts with the mesh's density")),
+                   advanced=True),
             Option("max_iterations", "INT", 100, "Max Iterations",
                    "Most steps one solve takes: raise it when the panel says 'not "
                    "converged', lower it to trade accuracy for speed",
-                   min=1, max=100000),
+                   min=1, max=100000, advanced=True),
             Option("tolerance", "FLOAT", 1e-6, "Tolerance",
                    "How settled the shape must be for a solve to stop (a step would change "
                    "the energy by less than this fraction): smaller is more exact and slower",
-                   min=0.0, max=1.0),
+                   min=0.0, max=1.0, advanced=True),
             # item order is stored in files: new items go last. Default: Newton (faster to
             # convergence and closer to the minimum, docs/methods/arap.md)
             Option("acceleration", "ENUM", "newton", "Solver",
@@ -151,10 +155,11 @@ METHODS = [
                            "compare with other ARAP tools"),
                           ("newton", "Newton",
                            "Fewer, costlier steps that also settle long, slow bends (the "
-                           "default): the quickest to the finished shape"))),
+                           "default): the quickest to the finished shape")),
+                   advanced=True),
             Option("cg_iterations", "INT", 12, "Newton Inner Steps",
                    "Newton: inner (conjugate-gradient) steps per Newton step: more make each "
-                   "step costlier and closer to exact", min=1, max=100),
+                   "step costlier and closer to exact", min=1, max=100, advanced=True),
             Option("stiffness_scale", "FLOAT", 10.0, "Painted Stiffness",
                    "How stiff the Stiffness group's vertices painted 1 are, against 1 for "
                    "the rest (paint in between blends): raise it to keep painted parts from "
@@ -176,7 +181,8 @@ METHODS = [
                            "the surface's true shape"),
                           ("uniform", "Uniform",
                            "Every neighbour counts the same: steadier on badly shaped "
-                           "triangles, but the detail shifts with the mesh's density"))),
+                           "triangles, but the detail shifts with the mesh's density")),
+                   advanced=True),
             Option("detail", "ENUM", "local_frame", "Detail",
                    "How the surface's detail (bumps, wrinkles) is carried along",
                    items=(("fixed", "Keep Direction",
@@ -202,11 +208,12 @@ METHODS = [
             Option("tikhonov", "FLOAT", 0.0, "Rest Pull",
                    "Pulls every moving vertex back towards its rest position (0: off): a "
                    "little lets parts that no handle or Fixed vertex holds bind and stay "
-                   "near rest; more stiffens the whole result", min=0.0, max=1e6),
+                   "near rest; more stiffens the whole result", min=0.0, max=1e6,
+                   advanced=True),
             Option("local_frame_iterations", "INT", 1, "Detail Passes",
                    "Turn with Surface: how often the detail is turned again to the reshaped "
                    "surface after the first solve; more follow big bends better, each costs "
-                   "another solve", min=0, max=1000),
+                   "another solve", min=0, max=1000, advanced=True),
         ],
     ),
     Method(
@@ -275,7 +282,7 @@ METHODS.append(Method(
                        "mesh): the nodes sit on the mesh itself"))),
         Option("k", "INT", 4, "Nearest Nodes",
                "How many nodes move each vertex: more blend their motions more smoothly, "
-               "fewer keep neighbouring parts apart", min=1, max=16),
+               "fewer keep neighbouring parts apart", min=1, max=16, advanced=True),
         Option("distance", "ENUM", "euclidean", "Influence",
                "How a vertex's nearest nodes are found",
                items=(("euclidean", "Euclidean",
@@ -292,19 +299,21 @@ METHODS.append(Method(
                kw=None),
         Option("w_rot", "FLOAT", 1.0, "Rigidity",
                "How strongly each node keeps its piece rigid (no shear or stretch): raise it "
-               "for stiffer parts", min=1e-6, max=1e6),
+               "for stiffer parts", min=1e-6, max=1e6, advanced=True),
         Option("w_reg", "FLOAT", 10.0, "Smoothness",
                "How strongly neighbouring nodes agree: raise it for smoother, more even "
-               "bends; lower lets the nodes move more on their own", min=1e-6, max=1e6),
+               "bends; lower lets the nodes move more on their own", min=1e-6, max=1e6,
+               advanced=True),
         Option("w_con", "FLOAT", 100.0, "Handle Pull",
                "How strongly the handles pull their vertices to the targets (handles are "
-               "soft here): lower lets the shape lag behind the handles", min=1e-6, max=1e9),
+               "soft here): lower lets the shape lag behind the handles", min=1e-6, max=1e9,
+               advanced=True),
         Option("max_iterations", "INT", 30, "Max Iterations",
                "Most Gauss-Newton steps one solve takes: raise it when the panel says 'not "
-               "converged'", min=1, max=10000),
+               "converged'", min=1, max=10000, advanced=True),
         Option("tolerance", "FLOAT", 1e-6, "Tolerance",
                "How settled the shape must be for a solve to stop: smaller is more exact "
-               "and slower", min=1e-15, max=1.0),
+               "and slower", min=1e-15, max=1.0, advanced=True),
         Option("show_graph", "BOOL", False, "Show Graph",
                "Draw the deformation graph's nodes and edges in the viewport",
                kw=None, bind_time=False),
@@ -330,7 +339,7 @@ METHODS.append(Method(
         Option("refine", "INT", 300, "Detail Shapes",
                "When Bend Shapes is lower, how many shapes a second pass uses to rebuild the "
                "details (0: no second pass: a faster bind, coarser details)",
-               min=0, max=2000),
+               min=0, max=2000, advanced=True),
         # item order is stored in files: new items go last
         Option("laplacian", "ENUM", "cotangent", "Shape Basis",
                "Which Laplacian's eigenvectors (smooth shapes) carry the deformation",
@@ -338,7 +347,8 @@ METHODS.append(Method(
                                                  "binds fastest (the default)"),
                       ("belkin_sun_wang", "Belkin-Sun-Wang",
                        "The paper's mesh-Laplacian: a heat kernel over nearby vertices in "
-                       "space; slower to bind, about the same shapes"))),
+                       "space; slower to bind, about the same shapes")),
+               advanced=True),
     ],
 ))
 
@@ -368,7 +378,7 @@ METHODS.append(Method(
                kw=None, shown_with="material_group"),
         Option("smooth_iterations", "INT", 10, "Smoothing",
                "Smooth: how many averaging passes soften the paint; more blur its edges",
-               min=0, max=1000, kw=None, shown_with="material_group"),
+               min=0, max=1000, kw=None, shown_with="material_group", advanced=True),
         Option("show_material", "BOOL", False, "Show Material",
                "Show the material map as the mesh's active colour attribute (Solid mode, "
                "Attribute colouring): grey as built, yellow softest",
@@ -376,7 +386,7 @@ METHODS.append(Method(
         Option("w", "FLOAT", 1.0, "Bend Stiffness",
                "How strongly the surface keeps its bends against its edge lengths: raise "
                "it to keep creases and curvature, lower it to keep lengths and let it bend",
-               min=1e-6, max=1e6),
+               min=1e-6, max=1e6, advanced=True),
         Option("orientation", "BOOL", False, "Turn Handle Faces",
                "A rotated handle target also turns the faces of its group (and the Fixed "
                "group's faces keep theirs): the surface leaves each handle at its angle"),

@@ -135,6 +135,10 @@ _deformer_ann = {
     "status_is_error": BoolProperty(default=False),
     "last_solve_ms": FloatProperty(name="Last Solve (ms)", default=0.0),
     "show_expanded": BoolProperty(default=True),
+    # the options box's Advanced section (ui.draw_options): open or collapsed
+    "show_advanced": BoolProperty(name="Advanced", default=False,
+                                  description="Show the expert options: tolerances, iteration "
+                                              "caps, solver internals, energy weights"),
 }
 for _m, _cls in zip(methods.METHODS, OPTION_CLASSES):
     _deformer_ann[methods.options_attr(_m.id)] = PointerProperty(type=_cls)

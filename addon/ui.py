@@ -37,19 +37,38 @@ class DEFORMKIT_UL_handles(bpy.types.UIList):
 
 
 def draw_options(layout, d, obj=None):
+    """The method's options: the everyday ones, then the expert ones (Option.advanced) under
+    an "Advanced" row with a disclosure triangle, collapsed unless the deformer's
+    show_advanced is on (a stored toggle, not layout.panel(): that needs Blender 4.1)."""
     m = methods.get(d.method)
     opts = d.options
     if m.draw is not None:
         m.draw(layout, opts)
         return
+    shown = [o for o in m.options if not (o.shown_with and not getattr(d, o.shown_with))]
     col = layout.column()
-    for o in m.options:
-        if o.shown_with and not getattr(d, o.shown_with):
-            continue
-        if o.type == "GROUP" and obj is not None:
-            col.prop_search(opts, o.name, obj, "vertex_groups")
-        else:
-            col.prop(opts, o.name)
+    for o in shown:
+        if not o.advanced:
+            _draw_option(col, opts, o, obj)
+    advanced = [o for o in shown if o.advanced]
+    if not advanced:
+        return
+    row = layout.row()
+    row.use_property_split = False
+    row.alignment = "LEFT"
+    row.prop(d, "show_advanced", emboss=False,
+             icon="TRIA_DOWN" if d.show_advanced else "TRIA_RIGHT")
+    if d.show_advanced:
+        sub = layout.column()
+        for o in advanced:
+            _draw_option(sub, opts, o, obj)
+
+
+def _draw_option(layout, opts, o, obj):
+    if o.type == "GROUP" and obj is not None:
+        layout.prop_search(opts, o.name, obj, "vertex_groups")
+    else:
+        layout.prop(opts, o.name)
 
 
 class DEFORMKIT_PT_modifiers(bpy.types.Panel):

@@ -337,6 +337,45 @@ def test_material_group_label():
             got == ([want[m.id]] if uses else []), got)
 
 
+def test_advanced_section():
+    """Expert options are drawn only in the Advanced section: not at all while it is
+    collapsed, after its toggle and in their own column when open; everyday ones always in
+    the main column."""
+    S.reset_scene()
+    obj, d, e, fixed, handle = S.grid_setup("ARAP")
+    d.material_group = "fixed"
+    for m in S.methods.METHODS:
+        d.method = m.id
+        names = [o.name for o in m.options]
+        everyday = [o.name for o in m.options if not o.advanced]
+        expert = [o.name for o in m.options if o.advanced]
+        d.show_advanced = False
+        calls = [c for c in draw_panel(obj) if c[1] in ("prop", "prop_search")]
+        drawn = [c[2] for c in calls if c[2] in names]
+        R.check("%s collapsed: the everyday options drawn (%s), no expert one"
+                % (m.id, ", ".join(everyday)),
+                drawn == everyday and ("show_advanced" in [c[2] for c in calls]) == bool(expert),
+                drawn)
+        if not expert:
+            continue
+        d.show_advanced = True
+        calls = [c for c in draw_panel(obj) if c[1] in ("prop", "prop_search")]
+        at = [c[2] for c in calls].index("show_advanced")
+        main = {c[0] for c in calls if c[2] in everyday}
+        adv = {c[0] for c in calls if c[2] in expert}
+        R.check("%s open: the expert options (%s) after the Advanced toggle, in their own "
+                "column" % (m.id, ", ".join(expert)),
+                [c[2] for c in calls[at + 1:] if c[2] in expert] == expert
+                and len(adv) == 1 and not adv & main, (calls, main, adv))
+    arap = S.methods.get("ARAP")
+    R.check("ARAP keeps tolerance, iteration cap and solver in Advanced",
+            all(o.advanced for o in arap.options
+                if o.name in ("tolerance", "max_iterations", "acceleration", "cg_iterations")))
+    R.check("every iterative method's iteration cap is Advanced",
+            all(next(o for o in m.options if o.name == m.iteration_cap).advanced
+                for m in S.methods.METHODS if m.iterative))
+
+
 def test_no_unplural_counts_in_source():
     """No user-facing string of the add-on formats a count before a plural noun ("%d handles"
     says "1 handles") or writes "a %s" before a word that may start with a vowel: counts go
@@ -363,5 +402,6 @@ R.run(test_long_status_wraps)
 R.run(test_name_follows_method)
 R.run(test_descriptions_and_labels)
 R.run(test_material_group_label)
+R.run(test_advanced_section)
 R.run(test_no_unplural_counts_in_source)
 R.finish()
