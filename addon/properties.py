@@ -27,10 +27,12 @@ AUTO_NAME = "DeformKit %s"
 _AUTO_NAME_RE = re.compile(r"DeformKit (.+?)(\.\d{3})?")
 
 
-def _auto_named(name):
-    """True for a name the add-on gave (after any method's label), False for a typed one."""
+def _auto_label(name):
+    """The method label in a name the add-on gave, or None for a name the user typed."""
     m = _AUTO_NAME_RE.fullmatch(name)
-    return m is not None and m.group(1) in {x.label for x in methods.METHODS}
+    if m is None or m.group(1) not in {x.label for x in methods.METHODS}:
+        return None
+    return m.group(1)
 
 
 def unique_name(dks, label, skip=None):
@@ -50,7 +52,7 @@ def _method_changed(self, context):
     carries the deformer's name; a name the user typed stays."""
     _touch(self, context)
     label = methods.get(self.method).label
-    if not _auto_named(self.name) or _AUTO_NAME_RE.fullmatch(self.name).group(1) == label:
+    if _auto_label(self.name) in (None, label):
         return
     from . import geonodes
     old = self.name
