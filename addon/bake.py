@@ -10,6 +10,7 @@ import bpy
 import numpy as np
 
 from . import compat, geonodes, handlers, pc2, solver
+from .text import plural
 
 
 def resolve_path(path, obj, d):
@@ -140,8 +141,8 @@ def state(obj, d):
     if n == 0:
         return dict(kind=kind, broken=True, text="its baked shape keys were removed")
     return dict(kind=kind, broken=False,
-                text="baked to %d shape keys (%s): edits don't show until you free the bake"
-                % (n, frames))
+                text="baked to %s (%s): edits don't show until you free the bake"
+                % (plural(n, "shape key"), frames))
 
 
 def free(obj, d):

@@ -17,9 +17,10 @@ class Option:
     type: str                    # 'ENUM' | 'INT' | 'FLOAT' | 'BOOL' | 'GROUP' (a vertex
                                  # group's name, read by the add-on: kw must be None)
     default: Any
-    label: str = ""
-    description: str = ""
-    items: tuple = ()            # ENUM: ((id, label, description), ...)
+    label: str = ""              # shown in the UI: the artist's word, not the solver's
+    description: str = ""        # the tooltip: what it does to the result, when to change it
+    items: tuple = ()            # ENUM: ((id, label, description), ...); ids are stored in
+                                 # files (never rename), labels and descriptions are free
     min: Optional[float] = None
     max: Optional[float] = None
     kw: Optional[str] = "same"   # constructor keyword; "same" = name; None = add-on only
@@ -27,6 +28,9 @@ class Option:
     # the deformer setting (a group name) that must be set for the option to matter; the
     # panel hides the option otherwise (e.g. the material stiffness without a material group)
     shown_with: Optional[str] = None
+    # True: an expert knob (tolerances, iteration caps, solver internals, energy weights),
+    # drawn in the options box's collapsed Advanced section (ui.draw_options)
+    advanced: bool = False
 
     @property
     def keyword(self):
@@ -48,6 +52,9 @@ class Method:
     # 'cut' (two
     # GROUP options become the `cut=(group_a, group_b)` keyword: section 7 of Sumner et al.)
     maps: tuple = ()
+    # 'stiffness' or 'material' map: the panel's label of the Material group (the deformer's
+    # material_group), in the method's terms ("Stiffness" for ARAP)
+    material_label: str = "Material"
     # 'cut' map: the two GROUP options holding the cut's sides
     cut_options: Optional[tuple] = None
     # 'stiffness' map: the option holding the stiffness where the material weight is 1
@@ -88,10 +95,6 @@ class Method:
     bind_progress: bool = False
 
 
-def _e(*ids):
-    return tuple((i, i.replace("_", " ").title(), "") for i in ids)
-
-
 METHODS = [
     Method(
         id="ARAP",
@@ -100,39 +103,67 @@ METHODS = [
         description="As-rigid-as-possible: keeps local shape, bends and twists naturally",
         icon="MOD_SIMPLEDEFORM",
         maps=("stiffness",),
+        material_label="Stiffness",
         stiffness_option="stiffness_scale",
         cold_solve={"warm_start": False},
         warm_solve={"warm_start": True},
         iterative=True,
         iteration_cap="max_iterations",
         options=[
-            Option("energy", "ENUM", "spokes", "Energy", "Spokes (classic) or spokes and rims",
-                   items=_e("spokes", "spokes_and_rims")),
+            Option("energy", "ENUM", "spokes", "Keep Rigid",
+                   "Which pieces of the surface the solve keeps rigid",
+                   items=(("spokes", "Edge Rings",
+                           "The edges around each vertex (the classic ARAP): fastest to bind "
+                           "and solve"),
+                          ("spokes_and_rims", "Edge Rings and Triangles",
+                           "The edges of every triangle around each vertex too (spokes and "
+                           "rims): steadier bends on coarse meshes or thin triangles, a "
+                           "little slower"))),
             # default = the native default: negative cotangent weights make the energy
             # indefinite on real meshes (docs/methods/arap.md); item order is stored in files
-            Option("weights", "ENUM", "clamped_cotangent", "Weights", "Edge weights of the energy",
-                   items=_e("cotangent", "clamped_cotangent", "uniform")),
+            Option("weights", "ENUM", "clamped_cotangent", "Edge Weights",
+                   "How much each edge counts in the rigidity",
+                   items=(("cotangent", "Cotangent",
+                           "From the triangles' angles, negative weights kept (the textbook "
+                           "energy): on meshes with long thin triangles the bind can fail or "
+                           "the solve stall"),
+                          ("clamped_cotangent", "Cotangent, Clamped",
+                           "From the triangles' angles, negative weights dropped (the "
+                           "default): the same result on well-shaped meshes, safe on any "
+                           "mesh"),
+                          ("uniform", "Uniform",
+                           "Every edge counts the same, whatever the triangles' shapes: a "
+                           "rougher result that shifts with the mesh's density")),
+                   advanced=True),
             Option("max_iterations", "INT", 100, "Max Iterations",
-                   "Iterations (Newton steps, or local/global iterations) per solve",
-                   min=1, max=100000),
+                   "Most steps one solve takes: raise it when the panel says 'not "
+                   "converged', lower it to trade accuracy for speed",
+                   min=1, max=100000, advanced=True),
             Option("tolerance", "FLOAT", 1e-6, "Tolerance",
-                   "Stop when a local/global step would change the energy by less than this "
-                   "fraction", min=0.0, max=1.0),
+                   "How settled the shape must be for a solve to stop (a step would change "
+                   "the energy by less than this fraction): smaller is more exact and slower",
+                   min=0.0, max=1.0, advanced=True),
             # item order is stored in files: new items go last. Default: Newton (faster to
             # convergence and closer to the minimum, docs/methods/arap.md)
             Option("acceleration", "ENUM", "newton", "Solver",
-                   "Newton steps (default), or local/global iterations with Anderson "
-                   "acceleration or without",
-                   items=(("anderson", "Anderson", "Local/global iterations, Anderson-accelerated"),
-                          ("none", "None", "Plain local/global iterations (the paper's)"),
-                          ("newton", "Newton", "Inexact Newton steps: fewer, costlier iterations "
-                                               "that reach the minimum's bending modes"))),
-            Option("cg_iterations", "INT", 12, "CG Iterations",
-                   "Newton: conjugate-gradient iterations (Hessian products) per step",
-                   min=1, max=100),
-            Option("stiffness_scale", "FLOAT", 10.0, "Material Stiffness",
-                   "Stiffness where the material group's weight is 1 (weight 0 gives 1)",
-                   min=0.001, max=1e6, kw=None, shown_with="material_group"),
+                   "How a solve steps towards the shape",
+                   items=(("anderson", "Accelerated",
+                           "Many cheap local/global steps, sped up (Anderson acceleration): "
+                           "long, slow bends can stop short of their final shape"),
+                          ("none", "Basic",
+                           "The paper's plain local/global steps: the slowest to settle; to "
+                           "compare with other ARAP tools"),
+                          ("newton", "Newton",
+                           "Fewer, costlier steps that also settle long, slow bends (the "
+                           "default): the quickest to the finished shape")),
+                   advanced=True),
+            Option("cg_iterations", "INT", 12, "Newton Inner Steps",
+                   "Newton: inner (conjugate-gradient) steps per Newton step: more make each "
+                   "step costlier and closer to exact", min=1, max=100, advanced=True),
+            Option("stiffness_scale", "FLOAT", 10.0, "Painted Stiffness",
+                   "How stiff the Stiffness group's vertices painted 1 are, against 1 for "
+                   "the rest (paint in between blends): raise it to keep painted parts from "
+                   "bending", min=0.001, max=1e6, kw=None, shown_with="material_group"),
         ],
     ),
     Method(
@@ -143,20 +174,46 @@ METHODS = [
         icon="MOD_SMOOTH",
         maps=("handle_weights",),
         options=[
-            Option("weights", "ENUM", "cotangent", "Weights", "Laplacian weights",
-                   items=_e("cotangent", "uniform")),
+            Option("weights", "ENUM", "cotangent", "Edge Weights",
+                   "How much each neighbour counts in a vertex's detail",
+                   items=(("cotangent", "Cotangent",
+                           "From the triangles' angles (the default): detail that follows "
+                           "the surface's true shape"),
+                          ("uniform", "Uniform",
+                           "Every neighbour counts the same: steadier on badly shaped "
+                           "triangles, but the detail shifts with the mesh's density")),
+                   advanced=True),
             Option("detail", "ENUM", "local_frame", "Detail",
-                   "How surface detail is carried along",
-                   items=_e("fixed", "membrane", "local_frame")),
-            Option("constraints", "ENUM", "hard", "Constraints", "Hard or least-squares handles",
-                   items=_e("hard", "soft")),
-            Option("constraint_weight", "FLOAT", 1.0, "Constraint Weight",
-                   "Weight of soft constraints (and of handle vertices with weight < 1)",
-                   min=1e-6, max=1e6),
-            Option("tikhonov", "FLOAT", 0.0, "Regularization", "Tikhonov regularization",
-                   min=0.0, max=1e6),
-            Option("local_frame_iterations", "INT", 1, "Frame Iterations",
-                   "Local frame: frame updates after the first solve", min=0, max=1000),
+                   "How the surface's detail (bumps, wrinkles) is carried along",
+                   items=(("fixed", "Keep Direction",
+                           "Detail keeps its rest direction: fastest, right for moves, but "
+                           "bumps keep pointing the old way where the surface turns"),
+                          ("membrane", "Flatten",
+                           "No detail (a membrane): a smooth rubber sheet between the handles "
+                           "and the Fixed group"),
+                          ("local_frame", "Turn with Surface",
+                           "Detail turns with the surface (the default): right for bends and "
+                           "twists; each update solves once more per Detail Pass"))),
+            Option("constraints", "ENUM", "hard", "Handle Fit",
+                   "Whether the handles and the Fixed group are met exactly",
+                   items=(("hard", "Exact",
+                           "Handles and the Fixed group are met exactly (the default)"),
+                          ("soft", "Approximate",
+                           "Handles and the Fixed group pull like springs of strength Handle "
+                           "Pull: the surface may fall short of them, for a smoother shape"))),
+            Option("constraint_weight", "FLOAT", 1.0, "Handle Pull",
+                   "How strongly soft handles pull to their targets: with Approximate fit "
+                   "all handles and the Fixed group, else the handle vertices weighted below "
+                   "1 (Soft handles)", min=1e-6, max=1e6),
+            Option("tikhonov", "FLOAT", 0.0, "Rest Pull",
+                   "Pulls every moving vertex back towards its rest position (0: off): a "
+                   "little lets parts that no handle or Fixed vertex holds bind and stay "
+                   "near rest; more stiffens the whole result", min=0.0, max=1e6,
+                   advanced=True),
+            Option("local_frame_iterations", "INT", 1, "Detail Passes",
+                   "Turn with Surface: how often the detail is turned again to the reshaped "
+                   "surface after the first solve; more follow big bends better, each costs "
+                   "another solve", min=0, max=1000, advanced=True),
         ],
     ),
     Method(
@@ -167,12 +224,28 @@ METHODS = [
         icon="SMOOTHCURVE",
         maps=("handle_weights",),
         options=[
-            Option("distance", "ENUM", "hops", "Distance", "How distance to a handle is measured",
-                   items=_e("hops", "euclidean", "geodesic", "dijkstra")),
+            Option("distance", "ENUM", "hops", "Distance",
+                   "How the distance from a handle is measured",
+                   items=(("hops", "Edge Steps",
+                           "Edges counted from the handle (the default): Range is a number of "
+                           "edges, so the reach follows the mesh's density"),
+                          ("euclidean", "Straight Line",
+                           "Straight through space: Range is a length; also moves nearby "
+                           "parts the surface does not connect (a hand resting on a leg)"),
+                          ("geodesic", "Along Surface",
+                           "Along the surface (heat method): Range is a length; smooth and "
+                           "independent of the edge layout, slower to bind"),
+                          ("dijkstra", "Along Edges",
+                           "Shortest path along the edges: Range is a length; quick to bind, "
+                           "a little longer than the surface distance where edges zigzag"))),
             Option("range", "FLOAT", 0.0, "Range",
-                   "Falloff range: edges for hops, else a length (0: 10 hops or 10 mean edge "
-                   "lengths)", min=0.0, max=1e9),
-            Option("k", "FLOAT", 0.0, "Shape", "Falloff shape exponent", min=-100.0, max=100.0),
+                   "How far the handle's pull reaches: a number of edges for Edge Steps, "
+                   "else a length (0: 10 edges, or 10 average edge lengths)",
+                   min=0.0, max=1e9),
+            Option("k", "FLOAT", 0.0, "Shape",
+                   "The profile of the fade: 0 fades evenly; above 0 stays firm near the "
+                   "handle and drops near the end of the range (rigid); below 0 drops fast "
+                   "and lingers (elastic)", min=-100.0, max=100.0),
         ],
     ),
 ]
@@ -195,35 +268,52 @@ METHODS.append(Method(
     graph=True,
     follows_input=True,
     options=[
-        Option("n_nodes", "INT", 200, "Nodes", "Graph nodes sampled on the surface",
+        Option("n_nodes", "INT", 200, "Nodes",
+               "How many graph nodes carry the shape: more follow small parts and bend more "
+               "locally; fewer give broader, smoother bends and solve faster",
                min=5, max=100000),
         Option("nodes", "ENUM", "surface", "Node Source",
                "Where the graph's nodes come from",
-               items=(("surface", "Surface", "Uniform samples of the surface (the paper's)"),
-                      ("vertices", "Vertices", "Mesh vertices (a graph that rides along an "
-                                               "animated mesh)"))),
-        Option("k", "INT", 4, "Nearest Nodes", "Nodes that move each vertex", min=1, max=16),
+               items=(("surface", "Surface",
+                       "Spread evenly over the surface (the paper's sampling): the most even "
+                       "graph"),
+                      ("vertices", "Vertices",
+                       "Picked among the mesh's vertices (the paper's choice for an animated "
+                       "mesh): the nodes sit on the mesh itself"))),
+        Option("k", "INT", 4, "Nearest Nodes",
+               "How many nodes move each vertex: more blend their motions more smoothly, "
+               "fewer keep neighbouring parts apart", min=1, max=16, advanced=True),
         Option("distance", "ENUM", "euclidean", "Influence",
                "How a vertex's nearest nodes are found",
-               items=(("euclidean", "Euclidean", "Straight-line distance in space (the "
-                                                 "paper's)"),
-                      ("geodesic", "Geodesic", "Distance along the surface, so that a hand "
-                                               "node does not move the leg it lies against "
-                                               "(needs faces)"))),
+               items=(("euclidean", "Euclidean",
+                       "Nearest in space (the paper's): a node can drag a part lying against "
+                       "its own (a hand resting on a leg)"),
+                      ("geodesic", "Geodesic",
+                       "Nearest along the surface, so that a hand's node does not move the "
+                       "leg it lies against (needs faces)"))),
         Option("cut_a", "GROUP", "", "Cut Side A",
                "With Cut Side B: no node near this vertex group moves the other, and no "
                "graph edge joins them (the paper's stroke between a hand and a leg)", kw=None),
-        Option("cut_b", "GROUP", "", "Cut Side B", "The other side of the cut", kw=None),
-        Option("w_rot", "FLOAT", 1.0, "Rigidity", "Weight of the rotation term", min=1e-6,
-               max=1e6),
-        Option("w_reg", "FLOAT", 10.0, "Smoothness", "Weight of the regularization term",
-               min=1e-6, max=1e6),
-        Option("w_con", "FLOAT", 100.0, "Handle Pull", "Weight of the handle constraints",
-               min=1e-6, max=1e9),
-        Option("max_iterations", "INT", 30, "Max Iterations", "Gauss-Newton iterations",
-               min=1, max=10000),
-        Option("tolerance", "FLOAT", 1e-6, "Tolerance", "epsilon of the stopping tests",
-               min=1e-15, max=1.0),
+        Option("cut_b", "GROUP", "", "Cut Side B",
+               "With Cut Side A: the other side of the cut, moved by no node of Cut Side A",
+               kw=None),
+        Option("w_rot", "FLOAT", 1.0, "Rigidity",
+               "How strongly each node keeps its piece rigid (no shear or stretch): raise it "
+               "for stiffer parts", min=1e-6, max=1e6, advanced=True),
+        Option("w_reg", "FLOAT", 10.0, "Smoothness",
+               "How strongly neighbouring nodes agree: raise it for smoother, more even "
+               "bends; lower lets the nodes move more on their own", min=1e-6, max=1e6,
+               advanced=True),
+        Option("w_con", "FLOAT", 100.0, "Handle Pull",
+               "How strongly the handles pull their vertices to the targets (handles are "
+               "soft here): lower lets the shape lag behind the handles", min=1e-6, max=1e9,
+               advanced=True),
+        Option("max_iterations", "INT", 30, "Max Iterations",
+               "Most Gauss-Newton steps one solve takes: raise it when the panel says 'not "
+               "converged'", min=1, max=10000, advanced=True),
+        Option("tolerance", "FLOAT", 1e-6, "Tolerance",
+               "How settled the shape must be for a solve to stop: smaller is more exact "
+               "and slower", min=1e-15, max=1.0, advanced=True),
         Option("show_graph", "BOOL", False, "Show Graph",
                "Draw the deformation graph's nodes and edges in the viewport",
                kw=None, bind_time=False),
@@ -242,20 +332,23 @@ METHODS.append(Method(
     region_is_handle=True,
     bind_progress=True,
     options=[
-        Option("n_eigenvectors", "INT", 0, "Eigenvectors",
-               "Eigenvectors of the fit (0: automatic, 8, 50 or 300 from the region's size; "
-               "fewer bend more globally)", min=0, max=2000),
-        Option("refine", "INT", 300, "Refinement",
-               "Eigenvectors of the second iteration that rebuilds the details when fewer "
-               "are used (0: one iteration)", min=0, max=2000),
+        Option("n_eigenvectors", "INT", 0, "Bend Shapes",
+               "How many of the mesh's smooth shapes (eigenvectors) build the bend (0: "
+               "automatic, 8, 50 or 300 from the region's size): fewer bend the mesh more "
+               "broadly, more keep the bend near the region", min=0, max=2000),
+        Option("refine", "INT", 300, "Detail Shapes",
+               "When Bend Shapes is lower, how many shapes a second pass uses to rebuild the "
+               "details (0: no second pass: a faster bind, coarser details)",
+               min=0, max=2000, advanced=True),
         # item order is stored in files: new items go last
-        Option("laplacian", "ENUM", "cotangent", "Laplacian",
-               "Whose eigenvectors carry the deformation",
+        Option("laplacian", "ENUM", "cotangent", "Shape Basis",
+               "Which Laplacian's eigenvectors (smooth shapes) carry the deformation",
                items=(("cotangent", "Cotangent", "Cotangent weights with Voronoi areas: "
                                                  "binds fastest (the default)"),
                       ("belkin_sun_wang", "Belkin-Sun-Wang",
                        "The paper's mesh-Laplacian: a heat kernel over nearby vertices in "
-                       "space; slower to bind, about the same shapes"))),
+                       "space; slower to bind, about the same shapes")),
+               advanced=True),
     ],
 ))
 
@@ -268,39 +361,58 @@ METHODS.append(Method(
                 "and triangle frames",
     icon="MOD_TRIANGULATE",
     maps=("material",),
+    material_label="Material",
     options=[
         Option("softness", "FLOAT", 1.0, "Softness",
-               "How much easier to fold the painted material is (0: as built, 1: softest)",
+               "How much more easily the Material group's painted areas fold (0: as built, "
+               "1: softest): paint where the surface should bend, an elbow",
                min=0.0, max=1.0, kw=None, shown_with="material_group"),
         Option("material_mode", "ENUM", "interpolate", "Material Paint",
                "How the Material group's weight paint becomes the material map",
-               items=(("interpolate", "Interpolate", "A smooth (harmonic) map through the "
-                                                     "painted vertices, as built at the "
-                                                     "handles and the fixed part"),
-                      ("smooth", "Smooth", "The raw paint, smoothed along the surface")),
+               items=(("interpolate", "Interpolate",
+                       "A smooth map through the painted vertices, as built at the handles and "
+                       "the Fixed group: a few strokes are enough"),
+                      ("smooth", "Smooth",
+                       "The paint as painted, softened along the surface (Smoothing passes): "
+                       "for detailed paint")),
                kw=None, shown_with="material_group"),
         Option("smooth_iterations", "INT", 10, "Smoothing",
-               "Smooth: averaging passes over the raw paint", min=0, max=1000, kw=None,
-               shown_with="material_group"),
+               "Smooth: how many averaging passes soften the paint; more blur its edges",
+               min=0, max=1000, kw=None, shown_with="material_group", advanced=True),
         Option("show_material", "BOOL", False, "Show Material",
                "Show the material map as the mesh's active colour attribute (Solid mode, "
                "Attribute colouring): grey as built, yellow softest",
                kw=None, bind_time=False, shown_with="material_group"),
-        Option("w", "FLOAT", 1.0, "Bending Weight",
-               "Weight of the frame (bending) term against the edge (stretching) term",
-               min=1e-6, max=1e6),
+        Option("w", "FLOAT", 1.0, "Bend Stiffness",
+               "How strongly the surface keeps its bends against its edge lengths: raise "
+               "it to keep creases and curvature, lower it to keep lengths and let it bend",
+               min=1e-6, max=1e6, advanced=True),
         Option("orientation", "BOOL", False, "Turn Handle Faces",
-               "A rotated handle target also turns the faces of its group"),
+               "A rotated handle target also turns the faces of its group (and the Fixed "
+               "group's faces keep theirs): the surface leaves each handle at its angle"),
     ],
 ))
+
 
 BY_ID = {m.id: m for m in METHODS}
 
 
 def _check_registry():
-    """Every field that names an option names one of the method's options."""
+    """Every field that names an option names one of the method's options; every option and
+    enum item has a label and a description (the artist reads them)."""
     for m in METHODS:
         names = {o.name for o in m.options}
+        for o in m.options:
+            if not (o.label and o.description.strip()):
+                raise ValueError("%s.%s needs a label and a description" % (m.id, o.name))
+            if o.type == "ENUM":
+                if o.default not in {i[0] for i in o.items}:
+                    raise ValueError("%s.%s: default %r is not an item" % (m.id, o.name,
+                                                                          o.default))
+                for item in o.items:
+                    if len(item) != 3 or not (item[1] and item[2].strip()):
+                        raise ValueError("%s.%s: item %r needs a name and a description"
+                                         % (m.id, o.name, item[0]))
         for field_name in ("stiffness_option", "iteration_cap"):
             ref = getattr(m, field_name)
             if ref is not None and ref not in names:

@@ -9,6 +9,7 @@ import numpy as np
 from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 
 from . import bake, compat, geonodes, methods, native, properties, solver
+from .text import plural
 
 
 def _get_object(op, context):
@@ -20,9 +21,7 @@ def _get_object(op, context):
     if obj is None:
         raise solver.DeformKitError("no active object" if not name else
                                     "object '%s' not found" % name)
-    if obj.type != "MESH":
-        raise solver.DeformKitError("DeformKit deforms mesh objects; '%s' is a %s"
-                                    % (obj.name, obj.type.lower()))
+    solver.check_mesh_type(obj)
     return obj
 
 
@@ -65,7 +64,7 @@ class DEFORMKIT_OT_add_deformer(_Base, bpy.types.Operator):
                                         % (obj.data.name, methods.get(self.method).label))
         d = properties.new_deformer(obj, self.method)
         geonodes.ensure_modifier(obj, d)
-        solver.set_status(d, "not bound: add handles, then Bind", False)
+        solver.reset_status(d)
         if not native.has_class(methods.get(self.method).native_class):
             self.report({"WARNING"}, "the native module lacks deformkit.%s: %s"
                         % (methods.get(self.method).native_class, native.error or "old build"))
@@ -120,6 +119,13 @@ class DEFORMKIT_OT_move_deformer(_Base, bpy.types.Operator):
                 bpy.ops.object.modifier_move_to_index(modifier=m1.name, index=k)
 
 
+def _handles_changed(d):
+    """An unbound deformer's status after a handle came or went: the error of a bind tried
+    before (e.g. "no handles") no longer holds. A bound one is re-checked by the handler."""
+    if not d.bound:
+        solver.reset_status(d)
+
+
 class DEFORMKIT_OT_add_handle(_Base, bpy.types.Operator):
     """Add an empty handle entry (choose its vertex group and target)"""
     bl_idname = "deformkit.add_handle"
@@ -144,6 +150,7 @@ class DEFORMKIT_OT_add_handle(_Base, bpy.types.Operator):
         d.active_handle = len(d.handles) - 1
         if d.bound and h.target is not None:
             solver.set_bind_matrix(obj, h)
+        _handles_changed(d)
 
 
 class DEFORMKIT_OT_add_handle_from_selection(_Base, bpy.types.Operator):
@@ -199,9 +206,10 @@ class DEFORMKIT_OT_add_handle_from_selection(_Base, bpy.types.Operator):
             if d.bound:
                 context.view_layer.update()
                 solver.set_bind_matrix(obj, h)
+            _handles_changed(d)
         finally:
             bpy.ops.object.mode_set(mode="EDIT")
-        self.report({"INFO"}, "handle '%s': %d vertices" % (name, len(sel)))
+        self.report({"INFO"}, "handle '%s': %s" % (name, plural(len(sel), "vertex")))
 
 
 class DEFORMKIT_OT_remove_handle(_Base, bpy.types.Operator):
@@ -219,13 +227,13 @@ class DEFORMKIT_OT_remove_handle(_Base, bpy.types.Operator):
             raise solver.DeformKitError("no handle at index %d" % i)
         d.handles.remove(i)
         d.active_handle = min(d.active_handle, max(0, len(d.handles) - 1))
+        _handles_changed(d)
 
 
 
-def _report_bound(op, obj, d, e, ms):
+def _report_bound(op, obj, d, ms):
     """The bind's report: a warning when nothing can show the result."""
-    msg = "%s bound: %d vertices, %d handles (%.0f ms)" % (d.name, e.n_vertices,
-                                                           len(d.handles), ms)
+    msg = "%s %s (%.0f ms)" % (d.name, solver.idle_status(d), ms)
     hidden = bake.hidden_reason(obj, d)
     baked = bake.state(obj, d)
     if hidden or baked:
@@ -247,14 +255,14 @@ class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
         wm = context.window_manager
         wm.progress_begin(0, 1)  # a busy cursor while the factorizations run
         try:
-            e = solver.bind(obj, d, context.evaluated_depsgraph_get())
+            solver.bind(obj, d, context.evaluated_depsgraph_get())
         except solver.DeformKitError as ex:
             solver.set_status(d, ex, True)
             raise
         finally:
             wm.progress_end()
         ms = (time.perf_counter() - t0) * 1000
-        _report_bound(self, obj, d, e, ms)
+        _report_bound(self, obj, d, ms)
 
     # ---- UI version: the native precomputation runs in a worker thread (it releases the
     # GIL), the window stays live with the elapsed time in the status bar, Esc cancels and
@@ -307,8 +315,9 @@ class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
         if self._thread.is_alive():
             frac = self._job.fraction
             context.workspace.status_text_set(
-                "DeformKit: binding %s (%d vertices) %.1f s%s, Esc to cancel"
-                % (self._name, self._job.n_vertices, time.perf_counter() - self._t0,
+                "DeformKit: binding %s (%s) %.1f s%s, Esc to cancel"
+                % (self._name, plural(self._job.n_vertices, "vertex"),
+                   time.perf_counter() - self._t0,
                    "" if frac is None else ", eigenvectors %.0f%%" % (100 * frac)))
             if frac is not None:
                 context.window_manager.progress_update(frac)
@@ -322,12 +331,12 @@ class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
                         % self._name)
             return {"CANCELLED"}
         try:
-            e = solver.bind_end(obj, d, self._job, self._mats, context.evaluated_depsgraph_get())
+            solver.bind_end(obj, d, self._job, self._mats, context.evaluated_depsgraph_get())
         except solver.DeformKitError as ex:
             solver.set_status(d, ex, True)
             self.report({"ERROR"}, str(ex))
             return {"CANCELLED"}
-        _report_bound(self, obj, d, e, (time.perf_counter() - self._t0) * 1000)
+        _report_bound(self, obj, d, (time.perf_counter() - self._t0) * 1000)
         return {"FINISHED"}
 
 
@@ -428,7 +437,7 @@ class DEFORMKIT_OT_bake(_Base, bpy.types.Operator):
                 self.report({"INFO"}, "baked frames %d-%d to %s" % (s, e, path))
             else:
                 n = bake.bake_shape_keys(context, obj, d, s, e, prog)
-                self.report({"INFO"}, "baked %d frames to shape keys" % n)
+                self.report({"INFO"}, "baked %s to shape keys" % plural(n, "frame"))
         finally:
             wm.progress_end()
 
@@ -494,7 +503,7 @@ class DEFORMKIT_OT_bake(_Base, bpy.types.Operator):
         context.workspace.status_text_set("DeformKit bake: frame %d (%d/%d), Esc to cancel"
                                           % (f, self._fb.i, n))
         if self._fb.done:
-            return self._end(context, True, "baked %d frames to %s" % (n, self._path))
+            return self._end(context, True, "baked %s to %s" % (plural(n, "frame"), self._path))
         return {"RUNNING_MODAL"}
 
 
@@ -602,7 +611,8 @@ class DEFORMKIT_OT_overlap(_Base, bpy.types.Operator):
             if obj.mode == "EDIT":
                 bpy.ops.object.mode_set(mode="OBJECT")
             vgs[0].remove([int(i) for i in shared])
-            self.report({"INFO"}, "removed %d vertices from '%s'" % (len(shared), names[0]))
+            self.report({"INFO"}, "removed %s from '%s'" % (plural(len(shared), "vertex"),
+                                                            names[0]))
             return
         if context.view_layer.objects.active != obj:
             context.view_layer.objects.active = obj
@@ -619,7 +629,8 @@ class DEFORMKIT_OT_overlap(_Base, bpy.types.Operator):
             v.select = v.index in want
         bm.select_flush(False)
         bmesh.update_edit_mesh(obj.data)
-        self.report({"INFO"}, "%d shared vertices selected" % len(shared))
+        self.report({"INFO"}, "%s selected" % plural(len(shared), "shared vertex",
+                                                       "shared vertices"))
 
 
 CLASSES = [

@@ -4,6 +4,7 @@ Only names and values are stored (vertex-group names, a target object pointer, m
 solver state lives in solver.py and is rebuilt on demand.
 """
 
+import re
 import uuid
 
 import bpy
@@ -19,6 +20,46 @@ def _touch(self, context):
     """Any settings change: mark solver inputs dirty (the handler re-checks and re-solves)."""
     from . import solver
     solver.mark_settings_changed()
+
+
+# A deformer's name as the add-on gives it: "DeformKit <method label>", with ".NNN" when taken
+AUTO_NAME = "DeformKit %s"
+_AUTO_NAME_RE = re.compile(r"DeformKit (.+?)(\.\d{3})?")
+
+
+def _auto_label(name):
+    """The method label in a name the add-on gave, or None for a name the user typed."""
+    m = _AUTO_NAME_RE.fullmatch(name)
+    if m is None or m.group(1) not in {x.label for x in methods.METHODS}:
+        return None
+    return m.group(1)
+
+
+def unique_name(dks, label, skip=None):
+    """AUTO_NAME for `label`, with the first free ".NNN" when another deformer of `dks` (but
+    `skip`) has it."""
+    names = {x.name for x in dks.deformers if skip is None or x.uid != skip.uid}
+    name, i = AUTO_NAME % label, 1
+    while name in names:
+        i += 1
+        name = "%s.%03d" % (AUTO_NAME % label, i)
+    return name
+
+
+def _method_changed(self, context):
+    """The method switched: re-solve, and a name the add-on gave follows the new method
+    ("DeformKit ARAP" becomes "DeformKit Laplacian Edit"), its modifier too when it still
+    carries the deformer's name; a name the user typed stays."""
+    _touch(self, context)
+    label = methods.get(self.method).label
+    if _auto_label(self.name) in (None, label):
+        return
+    from . import geonodes
+    old = self.name
+    self.name = unique_name(self.id_data.deformkit, label, skip=self)
+    mod = geonodes.find_modifier(self.id_data, self)
+    if mod is not None and mod.name == old:
+        mod.name = self.name
 
 
 class DeformKitHandle(bpy.types.PropertyGroup):
@@ -77,14 +118,16 @@ def _new_uid():
 
 _deformer_ann = {
     "uid": StringProperty(name="UID", description="Stable id: attribute and cache key"),
-    "method": EnumProperty(name="Method", items=methods.enum_items(), update=_touch),
+    "method": EnumProperty(name="Method", items=methods.enum_items(), update=_method_changed),
     "roi_group": StringProperty(name="Region", update=_touch,
                                 description="Vertex group: only these vertices move (empty: all)"),
     "fixed_group": StringProperty(name="Fixed", update=_touch,
                                   description="Vertex group: these vertices stay at rest"),
     "material_group": StringProperty(name="Material", update=_touch,
-                                     description="Weight-painted vertex group: per-vertex "
-                                                 "stiffness (methods that support it)"),
+                                     description="Weight-painted vertex group: where ARAP is "
+                                                 "stiffer (its Stiffness group), where Linear "
+                                                 "Reconstruction folds more easily (its "
+                                                 "Material group)"),
     "handles": CollectionProperty(type=DeformKitHandle),
     "active_handle": IntProperty(name="Active Handle", default=0),
     "bound": BoolProperty(name="Bound", default=False),
@@ -97,11 +140,11 @@ _deformer_ann = {
                                                  "tab-separated"),
     "last_solve_ms": FloatProperty(name="Last Solve (ms)", default=0.0),
     "show_expanded": BoolProperty(default=True),
-    # the bake that replaced the live result (bake.py): what, where, which frames
     "modifier_name": StringProperty(name="Modifier",
                                     description="Name of the deformer's Geometry Nodes "
                                                 "modifier (found again by it if its Attribute "
                                                 "input is edited)"),
+    # the bake that replaced the live result (bake.py): what, where, which frames
     "bake_kind": EnumProperty(name="Baked", default="NONE", items=(
         ("NONE", "Not Baked", "The deformer's live result shows"),
         ("PC2", "Point Cache", "A Mesh Cache modifier plays a PC2 file in its place"),
@@ -115,6 +158,10 @@ _deformer_ann = {
                                             "//<object>_<deformer>.pc2 next to the .blend)"),
     "bake_start": IntProperty(name="Baked From", default=0),
     "bake_end": IntProperty(name="Baked To", default=0),
+    # the options box's Advanced section (ui.draw_options): open or collapsed
+    "show_advanced": BoolProperty(name="Advanced", default=False,
+                                  description="Show the expert options: tolerances, iteration "
+                                              "caps, solver internals, energy weights"),
 }
 for _m, _cls in zip(methods.METHODS, OPTION_CLASSES):
     _deformer_ann[methods.options_attr(_m.id)] = PointerProperty(type=_cls)
@@ -153,13 +200,7 @@ def new_deformer(obj, method_id):
     d = dks.deformers.add()
     d.uid = _new_uid()
     d.method = method_id
-    label = methods.get(method_id).label
-    names = {x.name for x in dks.deformers}
-    name, i = "DeformKit " + label, 1
-    while name in names:
-        i += 1
-        name = "DeformKit %s.%03d" % (label, i)
-    d.name = name
+    d.name = unique_name(dks, methods.get(method_id).label, skip=d)
     dks.active_index = len(dks.deformers) - 1
     return d
 

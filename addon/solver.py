@@ -18,6 +18,7 @@ import numpy as np
 from mathutils import Matrix
 
 from . import geonodes, methods, native
+from .text import article, plural
 
 
 class DeformKitError(Exception):
@@ -36,7 +37,9 @@ class OverlapError(DeformKitError):
 NATIVE_ERRORS = (ValueError, IndexError, TypeError, RuntimeError, MemoryError, OverflowError)
 
 _cache = {}            # (object name, deformer uid) -> _Entry
-runtime = {}           # (object name, deformer uid) -> dict(ms=..., iterations=..., converged=...)
+# (object name, deformer uid) -> the last solve: dict(ms=..., iterations=..., converged=...,
+# energy=..., slices=...); the slices of one interactive solve add up (solve(), resume)
+runtime = {}
 _settings_serial = [0]
 # (object name, deformer uid) -> worker thread of a UI bind (operators.DEFORMKIT_OT_bind),
 # from its invoke until its modal part ends. A file load drops modal handlers without ending
@@ -74,12 +77,16 @@ def drop(obj_name, uid):
 
 # ------------------------------------------------------------------ reading Blender data ----
 
+def check_mesh_type(obj):
+    if obj.type != "MESH":
+        raise DeformKitError("DeformKit deforms mesh objects; '%s' is %s"
+                             % (obj.name, article(obj.type.lower().replace("_", " "))))
+
+
 def check_object(obj, d=None):
     if obj is None:
         raise DeformKitError("no active object")
-    if obj.type != "MESH":
-        raise DeformKitError("DeformKit deforms mesh objects; '%s' is a %s"
-                             % (obj.name, obj.type.lower()))
+    check_mesh_type(obj)
     me = obj.data
     if len(me.vertices) == 0:
         raise DeformKitError("mesh '%s' has no vertices" % me.name)
@@ -220,7 +227,7 @@ def collect(obj, d):
         names.add(h.vertex_group)
         target_world(h)  # raises for a missing/deleted target or bone
     for label, g in (("region", d.roi_group), ("fixed", d.fixed_group),
-                     ("material", d.material_group)):
+                     (m.material_label.lower(), d.material_group)):
         if g:
             if obj.vertex_groups.get(g) is None:
                 raise DeformKitError("%s vertex group '%s' does not exist" % (label, g))
@@ -258,9 +265,9 @@ def collect(obj, d):
         if (c > 1).any():
             v = int(u[c > 1][0])
             owners = [h for h, idx in zip(d.handles, handles) if v in idx]
-            raise OverlapError("handles '%s' and '%s' share %d vertices: a vertex can follow "
-                               "one handle only" % (owners[0].name, owners[1].name,
-                                                    int((c > 1).sum())),
+            raise OverlapError("handles '%s' and '%s' share %s: a vertex can follow one "
+                               "handle only" % (owners[0].name, owners[1].name,
+                                                plural(int((c > 1).sum()), "vertex")),
                                owners[0].vertex_group, owners[1].vertex_group)
     fixed = roi = None
     if d.fixed_group:
@@ -270,9 +277,9 @@ def collect(obj, d):
         for h, idx in zip(d.handles, handles):
             both = np.intersect1d(idx, fixed)
             if len(both):
-                raise OverlapError("handle '%s' overlaps the fixed group '%s' in %d vertices: "
-                                   "remove them from one group"
-                                   % (h.name, d.fixed_group, len(both)),
+                raise OverlapError("handle '%s' overlaps the fixed group '%s' in %s: remove "
+                                   "them from one group"
+                                   % (h.name, d.fixed_group, plural(len(both), "vertex")),
                                    h.vertex_group, d.fixed_group)
     if d.roi_group:
         roi = groups[d.roi_group][0]
@@ -429,8 +436,8 @@ class BindJob:
             raise self.error
         me = obj.data
         if (len(me.vertices), len(me.polygons)) != (self.n_vertices, self.n_faces):
-            raise DeformKitError("mesh changed from %d to %d vertices during the bind: bind "
-                                 "again" % (self.n_vertices, len(me.vertices)))
+            raise DeformKitError("mesh changed from %d to %s during the bind: bind "
+                                 "again" % (self.n_vertices, plural(len(me.vertices), "vertex")))
         e = _Entry()
         e.native, e.dkmesh, e.rest = self.native, self.dkmesh, self.rest
         e.extent = float(np.linalg.norm(self.rest.max(axis=0) - self.rest.min(axis=0)))
@@ -490,7 +497,7 @@ def bind_end(obj, d, job, mats, depsgraph=None):
     geonodes.ensure_modifier(obj, d)
     geonodes.ensure_attribute(obj.data, d.attribute_name)
     solve(obj, d, depsgraph, force=True)
-    set_status(d, "bound: %d vertices, %d handles" % (e.n_vertices, len(d.handles)), False)
+    reset_status(d)
     return e
 
 
@@ -511,7 +518,7 @@ def unbind(obj, d):
     if a is not None:
         a.data.foreach_set("vector", np.zeros(len(a.data) * 3, dtype=np.float32))
         obj.data.update_tag()
-    set_status(d, "not bound", False)
+    reset_status(d)
 
 
 def set_status(d, msg, is_error):
@@ -527,14 +534,37 @@ def set_status(d, msg, is_error):
         d.status_overlap = groups
 
 
+def idle_status(d):
+    """A deformer's status when nothing is wrong, composed from its state now (bound or not,
+    its handles): the one place that words it. The panel draws it at draw time, so it follows
+    handles added or removed since it was stored."""
+    if d.bound:
+        return "bound: %s, %s" % (plural(d.bind_n_vertices, "vertex"),
+                                  plural(len(d.handles), "handle"))
+    if len(d.handles) == 0:
+        return "not bound: add a handle, then Bind"
+    return "not bound: press Bind"
+
+
+def reset_status(d):
+    """Stores the idle status, clearing an error."""
+    set_status(d, idle_status(d), False)
+
+
+def status_text(d):
+    """What the panel shows: the stored error, else the idle status of the state now."""
+    return d.status if d.status_is_error else idle_status(d)
+
+
 def _entry_for(obj, d, check_groups):
     me = obj.data
     n, f = len(me.vertices), len(me.polygons)
     if n != d.bind_n_vertices:
-        raise DeformKitError("mesh changed from %d to %d vertices: bind again"
-                             % (d.bind_n_vertices, n))
+        raise DeformKitError("mesh changed from %d to %s: bind again"
+                             % (d.bind_n_vertices, plural(n, "vertex")))
     if f != d.bind_n_faces:
-        raise DeformKitError("mesh changed from %d to %d faces: bind again" % (d.bind_n_faces, f))
+        raise DeformKitError("mesh changed from %d to %s: bind again"
+                             % (d.bind_n_faces, plural(f, "face")))
     e = _cache.get((obj.name, d.uid))
     settings = _settings_key(d)
     same = e is not None and e.method_id == d.method and e.settings == settings
@@ -658,10 +688,10 @@ def moved_input(obj, d, depsgraph=None):
                              "modifier below it drops attributes" % (d.name, what))
     n = len(obj.data.vertices)
     if len(a.data) != n:
-        raise DeformKitError("%s follows %s, but the final mesh has %d vertices, not %d: a "
+        raise DeformKitError("%s follows %s, but the final mesh has %s, not %d: a "
                              "modifier below it (Subdivision?) changes the vertex count; "
                              "disable it while editing, or move it above %s"
-                             % (d.name, what, len(a.data), n, d.name))
+                             % (d.name, what, plural(len(a.data), "vertex"), n, d.name))
     co = np.empty(n * 3, dtype=np.float32)
     a.data.foreach_get("vector", co)
     return co.reshape(-1, 3).astype(np.float64)
@@ -738,8 +768,16 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
     res = _native_call(m.label + " solve", e.native.solve, **goal, **kw)
     ms = (time.perf_counter() - t0) * 1000.0
     pos = np.asarray(res.positions, dtype=np.float64).reshape(-1, 3)
-    runtime[key] = dict(ms=ms, iterations=int(res.iterations), converged=bool(res.converged),
-                        energy=float(res.energy))
+    rt = dict(ms=ms, iterations=int(res.iterations), converged=bool(res.converged),
+              energy=float(res.energy), slices=1)
+    last = runtime.get(key)
+    if budgeted and resume and e.pending and last is not None:
+        # a further slice of the interactive solve left pending: the figures are the whole
+        # solve's (its time and iterations so far), not this slice's
+        rt["ms"] += last["ms"]
+        rt["iterations"] += last["iterations"]
+        rt["slices"] += last["slices"]
+    runtime[key] = rt
     # unconverged only because of the budget: finish from the timer
     if budgeted:
         e.pending_its += int(res.iterations)
@@ -756,6 +794,27 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
         write_offset(obj, d, off, retime=cold)
         e.last_inputs = inputs
     return pos
+
+
+def solve_summary(obj, d):
+    """The panel's line about the last solve, or None before one (or while the status is an
+    error). Iterative methods: the time and iterations of the whole solve, its interactive
+    slices summed, and "(not converged)" when it stopped at Max Iterations short of its
+    tolerance (not while the timer is still refining it). Direct methods: the time only;
+    they never say "not converged" (Laplacian editing's local-frame passes are a fixed
+    count, not an iteration to convergence)."""
+    key = (obj.name, d.uid)
+    rt = runtime.get(key)
+    if not rt or not d.bound or d.status_is_error:
+        return None
+    m = methods.get(d.method)
+    if not m.iterative:
+        return "last solve %.1f ms" % rt["ms"]
+    e = _cache.get(key)
+    refining = e is not None and e.pending
+    return "last solve %.1f ms, %s%s" % (
+        rt["ms"], plural(rt["iterations"], "iteration"),
+        "" if rt["converged"] or refining else " (not converged)")
 
 
 def show_material(obj, d, e):
@@ -866,9 +925,7 @@ def evaluate_object(obj, depsgraph=None, check_groups=False, cold=False, interac
         try:
             if solve(obj, d, depsgraph, cold=cold, check_groups=check_groups,
                      interactive=interactive, force=refine, resume=refine) is not None:
-                if d.status_is_error or not d.status.startswith("bound"):
-                    set_status(d, "bound: %d vertices, %d handles"
-                               % (len(obj.data.vertices), len(d.handles)), False)
+                reset_status(d)
         except DeformKitError as ex:
             if d.status != str(ex):
                 zero_offset(obj, d)

@@ -37,19 +37,38 @@ class DEFORMKIT_UL_handles(bpy.types.UIList):
 
 
 def draw_options(layout, d, obj=None):
+    """The method's options: the everyday ones, then the expert ones (Option.advanced) under
+    an "Advanced" row with a disclosure triangle, collapsed unless the deformer's
+    show_advanced is on (a stored toggle, not layout.panel(): that needs Blender 4.1)."""
     m = methods.get(d.method)
     opts = d.options
     if m.draw is not None:
         m.draw(layout, opts)
         return
+    shown = [o for o in m.options if not (o.shown_with and not getattr(d, o.shown_with))]
     col = layout.column()
-    for o in m.options:
-        if o.shown_with and not getattr(d, o.shown_with):
-            continue
-        if o.type == "GROUP" and obj is not None:
-            col.prop_search(opts, o.name, obj, "vertex_groups")
-        else:
-            col.prop(opts, o.name)
+    for o in shown:
+        if not o.advanced:
+            _draw_option(col, opts, o, obj)
+    advanced = [o for o in shown if o.advanced]
+    if not advanced:
+        return
+    row = layout.row()
+    row.use_property_split = False
+    row.alignment = "LEFT"
+    row.prop(d, "show_advanced", emboss=False,
+             icon="TRIA_DOWN" if d.show_advanced else "TRIA_RIGHT")
+    if d.show_advanced:
+        sub = layout.column()
+        for o in advanced:
+            _draw_option(sub, opts, o, obj)
+
+
+def _draw_option(layout, opts, o, obj):
+    if o.type == "GROUP" and obj is not None:
+        layout.prop_search(opts, o.name, obj, "vertex_groups")
+    else:
+        layout.prop(opts, o.name)
 
 
 class DEFORMKIT_PT_modifiers(bpy.types.Panel):
@@ -68,11 +87,9 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         obj = context.object
+        width = wrap_width(context)
         if native.load() is None:
-            box = layout.box()
-            box.alert = True
-            for i, line in enumerate(_wrap(native.error, 60)):
-                box.label(text=line, icon="ERROR" if i == 0 else "BLANK1")
+            draw_wrapped(layout.box(), native.error, "ERROR", width, alert=True)
         dks = obj.deformkit
         row = layout.row()
         row.template_list("DEFORMKIT_UL_deformers", "", dks, "deformers", dks, "active_index",
@@ -105,7 +122,7 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
         col.prop_search(d, "roi_group", obj, "vertex_groups", text="Region")
         col.prop_search(d, "fixed_group", obj, "vertex_groups", text="Fixed")
         if "stiffness" in m.maps or "material" in m.maps:
-            col.prop_search(d, "material_group", obj, "vertex_groups", text="Material")
+            col.prop_search(d, "material_group", obj, "vertex_groups", text=m.material_label)
 
         layout.label(text="Handles")
         row = layout.row()
@@ -139,32 +156,25 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
             row.operator("deformkit.unbind", text="Unbind", icon="UNLINKED")
         else:
             row.operator("deformkit.bind", text="Bind", icon="LINKED")
-        r = layout.row()
-        if d.status:
-            r.alert = d.status_is_error
-            r.label(text=d.status, icon="ERROR" if d.status_is_error else "INFO")
+        draw_wrapped(layout, solver.status_text(d), "ERROR" if d.status_is_error else "INFO",
+                     width, alert=d.status_is_error)
         draw_overlap(layout, d)
         hidden = bake.hidden_reason(obj, d) if mod is not None and d.bound else None
         if hidden:
-            r = layout.row()
-            r.alert = True
-            r.label(text="%s: nothing shows the result" % hidden, icon="HIDE_ON")
+            draw_wrapped(layout, "%s: nothing shows the result" % hidden, "HIDE_ON", width,
+                         alert=True)
         why = bake.animated_reason(obj, d) if d.bound and bake.state(obj, d) is None else None
         if why:
-            box = layout.box()
-            for i, line in enumerate(_wrap("Animated (%s) and not baked: without DeformKit, "
-                                           "this file shows one frozen pose on every frame. "
-                                           "Bake before rendering elsewhere." % why, 56)):
-                box.label(text=line, icon="ERROR" if i == 0 else "BLANK1")
-        rt = solver.runtime.get((obj.name, d.uid))
-        if rt and d.bound and not d.status_is_error:
-            layout.label(text="last solve %.1f ms, %d iterations%s" % (
-                rt["ms"], rt["iterations"], "" if rt["converged"] else " (not converged)"),
-                icon="TIME")
+            draw_wrapped(layout.box(), "Animated (%s) and not baked: without DeformKit, this "
+                         "file shows one frozen pose on every frame. Bake before rendering "
+                         "elsewhere." % why, "ERROR", width)
+        summary = solver.solve_summary(obj, d)
+        if summary:
+            layout.label(text=summary, icon="TIME")
         row = layout.row(align=True)
         row.operator("deformkit.apply", text="Apply").mode = "MESH"
         row.operator("deformkit.apply", text="Apply as Shape Key").mode = "SHAPE_KEY"
-        draw_bake(layout, obj, d)
+        draw_bake(layout, obj, d, width)
 
 
 def draw_overlap(layout, d):
@@ -181,16 +191,14 @@ def draw_overlap(layout, d):
         op.action, op.group, op.other = "REMOVE", g, other
 
 
-def draw_bake(layout, obj, d):
+def draw_bake(layout, obj, d, width=60):
     """The bake buttons, or the bake that shows in place of the live result with the ways
     out (Free Bake, Re-bake)."""
     st = bake.state(obj, d)
     if st is not None:
         box = layout.box()
-        box.alert = True
-        for i, line in enumerate(_wrap(st["text"], 56)):
-            box.label(text=line, icon=("FILE_CACHE" if st["kind"] == "PC2" else
-                                       "SHAPEKEY_DATA") if i == 0 else "BLANK1")
+        draw_wrapped(box, st["text"], "FILE_CACHE" if st["kind"] == "PC2" else "SHAPEKEY_DATA",
+                     width, alert=True)
         row = box.row(align=True)
         row.operator("deformkit.free_bake", icon="TRASH")
         if not st["broken"]:
@@ -200,6 +208,28 @@ def draw_bake(layout, obj, d):
     row.operator("deformkit.bake", text="Bake to Point Cache", icon="FILE_CACHE").mode = "PC2"
     row.operator("deformkit.bake", text="Bake to Shape Keys").mode = "SHAPE_KEYS"
     layout.prop(d, "bake_file", text="Cache File")
+
+
+def wrap_width(context):
+    """How many characters of label text fit one line of the region being drawn: its width
+    less the icon and the panel's margins, at about 6.5 px a character at UI scale 1 (Blender's
+    default font); 60 when there is no region (scripts, tests)."""
+    region = getattr(context, "region", None)
+    width = getattr(region, "width", 0) or 0
+    if width <= 0:
+        return 60
+    prefs = bpy.context.preferences  # system.ui_scale has the display's DPI (0 without one)
+    scale = prefs.system.ui_scale or prefs.view.ui_scale or 1.0
+    return max(20, int((width - 60 * scale) / (6.5 * scale)))
+
+
+def draw_wrapped(layout, text, icon, width, alert=False):
+    """`text` over as many label lines as it needs at `width` characters, the icon on the
+    first (long errors were cut off at the panel's edge)."""
+    col = layout.column(align=True)
+    col.alert = alert
+    for i, line in enumerate(_wrap(text, width)):
+        col.label(text=line, icon=icon if i == 0 else "BLANK1")
 
 
 def _wrap(text, width):
@@ -228,19 +258,15 @@ def driven_by(target):
     return out
 
 
-def draw_deformer_summary(layout, obj, i, d, handle=None):
+def draw_deformer_summary(layout, obj, i, d, handle=None, width=40):
     """One deformer in brief: its name (and the handle), status, Bind / Rebind, its bake."""
     box = layout.box()
     m = methods.BY_ID.get(d.method)
     title = "%s: %s" % (obj.name, d.name) if handle is None else \
         "%s: %s, handle '%s'" % (obj.name, d.name, handle.name)
     box.label(text=title, icon=m.icon if m else "QUESTION")
-    if d.status:
-        for j, line in enumerate(_wrap(d.status, 40)):
-            r = box.row()
-            r.alert = d.status_is_error
-            r.label(text=line, icon=("ERROR" if d.status_is_error else "INFO") if j == 0
-                    else "BLANK1")
+    draw_wrapped(box, solver.status_text(d), "ERROR" if d.status_is_error else "INFO", width,
+                 alert=d.status_is_error)
     st = bake.state(obj, d)
     if st is not None:
         r = box.row()
@@ -271,19 +297,19 @@ class DEFORMKIT_PT_sidebar(bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         obj = context.object
+        width = wrap_width(context)
         if obj is not None and obj.type == "MESH" and len(obj.deformkit.deformers):
             for i, d in enumerate(obj.deformkit.deformers):
-                draw_deformer_summary(layout, obj, i, d)
+                draw_deformer_summary(layout, obj, i, d, width=width)
             return
         drives = driven_by(obj) if obj is not None else []
         if drives:
             layout.label(text="%s moves:" % obj.name, icon="HOOK")
             for mesh, i, d, h in drives:
-                draw_deformer_summary(layout, mesh, i, d, h)
+                draw_deformer_summary(layout, mesh, i, d, h, width=width)
             return
-        for line in _wrap("Select a mesh with a DeformKit deformer, or a handle's target. "
-                          "Add a deformer from the Modifiers tab or the Object menu.", 40):
-            layout.label(text=line)
+        draw_wrapped(layout, "Select a mesh with a DeformKit deformer, or a handle's target. "
+                     "Add a deformer from the Modifiers tab or the Object menu.", "INFO", width)
 
 
 class DEFORMKIT_PT_handle_target(bpy.types.Panel):

@@ -150,7 +150,7 @@ def do_bake(args):
     if obj is None:
         fail("no object named %r in %s" % (args.object, bpy.data.filepath or "the scene"))
     if obj.type != "MESH":
-        fail("%r is a %s, not a mesh" % (obj.name, obj.type.lower()))
+        fail("%r is %s, not a mesh" % (obj.name, ext.text.article(obj.type.lower())))
     dks = obj.deformkit
     if len(dks.deformers) == 0:
         fail("%r has no DeformKit deformer" % obj.name)

@@ -13,8 +13,8 @@ import sys
 HERE = os.path.dirname(os.path.abspath(__file__))
 OUT = os.path.join(HERE, "output")
 PNG = os.path.join(OUT, "modifiers_tab.png")
-# the second deformer (the registry's last method) made active, its options drawn: for the
-# embedded deformation, the Influence enum and the Cut Side vertex-group search fields
+# the second deformer (the registry's last method) made active, its options drawn with the
+# Advanced section open, and its error status wrapped over lines
 PNG2 = os.path.join(OUT, "modifiers_tab_last_method.png")
 # a 3D viewport with a bound embedded deformation and Show Graph on (overlay.py), in a second
 # Blender run (DEFORMKIT_SHOT=graph): the graph's nodes and edges drawn over the mesh
@@ -116,10 +116,15 @@ def in_blender():
             R.check("screenshot saved", os.path.exists(PNG))
             obj = bpy.context.view_layer.objects.active
             obj.deformkit.active_index = 1
-            opts = obj.deformkit.deformers[1].options
-            for o in S.methods.get(obj.deformkit.deformers[1].method).options:
+            d2 = obj.deformkit.deformers[1]
+            opts = d2.options
+            for o in S.methods.get(d2.method).options:
                 if o.type == "GROUP":
                     setattr(opts, o.name, "fixed")
+            d2.show_advanced = True
+            d2.material_group = "stiff"
+            S.solver.set_status(d2, "a long error wraps over the panel's lines: " + " ".join(
+                "word%d" % i for i in range(60)), True)
             window_shot(win, area, PNG2)
             R.check("second screenshot saved", os.path.exists(PNG2))
         except Exception:

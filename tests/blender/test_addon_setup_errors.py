@@ -73,7 +73,7 @@ def test_handles_overlap():
     obj, d, e, fixed, handle = fresh()
     S.group(obj, "tip2", [int(handle[0]), int(handle[0]) - 3])
     bpy.ops.deformkit.add_handle(vertex_group="tip2", target=e.name)
-    expect_error("two handles sharing a vertex", bpy.ops.deformkit.bind, "share 1 vertices")
+    expect_error("two handles sharing a vertex", bpy.ops.deformkit.bind, "share 1 vertex: a vertex can follow one handle only")
 
 
 def test_deleted_target_after_bind():

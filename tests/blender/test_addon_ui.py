@@ -158,9 +158,12 @@ def test_states():
     bpy.ops.deformkit.bind()
     calls = draw_all(obj, "ARAP bound, material group")
     R.check("the panel shows the material stiffness", "prop stiffness_scale" in calls)
-    for mid in ("LAPLACIAN", "FALLOFF"):
-        d.method = mid
-        draw_all(obj, "%s options" % mid)
+    for m in S.methods.METHODS:
+        d.method = m.id
+        for open_ in (False, True):   # the options box's Advanced section, both ways
+            d.show_advanced = open_
+            draw_all(obj, "%s options, Advanced %s" % (m.id, "open" if open_ else "closed"))
+    d.method = "ARAP"
     d.status, d.status_is_error = "something failed", True
     draw_all(obj, "error status")
     arm = bpy.data.armatures.new("Rig")
