@@ -98,7 +98,8 @@ def _make_options_group(method):
             if o.max is not None:
                 kw["max"] = o.max
             prec = 7 if abs(o.default) and abs(o.default) < 1e-3 else 3
-            ann[o.name] = FloatProperty(default=o.default, precision=prec, **kw, **common)
+            ann[o.name] = FloatProperty(default=o.default, precision=prec, subtype=o.subtype,
+                                        **kw, **common)
         elif o.type == "BOOL":
             ann[o.name] = BoolProperty(default=o.default, **common)
         elif o.type == "GROUP":

@@ -45,7 +45,8 @@ def draw_options(layout, d, obj=None):
     if m.draw is not None:
         m.draw(layout, opts)
         return
-    shown = [o for o in m.options if not (o.shown_with and not getattr(d, o.shown_with))]
+    shown = [o for o in m.options if not (o.shown_with and not getattr(d, o.shown_with))
+             and not (o.shown_if and getattr(opts, o.shown_if[0]) not in o.shown_if[1])]
     col = layout.column()
     for o in shown:
         if not o.advanced:

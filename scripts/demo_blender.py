@@ -79,7 +79,7 @@ def parse_args():
     p.add_argument("--threads", type=int, default=2, help="render threads")
     p.add_argument("--set", action="append", default=[], metavar="METHOD.OPTION=VALUE",
                    help="change a deformer option from its default (the options of "
-                        "addon/methods.py), e.g. FALLOFF.range=40; repeatable")
+                        "addon/methods.py), e.g. FALLOFF.range_length=0.3; repeatable")
     p.add_argument("--no-render", action="store_true", help="skip the images")
     a = p.parse_args(argv)
     try:

@@ -59,11 +59,22 @@ typedef enum dk_falloff_distance {
     DK_FALLOFF_DIJKSTRA = 3  /**< exact shortest paths along edges                         */
 } dk_falloff_distance;
 
+/** How far each handle group's pull reaches. */
+typedef enum dk_falloff_reach {
+    DK_FALLOFF_REACH_RANGE = 0, /**< `range`, for every group                               */
+    DK_FALLOFF_REACH_FIXED = 1  /**< per group, its distance (in the chosen kind) to the
+                                     nearest fixed vertex: the pull fades out exactly where
+                                     the fixed part begins, whatever the model's size and
+                                     edge density. A group that reaches no fixed vertex
+                                     uses `range`                                         */
+} dk_falloff_reach;
+
 /** Options; fill with dk_falloff_default_options. */
 typedef struct dk_falloff_options {
     dk_falloff_distance distance; /**< default HOPS                                         */
     double range;                 /**< n: > 0 (hops: edges; else a length). Default 0, which
                                        means 10 hops, or 10 mean edge lengths              */
+    dk_falloff_reach reach;       /**< default RANGE                                        */
     double k;                     /**< exponent parameter, finite; default 0 (linear)      */
     double heat_time_factor;      /**< GEODESIC: dk_heat_create's factor (<= 0: default)    */
 } dk_falloff_options;
@@ -103,6 +114,11 @@ dk_status dk_falloff_energy(const dk_falloff *f, const double *positions, double
  *  give INFINITY and 0. */
 void dk_falloff_vertex_weight(const dk_falloff *f, dk_index g, dk_index v, double *distance,
                               double *weight);
+
+/** The range handle group g uses (the distance kind's units: edges for hops), as chosen
+ *  at bind (`range`, or with REACH_FIXED its distance to the fixed part); NaN for an
+ *  out-of-range g. */
+double dk_falloff_group_range(const dk_falloff *f, dk_index g);
 
 /** The contract's counters (dk_method.h); zeros for NULL. */
 void dk_falloff_stats(const dk_falloff *f, dk_method_stats *stats);

@@ -16,6 +16,7 @@ typedef struct falloff_state {
     dk_index *label; /* n_handles x n: nearest handle-vertex position, -1 if none      */
     double *targets; /* n_handle_vertices x 3                                         */
     dk_index *hpos;  /* n: position of a handle vertex in the handle list, or -1       */
+    double *range;   /* n_handles: the range each group uses (units of the distance)   */
 } falloff_state;
 
 struct dk_falloff {
@@ -34,6 +35,7 @@ static void state_free(falloff_state *s)
     free(s->label);
     free(s->targets);
     free(s->hpos);
+    free(s->range);
     memset(s, 0, sizeof *s);
 }
 
@@ -43,6 +45,7 @@ void dk_falloff_default_options(dk_falloff_options *o)
         return;
     o->distance = DK_FALLOFF_HOPS;
     o->range = 0.0;
+    o->reach = DK_FALLOFF_REACH_RANGE;
     o->k = 0.0;
     o->heat_time_factor = 0.0;
 }
@@ -245,6 +248,19 @@ static dk_status group_distances(dk_falloff *f, falloff_state *s, dk_index g, do
     return dk_error_set(err, DK_ERR_INTERNAL, "Falloff: unknown distance kind");
 }
 
+/* The range of one group with distances `dist`: `range`, or (REACH_FIXED) the distance to
+ * its nearest fixed vertex when it reaches one at a positive distance. */
+static double group_reach(const dk_falloff *f, const falloff_state *s, const double *dist)
+{
+    if (f->opt.reach != DK_FALLOFF_REACH_FIXED)
+        return f->opt.range;
+    double r = INFINITY;
+    for (dk_index v = 0; v < f->mesh->n_vertices; v++)
+        if (s->con->role[v] == DK_VERTEX_FIXED && dist[v] < r)
+            r = dist[v];
+    return isfinite(r) && r > 0.0 ? r : f->opt.range;
+}
+
 static dk_status build_state(dk_falloff *f, const dk_constraint_desc *desc, falloff_state *s,
                              dk_error *err)
 {
@@ -267,11 +283,12 @@ static dk_status build_state(dk_falloff *f, const dk_constraint_desc *desc, fall
     s->label = malloc(sizeof(dk_index) * gn);
     s->targets = malloc(sizeof(double) * 3 * ((size_t)s->con->n_handle_vertices + 1));
     s->hpos = malloc(sizeof(dk_index) * ((size_t)n + 1));
+    s->range = malloc(sizeof(double) * ((size_t)s->con->n_handles + 1));
     scratch_i = malloc(sizeof(dk_index) * ((size_t)n + 1));
     scratch_d = malloc(sizeof(double) * ((size_t)n + 1));
     scratch_e = malloc(sizeof(double) * ((size_t)n + 1));
-    if (!s->dist || !s->weight || !s->label || !s->targets || !s->hpos || !scratch_i ||
-        !scratch_d || !scratch_e) {
+    if (!s->dist || !s->weight || !s->label || !s->targets || !s->hpos || !s->range ||
+        !scratch_i || !scratch_d || !scratch_e) {
         st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "Falloff: out of memory (weights)");
         goto done;
     }
@@ -285,10 +302,10 @@ static dk_status build_state(dk_falloff *f, const dk_constraint_desc *desc, fall
                              scratch_e, err);
         if (st != DK_OK)
             goto done;
+        s->range[g] = group_reach(f, s, dist);
         for (dk_index v = 0; v < n; v++)
             w[v] = s->con->role[v] == DK_VERTEX_FREE
-                       ? dk_falloff_profile(dist[v] / f->unit, f->opt.range / f->unit,
-                                            f->opt.k)
+                       ? dk_falloff_profile(dist[v] / f->unit, s->range[g] / f->unit, f->opt.k)
                        : 0.0;
     }
     st = DK_OK;
@@ -332,6 +349,12 @@ dk_status dk_falloff_bind(const dk_mesh *mesh, const dk_constraint_desc *desc,
         st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                           "Falloff bind: range must be finite and > 0 (0 = default), got %g",
                           f->opt.range);
+        goto fail;
+    }
+    if (f->opt.reach != DK_FALLOFF_REACH_RANGE && f->opt.reach != DK_FALLOFF_REACH_FIXED) {
+        st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                          "Falloff bind: unknown reach %d (range = 0, fixed = 1)",
+                          (int)f->opt.reach);
         goto fail;
     }
     if (!isfinite(f->opt.k)) {
@@ -494,6 +517,13 @@ void dk_falloff_vertex_weight(const dk_falloff *f, dk_index g, dk_index v, doubl
         *distance = d;
     if (weight)
         *weight = w;
+}
+
+double dk_falloff_group_range(const dk_falloff *f, dk_index g)
+{
+    if (!f || g < 0 || g >= f->st.con->n_handles)
+        return NAN;
+    return f->st.range[g];
 }
 
 void dk_falloff_stats(const dk_falloff *f, dk_method_stats *st)

@@ -6,6 +6,7 @@
 
 static const char *const distance_names[] = {"hops", "euclidean", "geodesic", "dijkstra",
                                              NULL};
+static const char *const reach_names[] = {"range", "fixed", NULL};
 
 static void default_options(void *o)
 {
@@ -15,13 +16,15 @@ static void default_options(void *o)
 static int parse_options(PyObject *kw, void *o, const char *context)
 {
     dk_falloff_options *opt = (dk_falloff_options *)o;
-    int distance = (int)opt->distance;
+    int distance = (int)opt->distance, reach = (int)opt->reach;
     if (dk_py_opt_choice(kw, "distance", distance_names, &distance, context) < 0 ||
+        dk_py_opt_choice(kw, "reach", reach_names, &reach, context) < 0 ||
         dk_py_opt_double(kw, "range", &opt->range) < 0 ||
         dk_py_opt_double(kw, "k", &opt->k) < 0 ||
         dk_py_opt_double(kw, "heat_time_factor", &opt->heat_time_factor) < 0)
         return -1;
     opt->distance = (dk_falloff_distance)distance;
+    opt->reach = (dk_falloff_reach)reach;
     return 0;
 }
 
@@ -69,17 +72,41 @@ PyDoc_STRVAR(solve_doc,
 
 PyDoc_STRVAR(falloff_doc,
              "Falloff(mesh, handles, fixed=None, roi=None, handle_weights=None,\n"
-             "        stiffness=None, distance='hops', range=0.0, k=0.0, heat_time_factor=0.0)\n\n"
+             "        stiffness=None, distance='hops', range=0.0, reach='range', k=0.0,\n"
+             "        heat_time_factor=0.0)\n\n"
              "Attenuated handle displacement (lecture slides 5-7): every free vertex moves by\n"
              "S(d) times the displacement of its nearest handle vertex (or S(d) (T p - p) for\n"
              "transforms), S(i) = 1 - (i/(n+1))^(k+1) for k >= 0, (1 - i/(n+1))^(1-k) for\n"
              "k < 0, 0 beyond the range. distance: 'hops' (range in edges), 'euclidean',\n"
              "'geodesic' (heat method) or 'dijkstra' (range a length; the formula is applied\n"
              "in units of the mean edge length). range 0 = 10 hops / 10 mean edge lengths.\n"
+             "reach='fixed': each group's range is its distance to the nearest fixed vertex\n"
+             "(the pull fades out where the fixed part begins; `range` for a group that\n"
+             "reaches none). `ranges` holds the range of each group.\n"
              "Several groups add up. stiffness is not supported (ValueError). See\n"
              "docs/methods/falloff.md.");
 
-static PyGetSetDef falloff_getset[] = {DK_PY_METHOD_GETSET, {NULL, NULL, NULL, NULL, NULL}};
+static PyObject *get_ranges(PyObject *obj, void *c)
+{
+    dk_py_method *self = (dk_py_method *)obj;
+    dk_method_stats ms;
+    double *out;
+    (void)c;
+    dk_falloff_stats(self->native, &ms);
+    PyObject *a = dk_py_new_doubles(1, ms.n_handles, 0, &out);
+    for (dk_index g = 0; a && g < ms.n_handles; g++)
+        out[g] = dk_falloff_group_range(self->native, g);
+    return a;
+}
+
+static PyGetSetDef falloff_getset[] = {
+    DK_PY_METHOD_GETSET,
+    {"ranges", get_ranges, NULL,
+     "n_handles: the range each handle group uses, in the distance's units (edges for "
+     "'hops'): `range`, or with reach='fixed' its distance to the fixed part",
+     NULL},
+    {NULL, NULL, NULL, NULL, NULL},
+};
 
 static PyMethodDef falloff_methods[] = {
     DK_PY_METHOD_METHODS(solve_doc),

@@ -24,6 +24,8 @@ def direct(obj, d, kw_extra, T_list):
     mesh = S.dk.Mesh(rest, tri)
     kw = S.methods.constructor_kwargs(m, d.options)
     kw.update(kw_extra)
+    if m.bind_args is not None:  # Falloff's automatic range: the add-on's own rule
+        kw.update(m.bind_args(d.options, rest, kw, mesh))
     meth = cls(mesh, **kw)
     skw = S.methods.solve_kwargs(m, d.options, cold=False)
     out = None

@@ -352,9 +352,13 @@ def test_advanced_section():
     d.material_group = "fixed"
     for m in S.methods.METHODS:
         d.method = m.id
+        opts = d.options
+
+        def applies(o):  # Option.shown_if: drawn only for some values of another option
+            return not o.shown_if or getattr(opts, o.shown_if[0]) in o.shown_if[1]
         names = [o.name for o in m.options]
-        everyday = [o.name for o in m.options if not o.advanced]
-        expert = [o.name for o in m.options if o.advanced]
+        everyday = [o.name for o in m.options if not o.advanced and applies(o)]
+        expert = [o.name for o in m.options if o.advanced and applies(o)]
         d.show_advanced = False
         calls = [c for c in draw_panel(obj) if c[1] in ("prop", "prop_search")]
         drawn = [c[2] for c in calls if c[2] in names]

@@ -20,6 +20,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _setup as S  # noqa: E402
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
+from mathutils import Matrix  # noqa: E402
 
 R = S.Results("test_addon_workflow")
 ui, bake = S.addon.ui, S.addon.bake
@@ -235,7 +236,43 @@ def test_keyed_factor_warns():
             bake.animated_reason(obj, d))
 
 
-for t in (test_point_cache_bake_shows_and_frees, test_shape_key_bake_shows_at_once_and_frees,
+def test_falloff_reach_scales_with_the_model():
+    """The automatic range: each handle's distance to the Fixed group (the native
+    reach='fixed'), so a model 10x larger deforms the same way relative to its size; without
+    a Fixed group a quarter of the diagonal. A Range typed in is used as given."""
+    shapes = []
+    for scale in (1.0, 10.0):
+        obj, d, e, handle = scene("FALLOFF")
+        obj.data.transform(Matrix.Scale(scale, 4))
+        e.location = (1.0 * scale, 0.0, 0.0)
+        bpy.ops.deformkit.bind()
+        native = S.addon.solver._cache[(obj.name, d.uid)].native
+        rest = S.rest_positions(obj)
+        fixed = np.array([i for i, v in enumerate(obj.data.vertices)
+                          if any(g.group == obj.vertex_groups["fixed"].index
+                                 for g in v.groups)])
+        near = np.linalg.norm(rest[handle][:, None] - rest[fixed][None], axis=2).min()
+        R.check("scale %g: the range is the handle's distance to the Fixed group" % scale,
+                abs(float(np.asarray(native.ranges)[0]) - near) < 1e-6 * near,
+                (np.asarray(native.ranges), near))
+        e.location.z += 0.3 * scale
+        bpy.context.view_layer.update()
+        shapes.append((S.evaluated_positions(obj) - rest) / scale)
+    R.check("a 10x larger model deforms the same relative to its size",
+            np.abs(shapes[0] - shapes[1]).max() < 1e-5, np.abs(shapes[0] - shapes[1]).max())
+    d.fixed_group = ""
+    bpy.ops.deformkit.bind()
+    native = S.addon.solver._cache[(obj.name, d.uid)].native
+    diag = float(np.linalg.norm(rest.max(0) - rest.min(0)))
+    R.check("without Fixed: a quarter of the diagonal",
+            abs(float(np.asarray(native.ranges)[0]) - 0.25 * diag) < 1e-6 * diag)
+    d.options.range_length = 0.123
+    bpy.ops.deformkit.bind()
+    native = S.addon.solver._cache[(obj.name, d.uid)].native
+    R.check("a Range typed in is used", abs(float(np.asarray(native.ranges)[0]) - 0.123) < 1e-6)
+
+
+for t in (test_falloff_reach_scales_with_the_model, test_point_cache_bake_shows_and_frees, test_shape_key_bake_shows_at_once_and_frees,
           test_sidebar_and_handle_target, test_errors_with_a_way_out, test_keyed_factor_warns):
     R.run(t)
 R.finish()

@@ -201,3 +201,44 @@ def test_arm_lift_geodesic():
     s = disp @ tr / (tr @ tr)
     assert s.min() >= -1e-12 and s.max() <= 1 + 1e-12
     np.testing.assert_allclose(np.cross(disp, tr), 0, atol=1e-12)
+
+
+def test_reach_fixed_fades_out_where_the_fixed_part_begins():
+    """reach='fixed': each group's range is its distance to the nearest fixed vertex, in the
+    chosen kind, so the weights reach 0 at the fixed part and are independent of the model's
+    scale; a group that reaches no fixed vertex keeps `range`."""
+    nx, ny = 30, 6
+    xs, ys = np.meshgrid(np.linspace(0, 3, nx), np.linspace(0, 0.5, ny))
+    v = np.c_[xs.ravel(), ys.ravel(), np.zeros(nx * ny)]
+    f = []
+    for j in range(ny - 1):
+        for i in range(nx - 1):
+            a = j * nx + i
+            f += [[a, a + 1, a + nx + 1], [a, a + nx + 1, a + nx]]
+    f = np.array(f, np.int32)
+    x = v[:, 0]
+    fixed, hand = np.where(x < 0.2)[0], np.where(x > 2.8)[0]
+    for distance in ("hops", "euclidean", "dijkstra", "geodesic"):
+        ranges = []
+        for scale in (1.0, 100.0):
+            mesh = deformkit.Mesh(v * scale, f)
+            fo = deformkit.Falloff(mesh, handles=[hand], fixed=fixed, distance=distance, reach="fixed",
+                            range=1.0)
+            d, S = fo.weights(0)
+            r = float(np.asarray(fo.ranges)[0])
+            assert abs(r - np.asarray(d)[fixed].min()) < 1e-12 * max(r, 1.0), distance
+            ranges.append(r / (1.0 if distance == "hops" else scale))
+            S = np.asarray(S)
+            free = np.setdiff1d(np.arange(len(v)), np.r_[fixed, hand])
+            beside = free[np.argmin(np.abs(x[free] - 0.3))]
+            assert S[beside] < 0.15, (distance, S[beside])   # nearly nothing next to fixed
+            mid = free[np.argmin(np.abs(x[free] - 1.5))]
+            assert 0.3 < S[mid] < 0.7, (distance, S[mid])     # half way: half the pull
+        assert abs(ranges[0] - ranges[1]) < 1e-6 * ranges[0], (distance, ranges)
+    # default reach: the given range for every group; no fixed vertex reached: `range`
+    mesh = deformkit.Mesh(v, f)
+    assert np.asarray(deformkit.Falloff(mesh, handles=[hand], fixed=fixed, range=7.0).ranges)[0] == 7.0
+    fo = deformkit.Falloff(mesh, handles=[hand], reach="fixed", range=5.0)
+    assert np.asarray(fo.ranges)[0] == 5.0
+    with pytest.raises(ValueError):
+        deformkit.Falloff(mesh, handles=[hand], reach="nowhere")
