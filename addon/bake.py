@@ -242,62 +242,124 @@ def prepare(obj, d, kind):
         free(obj, d)
 
 
-def bake_pc2(context, obj, d, frame_start, frame_end, path, progress=None):
-    """Synchronous bake of frames [start, end] to `path`; progress(i, n, frame) per frame."""
-    prepare(obj, d, "PC2")
-    fb = FrameBaker(context, obj, d, frame_start, frame_end)
-    n_points = len(obj.data.vertices)
-    os.makedirs(os.path.dirname(os.path.abspath(path)) or ".", exist_ok=True)
-    tmp = path + ".part"
+class PC2Bake:
+    """A bake to a PC2 file, frame by frame (the synchronous bake and the modal operator
+    share it): step() solves and writes the next frame into `path`.part; finish(True) puts
+    the file in place (and with `add_cache` adds the Mesh Cache that plays it), finish(False)
+    drops it. finish runs once."""
+    kind = "PC2"
+
+    def __init__(self, context, obj, d, frame_start, frame_end, path, add_cache=True):
+        prepare(obj, d, "PC2")
+        self.add_cache = add_cache
+        self.path, self.tmp = path, path + ".part"
+        self.start, self.end = frame_start, frame_end
+        self.fb = FrameBaker(context, obj, d, frame_start, frame_end)
+        try:
+            os.makedirs(os.path.dirname(os.path.abspath(path)) or ".", exist_ok=True)
+            self.w = pc2.Writer(self.tmp, len(obj.data.vertices), start=frame_start)
+        except BaseException:
+            self.fb.finish()
+            raise
+
+    @property
+    def done(self):
+        return self.fb.done
+
+    def step(self):
+        f, pos = self.fb.step()
+        self.w.add(np.asarray(pos, dtype=np.float32))
+        return f
+
+    def finish(self, ok):
+        self.fb.finish()
+        self.w.close()
+        if not ok:
+            if os.path.exists(self.tmp):
+                os.remove(self.tmp)
+            return None
+        os.replace(self.tmp, self.path)
+        if self.add_cache:
+            obj, d = self.fb._objects()
+            add_mesh_cache(obj, d, self.path, self.start, self.end)
+        return "baked %s to %s" % (plural(len(self.fb.frames), "frame"), self.path)
+
+
+class ShapeKeyBake:
+    """A bake to shape keys, frame by frame: step() solves the next frame; finish(True) adds
+    one shape key per frame, keyed to 1 on its frame and 0 on the neighbours."""
+    kind = "SHAPE_KEYS"
+
+    def __init__(self, context, obj, d, frame_start, frame_end):
+        prepare(obj, d, "SHAPE_KEYS")
+        solver.check_input_is_rest(obj, d, "bake to shape keys")
+        self.context, self.start, self.end = context, frame_start, frame_end
+        self.fb = FrameBaker(context, obj, d, frame_start, frame_end)
+        self.results = []
+
+    @property
+    def done(self):
+        return self.fb.done
+
+    def step(self):
+        f, pos = self.fb.step()
+        self.results.append((f, np.asarray(pos, dtype=np.float32)))
+        return f
+
+    def finish(self, ok):
+        self.fb.finish()
+        if not ok:
+            return None
+        obj, d = self.fb._objects()
+        prefix = d.name
+        if obj.data.shape_keys is None:
+            obj.shape_key_add(name="Basis", from_mix=False)
+        for f, pos in self.results:
+            kname = _key_name(d, prefix, f)
+            old = obj.data.shape_keys.key_blocks.get(kname)
+            if old is not None:
+                obj.shape_key_remove(old)
+            sk = obj.shape_key_add(name=kname, from_mix=False)
+            sk.data.foreach_set("co", pos.ravel())
+            for ff, v in ((f - 1, 0.0), (f, 1.0), (f + 1, 0.0)):
+                sk.value = v
+                sk.keyframe_insert("value", frame=ff)
+        gn = geonodes.find_modifier(obj, d)
+        if gn is not None:
+            gn.show_viewport = False
+            gn.show_render = False
+        _record(d, "SHAPE_KEYS", prefix, self.start, self.end)
+        # the keyframes were inserted after this frame was evaluated: evaluate it again, or
+        # the mesh shows no key (the rest shape) until the frame changes, as if the bake had
+        # failed
+        self.context.scene.frame_set(self.context.scene.frame_current)
+        return "baked %s to shape keys" % plural(len(self.results), "frame")
+
+
+def run(job, progress=None):
+    """Runs a PC2Bake or ShapeKeyBake to the end (progress(i, n, frame) per frame); on any
+    error the partial bake is dropped and the error raised. Returns the finish message."""
     try:
-        with pc2.Writer(tmp, n_points, start=frame_start) as w:
-            while not fb.done:
-                f, pos = fb.step()
-                w.add(np.asarray(pos, dtype=np.float32))
-                if progress is not None:
-                    progress(fb.i, len(fb.frames), f)
-        os.replace(tmp, path)
-    finally:
-        fb.finish()
-        if os.path.exists(tmp):
-            os.remove(tmp)
+        while not job.done:
+            f = job.step()
+            if progress is not None:
+                progress(job.fb.i, len(job.fb.frames), f)
+    except BaseException:
+        job.finish(False)
+        raise
+    return job.finish(True)
+
+
+def bake_pc2(context, obj, d, frame_start, frame_end, path, progress=None, add_cache=False):
+    """Synchronous bake of frames [start, end] to `path` (with `add_cache`, and its Mesh
+    Cache modifier); progress(i, n, frame) per frame. Returns `path`."""
+    run(PC2Bake(context, obj, d, frame_start, frame_end, path, add_cache), progress)
     return path
 
 
 def bake_shape_keys(context, obj, d, frame_start, frame_end, progress=None):
-    """One shape key per frame, keyed to 1 on its frame and 0 on the neighbours."""
-    prepare(obj, d, "SHAPE_KEYS")
-    solver.check_input_is_rest(obj, d, "bake to shape keys")
-    fb = FrameBaker(context, obj, d, frame_start, frame_end)
-    results = []
-    try:
-        while not fb.done:
-            f, pos = fb.step()
-            results.append((f, np.asarray(pos, dtype=np.float32)))
-            if progress is not None:
-                progress(fb.i, len(fb.frames), f)
-    finally:
-        fb.finish()
-    obj, d = fb._objects()
-    prefix = d.name
-    if obj.data.shape_keys is None:
-        obj.shape_key_add(name="Basis", from_mix=False)
-    for f, pos in results:
-        kname = _key_name(d, prefix, f)
-        old = obj.data.shape_keys.key_blocks.get(kname)
-        if old is not None:
-            obj.shape_key_remove(old)
-        sk = obj.shape_key_add(name=kname, from_mix=False)
-        sk.data.foreach_set("co", pos.ravel())
-        for ff, v in ((f - 1, 0.0), (f, 1.0), (f + 1, 0.0)):
-            sk.value = v
-            sk.keyframe_insert("value", frame=ff)
-    gn = geonodes.find_modifier(obj, d)
-    if gn is not None:
-        gn.show_viewport = False
-        gn.show_render = False
-    _record(d, "SHAPE_KEYS", prefix, frame_start, frame_end)
-    # the keyframes were inserted after this frame was evaluated: evaluate it again, or the
-    # mesh shows no key (the rest shape) until the frame changes, as if the bake had failed
-    context.scene.frame_set(context.scene.frame_current)
-    return len(results)
+    """One shape key per frame, keyed to 1 on its frame and 0 on the neighbours. Returns the
+    number of frames."""
+    job = ShapeKeyBake(context, obj, d, frame_start, frame_end)
+    run(job, progress)
+    return len(job.results)

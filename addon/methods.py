@@ -505,6 +505,16 @@ def constructor_kwargs(method, opts):
     return kw
 
 
+def bind_kwargs(method, opts, rest, constraints, mesh):
+    """Every constructor keyword the add-on's options give (constructor_kwargs, plus the
+    method's bind_args computed from the rest positions, the constraint keywords and the
+    native Mesh): what a bind passes, and what tests pass to compare with the API."""
+    kw = constructor_kwargs(method, opts)
+    if method.bind_args is not None:
+        kw.update(method.bind_args(opts, rest, constraints, mesh))
+    return kw
+
+
 def solve_kwargs(method, opts, cold):
     # The add-on never shows a method's energy: every solve skips its evaluation (a pass
     # over the operator: ~0.4 ms for Laplacian editing, ~35 ms for linear reconstruction's

@@ -432,8 +432,7 @@ class DEFORMKIT_OT_bake(_Base, bpy.types.Operator):
                 wm.progress_update(i)
             if self.mode == "PC2":
                 path = bake.resolve_path(self.filepath or d.bake_file, obj, d)
-                bake.bake_pc2(context, obj, d, s, e, path, prog)
-                bake.add_mesh_cache(obj, d, path, s, e)
+                bake.bake_pc2(context, obj, d, s, e, path, prog, add_cache=True)
                 self.report({"INFO"}, "baked frames %d-%d to %s" % (s, e, path))
             else:
                 n = bake.bake_shape_keys(context, obj, d, s, e, prog)
@@ -441,50 +440,43 @@ class DEFORMKIT_OT_bake(_Base, bpy.types.Operator):
         finally:
             wm.progress_end()
 
-    # ---- modal version for the UI: one frame per timer tick, Esc cancels
+    # ---- modal version for the UI: one frame per timer tick (the window stays live, the
+    # status bar shows the progress), Esc cancels and drops the partial bake
     def invoke(self, context, event):
-        if bpy.app.background or self.mode != "PC2":
+        if bpy.app.background:
             return self.execute(context)
         try:
             obj = _get_object(self, context)
             d = _get_deformer(self, context, obj)
             s, e = self._range(context)
-            self._path = bake.resolve_path(self.filepath or d.bake_file, obj, d)
-            bake.prepare(obj, d, "PC2")
-            self._fb = bake.FrameBaker(context, obj, d, s, e)
-            from . import pc2
-            self._tmp = self._path + ".part"
-            self._w = pc2.Writer(self._tmp, len(obj.data.vertices), start=s)
+            if self.mode == "PC2":
+                path = bake.resolve_path(self.filepath or d.bake_file, obj, d)
+                self._job = bake.PC2Bake(context, obj, d, s, e, path)
+            else:
+                self._job = bake.ShapeKeyBake(context, obj, d, s, e)
         except solver.DeformKitError as ex:
             self.report({"ERROR"}, str(ex))
             return {"CANCELLED"}
-        self._start, self._end = s, e
-        self._obj, self._uid = obj.name, d.uid
         wm = context.window_manager
         self._timer = wm.event_timer_add(0.001, window=context.window)
-        wm.progress_begin(0, len(self._fb.frames))
+        wm.progress_begin(0, len(self._job.fb.frames))
         wm.modal_handler_add(self)
         return {"RUNNING_MODAL"}
 
-    def _end(self, context, ok, msg):
-        import os
+    def _end(self, context, ok, msg=None):
         wm = context.window_manager
         wm.event_timer_remove(self._timer)
         wm.progress_end()
-        self._fb.finish()
-        self._w.close()
         if context.area:
             context.area.header_text_set(None)
         context.workspace.status_text_set(None)
+        try:
+            done = self._job.finish(ok)
+        except solver.DeformKitError as ex:
+            ok, msg = False, str(ex)
         if ok:
-            os.replace(self._tmp, self._path)
-            obj = bpy.data.objects.get(self._obj)
-            d = next((x for x in obj.deformkit.deformers if x.uid == self._uid), None)
-            bake.add_mesh_cache(obj, d, self._path, self._start, self._end)
-            self.report({"INFO"}, msg)
+            self.report({"INFO"}, done)
             return {"FINISHED"}
-        if os.path.exists(self._tmp):
-            os.remove(self._tmp)
         self.report({"WARNING"} if msg == "bake cancelled" else {"ERROR"}, msg)
         return {"CANCELLED"}
 
@@ -494,16 +486,15 @@ class DEFORMKIT_OT_bake(_Base, bpy.types.Operator):
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
         try:
-            f, pos = self._fb.step()
-            self._w.add(np.asarray(pos, dtype=np.float32))
+            f = self._job.step()
         except solver.DeformKitError as ex:
             return self._end(context, False, str(ex))
-        n = len(self._fb.frames)
-        context.window_manager.progress_update(self._fb.i)
+        fb = self._job.fb
+        context.window_manager.progress_update(fb.i)
         context.workspace.status_text_set("DeformKit bake: frame %d (%d/%d), Esc to cancel"
-                                          % (f, self._fb.i, n))
-        if self._fb.done:
-            return self._end(context, True, "baked %s to %s" % (plural(n, "frame"), self._path))
+                                          % (f, fb.i, len(fb.frames)))
+        if self._job.done:
+            return self._end(context, True)
         return {"RUNNING_MODAL"}
 
 

@@ -405,9 +405,7 @@ class BindJob:
         if paint is not None:
             args["material"] = self.material = material_map(dk, self.dkmesh, paint, kw,
                                                             d.options)
-        args.update(methods.constructor_kwargs(m, d.options))
-        if m.bind_args is not None:
-            args.update(m.bind_args(d.options, self.rest, kw, self.dkmesh))
+        args.update(methods.bind_kwargs(m, d.options, self.rest, kw, self.dkmesh))
         self.fraction, self.cancelled = None, False
         if m.bind_progress:  # called from the worker thread: plain attribute writes only
             args["progress"] = self._progress

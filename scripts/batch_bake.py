@@ -184,7 +184,7 @@ def do_bake(args):
         if args.save:
             if not bpy.data.filepath:
                 fail("--save needs a .blend file")
-            bake.add_mesh_cache(obj, d, out, a)
+            bake.add_mesh_cache(obj, d, out, a, b)
             bpy.ops.wm.save_mainfile()
             log("added a Mesh Cache modifier and saved %s" % bpy.data.filepath)
     except solver.DeformKitError as e:

@@ -44,9 +44,11 @@ def build(method=MID):
 
 def direct_cold(obj, d, e, fixed, handle, bind_world):
     m = S.methods.get(d.method)
-    mesh = S.dk.Mesh(S.rest_positions(obj), S.solver.triangles(obj.data))
-    meth = getattr(S.dk, m.native_class)(mesh, handles=[handle], fixed=fixed,
-                                        **S.methods.constructor_kwargs(m, d.options))
+    rest = S.rest_positions(obj)
+    mesh = S.dk.Mesh(rest, S.solver.triangles(obj.data))
+    kw = dict(handles=[handle], fixed=fixed)
+    meth = getattr(S.dk, m.native_class)(mesh, **kw, **S.methods.bind_kwargs(m, d.options, rest,
+                                                                            kw, mesh))
     T = np.array(e.matrix_world @ bind_world.inverted())[None]
     return np.asarray(meth.solve(transforms=T, **S.methods.solve_kwargs(m, d.options, True)).positions)
 
@@ -320,9 +322,10 @@ def test_embedded_follows_an_armature():
         obj, d, e, fixed, handle, bind_world = rigged_arm(nodes)
         m = S.methods.get("EMBEDDED")
         rest = S.rest_positions(obj)
-        native = S.dk.EmbeddedDeformation(
-            S.dk.Mesh(rest, S.solver.triangles(obj.data)), handles=[handle], fixed=fixed,
-            **S.methods.constructor_kwargs(m, d.options))
+        mesh = S.dk.Mesh(rest, S.solver.triangles(obj.data))
+        kw = dict(handles=[handle], fixed=fixed)
+        native = S.dk.EmbeddedDeformation(mesh, **kw, **S.methods.bind_kwargs(m, d.options,
+                                                                             rest, kw, mesh))
         T = np.array(e.matrix_world @ bind_world.inverted())
         edit = rest[handle] @ T[:3, :3].T + T[:3, 3] - rest[handle]
         sc = bpy.context.scene

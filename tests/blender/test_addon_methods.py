@@ -22,10 +22,8 @@ def direct(obj, d, kw_extra, T_list):
     rest = S.solver.rest_positions(obj.data)
     tri = S.solver.triangles(obj.data)
     mesh = S.dk.Mesh(rest, tri)
-    kw = S.methods.constructor_kwargs(m, d.options)
-    kw.update(kw_extra)
-    if m.bind_args is not None:  # Falloff's automatic range: the add-on's own rule
-        kw.update(m.bind_args(d.options, rest, kw, mesh))
+    kw = dict(kw_extra)
+    kw.update(S.methods.bind_kwargs(m, d.options, rest, kw_extra, mesh))
     meth = cls(mesh, **kw)
     skw = S.methods.solve_kwargs(m, d.options, cold=False)
     out = None
@@ -445,9 +443,11 @@ def test_eigen_region_and_preview():
     bpy.ops.deformkit.bind()
     R.check("EIGEN with a Region group binds", d.bound and not d.status_is_error, d.status)
     m = S.methods.get("EIGEN")
-    native = S.dk.EigenDeformation(S.dk.Mesh(rest, S.solver.triangles(obj.data)),
-                                   handles=[half], fixed=fixed,
-                                   **S.methods.constructor_kwargs(m, d.options))
+    mesh = S.dk.Mesh(rest, S.solver.triangles(obj.data))
+    native = S.dk.EigenDeformation(mesh, handles=[half], fixed=fixed,
+                                   **S.methods.bind_kwargs(m, d.options, rest,
+                                                           dict(handles=[half], fixed=fixed),
+                                                           mesh))
     S.handlers.force_interactive[0] = True
     try:
         e.location = (1.0, 0.0, 0.3)

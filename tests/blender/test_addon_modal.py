@@ -73,6 +73,36 @@ def main():
     gn = S.geonodes.find_modifier(obj, obj.deformkit.deformers[0])
     R.check("Esc cancels: DeformKit modifier still shown", gn.show_viewport)
 
+    # Bake to Shape Keys from the UI is modal too (it froze the UI for 21-24 s on the
+    # armadillo): the operator returns at once, the keys come at the end, Esc drops them
+    scene()
+    with bpy.context.temp_override(**S.ui_context()):
+        r = bpy.ops.deformkit.bake("INVOKE_DEFAULT", mode="SHAPE_KEYS", frame_start=1,
+                                   frame_end=12)
+    obj = bpy.data.objects["Grid"]
+    R.check("shape keys: invoke starts a modal bake, no key yet",
+            r == {"RUNNING_MODAL"} and obj.data.shape_keys is None, r)
+    t0 = time.time()
+    while obj.data.shape_keys is None and time.time() - t0 < 60:
+        yield 0.1
+    keys = obj.data.shape_keys
+    R.check("shape keys: 12 keys and the Basis at the end",
+            keys is not None and len(keys.key_blocks) == 13,
+            keys and len(keys.key_blocks))
+    R.check("shape keys: frame restored, handlers on",
+            bpy.context.scene.frame_current == 1 and S.handlers.enabled[0])
+    scene()
+    with bpy.context.temp_override(**S.ui_context()):
+        bpy.ops.deformkit.bake("INVOKE_DEFAULT", mode="SHAPE_KEYS", frame_start=1,
+                               frame_end=5000)
+    yield 0.3
+    esc()
+    yield 0.5
+    obj = bpy.data.objects["Grid"]
+    R.check("shape keys: Esc leaves no key and the live result",
+            obj.data.shape_keys is None and
+            S.geonodes.find_modifier(obj, obj.deformkit.deformers[0]).show_viewport)
+
 
 def esc():
     win = bpy.context.window_manager.windows[0]
