@@ -64,6 +64,8 @@ def _run(scene, depsgraph, cold=False):
             depsgraph.update()
         if not cold and solver.pending() and not bpy.app.timers.is_registered(refine):
             bpy.app.timers.register(refine, first_interval=0.001)
+        if solver.rebinding() and not bpy.app.timers.is_registered(poll_rebinds):
+            bpy.app.timers.register(poll_rebinds, first_interval=0.05)
     except Exception as ex:  # a handler must never raise
         print("DeformKit handler error: %s: %s" % (type(ex).__name__, ex))
     finally:
@@ -105,6 +107,23 @@ def refine():
     finally:
         _busy[0] = False
     return 0.001 if solver.pending() else None
+
+
+def poll_rebinds():
+    """Timer: installs the option and method re-binds that finished in their worker threads
+    (solver.finish_rebinds; their objects then re-solve on the next update), and redraws the
+    panels meanwhile so that the elapsed time shows. Returns the next interval, or None."""
+    try:
+        solver.finish_rebinds()
+        wm = getattr(bpy.context, "window_manager", None)
+        for win in (wm.windows if wm is not None else ()):
+            for area in win.screen.areas:
+                if area.type in ("PROPERTIES", "VIEW_3D"):
+                    area.tag_redraw()
+    except Exception as ex:  # a timer must never raise
+        print("DeformKit re-bind error: %s: %s" % (type(ex).__name__, ex))
+        return None
+    return 0.1 if solver.rebinding() else None
 
 
 @persistent
@@ -151,6 +170,7 @@ def unregister():
         for old in [f for f in lst if getattr(f, "__name__", "") == fn.__name__
                     and getattr(f, "__module__", "") == fn.__module__]:
             lst.remove(old)
-    if bpy.app.timers.is_registered(refine):
-        bpy.app.timers.unregister(refine)
+    for timer in (refine, poll_rebinds):
+        if bpy.app.timers.is_registered(timer):
+            bpy.app.timers.unregister(timer)
     solver.clear_cache()

@@ -61,6 +61,7 @@ def clear_cache():
     _cache.clear()
     runtime.clear()
     running_binds.clear()
+    _cancel_rebinds()
 
 
 def mark_all_dirty():
@@ -73,6 +74,7 @@ def mark_all_dirty():
 def drop(obj_name, uid):
     _cache.pop((obj_name, uid), None)
     runtime.pop((obj_name, uid), None)
+    _cancel_rebinds((obj_name, uid))
 
 
 # ------------------------------------------------------------------ reading Blender data ----
@@ -450,7 +452,7 @@ class BindJob:
         return e
 
 
-def _build(obj, d, kw, groups_key, entry=None):
+def _build(obj, d, kw, groups_key, entry=None, threaded=False):
     # Only the constraint groups changed: the native rebind is the fast path.
     if (entry is not None and entry.method_id == d.method and entry.settings == _settings_key(d)
             and hasattr(entry.native, "rebind") and set(kw) <= {"handles", "fixed", "roi"}):
@@ -465,9 +467,92 @@ def _build(obj, d, kw, groups_key, entry=None):
             return entry
         except NATIVE_ERRORS:
             pass  # fall back to a full bind, which reports the error properly
+    if threaded:
+        _rebind_in_thread(obj, d, kw, groups_key)  # raises RebindPending
     job = BindJob(obj, d, kw, groups_key)
     job.run()
     return job.entry(obj, d)
+
+
+# ---- re-binds after an option or method change, off the main thread in the UI ----------
+
+# (object name, deformer uid) -> dict(job, thread, t0, sig) of a re-bind running in a worker
+# thread. An option or method change in the UI re-binds this way (0.4-0.75 s at 43k
+# vertices, seconds on big meshes, used to freeze the handler); the last result stays shown
+# meanwhile and the panel says "re-binding". Frames, bakes, scripts and blender -b bind
+# synchronously: their result must be this frame's.
+_rebinds = {}
+threaded_rebinds = [None]  # None: in the UI only; True / False force it (tests)
+
+
+class RebindPending(Exception):
+    """The deformer's re-bind runs in a worker thread: nothing to solve yet."""
+
+
+def _use_threads(interactive):
+    force = threaded_rebinds[0]
+    return force if force is not None else (interactive and not bpy.app.background)
+
+
+def _rebind_in_thread(obj, d, kw, groups_key):
+    import threading
+    key = (obj.name, d.uid)
+    sig = (d.method, _settings_key(d), groups_key)
+    r = _rebinds.get(key)
+    if r is not None and r["sig"] == sig:
+        raise RebindPending()
+    if r is not None:
+        r["job"].cancelled = True  # settings changed again: its result will be dropped
+    job = BindJob(obj, d, kw, groups_key)  # main thread: reads Blender data
+    th = threading.Thread(target=job.run, name="DeformKit re-bind", daemon=True)
+    th.start()
+    _rebinds[key] = dict(job=job, thread=th, t0=time.perf_counter(), sig=sig)
+    raise RebindPending()
+
+
+def _cancel_rebinds(key=None):
+    """Forgets the running re-binds (of `key`, or all): their results are dropped."""
+    for k in [key] if key is not None else list(_rebinds):
+        r = _rebinds.pop(k, None)
+        if r is not None:
+            r["job"].cancelled = True
+
+
+def rebinding(obj=None, d=None):
+    """Seconds since the running re-bind of (obj, d) started, or None; without arguments,
+    whether any re-bind runs."""
+    if obj is None:
+        return bool(_rebinds)
+    r = _rebinds.get((obj.name, d.uid))
+    return None if r is None else time.perf_counter() - r["t0"]
+
+
+def finish_rebinds():
+    """Installs the re-binds whose worker finished (main thread; handlers.poll_rebinds calls
+    it from a timer): the result becomes the deformer's binding and its object is tagged so
+    that the next update solves with it; a failure becomes the deformer's status. Returns
+    the keys finished."""
+    done = []
+    for key, r in list(_rebinds.items()):
+        if r["thread"].is_alive():
+            continue
+        del _rebinds[key]
+        done.append(key)
+        obj = bpy.data.objects.get(key[0])
+        d = None if obj is None else next(
+            (x for x in obj.deformkit.deformers if x.uid == key[1]), None)
+        if d is None or r["job"].cancelled:
+            continue
+        try:
+            e = r["job"].entry(obj, d)
+        except DeformKitError as ex:
+            zero_offset(obj, d)
+            set_status(d, ex, True)
+            continue
+        e.last_inputs = None
+        reset_status(d)
+        obj.update_tag()
+    return done
 
 
 def bind_begin(obj, d, depsgraph=None):
@@ -475,6 +560,7 @@ def bind_begin(obj, d, depsgraph=None):
     the targets' current placement (which becomes the handles' rest pose at bind_end).
     Returns (job, bind matrices); nothing is changed until bind_end."""
     check_object(obj, d)
+    _cancel_rebinds((obj.name, d.uid))  # this bind replaces an automatic re-bind
     kw, key = collect(obj, d)
     mats = [bind_matrix(obj, h, depsgraph) for h in d.handles]
     return BindJob(obj, d, kw, key), mats
@@ -556,7 +642,7 @@ def status_text(d):
     return d.status if d.status_is_error else idle_status(d)
 
 
-def _entry_for(obj, d, check_groups):
+def _entry_for(obj, d, check_groups, threaded=False):
     me = obj.data
     n, f = len(me.vertices), len(me.polygons)
     if n != d.bind_n_vertices:
@@ -576,7 +662,10 @@ def _entry_for(obj, d, check_groups):
             e.verified = True
             return e
         e = None  # rest shape edited (same topology): full rebuild
-    return _build(obj, d, kw, key, e)
+    # in a worker thread: a re-bind for changed options or method (the last result then
+    # stays shown); a binding the cache lacks (after a file load, an undone Apply) is built
+    # here, so that the first update after it shows the deformer's result
+    return _build(obj, d, kw, key, e, threaded and e is not None and not same)
 
 
 # A handle transform this close to the identity is the identity seen through Blender's float32
@@ -731,7 +820,7 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
     if not d.bound:
         raise DeformKitError("not bound: press Bind")
     check_object(obj, d)
-    e = _entry_for(obj, d, check_groups)
+    e = _entry_for(obj, d, check_groups, threaded=not cold and _use_threads(interactive))
     T = snap_identity(transforms(obj, d, depsgraph), e.extent)
     m = methods.get(d.method)
     if len(T) > len(e.handles):  # region_is_handle: the Region group moves with the first
@@ -926,6 +1015,8 @@ def evaluate_object(obj, depsgraph=None, check_groups=False, cold=False, interac
             if solve(obj, d, depsgraph, cold=cold, check_groups=check_groups,
                      interactive=interactive, force=refine, resume=refine) is not None:
                 reset_status(d)
+        except RebindPending:
+            pass  # the last result stays shown; finish_rebinds installs the new binding
         except DeformKitError as ex:
             if d.status != str(ex):
                 zero_offset(obj, d)

@@ -159,6 +159,7 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
             row.operator("deformkit.bind", text="Bind", icon="LINKED")
         draw_wrapped(layout, solver.status_text(d), "ERROR" if d.status_is_error else "INFO",
                      width, alert=d.status_is_error)
+        draw_rebinding(layout, obj, d)
         draw_overlap(layout, d)
         hidden = bake.hidden_reason(obj, d) if mod is not None and d.bound else None
         if hidden:
@@ -176,6 +177,14 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
         row.operator("deformkit.apply", text="Apply").mode = "MESH"
         row.operator("deformkit.apply", text="Apply as Shape Key").mode = "SHAPE_KEY"
         draw_bake(layout, obj, d, width)
+
+
+def draw_rebinding(layout, obj, d):
+    """The re-bind that runs after an option or method change (solver.rebinding)."""
+    t = solver.rebinding(obj, d)
+    if t is not None:
+        layout.label(text="re-binding for the new settings: %.1f s (the last result shows)"
+                     % t, icon="SORTTIME")
 
 
 def draw_overlap(layout, d):
@@ -268,6 +277,7 @@ def draw_deformer_summary(layout, obj, i, d, handle=None, width=40):
     box.label(text=title, icon=m.icon if m else "QUESTION")
     draw_wrapped(box, solver.status_text(d), "ERROR" if d.status_is_error else "INFO", width,
                  alert=d.status_is_error)
+    draw_rebinding(box, obj, d)
     st = bake.state(obj, d)
     if st is not None:
         r = box.row()

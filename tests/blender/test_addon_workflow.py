@@ -272,7 +272,53 @@ def test_falloff_reach_scales_with_the_model():
     R.check("a Range typed in is used", abs(float(np.asarray(native.ranges)[0]) - 0.123) < 1e-6)
 
 
-for t in (test_falloff_reach_scales_with_the_model, test_point_cache_bake_shows_and_frees, test_shape_key_bake_shows_at_once_and_frees,
+def test_option_change_rebinds_in_a_thread():
+    """In the UI an option or method change re-binds in a worker thread (it froze the
+    handler for 0.4-0.75 s at 43k): the last result stays shown and the panel says
+    "re-binding"; when the thread is done the next update shows exactly what a synchronous
+    re-bind gives. (Forced here: blender -b re-binds synchronously.)"""
+    import time
+    obj, d, e, handle = scene()
+    e.location.z += 0.3
+    bpy.context.view_layer.update()
+    before = S.evaluated_positions(obj)
+    solver = S.addon.solver
+    solver.threaded_rebinds[0] = True
+    try:
+        d.method = "LAPLACIAN"
+        bpy.context.view_layer.update()
+        R.check("a method change starts a background re-bind",
+                solver.rebinding(obj, d) is not None)
+        R.check("meanwhile the last result stays shown",
+                np.abs(S.evaluated_positions(obj) - before).max() < 1e-6)
+        out = draw(ui.DEFORMKIT_PT_modifiers, obj)
+        R.check("the panel says it is re-binding", "re-binding" in text(out), text(out))
+        t0 = time.time()
+        while solver.rebinding() and time.time() - t0 < 30:
+            time.sleep(0.01)
+            S.handlers.poll_rebinds()
+        bpy.context.view_layer.update()
+        threaded = S.evaluated_positions(obj)
+    finally:
+        solver.threaded_rebinds[0] = None
+    R.check("the re-bind finished and is installed", not solver.rebinding() and
+            not d.status_is_error, d.status)
+    solver.drop(obj.name, d.uid)  # the same change, bound synchronously
+    solver.threaded_rebinds[0] = False
+    try:
+        e.location.x += 1e-3
+        bpy.context.view_layer.update()
+        e.location.x -= 1e-3
+        bpy.context.view_layer.update()
+    finally:
+        solver.threaded_rebinds[0] = None
+    sync = S.evaluated_positions(obj)
+    R.check("then it shows what a synchronous re-bind gives",
+            np.abs(threaded - sync).max() < 1e-6 and np.abs(threaded - before).max() > 1e-4,
+            (np.abs(threaded - sync).max(), np.abs(threaded - before).max()))
+
+
+for t in (test_option_change_rebinds_in_a_thread, test_falloff_reach_scales_with_the_model, test_point_cache_bake_shows_and_frees, test_shape_key_bake_shows_at_once_and_frees,
           test_sidebar_and_handle_target, test_errors_with_a_way_out, test_keyed_factor_warns):
     R.run(t)
 R.finish()
