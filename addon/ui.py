@@ -335,9 +335,10 @@ class DEFORMKIT_PT_handle_target(bpy.types.Panel):
         return context.object is not None and bool(driven_by(context.object))
 
     def draw(self, context):
+        width = wrap_width(context)
         for mesh, i, d, h in driven_by(context.object):
-            self.layout.label(text="moves handle '%s' of %s (%s)" % (h.name, mesh.name, d.name),
-                              icon="HOOK")
+            draw_wrapped(self.layout, "moves handle '%s' of %s (%s)" % (h.name, mesh.name,
+                                                                        d.name), "HOOK", width)
 
 
 class DEFORMKIT_MT_add(bpy.types.Menu):

@@ -19,6 +19,10 @@ PNG2 = os.path.join(OUT, "modifiers_tab_last_method.png")
 # a 3D viewport with a bound embedded deformation and Show Graph on (overlay.py), in a second
 # Blender run (DEFORMKIT_SHOT=graph): the graph's nodes and edges drawn over the mesh
 PNG3 = os.path.join(OUT, "viewport_show_graph.png")
+# the panel in each state an artist meets (DEFORMKIT_SHOT=states, a third run): one image
+# each, kept in docs/images after being looked at
+STATES = ("unbound", "bound", "rebinding", "baked", "overlap_error", "handle_target")
+STATE_PNGS = [os.path.join(OUT, "panel_%s.png" % s) for s in STATES]
 
 try:
     import bpy  # noqa: F401
@@ -32,7 +36,7 @@ def launch():
     if len(sys.argv) > 1:
         env["PYTHONPATH"] = sys.argv[1]
     os.makedirs(OUT, exist_ok=True)
-    for p in (PNG, PNG2, PNG3):
+    for p in (PNG, PNG2, PNG3) + tuple(STATE_PNGS):
         if os.path.exists(p):
             os.remove(p)
     cmd = ["xvfb-run", "-a", "-s", "-screen 0 1600x1000x24", "blender", "--factory-startup",
@@ -40,15 +44,18 @@ def launch():
     r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
     r2 = subprocess.run(cmd, env=dict(env, DEFORMKIT_SHOT="graph"), capture_output=True,
                         text=True, timeout=300)
-    log = r.stdout + r.stderr + "\n--- Show Graph run ---\n" + r2.stdout + r2.stderr
+    r3 = subprocess.run(cmd, env=dict(env, DEFORMKIT_SHOT="states"), capture_output=True,
+                        text=True, timeout=300)
+    log = (r.stdout + r.stderr + "\n--- Show Graph run ---\n" + r2.stdout + r2.stderr +
+           "\n--- panel states run ---\n" + r3.stdout + r3.stderr)
     with open(os.path.join(OUT, "screenshot_ui.log"), "w") as f:
         f.write(log)
     bad = [ln for ln in log.splitlines()
            if "Traceback" in ln or "Error: Python" in ln or "Error" in ln and "rna_uiItem" in ln
            or ln.startswith(("AttributeError", "TypeError", "KeyError", "NameError", "ValueError",
                              "RuntimeError"))]
-    ok = (r.returncode == 0 and r2.returncode == 0 and not bad and
-          all(os.path.exists(p) for p in (PNG, PNG2, PNG3)))
+    ok = (r.returncode == 0 and r2.returncode == 0 and r3.returncode == 0 and not bad and
+          all(os.path.exists(p) for p in (PNG, PNG2, PNG3) + tuple(STATE_PNGS)))
     print(log[-3000:])
     for ln in bad:
         print("PYTHON ERROR IN CONSOLE:", ln)
@@ -166,9 +173,91 @@ def in_blender():
             R.failed += 1
         finish()
 
-    graph_run = os.environ.get("DEFORMKIT_SHOT") == "graph"
+    def states():
+        """A generator: puts the scene in each of STATES, yields (the shot is taken 0.8 s
+        later, when the timer resumes it)."""
+        import time
+        S.reset_scene()
+        win = bpy.context.window_manager.windows[0]
+        area = max(win.screen.areas, key=lambda a: a.width * a.height)
+        with bpy.context.temp_override(**S.ui_context()):
+            obj, d, e, fixed, handle = S.grid_setup("ARAP")
+        area.type = "PROPERTIES"
+        S.geonodes.find_modifier(obj, d).show_expanded = False
+        yield "unbound"
+        with bpy.context.temp_override(**S.ui_context()):
+            bpy.ops.deformkit.bind()
+            e.location.z += 0.4
+            bpy.context.view_layer.update()
+        yield "bound"
+        S.solver.threaded_rebinds[0] = True
+        d.options.weights = "uniform" if d.options.weights != "uniform" else "cotangent"
+        bpy.context.view_layer.update()
+        # a 72-vertex bind ends in a millisecond: hold its installation back until the shot
+        if bpy.app.timers.is_registered(S.handlers.poll_rebinds):
+            bpy.app.timers.unregister(S.handlers.poll_rebinds)
+        yield "rebinding"
+        t0 = time.time()
+        while S.solver.rebinding() and time.time() - t0 < 20:
+            time.sleep(0.01)
+            S.handlers.poll_rebinds()
+        S.solver.threaded_rebinds[0] = None
+        with bpy.context.temp_override(**S.ui_context()):
+            bpy.ops.wm.save_as_mainfile(filepath=os.path.join(OUT, "panel_states.blend"))
+            e.keyframe_insert("location", frame=1)
+            e.location.z += 0.2
+            e.keyframe_insert("location", frame=10)
+            bpy.ops.deformkit.bake(mode="PC2", frame_start=1, frame_end=10,
+                                   filepath="//panel_states.pc2")
+        yield "baked"
+        with bpy.context.temp_override(**S.ui_context()):
+            bpy.ops.deformkit.free_bake()
+        S.group(obj, "fixed", [int(handle[0]), int(handle[1])])
+        bpy.context.view_layer.update()
+        S.solver.evaluate_object(obj, bpy.context.evaluated_depsgraph_get(), check_groups=True)
+        yield "overlap_error"
+        for x in bpy.context.view_layer.objects:
+            x.select_set(False)
+        bpy.context.view_layer.objects.active = e
+        e.select_set(True)
+        yield "handle_target"
+
+    def shoot_states():
+        gen = states()
+
+        def tick():
+            try:
+                name = next(gen, None)
+                if name is None:
+                    finish()
+                    return None
+                win = bpy.context.window_manager.windows[0]
+                area = max(win.screen.areas, key=lambda a: a.width * a.height)
+
+                def shot(name=name, win=win, area=area):
+                    path = os.path.join(OUT, "panel_%s.png" % name)
+                    area.spaces.active.context = \
+                        "OBJECT" if name == "handle_target" else "MODIFIER"
+                    window_shot(win, area, path)
+                    R.check("panel state %s shot" % name, os.path.exists(path))
+                    bpy.app.timers.register(tick, first_interval=0.1)
+                    return None
+                bpy.app.timers.register(shot, first_interval=0.8)
+            except Exception:
+                import traceback
+                traceback.print_exc()
+                R.failed += 1
+                finish()
+            return None
+        return tick
+
+    shot_kind = os.environ.get("DEFORMKIT_SHOT")
+    graph_run = shot_kind == "graph"
 
     def first():
+        if shot_kind == "states":
+            bpy.app.timers.register(shoot_states(), first_interval=0.5)
+            return None
         try:
             setup_graph() if graph_run else setup()
         except Exception:
