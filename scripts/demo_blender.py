@@ -532,9 +532,18 @@ def measure(scene, r, fixed, handles, translates, rest, edges, diag):
     # within 5% of the drag (3% on the armadillo with the default 200 nodes)
     m = addon.methods.get(r["method"])
     dk = addon.native.load()
-    penalty = dk._native._method_info(m.native_class)["penalty_handles"]
+    info = dk._native._method_info(m.native_class)
+    penalty = info["penalty_handles"]
     drag = max(float(np.linalg.norm(t)) for t in translates)
-    if (handle_err > (0.05 * drag if penalty else tol)) or fixed_err > tol:
+    if info["soft_regions"]:
+        # eigen deformation's regions guide a least-squares fit of the whole mesh (the
+        # paper's eq. 1): R and the fixed part are met approximately, the more so the smaller
+        # the drag. Reported, not enforced: the scenarios' drags (up to half the model) are
+        # beyond the region moves the method is built for (docs/methods/eigen.md).
+        r["approximate"] = True
+        log("[%s] %s: soft regions, constraints met approximately (handle error %.0f%% of "
+            "the drag)" % (scene.name, r["label"], 100 * handle_err / max(drag, 1e-30)))
+    elif (handle_err > (0.05 * drag if penalty else tol)) or fixed_err > tol:
         raise DemoError("%s: constraints not met (handle error %.3g, fixed drift %.3g, "
                         "tolerance %.3g)" % (r["label"], handle_err, fixed_err, tol))
 
@@ -664,15 +673,20 @@ def summary(records, elapsed):
             "method", "bind ms", "solve ms", "iters", "handle error", "fixed drift",
             "RMS edge chg"))
         for r in rec["results"]:
-            lines.append("  %-20s %9.0f %9.0f %6d %14.2e %13.2e %13.2f%%" % (
+            lines.append("  %-20s %9.0f %9.0f %6d %14.2e %13.2e %13.2f%%%s" % (
                 r["label"], r["bind_ms"], r["solve_ms"], r["iterations"],
-                r["max_handle_error"], r["max_fixed_drift"], 100 * r["rms_edge_change"]))
+                r["max_handle_error"], r["max_fixed_drift"], 100 * r["rms_edge_change"],
+                " *" if r.get("approximate") else ""))
     changed = ["%s.%s=%s" % (m, k, v) for m, o in SETTINGS.items() for k, v in o.items()]
     lines.append("options: the add-on's defaults%s"
                  % ((" except " + ", ".join(changed)) if changed else ""))
     lines.append("handle error: max distance of a handle vertex from rest + translate; fixed "
                  "drift: max distance of a fixed vertex from rest; RMS edge chg: root mean "
                  "square of (deformed - rest) / rest edge length. Units: the mesh's.")
+    if any(r.get("approximate") for rec in records for r in rec["results"]):
+        lines.append("*: soft regions (eigen deformation's least-squares fit): the handle and "
+                     "fixed parts are met approximately, well only for small region moves; "
+                     "these drags are larger (docs/methods/eigen.md)")
     lines.append("total %.0f s" % elapsed)
     return "\n".join(lines)
 
