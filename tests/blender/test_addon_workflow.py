@@ -78,14 +78,18 @@ def scene(method="ARAP"):
     return obj, d, e, handle
 
 
-def test_point_cache_bake_shows_and_frees():
-    obj, d, e, handle = scene()
-    sc = bpy.context.scene
+def lift(e, last, now):
+    """Keys the empty from rest (frame 1) to 0.3 up (frame `last`), then goes to frame `now`."""
     e.location.z = 0.0
     e.keyframe_insert("location", frame=1)
     e.location.z = 0.3
-    e.keyframe_insert("location", frame=10)
-    sc.frame_set(5)
+    e.keyframe_insert("location", frame=last)
+    bpy.context.scene.frame_set(now)
+
+
+def test_point_cache_bake_shows_and_frees():
+    obj, d, e, handle = scene()
+    lift(e, 10, 5)
     out = draw(ui.DEFORMKIT_PT_modifiers, obj)
     R.check("animated, not baked: the panel warns", "frozen pose" in text(out), text(out))
     R.check("the cache file is a field next to Bake", d.bake_file == "" and
@@ -126,12 +130,7 @@ def test_point_cache_bake_shows_and_frees():
 
 def test_shape_key_bake_shows_at_once_and_frees():
     obj, d, e, handle = scene()
-    sc = bpy.context.scene
-    e.location.z = 0.0
-    e.keyframe_insert("location", frame=1)
-    e.location.z = 0.3
-    e.keyframe_insert("location", frame=6)
-    sc.frame_set(4)
+    lift(e, 6, 4)
     want = S.evaluated_positions(obj)
     bpy.ops.deformkit.bake(mode="SHAPE_KEYS", frame_start=1, frame_end=6)
     S.handlers.enabled[0] = False  # what the keys alone show
