@@ -1,0 +1,187 @@
+#!/usr/bin/env python3
+"""Issue 19's benchmark: ARAP and Laplacian editing on high-resolution meshes.
+
+    OPENBLAS_NUM_THREADS=2 PYTHONPATH=build/python /usr/bin/python3 scripts/bench_scale.py \\
+        [--levels 2] [--meshes armadillo,ogre] [--methods ARAP,LaplacianEdit] [--builtin]
+
+The armadillo (the armadillo-wave scenario) and the ogre (the lowest 10% fixed, the
+vertices within 10% of the diagonal of the highest point a handle lifted by 5% of the
+diagonal) are midpoint-subdivided --levels times (2: 692k and 995k vertices); the fixed set
+and the handle follow the subdivision (a new vertex belongs to a set when both ends of its
+edge do). Each method runs in a fresh process (spawn), so that its peak memory is its own:
+  bind            the constructor, and the peak RSS after it
+  first update    solve(max_iterations=1, warm start from the bind pose): the smallest
+                  step the add-on can show while dragging, its time and its energy
+                  relative to the converged one (ARAP)
+  converge        the rest of that solve to the tolerance, resumed (ARAP), or the solve
+                  (Laplacian editing: one solve is the result)
+--builtin also times Blender's built-in Laplacian Deform on the same mesh, fixed set and
+drag (bind and one drag, in `blender -b`): the issue's reference. A script, not a test.
+"""
+import argparse
+import multiprocessing as mp
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import bench_common as bc  # noqa: E402
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+def subdivide_with_sets(V, F, sets):
+    """bench_common.midpoint_subdivide, carrying vertex sets: a midpoint is in a set when
+    both ends of its edge are."""
+    E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+    uE = np.unique(E, axis=0)
+    V2, F2 = bc.midpoint_subdivide(V, F)
+    out = []
+    for s in sets:
+        member = np.zeros(len(V), bool)
+        member[s] = True
+        both = member[uE[:, 0]] & member[uE[:, 1]]
+        out.append(np.concatenate([np.asarray(s), len(V) + np.nonzero(both)[0]]))
+    return V2, F2, out
+
+
+def scenario(name, levels):
+    if name == "armadillo":
+        s, V, F = bc.load_scenario("armadillo-wave")
+        fixed = np.array(s["fixed"])
+        hand = np.array(s["handles"][0]["vertices"])
+        t = np.array(s["handles"][0]["translate"], float)
+    else:
+        V, F = bc.load_obj(os.path.join(bc.SHARED, "meshes", name + ".obj"))
+        diag = float(np.linalg.norm(V.max(0) - V.min(0)))
+        fixed = np.where(V[:, 1] < np.percentile(V[:, 1], 10))[0]
+        top = int(np.argmax(V[:, 1]))
+        hand = np.setdiff1d(np.where(np.linalg.norm(V - V[top], axis=1) < 0.1 * diag)[0], fixed)
+        t = np.array([0.0, 0.05 * diag, 0.0])
+    for _ in range(levels):
+        V, F, (fixed, hand) = subdivide_with_sets(V, F, (fixed, hand))
+    return V, F.astype(np.int32), fixed, hand, t
+
+
+def peak_mb():
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def run_method(q, method, V, F, fixed, hand, t):
+    try:
+        _run_method(q, method, V, F, fixed, hand, t)
+    except Exception as ex:  # the parent waits on the queue: always answer
+        q.put({"error": "%s: %s" % (type(ex).__name__, ex)})
+
+
+def _run_method(q, method, V, F, fixed, hand, t):
+    import deformkit as dk
+    out = {"start_mb": peak_mb()}
+    mesh = dk.Mesh(V, F)
+    cls = getattr(dk, method)
+    t0 = time.perf_counter()
+    obj = cls(mesh, handles=[hand], fixed=fixed)
+    out["bind_s"] = time.perf_counter() - t0
+    out["bind_peak_mb"] = peak_mb()
+    obj.solve(V[hand], energy=False)  # the bind pose, as the add-on's Bind solves it
+    tg = V[hand] + t
+    if method == "ARAP":
+        t0 = time.perf_counter()
+        r = obj.solve(tg, max_iterations=1, warm_start=True)
+        out["first_s"] = time.perf_counter() - t0
+        out["first_energy"] = float(r.energy)
+        t0 = time.perf_counter()
+        r = obj.solve(tg, resume=True, max_iterations=1000)
+        out["converge_s"] = out["first_s"] + time.perf_counter() - t0
+        out["energy"] = float(r.energy)
+        out["iterations"] = 1 + int(r.iterations)
+        out["converged"] = bool(r.converged)
+    else:
+        t0 = time.perf_counter()
+        obj.solve(tg, energy=False)
+        out["first_s"] = out["converge_s"] = time.perf_counter() - t0
+    out["peak_mb"] = peak_mb()
+    q.put(out)
+
+
+BUILTIN = r'''
+import bpy, numpy as np, sys, time
+d = np.load(sys.argv[sys.argv.index("--") + 1])
+V, F, fixed, hand, t = d["V"], d["F"], d["fixed"], d["hand"], d["t"]
+me = bpy.data.meshes.new("m")
+me.from_pydata(V.tolist(), [], F.tolist())
+me.update()
+ob = bpy.data.objects.new("m", me); bpy.context.scene.collection.objects.link(ob)
+g = ob.vertex_groups.new(name="anchors")
+g.add(np.concatenate([fixed, hand]).tolist(), 1.0, "REPLACE")
+h = ob.vertex_groups.new(name="hand"); h.add(hand.tolist(), 1.0, "REPLACE")
+e = bpy.data.objects.new("e", None); bpy.context.scene.collection.objects.link(e)
+hook = ob.modifiers.new("hook", "HOOK"); hook.object = e; hook.vertex_group = "hand"
+lap = ob.modifiers.new("lap", "LAPLACIANDEFORM"); lap.vertex_group = "anchors"
+bpy.context.view_layer.objects.active = ob
+dg = bpy.context.evaluated_depsgraph_get()
+t0 = time.perf_counter()
+with bpy.context.temp_override(object=ob, active_object=ob):
+    bpy.ops.object.laplaciandeform_bind(modifier="lap")
+dg.update(); ob.evaluated_get(dg).to_mesh(); ob.evaluated_get(dg).to_mesh_clear()
+bind = time.perf_counter() - t0
+e.location = tuple(t)
+t0 = time.perf_counter()
+dg.update(); ob.evaluated_get(dg).to_mesh(); ob.evaluated_get(dg).to_mesh_clear()
+print("BUILTIN bind %.2f drag %.2f bound %s" % (bind, time.perf_counter() - t0, lap.is_bind))
+'''
+
+
+def builtin(V, F, fixed, hand, t):
+    with tempfile.TemporaryDirectory() as tmp:
+        data, script = os.path.join(tmp, "m.npz"), os.path.join(tmp, "builtin.py")
+        np.savez(data, V=V, F=F, fixed=fixed, hand=hand, t=t)
+        with open(script, "w") as f:
+            f.write(BUILTIN)
+        r = subprocess.run(["blender", "-b", "--factory-startup", "--python", script, "--", data],
+                           capture_output=True, text=True, timeout=3600)
+    line = [ln for ln in r.stdout.splitlines() if ln.startswith("BUILTIN")]
+    return line[0] if line else "BUILTIN failed: " + (r.stderr or r.stdout)[-400:]
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--levels", type=int, default=2)
+    ap.add_argument("--meshes", default="armadillo,ogre")
+    ap.add_argument("--methods", default="ARAP,LaplacianEdit")
+    ap.add_argument("--builtin", action="store_true")
+    a = ap.parse_args()
+    ctx = mp.get_context("spawn")
+    for name in a.meshes.split(","):
+        V, F, fixed, hand, t = scenario(name, a.levels)
+        print("%s, %d subdivisions: %d vertices, %d faces, %d fixed, %d handle, drag %.3g"
+              % (name, a.levels, len(V), len(F), len(fixed), len(hand), np.linalg.norm(t)))
+        for method in a.methods.split(","):
+            q = ctx.Queue()
+            p = ctx.Process(target=run_method, args=(q, method, V, F, fixed, hand, t))
+            p.start()
+            r = q.get()
+            p.join()
+            if "error" in r:
+                print("  %-14s failed: %s" % (method, r["error"]), flush=True)
+                continue
+            line = ("  %-14s bind %6.1f s  peak %6.0f MB  first update %7.3f s"
+                    % (method, r["bind_s"], r["peak_mb"], r["first_s"]))
+            if "energy" in r:
+                line += ("  (energy %.3gx converged)  converged in %.1f s, %d iterations%s"
+                         % (r["first_energy"] / max(r["energy"], 1e-300), r["converge_s"],
+                            r["iterations"], "" if r["converged"] else " (not converged)"))
+            print(line, flush=True)
+        if a.builtin:
+            print("  " + builtin(V, F, fixed, hand, t), flush=True)
+    print("targets (692k, 2 cores): ARAP update < 0.1 s within 5% of the converged energy, "
+          "converged < 10 s; Laplacian editing drag < 0.3 s; bind < 10 s; peak < 2 GB")
+
+
+if __name__ == "__main__":
+    main()
