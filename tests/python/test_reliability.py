@@ -1,0 +1,284 @@
+"""Issue 18: hostile inputs and the guarantees of docs/reliability.md, class by class.
+
+Each test names the defect class it covers. Run them also under AddressSanitizer (see
+docs/reliability.md): a heap overrun in the binding is then a crash, not a silent pass.
+"""
+import gc
+import math
+import os
+import stat
+import threading
+import weakref
+
+import numpy as np
+import pytest
+
+import deformkit as dk
+from deformkit import _native
+from conftest import make_grid, make_icosphere
+
+
+def info(name):
+    return _native._method_info(name)
+
+
+def cold(name):
+    return {"warm_start": False} if info(name)["iterative"] else {}
+
+
+def grid_scene():
+    v, f = make_grid(8, 6, bump=0.1, jitter=0.2)
+    left, right = np.where(v[:, 0] <= 1e-9)[0], np.where(v[:, 0] >= 1 - 1e-9)[0]
+    row = np.where((v[:, 1] <= 1e-9) & (v[:, 0] > 1e-9) & (v[:, 0] < 1 - 1e-9))[0]
+    return v, f, [left, right], row
+
+
+def lift(v, handles, dz=0.2):
+    return np.concatenate([v[h] + [0.0, 0.0, dz * (k + 1)] for k, h in enumerate(handles)])
+
+
+# ------------------------------------------------------------------------------------------
+# Class 1: every Python input read exactly once, into memory the binding owns.
+
+class CountingIndex:
+    """An int-like whose __index__ runs Python code: on every call after the first it calls
+    `mutate` (which changes the caller's containers while the binding is reading them)."""
+
+    def __init__(self, value, mutate):
+        self.value, self.mutate, self.calls = value, mutate, 0
+
+    def __index__(self):
+        self.calls += 1
+        if self.calls > 1:
+            self.mutate()
+        return self.value
+
+
+@pytest.mark.parametrize("name", dk.METHODS)
+@pytest.mark.parametrize("how", ["grow", "shrink"])
+def test_handle_groups_read_once_while_python_mutates_them(name, how):
+    """The handle-group reader summed the groups' sizes in one pass and copied them in a
+    second: an __index__ that grows a later group between the passes overran the heap
+    buffer (ASan: heap-buffer-overflow), one that shrinks it passed uninitialised memory as
+    vertex indices. Now each group is read once: __index__ runs once, and the bind sees the
+    groups as they were when read."""
+    v, f, (left, right), row = grid_scene()
+    g1 = [int(i) for i in right]
+    extra = [int(i) for i in row]
+
+    def mutate():
+        if how == "grow":
+            g1.extend(extra * 50)
+        else:
+            del g1[:]
+
+    hostile = CountingIndex(int(left[0]), mutate)
+    g0 = [hostile] + [int(i) for i in left[1:]]
+    m = getattr(dk, name)(dk.Mesh(v, f), handles=[g0, g1], fixed=row)
+    assert hostile.calls == 1
+    assert m.n_handle_vertices == len(left) + len(right)
+    r = m.solve(lift(v, [left, right]), **cold(name))
+    assert np.isfinite(r.positions).all()
+
+
+class MutatingList(list):
+    """A list whose __len__ mutates `victim` (the outer handle list) each time it is asked."""
+
+    def __init__(self, items, victim_box):
+        super().__init__(items)
+        self.victim_box = victim_box
+        self.len_calls = 0
+
+    def __len__(self):
+        self.len_calls += 1
+        victim = self.victim_box[0]
+        if victim is not None:
+            if self.len_calls % 2:
+                victim.append(list(range(5)))
+            elif len(victim) > 1:
+                victim.pop()
+        return super().__len__()
+
+
+@pytest.mark.parametrize("name", dk.METHODS)
+def test_len_that_mutates_the_outer_handle_list(name):
+    v, f, (left, right), row = grid_scene()
+    box = [None]
+    outer = [MutatingList([int(i) for i in left], box), [int(i) for i in right]]
+    box[0] = outer
+    m = getattr(dk, name)(dk.Mesh(v, f), handles=outer, fixed=row)
+    assert m.n_handles == 2
+    assert m.n_handle_vertices == len(left) + len(right)
+
+
+def test_handle_weights_and_fixed_read_once():
+    v, f, (left, right), row = grid_scene()
+    g1 = [int(i) for i in right]
+    weights = [1.0, None]
+
+    class Weight(float):
+        calls = 0
+
+        def __float__(self):
+            Weight.calls += 1
+            g1.extend([int(i) for i in row])   # changes a group already read
+            weights.append(0.5)                # and the weight list being read
+            return 0.75
+
+    weights[1] = Weight(0.75)
+    m = dk.ARAP(dk.Mesh(v, f), handles=[list(left), g1], fixed=row, handle_weights=weights)
+    assert m.n_handle_vertices == len(left) + len(right)
+    m.solve(lift(v, [left, right]))
+
+
+@pytest.mark.parametrize("how", ["grow", "shrink"])
+def test_coordinate_rows_read_once(how):
+    """Nested coordinate sequences: every row is copied before the shape is decided, so a
+    __float__ that changes the rows cannot make the shape and the data disagree."""
+    v, f = make_grid(3, 3)
+    rows = [list(map(float, p)) for p in v]
+
+    class Coord(float):
+        def __float__(self):
+            if how == "grow":
+                for r in rows:
+                    r.append(1.0)
+                rows.append([0.0, 0.0, 0.0])
+            else:
+                for r in rows[1:]:
+                    del r[:]
+                del rows[2:]
+            return 0.0
+
+    rows[0][0] = Coord(0.0)
+    mesh = dk.Mesh(rows, f)
+    np.testing.assert_array_equal(mesh.vertices[1:], v[1:])
+
+
+def test_cholesky_b_read_once():
+    n = 4
+    r = np.arange(n, dtype=np.int32)
+    chol = dk.SparseCholesky(r, r, np.full(n, 2.0), n)
+    np.testing.assert_allclose(chol.solve(np.ones(n)), np.full(n, 0.5))
+    np.testing.assert_allclose(chol.solve(np.ones((n, 2))), np.full((n, 2), 0.5))
+    np.testing.assert_allclose(chol.solve([[1.0], [1.0], [1.0], [1.0]]), np.full((n, 1), 0.5))
+
+
+def test_embedded_cut_read_once():
+    """cut=(a, b) is copied once; a pair whose length changes as it is asked is read as it
+    was at that one read (here: a third group appeared, which is refused)."""
+    v, f, (left, right), row = grid_scene()
+
+    class Pair(list):
+        def __len__(self):
+            self.append([0])
+            return super().__len__()
+
+    mesh = dk.Mesh(v, f)
+    with pytest.raises(ValueError, match="cut must be a pair"):
+        dk.EmbeddedDeformation(mesh, handles=[left, right], n_nodes=20,
+                               cut=Pair([list(left), list(right)]))
+    m = dk.EmbeddedDeformation(mesh, handles=[left], n_nodes=20,
+                               cut=(list(left), list(right)))
+    assert m.n_handles == 1
+
+
+# ------------------------------------------------------------------------------------------
+# Class 9: real inputs must be floating-point, indices integers; a TypeError names the
+# argument and the format found.
+
+def _raw_bytes(a):
+    return memoryview(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+
+
+def _entries():
+    """(label, argument name, call(bad_value)) for every public entry that takes a real
+    buffer; each call gives the good value for every argument but the one tested."""
+    v, f, (left, right), row = grid_scene()
+    mesh = dk.Mesh(v, f)
+    hv = len(left) + len(right)
+    out = [
+        ("Mesh vertices", "vertices", lambda x: dk.Mesh(x, f)),
+        ("Mesh.from_polygons vertices", "vertices",
+         lambda x: dk.Mesh.from_polygons(x, np.full(len(f), 3), f.ravel())),
+        ("knn points", "points", lambda x: dk.knn(x, v[:3], 1)),
+        ("KDTree points", "points", lambda x: dk.KDTree(x)),
+        ("closest_rotation", "A", lambda x: dk.closest_rotation(x)),
+        ("SparseCholesky values", "values",
+         lambda x: dk.SparseCholesky(np.arange(3), np.arange(3), x, 3)),
+    ]
+    tree = dk.KDTree(v)
+    out.append(("KDTree.query queries", "queries", lambda x: tree.query(x, 1)))
+    for name in dk.METHODS:
+        cls = getattr(dk, name)
+        m = cls(mesh, handles=[left, right], fixed=row)
+        out += [
+            ("%s targets" % name, "targets", lambda x, m=m: m.solve(x)),
+            ("%s transforms" % name, "transforms", lambda x, m=m: m.solve(transforms=x)),
+            ("%s energy" % name, "positions", lambda x, m=m: m.energy(x)),
+            ("%s handle_weights" % name, "handle_weights",
+             lambda x, cls=cls: cls(mesh, handles=[left], handle_weights=x)),
+        ]
+    return out, v, hv
+
+
+ENTRIES, _V, _HV = _entries()
+
+
+def _good_shape(label):
+    if "targets" in label:
+        return (_HV, 3)
+    if "transforms" in label:
+        return (2, 4, 4)
+    if "closest_rotation" in label:
+        return (3, 3)
+    if "SparseCholesky" in label:
+        return (3,)
+    if "handle_weights" in label:
+        return (int((_V[:, 0] <= 1e-9).sum()),)
+    if "query" in label or "knn" in label or "KDTree" in label:
+        return (4, 3)
+    return _V.shape
+
+
+@pytest.mark.parametrize("label,arg,call", ENTRIES, ids=[e[0] for e in ENTRIES])
+@pytest.mark.parametrize("kind", ["raw bytes", "int64", "complex"])
+def test_real_inputs_refuse_other_formats(label, arg, call, kind):
+    shape = _good_shape(label)
+    good = np.ones(shape)
+    if kind == "raw bytes":
+        bad = _raw_bytes(good)            # format 'B', 8 values per float
+        pattern = r"buffer format 'B'"
+    elif kind == "int64":
+        bad = good.astype(np.int64)
+        pattern = r"buffer format '[lq]'"
+    else:
+        bad = good.astype(np.complex128) + 0.5j
+        pattern = r"complex"
+    with pytest.raises(TypeError, match=r"%s.*%s" % (arg, pattern)):
+        call(bad)
+
+
+def test_complex_scalars_in_sequences_are_refused():
+    with pytest.raises(TypeError, match=r"obj\[0, 1\] must be a real number, got complex"):
+        _native._read_doubles([[0.0, 1j, 0.0]], -1, 3)
+    with pytest.raises(TypeError, match=r"obj\[0, 0\] must be a real number, got complex"):
+        _native._read_doubles([np.complex128(1.0), 0.0, 0.0], -1, 3)
+    with pytest.raises(TypeError, match=r"obj\[0, 0\] must be a float.*'[lq]'"):
+        _native._read_doubles([np.int64(1), 0.0, 0.0], -1, 3)
+    # Python ints and floats, numpy float scalars: accepted and read exactly
+    np.testing.assert_array_equal(
+        _native._read_doubles([1, np.float32(0.5), np.float64(0.25)], -1, 3), [[1, 0.5, 0.25]])
+
+
+def test_indices_refuse_float_and_complex_buffers():
+    v, f, (left, right), row = grid_scene()
+    mesh = dk.Mesh(v, f)
+    for bad, pattern in [(left.astype(np.float64), "floating-point"),
+                         (left.astype(np.complex128), "complex")]:
+        with pytest.raises(TypeError, match=r"handle 0.*%s" % pattern):
+            dk.ARAP(mesh, handles=[bad])
+        with pytest.raises(TypeError, match=r"fixed.*%s" % pattern):
+            dk.ARAP(mesh, handles=[left], fixed=bad)
+    with pytest.raises(TypeError, match=r"triangles.*floating-point"):
+        dk.Mesh(v, f.astype(np.float64))
