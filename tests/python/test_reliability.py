@@ -282,3 +282,60 @@ def test_indices_refuse_float_and_complex_buffers():
             dk.ARAP(mesh, handles=[left], fixed=bad)
     with pytest.raises(TypeError, match=r"triangles.*floating-point"):
         dk.Mesh(v, f.astype(np.float64))
+
+
+# ------------------------------------------------------------------------------------------
+# Class 2: mesh files are read only when they are regular files, up to a stated size.
+
+@pytest.mark.parametrize("kind", ["dev-zero symlink", "fifo", "directory"])
+@pytest.mark.parametrize("reader", ["load_mesh_file", "read_mesh"])
+def test_mesh_readers_refuse_non_regular_files(tmp_path, kind, reader):
+    """An .obj symlink to /dev/zero was read until memory ran out (the process killed), a
+    FIFO blocked forever; each is now a ValueError before anything is read. The test runs
+    in a thread with a timeout, so that a regression fails instead of hanging."""
+    path = tmp_path / "x.obj"
+    if kind == "dev-zero symlink":
+        os.symlink("/dev/zero", path)
+        want = "character device"
+    elif kind == "fifo":
+        os.mkfifo(path)
+        want = "FIFO"
+    else:
+        path.mkdir()
+        want = "directory"
+    result = {}
+
+    def run():
+        try:
+            getattr(dk, reader)(str(path))
+            result["value"] = "returned"
+        except BaseException as exc:   # noqa: BLE001 - reported below
+            result["value"] = exc
+
+    t = threading.Thread(target=run, daemon=True)
+    t.start()
+    t.join(10)
+    if t.is_alive():
+        if kind == "fifo":   # unblock the reader so the process can exit
+            with open(path, "w"):
+                pass
+        pytest.fail("%s(%s) did not return within 10 s" % (reader, kind))
+    exc = result["value"]
+    assert isinstance(exc, ValueError), exc
+    assert want in str(exc) and "only regular mesh files" in str(exc)
+
+
+def test_mesh_file_symlink_to_a_regular_file_is_followed(tmp_path):
+    real = tmp_path / "real.obj"
+    real.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    link = tmp_path / "link.obj"
+    os.symlink(real, link)
+    assert dk.read_mesh(str(link)).n_vertices == 3
+
+
+def test_obj_index_error_names_the_file_vertex_count(tmp_path):
+    bad = tmp_path / "bad.obj"
+    bad.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n")
+    with pytest.raises(IndexError, match=r"line 4: face index 7 is out of range \[1, 3\] "
+                                         r"\(the file has 3 vertices\)"):
+        dk.read_mesh(str(bad))
