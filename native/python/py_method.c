@@ -513,15 +513,30 @@ const char dk_py_method_energy_doc[] =
 
 /* ------------------------------------------------------------------ getters ------------ */
 
+/* Whether the object still has its native part (the garbage collector's tp_clear frees it
+ * when the object is in a cycle; anything that reaches the object afterwards gets an
+ * error instead of a NULL dereference). 0 with RuntimeError set when not. */
+static int still_bound(dk_py_method *self)
+{
+    if (self->native && self->mesh_obj)
+        return 1;
+    PyErr_Format(PyExc_RuntimeError, "%s: the object is not bound (it was cleared by the "
+                 "garbage collector)", self->spec->name);
+    return 0;
+}
+
 PyObject *dk_py_method_get_mesh(PyObject *obj, void *c)
 {
+    dk_py_method *self = (dk_py_method *)obj;
     (void)c;
-    return Py_NewRef(((dk_py_method *)obj)->mesh_obj);
+    return Py_NewRef(self->mesh_obj ? self->mesh_obj : Py_None);
 }
 
 PyObject *dk_py_method_get_n_vertices(PyObject *obj, void *c)
 {
     (void)c;
+    if (!still_bound((dk_py_method *)obj))
+        return NULL;
     return PyLong_FromSsize_t((Py_ssize_t)((dk_py_method *)obj)->mesh->n_vertices);
 }
 
@@ -530,6 +545,8 @@ PyObject *dk_py_method_get_n_handles(PyObject *obj, void *c)
     dk_py_method *self = (dk_py_method *)obj;
     dk_method_stats ms;
     (void)c;
+    if (!still_bound(self))
+        return NULL;
     self->spec->ops->stats(self->native, &ms);
     return PyLong_FromSsize_t((Py_ssize_t)ms.n_handles);
 }
@@ -539,6 +556,8 @@ PyObject *dk_py_method_get_n_handle_vertices(PyObject *obj, void *c)
     dk_py_method *self = (dk_py_method *)obj;
     dk_method_stats ms;
     (void)c;
+    if (!still_bound(self))
+        return NULL;
     self->spec->ops->stats(self->native, &ms);
     return PyLong_FromSsize_t((Py_ssize_t)ms.n_handle_vertices);
 }
@@ -548,6 +567,8 @@ PyObject *dk_py_method_get_stats(PyObject *obj, void *c)
     dk_py_method *self = (dk_py_method *)obj;
     dk_method_stats ms;
     (void)c;
+    if (!still_bound(self))
+        return NULL;
     if (self->spec->stats)
         return self->spec->stats(self);
     self->spec->ops->stats(self->native, &ms);

@@ -339,3 +339,58 @@ def test_obj_index_error_names_the_file_vertex_count(tmp_path):
     with pytest.raises(IndexError, match=r"line 4: face index 7 is out of range \[1, 3\] "
                                          r"\(the file has 3 vertices\)"):
         dk.read_mesh(str(bad))
+
+
+# ------------------------------------------------------------------------------------------
+# Class 5: objects in reference cycles are collected, with their native resources.
+
+def _threads():
+    return len(os.listdir("/proc/self/task"))
+
+
+class _Holder:
+    pass
+
+
+@pytest.mark.parametrize("name", dk.METHODS)
+def test_cycles_free_the_object_and_its_helper_thread(name):
+    """A method object in a cycle (its remembered handle list holds an object that holds
+    it) is collected by gc, and its native part with it: the helper thread some methods
+    keep for their two-thread passes ends (the process's thread count returns)."""
+    v, f = make_grid(24, 24)         # big enough for the methods' helper threads
+    left, right = np.where(v[:, 0] <= 1e-9)[0], np.where(v[:, 0] >= 1 - 1e-9)[0]
+    mesh = dk.Mesh(v, f)
+    # a first object, freed by reference counting: the BLAS / OpenMP pools the numerics
+    # start once per process are running before the count is taken
+    getattr(dk, name)(mesh, handles=[left, right]).solve(lift(v, [left, right]), **cold(name))
+    gc.collect()
+    before = _threads()
+    alive = []
+    for _ in range(3):
+        h = [left, right]
+        m = getattr(dk, name)(mesh, handles=h)
+        m.solve(lift(v, [left, right]), **cold(name))
+        s = _Holder()
+        s.method = m
+        h.append(s)              # m -> its handles h -> s -> m
+        alive.append(weakref.ref(s))
+        del m, h, s
+    gc.collect()
+    assert all(a() is None for a in alive)
+    for _ in range(50):          # joined threads leave /proc/self/task promptly
+        if _threads() <= before:
+            break
+        threading.Event().wait(0.02)
+    assert _threads() <= before
+
+
+def test_heat_geodesic_is_tracked_by_the_collector():
+    """HeatGeodesic holds its Mesh: it supports the collector (traverse/clear) like every
+    type that holds Python references."""
+    v, f = make_icosphere(1)
+    mesh = dk.Mesh(v, f)
+    h = dk.HeatGeodesic(mesh)
+    assert gc.is_tracked(h)
+    assert any(r is mesh for r in gc.get_referents(h))
+    d = h.distance([0])
+    assert d[0] == 0 and np.isfinite(d).all()
