@@ -238,6 +238,41 @@ dk_status dk_constraints_create(const dk_mesh *mesh, const dk_constraint_desc *d
     return DK_OK;
 }
 
+/* One expanded target: handle h's vertex v at row k, from a position (mode 0) or the
+ * transform t (mode 1), checked finite and within DK_COORD_MAX. */
+static dk_status target_of(const dk_constraints *c, const double *rest_positions,
+                           const double *targets, int mode, dk_index h, dk_index k,
+                           double o[3], dk_error *err)
+{
+    const dk_index v = c->handle_vertices[k];
+    if (mode == 0) {
+        const double *p = targets + 3 * (size_t)k;
+        if (!(isfinite(p[0]) && isfinite(p[1]) && isfinite(p[2])))
+            return dk_error_set(err, DK_ERR_NONFINITE,
+                                "constraint targets: handle %d vertex %d (target row %d) is "
+                                "not finite", (int)h, (int)v, (int)k);
+        o[0] = p[0];
+        o[1] = p[1];
+        o[2] = p[2];
+    } else {
+        const double *t = targets + 16 * (size_t)h, *r = rest_positions + 3 * (size_t)v;
+        for (int d = 0; d < 3; d++)
+            o[d] = t[4 * d] * r[0] + t[4 * d + 1] * r[1] + t[4 * d + 2] * r[2] + t[4 * d + 3];
+        if (!(isfinite(o[0]) && isfinite(o[1]) && isfinite(o[2])))
+            return dk_error_set(err, DK_ERR_NONFINITE,
+                                "constraint targets: handle %d vertex %d transformed position "
+                                "is not finite (overflow)", (int)h, (int)v);
+    }
+    for (int d = 0; d < 3; d++)
+        if (fabs(o[d]) > DK_COORD_MAX)
+            return dk_error_set(err, DK_ERR_NONFINITE,
+                                "constraint targets: handle %d vertex %d (target row %d) "
+                                "coordinate %c is %g, beyond +-%g (the solve would overflow "
+                                "double precision)", (int)h, (int)v, (int)k, "xyz"[d], o[d],
+                                DK_COORD_MAX);
+    return DK_OK;
+}
+
 dk_status dk_constraints_targets(const dk_constraints *c, const double *rest_positions,
                                  const double *targets, int mode, double *out, dk_error *err)
 {
@@ -248,9 +283,11 @@ dk_status dk_constraints_targets(const dk_constraints *c, const double *rest_pos
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "constraint targets: unknown mode %d (0 = positions, "
                             "1 = 4x4 transforms)", mode);
+    /* Everything is checked before anything is written: a refused request leaves `out`
+     * (a method's current targets) as it was. */
     for (dk_index h = 0; h < c->n_handles; h++) {
-        const double *t = targets + 16 * (size_t)h;
         if (mode == 1) {
+            const double *t = targets + 16 * (size_t)h;
             for (int e = 0; e < 16; e++)
                 if (!isfinite(t[e]))
                     return dk_error_set(err, DK_ERR_NONFINITE,
@@ -263,28 +300,14 @@ dk_status dk_constraints_targets(const dk_constraints *c, const double *rest_pos
                                     t[13], t[14], t[15]);
         }
         for (dk_index k = c->handle_start[h]; k < c->handle_start[h + 1]; k++) {
-            dk_index v = c->handle_vertices[k];
-            double *o = out + 3 * (size_t)k;
-            if (mode == 0) {
-                const double *p = targets + 3 * (size_t)k;
-                if (!(isfinite(p[0]) && isfinite(p[1]) && isfinite(p[2])))
-                    return dk_error_set(err, DK_ERR_NONFINITE,
-                                        "constraint targets: handle %d vertex %d (target row "
-                                        "%d) is not finite", (int)h, (int)v, (int)k);
-                o[0] = p[0];
-                o[1] = p[1];
-                o[2] = p[2];
-            } else {
-                const double *r = rest_positions + 3 * (size_t)v;
-                for (int d = 0; d < 3; d++)
-                    o[d] = t[4 * d] * r[0] + t[4 * d + 1] * r[1] + t[4 * d + 2] * r[2] +
-                           t[4 * d + 3];
-                if (!(isfinite(o[0]) && isfinite(o[1]) && isfinite(o[2])))
-                    return dk_error_set(err, DK_ERR_NONFINITE,
-                                        "constraint targets: handle %d vertex %d transformed "
-                                        "position is not finite (overflow)", (int)h, (int)v);
-            }
+            double o[3];
+            dk_status st = target_of(c, rest_positions, targets, mode, h, k, o, err);
+            if (st != DK_OK)
+                return st;
         }
     }
+    for (dk_index h = 0; h < c->n_handles; h++)
+        for (dk_index k = c->handle_start[h]; k < c->handle_start[h + 1]; k++)
+            (void)target_of(c, rest_positions, targets, mode, h, k, out + 3 * (size_t)k, err);
     return DK_OK;
 }

@@ -63,7 +63,9 @@ void dk_constraints_free(dk_constraints *c);
  *  mode 0: `targets` holds n_handle_vertices x 3 positions (concatenated in handle order).
  *  mode 1: `targets` holds n_handles 4x4 row-major affine transforms applied to the rest
  *          positions of each handle's vertices (bottom row must be 0 0 0 1).
- *  Checks finiteness (naming the handle and vertex). `out` is n_handle_vertices x 3. */
+ *  Checks finiteness and the DK_COORD_MAX bound of every expanded target (naming the
+ *  handle and vertex) before writing anything: on failure `out` is unchanged, so a
+ *  method whose current targets live there keeps them. `out` is n_handle_vertices x 3. */
 dk_status dk_constraints_targets(const dk_constraints *c, const double *rest_positions,
                                  const double *targets, int mode, double *out, dk_error *err);
 

@@ -183,6 +183,17 @@ const dk_method_ops *dk_method_find(const char *name);
 dk_status dk_solve_request_check(const dk_solve_request *request, const char *who,
                                  dk_error *err);
 
+/** Checks a solve's result before it is returned: every position finite, and the energy
+ *  finite unless `check_energy` is 0 (the request skipped it: NaN by contract). Every
+ *  method's solve ends with it, so that no solve returns NaN or Inf without an error
+ *  (DK_ERR_NONFINITE, naming the first bad vertex, or saying that the energy overflowed
+ *  while the positions are finite, with the remedy). `who` prefixes the message. */
+dk_status dk_solve_result_check(const double *positions, dk_index n_vertices, double energy,
+                                int check_energy, const char *who, dk_error *err);
+
+/** Checks an energy value before energy() returns it (DK_ERR_NONFINITE when not finite). */
+dk_status dk_energy_result_check(double energy, const char *who, dk_error *err);
+
 #ifdef __cplusplus
 }
 #endif

@@ -740,6 +740,11 @@ static void step3(dk_eigen *e, const level *L, const double *pstar, int blend, d
     }
 }
 
+int dk_eigen_preview(const dk_eigen *e)
+{
+    return e ? e->preview : 0;
+}
+
 void dk_eigen_set_preview(dk_eigen *e, int preview)
 {
     if (e)
@@ -769,7 +774,7 @@ dk_status dk_eigen_energy(const dk_eigen *e, const double *positions, double *en
         }
     }
     *energy = E;
-    return DK_OK;
+    return dk_energy_result_check(E, "EigenDeformation energy", err);
 }
 
 dk_status dk_eigen_solve(dk_eigen *e, const dk_solve_request *rq, double *positions,
@@ -803,13 +808,18 @@ dk_status dk_eigen_solve(dk_eigen *e, const dk_solve_request *rq, double *positi
         fit(e, L2->m, e->b, e->pstar);
         step3(e, L2, e->pstar, 0, positions);
     }
+    double energy = NAN;
+    if (!rq->skip_energy && (st = dk_eigen_energy(e, positions, &energy, err)) != DK_OK &&
+        st != DK_ERR_NONFINITE)
+        return st;
+    st = dk_solve_result_check(positions, e->n, energy, !rq->skip_energy,
+                               "EigenDeformation solve", err);
+    if (st != DK_OK)
+        return st;
     if (info) {
         info->iterations = e->preview ? 0 : e->n_levels;
         info->converged = 1;
-        if (rq->skip_energy)
-            info->energy = NAN;
-        else
-            dk_eigen_energy(e, positions, &info->energy, err);
+        info->energy = energy;
     }
     return DK_OK;
 }

@@ -1318,10 +1318,16 @@ dk_status dk_embedded_solve(dk_embedded *ed, const dk_solve_request *rq, double 
         }
     }
     dk_team_park(ed->team); /* the helper sleeps until the next solve */
-    ed->energy = F;
     apply(ed, ed->x, positions);
+    st = dk_solve_result_check(positions, ed->n, F, !rq->skip_energy,
+                               "EmbeddedDeformation solve", err);
+    if (st != DK_OK) { /* a non-finite end is no start: the next solve starts from rest */
+        identity(ed->x, ed->m);
+        return st;
+    }
+    ed->energy = F;
     if (info) {
-        info->energy = F;
+        info->energy = rq->skip_energy ? NAN : F; /* skipped: NaN, as the contract says */
         info->iterations = it;
         info->converged = converged;
     }
@@ -1611,7 +1617,7 @@ dk_status dk_embedded_energy(const dk_embedded *ed, const double *positions, dou
         }
     }
     *energy = F;
-    return DK_OK;
+    return dk_energy_result_check(F, "EmbeddedDeformation energy", err);
 }
 
 void dk_embedded_stats(const dk_embedded *ed, dk_method_stats *st)

@@ -453,8 +453,11 @@ dk_status dk_falloff_solve(dk_falloff *f, const dk_solve_request *rq, double *po
             e += dsp[d] * dsp[d];
         }
     }
+    st = dk_solve_result_check(positions, n, e, !rq->skip_energy, "Falloff solve", err);
+    if (st != DK_OK)
+        return st;
     if (info) {
-        info->energy = e;
+        info->energy = rq->skip_energy ? NAN : e;
         info->iterations = 1;
         info->converged = 1;
     }
@@ -476,7 +479,7 @@ dk_status dk_falloff_energy(const dk_falloff *f, const double *positions, double
         e += d * d;
     }
     *energy = e;
-    return DK_OK;
+    return dk_energy_result_check(e, "Falloff energy", err);
 }
 
 /* ------------------------------------------------------------------ accessors ----------- */

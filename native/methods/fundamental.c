@@ -900,12 +900,17 @@ dk_status dk_fundamental_solve(dk_fundamental *f, const dk_solve_request *rq, do
             for (int d = 0; d < 3; d++)
                 for (int k = 0; k < 3; k++)
                     f->frames[9 * (size_t)t + 3 * d + k] = f->el.rhs[(size_t)d * nu + f->el.fu[t] + k];
+    double energy = NAN;
+    if (!rq->skip_energy && (st = dk_fundamental_energy(f, positions, &energy, err)) != DK_OK &&
+        st != DK_ERR_NONFINITE)
+        return st;
+    st = dk_solve_result_check(positions, m->n_vertices, energy, !rq->skip_energy,
+                               "LinearReconstruction solve", err);
+    if (st != DK_OK)
+        return st;
     if (info) {
         info->iterations = info->converged = 1;
-        if (rq->skip_energy)
-            info->energy = NAN;
-        else
-            dk_fundamental_energy(f, positions, &info->energy, err);
+        info->energy = energy;
     }
     return DK_OK;
 }
@@ -924,7 +929,7 @@ dk_status dk_fundamental_energy(const dk_fundamental *f, const double *positions
     evaluation ev = {f, positions, f->frames, 0.0};
     for_each_residual(f, energy_visit, &ev);
     *energy = ev.E;
-    return DK_OK;
+    return dk_energy_result_check(ev.E, "LinearReconstruction energy", err);
 }
 
 const double *dk_fundamental_frames(const dk_fundamental *f)

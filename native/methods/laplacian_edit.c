@@ -921,7 +921,7 @@ dk_status dk_laplacian_edit_energy(const dk_laplacian_edit *le, const double *po
     *energy = energy_of(le, x, 3, 1, NULL, 1);
     dk_team_park(le->team);
     free(x);
-    return DK_OK;
+    return dk_energy_result_check(*energy, "LaplacianEdit energy", err);
 }
 
 /* ------------------------------------------------------------------ solve --------------- */
@@ -1287,6 +1287,9 @@ dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const dk_solve_request 
         /* the output and the energy in one pass */
         const double e = energy_of(le, le->x, 1, (size_t)n, positions, want_energy);
         dk_team_park(le->team); /* the last pass: let the helper sleep now */
+        st = dk_solve_result_check(positions, n, e, want_energy, "LaplacianEdit solve", err);
+        if (st != DK_OK)
+            return st;
         if (info)
             info->energy = e;
     }

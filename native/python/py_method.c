@@ -335,7 +335,13 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
     dk_status st;
     double *out;
     char fmt[64], ctx[80];
+    union {
+        max_align_t align;
+        unsigned char bytes[DK_PY_EXTRA_MAX];
+    } pending, saved;
 
+    memset(&pending, 0, sizeof pending);
+    memset(&saved, 0, sizeof saved);
     snprintf(fmt, sizeof fmt, "|OOpOpp:solve");
     snprintf(ctx, sizeof ctx, "%s.solve", spec->name);
     if (split_keywords(kwargs, kwlist, &mine, &rest) < 0)
@@ -375,7 +381,10 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
             Py_DECREF(motion);
         }
     }
-    if ((spec->solve_extra && spec->solve_extra(self, rest, ctx) < 0) ||
+    /* Everything is read and checked before anything changes (issue 18, class 8): the
+     * method's own keywords into `pending`, applied only just before the native solve,
+     * and put back if the solve fails. */
+    if ((spec->solve_extra && spec->solve_extra(self, rest, pending.bytes, ctx) < 0) ||
         refuse_leftovers(rest, "solve()") < 0)
         goto fail_busy;
     spec->ops->stats(self->native, &ms);
@@ -394,9 +403,13 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
         .max_iterations = maxit,
         .skip_energy = !want_energy,
     };
+    if (spec->apply_extra)
+        spec->apply_extra(self, pending.bytes, saved.bytes);
     Py_BEGIN_ALLOW_THREADS
     st = spec->ops->solve(self->native, &rq, out, &info, &err);
     Py_END_ALLOW_THREADS
+    if (st != DK_OK && spec->apply_extra)
+        spec->apply_extra(self, saved.bytes, NULL); /* the call raised: put it back */
     dk_py_doubles_release(&in);
     self->busy = 0;
     Py_DECREF(rest);

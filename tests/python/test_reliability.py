@@ -5,6 +5,7 @@ docs/reliability.md): a heap overrun in the binding is then a crash, not a silen
 """
 import gc
 import math
+import re
 import os
 import stat
 import threading
@@ -394,3 +395,162 @@ def test_heat_geodesic_is_tracked_by_the_collector():
     assert any(r is mesh for r in gc.get_referents(h))
     d = h.distance([0])
     assert d[0] == 0 and np.isfinite(d).all()
+
+
+# ------------------------------------------------------------------------------------------
+# Class 8: a call that raised changed nothing.
+
+def _observable(m):
+    """Every attribute the object shows (its getters), plus its energy of a fixed pose."""
+    out = {}
+    for name in dir(type(m)):
+        if name.startswith("_"):
+            continue
+        attr = getattr(type(m), name)
+        if callable(attr) and not type(attr).__name__ == "getset_descriptor":
+            continue
+        value = getattr(m, name)
+        out[name] = np.array(value).copy() if not isinstance(value, (dict, dk.Mesh)) else value
+    return out
+
+
+def _same(a, b):
+    assert a.keys() == b.keys()
+    for k in a:
+        if isinstance(a[k], np.ndarray):
+            assert a[k].shape == b[k].shape and np.array_equal(a[k], b[k], equal_nan=True), k
+        else:
+            assert a[k] == b[k] if not isinstance(a[k], dk.Mesh) else a[k] is b[k], k
+
+
+def _bad_calls(name, v, handles, fixed, hv):
+    good = lift(v, handles)
+    nh = len(handles)
+    extra = {"ARAP": {"tolerance": 0.5}, "EigenDeformation": {"preview": True}}.get(name, {})
+    calls = [
+        ("NaN targets", lambda m: m.solve(np.full((hv, 3), np.nan), **extra)),
+        ("wrong target rows", lambda m: m.solve(np.zeros((hv + 1, 3)), **extra)),
+        ("raw-byte targets", lambda m: m.solve(memoryview(good.tobytes()), **extra)),
+        ("huge targets", lambda m: m.solve(good * 1e300, **extra)),
+        ("non-affine transforms", lambda m: m.solve(transforms=[np.ones((4, 4))] * nh, **extra)),
+        ("both inputs", lambda m: m.solve(good, transforms=[np.eye(4)] * nh, **extra)),
+        ("unknown keyword", lambda m: m.solve(good, no_such_keyword=1, **extra)),
+        ("max_iterations 0", lambda m: m.solve(good, max_iterations=0, **extra)),
+        ("rebind: handle out of range", lambda m: m.rebind(handles=[[len(v)]])),
+        ("rebind: overlap", lambda m: m.rebind(handles=handles, fixed=handles[0][:1])),
+        ("rebind: bad weights", lambda m: m.rebind(handle_weights=[np.full(len(h), 2.0)
+                                                                   for h in handles])),
+        ("rebind: float indices", lambda m: m.rebind(fixed=np.asarray(fixed, dtype=float))),
+        ("energy: wrong shape", lambda m: m.energy(np.zeros((3, 3)))),
+        ("energy: NaN", lambda m: m.energy(np.full(v.shape, np.nan))),
+    ]
+    if name == "ARAP":
+        calls.append(("negative tolerance", lambda m: m.solve(good, tolerance=-1.0)))
+        calls.append(("NaN tolerance", lambda m: m.solve(good, tolerance=float("nan"))))
+    if name == "EigenDeformation":
+        calls.append(("bad pivot", lambda m: m.solve(pivot=[0, 0, 0], preview=True)))
+    return calls
+
+
+@pytest.mark.parametrize("name", dk.METHODS)
+def test_a_call_that_raised_changed_nothing(name):
+    """For each method and each way a call can be refused: every getter shows what it
+    showed before, energy() of a fixed pose is the same, and the next (warm) solve returns
+    bit for bit what it returns on an object that never saw the refused call. Before the
+    fix, solve(bad_targets, tolerance=...) kept the tolerance and solve(..., preview=True)
+    kept the preview, and ARAP forgot its targets (energy changed)."""
+    v, f, handles, fixed = grid_scene()
+    hv = sum(len(h) for h in handles)
+    mesh = dk.Mesh(v, f)
+    first, second = lift(v, handles, 0.1), lift(v, handles, 0.25)
+    pose = v + 0.01 * np.sin(np.arange(v.size)).reshape(v.shape)
+
+    def fresh():
+        m = getattr(dk, name)(mesh, handles=handles, fixed=fixed)
+        m.solve(first)
+        return m
+
+    reference = fresh()
+    want_energy = reference.energy(pose)
+    want_obs = _observable(reference)
+    want_next = reference.solve(second)
+    for what, call in _bad_calls(name, v, handles, fixed, hv):
+        m = fresh()
+        with pytest.raises((TypeError, ValueError, IndexError, OverflowError)):
+            call(m)
+        _same(_observable(m), want_obs)
+        assert m.energy(pose) == want_energy, what
+        got = m.solve(second)
+        assert np.array_equal(got.positions, want_next.positions), what
+        assert got.iterations == want_next.iterations, what
+        assert got.energy == want_energy or got.energy == want_next.energy, what
+
+
+# ------------------------------------------------------------------------------------------
+# Class 10: no solve or energy returns NaN or Inf without an error.
+
+@pytest.mark.parametrize("name", dk.METHODS)
+def test_overflowing_targets_fail_clearly_and_the_object_stays_usable(name):
+    """Targets of 1e300 were solved into Inf/NaN positions or an infinite energy, returned
+    as a result. They are now refused before anything changes (beyond the +-1e75 the
+    library computes with); targets just inside that bound either solve to finite
+    positions and energy, or fail with an error that says what overflowed. Either way the
+    object answers the next ordinary solve as a fresh one does."""
+    v, f, handles, fixed = grid_scene()
+    mesh = dk.Mesh(v, f)
+    m = getattr(dk, name)(mesh, handles=handles, fixed=fixed)
+    nh = len(handles)
+    with pytest.raises(ValueError, match=r"beyond \+-1e\+75"):
+        m.solve(lift(v, handles) * 1e300)
+    with pytest.raises(ValueError, match=r"beyond \+-1e\+75|not finite"):
+        m.solve(transforms=[np.diag([1e300, 1e300, 1e300, 1.0])] * nh)
+    for scale in (1e75, 1e74, 1e60):
+        for energy in (True, False):
+            try:
+                r = m.solve(lift(v, handles) * scale, energy=energy, **cold(name))
+            except (ValueError, RuntimeError) as exc:
+                assert re.search(r"not finite|energy is (inf|nan)|overflow", str(exc)), exc
+            else:
+                assert np.isfinite(r.positions).all()
+                assert math.isfinite(r.energy) if energy else math.isnan(r.energy)
+    good = lift(v, handles, 0.2)
+    want = getattr(dk, name)(mesh, handles=handles, fixed=fixed).solve(good, **cold(name))
+    got = m.solve(good, **cold(name))
+    np.testing.assert_allclose(got.positions, want.positions, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", dk.METHODS)
+def test_energy_of_huge_positions_is_an_error_not_inf(name):
+    v, f, handles, fixed = grid_scene()
+    m = getattr(dk, name)(dk.Mesh(v, f), handles=handles, fixed=fixed)
+    m.solve(lift(v, handles))
+    try:
+        e = m.energy(v * 1e300)
+    except ValueError as exc:
+        assert "energy is inf" in str(exc) or "overflow" in str(exc)
+    else:
+        assert math.isfinite(e)
+
+
+def test_mesh_coordinates_beyond_the_bound_are_refused():
+    v, f = make_grid(3, 3)
+    big = v.copy()
+    big[5, 1] = 1e300
+    with pytest.raises(ValueError, match=r"vertex 5 coordinate y is 1e\+300, beyond"):
+        dk.Mesh(big, f)
+
+
+@pytest.mark.parametrize("name", dk.METHODS)
+def test_huge_meshes_bind_and_solve_finite_or_say_overflow(name):
+    """A mesh at the edge of the coordinate bound: the bind's matrices stay finite (no
+    'not positive definite' caused by overflow); a result is finite or an error says why."""
+    v, f, handles, fixed = grid_scene()
+    mesh = dk.Mesh(v * 1e74, f)
+    try:
+        m = getattr(dk, name)(mesh, handles=handles, fixed=fixed)
+        r = m.solve(lift(v, handles) * 1e74, **cold(name))
+    except (ValueError, RuntimeError) as exc:
+        assert "positive definite" not in str(exc), exc
+        assert re.search(r"not finite|energy is (inf|nan)|overflow", str(exc)), exc
+    else:
+        assert np.isfinite(r.positions).all() and math.isfinite(r.energy)
