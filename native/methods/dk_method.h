@@ -80,7 +80,19 @@ typedef struct dk_method_stats {
     dk_index n_unknowns;         /**< size of the factored system (0 for direct methods)    */
     int analysis_count;          /**< symbolic analyses since bind                          */
     int factorization_count;     /**< numeric factorizations since bind                     */
+    dk_index n_held;             /**< vertices held at rest because no handle or fixed
+                                      vertex is in their connected component (loose
+                                      geometry, dk_constraints.h)                          */
+    dk_index n_held_components;  /**< the components they make up                          */
+    dk_index first_held;         /**< the smallest held vertex, -1 when none                */
 } dk_method_stats;
+
+/** Fills the held-vertex counters of `stats` from the method's constraints (NULL: none).
+ *  `to_caller` maps the constraints' vertex numbering to the caller's (a method that binds
+ *  on its own numbering passes its dk_reorder perm), NULL when they are the same, so that
+ *  first_held names the caller's vertex. */
+void dk_constraints_held_stats(const dk_constraints *c, const dk_index *to_caller,
+                               dk_method_stats *stats);
 
 /** What a method's results depend on, for code that is written against the contract. */
 typedef enum dk_method_flags {

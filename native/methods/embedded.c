@@ -816,10 +816,12 @@ static dk_status classify(const dk_embedded *ed, ed_system *s, dk_error *err)
         goto done;
     }
     /* the paper's rule: a node that influences a fixed vertex is a constant, so fixed
-     * vertices stay exactly at rest (all their nodes are the identity) */
+     * vertices stay exactly at rest (all their nodes are the identity). Not for held
+     * vertices (loose geometry nothing constrains, dk_constraints.h): they are put at rest
+     * in apply(), and freezing their nodes would freeze the surface around them. */
     unsigned char *held = moves; /* reused: 1 = influences a fixed vertex */
     for (dk_index v = 0; v < n; v++)
-        if (c->role[v] == DK_VERTEX_FIXED)
+        if (c->role[v] == DK_VERTEX_FIXED && !c->held[v])
             for (dk_index q = 0; q < k; q++)
                 if (ed->nb[(size_t)v * k + q] >= 0)
                     held[ed->nb[(size_t)v * k + q]] = 1;
@@ -1173,9 +1175,14 @@ static void identity(double *x, dk_index m)
 static void apply(const dk_embedded *ed, const double *x, double *out)
 {
     const dk_index k = ed->k;
+    const unsigned char *held_at_rest = ed->sys.con->held;
     for (dk_index v = 0; v < ed->n; v++) {
         const double *p = ed->p + 3 * v;
         int moving = 0;
+        if (held_at_rest[v]) { /* loose geometry nothing constrains: at rest */
+            memcpy(out + 3 * v, p, 3 * sizeof(double));
+            continue;
+        }
         for (dk_index q = 0; q < k; q++) {
             const dk_index j = ed->nb[(size_t)v * k + q];
             moving |= j >= 0 && ed->sys.node_unknown[j] >= 0;
@@ -1630,6 +1637,7 @@ void dk_embedded_stats(const dk_embedded *ed, dk_method_stats *st)
     st->n_vertices = ed->n;
     st->n_handles = ed->sys.con->n_handles;
     st->n_handle_vertices = ed->sys.con->n_handle_vertices;
+    dk_constraints_held_stats(ed->sys.con, NULL, st);
     st->n_unknowns = 12 * ed->sys.n_free;
     st->analysis_count = ed->analysis_count;
     st->factorization_count = ed->factorization_count;

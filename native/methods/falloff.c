@@ -509,6 +509,7 @@ void dk_falloff_stats(const dk_falloff *f, dk_method_stats *st)
     st->n_vertices = f->mesh->n_vertices;
     st->n_handles = f->st.con ? f->st.con->n_handles : 0;
     st->n_handle_vertices = f->st.con ? f->st.con->n_handle_vertices : 0;
+    dk_constraints_held_stats(f->st.con, NULL, st);
     st->factorization_count = f->heat ? dk_heat_factorization_count(f->heat) : 0;
 }
 

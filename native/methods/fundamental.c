@@ -953,6 +953,7 @@ void dk_fundamental_stats(const dk_fundamental *f, dk_method_stats *st)
     st->n_vertices = f->mesh->n_vertices;
     st->n_handles = f->el.con->n_handles;
     st->n_handle_vertices = f->el.con->n_handle_vertices;
+    dk_constraints_held_stats(f->el.con, NULL, st);
     st->n_unknowns = f->el.n_unk;
     st->analysis_count = st->factorization_count = f->el.n_unk > 0;
 }

@@ -89,3 +89,18 @@ dk_status dk_energy_result_check(double energy, const char *who, dk_error *err)
                         "%s: the energy is %g (overflow: the positions are too large for "
                         "double precision)", who, energy);
 }
+
+void dk_constraints_held_stats(const dk_constraints *c, const dk_index *to_caller,
+                               dk_method_stats *stats)
+{
+    stats->n_held = c ? c->n_held : 0;
+    stats->n_held_components = c ? c->n_held_components : 0;
+    stats->first_held = c ? c->first_held : -1;
+    if (c && to_caller && c->n_held > 0) {
+        dk_index first = -1;
+        for (dk_index v = 0; v < c->n_vertices; v++)
+            if (c->held[v] && (first < 0 || to_caller[v] < first))
+                first = to_caller[v];
+        stats->first_held = first;
+    }
+}

@@ -101,6 +101,7 @@ PyObject *dk_py_method_get_n_vertices(PyObject *obj, void *closure);
 PyObject *dk_py_method_get_n_handles(PyObject *obj, void *closure);
 PyObject *dk_py_method_get_n_handle_vertices(PyObject *obj, void *closure);
 PyObject *dk_py_method_get_stats(PyObject *obj, void *closure);
+PyObject *dk_py_method_get_warnings(PyObject *obj, void *closure);
 extern const char dk_py_method_rebind_doc[];
 extern const char dk_py_method_energy_doc[];
 
@@ -118,8 +119,12 @@ extern const char dk_py_method_energy_doc[];
         {"n_handle_vertices", dk_py_method_get_n_handle_vertices, NULL,                    \
          "rows expected in solve(targets)", NULL},                                         \
         {"stats", dk_py_method_get_stats, NULL,                                            \
-         "dict of counters: n_unknowns, analysis_count, factorization_count, and the "    \
-         "method's own",                                                                   \
+         "dict of counters: n_unknowns, analysis_count, factorization_count, n_held and "  \
+         "n_held_components (loose geometry held at rest), and the method's own",          \
+         NULL},                                                                            \
+        {"warnings", dk_py_method_get_warnings, NULL,                                      \
+         "tuple of str: what the bind decided for the caller, e.g. vertices held at rest " \
+         "because nothing constrains their component (empty when nothing)",               \
          NULL}
 
 /** tp_new of a method's type: binds per `spec`. A method's binding file defines its tp_new

@@ -582,12 +582,51 @@ PyObject *dk_py_method_get_stats(PyObject *obj, void *c)
     (void)c;
     if (!still_bound(self))
         return NULL;
-    if (self->spec->stats)
-        return self->spec->stats(self);
     self->spec->ops->stats(self->native, &ms);
-    return Py_BuildValue("{s:n,s:i,s:i}", "n_unknowns", (Py_ssize_t)ms.n_unknowns,
-                         "analysis_count", ms.analysis_count, "factorization_count",
-                         ms.factorization_count);
+    PyObject *d = self->spec->stats
+                      ? self->spec->stats(self)
+                      : Py_BuildValue("{s:n,s:i,s:i}", "n_unknowns", (Py_ssize_t)ms.n_unknowns,
+                                      "analysis_count", ms.analysis_count,
+                                      "factorization_count", ms.factorization_count);
+    if (!d)
+        return NULL;
+    /* every method: what the shared constraint layer held at rest (loose geometry) */
+    PyObject *a = PyLong_FromSsize_t((Py_ssize_t)ms.n_held);
+    PyObject *b = PyLong_FromSsize_t((Py_ssize_t)ms.n_held_components);
+    if (!a || !b || PyDict_SetItemString(d, "n_held", a) < 0 ||
+        PyDict_SetItemString(d, "n_held_components", b) < 0) {
+        Py_XDECREF(a);
+        Py_XDECREF(b);
+        Py_DECREF(d);
+        return NULL;
+    }
+    Py_DECREF(a);
+    Py_DECREF(b);
+    return d;
+}
+
+PyObject *dk_py_method_get_warnings(PyObject *obj, void *c)
+{
+    dk_py_method *self = (dk_py_method *)obj;
+    dk_method_stats ms;
+    (void)c;
+    if (!still_bound(self))
+        return NULL;
+    self->spec->ops->stats(self->native, &ms);
+    if (ms.n_held == 0)
+        return PyTuple_New(0);
+    PyObject *msg = PyUnicode_FromFormat(
+        "%zd %s in %zd connected component%s with no handle or fixed vertex %s held at "
+        "rest (first: vertex %zd); constrain a vertex there to move %s",
+        (Py_ssize_t)ms.n_held, ms.n_held == 1 ? "vertex" : "vertices",
+        (Py_ssize_t)ms.n_held_components,
+        ms.n_held_components == 1 ? "" : "s", ms.n_held == 1 ? "is" : "are",
+        (Py_ssize_t)ms.first_held, ms.n_held_components == 1 ? "it" : "them");
+    if (!msg)
+        return NULL;
+    PyObject *t = PyTuple_Pack(1, msg);
+    Py_DECREF(msg);
+    return t;
 }
 
 /* ------------------------------------------------------------------ registration ------- */

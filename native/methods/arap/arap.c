@@ -178,6 +178,22 @@ static dk_status solve_impl(dk_arap *ar, const dk_solve_request *rq, double *pos
         return dk_error_prefix(err, "ARAP solve");
     s->have_targets = 1;
 
+    if (s->nu == 0) { /* every vertex constrained: the constrained motion, exactly */
+        dk_constraints_constrained_motion(s->con, ar->mesh->positions, s->targets, ar->x);
+        const double e = arap_local_energy(ar, s, ar->x, NULL);
+        dk_reorder_rows_out(ar->ro, ar->x, positions);
+        st = dk_solve_result_check(positions, ar->n, e, !rq->skip_energy, "ARAP solve", err);
+        if (st != DK_OK)
+            return st;
+        ar->have_prev = 0;
+        if (info) {
+            info->energy = rq->skip_energy ? NAN : e;
+            info->iterations = 0;
+            info->converged = 1;
+        }
+        return DK_OK;
+    }
+
     /* 2. the start. Resume: the previous call's targets again, and nothing changed since:
      * continue exactly where it stopped, acceleration history included, so that solves
      * resumed in slices (the add-on's interactive time budget) equal one longer solve. */
@@ -279,6 +295,7 @@ void dk_arap_stats(const dk_arap *ar, dk_method_stats *stats)
     stats->n_vertices = ar->n;
     stats->n_handles = ar->sys.con->n_handles;
     stats->n_handle_vertices = ar->sys.con->n_handle_vertices;
+    dk_constraints_held_stats(ar->sys.con, ar->ro->perm, stats);
     stats->n_unknowns = ar->sys.nu;
     stats->analysis_count = ar->analysis_count;
     stats->factorization_count = ar->factorization_count;

@@ -270,11 +270,7 @@ static dk_status classify(const dk_arap *ar, arap_system *s, dk_error *err)
     for (int64_t t = 0; t < ar->n_terms; t++)
         if ((s->unk[ar->ta[t]] >= 0) != (s->unk[ar->tb[t]] >= 0))
             s->bterms[s->n_bterms++] = t;
-    if (nu == 0)
-        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
-                            "ARAP: no free vertex: every vertex is fixed, outside the ROI or "
-                            "a hard handle, so there is nothing to solve");
-    return DK_OK;
+    return DK_OK; /* nu == 0: every vertex constrained, solves give the constrained motion */
 }
 
 /* The per-solve buffers of the chosen solver (N = 3 nu each, column-major). */
@@ -402,6 +398,8 @@ dk_status arap_system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_sy
     const int newton = ar->opt.acceleration == DK_ARAP_ACCEL_NEWTON;
     if (st == DK_OK)
         st = classify(ar, s, err);
+    if (st == DK_OK && s->nu == 0)
+        return DK_OK; /* nothing to solve: no system, no factor (solve_impl) */
     if (st == DK_OK)
         st = solve_buffers(ar, s, err);
     if (st == DK_OK)
@@ -418,5 +416,5 @@ dk_status arap_system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_sy
         arap_system_free(s);
         return st;
     }
-    return factor(ar, old, s, err);
+    return factor(ar, old && old->nu > 0 ? old : NULL, s, err);
 }
