@@ -33,15 +33,34 @@ PyObject *dk_py_opt_object(PyObject *kw, const char *key)
     return take(kw, key, &owned);
 }
 
+/* Replaces a conversion error (OverflowError, TypeError) with one naming the keyword: the
+ * interpreter's "Python int too large to convert to C long" does not say which argument. */
+static int name_the_argument(const char *key, PyObject *v, const char *want)
+{
+    PyObject *tn = PyType_GetName(Py_TYPE(v));
+    if (PyErr_ExceptionMatches(PyExc_OverflowError)) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_OverflowError, "%s is %.40R, out of the range of %s", key, v, want);
+    } else if (PyErr_ExceptionMatches(PyExc_TypeError) && tn) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_TypeError, "%s must be %s, got %U", key, want, tn);
+    }
+    Py_XDECREF(tn);
+    return -1;
+}
+
 int dk_py_opt_int(PyObject *kw, const char *key, int *value)
 {
     PyObject *owned, *v = take(kw, key, &owned);
     if (!v)
         return PyErr_Occurred() ? -1 : 0;
     long x = PyLong_AsLong(v);
-    Py_DECREF(owned);
-    if (x == -1 && PyErr_Occurred())
+    if (x == -1 && PyErr_Occurred()) {
+        name_the_argument(key, v, "an int");
+        Py_DECREF(owned);
         return -1;
+    }
+    Py_DECREF(owned);
     if (x < INT32_MIN || x > INT32_MAX) {
         PyErr_Format(PyExc_OverflowError, "%s is %ld, out of the range of an int", key, x);
         return -1;
@@ -56,9 +75,12 @@ int dk_py_opt_double(PyObject *kw, const char *key, double *value)
     if (!v)
         return PyErr_Occurred() ? -1 : 0;
     double x = PyFloat_AsDouble(v);
-    Py_DECREF(owned);
-    if (x == -1.0 && PyErr_Occurred())
+    if (x == -1.0 && PyErr_Occurred()) {
+        name_the_argument(key, v, "a float");
+        Py_DECREF(owned);
         return -1;
+    }
+    Py_DECREF(owned);
     *value = x;
     return 0;
 }
@@ -353,8 +375,10 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
     Py_DECREF(mine);
     if (ok && maxit_obj != Py_None) {
         long v = PyLong_AsLong(maxit_obj);
-        if (v == -1 && PyErr_Occurred())
+        if (v == -1 && PyErr_Occurred()) {
+            name_the_argument("max_iterations", maxit_obj, "an int");
             ok = 0;
+        }
         else if (v < 1 || v > 1000000000L) {
             PyErr_Format(PyExc_ValueError, "%s: max_iterations is %ld, must be >= 1", ctx, v);
             ok = 0;

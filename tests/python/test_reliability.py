@@ -554,3 +554,24 @@ def test_huge_meshes_bind_and_solve_finite_or_say_overflow(name):
         assert re.search(r"not finite|energy is (inf|nan)|overflow", str(exc)), exc
     else:
         assert np.isfinite(r.positions).all() and math.isfinite(r.energy)
+
+
+# ------------------------------------------------------------------------------------------
+# Item 11: a conversion error names the argument.
+
+@pytest.mark.parametrize("kw, exc, pattern", [
+    (dict(max_iterations=2 ** 80), OverflowError, r"max_iterations is 1208925819614629174706176"),
+    (dict(tolerance="x"), TypeError, r"tolerance must be a float, got str"),
+    (dict(tolerance=10 ** 400), OverflowError, r"tolerance is 1000.*out of the range of a float"),
+])
+def test_option_conversion_errors_name_the_argument(kw, exc, pattern):
+    v, f, handles, fixed = grid_scene()
+    with pytest.raises(exc, match=pattern):
+        dk.ARAP(dk.Mesh(v, f), handles=handles, **kw)
+
+
+def test_solve_max_iterations_overflow_names_the_argument():
+    v, f, handles, fixed = grid_scene()
+    m = dk.ARAP(dk.Mesh(v, f), handles=handles)
+    with pytest.raises(OverflowError, match=r"max_iterations is"):
+        m.solve(lift(v, handles), max_iterations=2 ** 80)
