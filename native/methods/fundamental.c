@@ -3,6 +3,7 @@
 #include "dk_fundamental.h"
 
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -608,10 +609,20 @@ static dk_status eliminate(const dk_fundamental *f, const dk_constraint_desc *de
         st = dk_cholesky_analyze(s->A, &s->chol, err);
     if (st == DK_OK && nu > 0) {
         st = dk_cholesky_factorize(s->chol, s->A, err);
-        if (st == DK_ERR_NOT_POSITIVE_DEFINITE)
-            dk_error_prefix(err, "LinearReconstruction: the system is singular (constrained "
-                                 "vertices on a line, or a part held by nothing?)");
-        else if (st != DK_OK)
+        if (st == DK_ERR_NOT_POSITIVE_DEFINITE) {
+            /* name the caller's vertex (or face frame), not the matrix column */
+            const int64_t col = err ? err->column - 1 : -1;
+            char at[64] = "";
+            for (dk_index v = 0; col >= 0 && !at[0] && v < n; v++)
+                if (s->vu[v] == col)
+                    snprintf(at, sizeof at, " at vertex %d", (int)v);
+            for (dk_index t = 0; col >= 0 && !at[0] && t < F; t++)
+                if (s->fu[t] >= 0 && col >= s->fu[t] && col < s->fu[t] + 3)
+                    snprintf(at, sizeof at, " at the frame of face %d", (int)t);
+            dk_error_set(err, DK_ERR_NOT_POSITIVE_DEFINITE,
+                         "LinearReconstruction: the system is singular%s (constrained "
+                         "vertices on a line, or degenerate triangles around it)", at);
+        } else if (st != DK_OK)
             dk_error_prefix(err, "LinearReconstruction");
     }
     if (st == DK_OK) {

@@ -719,6 +719,13 @@ static dk_status factor(dk_laplacian_edit *le, le_system *old, le_system *s, con
                                   le->team, &counts, err);
     le->analysis_count = counts.analysis_count;
     le->factorization_count = counts.factorization_count;
+    if (st == DK_ERR_NOT_POSITIVE_DEFINITE && err && err->column > 0 &&
+        err->column <= s->n_unknowns) /* name the caller's vertex, not the matrix column */
+        return dk_error_set(err, DK_ERR_NOT_POSITIVE_DEFINITE,
+                            "%s: the system is not positive definite at vertex %ld "
+                            "(degenerate triangles around it, or a part held only along a "
+                            "line)", what,
+                            (long)le->ro->perm[s->unknowns[err->column - 1]]);
     return st == DK_OK ? DK_OK : dk_error_prefix(err, "%s", what);
 }
 

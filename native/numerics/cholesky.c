@@ -232,12 +232,16 @@ dk_status dk_cholesky_factorize(dk_cholesky *chol, const dk_sparse *a, dk_error 
                                 "up to %g): coordinates, weights or stiffness too large for "
                                 "double precision", largest);
         if (chol->indefinite)
-            return dk_error_set(err, DK_ERR_NOT_POSITIVE_DEFINITE,
-                                "Cholesky factorize: zero or NaN pivot %zu of %d in LDL' "
-                                "(matrix column %ld): the matrix is singular", k, (int)n, col);
-        return dk_error_set(err, DK_ERR_NOT_POSITIVE_DEFINITE,
-                            "Cholesky factorize: matrix is not positive definite: positivity "
-                            "lost at pivot %zu of %d (matrix column %ld)", k, (int)n, col);
+            dk_error_set(err, DK_ERR_NOT_POSITIVE_DEFINITE,
+                         "Cholesky factorize: zero or NaN pivot %zu of %d in LDL' "
+                         "(matrix column %ld): the matrix is singular", k, (int)n, col);
+        else
+            dk_error_set(err, DK_ERR_NOT_POSITIVE_DEFINITE,
+                         "Cholesky factorize: matrix is not positive definite: positivity "
+                         "lost at pivot %zu of %d (matrix column %ld)", k, (int)n, col);
+        if (err)
+            err->column = col + 1; /* for the caller to name its own vertex */
+        return DK_ERR_NOT_POSITIVE_DEFINITE;
     }
     chol->factored = 1;
     /* NULL (small factor, no gain, no memory): solves use cholmod_solve2 */

@@ -575,3 +575,23 @@ def test_solve_max_iterations_overflow_names_the_argument():
     m = dk.ARAP(dk.Mesh(v, f), handles=handles)
     with pytest.raises(OverflowError, match=r"max_iterations is"):
         m.solve(lift(v, handles), max_iterations=2 ** 80)
+
+
+def test_singular_systems_name_the_callers_vertex_not_a_matrix_column():
+    """Item 11: 'positivity lost at pivot 0 (matrix column 41)' named the solver's internal
+    column; the message now names the caller's vertex, and suggests clamped weights only
+    when they are not already in use."""
+    vd = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0.0], [9, 9, 9]])
+    fd = np.array([[0, 1, 2], [1, 2, 3]])
+    for order in ([0, 1, 2, 3, 4], [4, 3, 2, 1, 0], [2, 4, 0, 3, 1]):
+        p = np.asarray(order)          # new vertex k is old vertex p[k]
+        ip = np.argsort(p)
+        mesh = dk.Mesh(vd[p], ip[fd])
+        free = {int(ip[1]), int(ip[2])}
+        with pytest.raises(ValueError) as info:
+            dk.ARAP(mesh, [[int(ip[0])]], fixed=[int(ip[3])])
+        msg = str(info.value)
+        assert "matrix column" not in msg and "clamped_cotangent" not in msg, msg
+        assert int(re.search(r"at vertex (\d+)", msg).group(1)) in free, msg
+        with pytest.raises(ValueError, match=r"try weights='clamped_cotangent'"):
+            dk.ARAP(mesh, [[int(ip[0])]], fixed=[int(ip[3])], weights="cotangent")

@@ -2,6 +2,8 @@
  * factor, right-hand-side map (see arap_internal.h). */
 #include "arap_internal.h"
 
+#include <stdio.h>
+
 static void sparse_release(dk_sparse *a)
 {
     free(a->col_start);
@@ -364,13 +366,22 @@ static dk_status factor(dk_arap *ar, arap_system *old, arap_system *s, dk_error 
     ar->factorization_count = counts.factorization_count;
     if (st == DK_OK)
         return DK_OK;
+    /* the caller's vertex of the failing column, not the internal matrix column */
+    long vertex = -1;
+    if (st == DK_ERR_NOT_POSITIVE_DEFINITE && err && err->column > 0 && err->column <= s->nu)
+        vertex = (long)ar->ro->perm[s->unknowns[err->column - 1]];
     arap_system_free(s);
     if (st == DK_ERR_NOT_POSITIVE_DEFINITE) {
-        dk_error_prefix(err, "ARAP: the reduced matrix is not positive definite (degenerate "
-                             "triangles or negative cotangent weights; try "
-                             "weights=clamped_cotangent)");
-        if (err)
-            err->status = DK_ERR_DEGENERATE;
+        const int clamped = ar->opt.weights != DK_ARAP_WEIGHTS_COTANGENT;
+        char at[48] = "";
+        if (vertex >= 0)
+            snprintf(at, sizeof at, " at vertex %ld", vertex);
+        dk_error_set(err, DK_ERR_DEGENERATE,
+                     "ARAP: the reduced matrix is not positive definite%s (%s)", at,
+                     clamped ? "degenerate triangles around it, or a part held only along a "
+                               "line"
+                             : "degenerate triangles or negative cotangent weights; try "
+                               "weights='clamped_cotangent'");
         return DK_ERR_DEGENERATE;
     }
     return dk_error_prefix(err, "ARAP: factorization");
