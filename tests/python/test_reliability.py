@@ -210,6 +210,26 @@ def _entries():
     ]
     tree = dk.KDTree(v)
     out.append(("KDTree.query queries", "queries", lambda x: tree.query(x, 1)))
+    out.append(("cotangent_weights positions", "positions",
+                lambda x: dk.cotangent_weights(mesh, x)))
+    out.append(("harmonic_material values", "values",
+                lambda x: dk.harmonic_material(mesh, [0, 1, 2], x)))
+    chol = dk.SparseCholesky(np.arange(3), np.arange(3), np.full(3, 2.0), 3)
+    out.append(("SparseCholesky.solve b", "b", lambda x: chol.solve(x)))
+    out.append(("SparseCholesky.refactorize values", "values", lambda x: chol.refactorize(x)))
+    out.append(("ARAP stiffness", "stiffness",
+                lambda x: dk.ARAP(mesh, handles=[left, right], stiffness=x)))
+    out.append(("LinearReconstruction material", "material",
+                lambda x: dk.LinearReconstruction(mesh, handles=[left, right], material=x)))
+    ed = dk.EmbeddedDeformation(mesh, handles=[left, right], n_nodes=20)
+    out.append(("EmbeddedDeformation.normals", "normals", lambda x: ed.normals(x)))
+    out.append(("EmbeddedDeformation.update_source", "positions",
+                lambda x: ed.update_source(x)))
+    out.append(("EmbeddedDeformation.embed", "points", lambda x: ed.embed(x)))
+    eig = dk.EigenDeformation(mesh, handles=[left, right])
+    out.append(("EigenDeformation translation", "translation",
+                lambda x: eig.solve(translation=x)))
+    out.append(("EigenDeformation rotation", "rotation", lambda x: eig.solve(rotation=x)))
     for name in dk.METHODS:
         cls = getattr(dk, name)
         m = cls(mesh, handles=[left, right], fixed=row)
@@ -227,6 +247,18 @@ ENTRIES, _V, _HV = _entries()
 
 
 def _good_shape(label):
+    if "material" in label:
+        return (len(dk.Mesh(_V, grid_scene()[1]).edges),)
+    if "harmonic" in label or "SparseCholesky" in label:
+        return (3,)
+    if "stiffness" in label:
+        return (len(_V),)
+    if "translation" in label:
+        return (3,)
+    if "rotation" in label:
+        return (3, 3)
+    if "embed" in label and "update" not in label:
+        return (4, 3)
     if "targets" in label:
         return (_HV, 3)
     if "transforms" in label:
