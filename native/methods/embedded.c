@@ -1534,7 +1534,10 @@ dk_status dk_embedded_normals(const dk_embedded *ed, const double *normals, doub
     for (dk_index v = 0; v < n; v++) {
         const double *nv = normals + 3 * v;
         double o[3] = {0.0, 0.0, 0.0};
-        for (dk_index q = 0; q < k; q++) {
+        const int held = ed->sys.con->held[v]; /* at rest: its normal is the rest normal */
+        if (held)
+            memcpy(o, nv, sizeof o);
+        for (dk_index q = 0; q < k && !held; q++) {
             const dk_index j = ed->nb[(size_t)v * k + q];
             if (j < 0 || !ok[j])
                 continue;

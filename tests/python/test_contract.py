@@ -260,8 +260,12 @@ def test_loose_geometry_is_held_at_rest(name):
     assert len(m.warnings) == 1 and "6 vertices in 4 connected components" in m.warnings[0]
     assert "first: vertex %d)" % n0 in m.warnings[0]
     targets = np.concatenate([v[h] + [0, 0, 0.2] for h in handles])
+    rest_normals = m.normals() if name == "EmbeddedDeformation" else None
     r = m.solve(targets, **cold(name))
     assert np.array_equal(r.positions[n0:], v[n0:])
+    if name == "EmbeddedDeformation":   # held vertices keep their rest normals too
+        assert np.array_equal(m.normals()[n0:], rest_normals[n0:])
+        assert np.array_equal(m.deformed()[n0:], v[n0:])
     assert np.abs(r.positions[np.concatenate(handles), 2] - v[np.concatenate(handles), 2]).max() > 0.05
     # a constrained loose vertex follows its constraint
     m = getattr(dk, name)(dk.Mesh(v, f), handles=list(handles) + [[n0]], fixed=fixed)
