@@ -310,3 +310,22 @@ def test_stanford_bunny_with_its_loose_vertices(name, shared_mesh):
     assert np.isfinite(r.positions).all()
     assert np.array_equal(r.positions[~on_face], v[~on_face])
     assert np.abs(r.positions[handle] - v[handle]).max() > 0.002
+
+
+@pytest.mark.parametrize("name", dk.METHODS)
+def test_rebind_into_and_out_of_every_vertex_constrained(name):
+    _, v, f, handles, fixed = SCENES[0]
+    mesh = dk.Mesh(v, f)
+    allh = np.concatenate(handles)
+    rest = np.setdiff1d(np.arange(len(v)), allh)
+    targets = np.concatenate([v[h] + [0, 0, 0.2] for h in handles])
+    m = getattr(dk, name)(mesh, handles=handles, fixed=fixed)
+    m.solve(targets, **cold(name))
+    m.rebind(fixed=rest)
+    a = m.solve(targets, **cold(name))
+    b = getattr(dk, name)(mesh, handles=handles, fixed=rest).solve(targets, **cold(name))
+    np.testing.assert_allclose(a.positions, b.positions, atol=1e-12)
+    m.rebind(fixed=fixed)
+    a = m.solve(targets, **cold(name))
+    b = getattr(dk, name)(mesh, handles=handles, fixed=fixed).solve(targets, **cold(name))
+    np.testing.assert_allclose(a.positions, b.positions, atol=1e-12)
