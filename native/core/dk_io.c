@@ -1,10 +1,16 @@
 /* Mesh file reading (OBJ, OFF, PLY) and OBJ writing: see dk_io.h.
  *
- * The whole file is read into one NUL-terminated buffer and parsed in place; output arrays
- * grow by doubling. Text parsing uses strtod/strtol, which stop at whitespace, so the
- * buffer is never modified.
+ * The file is checked first (a regular file, after following symlinks, of at most
+ * DK_MESH_FILE_MAX_BYTES), then read whole into one NUL-terminated buffer and parsed in
+ * place; output arrays grow by doubling. Text parsing uses strtod/strtol, which stop at
+ * whitespace, so the buffer is never modified.
  */
+#define _POSIX_C_SOURCE 200809L
 #include "dk_io.h"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include <ctype.h>
 #include <errno.h>
@@ -135,10 +141,21 @@ static int at_line_end(const char *s)
 
 /* ------------------------------------------------------------------ OBJ ------------------ */
 
+/* Whether the line at t is a vertex statement `v x y z`. */
+static int is_obj_vertex(const char *t)
+{
+    return t[0] == 'v' && (t[1] == ' ' || t[1] == '\t');
+}
+
 static dk_status read_obj(const char *buf, const char *name, dk_mesh_file *out, dk_error *err)
 {
     builder b = {0};
-    long long line = 0;
+    long long line = 0, file_nv = 0;
+    /* The file's vertex count first: a positive face index refers to the file's vertices
+     * (some writers put faces before vertices), a negative one to those read so far. */
+    for (const char *s = buf; *s; s = next_line(s))
+        if (is_obj_vertex(skip_blanks(s)))
+            file_nv++;
     for (const char *s = buf; *s; s = next_line(s)) {
         line++;
         const char *t = skip_blanks(s);
@@ -170,12 +187,18 @@ static dk_status read_obj(const char *buf, const char *name, dk_mesh_file *out, 
                                         (int)k);
                 }
                 long long resolved = v > 0 ? v - 1 : b.nv + v;
-                if (v == 0 || resolved < 0 || resolved >= b.nv) {
+                if (v == 0 || resolved < 0 || (v > 0 && resolved >= file_nv)) {
+                    const long long so_far = b.nv; /* builder_free zeroes it */
                     builder_free(&b);
+                    if (v < 0)
+                        return dk_error_set(err, DK_ERR_INDEX,
+                                            "%s line %lld: relative face index %lld reaches "
+                                            "before the first vertex (%lld vertices so far)",
+                                            name, line, v, so_far);
                     return dk_error_set(err, DK_ERR_INDEX,
                                         "%s line %lld: face index %lld is out of range "
-                                        "(%lld vertices so far)",
-                                        name, line, v, (long long)b.nv);
+                                        "[1, %lld] (the file has %lld vertices)",
+                                        name, line, v, file_nv, file_nv);
                 }
                 if (push_index(&b, (dk_index)resolved)) {
                     builder_free(&b);
@@ -581,15 +604,59 @@ dk_status dk_read_mesh_file(const char *path, dk_mesh_file *out, dk_error *err)
     if (!path) return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "read mesh: path is NULL");
     const char *name = strrchr(path, '/');
     name = name ? name + 1 : path;
-    FILE *f = fopen(path, "rb");
-    if (!f)
+    /* Open without blocking (a FIFO would wait for a writer), then look before reading:
+     * only a regular file (symlinks followed) of a bounded size is read; a device such as
+     * /dev/zero, a FIFO or a directory would never end or is not a mesh. */
+    int fd = open(path, O_RDONLY | O_NONBLOCK);
+    if (fd < 0)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s: cannot open (%s)", path,
                             strerror(errno));
+    struct stat sb;
+    if (fstat(fd, &sb) != 0) {
+        int e = errno;
+        close(fd);
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s: cannot examine (%s)", path,
+                            strerror(e));
+    }
+    if (!S_ISREG(sb.st_mode)) {
+        const char *kind = S_ISDIR(sb.st_mode)    ? "a directory"
+                           : S_ISFIFO(sb.st_mode) ? "a FIFO (named pipe)"
+                           : S_ISCHR(sb.st_mode)  ? "a character device"
+                           : S_ISBLK(sb.st_mode)  ? "a block device"
+                           : S_ISSOCK(sb.st_mode) ? "a socket"
+                                                  : "not a regular file";
+        close(fd);
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "%s: is %s; only regular mesh files are read", path, kind);
+    }
+    if ((uint64_t)sb.st_size > (uint64_t)DK_MESH_FILE_MAX_BYTES) {
+        close(fd);
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "%s: is %lld bytes, more than the %lld-byte limit of mesh files "
+                            "(DK_MESH_FILE_MAX_BYTES)", path, (long long)sb.st_size,
+                            (long long)DK_MESH_FILE_MAX_BYTES);
+    }
+    int flags = fcntl(fd, F_GETFL);
+    if (flags >= 0)
+        (void)fcntl(fd, F_SETFL, flags & ~O_NONBLOCK);
+    FILE *f = fdopen(fd, "rb");
+    if (!f) {
+        int e = errno;
+        close(fd);
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s: cannot open (%s)", path,
+                            strerror(e));
+    }
+    /* The size may change while reading (a file being written): read at most the limit
+     * plus one byte, whatever fstat said, and refuse a file that grew past it. */
     char *buf = NULL;
     size_t len = 0, cap = 0;
+    const size_t limit = (size_t)DK_MESH_FILE_MAX_BYTES;
     for (;;) {
-        if (cap - len < 65536) {
-            size_t ncap = cap ? cap * 2 : 1 << 20;
+        if (cap - len < 65536 && cap < limit + 2) {
+            size_t want = (size_t)sb.st_size + 65536;
+            size_t ncap = cap ? cap * 2 : (want < ((size_t)1 << 20) ? (size_t)1 << 20 : want);
+            if (ncap > limit + 2)
+                ncap = limit + 2; /* room for the limit, one byte more, and the NUL */
             char *nb = realloc(buf, ncap);
             if (!nb) {
                 free(buf);
@@ -602,6 +669,13 @@ dk_status dk_read_mesh_file(const char *path, dk_mesh_file *out, dk_error *err)
         size_t got = fread(buf + len, 1, cap - len - 1, f);
         len += got;
         if (got == 0) break;
+        if (len > limit) {
+            free(buf);
+            fclose(f);
+            return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                                "%s: grew past the %lld-byte limit of mesh files while being "
+                                "read", path, (long long)DK_MESH_FILE_MAX_BYTES);
+        }
     }
     int bad = ferror(f);
     fclose(f);

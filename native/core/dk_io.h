@@ -3,7 +3,8 @@
  * Readers return polygons exactly as stored (vertex order as in the file), ready for
  * dk_mesh_from_polygons. They check what a file can get wrong: malformed numbers, missing
  * data, face indices out of range, polygons with fewer than 3 corners; messages name the file
- * and the line ("mesh.obj line 12: face index 90 is out of range [1, 40]"), or the element
+ * and the line ("mesh.obj line 12: face index 90 is out of range [1, 40] (the file has 40
+ * vertices)"; OBJ face indices may refer to vertices listed later), or the element
  * number for binary PLY. Nothing is printed; the library never aborts.
  *
  * Supported:
@@ -27,6 +28,13 @@
 #ifdef __cplusplus
 extern "C" {
 #endif
+
+/** The largest mesh file read, in bytes (2 GiB). A larger file is refused up front with
+ *  DK_ERR_INVALID_ARGUMENT naming the limit, and so is one that grows past it while being
+ *  read. Only regular files are read (symlinks are followed): a directory, a FIFO, a
+ *  socket or a device (an .obj symlink to /dev/zero) is refused before anything is read,
+ *  instead of growing memory until the process is killed. */
+#define DK_MESH_FILE_MAX_BYTES (INT64_C(2) * 1024 * 1024 * 1024)
 
 /** Polygons read from a file. All arrays are malloc'ed and owned by the struct: release them
  *  with dk_mesh_file_free(). Arrays are never NULL after a successful read (they have at

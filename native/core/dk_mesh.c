@@ -47,6 +47,11 @@ dk_status dk_check_positions(const double *positions, dk_index n, dk_error *err)
         if (!isfinite(positions[i]))
             return dk_error_set(err, DK_ERR_NONFINITE, "vertex %lld coordinate %c is %g",
                                 (long long)(i / 3), axis[i % 3], positions[i]);
+        if (fabs(positions[i]) > DK_COORD_MAX)
+            return dk_error_set(err, DK_ERR_NONFINITE,
+                                "vertex %lld coordinate %c is %g, beyond +-%g (the "
+                                "operators would overflow double precision)",
+                                (long long)(i / 3), axis[i % 3], positions[i], DK_COORD_MAX);
     }
     return DK_OK;
 }

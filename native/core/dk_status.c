@@ -9,12 +9,14 @@ void dk_error_clear(dk_error *err)
     if (!err) return;
     err->status = DK_OK;
     err->message[0] = '\0';
+    err->column = 0;
 }
 
 dk_status dk_error_set(dk_error *err, dk_status status, const char *fmt, ...)
 {
     if (!err) return status;
     err->status = status;
+    err->column = 0;
     va_list ap;
     va_start(ap, fmt);
     vsnprintf(err->message, sizeof err->message, fmt, ap);

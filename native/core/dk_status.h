@@ -8,6 +8,8 @@
 #ifndef DK_STATUS_H
 #define DK_STATUS_H
 
+#include <stdint.h>
+
 #include <stddef.h>
 
 #ifdef __cplusplus
@@ -37,6 +39,10 @@ typedef enum dk_status {
 typedef struct dk_error {
     dk_status status;                      /**< the failure, or DK_OK             */
     char message[DK_ERROR_MESSAGE_SIZE];   /**< NUL-terminated, never longer      */
+    int64_t column;                        /**< 1 + the matrix column a numerical
+                                                failure is about, 0 when none: for the
+                                                caller to name its own vertex instead
+                                                (dk_error_set resets it)           */
 } dk_error;
 
 /** Resets `err` (may be NULL) to DK_OK with an empty message. */

@@ -8,8 +8,10 @@
  *  - the ROI only turns FREE vertices into FIXED ones: a handle vertex outside the ROI stays
  *    a handle (it is constrained either way, and dropping its target silently would be
  *    worse than honouring it);
- *  - having no free vertex is not an error here (some methods accept it); methods that need
- *    unknowns refuse it themselves. */
+ *  - having no free vertex is not an error here: a method then returns the constrained
+ *    motion (dk_constraints_constrained_motion) instead of refusing;
+ *  - a component is held when none of its vertices is a handle or fixed after the ROI is
+ *    applied: a component outside the ROI is fixed by it, not held. */
 #include "dk_constraints.h"
 
 #include <math.h>
@@ -27,6 +29,7 @@ void dk_constraints_free(dk_constraints *c)
     free(c->free_index);
     free(c->free_vertices);
     free(c->stiffness);
+    free(c->held);
     free(c);
 }
 
@@ -178,6 +181,62 @@ static dk_status assign_roles(const dk_constraint_desc *desc, dk_constraints *c,
     return DK_OK;
 }
 
+/* Components nothing constrains are held: their vertices become FIXED and marked held. */
+static dk_status hold_unconstrained(const dk_mesh *mesh, dk_constraints *c, dk_error *err)
+{
+    const dk_index n = c->n_vertices, nc = mesh->report.n_components;
+    c->first_held = -1;
+    c->held = calloc((size_t)n + 1, 1);
+    if (!c->held)
+        return oom(err, "held vertices");
+    if (!mesh->component || nc <= 0 || mesh->n_faces == 0)
+        return DK_OK; /* a point set (no faces) has no loose geometry: its points are it */
+    unsigned char *constrained = calloc((size_t)nc + 1, 1);
+    if (!constrained)
+        return oom(err, "components");
+    for (dk_index v = 0; v < n; v++)
+        if (c->role[v] != DK_VERTEX_FREE)
+            constrained[mesh->component[v]] = 1;
+    for (dk_index k = 0; k < nc; k++)
+        if (!constrained[k])
+            c->n_held_components++;
+    for (dk_index v = 0; v < n; v++)
+        if (!constrained[mesh->component[v]]) {
+            c->role[v] = DK_VERTEX_FIXED;
+            c->held[v] = 1;
+            if (c->n_held++ == 0)
+                c->first_held = v;
+        }
+    free(constrained);
+    return DK_OK;
+}
+
+void dk_constraints_hold(const dk_constraints *c, const double *rest_positions,
+                         double *positions)
+{
+    if (!c || !c->held || c->n_held == 0)
+        return;
+    for (dk_index v = 0; v < c->n_vertices; v++)
+        if (c->held[v])
+            memcpy(positions + 3 * (size_t)v, rest_positions + 3 * (size_t)v,
+                   3 * sizeof(double));
+}
+
+void dk_constraints_constrained_motion(const dk_constraints *c, const double *rest_positions,
+                                       const double *targets, double *positions)
+{
+    memcpy(positions, rest_positions, 3 * (size_t)c->n_vertices * sizeof(double));
+    for (dk_index k = 0; k < c->n_handle_vertices; k++) {
+        const dk_index v = c->handle_vertices[k];
+        const double w = c->handle_weights[k];
+        for (int d = 0; d < 3; d++) {
+            const double r = rest_positions[3 * (size_t)v + d];
+            positions[3 * (size_t)v + d] = w == 1.0 ? targets[3 * (size_t)k + d]
+                                                    : r + w * (targets[3 * (size_t)k + d] - r);
+        }
+    }
+}
+
 /* The free vertices' numbering, both ways. */
 static dk_status number_free(dk_constraints *c, dk_error *err)
 {
@@ -229,12 +288,49 @@ dk_status dk_constraints_create(const dk_mesh *mesh, const dk_constraint_desc *d
     }
     st = assign_roles(desc, c, err);
     if (st == DK_OK)
+        st = hold_unconstrained(mesh, c, err);
+    if (st == DK_OK)
         st = number_free(c, err);
     if (st != DK_OK) {
         dk_constraints_free(c);
         return st;
     }
     *out = c;
+    return DK_OK;
+}
+
+/* One expanded target: handle h's vertex v at row k, from a position (mode 0) or the
+ * transform t (mode 1), checked finite and within DK_COORD_MAX. */
+static dk_status target_of(const dk_constraints *c, const double *rest_positions,
+                           const double *targets, int mode, dk_index h, dk_index k,
+                           double o[3], dk_error *err)
+{
+    const dk_index v = c->handle_vertices[k];
+    if (mode == 0) {
+        const double *p = targets + 3 * (size_t)k;
+        if (!(isfinite(p[0]) && isfinite(p[1]) && isfinite(p[2])))
+            return dk_error_set(err, DK_ERR_NONFINITE,
+                                "constraint targets: handle %d vertex %d (target row %d) is "
+                                "not finite", (int)h, (int)v, (int)k);
+        o[0] = p[0];
+        o[1] = p[1];
+        o[2] = p[2];
+    } else {
+        const double *t = targets + 16 * (size_t)h, *r = rest_positions + 3 * (size_t)v;
+        for (int d = 0; d < 3; d++)
+            o[d] = t[4 * d] * r[0] + t[4 * d + 1] * r[1] + t[4 * d + 2] * r[2] + t[4 * d + 3];
+        if (!(isfinite(o[0]) && isfinite(o[1]) && isfinite(o[2])))
+            return dk_error_set(err, DK_ERR_NONFINITE,
+                                "constraint targets: handle %d vertex %d transformed position "
+                                "is not finite (overflow)", (int)h, (int)v);
+    }
+    for (int d = 0; d < 3; d++)
+        if (fabs(o[d]) > DK_COORD_MAX)
+            return dk_error_set(err, DK_ERR_NONFINITE,
+                                "constraint targets: handle %d vertex %d (target row %d) "
+                                "coordinate %c is %g, beyond +-%g (the solve would overflow "
+                                "double precision)", (int)h, (int)v, (int)k, "xyz"[d], o[d],
+                                DK_COORD_MAX);
     return DK_OK;
 }
 
@@ -248,9 +344,11 @@ dk_status dk_constraints_targets(const dk_constraints *c, const double *rest_pos
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "constraint targets: unknown mode %d (0 = positions, "
                             "1 = 4x4 transforms)", mode);
+    /* Everything is checked before anything is written: a refused request leaves `out`
+     * (a method's current targets) as it was. */
     for (dk_index h = 0; h < c->n_handles; h++) {
-        const double *t = targets + 16 * (size_t)h;
         if (mode == 1) {
+            const double *t = targets + 16 * (size_t)h;
             for (int e = 0; e < 16; e++)
                 if (!isfinite(t[e]))
                     return dk_error_set(err, DK_ERR_NONFINITE,
@@ -263,28 +361,14 @@ dk_status dk_constraints_targets(const dk_constraints *c, const double *rest_pos
                                     t[13], t[14], t[15]);
         }
         for (dk_index k = c->handle_start[h]; k < c->handle_start[h + 1]; k++) {
-            dk_index v = c->handle_vertices[k];
-            double *o = out + 3 * (size_t)k;
-            if (mode == 0) {
-                const double *p = targets + 3 * (size_t)k;
-                if (!(isfinite(p[0]) && isfinite(p[1]) && isfinite(p[2])))
-                    return dk_error_set(err, DK_ERR_NONFINITE,
-                                        "constraint targets: handle %d vertex %d (target row "
-                                        "%d) is not finite", (int)h, (int)v, (int)k);
-                o[0] = p[0];
-                o[1] = p[1];
-                o[2] = p[2];
-            } else {
-                const double *r = rest_positions + 3 * (size_t)v;
-                for (int d = 0; d < 3; d++)
-                    o[d] = t[4 * d] * r[0] + t[4 * d + 1] * r[1] + t[4 * d + 2] * r[2] +
-                           t[4 * d + 3];
-                if (!(isfinite(o[0]) && isfinite(o[1]) && isfinite(o[2])))
-                    return dk_error_set(err, DK_ERR_NONFINITE,
-                                        "constraint targets: handle %d vertex %d transformed "
-                                        "position is not finite (overflow)", (int)h, (int)v);
-            }
+            double o[3];
+            dk_status st = target_of(c, rest_positions, targets, mode, h, k, o, err);
+            if (st != DK_OK)
+                return st;
         }
     }
+    for (dk_index h = 0; h < c->n_handles; h++)
+        for (dk_index k = c->handle_start[h]; k < c->handle_start[h + 1]; k++)
+            (void)target_of(c, rest_positions, targets, mode, h, k, out + 3 * (size_t)k, err);
     return DK_OK;
 }

@@ -138,6 +138,9 @@ dk_status dk_arap_solve(dk_arap *arap, const dk_solve_request *request, double *
  *  a loose one while dragging and a tight one when the user lets go; the warm start is kept. */
 dk_status dk_arap_set_tolerance(dk_arap *arap, double tolerance, dk_error *err);
 
+/** The stopping tolerance the next solve uses (NaN for NULL). */
+double dk_arap_tolerance(const dk_arap *arap);
+
 /** The ARAP energy E of arbitrary positions (n_vertices x 3) with their optimal rotations,
  *  including the soft-handle penalties for the targets of the last solve (none before the
  *  first solve), into `energy` (NaN on failure). Independent of the solver state otherwise.

@@ -9,6 +9,19 @@
  *
  * Overlaps are refused, not resolved silently: a vertex in two handles, or in a handle and the
  * fixed set, is a DK_ERR_INVALID_ARGUMENT naming the vertex and both groups.
+ *
+ * Loose geometry (issue 18, class 12): a connected component of the mesh in which no vertex
+ * is a handle or fixed (or outside the ROI) -- a loose vertex, a loose edge, a floating
+ * island -- is nothing any method can place: its position is undetermined for some, a
+ * guess for others. Every such component is HELD: its vertices get the role FIXED (so every
+ * method keeps them at rest, as it keeps fixed vertices), `held` marks them, and n_held /
+ * n_held_components / first_held count them for the methods' reports. A mesh without faces
+ * (a point set, which EmbeddedDeformation deforms through its graph) has no loose geometry
+ * and nothing is held there. This is decided once,
+ * here, so that every method treats loose geometry the same way; a method whose fixed
+ * vertices act on their surroundings (EmbeddedDeformation's constant nodes) ignores held
+ * ones there, and every method writes the rest position of held vertices into its result
+ * (dk_constraints_hold).
  */
 #ifndef DK_CONSTRAINTS_H
 #define DK_CONSTRAINTS_H
@@ -48,11 +61,17 @@ typedef struct dk_constraints {
     dk_index *free_index;             /**< n_vertices: position among free vertices or -1   */
     dk_index *free_vertices;          /**< n_free: the inverse map                          */
     double *stiffness;                /**< n_vertices                                       */
+    unsigned char *held;              /**< n_vertices: 1 = in a component nothing constrains,
+                                           held at rest (role FIXED)                      */
+    dk_index n_held;                  /**< vertices held                                    */
+    dk_index n_held_components;       /**< components held                                  */
+    dk_index first_held;              /**< the smallest held vertex, -1 when none           */
 } dk_constraints;
 
 /** Validates `desc` against the mesh (indices in range, no overlaps, weights in (0,1],
  *  stiffness finite and > 0, no empty handle, at least one handle vertex) and builds the
- *  owned form. Vertices outside a non-empty ROI become FIXED. */
+ *  owned form. Vertices outside a non-empty ROI become FIXED, and so do the vertices of
+ *  every connected component without a handle or fixed vertex (held, see above). */
 dk_status dk_constraints_create(const dk_mesh *mesh, const dk_constraint_desc *desc,
                                 dk_constraints **out, dk_error *err);
 
@@ -63,9 +82,23 @@ void dk_constraints_free(dk_constraints *c);
  *  mode 0: `targets` holds n_handle_vertices x 3 positions (concatenated in handle order).
  *  mode 1: `targets` holds n_handles 4x4 row-major affine transforms applied to the rest
  *          positions of each handle's vertices (bottom row must be 0 0 0 1).
- *  Checks finiteness (naming the handle and vertex). `out` is n_handle_vertices x 3. */
+ *  Checks finiteness and the DK_COORD_MAX bound of every expanded target (naming the
+ *  handle and vertex) before writing anything: on failure `out` is unchanged, so a
+ *  method whose current targets live there keeps them. `out` is n_handle_vertices x 3. */
 dk_status dk_constraints_targets(const dk_constraints *c, const double *rest_positions,
                                  const double *targets, int mode, double *out, dk_error *err);
+
+/** Writes the rest position of every held vertex into `positions` (n_vertices x 3): the
+ *  last step of every method's solve, so that loose geometry is held exactly at rest. */
+void dk_constraints_hold(const dk_constraints *c, const double *rest_positions,
+                         double *positions);
+
+/** Writes the constrained motion into `positions` (n_vertices x 3) when no vertex is free:
+ *  each handle vertex at rest + weight (target - rest) (its target when the weight is 1),
+ *  every other vertex at rest. `targets` are the expanded per-handle-vertex targets. For
+ *  methods whose bind finds nothing to solve. */
+void dk_constraints_constrained_motion(const dk_constraints *c, const double *rest_positions,
+                                       const double *targets, double *positions);
 
 #ifdef __cplusplus
 }

@@ -100,6 +100,9 @@ dk_status dk_eigen_solve(dk_eigen *e, const dk_solve_request *request, double *p
  *  iterations 0. */
 void dk_eigen_set_preview(dk_eigen *e, int preview);
 
+/** Whether the next solve is a preview (dk_eigen_set_preview); 0 for NULL. */
+int dk_eigen_preview(const dk_eigen *e);
+
 /** sum_i |positions_i - x~_i|^2 for the last solve's Step-1 target (before any solve: the
  *  rest). */
 dk_status dk_eigen_energy(const dk_eigen *e, const double *positions, double *energy,

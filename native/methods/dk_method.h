@@ -80,7 +80,19 @@ typedef struct dk_method_stats {
     dk_index n_unknowns;         /**< size of the factored system (0 for direct methods)    */
     int analysis_count;          /**< symbolic analyses since bind                          */
     int factorization_count;     /**< numeric factorizations since bind                     */
+    dk_index n_held;             /**< vertices held at rest because no handle or fixed
+                                      vertex is in their connected component (loose
+                                      geometry, dk_constraints.h)                          */
+    dk_index n_held_components;  /**< the components they make up                          */
+    dk_index first_held;         /**< the smallest held vertex, -1 when none                */
 } dk_method_stats;
+
+/** Fills the held-vertex counters of `stats` from the method's constraints (NULL: none).
+ *  `to_caller` maps the constraints' vertex numbering to the caller's (a method that binds
+ *  on its own numbering passes its dk_reorder perm), NULL when they are the same, so that
+ *  first_held names the caller's vertex. */
+void dk_constraints_held_stats(const dk_constraints *c, const dk_index *to_caller,
+                               dk_method_stats *stats);
 
 /** What a method's results depend on, for code that is written against the contract. */
 typedef enum dk_method_flags {
@@ -182,6 +194,17 @@ const dk_method_ops *dk_method_find(const char *name);
  *  ("ARAP solve"). */
 dk_status dk_solve_request_check(const dk_solve_request *request, const char *who,
                                  dk_error *err);
+
+/** Checks a solve's result before it is returned: every position finite, and the energy
+ *  finite unless `check_energy` is 0 (the request skipped it: NaN by contract). Every
+ *  method's solve ends with it, so that no solve returns NaN or Inf without an error
+ *  (DK_ERR_NONFINITE, naming the first bad vertex, or saying that the energy overflowed
+ *  while the positions are finite, with the remedy). `who` prefixes the message. */
+dk_status dk_solve_result_check(const double *positions, dk_index n_vertices, double energy,
+                                int check_energy, const char *who, dk_error *err);
+
+/** Checks an energy value before energy() returns it (DK_ERR_NONFINITE when not finite). */
+dk_status dk_energy_result_check(double energy, const char *who, dk_error *err);
 
 #ifdef __cplusplus
 }

@@ -178,11 +178,46 @@ static dk_status eigenvectors(dk_eigen *e, dk_error *err)
         st = bsw ? bsw_laplacian(e->mesh, e->opt.bsw_width, mass, &l, err)
                  : dk_laplacian_cotangent(e->mesh, &l, err);
     for (dk_index i = 0; st == DK_OK && i < n; i++)
-        if (!(mass[i] > 0.0))
+        if (!(mass[i] > 0.0) && e->mesh->ring_start[i + 1] > e->mesh->ring_start[i])
             st = dk_error_set(err, DK_ERR_DEGENERATE,
-                              "EigenDeformation: vertex %d has no area (isolated, or only on "
+                              "EigenDeformation: vertex %d has no area (it is only on "
                               "degenerate triangles): the Laplacian's mass matrix needs every "
-                              "vertex on a face with area", (int)i);
+                              "vertex of a face to have area", (int)i);
+    /* Loose vertices (on no face, issue 18 class 12) take no part in the spectral fit: each
+     * gets mass 1 and a Laplacian diagonal above every eigenvalue of the surface (a
+     * Gershgorin bound of M^-1 L), so that it decouples into a mode of its own that is
+     * never among the smallest, and every surface eigenvector is exactly 0 there. Their
+     * result is their constraint's (solve: handle target, or rest). */
+    if (st == DK_OK) {
+        double bound = 0.0;
+        dk_index n_loose = 0;
+        double *row = calloc((size_t)n + 1, sizeof *row);
+        if (!row)
+            st = oom(err, "eigenvectors");
+        for (dk_index j = 0; st == DK_OK && j < n; j++) /* symmetric: columns are rows */
+            for (dk_index p = l->col_start[j]; p < l->col_start[j + 1]; p++)
+                row[j] += fabs(l->values[p]);
+        for (dk_index i = 0; st == DK_OK && i < n; i++) {
+            if (mass[i] > 0.0)
+                bound = fmax(bound, row[i] / mass[i]);
+            else
+                n_loose++;
+        }
+        if (st == DK_OK && n_loose > 0) {
+            dk_sparse *l2 = NULL;
+            for (dk_index i = 0; i < n; i++) {
+                row[i] = mass[i] > 0.0 ? 0.0 : 1e3 * bound + 1.0;
+                if (!(mass[i] > 0.0))
+                    mass[i] = 1.0;
+            }
+            st = dk_sparse_add_diagonal(l, row, &l2, err);
+            if (st == DK_OK) {
+                dk_sparse_free(l);
+                l = l2;
+            }
+        }
+        free(row);
+    }
     if (st == DK_OK) {
         if (n <= DENSE_MAX || e->K > n / 4) {
             st = dense_eigenpairs(l, mass, n, e->K, e->evals, e->U, err);
@@ -740,6 +775,11 @@ static void step3(dk_eigen *e, const level *L, const double *pstar, int blend, d
     }
 }
 
+int dk_eigen_preview(const dk_eigen *e)
+{
+    return e ? e->preview : 0;
+}
+
 void dk_eigen_set_preview(dk_eigen *e, int preview)
 {
     if (e)
@@ -769,7 +809,7 @@ dk_status dk_eigen_energy(const dk_eigen *e, const double *positions, double *en
         }
     }
     *energy = E;
-    return DK_OK;
+    return dk_energy_result_check(E, "EigenDeformation energy", err);
 }
 
 dk_status dk_eigen_solve(dk_eigen *e, const dk_solve_request *rq, double *positions,
@@ -803,13 +843,34 @@ dk_status dk_eigen_solve(dk_eigen *e, const dk_solve_request *rq, double *positi
         fit(e, L2->m, e->b, e->pstar);
         step3(e, L2, e->pstar, 0, positions);
     }
+    /* loose vertices (on no face) follow their constraint exactly, held ones stay at rest */
+    {
+        const dk_constraints *c = e->con;
+        const dk_mesh *mesh = e->mesh;
+        for (dk_index i = 0; i < e->n; i++)
+            if (mesh->ring_start[i + 1] == mesh->ring_start[i] && c->role[i] < 0)
+                memcpy(positions + 3 * (size_t)i, mesh->positions + 3 * (size_t)i,
+                       3 * sizeof(double));
+        for (dk_index q = 0; q < c->n_handle_vertices; q++) {
+            const dk_index i = c->handle_vertices[q];
+            if (mesh->ring_start[i + 1] == mesh->ring_start[i])
+                memcpy(positions + 3 * (size_t)i, e->target + 3 * (size_t)q,
+                       3 * sizeof(double));
+        }
+        dk_constraints_hold(c, mesh->positions, positions);
+    }
+    double energy = NAN;
+    if (!rq->skip_energy && (st = dk_eigen_energy(e, positions, &energy, err)) != DK_OK &&
+        st != DK_ERR_NONFINITE)
+        return st;
+    st = dk_solve_result_check(positions, e->n, energy, !rq->skip_energy,
+                               "EigenDeformation solve", err);
+    if (st != DK_OK)
+        return st;
     if (info) {
         info->iterations = e->preview ? 0 : e->n_levels;
         info->converged = 1;
-        if (rq->skip_energy)
-            info->energy = NAN;
-        else
-            dk_eigen_energy(e, positions, &info->energy, err);
+        info->energy = energy;
     }
     return DK_OK;
 }
@@ -859,6 +920,7 @@ void dk_eigen_stats(const dk_eigen *e, dk_method_stats *st)
     st->n_vertices = e->n;
     st->n_handles = e->con->n_handles;
     st->n_handle_vertices = e->con->n_handle_vertices;
+    dk_constraints_held_stats(e->con, NULL, st);
     st->n_unknowns = 3 * e->m;
     st->factorization_count = 1;
 }

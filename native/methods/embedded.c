@@ -816,10 +816,12 @@ static dk_status classify(const dk_embedded *ed, ed_system *s, dk_error *err)
         goto done;
     }
     /* the paper's rule: a node that influences a fixed vertex is a constant, so fixed
-     * vertices stay exactly at rest (all their nodes are the identity) */
+     * vertices stay exactly at rest (all their nodes are the identity). Not for held
+     * vertices (loose geometry nothing constrains, dk_constraints.h): they are put at rest
+     * in apply(), and freezing their nodes would freeze the surface around them. */
     unsigned char *held = moves; /* reused: 1 = influences a fixed vertex */
     for (dk_index v = 0; v < n; v++)
-        if (c->role[v] == DK_VERTEX_FIXED)
+        if (c->role[v] == DK_VERTEX_FIXED && !c->held[v])
             for (dk_index q = 0; q < k; q++)
                 if (ed->nb[(size_t)v * k + q] >= 0)
                     held[ed->nb[(size_t)v * k + q]] = 1;
@@ -1173,9 +1175,14 @@ static void identity(double *x, dk_index m)
 static void apply(const dk_embedded *ed, const double *x, double *out)
 {
     const dk_index k = ed->k;
+    const unsigned char *held_at_rest = ed->sys.con->held;
     for (dk_index v = 0; v < ed->n; v++) {
         const double *p = ed->p + 3 * v;
         int moving = 0;
+        if (held_at_rest[v]) { /* loose geometry nothing constrains: at rest */
+            memcpy(out + 3 * v, p, 3 * sizeof(double));
+            continue;
+        }
         for (dk_index q = 0; q < k; q++) {
             const dk_index j = ed->nb[(size_t)v * k + q];
             moving |= j >= 0 && ed->sys.node_unknown[j] >= 0;
@@ -1318,10 +1325,16 @@ dk_status dk_embedded_solve(dk_embedded *ed, const dk_solve_request *rq, double 
         }
     }
     dk_team_park(ed->team); /* the helper sleeps until the next solve */
-    ed->energy = F;
     apply(ed, ed->x, positions);
+    st = dk_solve_result_check(positions, ed->n, F, !rq->skip_energy,
+                               "EmbeddedDeformation solve", err);
+    if (st != DK_OK) { /* a non-finite end is no start: the next solve starts from rest */
+        identity(ed->x, ed->m);
+        return st;
+    }
+    ed->energy = F;
     if (info) {
-        info->energy = F;
+        info->energy = rq->skip_energy ? NAN : F; /* skipped: NaN, as the contract says */
         info->iterations = it;
         info->converged = converged;
     }
@@ -1521,7 +1534,10 @@ dk_status dk_embedded_normals(const dk_embedded *ed, const double *normals, doub
     for (dk_index v = 0; v < n; v++) {
         const double *nv = normals + 3 * v;
         double o[3] = {0.0, 0.0, 0.0};
-        for (dk_index q = 0; q < k; q++) {
+        const int held = ed->sys.con->held[v]; /* at rest: its normal is the rest normal */
+        if (held)
+            memcpy(o, nv, sizeof o);
+        for (dk_index q = 0; q < k && !held; q++) {
             const dk_index j = ed->nb[(size_t)v * k + q];
             if (j < 0 || !ok[j])
                 continue;
@@ -1611,7 +1627,7 @@ dk_status dk_embedded_energy(const dk_embedded *ed, const double *positions, dou
         }
     }
     *energy = F;
-    return DK_OK;
+    return dk_energy_result_check(F, "EmbeddedDeformation energy", err);
 }
 
 void dk_embedded_stats(const dk_embedded *ed, dk_method_stats *st)
@@ -1624,6 +1640,7 @@ void dk_embedded_stats(const dk_embedded *ed, dk_method_stats *st)
     st->n_vertices = ed->n;
     st->n_handles = ed->sys.con->n_handles;
     st->n_handle_vertices = ed->sys.con->n_handle_vertices;
+    dk_constraints_held_stats(ed->sys.con, NULL, st);
     st->n_unknowns = 12 * ed->sys.n_free;
     st->analysis_count = ed->analysis_count;
     st->factorization_count = ed->factorization_count;

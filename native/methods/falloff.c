@@ -476,8 +476,11 @@ dk_status dk_falloff_solve(dk_falloff *f, const dk_solve_request *rq, double *po
             e += dsp[d] * dsp[d];
         }
     }
+    st = dk_solve_result_check(positions, n, e, !rq->skip_energy, "Falloff solve", err);
+    if (st != DK_OK)
+        return st;
     if (info) {
-        info->energy = e;
+        info->energy = rq->skip_energy ? NAN : e;
         info->iterations = 1;
         info->converged = 1;
     }
@@ -499,7 +502,7 @@ dk_status dk_falloff_energy(const dk_falloff *f, const double *positions, double
         e += d * d;
     }
     *energy = e;
-    return DK_OK;
+    return dk_energy_result_check(e, "Falloff energy", err);
 }
 
 /* ------------------------------------------------------------------ accessors ----------- */
@@ -536,6 +539,7 @@ void dk_falloff_stats(const dk_falloff *f, dk_method_stats *st)
     st->n_vertices = f->mesh->n_vertices;
     st->n_handles = f->st.con ? f->st.con->n_handles : 0;
     st->n_handle_vertices = f->st.con ? f->st.con->n_handle_vertices : 0;
+    dk_constraints_held_stats(f->st.con, NULL, st);
     st->factorization_count = f->heat ? dk_heat_factorization_count(f->heat) : 0;
 }
 

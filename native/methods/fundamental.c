@@ -3,6 +3,7 @@
 #include "dk_fundamental.h"
 
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -608,10 +609,20 @@ static dk_status eliminate(const dk_fundamental *f, const dk_constraint_desc *de
         st = dk_cholesky_analyze(s->A, &s->chol, err);
     if (st == DK_OK && nu > 0) {
         st = dk_cholesky_factorize(s->chol, s->A, err);
-        if (st == DK_ERR_NOT_POSITIVE_DEFINITE)
-            dk_error_prefix(err, "LinearReconstruction: the system is singular (constrained "
-                                 "vertices on a line, or a part held by nothing?)");
-        else if (st != DK_OK)
+        if (st == DK_ERR_NOT_POSITIVE_DEFINITE) {
+            /* name the caller's vertex (or face frame), not the matrix column */
+            const int64_t col = err ? err->column - 1 : -1;
+            char at[64] = "";
+            for (dk_index v = 0; col >= 0 && !at[0] && v < n; v++)
+                if (s->vu[v] == col)
+                    snprintf(at, sizeof at, " at vertex %d", (int)v);
+            for (dk_index t = 0; col >= 0 && !at[0] && t < F; t++)
+                if (s->fu[t] >= 0 && col >= s->fu[t] && col < s->fu[t] + 3)
+                    snprintf(at, sizeof at, " at the frame of face %d", (int)t);
+            dk_error_set(err, DK_ERR_NOT_POSITIVE_DEFINITE,
+                         "LinearReconstruction: the system is singular%s (constrained "
+                         "vertices on a line, or degenerate triangles around it)", at);
+        } else if (st != DK_OK)
             dk_error_prefix(err, "LinearReconstruction");
     }
     if (st == DK_OK) {
@@ -900,12 +911,17 @@ dk_status dk_fundamental_solve(dk_fundamental *f, const dk_solve_request *rq, do
             for (int d = 0; d < 3; d++)
                 for (int k = 0; k < 3; k++)
                     f->frames[9 * (size_t)t + 3 * d + k] = f->el.rhs[(size_t)d * nu + f->el.fu[t] + k];
+    double energy = NAN;
+    if (!rq->skip_energy && (st = dk_fundamental_energy(f, positions, &energy, err)) != DK_OK &&
+        st != DK_ERR_NONFINITE)
+        return st;
+    st = dk_solve_result_check(positions, m->n_vertices, energy, !rq->skip_energy,
+                               "LinearReconstruction solve", err);
+    if (st != DK_OK)
+        return st;
     if (info) {
         info->iterations = info->converged = 1;
-        if (rq->skip_energy)
-            info->energy = NAN;
-        else
-            dk_fundamental_energy(f, positions, &info->energy, err);
+        info->energy = energy;
     }
     return DK_OK;
 }
@@ -924,7 +940,7 @@ dk_status dk_fundamental_energy(const dk_fundamental *f, const double *positions
     evaluation ev = {f, positions, f->frames, 0.0};
     for_each_residual(f, energy_visit, &ev);
     *energy = ev.E;
-    return DK_OK;
+    return dk_energy_result_check(ev.E, "LinearReconstruction energy", err);
 }
 
 const double *dk_fundamental_frames(const dk_fundamental *f)
@@ -948,6 +964,7 @@ void dk_fundamental_stats(const dk_fundamental *f, dk_method_stats *st)
     st->n_vertices = f->mesh->n_vertices;
     st->n_handles = f->el.con->n_handles;
     st->n_handle_vertices = f->el.con->n_handle_vertices;
+    dk_constraints_held_stats(f->el.con, NULL, st);
     st->n_unknowns = f->el.n_unk;
     st->analysis_count = st->factorization_count = f->el.n_unk > 0;
 }

@@ -84,6 +84,8 @@ static dk_status build_basis(dk_laplacian_edit *le, le_system *s, dk_error *err)
 static void try_build_basis(dk_laplacian_edit *le, le_system *s)
 {
     dk_error ignored;
+    if (s->n_unknowns == 0)
+        return;
     dk_error_clear(&ignored);
     (void)build_basis(le, s, &ignored);
 }
@@ -645,10 +647,11 @@ static dk_status build_system(dk_laplacian_edit *le, const dk_constraint_desc *d
     s->n_unknowns = dk_csys_number_unknowns(n, le_classify, &cc, s->unknown_index, s->unknowns,
                                             s->soft_w2, &s->n_soft);
     if (s->n_unknowns == 0) {
-        st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
-                          "LaplacianEdit: no free vertices: every vertex is a handle, fixed "
-                          "or outside the region of interest");
-        goto fail;
+        /* every vertex a handle, fixed or outside the ROI: nothing to solve, no system;
+         * solves give the constrained motion (issue 18, class 12) */
+        mark_active_rows(le, s);
+        free(in_roi);
+        return DK_OK;
     }
     /* Singular-system check: every component holding an unknown must be pinned by an
      * eliminated vertex, a soft row or an isolated vertex (its row A_ii = 1 pins it). */
@@ -702,6 +705,10 @@ static dk_status build_system_caller(dk_laplacian_edit *le, const dk_constraint_
 static dk_status factor(dk_laplacian_edit *le, le_system *old, le_system *s, const char *what,
                         dk_error *err)
 {
+    if (s->n_unknowns == 0)
+        return DK_OK; /* every vertex constrained: nothing to factor */
+    if (old && !old->chol)
+        old = NULL;
     const int same = old && old->chol && s->n_unknowns == old->n_unknowns &&
                      memcmp(s->unknown_index, old->unknown_index,
                             sizeof(dk_index) * (size_t)le->n) == 0 &&
@@ -712,6 +719,13 @@ static dk_status factor(dk_laplacian_edit *le, le_system *old, le_system *s, con
                                   le->team, &counts, err);
     le->analysis_count = counts.analysis_count;
     le->factorization_count = counts.factorization_count;
+    if (st == DK_ERR_NOT_POSITIVE_DEFINITE && err && err->column > 0 &&
+        err->column <= s->n_unknowns) /* name the caller's vertex, not the matrix column */
+        return dk_error_set(err, DK_ERR_NOT_POSITIVE_DEFINITE,
+                            "%s: the system is not positive definite at vertex %ld "
+                            "(degenerate triangles around it, or a part held only along a "
+                            "line)", what,
+                            (long)le->ro->perm[s->unknowns[err->column - 1]]);
     return st == DK_OK ? DK_OK : dk_error_prefix(err, "%s", what);
 }
 
@@ -921,7 +935,7 @@ dk_status dk_laplacian_edit_energy(const dk_laplacian_edit *le, const double *po
     *energy = energy_of(le, x, 3, 1, NULL, 1);
     dk_team_park(le->team);
     free(x);
-    return DK_OK;
+    return dk_energy_result_check(*energy, "LaplacianEdit energy", err);
 }
 
 /* ------------------------------------------------------------------ solve --------------- */
@@ -1244,7 +1258,7 @@ dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const dk_solve_request 
     const int want_energy = !rq->skip_energy;
     const int mode = (int)rq->target_kind;
     s = &le->sys;
-    if (!s->chol)
+    if (!s->chol && s->n_unknowns > 0)
         return dk_error_set(err, DK_ERR_INTERNAL,
                             "LaplacianEdit solve: no factorization (a failed rebind could not "
                             "restore it); rebind first");
@@ -1259,7 +1273,9 @@ dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const dk_solve_request 
         solve_init_job job = {le, NULL};
         dk_team_run_halves(le->team, solve_init_range, &job, n, LE_PARALLEL_MIN);
     }
-    if (mode == 1 && s->basis) {
+    if (s->n_unknowns == 0) {
+        /* every vertex constrained: x (targets and rest) is the result */
+    } else if (mode == 1 && s->basis) {
         /* affine in the transforms: combine the precomputed basis (no back-substitution) */
         solve_init_job job = {le, targets};
         dk_team_run_halves(le->team, basis_range, &job, s->n_unknowns, LE_PARALLEL_MIN);
@@ -1269,7 +1285,7 @@ dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const dk_solve_request 
             return st;
     }
     iterations = 1;
-    if (le->opt.detail == DK_LE_DETAIL_LOCAL_FRAME) {
+    if (le->opt.detail == DK_LE_DETAIL_LOCAL_FRAME && s->n_unknowns > 0) {
         const double scale = le->mesh->bbox_diagonal;
         converged = le->opt.local_frame_iterations == 0;
         for (int it = 0; it < le->opt.local_frame_iterations; it++) {
@@ -1287,6 +1303,9 @@ dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const dk_solve_request 
         /* the output and the energy in one pass */
         const double e = energy_of(le, le->x, 1, (size_t)n, positions, want_energy);
         dk_team_park(le->team); /* the last pass: let the helper sleep now */
+        st = dk_solve_result_check(positions, n, e, want_energy, "LaplacianEdit solve", err);
+        if (st != DK_OK)
+            return st;
         if (info)
             info->energy = e;
     }
@@ -1310,6 +1329,7 @@ void dk_laplacian_edit_stats(const dk_laplacian_edit *le, dk_method_stats *st)
     st->n_vertices = le->n;
     st->n_handles = le->sys.con ? le->sys.con->n_handles : 0;
     st->n_handle_vertices = le->sys.con ? le->sys.con->n_handle_vertices : 0;
+    dk_constraints_held_stats(le->sys.con, le->ro->perm, st);
     st->n_unknowns = le->sys.n_unknowns;
     st->analysis_count = le->analysis_count;
     st->factorization_count = le->factorization_count;

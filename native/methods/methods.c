@@ -1,6 +1,7 @@
 /* DeformKit: the registry of methods (dk_method.h) and the request checks they share. */
 #include "dk_method.h"
 
+#include <math.h>
 #include <stddef.h>
 #include <string.h>
 
@@ -54,4 +55,52 @@ dk_status dk_solve_request_check(const dk_solve_request *rq, const char *who, dk
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s: skip_energy must be 0 or 1",
                             who);
     return DK_OK;
+}
+
+dk_status dk_solve_result_check(const double *positions, dk_index n_vertices, double energy,
+                                int check_energy, const char *who, dk_error *err)
+{
+    double largest = 0.0;
+    for (int64_t i = 0; i < 3 * (int64_t)n_vertices; i++) {
+        const double x = positions[i];
+        if (!isfinite(x))
+            return dk_error_set(err, DK_ERR_NONFINITE,
+                                "%s: the result is not finite (vertex %lld coordinate %c is "
+                                "%g): the constraints or the mesh are too large or too "
+                                "degenerate for double precision; nothing was returned",
+                                who, (long long)(i / 3), "xyz"[i % 3], x);
+        if (fabs(x) > largest)
+            largest = fabs(x);
+    }
+    if (check_energy && !isfinite(energy))
+        return dk_error_set(err, DK_ERR_NONFINITE,
+                            "%s: the energy is %g (overflow: the largest coordinate of the "
+                            "result is %g); the positions are finite: solve without the "
+                            "energy (energy=False, skip_energy) to get them",
+                            who, energy, largest);
+    return DK_OK;
+}
+
+dk_status dk_energy_result_check(double energy, const char *who, dk_error *err)
+{
+    if (isfinite(energy))
+        return DK_OK;
+    return dk_error_set(err, DK_ERR_NONFINITE,
+                        "%s: the energy is %g (overflow: the positions are too large for "
+                        "double precision)", who, energy);
+}
+
+void dk_constraints_held_stats(const dk_constraints *c, const dk_index *to_caller,
+                               dk_method_stats *stats)
+{
+    stats->n_held = c ? c->n_held : 0;
+    stats->n_held_components = c ? c->n_held_components : 0;
+    stats->first_held = c ? c->first_held : -1;
+    if (c && to_caller && c->n_held > 0) {
+        dk_index first = -1;
+        for (dk_index v = 0; v < c->n_vertices; v++)
+            if (c->held[v] && (first < 0 || to_caller[v] < first))
+                first = to_caller[v];
+        stats->first_held = first;
+    }
 }

@@ -219,13 +219,29 @@ dk_status dk_cholesky_factorize(dk_cholesky *chol, const dk_sparse *a, dk_error 
         const size_t k = chol->factor->minor;
         const int *perm = chol->factor->Perm;
         const long col = (perm && k < (size_t)n) ? (long)perm[k] : (long)k;
+        /* Entries so large that the elimination overflows are no loss of positivity: say
+         * what it is (the inputs beyond what double precision carries), not "not positive
+         * definite", which sends the caller looking for degenerate triangles. */
+        double largest = 0.0;
+        for (int64_t p = 0; p < (int64_t)a->col_start[n]; p++)
+            if (fabs(a->values[p]) > largest)
+                largest = fabs(a->values[p]);
+        if (largest > 1e150)
+            return dk_error_set(err, DK_ERR_NONFINITE,
+                                "Cholesky factorize: the elimination overflowed (matrix entries "
+                                "up to %g): coordinates, weights or stiffness too large for "
+                                "double precision", largest);
         if (chol->indefinite)
-            return dk_error_set(err, DK_ERR_NOT_POSITIVE_DEFINITE,
-                                "Cholesky factorize: zero or NaN pivot %zu of %d in LDL' "
-                                "(matrix column %ld): the matrix is singular", k, (int)n, col);
-        return dk_error_set(err, DK_ERR_NOT_POSITIVE_DEFINITE,
-                            "Cholesky factorize: matrix is not positive definite: positivity "
-                            "lost at pivot %zu of %d (matrix column %ld)", k, (int)n, col);
+            dk_error_set(err, DK_ERR_NOT_POSITIVE_DEFINITE,
+                         "Cholesky factorize: zero or NaN pivot %zu of %d in LDL' "
+                         "(matrix column %ld): the matrix is singular", k, (int)n, col);
+        else
+            dk_error_set(err, DK_ERR_NOT_POSITIVE_DEFINITE,
+                         "Cholesky factorize: matrix is not positive definite: positivity "
+                         "lost at pivot %zu of %d (matrix column %ld)", k, (int)n, col);
+        if (err)
+            err->column = col + 1; /* for the caller to name its own vertex */
+        return DK_ERR_NOT_POSITIVE_DEFINITE;
     }
     chol->factored = 1;
     /* NULL (small factor, no gain, no memory): solves use cholmod_solve2 */

@@ -36,10 +36,19 @@ PyObject *dk_py_raise(const dk_error *err, const char *context);
 typedef struct dk_py_doubles {
     double *data;      /**< rows x cols, row-major; owned (PyMem_Malloc), free with _release */
     Py_ssize_t rows, cols;
+    int ndim;          /**< 1 or 2: the dimensions of what was read                        */
 } dk_py_doubles;
 
-/** Reads `obj` as a float32/float64 (or integer) array of shape (rows, cols), converting to
- *  double. `cols` > 0 demands that many columns (a flat buffer of rows*cols is accepted and
+/** `cols` for a 1-D array (cols set to 1, ndim 1) or a 2-D one of any width (ndim 2), so that
+ *  a caller that treats the two differently reads the input once and then looks at ndim. */
+#define DK_PY_COLS_1D_OR_2D (-2)
+
+/** Reads `obj` exactly once, as a float32/float64 array (any buffer of another element type is
+ *  a TypeError naming `name` and the format found: integer and byte buffers are not
+ *  coordinates, and complex data would lose its imaginary part) or a (nested) sequence of
+ *  Python floats and ints (numpy scalars by their format), of shape (rows, cols), converting
+ *  to double. Sequences are copied into lists of our own before their shape is decided, so
+ *  Python code run by the conversion cannot make the shape and the data disagree. `cols` > 0 demands that many columns (a flat buffer of rows*cols is accepted and
  *  reshaped); cols == 0 accepts a 1-D array (cols set to 1). `rows` >= 0 demands that many
  *  rows, -1 accepts any. Non-finite values are NOT rejected here (callers name the vertex).
  *  `name` is used in messages ("vertices must have 3 columns, got 2"). Returns 0 or -1 with
@@ -51,6 +60,7 @@ int dk_py_read_doubles(PyObject *obj, Py_ssize_t rows, Py_ssize_t cols, const ch
 typedef struct dk_py_indices {
     dk_index *data;    /**< rows x cols, row-major; owned, free with _release              */
     Py_ssize_t rows, cols;
+    int ndim;          /**< 1 or 2: the dimensions of what was read                        */
 } dk_py_indices;
 
 /** Same contract as dk_py_read_doubles for integer data. Values outside int32 raise

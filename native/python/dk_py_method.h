@@ -33,6 +33,9 @@
 
 typedef struct dk_py_method_spec dk_py_method_spec;
 
+/** The size of a method's pending solve keywords (see dk_py_method_spec.solve_extra). */
+#define DK_PY_EXTRA_MAX 64
+
 /** The Python object of every method. */
 typedef struct dk_py_method {
     PyObject_HEAD
@@ -62,9 +65,16 @@ struct dk_py_method_spec {
      *  options point to during bind); called once after the bind, and after a failed
      *  parse, so parse_options must leave `options` releasable at every exit. */
     void (*release_options)(void *options);
-    /** Optional: the method's own solve keywords, read from `kw` like parse_options and
-     *  applied to the bound object before the solve (called with the object entered). */
-    int (*solve_extra)(dk_py_method *self, PyObject *kw, const char *context);
+    /** Optional: the method's own solve keywords, in two steps so that a call that raises
+     *  changes nothing (issue 18, class 8). solve_extra takes them out of `kw` (like
+     *  parse_options) and checks them into `pending` (DK_PY_EXTRA_MAX bytes, zeroed),
+     *  changing nothing; returns 0 or -1 with an exception set. apply_extra runs only after
+     *  every input of the call has been read and checked, just before the native solve: it
+     *  sets `pending` on the bound object and writes what it replaced into `saved` (same
+     *  layout); when the solve fails it is called again with (saved, NULL) to put the
+     *  object back. Both are called with the object entered. */
+    int (*solve_extra)(dk_py_method *self, PyObject *kw, void *pending, const char *context);
+    void (*apply_extra)(dk_py_method *self, const void *pending, void *saved);
     /** Optional: the method's own forms of the motion (e.g. translation=, rotation=, pivot=),
      *  read from `kw` like solve_extra: returns the equivalent `transforms` (n_handles x 4 x
      *  4, a new reference), Py_None (a new reference) when none of its keywords is given,
@@ -91,6 +101,7 @@ PyObject *dk_py_method_get_n_vertices(PyObject *obj, void *closure);
 PyObject *dk_py_method_get_n_handles(PyObject *obj, void *closure);
 PyObject *dk_py_method_get_n_handle_vertices(PyObject *obj, void *closure);
 PyObject *dk_py_method_get_stats(PyObject *obj, void *closure);
+PyObject *dk_py_method_get_warnings(PyObject *obj, void *closure);
 extern const char dk_py_method_rebind_doc[];
 extern const char dk_py_method_energy_doc[];
 
@@ -108,8 +119,12 @@ extern const char dk_py_method_energy_doc[];
         {"n_handle_vertices", dk_py_method_get_n_handle_vertices, NULL,                    \
          "rows expected in solve(targets)", NULL},                                         \
         {"stats", dk_py_method_get_stats, NULL,                                            \
-         "dict of counters: n_unknowns, analysis_count, factorization_count, and the "    \
-         "method's own",                                                                   \
+         "dict of counters: n_unknowns, analysis_count, factorization_count, n_held and "  \
+         "n_held_components (loose geometry held at rest), and the method's own",          \
+         NULL},                                                                            \
+        {"warnings", dk_py_method_get_warnings, NULL,                                      \
+         "tuple of str: what the bind decided for the caller, e.g. vertices held at rest " \
+         "because nothing constrains their component (empty when nothing)",               \
          NULL}
 
 /** tp_new of a method's type: binds per `spec`. A method's binding file defines its tp_new

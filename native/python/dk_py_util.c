@@ -231,6 +231,9 @@ static int resolve_shape(int ndim, Py_ssize_t shape0, Py_ssize_t shape1, Py_ssiz
         }
         r = shape0;
         c = 1;
+    } else if (cols == DK_PY_COLS_1D_OR_2D) {
+        r = shape0;
+        c = ndim == 2 ? shape1 : 1;
     } else {
         if (ndim != 2) {
             PyErr_Format(PyExc_ValueError, "%s must be 2-D, got a 1-D array of %zd values",
@@ -299,12 +302,55 @@ static void *alloc_elems(Py_ssize_t rows, Py_ssize_t cols, size_t size)
     return p;
 }
 
+/** Whether a buffer format (after any byte-order prefix) is a complex type ('Zd', 'Zf'). */
+static int format_is_complex(const char *fmt)
+{
+    if (!fmt)
+        return 0;
+    if (fmt[0] == '@' || fmt[0] == '=' || fmt[0] == '<' || fmt[0] == '>' || fmt[0] == '!')
+        fmt++;
+    return fmt[0] == 'Z';
+}
+
+/** Whether a buffer format is the object format 'O' (a numpy object array, whose items are
+ *  read as a sequence). */
+static int format_is_object(const char *fmt)
+{
+    if (!fmt)
+        return 0;
+    if (fmt[0] == '@' || fmt[0] == '=' || fmt[0] == '<' || fmt[0] == '>' || fmt[0] == '!')
+        fmt++;
+    return fmt[0] == 'O' && fmt[1] == '\0';
+}
+
+/** Refuses a buffer whose elements are not what `name` needs: real inputs (want_int == 0)
+ *  must be float32/float64 (integer or byte buffers were read as numbers before: raw
+ *  `memoryview(V.tobytes())` passed as coordinates); indices must be integers. Complex data
+ *  is always refused (its imaginary part would be dropped). Returns 0 or -1 with TypeError. */
+static int check_kind(elem_kind kind, int want_int, const char *format, const char *name)
+{
+    const char *f = format ? format : "B";
+    if (want_int && kind == KIND_FLOAT) {
+        PyErr_Format(PyExc_TypeError, "%s must hold integers, got floating-point data "
+                     "(buffer format '%s')", name, f);
+        return -1;
+    }
+    if (!want_int && kind != KIND_FLOAT) {
+        PyErr_Format(PyExc_TypeError,
+                     "%s must hold floating-point values (float32 or float64), got integer "
+                     "data (buffer format '%s'); convert it first, e.g. "
+                     "numpy.asarray(x, dtype=float)", name, f);
+        return -1;
+    }
+    return 0;
+}
+
 /** Reads through the buffer protocol. Returns 1 when done (0 on success in *rc), or 0 when
- *  the buffer's format is unsupported and the caller may try the sequence protocol (no
- *  exception set, *fmt_out describes it for messages). */
+ *  the buffer is an object array that the caller reads with the sequence protocol (no
+ *  exception set). Any other unsupported format is a TypeError naming it. */
 static int read_buffer(PyObject *obj, Py_ssize_t rows, Py_ssize_t cols, const char *name,
                        int want_int, void **out, Py_ssize_t *out_rows, Py_ssize_t *out_cols,
-                       int *rc, char *fmt_out, size_t fmt_size)
+                       int *out_ndim, int *rc)
 {
     Py_buffer view;
     elem_kind kind;
@@ -316,10 +362,24 @@ static int read_buffer(PyObject *obj, Py_ssize_t rows, Py_ssize_t cols, const ch
     if (PyObject_GetBuffer(obj, &view, PyBUF_RECORDS_RO) < 0)
         return 1;
     if (parse_format(view.format, view.itemsize, &kind, &swap) < 0) {
-        snprintf(fmt_out, fmt_size, "%s", view.format ? view.format : "B");
-        PyBuffer_Release(&view);
-        return 0;
+        const char *f = view.format ? view.format : "B";
+        if (format_is_object(f) && PySequence_Check(obj)) {
+            PyBuffer_Release(&view);
+            return 0;
+        }
+        if (format_is_complex(f))
+            PyErr_Format(PyExc_TypeError,
+                         "%s must hold real numbers, got complex data (buffer format '%s'): "
+                         "its imaginary part would be lost; pass the real part explicitly",
+                         name, f);
+        else
+            PyErr_Format(PyExc_TypeError,
+                         "%s: unsupported element type (buffer format '%s'); use %s", name, f,
+                         want_int ? "int32/int64" : "float32/float64");
+        goto done;
     }
+    if (check_kind(kind, want_int, view.format, name) < 0)
+        goto done;
     if (view.ndim == 0) {
         PyErr_Format(PyExc_ValueError, "%s must be an array, got a scalar", name);
         goto done;
@@ -327,11 +387,6 @@ static int read_buffer(PyObject *obj, Py_ssize_t rows, Py_ssize_t cols, const ch
     shape1 = view.ndim >= 2 ? view.shape[1] : 1;
     if (resolve_shape(view.ndim, view.shape[0], shape1, rows, cols, name, &r, &c) < 0)
         goto done;
-    if (want_int && kind == KIND_FLOAT) {
-        PyErr_Format(PyExc_TypeError, "%s must hold integers, got floating-point data "
-                     "(buffer format '%s')", name, view.format ? view.format : "B");
-        goto done;
-    }
     data = alloc_elems(r, c, want_int ? sizeof(dk_index) : sizeof(double));
     if (!data)
         goto done;
@@ -361,6 +416,7 @@ static int read_buffer(PyObject *obj, Py_ssize_t rows, Py_ssize_t cols, const ch
     *out = data;
     *out_rows = r;
     *out_cols = c;
+    *out_ndim = view.ndim;
     *rc = 0;
 done:
     PyBuffer_Release(&view);
@@ -372,7 +428,34 @@ static int store_object(PyObject *item, int want_int, void *out, Py_ssize_t k, P
                         Py_ssize_t j, const char *name)
 {
     if (!want_int) {
-        double d = PyFloat_AsDouble(item);
+        double d;
+        if (PyComplex_Check(item)) {
+            PyErr_Format(PyExc_TypeError, "%s[%zd, %zd] must be a real number, got complex",
+                         name, i, j);
+            return -1;
+        }
+        if (!PyFloat_Check(item) && !PyLong_Check(item) && PyObject_CheckBuffer(item)) {
+            /* a numpy scalar: judged by its format, as an array of it would be */
+            Py_buffer view;
+            elem_kind kind;
+            int swap;
+            if (PyObject_GetBuffer(item, &view, PyBUF_RECORDS_RO) < 0)
+                return -1;
+            if (view.ndim != 0 || parse_format(view.format, view.itemsize, &kind, &swap) < 0 ||
+                kind != KIND_FLOAT) {
+                PyErr_Format(PyExc_TypeError,
+                             "%s[%zd, %zd] must be a float, got an element of buffer format "
+                             "'%s'%s", name, i, j, view.format ? view.format : "B",
+                             view.ndim != 0 ? " that is not a scalar" : "");
+                PyBuffer_Release(&view);
+                return -1;
+            }
+            ((double *)out)[k] = load_scalar((const char *)view.buf, view.itemsize, kind,
+                                             swap).d;
+            PyBuffer_Release(&view);
+            return 0;
+        }
+        d = PyFloat_AsDouble(item);
         if (d == -1.0 && PyErr_Occurred()) {
             if (PyErr_ExceptionMatches(PyExc_TypeError)) {
                 PyObject *tn = PyType_GetName(Py_TYPE(item));
@@ -431,11 +514,17 @@ static int is_row_like(PyObject *o)
     return PySequence_Check(o);
 }
 
-/** Reads a (nested) sequence. Returns 0 or -1 with an exception set. */
+/** Reads a (nested) sequence. Returns 0 or -1 with an exception set.
+ *
+ * Every level is read exactly once, into lists this function owns, before any shape is
+ * decided: Python code can run while the items are converted (__index__, __float__,
+ * __len__, __getitem__) and may change the caller's sequences, but never these copies, so
+ * a sequence that grows or shrinks meanwhile cannot make the shape disagree with the data. */
 static int read_sequence(PyObject *obj, Py_ssize_t rows, Py_ssize_t cols, const char *name,
-                         int want_int, void **out, Py_ssize_t *out_rows, Py_ssize_t *out_cols)
+                         int want_int, void **out, Py_ssize_t *out_rows, Py_ssize_t *out_cols,
+                         int *out_ndim)
 {
-    PyObject *outer, *row = NULL;
+    PyObject *outer, *snap = NULL;
     Py_ssize_t n0, n1 = 1, r, c;
     int ndim = 1;
     void *data = NULL;
@@ -446,11 +535,29 @@ static int read_sequence(PyObject *obj, Py_ssize_t rows, Py_ssize_t cols, const 
         return -1;
     n0 = PyList_Size(outer);
     if (n0 > 0 && is_row_like(PyList_GetItem(outer, 0))) {
-        Py_ssize_t len = PyObject_Length(PyList_GetItem(outer, 0));
-        if (len < 0)
-            goto done;
+        /* snapshot every row (a list of lists of our own), then check they agree */
         ndim = 2;
-        n1 = len;
+        snap = PyList_New(n0);
+        if (!snap)
+            goto done;
+        for (Py_ssize_t i = 0; i < n0; ++i) {
+            PyObject *item = PyList_GetItem(outer, i), *row;
+            if (!is_row_like(item)) {
+                PyErr_Format(PyExc_ValueError, "%s row %zd is not a sequence", name, i);
+                goto done;
+            }
+            row = PySequence_List(item);
+            if (!row)
+                goto done;
+            PyList_SetItem(snap, i, row); /* steals */
+        }
+        n1 = PyList_Size(PyList_GetItem(snap, 0));
+        for (Py_ssize_t i = 1; i < n0; ++i)
+            if (PyList_Size(PyList_GetItem(snap, i)) != n1) {
+                PyErr_Format(PyExc_ValueError, "%s row %zd has %zd values, expected %zd", name,
+                             i, PyList_Size(PyList_GetItem(snap, i)), n1);
+                goto done;
+            }
     }
     if (n0 == 0) {
         r = 0;
@@ -474,34 +581,22 @@ static int read_sequence(PyObject *obj, Py_ssize_t rows, Py_ssize_t cols, const 
         }
     } else {
         for (Py_ssize_t i = 0; i < n0; ++i) {
-            PyObject *item = PyList_GetItem(outer, i);
-            if (!is_row_like(item)) {
-                PyErr_Format(PyExc_ValueError, "%s row %zd is not a sequence", name, i);
-                goto done;
-            }
-            row = PySequence_List(item);
-            if (!row)
-                goto done;
-            if (PyList_Size(row) != n1) {
-                PyErr_Format(PyExc_ValueError, "%s row %zd has %zd values, expected %zd", name,
-                             i, PyList_Size(row), n1);
-                goto done;
-            }
+            PyObject *row = PyList_GetItem(snap, i);
             for (Py_ssize_t j = 0; j < n1; ++j) {
                 if (store_object(PyList_GetItem(row, j), want_int, data, i * n1 + j,
                                  i, j, name) < 0)
                     goto done;
             }
-            Py_CLEAR(row);
         }
     }
     *out = data;
     data = NULL;
     *out_rows = r;
     *out_cols = c;
+    *out_ndim = ndim;
     rc = 0;
 done:
-    Py_XDECREF(row);
+    Py_XDECREF(snap);
     Py_DECREF(outer);
     PyMem_Free(data);
     return rc;
@@ -509,10 +604,9 @@ done:
 
 /** Common entry: buffer first, then sequences. */
 static int read_array(PyObject *obj, Py_ssize_t rows, Py_ssize_t cols, const char *name,
-                      int want_int, void **out, Py_ssize_t *out_rows, Py_ssize_t *out_cols)
+                      int want_int, void **out, Py_ssize_t *out_rows, Py_ssize_t *out_cols,
+                      int *out_ndim)
 {
-    char fmt[64] = "";
-
     *out = NULL;
     *out_rows = *out_cols = 0;
     if (obj == NULL || obj == Py_None) {
@@ -525,15 +619,10 @@ static int read_array(PyObject *obj, Py_ssize_t rows, Py_ssize_t cols, const cha
     }
     if (PyObject_CheckBuffer(obj)) {
         int rc;
-        if (read_buffer(obj, rows, cols, name, want_int, out, out_rows, out_cols, &rc, fmt,
-                        sizeof fmt))
+        if (read_buffer(obj, rows, cols, name, want_int, out, out_rows, out_cols, out_ndim,
+                        &rc))
             return rc;
-        /* Unsupported element format: object arrays may still hold numbers. */
-        if (!PySequence_Check(obj) || PyBytes_Check(obj) || PyByteArray_Check(obj)) {
-            PyErr_Format(PyExc_TypeError, "%s: unsupported element type (buffer format '%s'); "
-                         "use float32/float64 or int32/int64", name, fmt);
-            return -1;
-        }
+        /* an object array: its items are read one by one below */
     } else if (!PySequence_Check(obj)) {
         PyObject *tn = PyType_GetName(Py_TYPE(obj));
         if (tn) {
@@ -542,7 +631,7 @@ static int read_array(PyObject *obj, Py_ssize_t rows, Py_ssize_t cols, const cha
         }
         return -1;
     }
-    return read_sequence(obj, rows, cols, name, want_int, out, out_rows, out_cols);
+    return read_sequence(obj, rows, cols, name, want_int, out, out_rows, out_cols, out_ndim);
 }
 
 int dk_py_read_doubles(PyObject *obj, Py_ssize_t rows, Py_ssize_t cols, const char *name,
@@ -551,7 +640,8 @@ int dk_py_read_doubles(PyObject *obj, Py_ssize_t rows, Py_ssize_t cols, const ch
     void *data;
     out->data = NULL;
     out->rows = out->cols = 0;
-    if (read_array(obj, rows, cols, name, 0, &data, &out->rows, &out->cols) < 0)
+    out->ndim = 0;
+    if (read_array(obj, rows, cols, name, 0, &data, &out->rows, &out->cols, &out->ndim) < 0)
         return -1;
     out->data = (double *)data;
     return 0;
@@ -563,7 +653,8 @@ int dk_py_read_indices(PyObject *obj, Py_ssize_t rows, Py_ssize_t cols, const ch
     void *data;
     out->data = NULL;
     out->rows = out->cols = 0;
-    if (read_array(obj, rows, cols, name, 1, &data, &out->rows, &out->cols) < 0)
+    out->ndim = 0;
+    if (read_array(obj, rows, cols, name, 1, &data, &out->rows, &out->cols, &out->ndim) < 0)
         return -1;
     out->data = (dk_index *)data;
     return 0;

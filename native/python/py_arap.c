@@ -5,6 +5,8 @@
 
 #include "dk_arap.h"
 
+#include <math.h>
+
 static const char *const energy_names[] = {"spokes", "spokes_and_rims", NULL};
 static const char *const weights_names[] = {"cotangent", "clamped_cotangent", "uniform", NULL};
 static const char *const accel_names[] = {"none", "anderson", "newton", NULL};
@@ -34,24 +36,46 @@ static int parse_options(PyObject *kw, void *o, const char *context)
     return 0;
 }
 
-/* solve(tolerance=...): replaces the bound tolerance for this and later solves */
-static int solve_extra(dk_py_method *self, PyObject *kw, const char *context)
+/* solve(tolerance=...): replaces the bound tolerance for this and later solves; read and
+ * checked first, set only when the whole call has been validated (apply_extra) */
+typedef struct arap_extra {
+    int given;
+    double tolerance;
+} arap_extra;
+
+static int solve_extra(dk_py_method *self, PyObject *kw, void *pending, const char *context)
 {
+    arap_extra *x = (arap_extra *)pending;
     PyObject *tol_obj = kw ? PyDict_GetItemString(kw, "tolerance") : NULL;
+    (void)self;
     if (!tol_obj || tol_obj == Py_None) {
         if (tol_obj && PyDict_DelItemString(kw, "tolerance") < 0)
             return -1;
         return 0;
     }
     double tol = -1.0;
-    dk_error err = {0};
     if (dk_py_opt_double(kw, "tolerance", &tol) < 0)
         return -1;
-    if (dk_arap_set_tolerance(self->native, tol, &err) != DK_OK) {
-        dk_py_raise(&err, context);
+    if (!(isfinite(tol) && tol >= 0.0)) {
+        PyErr_Format(PyExc_ValueError, "%s: tolerance is %R, must be finite and >= 0", context,
+                     tol_obj);
         return -1;
     }
+    x->given = 1;
+    x->tolerance = tol;
     return 0;
+}
+
+static void apply_extra(dk_py_method *self, const void *pending, void *saved)
+{
+    const arap_extra *x = (const arap_extra *)pending;
+    dk_error err = {0};
+    if (saved) {
+        ((arap_extra *)saved)->given = x->given;
+        ((arap_extra *)saved)->tolerance = dk_arap_tolerance(self->native);
+    }
+    if (x->given)
+        (void)dk_arap_set_tolerance(self->native, x->tolerance, &err); /* checked above */
 }
 
 static PyObject *stats(dk_py_method *self)
@@ -130,6 +154,7 @@ static const dk_py_method_spec arap_spec = {
     .default_options = default_options,
     .parse_options = parse_options,
     .solve_extra = solve_extra,
+    .apply_extra = apply_extra,
     .stats = stats,
     .getset = arap_getset,
     .methods = arap_methods,

@@ -209,24 +209,10 @@ static PyObject *cholesky_solve(PyObject *obj, PyObject *arg)
 
     if (enter(self) < 0)
         return NULL;
-    /* 1-D b (n values) or 2-D (n x k): decide first, then read with that shape. */
-    {
-        Py_buffer view;
-        if (PyObject_CheckBuffer(arg) && PyObject_GetBuffer(arg, &view, PyBUF_ND) == 0) {
-            flat = view.ndim == 1;
-            PyBuffer_Release(&view);
-        } else {
-            PyObject *first;
-            PyErr_Clear();
-            first = PySequence_Check(arg) && PySequence_Size(arg) > 0
-                        ? PySequence_GetItem(arg, 0) : NULL;
-            flat = !(first && PySequence_Check(first));
-            Py_XDECREF(first);
-            PyErr_Clear();
-        }
-    }
-    if (dk_py_read_doubles(arg, n, flat ? 0 : -1, "b", &b) < 0)
+    /* 1-D b (n values) or 2-D (n x k): read once, then look at what it was */
+    if (dk_py_read_doubles(arg, n, DK_PY_COLS_1D_OR_2D, "b", &b) < 0)
         goto fail;
+    flat = b.ndim == 1;
     k = b.cols;
     if (k < 1 || k > INT32_MAX) {
         PyErr_SetString(PyExc_ValueError, "SparseCholesky.solve: b has no columns");

@@ -94,15 +94,24 @@ static int parse_options(PyObject *kw, void *o, const char *context)
     return 0;
 }
 
-/* solve(preview=False): Steps 1-2 only (the drag preview) or the full result */
-static int solve_extra(dk_py_method *self, PyObject *kw, const char *context)
+/* solve(preview=False): Steps 1-2 only (the drag preview) or the full result; read first,
+ * set when the whole call has been validated (apply_extra) */
+static int solve_extra(dk_py_method *self, PyObject *kw, void *pending, const char *context)
 {
-    int preview = 0;
+    int *preview = (int *)pending;
     (void)context;
-    if (kw && dk_py_opt_bool(kw, "preview", &preview) < 0)
+    (void)self;
+    *preview = 0;
+    if (kw && dk_py_opt_bool(kw, "preview", preview) < 0)
         return -1;
-    dk_eigen_set_preview(self->native, preview);
     return 0;
+}
+
+static void apply_extra(dk_py_method *self, const void *pending, void *saved)
+{
+    if (saved)
+        *(int *)saved = dk_eigen_preview(self->native);
+    dk_eigen_set_preview(self->native, *(const int *)pending);
 }
 
 /* solve(translation=t, rotation=r, pivot=p): the paper's one motion of R, as transforms
@@ -279,6 +288,7 @@ static const dk_py_method_spec eig_spec = {
     .release_options = release_options,
     .solve_motion = solve_motion,
     .solve_extra = solve_extra,
+    .apply_extra = apply_extra,
     .serialise_bind = 1,
     .getset = eig_getset,
     .methods = eig_methods,

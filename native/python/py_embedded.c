@@ -21,22 +21,22 @@ static int parse_cut(PyObject *kw, dk_embedded_options *opt, const char *context
     if (!cut)
         return PyErr_Occurred() ? -1 : 0;
     int rc = -1;
+    PyObject *pair = NULL;
+    if (cut != Py_None && PySequence_Check(cut) && !PyUnicode_Check(cut))
+        pair = PySequence_Tuple(cut); /* read once: the pair cannot change below */
     if (cut == Py_None) {
         rc = 0;
-    } else if (!PySequence_Check(cut) || PySequence_Size(cut) != 2) {
+    } else if (!pair || PyTuple_Size(pair) != 2) {
+        PyErr_Clear();
         PyErr_Format(PyExc_ValueError,
                      "%s: cut must be a pair (group_a, group_b) of vertex index arrays",
                      context);
     } else {
         dk_py_indices side[2] = {{0}, {0}};
         rc = 0;
-        for (int i = 0; i < 2 && rc == 0; i++) {
-            PyObject *item = PySequence_GetItem(cut, i);
-            rc = item ? dk_py_read_indices(item, -1, 0, i ? "cut group B" : "cut group A",
-                                           &side[i])
-                      : -1;
-            Py_XDECREF(item);
-        }
+        for (int i = 0; i < 2 && rc == 0; i++)
+            rc = dk_py_read_indices(PyTuple_GetItem(pair, i), -1, 0,
+                                    i ? "cut group B" : "cut group A", &side[i]);
         if (rc == 0 && (side[0].rows == 0 || side[1].rows == 0)) {
             PyErr_Format(PyExc_ValueError,
                          "%s: cut group %c is empty; a cut needs vertices on both sides",
@@ -53,6 +53,7 @@ static int parse_cut(PyObject *kw, dk_embedded_options *opt, const char *context
             dk_py_indices_release(&side[1]);
         }
     }
+    Py_XDECREF(pair);
     Py_DECREF(cut);
     return rc;
 }

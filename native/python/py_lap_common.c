@@ -40,12 +40,117 @@ static int read_optional_indices(PyObject *obj, const char *name, dk_index **dat
     return 0;
 }
 
+/* Whether `o` is a single number (a Python int or float, or a 0-d numeric buffer such as a
+ * numpy scalar), as one weight for a whole handle group. */
+static int is_number(PyObject *o)
+{
+    if (PyFloat_Check(o) || PyLong_Check(o))
+        return 1;
+    if (PyObject_CheckBuffer(o) && !PySequence_Check(o)) {
+        Py_buffer view;
+        if (PyObject_GetBuffer(o, &view, PyBUF_RECORDS_RO) < 0) {
+            PyErr_Clear();
+            return 0;
+        }
+        int scalar = view.ndim == 0;
+        PyBuffer_Release(&view);
+        return scalar;
+    }
+    return 0;
+}
+
+/* Reads `handle_weights` into out->weights (out->sizes and the total known). Each input is
+ * read exactly once: a list or tuple is first copied into a tuple of our own, an array is
+ * read in one go and then interpreted by its length. */
+static int read_weights(PyObject *hw, Py_ssize_t ng, Py_ssize_t total, const char *context,
+                        dk_py_lap_constraints *out)
+{
+    PyObject *wl = NULL;
+    char name[64];
+    int rc = -1;
+
+    out->weights = PyMem_Malloc(sizeof(double) * (size_t)(total + 1));
+    if (!out->weights) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    if (!PyList_Check(hw) && !PyTuple_Check(hw) && ng == 1) {
+        /* one group and an array: per-vertex weights, or one weight for the group */
+        dk_py_doubles a = {0};
+        if (dk_py_read_doubles(hw, -1, 0, "handle_weights", &a) < 0)
+            return -1;
+        if (a.rows == total) {
+            memcpy(out->weights, a.data, sizeof(double) * (size_t)total);
+            rc = 0;
+        } else if (a.rows == 1) {
+            for (Py_ssize_t k = 0; k < total; k++)
+                out->weights[k] = a.data[0];
+            rc = 0;
+        } else {
+            PyErr_Format(PyExc_ValueError,
+                         "%s: handle_weights has %zd values; the handle has %zd vertices",
+                         context, a.rows, total);
+        }
+        dk_py_doubles_release(&a);
+        return rc;
+    }
+    wl = PySequence_Tuple(hw); /* our own copy: what is read below cannot change */
+    if (!wl)
+        return -1;
+    if (ng == 1 && total > 1 && PyTuple_Size(wl) == total) {
+        /* one group: a flat per-vertex list is accepted as well as [list] */
+        int all_numbers = 1;
+        for (Py_ssize_t k = 0; k < total && all_numbers; k++)
+            all_numbers = is_number(PyTuple_GetItem(wl, k));
+        if (all_numbers) {
+            PyObject *one = PyTuple_Pack(1, wl);
+            Py_DECREF(wl);
+            wl = one;
+            if (!wl)
+                return -1;
+        }
+    }
+    if (PyTuple_Size(wl) != ng) {
+        PyErr_Format(PyExc_ValueError,
+                     "%s: handle_weights must have one entry per handle group (%zd), got %zd",
+                     context, ng, PyTuple_Size(wl));
+        goto done;
+    }
+    for (Py_ssize_t g = 0, at = 0; g < ng; g++) {
+        PyObject *item = PyTuple_GetItem(wl, g);
+        dk_py_doubles a = {0};
+        snprintf(name, sizeof name, "handle_weights[%zd]", g);
+        if (is_number(item)) {
+            /* one weight for the group, converted as a 1-element sequence would be */
+            PyObject *one = PyTuple_Pack(1, item);
+            int r = one ? dk_py_read_doubles(one, 1, 0, name, &a) : -1;
+            Py_XDECREF(one);
+            if (r < 0)
+                goto done;
+            for (dk_index k = 0; k < out->sizes[g]; k++)
+                out->weights[at + k] = a.data[0];
+        } else {
+            if (dk_py_read_doubles(item, out->sizes[g], 0, name, &a) < 0)
+                goto done;
+            if (a.rows > 0)
+                memcpy(out->weights + at, a.data, sizeof(double) * (size_t)a.rows);
+        }
+        dk_py_doubles_release(&a);
+        at += out->sizes[g];
+    }
+    rc = 0;
+done:
+    Py_XDECREF(wl);
+    return rc;
+}
+
 int dk_py_lap_read_constraints(PyObject *handles, PyObject *fixed, PyObject *roi,
                                PyObject *handle_weights, const char *context,
                                dk_py_lap_constraints *out)
 {
     PyObject *groups = NULL;
-    Py_ssize_t ng, total = 0;
+    dk_py_indices *read = NULL;
+    Py_ssize_t ng = 0, total = 0;
     char name[64];
 
     memset(out, 0, sizeof *out);
@@ -55,13 +160,16 @@ int dk_py_lap_read_constraints(PyObject *handles, PyObject *fixed, PyObject *roi
         return -1;
     }
     if (PyList_Check(handles) || PyTuple_Check(handles)) {
-        Py_ssize_t len = PySequence_Size(handles);
-        PyObject *first = len > 0 ? PySequence_GetItem(handles, 0) : NULL;
-        int flat = first && PyLong_Check(first);
-        Py_XDECREF(first);
-        if (len > 0 && !first)
+        /* our own copy of the outer list first: nothing below looks at the caller's again */
+        PyObject *snap = PySequence_Tuple(handles);
+        if (!snap)
             return -1;
-        groups = flat ? PyTuple_Pack(1, handles) : PySequence_Tuple(handles);
+        if (PyTuple_Size(snap) > 0 && PyLong_Check(PyTuple_GetItem(snap, 0))) {
+            groups = PyTuple_Pack(1, snap); /* a flat list of ints: one group */
+            Py_DECREF(snap);
+        } else {
+            groups = snap;
+        }
     } else {
         groups = PyTuple_Pack(1, handles); /* a single array: one group */
     }
@@ -78,99 +186,41 @@ int dk_py_lap_read_constraints(PyObject *handles, PyObject *fixed, PyObject *roi
         goto fail;
     }
     out->sizes = PyMem_Malloc(sizeof(dk_index) * (size_t)ng);
-    if (!out->sizes) {
+    read = PyMem_Calloc((size_t)ng, sizeof *read);
+    if (!out->sizes || !read) {
         PyErr_NoMemory();
         goto fail;
     }
-    /* first pass: sizes; second: copy */
-    for (int pass = 0; pass < 2; pass++) {
-        Py_ssize_t at = 0;
-        for (Py_ssize_t g = 0; g < ng; g++) {
-            dk_py_indices a = {0};
-            snprintf(name, sizeof name, "handle %zd", g);
-            if (dk_py_read_indices(PyTuple_GetItem(groups, g), -1, 0, name, &a) < 0)
-                goto fail;
-            if (pass == 0) {
-                out->sizes[g] = (dk_index)a.rows;
-                total += a.rows;
-            } else if (a.rows > 0) {
-                memcpy(out->vertices + at, a.data, sizeof(dk_index) * (size_t)a.rows);
-            }
-            at += a.rows;
-            dk_py_indices_release(&a);
-        }
-        if (pass == 0) {
-            if (total > INT32_MAX) {
-                PyErr_Format(PyExc_ValueError, "%s: too many handle vertices", context);
-                goto fail;
-            }
-            out->vertices = PyMem_Malloc(sizeof(dk_index) * (size_t)(total + 1));
-            if (!out->vertices) {
-                PyErr_NoMemory();
-                goto fail;
-            }
+    /* One pass: each group read exactly once into memory of our own (its size is the size
+     * of what was read), then concatenated. Reading a group can run Python code
+     * (__index__, __len__) that changes the others; it changes nothing already read. */
+    for (Py_ssize_t g = 0; g < ng; g++) {
+        snprintf(name, sizeof name, "handle %zd", g);
+        if (dk_py_read_indices(PyTuple_GetItem(groups, g), -1, 0, name, &read[g]) < 0)
+            goto fail;
+        out->sizes[g] = (dk_index)read[g].rows;
+        total += read[g].rows;
+        if (total > INT32_MAX) {
+            PyErr_Format(PyExc_ValueError, "%s: too many handle vertices", context);
+            goto fail;
         }
     }
-    if (handle_weights && handle_weights != Py_None) {
-        PyObject *wl = NULL;
-        if (ng == 1) {
-            /* one group: a flat per-vertex array is accepted as well as [array] */
-            PyObject *first = PySequence_Check(handle_weights) && PySequence_Size(handle_weights) > 0
-                                  ? PySequence_GetItem(handle_weights, 0)
-                                  : NULL;
-            PyErr_Clear();
-            if (first && (PyFloat_Check(first) || PyLong_Check(first)) &&
-                PySequence_Size(handle_weights) == total && total > 1)
-                wl = PyTuple_Pack(1, handle_weights);
-            else if (!first && PyObject_HasAttrString(handle_weights, "ndim"))
-                wl = PyTuple_Pack(1, handle_weights);
-            Py_XDECREF(first);
-            if (!wl && PyErr_Occurred())
-                goto fail;
-        }
-        if (!wl)
-            wl = PySequence_Tuple(handle_weights);
-        Py_ssize_t at = 0;
-        if (!wl)
-            goto fail;
-        if (PyTuple_Size(wl) != ng) {
-            PyErr_Format(PyExc_ValueError,
-                         "%s: handle_weights must have one entry per handle group (%zd), got %zd",
-                         context, ng, PyTuple_Size(wl));
-            Py_DECREF(wl);
-            goto fail;
-        }
-        out->weights = PyMem_Malloc(sizeof(double) * (size_t)(total + 1));
-        if (!out->weights) {
-            Py_DECREF(wl);
-            PyErr_NoMemory();
-            goto fail;
-        }
-        for (Py_ssize_t g = 0; g < ng; g++) {
-            PyObject *item = PyTuple_GetItem(wl, g);
-            if (PyFloat_Check(item) || PyLong_Check(item)) {
-                double w = PyFloat_AsDouble(item);
-                if (w == -1.0 && PyErr_Occurred()) {
-                    Py_DECREF(wl);
-                    goto fail;
-                }
-                for (dk_index k = 0; k < out->sizes[g]; k++)
-                    out->weights[at + k] = w;
-            } else {
-                dk_py_doubles a = {0};
-                snprintf(name, sizeof name, "handle_weights[%zd]", g);
-                if (dk_py_read_doubles(item, out->sizes[g], 0, name, &a) < 0) {
-                    Py_DECREF(wl);
-                    goto fail;
-                }
-                if (a.rows > 0)
-                    memcpy(out->weights + at, a.data, sizeof(double) * (size_t)a.rows);
-                dk_py_doubles_release(&a);
-            }
-            at += out->sizes[g];
-        }
-        Py_DECREF(wl);
+    out->vertices = PyMem_Malloc(sizeof(dk_index) * (size_t)(total + 1));
+    if (!out->vertices) {
+        PyErr_NoMemory();
+        goto fail;
     }
+    for (Py_ssize_t g = 0, at = 0; g < ng; g++) {
+        if (read[g].rows > 0)
+            memcpy(out->vertices + at, read[g].data, sizeof(dk_index) * (size_t)read[g].rows);
+        at += read[g].rows;
+        dk_py_indices_release(&read[g]);
+    }
+    PyMem_Free(read);
+    read = NULL;
+    if (handle_weights && handle_weights != Py_None &&
+        read_weights(handle_weights, ng, total, context, out) < 0)
+        goto fail;
     if (read_optional_indices(fixed, "fixed", &out->fixed, &out->desc.n_fixed) < 0 ||
         read_optional_indices(roi, "roi", &out->roi, &out->desc.n_roi) < 0)
         goto fail;
@@ -189,6 +239,11 @@ int dk_py_lap_read_constraints(PyObject *handles, PyObject *fixed, PyObject *roi
     Py_DECREF(groups);
     return 0;
 fail:
+    if (read) {
+        for (Py_ssize_t g = 0; g < ng; g++)
+            dk_py_indices_release(&read[g]);
+        PyMem_Free(read);
+    }
     Py_XDECREF(groups);
     dk_py_lap_constraints_release(out);
     return -1;

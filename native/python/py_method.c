@@ -33,15 +33,34 @@ PyObject *dk_py_opt_object(PyObject *kw, const char *key)
     return take(kw, key, &owned);
 }
 
+/* Replaces a conversion error (OverflowError, TypeError) with one naming the keyword: the
+ * interpreter's "Python int too large to convert to C long" does not say which argument. */
+static int name_the_argument(const char *key, PyObject *v, const char *want)
+{
+    PyObject *tn = PyType_GetName(Py_TYPE(v));
+    if (PyErr_ExceptionMatches(PyExc_OverflowError)) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_OverflowError, "%s is %.40R, out of the range of %s", key, v, want);
+    } else if (PyErr_ExceptionMatches(PyExc_TypeError) && tn) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_TypeError, "%s must be %s, got %U", key, want, tn);
+    }
+    Py_XDECREF(tn);
+    return -1;
+}
+
 int dk_py_opt_int(PyObject *kw, const char *key, int *value)
 {
     PyObject *owned, *v = take(kw, key, &owned);
     if (!v)
         return PyErr_Occurred() ? -1 : 0;
     long x = PyLong_AsLong(v);
-    Py_DECREF(owned);
-    if (x == -1 && PyErr_Occurred())
+    if (x == -1 && PyErr_Occurred()) {
+        name_the_argument(key, v, "an int");
+        Py_DECREF(owned);
         return -1;
+    }
+    Py_DECREF(owned);
     if (x < INT32_MIN || x > INT32_MAX) {
         PyErr_Format(PyExc_OverflowError, "%s is %ld, out of the range of an int", key, x);
         return -1;
@@ -56,9 +75,12 @@ int dk_py_opt_double(PyObject *kw, const char *key, double *value)
     if (!v)
         return PyErr_Occurred() ? -1 : 0;
     double x = PyFloat_AsDouble(v);
-    Py_DECREF(owned);
-    if (x == -1.0 && PyErr_Occurred())
+    if (x == -1.0 && PyErr_Occurred()) {
+        name_the_argument(key, v, "a float");
+        Py_DECREF(owned);
         return -1;
+    }
+    Py_DECREF(owned);
     *value = x;
     return 0;
 }
@@ -335,7 +357,13 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
     dk_status st;
     double *out;
     char fmt[64], ctx[80];
+    union {
+        max_align_t align;
+        unsigned char bytes[DK_PY_EXTRA_MAX];
+    } pending, saved;
 
+    memset(&pending, 0, sizeof pending);
+    memset(&saved, 0, sizeof saved);
     snprintf(fmt, sizeof fmt, "|OOpOpp:solve");
     snprintf(ctx, sizeof ctx, "%s.solve", spec->name);
     if (split_keywords(kwargs, kwlist, &mine, &rest) < 0)
@@ -347,8 +375,10 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
     Py_DECREF(mine);
     if (ok && maxit_obj != Py_None) {
         long v = PyLong_AsLong(maxit_obj);
-        if (v == -1 && PyErr_Occurred())
+        if (v == -1 && PyErr_Occurred()) {
+            name_the_argument("max_iterations", maxit_obj, "an int");
             ok = 0;
+        }
         else if (v < 1 || v > 1000000000L) {
             PyErr_Format(PyExc_ValueError, "%s: max_iterations is %ld, must be >= 1", ctx, v);
             ok = 0;
@@ -375,7 +405,10 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
             Py_DECREF(motion);
         }
     }
-    if ((spec->solve_extra && spec->solve_extra(self, rest, ctx) < 0) ||
+    /* Everything is read and checked before anything changes (issue 18, class 8): the
+     * method's own keywords into `pending`, applied only just before the native solve,
+     * and put back if the solve fails. */
+    if ((spec->solve_extra && spec->solve_extra(self, rest, pending.bytes, ctx) < 0) ||
         refuse_leftovers(rest, "solve()") < 0)
         goto fail_busy;
     spec->ops->stats(self->native, &ms);
@@ -394,9 +427,13 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
         .max_iterations = maxit,
         .skip_energy = !want_energy,
     };
+    if (spec->apply_extra)
+        spec->apply_extra(self, pending.bytes, saved.bytes);
     Py_BEGIN_ALLOW_THREADS
     st = spec->ops->solve(self->native, &rq, out, &info, &err);
     Py_END_ALLOW_THREADS
+    if (st != DK_OK && spec->apply_extra)
+        spec->apply_extra(self, saved.bytes, NULL); /* the call raised: put it back */
     dk_py_doubles_release(&in);
     self->busy = 0;
     Py_DECREF(rest);
@@ -513,15 +550,30 @@ const char dk_py_method_energy_doc[] =
 
 /* ------------------------------------------------------------------ getters ------------ */
 
+/* Whether the object still has its native part (the garbage collector's tp_clear frees it
+ * when the object is in a cycle; anything that reaches the object afterwards gets an
+ * error instead of a NULL dereference). 0 with RuntimeError set when not. */
+static int still_bound(dk_py_method *self)
+{
+    if (self->native && self->mesh_obj)
+        return 1;
+    PyErr_Format(PyExc_RuntimeError, "%s: the object is not bound (it was cleared by the "
+                 "garbage collector)", self->spec->name);
+    return 0;
+}
+
 PyObject *dk_py_method_get_mesh(PyObject *obj, void *c)
 {
+    dk_py_method *self = (dk_py_method *)obj;
     (void)c;
-    return Py_NewRef(((dk_py_method *)obj)->mesh_obj);
+    return Py_NewRef(self->mesh_obj ? self->mesh_obj : Py_None);
 }
 
 PyObject *dk_py_method_get_n_vertices(PyObject *obj, void *c)
 {
     (void)c;
+    if (!still_bound((dk_py_method *)obj))
+        return NULL;
     return PyLong_FromSsize_t((Py_ssize_t)((dk_py_method *)obj)->mesh->n_vertices);
 }
 
@@ -530,6 +582,8 @@ PyObject *dk_py_method_get_n_handles(PyObject *obj, void *c)
     dk_py_method *self = (dk_py_method *)obj;
     dk_method_stats ms;
     (void)c;
+    if (!still_bound(self))
+        return NULL;
     self->spec->ops->stats(self->native, &ms);
     return PyLong_FromSsize_t((Py_ssize_t)ms.n_handles);
 }
@@ -539,6 +593,8 @@ PyObject *dk_py_method_get_n_handle_vertices(PyObject *obj, void *c)
     dk_py_method *self = (dk_py_method *)obj;
     dk_method_stats ms;
     (void)c;
+    if (!still_bound(self))
+        return NULL;
     self->spec->ops->stats(self->native, &ms);
     return PyLong_FromSsize_t((Py_ssize_t)ms.n_handle_vertices);
 }
@@ -548,12 +604,53 @@ PyObject *dk_py_method_get_stats(PyObject *obj, void *c)
     dk_py_method *self = (dk_py_method *)obj;
     dk_method_stats ms;
     (void)c;
-    if (self->spec->stats)
-        return self->spec->stats(self);
+    if (!still_bound(self))
+        return NULL;
     self->spec->ops->stats(self->native, &ms);
-    return Py_BuildValue("{s:n,s:i,s:i}", "n_unknowns", (Py_ssize_t)ms.n_unknowns,
-                         "analysis_count", ms.analysis_count, "factorization_count",
-                         ms.factorization_count);
+    PyObject *d = self->spec->stats
+                      ? self->spec->stats(self)
+                      : Py_BuildValue("{s:n,s:i,s:i}", "n_unknowns", (Py_ssize_t)ms.n_unknowns,
+                                      "analysis_count", ms.analysis_count,
+                                      "factorization_count", ms.factorization_count);
+    if (!d)
+        return NULL;
+    /* every method: what the shared constraint layer held at rest (loose geometry) */
+    PyObject *a = PyLong_FromSsize_t((Py_ssize_t)ms.n_held);
+    PyObject *b = PyLong_FromSsize_t((Py_ssize_t)ms.n_held_components);
+    if (!a || !b || PyDict_SetItemString(d, "n_held", a) < 0 ||
+        PyDict_SetItemString(d, "n_held_components", b) < 0) {
+        Py_XDECREF(a);
+        Py_XDECREF(b);
+        Py_DECREF(d);
+        return NULL;
+    }
+    Py_DECREF(a);
+    Py_DECREF(b);
+    return d;
+}
+
+PyObject *dk_py_method_get_warnings(PyObject *obj, void *c)
+{
+    dk_py_method *self = (dk_py_method *)obj;
+    dk_method_stats ms;
+    (void)c;
+    if (!still_bound(self))
+        return NULL;
+    self->spec->ops->stats(self->native, &ms);
+    if (ms.n_held == 0)
+        return PyTuple_New(0);
+    PyObject *msg = PyUnicode_FromFormat(
+        "%zd %s in %zd connected component%s with no handle or fixed vertex %s held at "
+        "rest (first: vertex %zd); constrain a vertex there to move %s",
+        (Py_ssize_t)ms.n_held, ms.n_held == 1 ? "vertex" : "vertices",
+        (Py_ssize_t)ms.n_held_components,
+        ms.n_held_components == 1 ? "" : "s", ms.n_held == 1 ? "is" : "are",
+        (Py_ssize_t)ms.first_held, ms.n_held_components == 1 ? "it" : "them");
+    if (!msg)
+        return NULL;
+    PyObject *t = PyTuple_Pack(1, msg);
+    Py_DECREF(msg);
+    return t;
 }
 
 /* ------------------------------------------------------------------ registration ------- */

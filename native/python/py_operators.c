@@ -369,15 +369,34 @@ static PyObject *heat_new(PyTypeObject *type, PyObject *args, PyObject *kwargs)
     return self;
 }
 
+/* Garbage-collector support: the object holds its Mesh, so it takes part in cycles
+ * through anything that holds it (issue 18, class 5). */
+static int heat_traverse(PyObject *self, visitproc visit, void *arg)
+{
+    Py_VISIT(Py_TYPE(self)); /* a heap type is owned by its instances */
+    Py_VISIT(((HeatObject *)self)->mesh_obj);
+    return 0;
+}
+
+static int heat_clear(PyObject *self)
+{
+    HeatObject *h = (HeatObject *)self;
+    /* the factorizations borrow the mesh: free them before the mesh can go */
+    dk_heat_free(h->heat);
+    h->heat = NULL;
+    Py_CLEAR(h->mesh_obj);
+    return 0;
+}
+
 static void heat_dealloc(PyObject *self)
 {
     HeatObject *h = (HeatObject *)self;
     PyTypeObject *type = Py_TYPE(self);
     freefunc tp_free = (freefunc)PyType_GetSlot(type, Py_tp_free);
-    dk_heat_free(h->heat);
+    PyObject_GC_UnTrack(self);
+    heat_clear(self);
     if (h->lock)
         PyThread_free_lock(h->lock);
-    Py_XDECREF(h->mesh_obj);
     tp_free(self);
     Py_DECREF((PyObject *)type);
 }
@@ -400,6 +419,11 @@ static PyObject *heat_distance(PyObject *self, PyObject *args, PyObject *kwargs)
 
     if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O:distance", kwlist, &sobj))
         return NULL;
+    if (!h->heat || !h->mesh_obj) {
+        PyErr_SetString(PyExc_RuntimeError,
+                        "HeatGeodesic: the object was cleared by the garbage collector");
+        return NULL;
+    }
     module = PyType_GetModule(Py_TYPE(self));
     if (!module)
         return NULL;
@@ -426,8 +450,9 @@ static PyObject *heat_distance(PyObject *self, PyObject *args, PyObject *kwargs)
 
 static PyObject *heat_get_mesh(PyObject *self, void *c)
 {
+    PyObject *m = ((HeatObject *)self)->mesh_obj;
     (void)c;
-    return Py_NewRef(((HeatObject *)self)->mesh_obj);
+    return Py_NewRef(m ? m : Py_None);
 }
 
 static PyObject *heat_get_time_factor(PyObject *self, void *c)
@@ -457,6 +482,8 @@ PyDoc_STRVAR(heat_doc,
 static PyType_Slot heat_slots[] = {
     {Py_tp_new, (void *)heat_new},
     {Py_tp_dealloc, (void *)heat_dealloc},
+    {Py_tp_traverse, (void *)heat_traverse},
+    {Py_tp_clear, (void *)heat_clear},
     {Py_tp_methods, heat_methods},
     {Py_tp_getset, heat_getset},
     {Py_tp_doc, (void *)heat_doc},
@@ -467,7 +494,7 @@ static PyType_Spec heat_spec = {
     "deformkit.HeatGeodesic",
     (int)sizeof(HeatObject),
     0,
-    Py_TPFLAGS_DEFAULT | Py_TPFLAGS_IMMUTABLETYPE,
+    Py_TPFLAGS_DEFAULT | Py_TPFLAGS_IMMUTABLETYPE | Py_TPFLAGS_HAVE_GC,
     heat_slots,
 };
 

@@ -168,6 +168,21 @@ static void test_targets(void)
     CHECK(dk_constraints_targets(c, rest, t, 1, out, &e) == DK_ERR_NONFINITE);
     CHECK_MSG(strstr(e.message, "handle 0") != NULL, "%s", e.message);
     CHECK(dk_constraints_targets(c, rest, t, 2, out, &e) == DK_ERR_INVALID_ARGUMENT);
+
+    /* Issue 18, class 8: a refused request writes nothing (the method's current targets
+     * live in `out`); class 10: targets beyond DK_COORD_MAX are refused, naming them. */
+    double keep[9];
+    CHECK(dk_constraints_targets(c, rest, pos, 0, out, &e) == DK_ERR_NONFINITE); /* pos[4] NaN */
+    pos[4] = 5;
+    CHECK(dk_constraints_targets(c, rest, pos, 0, out, &e) == DK_OK);
+    memcpy(keep, out, sizeof keep);
+    double bad[9] = {-1, -2, -3, -4, -5, -6, -7, -8, NAN};
+    CHECK(dk_constraints_targets(c, rest, bad, 0, out, &e) == DK_ERR_NONFINITE);
+    CHECK(memcmp(keep, out, sizeof keep) == 0);
+    bad[8] = 1e300;
+    CHECK(dk_constraints_targets(c, rest, bad, 0, out, &e) == DK_ERR_NONFINITE);
+    CHECK_MSG(strstr(e.message, "beyond") != NULL, "%s", e.message);
+    CHECK(memcmp(keep, out, sizeof keep) == 0);
     dk_constraints_free(c);
     dk_constraints_free(NULL);
 }

@@ -12,7 +12,11 @@
  *     (DK_METHOD_RIGID_INVARIANT), or a translation translates it
  *     (DK_METHOD_TRANSLATION_INVARIANT);
  *   - every malformed request is refused with the same status by every method, and a
- *     refused solve leaves the object as it was. */
+ *     refused solve leaves the object as it was;
+ *   - loose geometry (issue 18, class 12): the bumpy plane with loose vertices and an
+ *     unconstrained floating triangle binds with every method, every held vertex stays
+ *     exactly at rest, the counters say how many were held, and a mesh whose every vertex
+ *     is constrained gives the constrained motion instead of a refusal. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -326,4 +330,105 @@ static void test_every_method(void)
     dk_test_mesh_free(&sphere);
 }
 
-DK_TEST_MAIN(test_registry, test_every_method)
+/* The plane of test_every_method plus three loose vertices and a floating triangle, with
+ * the plane's handles and fixed row: nothing constrains the four extra components. */
+static void test_loose_geometry(void)
+{
+    dk_test_mesh plane = {0};
+    CHECK(dk_test_bumpy_plane(12, 0.1, &plane) == 0);
+    const dk_index n0 = plane.n_vertices, n = n0 + 6, nf = plane.n_faces + 1;
+    double *p = malloc(sizeof(double) * 3 * (size_t)n);
+    dk_index *f = malloc(sizeof(dk_index) * 3 * (size_t)nf);
+    if (!p || !f)
+        abort();
+    memcpy(p, plane.positions, sizeof(double) * 3 * (size_t)n0);
+    const double extra[18] = {0, 0, 3, 0.1, 0, 4, 0.2, 0.1, 5, 0, 0.5, 2, 0.5, 0.5, 2, 0, 0.9, 2.5};
+    memcpy(p + 3 * (size_t)n0, extra, sizeof extra);
+    memcpy(f, plane.faces, sizeof(dk_index) * 3 * (size_t)plane.n_faces);
+    f[3 * plane.n_faces] = n0 + 3, f[3 * plane.n_faces + 1] = n0 + 4;
+    f[3 * plane.n_faces + 2] = n0 + 5;
+    dk_test_mesh loose = {p, f, n, nf};
+    scene s;
+    CHECK(scene_make(&s, "plane with loose geometry", &loose, 0, -0.99, 0.99, 1, 1, -1.0,
+                     1e-9) == 0);
+    double *t = malloc(sizeof(double) * 3 * (size_t)s.n_hv), *x = malloc(sizeof(double) * 3 * (size_t)n);
+    if (!t || !x)
+        abort();
+    for (dk_index k = 0; k < s.n_hv; k++)
+        for (int c = 0; c < 3; c++)
+            t[3 * k + c] = p[3 * s.hv[k] + c] + (c == 2 ? 0.2 : 0.0);
+    for (const dk_method_ops *const *m = dk_methods(); *m; m++) {
+        const dk_method_ops *o = *m;
+        void *obj = NULL;
+        dk_error e = {0};
+        dk_status st = o->bind(s.mesh, &s.desc, NULL, &obj, &e);
+        CHECK_MSG(st == DK_OK, "%s: %s", o->name, e.message);
+        if (st != DK_OK)
+            continue;
+        dk_method_stats ms;
+        o->stats(obj, &ms);
+        CHECK_MSG(ms.n_held == 6 && ms.n_held_components == 4 && ms.first_held == n0,
+                  "%s: held %d in %d, first %d", o->name, (int)ms.n_held,
+                  (int)ms.n_held_components, (int)ms.first_held);
+        const dk_solve_request rq = {.targets = t};
+        st = o->solve(obj, &rq, x, NULL, &e);
+        CHECK_MSG(st == DK_OK, "%s: %s", o->name, e.message);
+        if (st == DK_OK) {
+            CHECK_MSG(memcmp(x + 3 * (size_t)n0, p + 3 * (size_t)n0, sizeof extra) == 0,
+                      "%s: a held vertex moved", o->name);
+            double moved = 0.0;
+            for (dk_index k = 0; k < s.n_hv; k++)
+                moved = fmax(moved, x[3 * s.hv[k] + 2] - p[3 * s.hv[k] + 2]);
+            CHECK_MSG(moved > 0.05, "%s: the handles did not move (%g)", o->name, moved);
+        }
+        o->free(obj);
+    }
+    /* every vertex constrained (handles, and fixed everything else): the constrained
+     * motion for the methods whose handles are exact */
+    dk_index *rest = malloc(sizeof(dk_index) * (size_t)n), nr = 0;
+    unsigned char *is_h = calloc((size_t)n, 1);
+    if (!rest || !is_h)
+        abort();
+    for (dk_index k = 0; k < s.n_hv; k++)
+        is_h[s.hv[k]] = 1;
+    for (dk_index v = 0; v < n; v++)
+        if (!is_h[v])
+            rest[nr++] = v;
+    dk_constraint_desc all = s.desc;
+    all.n_fixed = nr;
+    all.fixed_vertices = rest;
+    for (const dk_method_ops *const *m = dk_methods(); *m; m++) {
+        const dk_method_ops *o = *m;
+        void *obj = NULL;
+        dk_error e = {0};
+        dk_status st = o->bind(s.mesh, &all, NULL, &obj, &e);
+        CHECK_MSG(st == DK_OK, "%s, every vertex constrained: %s", o->name, e.message);
+        if (st != DK_OK)
+            continue;
+        const dk_solve_request rq = {.targets = t};
+        st = o->solve(obj, &rq, x, NULL, &e);
+        CHECK_MSG(st == DK_OK, "%s, every vertex constrained: %s", o->name, e.message);
+        if (st == DK_OK && !(o->flags & (DK_METHOD_PENALTY_HANDLES | DK_METHOD_SOFT_REGIONS))) {
+            double err_h = 0.0, err_f = 0.0;
+            for (dk_index k = 0; k < s.n_hv; k++)
+                for (int c = 0; c < 3; c++)
+                    err_h = fmax(err_h, fabs(x[3 * s.hv[k] + c] - t[3 * k + c]));
+            for (dk_index k = 0; k < nr; k++)
+                for (int c = 0; c < 3; c++)
+                    err_f = fmax(err_f, fabs(x[3 * rest[k] + c] - p[3 * rest[k] + c]));
+            CHECK_MSG(err_h <= 1e-12 && err_f <= 1e-12, "%s: handles off by %g, fixed by %g",
+                      o->name, err_h, err_f);
+        }
+        o->free(obj);
+    }
+    free(rest);
+    free(is_h);
+    free(t);
+    free(x);
+    scene_free(&s);
+    free(p);
+    free(f);
+    dk_test_mesh_free(&plane);
+}
+
+DK_TEST_MAIN(test_registry, test_every_method, test_loose_geometry)

@@ -1,8 +1,11 @@
 /* Tests for dk_io: every real mesh in DK_SHARED_DIR/meshes (vertex counts from SOURCES.md,
  * valid meshes after triangulation), crafted OBJ/OFF/PLY files covering the syntax variants
  * and the error messages (file and line), and an OBJ write/read round trip. */
+#define _POSIX_C_SOURCE 200809L
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include "dk_io.h"
 #include "dk_mesh.h"
@@ -257,5 +260,67 @@ static void test_write_roundtrip(void)
     dk_test_mesh_free(&g);
 }
 
+/* Issue 18, class 2: only regular files are read. A symlink x.obj -> /dev/zero, a FIFO and
+ * a directory were read "to the end" (memory grew until the process was killed, or a FIFO
+ * blocked forever); now each is refused before anything is read, naming what it is. */
+static void test_refuses_non_regular_files(void)
+{
+    dk_mesh_file f;
+    dk_error err = {0};
+    remove("test_io_tmp_zero.obj");
+    if (symlink("/dev/zero", "test_io_tmp_zero.obj") == 0) {
+        CHECK(dk_read_mesh_file("test_io_tmp_zero.obj", &f, &err) == DK_ERR_INVALID_ARGUMENT);
+        CHECK_MSG(strstr(err.message, "character device"), "%s", err.message);
+        CHECK(f.positions == NULL);
+        remove("test_io_tmp_zero.obj");
+    }
+    remove("test_io_tmp_fifo.obj");
+    if (mkfifo("test_io_tmp_fifo.obj", 0600) == 0) {
+        CHECK(dk_read_mesh_file("test_io_tmp_fifo.obj", &f, &err) == DK_ERR_INVALID_ARGUMENT);
+        CHECK_MSG(strstr(err.message, "FIFO"), "%s", err.message);
+        remove("test_io_tmp_fifo.obj");
+    }
+    rmdir("test_io_tmp_dir.obj");
+    if (mkdir("test_io_tmp_dir.obj", 0700) == 0) {
+        CHECK(dk_read_mesh_file("test_io_tmp_dir.obj", &f, &err) == DK_ERR_INVALID_ARGUMENT);
+        CHECK_MSG(strstr(err.message, "directory"), "%s", err.message);
+        rmdir("test_io_tmp_dir.obj");
+    }
+    /* a symlink to a regular file is followed */
+    CHECK(dk_test_write_file("test_io_tmp_real.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n") == 0);
+    remove("test_io_tmp_link.obj");
+    if (symlink("test_io_tmp_real.obj", "test_io_tmp_link.obj") == 0) {
+        CHECK(dk_read_mesh_file("test_io_tmp_link.obj", &f, &err) == DK_OK);
+        CHECK(f.n_vertices == 3 && f.n_polygons == 1);
+        dk_mesh_file_free(&f);
+        remove("test_io_tmp_link.obj");
+    }
+    remove("test_io_tmp_real.obj");
+    CHECK(DK_MESH_FILE_MAX_BYTES == (int64_t)2 * 1024 * 1024 * 1024);
+}
+
+/* Issue 18, item 11: the OBJ index error said "(0 vertices so far)" for a face before its
+ * vertices, which OBJ writers produce; it now names the file's vertex count, and faces may
+ * refer to vertices listed later. */
+static void test_obj_index_messages(void)
+{
+    dk_mesh_file f;
+    dk_error err = {0};
+    CHECK(read_text("test_io_tmp_g.obj", "f 1 2 3\nv 0 0 0\nv 1 0 0\nv 0 1 0\n", &f, &err) ==
+          DK_OK);
+    CHECK(f.n_vertices == 3 && f.n_polygons == 1);
+    dk_mesh_file_free(&f);
+    CHECK(read_text("test_io_tmp_h.obj", "f 1 2 9\nv 0 0 0\nv 1 0 0\nv 0 1 0\n", &f, &err) ==
+          DK_ERR_INDEX);
+    CHECK_MSG(strstr(err.message, "line 1: face index 9 is out of range [1, 3] (the file has "
+                                  "3 vertices)"),
+              "%s", err.message);
+    CHECK(read_text("test_io_tmp_i.obj", "v 0 0 0\nv 1 0 0\nf -1 -2 -3\nv 0 1 0\n", &f,
+                    &err) == DK_ERR_INDEX);
+    CHECK_MSG(strstr(err.message, "relative face index -3") &&
+                  strstr(err.message, "(2 vertices so far)"),
+              "%s", err.message);
+}
+
 DK_TEST_MAIN(test_real_meshes, test_obj_syntax, test_off_syntax, test_ply_syntax,
-             test_write_roundtrip)
+             test_write_roundtrip, test_refuses_non_regular_files, test_obj_index_messages)

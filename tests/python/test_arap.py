@@ -349,8 +349,11 @@ def test_bad_input():
         deformkit.ARAP(mesh, [np.append(handle, len(v) + 3)], fixed=fixed)
     with pytest.raises(ValueError, match=rf"vertex {fixed[2]}\b.*fixed"):
         deformkit.ARAP(mesh, [np.append(handle, fixed[2])], fixed=fixed)
-    with pytest.raises(ValueError, match="no free"):
-        deformkit.ARAP(mesh, [handle], fixed=np.setdiff1d(np.arange(len(v)), handle))
+    # every vertex constrained: the constrained motion, not a refusal (issue 18, class 12)
+    rest = np.setdiff1d(np.arange(len(v)), handle)
+    r = deformkit.ARAP(mesh, [handle], fixed=rest).solve(v[handle] + [0, 0, 0.1])
+    np.testing.assert_array_equal(r.positions[handle], v[handle] + [0, 0, 0.1])
+    np.testing.assert_array_equal(r.positions[rest], v[rest])
     with pytest.raises(ValueError, match="energy"):
         deformkit.ARAP(mesh, [handle], fixed=fixed, energy="rims")
     with pytest.raises(ValueError, match="acceleration"):
@@ -374,11 +377,12 @@ def test_bad_input():
     fd = np.array([[0, 1, 2], [1, 2, 3]])
     with pytest.raises(ValueError, match="positive definite"):
         deformkit.ARAP(deformkit.Mesh(vd, fd), [[0]], fixed=[3])
-    # a component without any constraint
+    # a component without any constraint: held at rest and reported (issue 18, class 12)
     vc = np.vstack([v, v + [5.0, 0, 0]])
     fc = np.vstack([f, f + len(v)])
-    with pytest.raises(ValueError, match="component"):
-        deformkit.ARAP(deformkit.Mesh(vc, fc), [handle], fixed=fixed)
+    held = deformkit.ARAP(deformkit.Mesh(vc, fc), [handle], fixed=fixed)
+    assert held.stats["n_held"] == len(v) and len(held.warnings) == 1
+    np.testing.assert_array_equal(held.solve(v[handle] + 0.1).positions[len(v):], vc[len(v):])
 
 
 @pytest.mark.skipif(not (SHARED / "scenarios" / "arm-lift.json").exists(),
@@ -517,8 +521,10 @@ def test_vertex_numbering_does_not_change_the_result(energy):
     assert rb.energy == pytest.approx(ra.energy, rel=1e-9)
     assert b.energy(xb) == pytest.approx(a.energy(xa), rel=1e-9)
     assert b.energy(xb[p]) != pytest.approx(b.energy(xb), rel=1e-6)  # the numbering matters
-    # errors name the caller's vertices: a floating component (no constraint) in b
+    # reports name the caller's vertices: a floating component (no constraint) is held at
+    # rest, and the warning names its first vertex in the caller's numbering
     v2 = np.vstack([v, v[:3] + [0.0, 0.0, 5.0]])
     f2 = np.vstack([f, [[n, n + 1, n + 2]]])
-    with pytest.raises(ValueError, match="component of vertex %d" % n):
-        deformkit.ARAP(deformkit.Mesh(v2, f2), [handle], fixed=fixed)
+    c = deformkit.ARAP(deformkit.Mesh(v2, f2), [handle], fixed=fixed)
+    assert c.stats["n_held"] == 3 and "first: vertex %d)" % n in c.warnings[0]
+    np.testing.assert_array_equal(c.solve(t).positions[n:], v2[n:])

@@ -15,13 +15,23 @@ from deformkit import _native
 REF = np.arange(12, dtype=np.float64).reshape(4, 3) * 0.5 - 1.0
 
 
-@pytest.mark.parametrize("dtype", [np.float32, np.float64, np.int8, np.int16, np.int32,
-                                   np.int64, np.uint8, np.uint16, np.uint32, np.uint64])
-def test_doubles_from_every_numeric_dtype(dtype):
+@pytest.mark.parametrize("dtype", [np.float32, np.float64, ">f8", "<f4"])
+def test_doubles_from_every_floating_dtype(dtype):
     src = (np.arange(12).reshape(4, 3) * 2).astype(dtype)
     out = _native._read_doubles(src, -1, 3)
     assert isinstance(out, np.ndarray) and out.dtype == np.float64 and out.shape == (4, 3)
     np.testing.assert_array_equal(out, src.astype(np.float64))
+
+
+@pytest.mark.parametrize("dtype", [np.int8, np.int16, np.int32, np.int64, np.uint8,
+                                   np.uint16, np.uint32, np.uint64, np.bool_])
+def test_real_inputs_refuse_integer_buffers(dtype):
+    """Issue 18, class 9: coordinates are floating-point. An integer (or raw byte) buffer was
+    read value by value as if it were coordinates; now it is a TypeError naming the argument
+    and the format found."""
+    src = (np.arange(12).reshape(4, 3) % 2).astype(dtype)
+    with pytest.raises(TypeError, match=r"obj(:| must hold floating-point).*buffer format '.+'"):
+        _native._read_doubles(src, -1, 3)
 
 
 def test_float32_values_are_exact_conversions():
@@ -98,7 +108,8 @@ def test_nested_sequences():
 
 
 def test_one_dimensional_requests():
-    np.testing.assert_array_equal(_native._read_doubles(np.arange(5), -1, 0), np.arange(5))
+    np.testing.assert_array_equal(_native._read_doubles(np.arange(5.0), -1, 0), np.arange(5))
+    np.testing.assert_array_equal(_native._read_doubles(list(range(5)), -1, 0), np.arange(5))
     np.testing.assert_array_equal(_native._read_indices(np.arange(5).reshape(5, 1), -1, 0),
                                   np.arange(5))
     with pytest.raises(ValueError, match=r"must be 1-D"):
@@ -112,7 +123,9 @@ def test_one_dimensional_requests():
     (np.zeros((2, 2, 3)), -1, 3, ValueError, r"1-D or 2-D"),
     (np.float64(3.0), -1, 3, (ValueError, TypeError), r"scalar|array|sequence"),
     ([[1, 2, 3], [4, 5]], -1, 3, ValueError, r"row 1 has 2 values, expected 3"),
-    (np.array([["a", "b", "c"]]), -1, 3, TypeError, r"obj\[0, 0\] must be a number"),
+    (np.array([["a", "b", "c"]]), -1, 3, TypeError, r"obj: unsupported element type"),
+    (np.array([[1, 2, 3]], dtype=object).astype(str).astype(object), -1, 3, TypeError,
+     r"obj\[0, 0\] must be a number, got str"),
     ([["x", 1, 2]], -1, 3, TypeError, r"obj\[0, 0\] must be a number, got str"),
     ("abc", -1, 3, TypeError, r"got str"),
     (None, -1, 3, TypeError, r"got None"),

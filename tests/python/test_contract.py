@@ -237,3 +237,95 @@ def test_reference_cycles_are_collected(name):
     del m, h, s
     gc.collect()
     assert alive() is None
+
+
+# Loose geometry (issue 18, class 12): components that no handle or fixed vertex reaches --
+# loose vertices, a floating triangle -- are held at rest by every method (the shared
+# constraint layer decides it), counted in stats and named in warnings; a mesh whose every
+# vertex is constrained gives the constrained motion.
+
+def loose_scene():
+    _, v, f, handles, fixed = SCENES[0]
+    n = len(v)
+    extra = np.array([[0.5, 0.5, 3.0], [0.4, 0.5, 4.0], [0.3, 0.6, 5.0],
+                      [0.5, 0.2, 2.0], [0.6, 0.2, 2.0], [0.5, 0.3, 2.5]])
+    return (np.vstack([v, extra]), np.vstack([f, [[n + 3, n + 4, n + 5]]]), handles, fixed, n)
+
+
+@pytest.mark.parametrize("name", dk.METHODS)
+def test_loose_geometry_is_held_at_rest(name):
+    v, f, handles, fixed, n0 = loose_scene()
+    m = getattr(dk, name)(dk.Mesh(v, f), handles=handles, fixed=fixed)
+    assert m.stats["n_held"] == 6 and m.stats["n_held_components"] == 4
+    assert len(m.warnings) == 1 and "6 vertices in 4 connected components" in m.warnings[0]
+    assert "first: vertex %d)" % n0 in m.warnings[0]
+    targets = np.concatenate([v[h] + [0, 0, 0.2] for h in handles])
+    rest_normals = m.normals() if name == "EmbeddedDeformation" else None
+    r = m.solve(targets, **cold(name))
+    assert np.array_equal(r.positions[n0:], v[n0:])
+    if name == "EmbeddedDeformation":   # held vertices keep their rest normals too
+        assert np.array_equal(m.normals()[n0:], rest_normals[n0:])
+        assert np.array_equal(m.deformed()[n0:], v[n0:])
+    assert np.abs(r.positions[np.concatenate(handles), 2] - v[np.concatenate(handles), 2]).max() > 0.05
+    # a constrained loose vertex follows its constraint
+    m = getattr(dk, name)(dk.Mesh(v, f), handles=list(handles) + [[n0]], fixed=fixed)
+    assert m.stats["n_held"] == 5
+    r = m.solve(np.concatenate([targets, [v[n0] + [0.1, 0, 0]]]), **cold(name))
+    if not (info(name)["penalty_handles"] or info(name)["soft_regions"]):
+        np.testing.assert_allclose(r.positions[n0], v[n0] + [0.1, 0, 0], atol=1e-12)
+    # nothing held: no warning
+    assert getattr(dk, name)(dk.Mesh(*SCENES[0][1:3]), handles=handles).warnings == ()
+
+
+@pytest.mark.parametrize("name", dk.METHODS)
+def test_every_vertex_constrained_gives_the_constrained_motion(name):
+    _, v, f, handles, fixed = SCENES[0]
+    allh = np.concatenate(handles)
+    rest = np.setdiff1d(np.arange(len(v)), allh)
+    m = getattr(dk, name)(dk.Mesh(v, f), handles=handles, fixed=rest)
+    targets = np.concatenate([v[h] + [0, 0, 0.2] for h in handles])
+    r = m.solve(targets, **cold(name))
+    assert np.isfinite(r.positions).all()
+    if not (info(name)["penalty_handles"] or info(name)["soft_regions"]):
+        np.testing.assert_allclose(r.positions[allh], targets, atol=1e-12)
+        np.testing.assert_allclose(r.positions[rest], v[rest], atol=1e-12)
+
+
+@pytest.mark.parametrize("name", dk.METHODS)
+def test_stanford_bunny_with_its_loose_vertices(name, shared_mesh):
+    """The real example: the Stanford bunny carries 1,113 vertices on no face. Every method
+    binds and solves it with a handle and a fixed set on the surface; the loose vertices
+    stay exactly at rest and are reported."""
+    mesh = dk.read_mesh(shared_mesh("stanford-bunny.obj"))
+    v = mesh.vertices
+    on_face = np.zeros(len(v), bool)
+    on_face[mesh.triangles.ravel()] = True
+    assert (~on_face).sum() == 1113
+    surface = np.flatnonzero(on_face)
+    order = surface[np.argsort(v[surface, 1])]
+    fixed, handle = order[:300], order[-300:]
+    m = getattr(dk, name)(mesh, handles=[handle], fixed=fixed)
+    assert m.stats["n_held"] == 1113 and m.stats["n_held_components"] == 1113
+    r = m.solve(v[handle] + [0, 0.01, 0], **cold(name))
+    assert np.isfinite(r.positions).all()
+    assert np.array_equal(r.positions[~on_face], v[~on_face])
+    assert np.abs(r.positions[handle] - v[handle]).max() > 0.002
+
+
+@pytest.mark.parametrize("name", dk.METHODS)
+def test_rebind_into_and_out_of_every_vertex_constrained(name):
+    _, v, f, handles, fixed = SCENES[0]
+    mesh = dk.Mesh(v, f)
+    allh = np.concatenate(handles)
+    rest = np.setdiff1d(np.arange(len(v)), allh)
+    targets = np.concatenate([v[h] + [0, 0, 0.2] for h in handles])
+    m = getattr(dk, name)(mesh, handles=handles, fixed=fixed)
+    m.solve(targets, **cold(name))
+    m.rebind(fixed=rest)
+    a = m.solve(targets, **cold(name))
+    b = getattr(dk, name)(mesh, handles=handles, fixed=rest).solve(targets, **cold(name))
+    np.testing.assert_allclose(a.positions, b.positions, atol=1e-12)
+    m.rebind(fixed=fixed)
+    a = m.solve(targets, **cold(name))
+    b = getattr(dk, name)(mesh, handles=handles, fixed=fixed).solve(targets, **cold(name))
+    np.testing.assert_allclose(a.positions, b.positions, atol=1e-12)

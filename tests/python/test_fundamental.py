@@ -212,11 +212,13 @@ def test_robustness_and_bad_input():
     lr = dk.LinearReconstruction(dk.Mesh(w, f), handles=[top], fixed=cap)
     r = np.asarray(lr.solve(w[top] + [0, 0, 0.2]).positions)
     assert np.isfinite(r).all()
-    # two components, one without a constraint: the error names it
+    # two components, one without a constraint: it is held at rest, and reported
     v2 = np.r_[v, v + [3, 0, 0]]
     f2 = np.r_[f, f + len(v)]
-    with pytest.raises(ValueError, match="component containing vertex %d" % len(v)):
-        dk.LinearReconstruction(dk.Mesh(v2, f2), handles=[top], fixed=cap)
+    held = dk.LinearReconstruction(dk.Mesh(v2, f2), handles=[top], fixed=cap)
+    assert held.stats["n_held"] == len(v) and "vertex %d" % len(v) in held.warnings[0]
+    np.testing.assert_array_equal(held.solve(v[top] + [0, 0, 0.1]).positions[len(v):],
+                                  v2[len(v):])
     r = np.asarray(dk.LinearReconstruction(dk.Mesh(v2, f2), handles=[top, top + len(v)],
                                            fixed=np.r_[cap, cap + len(v)])
                    .solve(np.r_[v[top], v[top] + [3, 0, 0]] + [0, 0, 0.1]).positions)

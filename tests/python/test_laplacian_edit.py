@@ -402,8 +402,9 @@ def test_bad_input():
         deformkit.LaplacianEdit(mesh, [[0, len(v) + 1]])
     with pytest.raises(ValueError, match=str(handle[2])):
         deformkit.LaplacianEdit(mesh, [handle], fixed=[int(handle[2])])  # both fixed and handle
-    with pytest.raises(ValueError, match="no free"):
-        deformkit.LaplacianEdit(mesh, [np.arange(len(v))])
+    # every vertex a handle: the constrained motion (issue 18, class 12)
+    r = deformkit.LaplacianEdit(mesh, [np.arange(len(v))]).solve(v + [0, 0, 0.1])
+    np.testing.assert_allclose(r.positions, v + [0, 0, 0.1], atol=1e-15)
     with pytest.raises(ValueError):
         deformkit.LaplacianEdit(mesh, [handle], detail="rigid")
     with pytest.raises(ValueError):
@@ -428,8 +429,9 @@ def test_bad_input():
         deformkit.LaplacianEdit(pts, [[0]])
     v2 = np.vstack([v, v + [0, 0, 2]])
     f2 = np.vstack([f, f + len(v)])
-    with pytest.raises(ValueError, match="component"):
-        deformkit.LaplacianEdit(deformkit.Mesh(v2, f2), [handle], fixed=fixed)
+    held = deformkit.LaplacianEdit(deformkit.Mesh(v2, f2), [handle], fixed=fixed)
+    assert held.stats["n_held"] == len(v)   # the unconstrained copy is held at rest
+    np.testing.assert_array_equal(held.solve(v[handle] + 0.1).positions[len(v):], v2[len(v):])
 
 
 @pytest.mark.parametrize("bump", [0.05])
@@ -477,11 +479,11 @@ def test_vertex_numbering_does_not_change_the_result(bump, detail, constraints, 
     T[0, :3, 3] = (0.0, 0.1, 0.2)
     ya, yb = a.solve(transforms=T).positions, b.solve(transforms=T).positions
     assert np.abs(np.asarray(yb)[ip] - np.asarray(ya)).max() <= 1e-9 * bbox
-    # an unconstrained component: the message names the caller's first vertex of it
+    # an unconstrained component is held; the warning names the caller's first vertex of it
     v2 = np.vstack([v, v[:3] + [0.0, 0.0, 5.0]])
     f2 = np.vstack([f, [[n + 2, n + 1, n]]])
-    with pytest.raises(ValueError, match="vertex %d\\)" % n):
-        deformkit.LaplacianEdit(deformkit.Mesh(v2, f2), [handle], fixed=fixed)
+    c = deformkit.LaplacianEdit(deformkit.Mesh(v2, f2), [handle], fixed=fixed)
+    assert "first: vertex %d)" % n in c.warnings[0]
 
 
 @pytest.mark.skipif(not (SHARED / "scenarios" / "arm-lift.json").exists(),

@@ -174,9 +174,25 @@ static dk_status solve_impl(dk_arap *ar, const dk_solve_request *rq, double *pos
     /* 1. the targets, expanded per handle vertex */
     st = dk_constraints_targets(s->con, ar->mesh->positions, rq->targets, (int)rq->target_kind,
                                 s->targets, err);
-    s->have_targets = st == DK_OK;
-    if (st != DK_OK)
+    if (st != DK_OK) /* refused: the targets of the last solve are still in place */
         return dk_error_prefix(err, "ARAP solve");
+    s->have_targets = 1;
+
+    if (s->nu == 0) { /* every vertex constrained: the constrained motion, exactly */
+        dk_constraints_constrained_motion(s->con, ar->mesh->positions, s->targets, ar->x);
+        const double e = arap_local_energy(ar, s, ar->x, NULL);
+        dk_reorder_rows_out(ar->ro, ar->x, positions);
+        st = dk_solve_result_check(positions, ar->n, e, !rq->skip_energy, "ARAP solve", err);
+        if (st != DK_OK)
+            return st;
+        ar->have_prev = 0;
+        if (info) {
+            info->energy = rq->skip_energy ? NAN : e;
+            info->iterations = 0;
+            info->converged = 1;
+        }
+        return DK_OK;
+    }
 
     /* 2. the start. Resume: the previous call's targets again, and nothing changed since:
      * continue exactly where it stopped, acceleration history included, so that solves
@@ -203,10 +219,16 @@ static dk_status solve_impl(dk_arap *ar, const dk_solve_request *rq, double *pos
     /* 4. the result, and its end kept for the next warm start */
     arap_keep_history(ar, s, warm_start);
     dk_reorder_rows_out(ar->ro, ar->x, positions);
+    st = dk_solve_result_check(positions, ar->n, p.energy, !rq->skip_energy, "ARAP solve", err);
+    if (st != DK_OK) { /* a non-finite end is no start: the next solve starts cold */
+        ar->have_prev = 0;
+        ar->n_hist = 0;
+        return st;
+    }
     s->last_energy = p.energy;
     s->resumable = 1;
     if (info) {
-        info->energy = p.energy;
+        info->energy = rq->skip_energy ? NAN : p.energy; /* skipped: NaN, as the contract says */
         info->iterations = p.iterations;
         info->converged = p.converged;
         info->rejected = p.rejected;
@@ -236,6 +258,11 @@ dk_status dk_arap_set_tolerance(dk_arap *ar, double tolerance, dk_error *err)
     return DK_OK;
 }
 
+double dk_arap_tolerance(const dk_arap *ar)
+{
+    return ar ? ar->opt.tolerance : NAN;
+}
+
 dk_status dk_arap_energy(const dk_arap *ar, const double *positions, double *energy,
                          dk_error *err)
 {
@@ -250,7 +277,7 @@ dk_status dk_arap_energy(const dk_arap *ar, const double *positions, double *ene
     dk_reorder_rows_in(ar->ro, positions, x);
     *energy = arap_local_energy(ar, &ar->sys, x, NULL);
     free(x);
-    return DK_OK;
+    return dk_energy_result_check(*energy, "ARAP energy", err);
 }
 
 const dk_constraints *dk_arap_constraints(const dk_arap *ar)
@@ -268,6 +295,7 @@ void dk_arap_stats(const dk_arap *ar, dk_method_stats *stats)
     stats->n_vertices = ar->n;
     stats->n_handles = ar->sys.con->n_handles;
     stats->n_handle_vertices = ar->sys.con->n_handle_vertices;
+    dk_constraints_held_stats(ar->sys.con, ar->ro->perm, stats);
     stats->n_unknowns = ar->sys.nu;
     stats->analysis_count = ar->analysis_count;
     stats->factorization_count = ar->factorization_count;

@@ -2,6 +2,8 @@
  * factor, right-hand-side map (see arap_internal.h). */
 #include "arap_internal.h"
 
+#include <stdio.h>
+
 static void sparse_release(dk_sparse *a)
 {
     free(a->col_start);
@@ -270,11 +272,7 @@ static dk_status classify(const dk_arap *ar, arap_system *s, dk_error *err)
     for (int64_t t = 0; t < ar->n_terms; t++)
         if ((s->unk[ar->ta[t]] >= 0) != (s->unk[ar->tb[t]] >= 0))
             s->bterms[s->n_bterms++] = t;
-    if (nu == 0)
-        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
-                            "ARAP: no free vertex: every vertex is fixed, outside the ROI or "
-                            "a hard handle, so there is nothing to solve");
-    return DK_OK;
+    return DK_OK; /* nu == 0: every vertex constrained, solves give the constrained motion */
 }
 
 /* The per-solve buffers of the chosen solver (N = 3 nu each, column-major). */
@@ -368,13 +366,22 @@ static dk_status factor(dk_arap *ar, arap_system *old, arap_system *s, dk_error 
     ar->factorization_count = counts.factorization_count;
     if (st == DK_OK)
         return DK_OK;
+    /* the caller's vertex of the failing column, not the internal matrix column */
+    long vertex = -1;
+    if (st == DK_ERR_NOT_POSITIVE_DEFINITE && err && err->column > 0 && err->column <= s->nu)
+        vertex = (long)ar->ro->perm[s->unknowns[err->column - 1]];
     arap_system_free(s);
     if (st == DK_ERR_NOT_POSITIVE_DEFINITE) {
-        dk_error_prefix(err, "ARAP: the reduced matrix is not positive definite (degenerate "
-                             "triangles or negative cotangent weights; try "
-                             "weights=clamped_cotangent)");
-        if (err)
-            err->status = DK_ERR_DEGENERATE;
+        const int clamped = ar->opt.weights != DK_ARAP_WEIGHTS_COTANGENT;
+        char at[48] = "";
+        if (vertex >= 0)
+            snprintf(at, sizeof at, " at vertex %ld", vertex);
+        dk_error_set(err, DK_ERR_DEGENERATE,
+                     "ARAP: the reduced matrix is not positive definite%s (%s)", at,
+                     clamped ? "degenerate triangles around it, or a part held only along a "
+                               "line"
+                             : "degenerate triangles or negative cotangent weights; try "
+                               "weights='clamped_cotangent'");
         return DK_ERR_DEGENERATE;
     }
     return dk_error_prefix(err, "ARAP: factorization");
@@ -402,6 +409,8 @@ dk_status arap_system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_sy
     const int newton = ar->opt.acceleration == DK_ARAP_ACCEL_NEWTON;
     if (st == DK_OK)
         st = classify(ar, s, err);
+    if (st == DK_OK && s->nu == 0)
+        return DK_OK; /* nothing to solve: no system, no factor (solve_impl) */
     if (st == DK_OK)
         st = solve_buffers(ar, s, err);
     if (st == DK_OK)
@@ -418,5 +427,5 @@ dk_status arap_system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_sy
         arap_system_free(s);
         return st;
     }
-    return factor(ar, old, s, err);
+    return factor(ar, old && old->nu > 0 ? old : NULL, s, err);
 }
