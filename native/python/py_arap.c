@@ -34,9 +34,37 @@ static int parse_options(PyObject *kw, void *o, const char *context)
     return 0;
 }
 
+/* solve(cg_iterations=...): Newton's CG iterations per step for this call only (None: as
+ * bound), so every call sets them */
+static int solve_cg(dk_py_method *self, PyObject *kw, const char *context)
+{
+    int cg = 0;
+    dk_error err = {0};
+    PyObject *v = kw ? PyDict_GetItemString(kw, "cg_iterations") : NULL;
+    if (v == Py_None) {
+        if (PyDict_DelItemString(kw, "cg_iterations") < 0)
+            return -1;
+    } else if (v) {
+        if (dk_py_opt_int(kw, "cg_iterations", &cg) < 0)
+            return -1;
+        if (cg < 1 || cg > 100) {
+            PyErr_Format(PyExc_ValueError, "%s: cg_iterations is %d, must be in [1, 100]",
+                         context, cg);
+            return -1;
+        }
+    }
+    if (dk_arap_set_cg_iterations(self->native, cg, &err) != DK_OK) {
+        dk_py_raise(&err, context);
+        return -1;
+    }
+    return 0;
+}
+
 /* solve(tolerance=...): replaces the bound tolerance for this and later solves */
 static int solve_extra(dk_py_method *self, PyObject *kw, const char *context)
 {
+    if (solve_cg(self, kw, context) < 0)
+        return -1;
     PyObject *tol_obj = kw ? PyDict_GetItemString(kw, "tolerance") : NULL;
     if (!tol_obj || tol_obj == Py_None) {
         if (tol_obj && PyDict_DelItemString(kw, "tolerance") < 0)
@@ -83,7 +111,8 @@ static PyObject *get_handle_sizes(PyObject *obj, void *c)
 
 PyDoc_STRVAR(solve_doc,
              "solve(targets=None, transforms=None, warm_start=True, max_iterations=None,\n"
-             "      resume=False, energy=True, tolerance=None) -> SolveResult\n\n"
+             "      resume=False, energy=True, tolerance=None, cg_iterations=None)\n"
+             "      -> SolveResult\n\n"
              "targets: (sum of handle sizes) x 3 positions, concatenated in handle order;\n"
              "transforms: n_handles x 4 x 4 affine transforms of the rest pose. warm_start\n"
              "starts from the previous solution (else from the naive Laplacian-editing guess).\n"
@@ -91,7 +120,10 @@ PyDoc_STRVAR(solve_doc,
              "bound value for this and later calls. resume=True with the previous call's\n"
              "targets continues that solve where it stopped (acceleration history kept), so\n"
              "solves sliced by max_iterations equal one longer solve; with other targets it\n"
-             "is a warm start.\n"
+             "is a warm start. cg_iterations: Newton's CG iterations per step for this\n"
+             "call only (None: as bound); fewer make cheaper, less complete steps with the\n"
+             "same stopping test (the add-on's time-budgeted slices); a resume with another\n"
+             "count ends at a point that test accepts, not bit for bit one long solve.\n"
              "Returns the positions, the ARAP energy of those positions, the iterations used\n"
              "and whether the relative energy change fell below the tolerance.");
 

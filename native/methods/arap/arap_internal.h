@@ -124,6 +124,8 @@ struct dk_arap {
     const dk_mesh *caller_mesh;
     dk_reorder *ro;
     dk_arap_options opt;
+    int cg;               /* CG iterations per Newton step of the next solves
+                             (dk_arap_set_cg_iterations; opt.cg_iterations as bound)       */
     dk_index n;
     int64_t n_terms;
     dk_index *cell_start, *ta, *tb;

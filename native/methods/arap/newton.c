@@ -12,7 +12,7 @@
  * numbers per map entry (R_c g is stored with each right-hand side). A Newton step solves
  * H d = -g approximately by preconditioned conjugate gradients, preconditioner A^-1 (the
  * bound factor), from d = 0: its first iterate is the local/global step; at most
- * cg_iterations Hessian products; a direction of non-positive curvature ends it (the first
+ * cg_iterations Hessian products (ar->cg: as bound, or dk_arap_set_cg_iterations); a direction of non-positive curvature ends it (the first
  * one: the local/global step is used). Then a line search on E (t = 1, 1/2, 1/4, 1/8;
  * accept when E does not increase), and if it fails, the local/global step (which never
  * increases E). Far from a minimum (the local/global step promises more than NEWTON_FAR of
@@ -197,7 +197,7 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
     job.v = s->vfull;
     job.out = q;
     job.rhs = NULL;
-    for (int k = 0; k < ar->opt.cg_iterations; k++) {
+    for (int k = 0; k < ar->cg; k++) {
         dk_team_run_halves(ar->team, hv_cells_part, &job, ar->n, cells_min);
         dk_team_run_halves(ar->team, hv_rows_part, &job, nu, rows_min);
         (*cg_total)++;
@@ -222,7 +222,7 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
             vec_job vj = {s, VEC_STEP, alpha, d, r, p, q, NULL};
             dk_team_run_halves(ar->team, vec_part, &vj, nu, rows_min);
         }
-        if (k + 1 == ar->opt.cg_iterations)
+        if (k + 1 == ar->cg)
             break;
         st = dk_cholesky_solve(s->chol, r, 3, z, err);
         if (st != DK_OK)
