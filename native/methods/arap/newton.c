@@ -178,6 +178,7 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
     const dk_index cells_min = par ? 0 : ar->n + 1, rows_min = par ? 0 : nu + 1;
     double *r = s->nt_r, *z = s->nt_z, *p = s->nt_p, *q = s->nt_q, *d = s->nt_d;
     double *z0 = s->nt_z0, ignored;
+    const int whole = ar->cg >= ar->opt.cg_iterations;
     *newton_converged = 0;
     hv_job job = {ar, s, ar->x, r, s->rhs, {0.0, 0.0}};
     dk_team_run_halves(ar->team, hv_rows_part, &job, nu, rows_min); /* r = -g */
@@ -213,11 +214,11 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
          * least what a local/global step would achieve; at most tolerance * E: converged,
          * the local/global test predicted instead of taken (so that one tolerance means the
          * same for every acceleration). Nothing moves. */
-        if (k == 0 && alpha * rz <= ar->opt.tolerance * energy) {
+        if (k == 0 && alpha * rz <= ar->opt.tolerance * energy && !s->cut) {
             *newton_converged = 1;
             *e_new = energy;
             return DK_OK;
-        }
+        } /* (after cut steps the step is taken: the test counts again after a whole one) */
         {
             vec_job vj = {s, VEC_STEP, alpha, d, r, p, q, NULL};
             dk_team_run_halves(ar->team, vec_part, &vj, nu, rows_min);
@@ -257,6 +258,7 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
         e = local_global_step(ar, s, z0);
     }
     arap_rotations_rhs(ar, s, ar->rot);
+    s->cut = !whole;
     *e_new = e;
     return DK_OK;
 }
