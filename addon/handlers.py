@@ -8,6 +8,8 @@
 - UI updates of iterative methods (ARAP) solve within a time budget; the `refine` timer
   finishes them once the handles stop, so dragging stays interactive and the result still
   converges. Frame changes, bakes, scripts and blender -b always solve to convergence.
+- The panel says "refining..." while a shown result is pending (solver.refining): the
+  Properties editor is redrawn whenever the set of pending solves changes.
 """
 
 import bpy
@@ -30,10 +32,23 @@ def _deformed_objects(scene):
                 yield obj
 
 
+def _redraw_if_changed(before):
+    """Redraws the Properties editor when the pending solves changed (the panel's
+    "refining..." line); a no-op without windows (blender -b)."""
+    if set(solver.pending()) == before:
+        return
+    wm = getattr(bpy.context, "window_manager", None)
+    for win in (wm.windows if wm is not None else ()):
+        for area in win.screen.areas:
+            if area.type == "PROPERTIES":
+                area.tag_redraw()
+
+
 def _run(scene, depsgraph, cold=False):
     if _busy[0] or not enabled[0]:
         return
     _busy[0] = True
+    before = set(solver.pending())
     try:
         geometry = set()
         if depsgraph is not None:
@@ -64,6 +79,7 @@ def _run(scene, depsgraph, cold=False):
             depsgraph.update()
         if not cold and solver.pending() and not bpy.app.timers.is_registered(refine):
             bpy.app.timers.register(refine, first_interval=0.001)
+        _redraw_if_changed(before)
     except Exception as ex:  # a handler must never raise
         print("DeformKit handler error: %s: %s" % (type(ex).__name__, ex))
     finally:
@@ -85,6 +101,7 @@ def refine():
         return 0.05  # previews only, the handles still moving: their full results wait
     keys = [k for k in keys if not solver.settling(k)]
     _busy[0] = True
+    before = set(solver.pending())
     try:
         try:
             depsgraph = bpy.context.evaluated_depsgraph_get()
@@ -99,6 +116,7 @@ def refine():
                 continue
             solver.evaluate_object(obj, depsgraph, interactive=True, refine=True,
                                    only={k[1] for k in keys if k[0] == name})
+        _redraw_if_changed(before)
     except Exception as ex:  # a timer must never raise either
         print("DeformKit refine error: %s: %s" % (type(ex).__name__, ex))
         return None

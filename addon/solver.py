@@ -623,6 +623,13 @@ def settling(key):
         time.monotonic() - e.preview_at < PREVIEW_SETTLE_S
 
 
+def refining(obj, d):
+    """True while d's shown result is still being refined: an interactive solve stopped at
+    its time budget (or a preview shown) and the refine timer has not converged it yet."""
+    e = _cache.get((obj.name, d.uid))
+    return e is not None and e.pending and bool(d.bound)
+
+
 def drop_pending(key):
     e = _cache.get(key)
     if e is not None:

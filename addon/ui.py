@@ -145,6 +145,8 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
             layout.label(text="last solve %.1f ms, %d iterations%s" % (
                 rt["ms"], rt["iterations"], "" if rt["converged"] else " (not converged)"),
                 icon="TIME")
+        if d.bound and solver.refining(obj, d):
+            layout.label(text="refining\u2026", icon="SORTTIME")
         row = layout.row(align=True)
         row.operator("deformkit.apply", text="Apply").mode = "MESH"
         row.operator("deformkit.apply", text="Apply as Shape Key").mode = "SHAPE_KEY"

@@ -1,6 +1,7 @@
 """Interactive (time-budgeted) solves without a window: the budget's arithmetic, a drag
 update of ARAP's Newton solver cut to one step of few CG iterations that the refine steps
-still bring to the minimum of one uninterrupted solve. The UI path (timer, window) is in
+still bring to the minimum of one uninterrupted solve, and the "refining" flag the panel
+shows. The UI path (timer, window) is in
 test_addon_modal.py and test_addon_undo.py; no timing is asserted here: the budget is set so
 small that no machine fits a full Newton step in it."""
 import os
@@ -88,12 +89,14 @@ def test_cheap_drag_step_converges_to_the_minimum():
         R.check("the drag update is one Newton step of 1 CG iteration, unconverged",
                 first.get("budgeted") and first.get("iterations") == 1
                 and first.get("inner") == 1 and not first.get("converged"), first)
-        R.check("it is pending", key in S.solver.pending())
+        R.check("it is pending and the panel's flag says refining",
+                key in S.solver.pending() and S.solver.refining(obj, d))
     with budget(S.solver.INTERACTIVE_BUDGET_MS):
         ticks = refine_all()
     last = S.solver.runtime.get(key, {})
     R.check("refine steps converge it (%d ticks)" % ticks,
             last.get("converged") and key not in S.solver.pending(), last)
+    R.check("the flag is cleared once converged", not S.solver.refining(obj, d))
     got = S.evaluated_positions(obj)
     rest = S.rest_positions(obj)
     T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())

@@ -6,9 +6,9 @@
   equals the synchronous bind's, Esc cancels and keeps the previous binding, and a second
   bind of the same deformer while one runs is refused;
 - dragging (ARAP): a UI update solves within the interactive time budget (Newton steps cut to
-  fewer CG iterations when a whole one does not fit), and the refine timer finishes the
-  solve once the handle stops, reaching the minimum a full solve reaches (to the tolerance:
-  cut steps take another path)."""
+  fewer CG iterations when a whole one does not fit), the panel's flag says "refining" while
+  it is pending, and the refine timer finishes the solve once the handle stops, reaching the
+  minimum a full solve reaches (to the tolerance: cut steps take another path)."""
 import os
 import sys
 import time
@@ -205,12 +205,14 @@ def refine_tests():
             key in S.solver.pending() and not first.get("converged", True)
             and (first.get("iterations", 0), first.get("inner")) == want
             and want[0] < d.options.max_iterations, (first, want))
+    R.check("the panel's flag says refining", S.solver.refining(obj, d))
     t0 = time.time()
     while S.solver.pending() and time.time() - t0 < 60:
         yield 0.05
     last = S.solver.runtime.get(key, {})
     R.check("refine timer finishes the solve", not S.solver.pending() and last.get("converged"),
             last)
+    R.check("... and the refining flag is cleared", not S.solver.refining(obj, d))
     with bpy.context.temp_override(**S.ui_context()):
         got = S.evaluated_positions(obj)
         T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
