@@ -7,7 +7,8 @@
 - No bpy references are kept: objects are looked up by name each time.
 - UI updates of iterative methods (ARAP) solve within a time budget; the `refine` timer
   finishes them once the handles stop, so dragging stays interactive and the result still
-  converges. Frame changes, bakes, scripts and blender -b always solve to convergence.
+  converges. Frame changes, bakes, scripts and blender -b always solve to convergence, and so
+  does the first solve of each deformer after an undo or redo (solver.mark_all_dirty).
 - The panel says "refining..." while a shown result is pending (solver.refining): the
   Properties editor is redrawn whenever the set of pending solves changes.
 """
@@ -143,6 +144,7 @@ def on_load(*_args):
 
 @persistent
 def on_undo(*_args):
+    # re-check everything, and solve each deformer in full before it shows again
     solver.mark_all_dirty()
 
 

@@ -1,7 +1,7 @@
 """Interactive (time-budgeted) solves without a window: the budget's arithmetic, a drag
 update of ARAP's Newton solver cut to one step of few CG iterations that the refine steps
-still bring to the minimum of one uninterrupted solve, and the "refining" flag the panel
-shows. The UI path (timer, window) is in
+still bring to the minimum of one uninterrupted solve, the "refining" flag the panel shows,
+and undo/redo converging before they show. The UI path (timer, window) is in
 test_addon_modal.py and test_addon_undo.py; no timing is asserted here: the budget is set so
 small that no machine fits a full Newton step in it."""
 import os
@@ -112,6 +112,39 @@ def test_cheap_drag_step_converges_to_the_minimum():
     R.check("... positions within 1e-3 of the bbox diagonal (%.1e)" % err, err < 1e-3)
 
 
-for t in (test_budget_arithmetic, test_cheap_drag_step_converges_to_the_minimum):
+def test_undo_converges_before_showing():
+    """After on_undo (undo_post / redo_post) the next solve of a deformer is a full one even
+    when UI updates are budgeted; the one after is a budgeted slice again."""
+    obj, d, e, fixed, handle, key = arap_grid()
+    with budget(1e-6):
+        e.location = (1.0, 0.1, 0.4)
+        bpy.context.view_layer.update()
+        R.check("before: a budgeted slice, pending",
+                S.solver.runtime[key]["budgeted"] and key in S.solver.pending())
+        S.handlers.on_undo()
+        R.check("on_undo: the deformer converges next", S.solver.converges_next(key))
+        e.location = (1.0, 0.1, 0.45)
+        bpy.context.view_layer.update()
+        rt = dict(S.solver.runtime[key])
+        R.check("the first solve after undo is full and converged",
+                not rt["budgeted"] and rt["converged"] and key not in S.solver.pending()
+                and not S.solver.refining(obj, d), rt)
+        R.check("... once", not S.solver.converges_next(key))
+        e.location = (1.0, 0.1, 0.5)
+        bpy.context.view_layer.update()
+        R.check("the next drag update is budgeted again", S.solver.runtime[key]["budgeted"]
+                and key in S.solver.pending())
+        # the same through evaluate_object directly, as the handler calls it, with nothing
+        # moved since the undo (its check of the inputs is reset)
+        S.handlers.on_undo()
+        S.solver.evaluate_object(obj, bpy.context.evaluated_depsgraph_get(), interactive=True)
+        rt = dict(S.solver.runtime[key])
+        R.check("evaluate_object after on_undo re-solves in full", not rt["budgeted"]
+                and rt["converged"] and key not in S.solver.pending(), rt)
+    S.solver.clear_cache()
+
+
+for t in (test_budget_arithmetic, test_cheap_drag_step_converges_to_the_minimum,
+          test_undo_converges_before_showing):
     R.run(t)
 R.finish()
