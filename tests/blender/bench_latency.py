@@ -10,10 +10,10 @@ Default scenario: ../shared/scenarios/armadillo-wave.json (43k vertices). The dr
 handle target along the scenario's translation in N steps; each step's time covers the depsgraph
 update that runs the add-on's handler (solve + attribute write) and the re-evaluation of the
 modifier stack that shows it (two updates for DeformKit, one for the built-in modifier).
---paired adds, per DeformKit variant (not the interactive ones), a drag alternating step by
-step with a built-in Laplacian Deform object of its own, for a ratio that machine-speed drift
-between the variants' runs cannot skew (the add-on's handler also runs, and returns at once,
-on the built-in's updates: ~0.05 ms of its ~100).
+--paired adds, per DeformKit variant (the interactive ones too, without timer ticks), a drag
+alternating step by step with a built-in Laplacian Deform object of its own, for a ratio that
+machine-speed drift between the variants' runs cannot skew (the add-on's handler also runs,
+and returns at once, on the built-in's updates: ~0.05 ms of its ~100).
 --load keeps one core busy for the whole run with a second process (a plain Python busy
 loop, killed at the end, also on an error, and ending by itself if this process dies), as
 when the artist's machine renders or compiles meanwhile; it reports the CPU share the loop
@@ -285,7 +285,7 @@ def run(a):
         bpy.ops.deformkit.bind()
         bind_ms = (time.perf_counter() - t0) * 1000
         S.handlers.force_interactive[0] = interactive
-        if a.paired and not interactive:
+        if a.paired:
             bobj, be, _, bbind = make_builtin("Builtin_" + mid, vs, fs, fixed, handle)
             dk, bi, errs = drag_paired(obj, e, bobj, be, a.steps, translate, handle[0], rest)
             ratio = statistics.median(bi) / statistics.median(dk)
@@ -321,7 +321,10 @@ def run(a):
         settle_ms, ticks = 0.0, 0
         if interactive:  # what the timer does once the handle stops
             t0 = time.perf_counter()
-            while S.solver.pending() and ticks < 10000:
+            while S.solver.pending() and ticks < 10000 and time.perf_counter() - t0 < 120:
+                if all(S.solver.settling(k) for k in S.solver.pending()):
+                    time.sleep(0.005)  # a preview waits for the handles to settle
+                    continue
                 S.handlers.refine()
                 bpy.context.evaluated_depsgraph_get().update()
                 ticks += 1
