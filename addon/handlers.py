@@ -7,7 +7,10 @@
 - No bpy references are kept: objects are looked up by name each time.
 - UI updates of iterative methods (ARAP) solve within a time budget; the `refine` timer
   finishes them once the handles stop, so dragging stays interactive and the result still
-  converges. Frame changes, bakes, scripts and blender -b always solve to convergence.
+  converges. Frame changes, bakes, scripts and blender -b always solve to convergence, and so
+  does the first solve of each deformer after an undo or redo (solver.mark_all_dirty).
+- The panel says "refining..." while a shown result is pending (solver.refining): the
+  Properties editor is redrawn whenever the set of pending solves changes.
 """
 
 import bpy
@@ -30,10 +33,23 @@ def _deformed_objects(scene):
                 yield obj
 
 
+def _redraw_if_changed(before):
+    """Redraws the Properties editor when the pending solves changed (the panel's
+    "refining..." line); a no-op without windows (blender -b)."""
+    if set(solver.pending()) == before:
+        return
+    wm = getattr(bpy.context, "window_manager", None)
+    for win in (wm.windows if wm is not None else ()):
+        for area in win.screen.areas:
+            if area.type == "PROPERTIES":
+                area.tag_redraw()
+
+
 def _run(scene, depsgraph, cold=False):
     if _busy[0] or not enabled[0]:
         return
     _busy[0] = True
+    before = set(solver.pending())
     try:
         geometry = set()
         if depsgraph is not None:
@@ -66,6 +82,7 @@ def _run(scene, depsgraph, cold=False):
             bpy.app.timers.register(refine, first_interval=0.001)
         if solver.rebinding() and not bpy.app.timers.is_registered(poll_rebinds):
             bpy.app.timers.register(poll_rebinds, first_interval=0.05)
+        _redraw_if_changed(before)
     except Exception as ex:  # a handler must never raise
         print("DeformKit handler error: %s: %s" % (type(ex).__name__, ex))
     finally:
@@ -87,6 +104,7 @@ def refine():
         return 0.05  # previews only, the handles still moving: their full results wait
     keys = [k for k in keys if not solver.settling(k)]
     _busy[0] = True
+    before = set(solver.pending())
     try:
         try:
             depsgraph = bpy.context.evaluated_depsgraph_get()
@@ -101,6 +119,7 @@ def refine():
                 continue
             solver.evaluate_object(obj, depsgraph, interactive=True, refine=True,
                                    only={k[1] for k in keys if k[0] == name})
+        _redraw_if_changed(before)
     except Exception as ex:  # a timer must never raise either
         print("DeformKit refine error: %s: %s" % (type(ex).__name__, ex))
         return None
@@ -144,6 +163,7 @@ def on_load(*_args):
 
 @persistent
 def on_undo(*_args):
+    # re-check everything, and solve each deformer in full before it shows again
     solver.mark_all_dirty()
 
 

@@ -80,6 +80,12 @@ class Method:
     # iterative methods: the option capping the iterations of one solve (the budgeted
     # slices of an interactive solve add up to at most that many)
     iteration_cap: Optional[str] = None
+    # iterative methods whose iterations are iterative themselves (ARAP's Newton steps: CG
+    # iterations): the option, also a solve keyword for one call, holding their inner count,
+    # and the (option, value) under which it applies. A budgeted slice that cannot fit one
+    # full iteration takes one with fewer inner iterations (solver._budget)
+    inner_iterations: Optional[str] = None
+    inner_when: Optional[tuple] = None
     # False: the method also deforms meshes without faces (vertex clouds)
     needs_faces: bool = True
     # True: the native object has `nodes`, `edges` and `transforms` (a deformation graph)
@@ -116,6 +122,8 @@ METHODS = [
         warm_solve={"warm_start": True},
         iterative=True,
         iteration_cap="max_iterations",
+        inner_iterations="cg_iterations",
+        inner_when=("acceleration", "newton"),
         options=[
             Option("energy", "ENUM", "spokes", "Keep Rigid",
                    "Which pieces of the surface the solve keeps rigid",
@@ -434,7 +442,7 @@ def _check_registry():
                     if len(item) != 3 or not (item[1] and item[2].strip()):
                         raise ValueError("%s.%s: item %r needs a name and a description"
                                          % (m.id, o.name, item[0]))
-        for field_name in ("stiffness_option", "iteration_cap"):
+        for field_name in ("stiffness_option", "iteration_cap", "inner_iterations"):
             ref = getattr(m, field_name)
             if ref is not None and ref not in names:
                 raise ValueError("%s.%s names %r, which is not one of its options"
@@ -453,6 +461,10 @@ def _check_registry():
             raise ValueError("%s: a method that draws a graph needs a BOOL show_graph" % m.id)
         if m.iterative and m.iteration_cap is None:
             raise ValueError("%s: an iterative method needs an iteration_cap option" % m.id)
+        if m.inner_iterations is not None and (
+                not m.iterative or (m.inner_when is not None and m.inner_when[0] not in names)):
+            raise ValueError("%s: inner_iterations belong to an iterative method, and "
+                             "inner_when must name one of its options" % m.id)
 
 
 _check_registry()

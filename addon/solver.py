@@ -11,6 +11,7 @@ Solver state (native objects) is cached by (object name, deformer uid) and holds
 references; it is rebuilt on demand (after file load, undo, settings or group changes).
 """
 
+import math
 import time
 
 import bpy
@@ -41,6 +42,11 @@ _cache = {}            # (object name, deformer uid) -> _Entry
 # energy=..., slices=...); the slices of one interactive solve add up (solve(), resume)
 runtime = {}
 _settings_serial = [0]
+# Undo and redo converge before they show: on_undo bumps the serial, and the next solve of
+# each deformer that writes its result is a full one (not a budgeted slice or a preview)
+# until it has been solved since (key -> the serial of its last written solve).
+_undo_serial = [0]
+_written_at_undo = {}
 # (object name, deformer uid) -> worker thread of a UI bind (operators.DEFORMKIT_OT_bind),
 # from its invoke until its modal part ends. A file load drops modal handlers without ending
 # them: clear_cache (on load_post) forgets those.
@@ -50,7 +56,8 @@ running_binds = {}
 class _Entry:
     __slots__ = ("native", "dkmesh", "rest", "extent", "n_vertices", "n_faces", "settings",
                  "groups", "last_inputs", "method_id", "verified", "pending", "pending_its",
-                 "handles", "source", "preview_at", "material", "material_shown")
+                 "handles", "source", "preview_at", "material", "material_shown", "slice_cost",
+                 "moved_at")
 
 
 def mark_settings_changed():
@@ -60,15 +67,26 @@ def mark_settings_changed():
 def clear_cache():
     _cache.clear()
     runtime.clear()
+    _written_at_undo.clear()
     running_binds.clear()
     _cancel_rebinds()
 
 
 def mark_all_dirty():
-    """After undo/redo: the attribute may hold an older result; re-check everything."""
+    """After undo/redo: the attribute may hold an older result; re-check everything, and
+    solve every deformer in full before showing it again (an undone Apply would otherwise
+    show a budgeted slice of a solve from the naive start: 14 cm off on the armadillo for
+    the seconds the refine timer takes)."""
     for e in _cache.values():
         e.last_inputs = None
         e.verified = False
+    _undo_serial[0] += 1
+
+
+def converges_next(key):
+    """True when the next solve of `key` is a full one because of an undo or redo since its
+    last written solve."""
+    return _written_at_undo.get(key, 0) != _undo_serial[0]
 
 
 def drop(obj_name, uid):
@@ -448,6 +466,7 @@ class BindJob:
         e.last_inputs, e.verified, e.pending, e.pending_its = None, True, False, 0
         e.handles, e.source, e.preview_at = self.handles, self.rest, 0.0
         e.material, e.material_shown = self.material, None
+        e.slice_cost, e.moved_at = {}, 0.0
         _cache[(obj.name, d.uid)] = e
         return e
 
@@ -694,22 +713,55 @@ def snap_identity(T, extent):
 INTERACTIVE_BUDGET_MS = 30.0
 
 
-def _budget_iterations(key, cap):
-    """Iterations that fit the interactive budget, at most `cap`, from the last solve's time
-    per iteration (before any solve was timed: ~0.15 us per vertex, the armadillo's 6.5 ms
-    at 43k)."""
-    last = runtime.get(key)
-    if last and last.get("iterations", 0) >= 1:
-        per_it = last["ms"] / last["iterations"]
+def inner_cap(m, opts):
+    """The bound inner count of m's iterations (ARAP Newton steps: CG iterations), or 0 when
+    its iterations have none (for ARAP: another solver)."""
+    if m.inner_iterations is None:
+        return 0
+    if m.inner_when is not None and getattr(opts, m.inner_when[0]) != m.inner_when[1]:
+        return 0
+    return int(getattr(opts, m.inner_iterations))
+
+
+def _budget(key, cap, inner=0, resume=False, cut=True):
+    """(iterations, inner count or None for the bound one) of a slice that fits
+    INTERACTIVE_BUDGET_MS: at most `cap` iterations, and for methods whose iterations have an
+    inner count (`inner`, ARAP Newton: 12 CG iterations a step) one iteration with fewer when
+    a full one does not fit (a Newton step is ~50 ms on the armadillo, 100-250 ms on a loaded
+    machine; a CG iteration ~4 / ~8 ms). The cost of a unit (an iteration, or an inner
+    iteration) comes from the last unconverged slice of the same kind (a drag update starts
+    warm, a refine tick resumes: their fixed costs differ), else from the last solve (the
+    bind's), else ~0.15 us per vertex (the armadillo's 6.5 ms at 43k). Dividing a slice's
+    time, fixed cost included, by its units converges within a few slices to the count that
+    fills the budget: (budget - fixed) / unit. `cut` False: whole iterations only (at least
+    one), for the refine steps once the handles have settled: after cut Newton steps the
+    solver's stopping test waits for a whole one (docs/methods/arap.md)."""
+    e = _cache.get(key)
+    last = None
+    if e is not None:
+        last = e.slice_cost.get(bool(resume)) or e.slice_cost.get(not resume)
+    if last is None:
+        rt = runtime.get(key)
+        if rt and rt.get("iterations", 0) >= 1:
+            last = (rt["ms"], rt["iterations"], inner or 1)
+    if last is not None:
+        ms, its, per_it = last
+        per_unit = ms / max(its * per_it, 1)
     else:
-        e = _cache.get(key)
-        per_it = 1.5e-4 * (e.n_vertices if e is not None else 1e5)
-    # at least one: a Newton step can take most of the budget on its own
-    return max(1, min(cap, int(INTERACTIVE_BUDGET_MS / max(per_it, 1e-3))))
+        per_unit = 1.5e-4 * (e.n_vertices if e is not None else 1e5)
+    units = int(INTERACTIVE_BUDGET_MS / max(per_unit, 1e-3))
+    if inner and units < inner and cut:
+        # one iteration cut short: the smallest unit is an inner iteration
+        return 1, max(1, units)
+    # at least one: an iteration can take most of the budget on its own
+    return max(1, min(cap, units // max(inner, 1))), None
 
 
 # A preview (methods.Method.preview) is replaced by the full result once the handles have
-# not moved for this long.
+# not moved for this long; and the refine steps of a budgeted solve cut its iterations to
+# the budget (ARAP: Newton steps of fewer CG iterations) until then, so that the ticks the
+# timer gets between the updates of a drag stay within the budget too, and take whole
+# iterations once the handles have stopped, which is how the solve converges.
 PREVIEW_SETTLE_S = 0.15
 
 
@@ -724,6 +776,13 @@ def settling(key):
     e = _cache.get(key)
     return e is not None and e.preview_at > 0.0 and \
         time.monotonic() - e.preview_at < PREVIEW_SETTLE_S
+
+
+def refining(obj, d):
+    """True while d's shown result is still being refined: an interactive solve stopped at
+    its time budget (or a preview shown) and the refine timer has not converged it yet."""
+    e = _cache.get((obj.name, d.uid))
+    return e is not None and e.pending and bool(d.bound)
 
 
 def drop_pending(key):
@@ -839,26 +898,40 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
         if source is not None:
             goal = dict(targets=edit_targets(e, T, source))
     kw = methods.solve_kwargs(m, d.options, cold)
-    budgeted = interactive and m.iterative and not cold
-    previewing = interactive and bool(m.preview) and not cold and not resume
+    # after an undo or redo: a full solve before showing (mark_all_dirty)
+    full = write and converges_next(key)
+    budgeted = interactive and m.iterative and not cold and not full
+    previewing = interactive and bool(m.preview) and not cold and not resume and not full
     if previewing:
         kw.update(m.preview)
     cap = int(getattr(d.options, m.iteration_cap)) if m.iteration_cap else 0
+    n_inner = inner_cap(m, d.options) if budgeted else 0
+    inner = None
     if budgeted:
-        # slices of one solve: together at most the method's Max Iterations, so the sliced
-        # result is exactly what one uninterrupted solve would give
+        # slices of one solve: together at most the method's Max Iterations (counted in full
+        # iterations: a Newton step of 3 CG iterations out of 12 is a quarter). A slice of
+        # whole iterations resumed by another of whole iterations is exactly what one
+        # uninterrupted solve would give; slices cut to fewer inner iterations take another
+        # path to a point the same stopping test accepts (docs/methods/arap.md)
+        now = time.monotonic()
         if not resume:
-            e.pending_its = 0
-        kw["max_iterations"] = max(1, min(_budget_iterations(key, cap or 100),
-                                          cap - e.pending_its if cap else 1 << 30))
+            e.pending_its, e.moved_at = 0, now
+        its, inner = _budget(key, cap or 100, n_inner, resume,
+                             cut=not resume or now - e.moved_at < PREVIEW_SETTLE_S)
+        left = cap - e.pending_its if cap else 1 << 30
+        kw["max_iterations"] = max(1, min(its, int(math.ceil(left))))
+        if inner is not None:
+            kw[m.inner_iterations] = inner
         if resume:
             kw["resume"] = True
     t0 = time.perf_counter()
     res = _native_call(m.label + " solve", e.native.solve, **goal, **kw)
     ms = (time.perf_counter() - t0) * 1000.0
     pos = np.asarray(res.positions, dtype=np.float64).reshape(-1, 3)
+    # inner: the inner count of a slice's iterations when cut below the bound one (ARAP: CG
+    # iterations per Newton step), else None
     rt = dict(ms=ms, iterations=int(res.iterations), converged=bool(res.converged),
-              energy=float(res.energy), slices=1)
+              energy=float(res.energy), slices=1, inner=inner, budgeted=budgeted)
     last = runtime.get(key)
     if budgeted and resume and e.pending and last is not None:
         # a further slice of the interactive solve left pending: the figures are the whole
@@ -869,7 +942,12 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
     runtime[key] = rt
     # unconverged only because of the budget: finish from the timer
     if budgeted:
-        e.pending_its += int(res.iterations)
+        per_it = inner if inner is not None else (n_inner or 1)
+        e.pending_its += int(res.iterations) * per_it / (n_inner or 1)
+        if not (n_inner and res.converged):
+            # (a converged Newton slice ended at its stopping test, one product into a step:
+            # its time says nothing of a full unit's)
+            e.slice_cost[bool(resume)] = (ms, max(int(res.iterations), 1), per_it)
     e.pending = bool(budgeted and not res.converged and (not cap or e.pending_its < cap))
     if previewing:  # the full result follows from the timer once the handles stop
         e.pending, e.preview_at = True, time.monotonic()
@@ -882,6 +960,7 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
         np.subtract(pos, e.source, out=off, casting="unsafe")
         write_offset(obj, d, off, retime=cold)
         e.last_inputs = inputs
+        _written_at_undo[key] = _undo_serial[0]
     return pos
 
 
@@ -968,6 +1047,8 @@ def finish(obj, d, depsgraph=None):
     solve, and completes an interactive solve left pending (as the timer would)."""
     solve(obj, d, depsgraph)
     key = (obj.name, d.uid)
+    if key in _cache:
+        _cache[key].moved_at = 0.0  # settled: whole iterations
     while key in _cache and _cache[key].pending:
         solve(obj, d, depsgraph, interactive=True, resume=True, force=True)
 

@@ -173,6 +173,8 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
         summary = solver.solve_summary(obj, d)
         if summary:
             layout.label(text=summary, icon="TIME")
+        if d.bound and solver.refining(obj, d):
+            layout.label(text="refining\u2026", icon="SORTTIME")
         row = layout.row(align=True)
         row.operator("deformkit.apply", text="Apply").mode = "MESH"
         row.operator("deformkit.apply", text="Apply as Shape Key").mode = "SHAPE_KEY"

@@ -141,6 +141,23 @@ dk_status dk_arap_set_tolerance(dk_arap *arap, double tolerance, dk_error *err);
 /** The stopping tolerance the next solve uses (NaN for NULL). */
 double dk_arap_tolerance(const dk_arap *arap);
 
+/** Conjugate-gradient iterations (Hessian products) per Newton step for the following
+ *  solves: 1..100, or 0 for the bound options.cg_iterations again (the other accelerations
+ *  ignore it). Fewer make a step cheaper and less complete (still a descent step with the
+ *  same line search, and the same stopping test, which looks only at the first CG iterate).
+ *  The add-on fits its interactive slices to a time budget with it: one step of a few
+ *  products where a full step (12) would take ~50 ms on the armadillo, 100-250 ms on a
+ *  loaded machine (docs/methods/arap.md, "Interactive slices"). After a cut step (fewer
+ *  than the bound count) the stopping test does not end the solve until a whole step has
+ *  been taken: cut steps, like local/global ones, leave the slow bending modes, where the
+ *  test's local/global prediction is small while the minimum is still away (measured:
+ *  1.3e-4 of E above it on a bent grid), so a solve of cut steps only reports converged
+ *  only for a rigid motion or when E stops decreasing. A solve resumed (DK_START_RESUME)
+ *  with another count continues from where the previous call stopped, so slices of
+ *  different counts end, converged, at a point the same test accepts after a whole step,
+ *  not bit for bit where one uninterrupted solve would. The warm start is kept. */
+dk_status dk_arap_set_cg_iterations(dk_arap *arap, int cg_iterations, dk_error *err);
+
 /** The ARAP energy E of arbitrary positions (n_vertices x 3) with their optimal rotations,
  *  including the soft-handle penalties for the targets of the last solve (none before the
  *  first solve), into `energy` (NaN on failure). Independent of the solver state otherwise.

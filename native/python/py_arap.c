@@ -36,16 +36,34 @@ static int parse_options(PyObject *kw, void *o, const char *context)
     return 0;
 }
 
-/* solve(tolerance=...): replaces the bound tolerance for this and later solves; read and
- * checked first, set only when the whole call has been validated (apply_extra) */
+/* solve(tolerance=..., cg_iterations=...): the tolerance replaces the bound one for this and
+ * later solves; cg_iterations (Newton's CG iterations per step) holds for this call only
+ * (None: as bound), so every call sets it. Read and checked first, set only when the whole
+ * call has been validated (apply_extra). */
 typedef struct arap_extra {
     int given;
     double tolerance;
+    int cg; /* 0: as bound */
 } arap_extra;
 
 static int solve_extra(dk_py_method *self, PyObject *kw, void *pending, const char *context)
 {
     arap_extra *x = (arap_extra *)pending;
+    PyObject *cg_obj = kw ? PyDict_GetItemString(kw, "cg_iterations") : NULL;
+    if (cg_obj == Py_None) {
+        if (PyDict_DelItemString(kw, "cg_iterations") < 0)
+            return -1;
+    } else if (cg_obj) {
+        int cg = 0;
+        if (dk_py_opt_int(kw, "cg_iterations", &cg) < 0)
+            return -1;
+        if (cg < 1 || cg > 100) {
+            PyErr_Format(PyExc_ValueError, "%s: cg_iterations is %d, must be in [1, 100]",
+                         context, cg);
+            return -1;
+        }
+        x->cg = cg;
+    }
     PyObject *tol_obj = kw ? PyDict_GetItemString(kw, "tolerance") : NULL;
     (void)self;
     if (!tol_obj || tol_obj == Py_None) {
@@ -76,6 +94,8 @@ static void apply_extra(dk_py_method *self, const void *pending, void *saved)
     }
     if (x->given)
         (void)dk_arap_set_tolerance(self->native, x->tolerance, &err); /* checked above */
+    /* every call sets the CG count (its own, or the bound one): nothing to save */
+    (void)dk_arap_set_cg_iterations(self->native, x->cg, &err);      /* checked above */
 }
 
 static PyObject *stats(dk_py_method *self)
@@ -107,7 +127,8 @@ static PyObject *get_handle_sizes(PyObject *obj, void *c)
 
 PyDoc_STRVAR(solve_doc,
              "solve(targets=None, transforms=None, warm_start=True, max_iterations=None,\n"
-             "      resume=False, energy=True, tolerance=None) -> SolveResult\n\n"
+             "      resume=False, energy=True, tolerance=None, cg_iterations=None)\n"
+             "      -> SolveResult\n\n"
              "targets: (sum of handle sizes) x 3 positions, concatenated in handle order;\n"
              "transforms: n_handles x 4 x 4 affine transforms of the rest pose. warm_start\n"
              "starts from the previous solution (else from the naive Laplacian-editing guess).\n"
@@ -115,7 +136,10 @@ PyDoc_STRVAR(solve_doc,
              "bound value for this and later calls. resume=True with the previous call's\n"
              "targets continues that solve where it stopped (acceleration history kept), so\n"
              "solves sliced by max_iterations equal one longer solve; with other targets it\n"
-             "is a warm start.\n"
+             "is a warm start. cg_iterations: Newton's CG iterations per step for this\n"
+             "call only (None: as bound); fewer make cheaper, less complete steps with the\n"
+             "same stopping test (the add-on's time-budgeted slices); a resume with another\n"
+             "count ends at a point that test accepts, not bit for bit one long solve.\n"
              "Returns the positions, the ARAP energy of those positions, the iterations used\n"
              "and whether the relative energy change fell below the tolerance.");
 

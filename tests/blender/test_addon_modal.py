@@ -5,8 +5,10 @@
 - bind: invoked from the UI the native precomputation runs in a worker thread; the result
   equals the synchronous bind's, Esc cancels and keeps the previous binding, and a second
   bind of the same deformer while one runs is refused;
-- dragging (ARAP): a UI update solves within the interactive time budget, and the refine timer
-  finishes the solve once the handle stops, reaching what a full solve gives."""
+- dragging (ARAP): a UI update solves within the interactive time budget (Newton steps cut to
+  fewer CG iterations when a whole one does not fit), the panel's flag says "refining" while
+  it is pending, and the refine timer finishes the solve once the handle stops, reaching the
+  minimum a full solve reaches (to the tolerance: cut steps take another path)."""
 import os
 import sys
 import time
@@ -222,37 +224,47 @@ def refine_tests():
         bpy.ops.deformkit.bind()
         key = (obj.name, d.uid)
         bind_T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
-        cap = S.solver._budget_iterations(key, d.options.max_iterations)  # from the bind solve's timing
+        # from the bind solve's timing
+        want = S.solver._budget(key, d.options.max_iterations,
+                                S.solver.inner_cap(S.methods.get("ARAP"), d.options), False)
         e.location = (1.0, 0.1, 0.4)   # a move that takes several budgets
         e.rotation_euler = (0.0, -0.3, 0.0)
         bpy.context.view_layer.update()
     first = dict(S.solver.runtime.get(key, {}))
     R.check("drag update stops at the budget and is left pending",
             key in S.solver.pending() and not first.get("converged", True)
-            and first.get("iterations", 0) == cap < d.options.max_iterations, (first, cap))
+            and (first.get("iterations", 0), first.get("inner")) == want
+            and want[0] < d.options.max_iterations, (first, want))
+    R.check("the panel's flag says refining", S.solver.refining(obj, d))
     t0 = time.time()
     while S.solver.pending() and time.time() - t0 < 60:
         yield 0.05
     last = S.solver.runtime.get(key, {})
     R.check("refine timer finishes the solve", not S.solver.pending() and last.get("converged"),
             last)
+    R.check("... and the refining flag is cleared", not S.solver.refining(obj, d))
     with bpy.context.temp_override(**S.ui_context()):
         got = S.evaluated_positions(obj)
         T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
     rest = S.rest_positions(obj)
     mesh = S.dk.Mesh(rest, S.solver.triangles(obj.data))
-    # the same as one uninterrupted solve: bind (cold) then one warm solve of Max Iterations
+    # the minimum of one uninterrupted solve: bind (cold) then one warm solve of Max
+    # Iterations (bit for bit when every slice took whole Newton steps, as the Python and C
+    # resume tests check; slices cut to fewer CG iterations end elsewhere within the
+    # tolerance)
     ref = S.dk.ARAP(mesh, [handle], fixed=fixed, weights=d.options.weights,
                     energy=d.options.energy, tolerance=d.options.tolerance,
                     max_iterations=d.options.max_iterations,
                     acceleration=d.options.acceleration)
     ref.solve(transforms=bind_T, warm_start=False)
     r = ref.solve(transforms=T, warm_start=True)
-    R.check("sliced interactive solve = one uninterrupted solve (iterations)",
-            r.converged and abs(last.get("energy", 0) - r.energy) <= 1e-12 * r.energy,
-            (last, r.energy, r.iterations))
-    R.check("sliced interactive solve = one uninterrupted solve (positions)",
-            np.abs(got - r.positions).max() < 1e-6, np.abs(got - r.positions).max())
+    bbox = np.linalg.norm(rest.max(0) - rest.min(0))
+    R.check("sliced interactive solve = one uninterrupted solve's minimum (energy within 1e-5)",
+            r.converged and abs(float(ref.energy(got)) - r.energy) <= 1e-5 * r.energy,
+            (last, float(ref.energy(got)), r.energy, r.iterations))
+    R.check("... (positions within 1e-3 of the bbox diagonal)",
+            np.abs(got - r.positions).max() < 1e-3 * bbox,
+            np.abs(got - r.positions).max())
 
 
 def all_tests():

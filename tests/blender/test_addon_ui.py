@@ -60,7 +60,7 @@ class Layout:
 
     def label(self, text="", icon=None, **kw):
         check_icon(icon, "label %r" % text)
-        self.calls.append("label")
+        self.calls.append("label " + str(text))
 
     def prop(self, data, path, text=None, icon=None, **kw):
         check_icon(icon, "prop %s" % path)
@@ -158,6 +158,11 @@ def test_states():
     bpy.ops.deformkit.bind()
     calls = draw_all(obj, "ARAP bound, material group")
     R.check("the panel shows the material stiffness", "prop stiffness_scale" in calls)
+    R.check("a converged result: no refining line", "label refining\u2026" not in calls)
+    S.solver._cache[(obj.name, d.uid)].pending = True  # as a budgeted drag update leaves it
+    calls = draw_all(obj, "ARAP refining")
+    R.check("a pending result: the panel says refining", "label refining\u2026" in calls)
+    S.solver._cache[(obj.name, d.uid)].pending = False
     for m in S.methods.METHODS:
         d.method = m.id
         for open_ in (False, True):   # the options box's Advanced section, both ways

@@ -55,6 +55,13 @@ def main():
         bpy.context.view_layer.update()
         p = S.evaluated_positions(g)
         R.check("undo apply: evaluated result back (re-solved, ARAP tolerance)", np.abs(p - deformed).max() < 1e-3, np.abs(p - deformed).max())
+        d = g.deformkit.deformers[0]
+        rt = S.solver.runtime.get((g.name, d.uid), {})
+        if S.methods.get(d.method).iterative:
+            # UI solves are budgeted; the first after an undo is not, so no partial pose shows
+            R.check("undo apply: the first solve after undo is full and converged, not a "
+                    "budgeted slice", rt and not rt.get("budgeted") and rt.get("converged")
+                    and not S.solver.refining(g, d), rt)
         # the solver works after undo (cache re-validated, no stale bpy references)
         bpy.data.objects["Tip"].location.z -= 0.4
         bpy.context.view_layer.update()

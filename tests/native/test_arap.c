@@ -745,6 +745,100 @@ out:
     plane_free(&s);
 }
 
+/* dk_arap_set_cg_iterations: a count set on a Newton object gives bit for bit what an
+ * object bound with that count gives, 0 restores the bound count, and a solve sliced into
+ * one-step slices of few CG iterations (the add-on's budgeted updates) then resumed with the
+ * bound count ends converged at the same minimum as one uninterrupted solve, to the
+ * tolerance (not bit for bit: the iterates differ); cut steps alone are not reported
+ * converged (the test waits for a whole step). Out-of-range counts are refused. */
+static void test_cg_override(void)
+{
+    plane_setup s;
+    if (plane_make(&s, 12) != 0) {
+        CHECK(0);
+        return;
+    }
+    const dk_mesh *m = s.mesh;
+    const dk_index n = m->n_vertices;
+    dk_index sizes[1] = {s.n_handle};
+    double t[3 * 64];
+    bend_targets(&s, 1.1, t);
+    double *x = malloc(sizeof(double) * 3 * n), *y = malloc(sizeof(double) * 3 * n),
+           *z = malloc(sizeof(double) * 3 * n);
+    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    dk_arap_options o, o2;
+    dk_arap_default_options(&o);
+    o.max_iterations = 1000;
+    o.tolerance = 1e-9;
+    o2 = o;
+    o2.cg_iterations = 2;
+    dk_arap *a = NULL, *b = NULL, *c = NULL;
+    dk_error e = {0};
+    dk_solve_info ia, ib, ic;
+    if (!x || !y || !z || dk_arap_bind(m, &d, &o, &a, &e) != DK_OK ||
+        dk_arap_bind(m, &d, &o2, &b, &e) != DK_OK || dk_arap_bind(m, &d, &o, &c, &e) != DK_OK) {
+        CHECK_MSG(0, "%s", e.message);
+        goto out;
+    }
+    /* the override = the bound count */
+    CHECK(dk_arap_set_cg_iterations(a, 2, &e) == DK_OK);
+    CHECK(dk_arap_solve(a, &(dk_solve_request){.targets = t, .max_iterations = 4}, x, &ia,
+                        &e) == DK_OK);
+    CHECK(dk_arap_solve(b, &(dk_solve_request){.targets = t, .max_iterations = 4}, y, &ib,
+                        &e) == DK_OK);
+    CHECK(memcmp(x, y, sizeof(double) * 3 * n) == 0 && ia.cg_iterations == ib.cg_iterations);
+    CHECK_MSG(ia.cg_iterations <= 2 * 4, "%d products in 4 steps of 2", ia.cg_iterations);
+    /* 0: the bound count again (a cold solve: a function of its input) */
+    CHECK(dk_arap_set_cg_iterations(a, 0, &e) == DK_OK);
+    CHECK(dk_arap_solve(a, &(dk_solve_request){.targets = t}, x, &ia, &e) == DK_OK);
+    CHECK(dk_arap_solve(c, &(dk_solve_request){.targets = t}, z, &ic, &e) == DK_OK);
+    CHECK(ic.converged && memcmp(x, z, sizeof(double) * 3 * n) == 0 &&
+          ia.iterations == ic.iterations);
+    /* slices of one 2-product step, then the bound count, resumed: the same minimum */
+    CHECK(dk_arap_set_cg_iterations(b, 0, &e) == DK_OK); /* b is bound with 2 */
+    dk_arap_free(b);
+    b = NULL;
+    if (dk_arap_bind(m, &d, &o, &b, &e) != DK_OK) {
+        CHECK_MSG(0, "%s", e.message);
+        goto out;
+    }
+    CHECK(dk_arap_set_cg_iterations(b, 2, &e) == DK_OK);
+    CHECK(dk_arap_solve(b, &(dk_solve_request){.targets = t, .max_iterations = 1}, y, &ib,
+                        &e) == DK_OK);
+    for (int k = 0; k < 30; k++)
+        CHECK(dk_arap_solve(b,
+                            &(dk_solve_request){.targets = t, .start = DK_START_RESUME,
+                                                .max_iterations = 1},
+                            y, &ib, &e) == DK_OK);
+    /* cut steps alone: the stopping test waits for a whole step */
+    CHECK_MSG(!ib.converged, "converged after %d cut steps", ib.iterations);
+    CHECK(dk_arap_set_cg_iterations(b, 0, &e) == DK_OK);
+    for (int k = 0; k < 1000 && !ib.converged; k++)
+        CHECK(dk_arap_solve(b,
+                            &(dk_solve_request){.targets = t, .start = DK_START_RESUME,
+                                                .max_iterations = 1},
+                            y, &ib, &e) == DK_OK);
+    CHECK(ib.converged);
+    CHECK_MSG(fabs(ib.energy - ic.energy) <= 1e-6 * ic.energy, "sliced %.12g whole %.12g",
+              ib.energy, ic.energy);
+    double dmax = 0.0;
+    for (size_t k = 0; k < 3 * (size_t)n; k++)
+        dmax = fmax(dmax, fabs(y[k] - z[k]));
+    CHECK_MSG(dmax < 1e-3 && dmax > 0.0, "max coordinate difference %g", dmax);
+    CHECK(dk_arap_set_cg_iterations(b, 101, &e) == DK_ERR_INVALID_ARGUMENT &&
+          strstr(e.message, "cg_iterations"));
+    CHECK(dk_arap_set_cg_iterations(b, -1, &e) == DK_ERR_INVALID_ARGUMENT);
+    CHECK(dk_arap_set_cg_iterations(NULL, 2, &e) == DK_ERR_INVALID_ARGUMENT);
+out:
+    dk_arap_free(a);
+    dk_arap_free(b);
+    dk_arap_free(c);
+    free(x);
+    free(y);
+    free(z);
+    plane_free(&s);
+}
+
 /* The secant predictor of warm starts (option predict): identical to the plain warm start
  * until two earlier solutions exist and whenever the drag reverses; along a drag it is used,
  * never starts above the plain warm start (the energy guard), takes fewer iterations in total
@@ -1257,7 +1351,7 @@ static void test_big_mesh_threaded_local_step(void)
     dk_test_mesh_free(&tm);
 }
 
-DK_TEST_MAIN(test_newton_quadratic, test_newton_soft_stiffness, test_resume, test_predictor, test_zero_drag, test_rigid_motion, test_bend, test_twist, test_clamping,
+DK_TEST_MAIN(test_newton_quadratic, test_newton_soft_stiffness, test_resume, test_cg_override, test_predictor, test_zero_drag, test_rigid_motion, test_bend, test_twist, test_clamping,
              test_stiffness_soft_warm_rebind, test_warm_rotations_and_cold_reproducibility,
              test_errors,
              test_big_mesh_threaded_local_step)

@@ -304,6 +304,50 @@ def test_resumed_slices_equal_one_long_solve(acceleration):
     assert r2.iterations == ref2.iterations and np.array_equal(r2.positions, ref2.positions)
 
 
+def test_cg_iterations_per_call():
+    """solve(cg_iterations=k) gives this call's Newton steps k CG iterations (bit for bit an
+    object bound with k), the next call without it the bound count again; slices of one
+    cheap step, resumed (the add-on's budgeted updates), then finished with the bound count
+    end converged at the same minimum as one uninterrupted solve, to the tolerance; after
+    cut steps the stopping test waits for a whole step."""
+    v, f, fixed, handle = plane_setup(12)
+    mesh = deformkit.Mesh(v, f)
+    t = bend(v, handle, 1.1)
+    kw = dict(fixed=fixed, tolerance=1e-9, max_iterations=1000)
+    two = deformkit.ARAP(mesh, [handle], cg_iterations=2, **kw).solve(
+        t, warm_start=False, max_iterations=3)
+    a = deformkit.ARAP(mesh, [handle], **kw)
+    r = a.solve(t, warm_start=False, max_iterations=3, cg_iterations=2)
+    assert np.array_equal(r.positions, two.positions) and r.energy == two.energy
+    whole = deformkit.ARAP(mesh, [handle], **kw).solve(t, warm_start=False)
+    r = a.solve(t, warm_start=False)  # no keyword: the bound 12 again
+    assert np.array_equal(r.positions, whole.positions) and r.iterations == whole.iterations
+    sliced = deformkit.ARAP(mesh, [handle], **kw)
+    r = sliced.solve(t, warm_start=False, max_iterations=1, cg_iterations=2)
+    for _ in range(4):
+        r = sliced.solve(t, resume=True, max_iterations=1, cg_iterations=2)
+    steps = 0
+    while not r.converged and steps < 1000:
+        r = sliced.solve(t, resume=True, max_iterations=1)
+        steps += 1
+    assert r.converged
+    assert abs(r.energy - whole.energy) <= 1e-6 * whole.energy
+    bbox = np.linalg.norm(v.max(0) - v.min(0))
+    diff = np.abs(r.positions - whole.positions).max()
+    assert 0 < diff < 1e-3 * bbox
+    # cut steps alone are not reported converged: the test waits for a whole step (cut
+    # steps leave the slow modes where it predicts little), which the resume then takes
+    cut = deformkit.ARAP(mesh, [handle], **kw)
+    r = cut.solve(t, warm_start=False, max_iterations=40, cg_iterations=2)
+    assert not r.converged and r.iterations == 40
+    r = cut.solve(t, resume=True)
+    assert r.converged and r.iterations >= 2  # a whole step, then the test
+    assert abs(r.energy - whole.energy) <= 1e-6 * whole.energy
+    for bad in (0, 101, -3):
+        with pytest.raises(ValueError, match="cg_iterations"):
+            sliced.solve(t, cg_iterations=bad)
+
+
 def test_warm_start_and_rebind_reuse():
     v, f, fixed, handle = plane_setup(12)
     mesh = deformkit.Mesh(v, f)

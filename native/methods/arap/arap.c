@@ -99,6 +99,7 @@ dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraint
     ar->caller_mesh = mesh;
     ar->team = dk_team_create(); /* NULL (no thread available) is fine: passes start threads */
     ar->opt = opt;
+    ar->cg = opt.cg_iterations;
     ar->n = mesh->n_vertices;
     st = dk_reorder_create(mesh, 0, &ar->ro, err);
     if (st != DK_OK) {
@@ -261,6 +262,18 @@ dk_status dk_arap_set_tolerance(dk_arap *ar, double tolerance, dk_error *err)
 double dk_arap_tolerance(const dk_arap *ar)
 {
     return ar ? ar->opt.tolerance : NAN;
+}
+
+dk_status dk_arap_set_cg_iterations(dk_arap *ar, int cg_iterations, dk_error *err)
+{
+    if (!ar)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "ARAP: object is NULL");
+    if (cg_iterations < 0 || cg_iterations > 100)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP: cg_iterations is %d, must be in [1, 100] (0: as bound)",
+                            cg_iterations);
+    ar->cg = cg_iterations > 0 ? cg_iterations : ar->opt.cg_iterations;
+    return DK_OK;
 }
 
 dk_status dk_arap_energy(const dk_arap *ar, const double *positions, double *energy,

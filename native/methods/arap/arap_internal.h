@@ -110,6 +110,12 @@ typedef struct arap_system {
      * gradient, energies and line search stay in double, and halving these streams made a
      * product ~25% faster (memory-bound); the PCG vectors (N each) */
     double *kinv, *omega, *vfull;
+    /* the current iterate comes from a Newton step cut to fewer CG iterations than bound
+     * (dk_arap_set_cg_iterations) with no whole step since: the stopping test then waits
+     * for a whole step (cut steps, like local/global ones, leave the slow bending modes
+     * where the test's local/global prediction is small while the minimum is still away).
+     * Cleared by a whole step and by a cold start; kept across warm starts. */
+    int cut;
     dk_index *a_vrow; /* per entry of a: the vertex of its row (products in the mesh layout) */
     struct nt_entry { float h[3]; dk_index cell; } *nt;
     struct nt_term { float e[3], w; dk_index a, b; } *ntt; /* the cell terms, packed */
@@ -124,6 +130,8 @@ struct dk_arap {
     const dk_mesh *caller_mesh;
     dk_reorder *ro;
     dk_arap_options opt;
+    int cg;               /* CG iterations per Newton step of the next solves
+                             (dk_arap_set_cg_iterations; opt.cg_iterations as bound)       */
     dk_index n;
     int64_t n_terms;
     dk_index *cell_start, *ta, *tb;

@@ -12,7 +12,7 @@
  * numbers per map entry (R_c g is stored with each right-hand side). A Newton step solves
  * H d = -g approximately by preconditioned conjugate gradients, preconditioner A^-1 (the
  * bound factor), from d = 0: its first iterate is the local/global step; at most
- * cg_iterations Hessian products; a direction of non-positive curvature ends it (the first
+ * cg_iterations Hessian products (ar->cg: as bound, or dk_arap_set_cg_iterations); a direction of non-positive curvature ends it (the first
  * one: the local/global step is used). Then a line search on E (t = 1, 1/2, 1/4, 1/8;
  * accept when E does not increase), and if it fails, the local/global step (which never
  * increases E). Far from a minimum (the local/global step promises more than NEWTON_FAR of
@@ -178,6 +178,7 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
     const dk_index cells_min = par ? 0 : ar->n + 1, rows_min = par ? 0 : nu + 1;
     double *r = s->nt_r, *z = s->nt_z, *p = s->nt_p, *q = s->nt_q, *d = s->nt_d;
     double *z0 = s->nt_z0, ignored;
+    const int whole = ar->cg >= ar->opt.cg_iterations;
     *newton_converged = 0;
     hv_job job = {ar, s, ar->x, r, s->rhs, {0.0, 0.0}};
     dk_team_run_halves(ar->team, hv_rows_part, &job, nu, rows_min); /* r = -g */
@@ -197,7 +198,7 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
     job.v = s->vfull;
     job.out = q;
     job.rhs = NULL;
-    for (int k = 0; k < ar->opt.cg_iterations; k++) {
+    for (int k = 0; k < ar->cg; k++) {
         dk_team_run_halves(ar->team, hv_cells_part, &job, ar->n, cells_min);
         dk_team_run_halves(ar->team, hv_rows_part, &job, nu, rows_min);
         (*cg_total)++;
@@ -213,16 +214,16 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
          * least what a local/global step would achieve; at most tolerance * E: converged,
          * the local/global test predicted instead of taken (so that one tolerance means the
          * same for every acceleration). Nothing moves. */
-        if (k == 0 && alpha * rz <= ar->opt.tolerance * energy) {
+        if (k == 0 && alpha * rz <= ar->opt.tolerance * energy && !s->cut) {
             *newton_converged = 1;
             *e_new = energy;
             return DK_OK;
-        }
+        } /* (after cut steps the step is taken: the test counts again after a whole one) */
         {
             vec_job vj = {s, VEC_STEP, alpha, d, r, p, q, NULL};
             dk_team_run_halves(ar->team, vec_part, &vj, nu, rows_min);
         }
-        if (k + 1 == ar->opt.cg_iterations)
+        if (k + 1 == ar->cg)
             break;
         st = dk_cholesky_solve(s->chol, r, 3, z, err);
         if (st != DK_OK)
@@ -257,6 +258,7 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
         e = local_global_step(ar, s, z0);
     }
     arap_rotations_rhs(ar, s, ar->rot);
+    s->cut = !whole;
     *e_new = e;
     return DK_OK;
 }

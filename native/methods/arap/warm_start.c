@@ -138,6 +138,8 @@ dk_status arap_start(dk_arap *ar, arap_system *s, int warm, double *energy_out, 
     int have_energy = 0;
     dk_status st;
     s->predicted = 0;
+    if (!warm)
+        s->cut = 0; /* a cold start remembers nothing of the cut steps (newton.c) */
     place_known(ar, s, warm ? ar->prev : ar->mesh->positions);
     arap_build_rhs_const(ar, s, ar->x);
     st = warm ? start_warm(ar, s, &energy, &have_energy, err) : start_cold(ar, s, err);

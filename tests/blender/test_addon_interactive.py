@@ -1,0 +1,153 @@
+"""Interactive (time-budgeted) solves without a window: the budget's arithmetic, a drag
+update of ARAP's Newton solver cut to one step of few CG iterations that the refine steps
+still bring to the minimum of one uninterrupted solve, the "refining" flag the panel shows,
+and undo/redo converging before they show. The UI path (timer, window) is in
+test_addon_modal.py and test_addon_undo.py; no timing is asserted here: the budget is set so
+small that no machine fits a full Newton step in it."""
+import os
+import sys
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import _setup as S  # noqa: E402
+import bpy  # noqa: E402
+import numpy as np  # noqa: E402
+from mathutils import Euler  # noqa: E402
+
+R = S.Results("test_addon_interactive")
+
+
+def arap_grid(nx=40, ny=20):
+    S.reset_scene()
+    obj, d, e, fixed, handle = S.grid_setup("ARAP", nx=nx, ny=ny)
+    bpy.ops.deformkit.bind()
+    return obj, d, e, fixed, handle, (obj.name, d.uid)
+
+
+class budget:
+    """INTERACTIVE_BUDGET_MS set for a block, and UI-style solves under blender -b."""
+
+    def __init__(self, ms):
+        self.ms = ms
+
+    def __enter__(self):
+        self.old = S.solver.INTERACTIVE_BUDGET_MS
+        S.solver.INTERACTIVE_BUDGET_MS = self.ms
+        S.handlers.force_interactive[0] = True
+
+    def __exit__(self, *exc):
+        S.solver.INTERACTIVE_BUDGET_MS = self.old
+        S.handlers.force_interactive[0] = False
+
+
+def refine_all():
+    n = 0
+    while S.handlers.refine() is not None and n < 100000:
+        n += 1
+    return n
+
+
+def test_budget_arithmetic():
+    """_budget: units that fit = budget / (a slice's time / its units), per kind of slice;
+    an iteration with an inner count that does not fit whole is cut to fewer inner
+    iterations; with room for several whole ones, several."""
+    obj, d, e, fixed, handle, key = arap_grid(12, 6)
+    ent = S.solver._cache[key]
+    B = S.solver.INTERACTIVE_BUDGET_MS
+    ent.slice_cost = {False: (B * 2.0, 1, 12)}  # a unit costs B/6
+    R.check("a step that does not fit is cut to the inner iterations that do",
+            S.solver._budget(key, 100, 12, False) == (1, 6), S.solver._budget(key, 100, 12, False))
+    ent.slice_cost = {False: (B * 2.0, 1, 12), True: (B / 3.0, 1, 12)}  # a unit: B/36
+    R.check("resumed slices use their own cost (3 whole steps fit)",
+            S.solver._budget(key, 100, 12, True) == (3, None), S.solver._budget(key, 100, 12, True))
+    R.check("... and the cap holds", S.solver._budget(key, 2, 12, True) == (2, None))
+    ent.slice_cost = {False: (B * 2.0, 1, 12)}
+    R.check("settled refine steps (cut=False) take whole iterations",
+            S.solver._budget(key, 100, 12, True, cut=False) == (1, None))
+    ent.slice_cost = {False: (B * 100.0, 1, 12)}
+    R.check("at least one inner iteration", S.solver._budget(key, 100, 12, False) == (1, 1))
+    ent.slice_cost = {False: (B / 2.0, 3, 1)}
+    R.check("methods without an inner count: whole iterations (6 fit)",
+            S.solver._budget(key, 100, 0, False) == (6, None), S.solver._budget(key, 100, 0, False))
+    m = S.methods.get("ARAP")
+    R.check("ARAP Newton's inner count is its CG iterations",
+            S.solver.inner_cap(m, d.options) == d.options.cg_iterations == 12)
+    d.options.acceleration = "anderson"
+    R.check("... and Anderson's iterations have none", S.solver.inner_cap(m, d.options) == 0)
+
+
+def test_cheap_drag_step_converges_to_the_minimum():
+    """A drag update whose budget fits no full Newton step takes one step of a single CG
+    iteration and is left pending ("refining"); refine steps with the normal budget end
+    converged at the minimum one uninterrupted solve reaches, to the solver's tolerance."""
+    obj, d, e, fixed, handle, key = arap_grid()
+    dg = bpy.context.evaluated_depsgraph_get()
+    bind_T = S.solver.transforms(obj, d, dg)
+    with budget(1e-6):
+        e.location = (1.0, 0.1, 0.4)
+        e.rotation_euler = Euler((0.0, -0.3, 0.0))
+        bpy.context.view_layer.update()
+        first = dict(S.solver.runtime.get(key, {}))
+        R.check("the drag update is one Newton step of 1 CG iteration, unconverged",
+                first.get("budgeted") and first.get("iterations") == 1
+                and first.get("inner") == 1 and not first.get("converged"), first)
+        R.check("it is pending and the panel's flag says refining",
+                key in S.solver.pending() and S.solver.refining(obj, d))
+    with budget(S.solver.INTERACTIVE_BUDGET_MS):
+        ticks = refine_all()
+    last = S.solver.runtime.get(key, {})
+    R.check("refine steps converge it (%d ticks)" % ticks,
+            last.get("converged") and key not in S.solver.pending(), last)
+    R.check("the flag is cleared once converged", not S.solver.refining(obj, d))
+    got = S.evaluated_positions(obj)
+    rest = S.rest_positions(obj)
+    T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
+    ref = S.dk.ARAP(S.dk.Mesh(rest, S.solver.triangles(obj.data)), [handle], fixed=fixed,
+                    tolerance=d.options.tolerance, max_iterations=d.options.max_iterations)
+    ref.solve(transforms=bind_T, warm_start=False)
+    r = ref.solve(transforms=T, warm_start=True)
+    bbox = np.linalg.norm(rest.max(0) - rest.min(0))
+    # the add-on skips the energy of its solves: the shown result's, evaluated here
+    gap = abs(float(ref.energy(got)) - r.energy) / r.energy
+    R.check("the same minimum as one uninterrupted solve: energy within 1e-5 (%.1e)" % gap,
+            r.converged and gap <= 1e-5, (last.get("energy"), r.energy))
+    err = np.abs(got - r.positions).max() / bbox
+    R.check("... positions within 1e-3 of the bbox diagonal (%.1e)" % err, err < 1e-3)
+
+
+def test_undo_converges_before_showing():
+    """After on_undo (undo_post / redo_post) the next solve of a deformer is a full one even
+    when UI updates are budgeted; the one after is a budgeted slice again."""
+    obj, d, e, fixed, handle, key = arap_grid()
+    with budget(1e-6):
+        e.location = (1.0, 0.1, 0.4)
+        bpy.context.view_layer.update()
+        R.check("before: a budgeted slice, pending",
+                S.solver.runtime[key]["budgeted"] and key in S.solver.pending())
+        S.handlers.on_undo()
+        R.check("on_undo: the deformer converges next", S.solver.converges_next(key))
+        e.location = (1.0, 0.1, 0.45)
+        bpy.context.view_layer.update()
+        rt = dict(S.solver.runtime[key])
+        R.check("the first solve after undo is full and converged",
+                not rt["budgeted"] and rt["converged"] and key not in S.solver.pending()
+                and not S.solver.refining(obj, d), rt)
+        R.check("... once", not S.solver.converges_next(key))
+        e.location = (1.0, 0.1, 0.5)
+        bpy.context.view_layer.update()
+        R.check("the next drag update is budgeted again", S.solver.runtime[key]["budgeted"]
+                and key in S.solver.pending())
+        # the same through evaluate_object directly, as the handler calls it, with nothing
+        # moved since the undo (its check of the inputs is reset)
+        S.handlers.on_undo()
+        S.solver.evaluate_object(obj, bpy.context.evaluated_depsgraph_get(), interactive=True)
+        rt = dict(S.solver.runtime[key])
+        R.check("evaluate_object after on_undo re-solves in full", not rt["budgeted"]
+                and rt["converged"] and key not in S.solver.pending(), rt)
+    S.solver.clear_cache()
+
+
+# the stand-in module (DEFORMKIT_MOCK=1) converges every solve at once: the arithmetic only
+MOCK = os.environ.get("DEFORMKIT_MOCK") == "1"
+for t in (test_budget_arithmetic,) + (() if MOCK else (
+        test_cheap_drag_step_converges_to_the_minimum, test_undo_converges_before_showing)):
+    R.run(t)
+R.finish()
