@@ -296,6 +296,19 @@ def grid_setup(method="ARAP", nx=12, ny=6, handle_at=None):
     return obj, d, e, np.array(fixed), np.array(handle)
 
 
+def arap_reference(obj, d, handle, fixed, bind_T, T):
+    """What one uninterrupted solve gives, through the Python API: an ARAP of the deformer's
+    options on obj's rest mesh, solved cold at the bind pose `bind_T`, then warm for `T`
+    (to the deformer's Max Iterations). Returns (the ARAP object, that SolveResult)."""
+    mesh = dk.Mesh(solver.rest_positions(obj.data), solver.triangles(obj.data))
+    o = d.options
+    ref = dk.ARAP(mesh, [handle], fixed=fixed, weights=o.weights, energy=o.energy,
+                  tolerance=o.tolerance, max_iterations=o.max_iterations,
+                  acceleration=o.acceleration)
+    ref.solve(transforms=bind_T, warm_start=False)
+    return ref, ref.solve(transforms=T, warm_start=True)
+
+
 def run_in_ui(fn, results, delay=1.0):
     """For tests that need a window (undo, modal operators, screenshots): run under
     `xvfb-run -a blender --factory-startup [--enable-event-simulate] --python FILE`.

@@ -247,17 +247,11 @@ def refine_tests():
         got = S.evaluated_positions(obj)
         T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
     rest = S.rest_positions(obj)
-    mesh = S.dk.Mesh(rest, S.solver.triangles(obj.data))
     # the minimum of one uninterrupted solve: bind (cold) then one warm solve of Max
     # Iterations (bit for bit when every slice took whole Newton steps, as the Python and C
     # resume tests check; slices cut to fewer CG iterations end elsewhere within the
     # tolerance)
-    ref = S.dk.ARAP(mesh, [handle], fixed=fixed, weights=d.options.weights,
-                    energy=d.options.energy, tolerance=d.options.tolerance,
-                    max_iterations=d.options.max_iterations,
-                    acceleration=d.options.acceleration)
-    ref.solve(transforms=bind_T, warm_start=False)
-    r = ref.solve(transforms=T, warm_start=True)
+    ref, r = S.arap_reference(obj, d, handle, fixed, bind_T, T)
     bbox = np.linalg.norm(rest.max(0) - rest.min(0))
     R.check("sliced interactive solve = one uninterrupted solve's minimum (energy within 1e-5)",
             r.converged and abs(float(ref.energy(got)) - r.energy) <= 1e-5 * r.energy,

@@ -165,13 +165,7 @@ def test_sliced_solve_totals():
         S.handlers.force_interactive[0] = False
     rt = seen[-1]
     T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
-    mesh = S.dk.Mesh(S.rest_positions(obj), S.solver.triangles(obj.data))
-    ref = S.dk.ARAP(mesh, [handle], fixed=fixed, weights=d.options.weights,
-                    energy=d.options.energy, tolerance=d.options.tolerance,
-                    max_iterations=d.options.max_iterations,
-                    acceleration=d.options.acceleration)
-    ref.solve(transforms=bind_T, warm_start=False)
-    r = ref.solve(transforms=T, warm_start=True)
+    ref, r = S.arap_reference(obj, d, handle, fixed, bind_T, T)
     steps = [b["iterations"] - a["iterations"] for a, b in zip(seen, seen[1:])]
     R.check("the solve took several slices (%d)" % len(seen),
             len(seen) > 2 and seen[0]["iterations"] == 1 and rt["slices"] == len(seen),
