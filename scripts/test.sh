@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Sets everything up and runs every DeformKit test:
 #   1. C tests (ctest) in the Release build and in the ASan+UBSan build,
-#   2. Python module tests (pytest under Debian's /usr/bin/python3),
+#   2. Python module tests (pytest under Debian's /usr/bin/python3), and again with the
+#      module of the ASan+UBSan build (the sanitizer runtimes preloaded; leaving out the
+#      tests marked heavy: whole scanned meshes solved to convergence),
 #   3. the packages: scripts/package.sh builds the wheel and the two add-on zips into dist/
 #      (and validates the extension in every Blender 4.2+ here); the wheel is installed into
 #      a clean virtual environment and smoke-tested there,
@@ -50,6 +52,14 @@ if [ "$quick" = 0 ]; then
   run_suite "C tests (ASan+UBSan)" ctest --test-dir build-asan --output-on-failure
 fi
 run_suite "Python tests" "$PY" -m pytest -q tests/python
+if [ "$quick" = 0 ]; then
+  # detect_leaks=0: the interpreter keeps memory at exit that LeakSanitizer would report (the
+  # C tests run with leak detection on)
+  run_suite "Python tests (ASan+UBSan)" env \
+    LD_PRELOAD="$(gcc -print-file-name=libasan.so) $(gcc -print-file-name=libubsan.so)" \
+    ASAN_OPTIONS=detect_leaks=0 PYTHONPATH="$here/build-asan/python" \
+    "$PY" -m pytest -q -p no:cacheprovider -m "not heavy" tests/python
+fi
 run_suite "package" scripts/package.sh --no-setup
 run_suite "wheel in a clean venv" tests/wheel/test_wheel.sh
 
