@@ -60,18 +60,24 @@ def _run(scene, depsgraph, cold=False):
                         geometry.add(idd.name)
                     elif isinstance(idd, bpy.types.Mesh):
                         geometry.add(("mesh", idd.name))
-        any_deformed = False
-        for obj in _deformed_objects(scene):
-            any_deformed = True
-            if obj.mode == "EDIT":
-                continue
+        ours = solver.take_own_writes()
+        objs = list(_deformed_objects(scene))
+        _claim_duplicates(objs)
+        any_deformed = bool(objs)
+        for obj in objs:
+            if obj.mode in ("EDIT", "SCULPT"):
+                # modes that may change the topology: checked in full once out of them
+                solver.mark_unverified(obj)
+                if obj.mode == "EDIT":
+                    continue
             changed = (obj.name in geometry or ("mesh", obj.data.name) in geometry)
             # re-read groups on every geometry update of the object, ours included: skipping
             # our own writes could hide a group edit made in the same update
             check = changed
             solver.evaluate_object(obj, depsgraph, check_groups=check, cold=cold,
                                    interactive=not cold and (force_interactive[0]
-                                                             or not bpy.app.background))
+                                                             or not bpy.app.background),
+                                   check_topology=changed and obj.data.name not in ours)
         if cold and depsgraph is not None and any_deformed:
             # Frame change: this depsgraph (the viewport's or a render's) may have been
             # evaluated before the offsets were written (here, or by the handler call of
@@ -87,6 +93,19 @@ def _run(scene, depsgraph, cold=False):
         print("DeformKit handler error: %s: %s" % (type(ex).__name__, ex))
     finally:
         _busy[0] = False
+
+
+def _claim_duplicates(objs):
+    """A deformer id seen on two objects of the scene (Shift+D, Alt+D): the copy gets its
+    own (solver.ensure_own_uid), also when its modifier is hidden and it is not solved."""
+    seen = {}
+    for obj in objs:
+        for d in obj.deformkit.deformers:
+            seen.setdefault(d.uid, []).append((obj, d))
+    for holders in seen.values():
+        if len(holders) > 1:
+            for obj, d in holders:
+                solver.ensure_own_uid(obj, d)
 
 
 def refine():
