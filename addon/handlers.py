@@ -5,6 +5,11 @@
 - Vertex groups are re-read only when the deformed object's geometry was updated by someone
   else than us (weight paint, edit mode exit, group assignment), since that read is O(n).
 - No bpy references are kept: objects are looked up by name each time.
+- Before solving, a deformer id seen on two objects (a Shift+D or Alt+D copy) is made the
+  copy's own (solver.ensure_own_uid). The mesh topology is checked in full (the fingerprint
+  stored at bind) headless, and in the UI after a geometry update the add-on's own writes do
+  not explain, after Edit or Sculpt Mode and after undo; Blender 3.6+ also compares the
+  mesh's corner attributes on every solve (solver.check_topology).
 - UI updates of iterative methods (ARAP) solve within a time budget; the `refine` timer
   finishes them once the handles stop, so dragging stays interactive and the result still
   converges. Frame changes, bakes, scripts and blender -b always solve to convergence, and so
@@ -60,7 +65,7 @@ def _run(scene, depsgraph, cold=False):
                         geometry.add(idd.name)
                     elif isinstance(idd, bpy.types.Mesh):
                         geometry.add(("mesh", idd.name))
-        ours = solver.take_own_writes()
+        ui = force_interactive[0] or not bpy.app.background
         objs = list(_deformed_objects(scene))
         _claim_duplicates(objs)
         any_deformed = bool(objs)
@@ -74,10 +79,12 @@ def _run(scene, depsgraph, cold=False):
             # re-read groups on every geometry update of the object, ours included: skipping
             # our own writes could hide a group edit made in the same update
             check = changed
+            # the topology: headless always, in the UI (drags, playback) on every geometry
+            # update of the object, ours included (solver.check_topology: Blender 3.6+
+            # compares three attributes on every solve anyway, 3.4-3.5 read every corner)
             solver.evaluate_object(obj, depsgraph, check_groups=check, cold=cold,
-                                   interactive=not cold and (force_interactive[0]
-                                                             or not bpy.app.background),
-                                   check_topology=changed and obj.data.name not in ours)
+                                   interactive=not cold and ui,
+                                   check_topology=not ui or changed)
         if cold and depsgraph is not None and any_deformed:
             # Frame change: this depsgraph (the viewport's or a render's) may have been
             # evaluated before the offsets were written (here, or by the handler call of

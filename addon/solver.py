@@ -52,10 +52,6 @@ _written_at_undo = {}
 # from its invoke until its modal part ends. A file load drops modal handlers without ending
 # them: clear_cache (on load_post) forgets those.
 running_binds = {}
-# names of the meshes whose attributes the add-on wrote since the handler last looked
-# (handlers._run): a geometry update of such a mesh may be only ours, so Blender 3.4-3.5,
-# where the topology check reads every corner (17 ms at 43k vertices), skips it then
-_own_writes = set()
 
 
 class _Entry:
@@ -75,13 +71,6 @@ def clear_cache():
     _written_at_undo.clear()
     running_binds.clear()
     _cancel_rebinds()
-
-
-def take_own_writes():
-    """The meshes written by the add-on since the last call (and forgets them)."""
-    out = set(_own_writes)
-    _own_writes.clear()
-    return out
 
 
 def mark_unverified(obj):
@@ -415,15 +404,19 @@ def quick_topology(me):
 
 def check_topology(obj, d, e=None, full=True):
     """Raises DeformKitError(TOPOLOGY_CHANGED) when the mesh's connectivity or vertex order
-    is not the one `d` was bound on (d.bind_topology). With a cache entry `e` and not
-    `full`: the quick check of 3.6+ (a mismatch there is confirmed by the full one), none
-    before 3.6. A deformer bound before fingerprints were stored takes the mesh's."""
+    is not the one `d` was bound on (d.bind_topology). With a cache entry `e`: from 3.6 the
+    quick check against the arrays `e` took when its mesh matched (exact; a mismatch, such as
+    edges merely re-ordered, goes on to the fingerprint); before 3.6 the fingerprint when
+    `full`, else nothing. A deformer bound before fingerprints were stored takes the
+    mesh's."""
     me = obj.data
-    if e is not None and not full:
+    if e is not None and e.quick is not None:
         q = quick_topology(me)
-        if q is None or (e.quick is not None and len(q) == len(e.quick)
-                         and all(np.array_equal(a, b) for a, b in zip(q, e.quick))):
+        if q is not None and len(q) == len(e.quick) and all(
+                np.array_equal(a, b) for a, b in zip(q, e.quick)):
             return
+    elif e is not None and not full:
+        return
     fp = topology_fingerprint(me)
     if not d.bind_topology:
         d.bind_topology = fp
@@ -1047,7 +1040,7 @@ def edit_targets(e, T, source):
 
 
 def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_groups=False,
-          interactive=False, resume=False, check_topology=False):
+          interactive=False, resume=False, check_topology=None):
     """Solves `d` for the targets' current placement. Returns the n x 3 positions, or None when
     nothing changed since the last solve (unless `force`). Raises DeformKitError.
     `interactive` (UI updates): an iterative method stops at the time budget and is marked
@@ -1057,10 +1050,12 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
         raise DeformKitError("not bound: press Bind")
     check_object(obj, d)
     ensure_own_uid(obj, d)
-    # the topology in full for every solve but the UI's interactive ones, which check it
-    # in full after a geometry update the add-on did not make (`check_topology`)
+    # the topology in full (check_topology) for Apply, bakes, scripts and blender -b (None:
+    # all but interactive solves); the UI's handler asks for it after a geometry update the
+    # add-on did not make, an Edit or Sculpt Mode session or an undo (handlers._run)
+    full = (not interactive) if check_topology is None else check_topology
     e = _entry_for(obj, d, check_groups, threaded=not cold and _use_threads(interactive),
-                   full_check=check_topology or not interactive)
+                   full_check=full)
     T = snap_identity(transforms(obj, d, depsgraph), e.extent)
     m = methods.get(d.method)
     if len(T) > len(e.handles):  # region_is_handle: the Region group moves with the first
@@ -1208,7 +1203,6 @@ def write_offset(obj, d, offset, retime=False):
     a = geonodes.ensure_attribute(me, d.attribute_name)
     a.data.foreach_set("vector", np.ascontiguousarray(offset, dtype=np.float32).ravel())
     me.update_tag()
-    _own_writes.add(me.name)
     if retime:
         # Frame change: a depsgraph re-evaluated after this tag (a render's, see handlers.py)
         # re-copies the object from the original, whose animated values (the modifier's
@@ -1222,7 +1216,6 @@ def zero_offset(obj, d):
     if a is not None and len(a.data) == len(me.vertices):
         a.data.foreach_set("vector", np.zeros(len(me.vertices) * 3, dtype=np.float32))
         me.update_tag()
-        _own_writes.add(me.name)
 
 
 def finish(obj, d, depsgraph=None):
@@ -1260,7 +1253,7 @@ def deformed_positions(obj, d, depsgraph=None, cold=True):
 
 
 def evaluate_object(obj, depsgraph=None, check_groups=False, cold=False, interactive=False,
-                    refine=False, only=None, check_topology=False):
+                    refine=False, only=None, check_topology=None):
     """Handler entry: solves every bound deformer of `obj` whose inputs changed; errors go to
     the deformer's status (and its offset is zeroed), never raised. `refine`: only the
     deformers with a pending interactive solve, continued for another budget (or, for a

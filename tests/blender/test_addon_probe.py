@@ -198,6 +198,27 @@ def test_topology_edits():
         check_refused(what, obj, d)
 
 
+def test_topology_edits_ui_style():
+    """The same edits with the handler solving as in the UI (interactive, budgeted; the full
+    topology check only after a geometry update the add-on did not make, the quick one of
+    3.6+ on every solve)."""
+    S.handlers.force_interactive[0] = True
+    try:
+        for what, edit in TOPOLOGY_EDITS:
+            obj, d, e = bound_grid()
+            for _ in range(3):  # drags: the add-on's own writes and updates
+                e.location.z += 0.02
+                update()
+            edit(obj)
+            update()
+            R.check("UI-style %s: refused" % what,
+                    d.status_is_error and "topology changed" in d.status, d.status)
+            R.check("UI-style %s: the rest shape shows" % what,
+                    err(S.evaluated_positions(obj), S.rest_positions(obj)) < 1e-6)
+    finally:
+        S.handlers.force_interactive[0] = False
+
+
 def test_topology_edit_unseen_before_apply():
     """The edit made with the handlers off (a script, nothing solved since): Apply, the first
     to look, refuses; so does a bake to shape keys and to a point cache."""
@@ -493,7 +514,7 @@ def test_undo_headless():
             and err(got, want) < ARAP_TOL, (d.status, err(got, want)))
 
 
-for t in (test_topology_edits, test_topology_edit_unseen_before_apply,
+for t in (test_topology_edits, test_topology_edits_ui_style, test_topology_edit_unseen_before_apply,
           test_topology_survives_reload, test_rest_edit_rebinds, test_duplicates,
           test_duplicate_of_a_legacy_deformer, test_file_load_during_threaded_binds,
           test_render_animation, test_unregister_register, test_undo_headless):
