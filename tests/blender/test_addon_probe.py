@@ -219,6 +219,33 @@ def test_topology_edits_ui_style():
         S.handlers.force_interactive[0] = False
 
 
+def test_drags_do_not_fingerprint():
+    """The full fingerprint is for geometry updates by others: a UI drag (its steps and the
+    evaluation of the add-on's own writes) computes none (3.6+ compare three attributes,
+    3.4-3.5 nothing more)."""
+    S.handlers.force_interactive[0] = True
+    calls = [0]
+    real = S.solver.topology_fingerprint
+
+    def counting(me):
+        calls[0] += 1
+        return real(me)
+    try:
+        obj, d, e = bound_grid("LAPLACIAN")
+        S.solver.topology_fingerprint = counting
+        for _ in range(5):
+            e.location.z += 0.02
+            update()
+            update()
+        R.check("a 5-step drag computes no full fingerprint", calls[0] == 0, calls[0])
+        edit_rotate(obj)
+        update()
+        R.check("an edit after it does", calls[0] >= 1 and d.status_is_error, calls[0])
+    finally:
+        S.solver.topology_fingerprint = real
+        S.handlers.force_interactive[0] = False
+
+
 def test_topology_edit_unseen_before_apply():
     """The edit made with the handlers off (a script, nothing solved since): Apply, the first
     to look, refuses; so does a bake to shape keys and to a point cache."""
@@ -514,7 +541,8 @@ def test_undo_headless():
             and err(got, want) < ARAP_TOL, (d.status, err(got, want)))
 
 
-for t in (test_topology_edits, test_topology_edits_ui_style, test_topology_edit_unseen_before_apply,
+for t in (test_topology_edits, test_topology_edits_ui_style, test_drags_do_not_fingerprint,
+          test_topology_edit_unseen_before_apply,
           test_topology_survives_reload, test_rest_edit_rebinds, test_duplicates,
           test_duplicate_of_a_legacy_deformer, test_file_load_during_threaded_binds,
           test_render_animation, test_unregister_register, test_undo_headless):
