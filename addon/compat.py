@@ -16,6 +16,8 @@ each behind one small function, so that the rest of the add-on reads the same ev
   hidden attributes ".corner_vert", ".corner_edge" and ".edge_verts", read at once with
   foreach_get; before, only through Mesh.loops and Mesh.edges, element by element (17 ms
   for the armadillo's 259k corners in 3.4): solver.quick_topology exists only from 3.6.
+  The positions likewise: the "position" attribute from 3.6 (solver.rest_positions), where
+  MeshVertex.co is 1-4 ms at 43k vertices in 4.2-5.0.
 
 Checked and needing nothing here (docs/addon.md, "Blender versions"): the add-on imports no OBJ through
 Blender (4.0 removed `import_scene.obj`), and its materials name no renamed BSDF input.

@@ -140,8 +140,15 @@ def evaluated_positions(obj):
 
 
 def rest_positions(me):
+    """The base mesh's positions (n x 3 float64). From 3.6 through the "position" attribute:
+    0.04 ms at 43k vertices where MeshVertex.co takes 1-4 ms in 4.2-5.0, and every solve
+    compares them with the binding's."""
     co = np.empty(len(me.vertices) * 3, dtype=np.float32)
-    me.vertices.foreach_get("co", co)
+    a = me.attributes.get("position") if compat.CORNER_ATTRIBUTES else None
+    if a is not None and a.domain == "POINT" and a.data_type == "FLOAT_VECTOR":
+        a.data.foreach_get("vector", co)
+    else:
+        me.vertices.foreach_get("co", co)
     return co.reshape(-1, 3).astype(np.float64)
 
 
@@ -384,8 +391,8 @@ def _corner_verts(me):
 
 def quick_topology(me):
     """Blender 3.6+ only (else None): the mesh's corner vertices, corner edges and edge
-    vertices, read straight from its attributes (0.03 ms each at 43k vertices, where the
-    full fingerprint takes 5-7 ms). Equal arrays mean an equal fingerprint: a corner's edge
+    vertices, read straight from its attributes (0.2-0.3 ms together at 43k vertices, where
+    the full fingerprint takes 8-9 ms). Equal arrays mean an equal fingerprint: a corner's edge
     joins its vertex to the next corner's, so the corners' vertices and edges fix where
     each face ends (a face may not repeat a vertex)."""
     if not compat.CORNER_ATTRIBUTES:

@@ -159,9 +159,39 @@ def topology_and_duplicates():
         R.check("redo Alt+D: the copy its own", np.abs(q - b).max() < 1e-3, np.abs(q - b).max())
 
 
+def shift_d_in_the_ui():
+    """Shift+D with the UI's budgeted solves and refine timer: once refined, the original and
+    the copy (moved, so that its handles pull it elsewhere) each show the converged solve
+    of their own (issue 18 saw a copy 0.005 off on a 2 x 1 grid; this scene did not show it
+    before the copies got their own ids either)."""
+    S.reset_scene()
+    with bpy.context.temp_override(**S.ui_context()):
+        obj, d, e, fixed, handle = S.grid_setup("ARAP")
+        bpy.ops.deformkit.bind()
+        for o in bpy.context.view_layer.objects:
+            o.select_set(o == obj)
+        bpy.context.view_layer.objects.active = obj
+        bpy.ops.object.duplicate(linked=False)
+        copy = bpy.context.view_layer.objects.active
+        copy.location.z = 0.25
+        e.location.z = 0.4
+        bpy.context.view_layer.update()
+    yield 2.0  # the refine timer converges both
+    with bpy.context.temp_override(**S.ui_context()):
+        for o in (obj, copy):
+            dd = o.deformkit.deformers[0]
+            T = S.solver.transforms(o, dd)
+            ref, want = S.arap_reference(o, dd, handle, fixed, np.eye(4)[None], T)
+            got = S.evaluated_positions(o)
+            err = np.abs(got - np.asarray(want.positions)).max()
+            R.check("Shift+D in the UI: %s shows its own converged solve" % o.name,
+                    err < 2e-4 and not S.solver.refining(o, dd), (err, dd.status))
+
+
 def both():
     main()
     topology_and_duplicates()
+    yield from shift_d_in_the_ui()
 
 
 S.run_in_ui(both, R)
