@@ -22,6 +22,7 @@ import threading
 import time
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _setup as S  # noqa: E402
+from addon import compat  # noqa: E402
 import bmesh  # noqa: E402
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
@@ -275,6 +276,32 @@ def test_topology_edit_unseen_before_apply():
                 refused or "baked")
         R.check("unseen %s: the base mesh is untouched" % what,
                 err(S.rest_positions(obj), rest) == 0 and obj.data.shape_keys is None)
+
+
+def test_fingerprint_is_the_same_in_every_blender():
+    """The stored fingerprint must match in another Blender: from 3.6 it reads the corners
+    from the ".corner_vert" attribute, before through Mesh.loops; both give the same string
+    (and the hash of the vertex count, the corner counts and the corners' vertices)."""
+    import hashlib
+    obj, d, e = bound_grid()
+    edit_merge_split(obj)  # a triangle and a pentagon among the quads
+    me = obj.data
+    fast = S.solver.topology_fingerprint(me)
+    was = compat.CORNER_ATTRIBUTES
+    compat.CORNER_ATTRIBUTES = False
+    try:
+        slow = S.solver.topology_fingerprint(me)
+    finally:
+        compat.CORNER_ATTRIBUTES = was
+    totals = [p.loop_total for p in me.polygons]
+    corners = [lp.vertex_index for lp in me.loops]
+    h = hashlib.blake2b(digest_size=16)
+    h.update(np.array([len(me.vertices), len(totals), len(corners)], np.int64).tobytes())
+    h.update(np.array(totals, np.int32).tobytes())
+    h.update(np.array(corners, np.int32).tobytes())
+    R.check("the fingerprint through the attributes = through Mesh.loops", fast == slow,
+            (fast, slow))
+    R.check("the fingerprint = the hash of the counts and corners", fast == "v1:" + h.hexdigest())
 
 
 def test_topology_survives_reload():
@@ -542,7 +569,7 @@ def test_undo_headless():
 
 
 for t in (test_topology_edits, test_topology_edits_ui_style, test_drags_do_not_fingerprint,
-          test_topology_edit_unseen_before_apply,
+          test_topology_edit_unseen_before_apply, test_fingerprint_is_the_same_in_every_blender,
           test_topology_survives_reload, test_rest_edit_rebinds, test_duplicates,
           test_duplicate_of_a_legacy_deformer, test_file_load_during_threaded_binds,
           test_render_animation, test_unregister_register, test_undo_headless):
