@@ -13,7 +13,10 @@
 - a file load while a threaded re-bind and an explicit bind's worker run;
 - an animation render with the add-on's handlers (each frame = an independent cold solve);
 - the add-on unregistered and registered again while Blender runs, then solving again;
-- undo and redo of Bind and of a topology edit, where Blender's undo works headless.
+- undo and redo of a topology edit where Blender's undo works headless (in none of the
+  Blenders tested: bpy.ops.ed.undo does not poll without a window, the probe says so);
+  test_addon_undo.py, under Xvfb, undoes and redoes Bind, Apply, a topology edit and a
+  linked duplicate, and checks Shift+D under the UI's budgeted solves.
 Headless: blender -b --factory-startup --python tests/blender/test_addon_probe.py, or a bpy
 wheel's python."""
 import os
