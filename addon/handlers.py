@@ -7,9 +7,10 @@
 - No bpy references are kept: objects are looked up by name each time.
 - Before solving, a deformer id seen on two objects (a Shift+D or Alt+D copy) is made the
   copy's own (solver.ensure_own_uid). The mesh topology is checked in full (the fingerprint
-  stored at bind) headless, and in the UI after a geometry update the add-on's own writes do
-  not explain, after Edit or Sculpt Mode and after undo; Blender 3.6+ also compares the
-  mesh's corner attributes on every solve (solver.check_topology).
+  stored at bind) headless, and in the UI on every geometry update of the object (the
+  add-on's own attribute writes bring none: measured, test_addon_probe), after Edit or
+  Sculpt Mode and after undo; Blender 3.6+ also compares the mesh's corner attributes on
+  every solve (solver.check_topology).
 - UI updates of iterative methods (ARAP) solve within a time budget; the `refine` timer
   finishes them once the handles stop, so dragging stays interactive and the result still
   converges. Frame changes, bakes, scripts and blender -b always solve to convergence, and so
@@ -80,8 +81,8 @@ def _run(scene, depsgraph, cold=False):
             # our own writes could hide a group edit made in the same update
             check = changed
             # the topology: headless always, in the UI (drags, playback) on every geometry
-            # update of the object, ours included (solver.check_topology: Blender 3.6+
-            # compares three attributes on every solve anyway, 3.4-3.5 read every corner)
+            # update of the object (solver.check_topology: Blender 3.6+ compare three
+            # attributes on every solve anyway, 3.4-3.5 read every corner)
             solver.evaluate_object(obj, depsgraph, check_groups=check, cold=cold,
                                    interactive=not cold and ui,
                                    check_topology=not ui or changed)
