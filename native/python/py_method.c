@@ -5,6 +5,7 @@
 #include <stddef.h>
 #include <stdio.h>
 #include <string.h>
+#include <unistd.h>
 
 #define OPTIONS_MAX 256
 
@@ -157,8 +158,13 @@ fail:
 
 /* ------------------------------------------------------------------ the object --------- */
 
+static int bind_again_after_fork(dk_py_method *self);
+
 int dk_py_method_enter(dk_py_method *self)
 {
+    const long pid = (long)getpid();
+    if (self->busy && self->busy_pid != pid && bind_again_after_fork(self) < 0)
+        return -1;
     if (self->busy) {
         PyErr_Format(PyExc_RuntimeError, "%s: the object is in use by another thread",
                      self->spec->name);
@@ -169,6 +175,7 @@ int dk_py_method_enter(dk_py_method *self)
         return -1;
     }
     self->busy = 1;
+    self->busy_pid = pid;
     return 0;
 }
 
@@ -244,6 +251,12 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
     if (split_keywords(kwargs, kwlist, &mine, &rest) < 0)
         return NULL;
     spec->default_options(&opt);
+    PyObject *options = PyDict_Copy(rest); /* parse_options consumes `rest` */
+    if (!options) {
+        Py_DECREF(mine);
+        Py_DECREF(rest);
+        return NULL;
+    }
     int ok = PyArg_ParseTupleAndKeywords(args, mine, fmt, kwlist, &mesh_obj, &handles, &fixed,
                                          &roi, &hw, &stiffness) &&
              spec->parse_options(rest, &opt, spec->name) == 0 &&
@@ -256,22 +269,24 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
         if (spec->release_options)
             spec->release_options(&opt);
         Py_DECREF(mine);
+        Py_DECREF(options);
         return NULL;
     }
     dk_py_state *state = spec->serialise_bind ? dk_py_get_state(module) : NULL;
-    Py_BEGIN_ALLOW_THREADS
+    DK_PY_BEGIN_NATIVE(dk_py_get_state(module))
     if (state)
         PyThread_acquire_lock(state->arpack_lock, WAIT_LOCK);
     st = spec->ops->bind(mesh, &con.desc, &opt, &native, &err);
     if (state)
         PyThread_release_lock(state->arpack_lock);
-    Py_END_ALLOW_THREADS
+    DK_PY_END_NATIVE
     if (spec->release_options)
         spec->release_options(&opt);
     dk_py_lap_constraints_release(&con);
     dk_py_doubles_release(&stiff);
     if (st != DK_OK) {
         Py_DECREF(mine);
+        Py_DECREF(options);
         return dk_py_raise(&err, spec->name);
     }
     allocfunc alloc = (allocfunc)PyType_GetSlot(type, Py_tp_alloc);
@@ -279,6 +294,7 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
     if (!self) {
         spec->ops->free(native);
         Py_DECREF(mine);
+        Py_DECREF(options);
         if (!PyErr_Occurred())
             PyErr_NoMemory();
         return NULL;
@@ -287,9 +303,56 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
     self->native = native;
     self->mesh = mesh;
     self->mesh_obj = Py_NewRef(mesh_obj);
+    self->options = options;
     remember(self, handles, fixed, roi, hw, stiffness);
     Py_DECREF(mine);
     return (PyObject *)self;
+}
+
+/* See dk_py_method_enter. Called with the GIL held; no other thread of this process can be
+ * inside a call on the object (the one that was is in the parent), so the swap is safe. */
+static int bind_again_after_fork(dk_py_method *self)
+{
+    PyObject *args = NULL, *kw = NULL, *fresh = NULL;
+    if (!self->mesh_obj || !self->options) {
+        PyErr_Format(PyExc_RuntimeError, "%s: the object was in use by another thread when "
+                     "the process forked and cannot be bound again here", self->spec->name);
+        return -1;
+    }
+    args = PyTuple_Pack(2, self->mesh_obj, self->handles);
+    kw = PyDict_Copy(self->options);
+    if (!args || !kw || PyDict_SetItemString(kw, "fixed", self->fixed) < 0 ||
+        PyDict_SetItemString(kw, "roi", self->roi) < 0 ||
+        PyDict_SetItemString(kw, "handle_weights", self->handle_weights) < 0 ||
+        PyDict_SetItemString(kw, "stiffness", self->stiffness) < 0)
+        goto done;
+    fresh = dk_py_method_new(Py_TYPE((PyObject *)self), args, kw, self->spec);
+    if (!fresh)
+        goto done;
+    dk_py_method *f = (dk_py_method *)fresh;
+    /* the inherited native object stays allocated and unused (see dk_py_method_enter) */
+    self->native = f->native;
+    self->mesh = f->mesh;
+    f->native = NULL;
+    self->busy = 0;
+done:
+    Py_XDECREF(args);
+    Py_XDECREF(kw);
+    Py_XDECREF(fresh);
+    if (self->busy) {
+        PyObject *type, *value, *tb;
+        PyErr_Fetch(&type, &value, &tb);
+        PyErr_NormalizeException(&type, &value, &tb);
+        PyErr_Format(type ? type : PyExc_RuntimeError,
+                     "%s: the object was in use by another thread when the process forked; "
+                     "binding it again in this process failed: %S",
+                     self->spec->name, value ? value : Py_None);
+        Py_XDECREF(type);
+        Py_XDECREF(value);
+        Py_XDECREF(tb);
+        return -1;
+    }
+    return 0;
 }
 
 static int method_traverse(PyObject *obj, visitproc visit, void *arg)
@@ -302,6 +365,7 @@ static int method_traverse(PyObject *obj, visitproc visit, void *arg)
     Py_VISIT(self->roi);
     Py_VISIT(self->handle_weights);
     Py_VISIT(self->stiffness);
+    Py_VISIT(self->options);
     return 0;
 }
 
@@ -320,6 +384,7 @@ static int method_clear(PyObject *obj)
     Py_CLEAR(self->roi);
     Py_CLEAR(self->handle_weights);
     Py_CLEAR(self->stiffness);
+    Py_CLEAR(self->options);
     return 0;
 }
 
@@ -328,7 +393,9 @@ static void method_dealloc(PyObject *obj)
     dk_py_method *self = (dk_py_method *)obj;
     PyTypeObject *type = Py_TYPE(obj);
     PyObject_GC_UnTrack(obj);
-    if (self->native) {
+    /* the native state of an object a thread of the parent was inside when this process
+     * forked is not freed (see dk_py_method_enter) */
+    if (self->native && !(self->busy && self->busy_pid != (long)getpid())) {
         self->spec->ops->free(self->native);
         self->native = NULL;
     }
@@ -429,9 +496,9 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
     };
     if (spec->apply_extra)
         spec->apply_extra(self, pending.bytes, saved.bytes);
-    Py_BEGIN_ALLOW_THREADS
+    DK_PY_BEGIN_NATIVE(dk_py_get_state(module))
     st = spec->ops->solve(self->native, &rq, out, &info, &err);
-    Py_END_ALLOW_THREADS
+    DK_PY_END_NATIVE
     if (st != DK_OK && spec->apply_extra)
         spec->apply_extra(self, saved.bytes, NULL); /* the call raised: put it back */
     dk_py_doubles_release(&in);
@@ -488,9 +555,9 @@ PyObject *dk_py_method_rebind(PyObject *obj, PyObject *args, PyObject *kwargs)
         self->busy = 0;
         return NULL;
     }
-    Py_BEGIN_ALLOW_THREADS
+    DK_PY_BEGIN_NATIVE(dk_py_state_of(obj))
     st = self->spec->ops->rebind(self->native, &con.desc, &err);
-    Py_END_ALLOW_THREADS
+    DK_PY_END_NATIVE
     dk_py_lap_constraints_release(&con);
     dk_py_doubles_release(&stiff);
     self->busy = 0;
@@ -532,9 +599,9 @@ PyObject *dk_py_method_energy(PyObject *obj, PyObject *arg)
             self->busy = 0;
             return NULL;
         }
-    Py_BEGIN_ALLOW_THREADS
+    DK_PY_BEGIN_NATIVE(dk_py_state_of(obj))
     st = self->spec->ops->energy(self->native, x.data, &e, &err);
-    Py_END_ALLOW_THREADS
+    DK_PY_END_NATIVE
     dk_py_doubles_release(&x);
     self->busy = 0;
     if (st != DK_OK)
