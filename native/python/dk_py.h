@@ -110,6 +110,11 @@ typedef struct dk_py_state {
     int gate_ready;             /* gate_mu and gate_cv are initialised */
     int in_flight;              /* native calls running (under gate_mu) */
     int forks_pending;          /* os.fork calls waiting or forking (under gate_mu) */
+    /* the method types and their specs, for their classmethods (estimate_memory): the type
+     * pointers are compared, never followed (the module holds the types) */
+    const void *method_type[16];
+    const void *method_spec[16];
+    int n_method_types;
 } dk_py_state;
 
 dk_py_state *dk_py_get_state(PyObject *module);

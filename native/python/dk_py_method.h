@@ -99,6 +99,7 @@ struct dk_py_method_spec {
 PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs);
 PyObject *dk_py_method_rebind(PyObject *obj, PyObject *args, PyObject *kwargs);
 PyObject *dk_py_method_energy(PyObject *obj, PyObject *arg);
+PyObject *dk_py_method_estimate_memory(PyObject *cls, PyObject *args, PyObject *kwargs);
 PyObject *dk_py_method_get_mesh(PyObject *obj, void *closure);
 PyObject *dk_py_method_get_n_vertices(PyObject *obj, void *closure);
 PyObject *dk_py_method_get_n_handles(PyObject *obj, void *closure);
@@ -107,13 +108,16 @@ PyObject *dk_py_method_get_stats(PyObject *obj, void *closure);
 PyObject *dk_py_method_get_warnings(PyObject *obj, void *closure);
 extern const char dk_py_method_rebind_doc[];
 extern const char dk_py_method_energy_doc[];
+extern const char dk_py_method_estimate_memory_doc[];
 
 #define DK_PY_METHOD_METHODS(solve_doc)                                                    \
     {"solve", (PyCFunction)(void (*)(void))dk_py_method_solve, METH_VARARGS | METH_KEYWORDS, \
      solve_doc},                                                                           \
         {"rebind", (PyCFunction)(void (*)(void))dk_py_method_rebind,                       \
          METH_VARARGS | METH_KEYWORDS, dk_py_method_rebind_doc},                           \
-        {"energy", dk_py_method_energy, METH_O, dk_py_method_energy_doc}
+        {"energy", dk_py_method_energy, METH_O, dk_py_method_energy_doc},                  \
+        {"estimate_memory", (PyCFunction)(void (*)(void))dk_py_method_estimate_memory,      \
+         METH_VARARGS | METH_KEYWORDS | METH_CLASS, dk_py_method_estimate_memory_doc}
 
 #define DK_PY_METHOD_GETSET                                                                \
     {"mesh", dk_py_method_get_mesh, NULL, "the bound deformkit.Mesh", NULL},               \

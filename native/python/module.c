@@ -10,6 +10,7 @@
 #include "dk_py.h"
 
 #include "dk_method.h"
+#include "dk_memory.h"
 #include "dk_parallel.h"
 
 #include <string.h>
@@ -147,6 +148,43 @@ static PyObject *py_method_info(PyObject *module, PyObject *arg)
                          (f & DK_METHOD_SOFT_REGIONS) ? Py_True : Py_False);
 }
 
+/* ------------------------------------------------------------------ memory ------------- */
+
+PyDoc_STRVAR(available_memory_doc,
+             "available_memory() -> dict\n\n"
+             "What a bind may still take now (issue 19, item 4): 'bytes', the least of\n"
+             "'address_space' (RLIMIT_AS minus the process's VmSize), 'cgroup' (the cgroup v2\n"
+             "memory.max minus memory.current) and 'mem_available' (/proc/meminfo); each is\n"
+             "None when there is no such limit; 'limit' names the tightest ('RLIMIT_AS\n"
+             "headroom', 'cgroup memory.max headroom', 'MemAvailable' or 'no limit');\n"
+             "'thread_reserve', the address space the numerics' thread pools may take on\n"
+             "first use, which binds keep free below RLIMIT_AS.");
+
+static PyObject *opt_bytes(uint64_t v)
+{
+    if (v == UINT64_MAX)
+        Py_RETURN_NONE;
+    return PyLong_FromUnsignedLongLong((unsigned long long)v);
+}
+
+static PyObject *py_available_memory(PyObject *module, PyObject *unused)
+{
+    dk_memory_available a;
+    (void)module;
+    (void)unused;
+    dk_memory_query(&a);
+    PyObject *vals[5] = {opt_bytes(a.bytes), opt_bytes(a.address_space), opt_bytes(a.cgroup),
+                         opt_bytes(a.mem_available), opt_bytes(dk_memory_thread_reserve())};
+    PyObject *d = NULL;
+    if (vals[0] && vals[1] && vals[2] && vals[3] && vals[4])
+        d = Py_BuildValue("{s:O,s:s,s:O,s:O,s:O,s:O}", "bytes", vals[0], "limit",
+                          dk_memory_limit_name(a.limit), "address_space", vals[1], "cgroup",
+                          vals[2], "mem_available", vals[3], "thread_reserve", vals[4]);
+    for (int i = 0; i < 5; i++)
+        Py_XDECREF(vals[i]);
+    return d;
+}
+
 /* ------------------------------------------------------------------ fork --------------- */
 
 PyDoc_STRVAR(after_fork_child_doc,
@@ -214,6 +252,7 @@ static PyObject *py_after_fork_parent(PyObject *module, PyObject *unused)
 }
 
 static PyMethodDef module_methods[] = {
+    {"available_memory", py_available_memory, METH_NOARGS, available_memory_doc},
     {"_before_fork", py_before_fork, METH_NOARGS, before_fork_doc},
     {"_after_fork_in_parent", py_after_fork_parent, METH_NOARGS, after_fork_parent_doc},
     {"_after_fork_in_child", py_after_fork_child, METH_NOARGS, after_fork_child_doc},

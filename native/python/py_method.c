@@ -1,6 +1,8 @@
 /* DeformKit CPython module: the generic deformation-method type (dk_py_method.h). */
 #include "dk_py_method.h"
 
+#include "dk_memory.h"
+
 #include <math.h>
 #include <stddef.h>
 #include <stdio.h>
@@ -273,6 +275,23 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
         return NULL;
     }
     dk_py_state *state = spec->serialise_bind ? dk_py_get_state(module) : NULL;
+    /* refused before anything big is allocated when it cannot fit (issue 18 class 4) */
+    uint64_t need = 0;
+    st = dk_method_estimate_memory(spec->ops, mesh, &opt, &need, &err);
+    if (st == DK_OK) {
+        char what[96];
+        snprintf(what, sizeof what, "binding %lld vertices", (long long)mesh->n_vertices);
+        st = dk_memory_check(need, spec->name, what, &err);
+    }
+    if (st != DK_OK) {
+        if (spec->release_options)
+            spec->release_options(&opt);
+        dk_py_lap_constraints_release(&con);
+        dk_py_doubles_release(&stiff);
+        Py_DECREF(mine);
+        Py_DECREF(options);
+        return dk_py_raise(&err, NULL);
+    }
     DK_PY_BEGIN_NATIVE(dk_py_get_state(module))
     if (state)
         PyThread_acquire_lock(state->arpack_lock, WAIT_LOCK);
@@ -521,6 +540,62 @@ fail:
     return NULL;
 }
 
+/* ------------------------------------------------------------------ estimate_memory ---- */
+
+PyObject *dk_py_method_estimate_memory(PyObject *cls, PyObject *args, PyObject *kwargs)
+{
+    static char *kwlist[] = {"mesh", NULL};
+    PyObject *module = PyType_GetModule((PyTypeObject *)cls);
+    dk_py_state *state = module ? dk_py_get_state(module) : NULL;
+    const dk_py_method_spec *spec = NULL;
+    PyObject *mine = NULL, *rest = NULL, *mesh_obj;
+    union {
+        max_align_t align;
+        unsigned char bytes[OPTIONS_MAX];
+    } opt;
+    dk_error err = {0};
+    uint64_t bytes = 0;
+    char where[80];
+
+    if (!state)
+        return NULL;
+    for (int i = 0; i < state->n_method_types; i++)
+        if (state->method_type[i] == (const void *)cls)
+            spec = state->method_spec[i];
+    if (!spec) {
+        PyErr_SetString(PyExc_TypeError, "estimate_memory: not a deformkit method class");
+        return NULL;
+    }
+    snprintf(where, sizeof where, "%s.estimate_memory()", spec->name);
+    if (split_keywords(kwargs, kwlist, &mine, &rest) < 0)
+        return NULL;
+    spec->default_options(&opt);
+    int ok = PyArg_ParseTupleAndKeywords(args, mine, "O:estimate_memory", kwlist, &mesh_obj) &&
+             spec->parse_options(rest, &opt, spec->name) == 0 &&
+             refuse_leftovers(rest, where) == 0;
+    const dk_mesh *mesh = ok ? dk_py_mesh_get(module, mesh_obj, "mesh") : NULL;
+    dk_status st = mesh ? dk_method_estimate_memory(spec->ops, mesh, &opt, &bytes, &err)
+                        : DK_OK;
+    if (spec->release_options)
+        spec->release_options(&opt);
+    Py_DECREF(mine);
+    Py_DECREF(rest);
+    if (!mesh)
+        return NULL;
+    if (st != DK_OK)
+        return dk_py_raise(&err, where);
+    return PyLong_FromUnsignedLongLong((unsigned long long)bytes);
+}
+
+const char dk_py_method_estimate_memory_doc[] =
+             "estimate_memory(mesh, **options) -> int (classmethod)\n\n"
+             "The bytes a bind of this method on `mesh` with these options (the\n"
+             "constructor's own keywords) needs at its peak, first solve included: a model\n"
+             "fitted to measured peak RSS (docs/benchmarks.md, Memory). A bind whose estimate\n"
+             "does not fit deformkit.available_memory() is refused with MemoryError before\n"
+             "allocating; so is a factorization whose exact size (from the symbolic\n"
+             "analysis) does not.";
+
 /* ------------------------------------------------------------------ rebind, energy ----- */
 
 PyObject *dk_py_method_rebind(PyObject *obj, PyObject *args, PyObject *kwargs)
@@ -744,6 +819,12 @@ int dk_py_method_register(PyObject *module, const dk_py_method_spec *spec, newfu
     PyObject *type = PyType_FromModuleAndSpec(module, &type_spec, NULL);
     if (!type)
         return -1;
+    dk_py_state *state = dk_py_get_state(module);
+    if (state && state->n_method_types < 16) {
+        state->method_type[state->n_method_types] = type;
+        state->method_spec[state->n_method_types] = spec;
+        state->n_method_types++;
+    }
     int r = PyModule_AddObjectRef(module, spec->name, type);
     Py_DECREF(type);
     return r;
