@@ -333,7 +333,8 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
 static int bind_again_after_fork(dk_py_method *self)
 {
     PyObject *args = NULL, *kw = NULL, *fresh = NULL;
-    if (!self->mesh_obj || !self->options) {
+    if (!self->mesh_obj || !self->options || !self->handles || !self->fixed || !self->roi ||
+        !self->handle_weights || !self->stiffness) { /* cleared by the collector */
         PyErr_Format(PyExc_RuntimeError, "%s: the object was in use by another thread when "
                      "the process forked and cannot be bound again here", self->spec->name);
         return -1;
