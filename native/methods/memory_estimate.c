@@ -29,9 +29,10 @@ dk_status dk_method_estimate_memory(const dk_method_ops *ops, const dk_mesh *mes
     const double fixed = 8.0 * MIB; /* small per-object tables, the helper thread */
     double per_vertex;
     if (strcmp(ops->name, "ARAP") == 0 || strcmp(ops->name, "LaplacianEdit") == 0) {
-        per_vertex = 1700.0 + 20.0 * lg; /* measured 1950 B/vertex at 8k and 43k vertices */
+        /* measured 1950 B/vertex at 8k and 43k vertices, 2180-2450 at 692k */
+        per_vertex = 1700.0 + 40.0 * lg;
     } else if (strcmp(ops->name, "Falloff") == 0) {
-        per_vertex = 40.0;               /* measured 34 */
+        per_vertex = 80.0;               /* measured 34 at 43k, 70 at 692k */
     } else if (strcmp(ops->name, "EmbeddedDeformation") == 0) {
         /* measured 430 B/vertex at 43k (+ ~16 MiB at any size: the node graph's factor
          * and the BLAS buffers it touches first) */
