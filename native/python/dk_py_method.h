@@ -44,8 +44,6 @@ typedef struct dk_py_method {
     const dk_mesh *mesh;
     void *native;                                              /* the bound method object */
     PyObject *handles, *fixed, *roi, *handle_weights, *stiffness; /* as last bound         */
-    PyObject *options;       /* a copy of the method's own constructor keywords (a dict),
-                                to bind again in a forked child (dk_py_method_enter)      */
     int busy;                /* a call is running on the object ...                      */
     long busy_pid;           /* ... in this process (getpid() when it was entered)       */
 } dk_py_method;
@@ -145,12 +143,11 @@ int dk_py_method_register(PyObject *module, const dk_py_method_spec *spec, newfu
 
 /** Enters the object for one native call (RuntimeError when busy or unbound); leave with
  *  self->busy = 0. For a spec's extra methods. An object that is busy in another process --
- *  a thread of the parent was inside a call on it when this process forked, and that thread
- *  does not exist here -- is bound anew first from its mesh, its current constraints and its
- *  constructor options (issue 18, class 3): its native state is a snapshot taken in the
- *  middle of that call, so it is neither used nor freed (its pointers may be halfway through
- *  an update; it is left allocated, once per such object in the child). Solve keywords set
- *  on it (e.g. ARAP's tolerance) return to their bound values. */
+ *  a thread of the parent had entered it when this process forked, and that thread does not
+ *  exist here -- is taken over (issue 18, class 3): the fork gate (dk_py.h) guarantees that
+ *  its native call was not running at the fork, so its native state is whole. Every native
+ *  call on a method object that releases the GIL must therefore pass the gate
+ *  (DK_PY_BEGIN_NATIVE). */
 int dk_py_method_enter(dk_py_method *self);
 
 /* Reading options: each takes `key` out of the dict `kw` when present (absent: `*value`

@@ -19,6 +19,8 @@
 #include "dk_cholesky.h"
 #include "dk_sparse.h"
 
+#include <unistd.h>
+
 typedef struct CholeskyObject {
     PyObject_HEAD
     dk_cholesky *chol;
@@ -26,6 +28,7 @@ typedef struct CholeskyObject {
     Py_ssize_t n_triplets;
     dk_index *rows, *cols; /* the triplets' positions, kept for refactorize (PyMem) */
     int busy;
+    long busy_pid;         /* getpid() of the process that set busy */
 } CholeskyObject;
 
 /* Relative asymmetry allowed: round-off of an assembly that sums the same terms in another
@@ -34,12 +37,17 @@ typedef struct CholeskyObject {
 
 static int enter(CholeskyObject *self)
 {
+    /* busy in the parent when this process forked: its native call was not running (the
+     * fork gate, dk_py.h), so the factor is whole; the thread that set it is not here */
+    if (self->busy && self->busy_pid != (long)getpid())
+        self->busy = 0;
     if (self->busy) {
         PyErr_SetString(PyExc_RuntimeError,
                         "SparseCholesky: the object is in use by another thread");
         return -1;
     }
     self->busy = 1;
+    self->busy_pid = (long)getpid();
     return 0;
 }
 

@@ -160,13 +160,15 @@ fail:
 
 /* ------------------------------------------------------------------ the object --------- */
 
-static int bind_again_after_fork(dk_py_method *self);
-
 int dk_py_method_enter(dk_py_method *self)
 {
     const long pid = (long)getpid();
-    if (self->busy && self->busy_pid != pid && bind_again_after_fork(self) < 0)
-        return -1;
+    /* Busy in another process: the parent's thread that entered the object does not exist
+     * here. The fork gate (dk_py.h) guarantees that no native call on it was running at the
+     * fork -- that thread was reading its inputs, waiting at the gate, or back from its
+     * native call and waiting for the GIL -- so the native state is whole: take it over. */
+    if (self->busy && self->busy_pid != pid)
+        self->busy = 0;
     if (self->busy) {
         PyErr_Format(PyExc_RuntimeError, "%s: the object is in use by another thread",
                      self->spec->name);
@@ -253,12 +255,6 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
     if (split_keywords(kwargs, kwlist, &mine, &rest) < 0)
         return NULL;
     spec->default_options(&opt);
-    PyObject *options = PyDict_Copy(rest); /* parse_options consumes `rest` */
-    if (!options) {
-        Py_DECREF(mine);
-        Py_DECREF(rest);
-        return NULL;
-    }
     int ok = PyArg_ParseTupleAndKeywords(args, mine, fmt, kwlist, &mesh_obj, &handles, &fixed,
                                          &roi, &hw, &stiffness) &&
              spec->parse_options(rest, &opt, spec->name) == 0 &&
@@ -271,7 +267,6 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
         if (spec->release_options)
             spec->release_options(&opt);
         Py_DECREF(mine);
-        Py_DECREF(options);
         return NULL;
     }
     dk_py_state *state = spec->serialise_bind ? dk_py_get_state(module) : NULL;
@@ -289,7 +284,6 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
         dk_py_lap_constraints_release(&con);
         dk_py_doubles_release(&stiff);
         Py_DECREF(mine);
-        Py_DECREF(options);
         return dk_py_raise(&err, NULL);
     }
     DK_PY_BEGIN_NATIVE(dk_py_get_state(module))
@@ -305,7 +299,6 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
     dk_py_doubles_release(&stiff);
     if (st != DK_OK) {
         Py_DECREF(mine);
-        Py_DECREF(options);
         return dk_py_raise(&err, spec->name);
     }
     allocfunc alloc = (allocfunc)PyType_GetSlot(type, Py_tp_alloc);
@@ -313,7 +306,6 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
     if (!self) {
         spec->ops->free(native);
         Py_DECREF(mine);
-        Py_DECREF(options);
         if (!PyErr_Occurred())
             PyErr_NoMemory();
         return NULL;
@@ -322,57 +314,9 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
     self->native = native;
     self->mesh = mesh;
     self->mesh_obj = Py_NewRef(mesh_obj);
-    self->options = options;
     remember(self, handles, fixed, roi, hw, stiffness);
     Py_DECREF(mine);
     return (PyObject *)self;
-}
-
-/* See dk_py_method_enter. Called with the GIL held; no other thread of this process can be
- * inside a call on the object (the one that was is in the parent), so the swap is safe. */
-static int bind_again_after_fork(dk_py_method *self)
-{
-    PyObject *args = NULL, *kw = NULL, *fresh = NULL;
-    if (!self->mesh_obj || !self->options || !self->handles || !self->fixed || !self->roi ||
-        !self->handle_weights || !self->stiffness) { /* cleared by the collector */
-        PyErr_Format(PyExc_RuntimeError, "%s: the object was in use by another thread when "
-                     "the process forked and cannot be bound again here", self->spec->name);
-        return -1;
-    }
-    args = PyTuple_Pack(2, self->mesh_obj, self->handles);
-    kw = PyDict_Copy(self->options);
-    if (!args || !kw || PyDict_SetItemString(kw, "fixed", self->fixed) < 0 ||
-        PyDict_SetItemString(kw, "roi", self->roi) < 0 ||
-        PyDict_SetItemString(kw, "handle_weights", self->handle_weights) < 0 ||
-        PyDict_SetItemString(kw, "stiffness", self->stiffness) < 0)
-        goto done;
-    fresh = dk_py_method_new(Py_TYPE((PyObject *)self), args, kw, self->spec);
-    if (!fresh)
-        goto done;
-    dk_py_method *f = (dk_py_method *)fresh;
-    /* the inherited native object stays allocated and unused (see dk_py_method_enter) */
-    self->native = f->native;
-    self->mesh = f->mesh;
-    f->native = NULL;
-    self->busy = 0;
-done:
-    Py_XDECREF(args);
-    Py_XDECREF(kw);
-    Py_XDECREF(fresh);
-    if (self->busy) {
-        PyObject *type, *value, *tb;
-        PyErr_Fetch(&type, &value, &tb);
-        PyErr_NormalizeException(&type, &value, &tb);
-        PyErr_Format(type ? type : PyExc_RuntimeError,
-                     "%s: the object was in use by another thread when the process forked; "
-                     "binding it again in this process failed: %S",
-                     self->spec->name, value ? value : Py_None);
-        Py_XDECREF(type);
-        Py_XDECREF(value);
-        Py_XDECREF(tb);
-        return -1;
-    }
-    return 0;
 }
 
 static int method_traverse(PyObject *obj, visitproc visit, void *arg)
@@ -385,7 +329,6 @@ static int method_traverse(PyObject *obj, visitproc visit, void *arg)
     Py_VISIT(self->roi);
     Py_VISIT(self->handle_weights);
     Py_VISIT(self->stiffness);
-    Py_VISIT(self->options);
     return 0;
 }
 
@@ -404,7 +347,6 @@ static int method_clear(PyObject *obj)
     Py_CLEAR(self->roi);
     Py_CLEAR(self->handle_weights);
     Py_CLEAR(self->stiffness);
-    Py_CLEAR(self->options);
     return 0;
 }
 
@@ -413,9 +355,7 @@ static void method_dealloc(PyObject *obj)
     dk_py_method *self = (dk_py_method *)obj;
     PyTypeObject *type = Py_TYPE(obj);
     PyObject_GC_UnTrack(obj);
-    /* the native state of an object a thread of the parent was inside when this process
-     * forked is not freed (see dk_py_method_enter) */
-    if (self->native && !(self->busy && self->busy_pid != (long)getpid())) {
+    if (self->native) {
         self->spec->ops->free(self->native);
         self->native = NULL;
     }
