@@ -16,7 +16,7 @@ import textwrap
 import pytest
 
 import deformkit as dk
-from conftest import SHARED_MESHES
+from conftest import SHARED_MESHES, measures_rss
 
 MESH = SHARED_MESHES / "arm.obj"
 TIMEOUT = 120.0   # s for one subprocess binding all six methods (~10 s unlimited)
@@ -119,6 +119,7 @@ PEAK = textwrap.dedent("""
 """)
 
 
+@measures_rss
 @pytest.mark.parametrize("name", dk.METHODS)
 def test_estimate_bounds_the_measured_peak(name):
     """The estimate is at least the measured peak RSS of a bind and its first solve (a bind
