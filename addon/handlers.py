@@ -142,9 +142,12 @@ def refine():
     keys = solver.pending()
     if not keys:
         return None
-    if all(solver.settling(k) for k in keys):
-        return 0.05  # previews only, the handles still moving: their full results wait
-    keys = [k for k in keys if not solver.settling(k)]
+    working = set(solver.working())
+    if all(k in working or solver.settling(k) for k in keys):
+        # solves running in worker threads (polled), or previews while the handles still
+        # move (their full results wait)
+        return 0.02 if working else 0.05
+    keys = [k for k in keys if not solver.settling(k) and k not in working]
     # Our own attribute writes must not cost a vertex-group re-read (a Python pass over every
     # vertex: ~30 ms at 43k, ~0.5 s at 692k). A write from the depsgraph handler never does:
     # Blender evaluates what a depsgraph_update_post callback tagged at once, in a second pass

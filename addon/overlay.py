@@ -26,11 +26,15 @@ def graph_lines(obj, d):
     e = solver._cache.get((obj.name, d.uid))
     if e is None or e.native is None:
         return None
+    if e.worker is not None and e.worker.thread.is_alive():
+        # the object is solving in a worker thread (solver._Worker): the last graph drawn
+        return e.graph_shown
     g = np.asarray(e.native.nodes, dtype=np.float64)
     t = np.asarray(e.native.transforms, dtype=np.float64)[:, 9:12]
     local = g + geonodes.factor(obj, d) * t
     mw = np.array(obj.matrix_world, dtype=np.float64)
-    return local @ mw[:3, :3].T + mw[:3, 3], np.asarray(e.native.edges, dtype=np.int32)
+    e.graph_shown = (local @ mw[:3, :3].T + mw[:3, 3], np.asarray(e.native.edges, dtype=np.int32))
+    return e.graph_shown
 
 
 def _draw():

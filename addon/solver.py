@@ -58,7 +58,7 @@ class _Entry:
     __slots__ = ("native", "dkmesh", "rest", "extent", "n_vertices", "n_faces", "settings",
                  "groups", "last_inputs", "method_id", "verified", "pending", "pending_its",
                  "handles", "source", "preview_at", "material", "material_shown", "slice_cost",
-                 "moved_at", "quick")
+                 "moved_at", "quick", "worker", "slice_ms", "graph_shown")
 
 
 def mark_settings_changed():
@@ -636,6 +636,7 @@ class BindJob:
         e.material, e.material_shown = self.material, None
         e.slice_cost, e.moved_at = {}, 0.0
         e.quick = quick_topology(me)
+        e.worker, e.slice_ms, e.graph_shown = None, None, None
         _cache[(obj.name, d.uid)] = e
         return e
 
@@ -1046,32 +1047,130 @@ def edit_targets(e, T, source):
     return np.concatenate(out)
 
 
+# An interactive solve that takes longer than this (its last run, or a mesh of at least
+# ASYNC_MIN_VERTICES before any) runs in a worker thread: the update returns at once, the
+# shown result stays until the worker's is ready (the refine timer installs it), so that
+# dragging a million-vertex mesh never freezes Blender (issue 19). The native solve releases
+# the GIL; the object is used by the worker alone meanwhile.
+ASYNC_MS = 50.0
+ASYNC_MIN_VERTICES = 200_000
+threaded_solves = [None]  # None: in the UI only (and not below the thresholds); True / False force it
+
+
+class _Worker:
+    """One native solve off the main thread: its plan (what solve() prepared) and outcome."""
+    __slots__ = ("plan", "thread", "result", "error", "ms")
+
+    def __init__(self, e, plan):
+        import threading
+        self.plan, self.result, self.error, self.ms = plan, None, None, 0.0
+        native_solve, label, goal, kw = e.native.solve, plan["label"], plan["goal"], plan["kw"]
+
+        def run():
+            t0 = time.perf_counter()
+            try:
+                self.result = _native_call(label + " solve", native_solve, **goal, **kw)
+            except DeformKitError as ex:
+                self.error = ex
+            except Exception as ex:  # a worker must not die silently
+                self.error = DeformKitError("%s solve: %s: %s" % (label, type(ex).__name__, ex))
+            self.ms = (time.perf_counter() - t0) * 1000.0
+        self.thread = threading.Thread(target=run, name="DeformKit solve", daemon=True)
+        self.thread.start()
+
+
+def _async_wanted(e, interactive, cold, write):
+    if not (interactive and write and not cold):
+        return False
+    force = threaded_solves[0]
+    if force is not None:
+        return force
+    if bpy.app.background:
+        return False
+    if e.slice_ms is not None:
+        return e.slice_ms > ASYNC_MS
+    return e.n_vertices >= ASYNC_MIN_VERTICES
+
+
+def working():
+    """The keys whose solve is running in a worker thread."""
+    return [k for k, e in _cache.items() if e.worker is not None and e.worker.thread.is_alive()]
+
+
+def _wait_for_worker(key):
+    """Joins the key's worker (a frame, bake, Apply or re-check needs the native object):
+    its result is installed by the solve that follows when still wanted."""
+    e = _cache.get(key)
+    if e is not None and e.worker is not None:
+        e.worker.thread.join()
+
+
 def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_groups=False,
           interactive=False, resume=False, check_topology=None):
     """Solves `d` for the targets' current placement. Returns the n x 3 positions, or None when
     nothing changed since the last solve (unless `force`). Raises DeformKitError.
     `interactive` (UI updates): an iterative method stops at the time budget and is marked
     pending; the timer in handlers.py continues it (`resume`: from where it stopped, as one
-    long solve would) with further interactive solves."""
+    long solve would) with further interactive solves. A slow interactive solve runs in a
+    worker thread (_async_wanted): the call returns None at once, and a later call (the
+    refine timer's) installs its result."""
     if not d.bound:
         raise DeformKitError("not bound: press Bind")
     check_object(obj, d)
     ensure_own_uid(obj, d)
+    key = (obj.name, d.uid)
+    ce = _cache.get(key)
+    if ce is not None and ce.worker is not None and ce.worker.thread.is_alive():
+        if interactive and write and not cold and not check_groups:
+            ce.pending = True  # the timer polls it
+            return None
+        _wait_for_worker(key)
     # the topology in full (check_topology) for Apply, bakes, scripts and blender -b (None:
     # all but interactive solves); the UI's handler asks for it after a geometry update the
     # add-on did not make, an Edit or Sculpt Mode session or an undo (handlers._run)
     full = (not interactive) if check_topology is None else check_topology
     e = _entry_for(obj, d, check_groups, threaded=not cold and _use_threads(interactive),
                    full_check=full)
+    w, e.worker = e.worker, None
+    shown = None
+    if w is not None:  # a worker's solve ended: its result shows now (if still wanted)
+        if w.error is not None:
+            e.pending = False
+            raise w.error
+        if interactive and write and not cold:
+            shown = _finish_solve(obj, d, e, key, w.plan, w.result, w.ms)
+    T, source, inputs = _solve_inputs(obj, d, e, depsgraph)
+    if shown is not None and inputs == w.plan["inputs"]:
+        return shown  # the worker's result is for the targets as they are
+    if not force and e.last_inputs == inputs:
+        return shown
+    plan = _plan_solve(obj, d, e, key, T, source, inputs, cold, write, interactive,
+                       resume and shown is None)
+    if _async_wanted(e, interactive, cold, write):
+        e.worker = _Worker(e, plan)
+        e.pending = True
+        return shown
+    t0 = time.perf_counter()
+    res = _native_call(plan["label"] + " solve", e.native.solve, **plan["goal"], **plan["kw"])
+    ms = (time.perf_counter() - t0) * 1000.0
+    return _finish_solve(obj, d, e, key, plan, res, ms)
+
+
+def _solve_inputs(obj, d, e, depsgraph):
+    """The handle transforms, the animated input (methods that follow one, else None) and
+    the bytes they make, which say whether anything changed since the last solve."""
     T = snap_identity(transforms(obj, d, depsgraph), e.extent)
     m = methods.get(d.method)
     if len(T) > len(e.handles):  # region_is_handle: the Region group moves with the first
         T = T[:len(e.handles)]
     source = moved_input(obj, d, depsgraph) if m.follows_input else None
-    inputs = T.tobytes() + (b"" if source is None else source.tobytes())
-    if not force and e.last_inputs == inputs:
-        return None
-    key = (obj.name, d.uid)
+    return T, source, T.tobytes() + (b"" if source is None else source.tobytes())
+
+
+def _plan_solve(obj, d, e, key, T, source, inputs, cold, write, interactive, resume):
+    """What a solve of `d` asks the native object for now: the goal (targets), the solve
+    keywords (the budget's slice when interactive) and the inputs they come from."""
+    m = methods.get(d.method)
     goal = dict(transforms=T)
     if m.follows_input:
         want = e.rest if source is None else source
@@ -1107,9 +1206,17 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
             kw[m.inner_iterations] = inner
         if resume:
             kw["resume"] = True
-    t0 = time.perf_counter()
-    res = _native_call(m.label + " solve", e.native.solve, **goal, **kw)
-    ms = (time.perf_counter() - t0) * 1000.0
+    return dict(label=m.label, goal=goal, kw=kw, inputs=inputs, budgeted=budgeted,
+                previewing=previewing, resume=resume, cap=cap, n_inner=n_inner, inner=inner,
+                write=write, cold=cold)
+
+
+def _finish_solve(obj, d, e, key, plan, res, ms):
+    """Records a native solve's figures and pending state, and writes its result (when the
+    plan says so). Returns the n x 3 positions."""
+    budgeted, resume, inner = plan["budgeted"], plan["resume"], plan["inner"]
+    cap, n_inner = plan["cap"], plan["n_inner"]
+    e.slice_ms = ms
     pos = np.asarray(res.positions, dtype=np.float64).reshape(-1, 3)
     # inner: the inner count of a slice's iterations when cut below the bound one (ARAP: CG
     # iterations per Newton step), else None
@@ -1132,17 +1239,17 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
             # its time says nothing of a full unit's)
             e.slice_cost[bool(resume)] = (ms, max(int(res.iterations), 1), per_it)
     e.pending = bool(budgeted and not res.converged and (not cap or e.pending_its < cap))
-    if previewing:  # the full result follows from the timer once the handles stop
+    if plan["previewing"]:  # the full result follows from the timer once the handles stop
         e.pending, e.preview_at = True, time.monotonic()
     else:
         e.preview_at = 0.0
-    if write:
+    if plan["write"]:
         show_material(obj, d, e)
         # the offset computed in float64 and rounded once, straight into float32 (one pass)
         off = np.empty(pos.shape, dtype=np.float32)
         np.subtract(pos, e.source, out=off, casting="unsafe")
-        write_offset(obj, d, off, retime=cold)
-        e.last_inputs = inputs
+        write_offset(obj, d, off, retime=plan["cold"])
+        e.last_inputs = plan["inputs"]
         _written_at_undo[key] = _undo_serial[0]
     return pos
 
@@ -1233,6 +1340,7 @@ def finish(obj, d, depsgraph=None):
     if key in _cache:
         _cache[key].moved_at = 0.0  # settled: whole iterations
     while key in _cache and _cache[key].pending:
+        _wait_for_worker(key)  # a slice in a worker thread: its result installs next
         solve(obj, d, depsgraph, interactive=True, resume=True, force=True)
 
 

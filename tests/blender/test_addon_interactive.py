@@ -195,10 +195,103 @@ def test_refine_ticks_do_not_reread_groups_but_see_edits():
     S.solver.clear_cache()
 
 
+class threaded_solves:
+    """Interactive solves in worker threads (solver._Worker) for a block, under blender -b."""
+
+    def __enter__(self):
+        S.solver.threaded_solves[0] = True
+        S.handlers.force_interactive[0] = True
+
+    def __exit__(self, *exc):
+        S.solver.threaded_solves[0] = None
+        S.handlers.force_interactive[0] = False
+
+
+def refine_until_settled(limit_s=60.0):
+    """handlers.refine() as the timer calls it, sleeping while solves run in threads."""
+    import time
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < limit_s:
+        nxt = S.handlers.refine()
+        if nxt is None:
+            return True
+        time.sleep(min(nxt, 0.005))
+    return False
+
+
+def shown_offset(obj, d):
+    a = obj.data.attributes[d.attribute_name]
+    off = np.empty(len(obj.data.vertices) * 3, dtype=np.float32)
+    a.data.foreach_get("vector", off)
+    return off.reshape(-1, 3)
+
+
+def test_slow_solves_run_in_a_worker_thread():
+    """With solves in worker threads (what the UI does for a solve slower than ASYNC_MS or a
+    mesh of ASYNC_MIN_VERTICES), a drag update returns without writing (the shown result
+    stays), the refine timer installs the worker's result, and the end is the same minimum
+    as one uninterrupted solve; a frame's cold solve while a worker runs waits for it."""
+    for method in ("ARAP", "LAPLACIAN"):
+        S.reset_scene()
+        obj, d, e, fixed, handle = S.grid_setup(method, nx=60, ny=30)
+        bpy.ops.deformkit.bind()
+        key = (obj.name, d.uid)
+        bind_T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
+        before = shown_offset(obj, d).copy()
+        with threaded_solves():
+            e.location = (1.0, 0.1, 0.4)
+            e.rotation_euler = Euler((0.0, -0.3, 0.0))
+            bpy.context.view_layer.update()
+            ent = S.solver._cache[key]
+            R.check("%s: the drag update started a worker and wrote nothing yet" % method,
+                    ent.worker is not None and np.array_equal(shown_offset(obj, d), before))
+            R.check("%s: ... and the solve is pending (the panel says refining)" % method,
+                    key in S.solver.pending() and S.solver.refining(obj, d))
+            R.check("%s: the refine timer settles it" % method, refine_until_settled())
+            R.check("%s: the worker's result is shown and recorded" % method,
+                    not np.array_equal(shown_offset(obj, d), before)
+                    and ent.slice_ms is not None and key not in S.solver.pending(),
+                    S.solver.runtime.get(key))
+        got = S.evaluated_positions(obj)
+        rest = S.rest_positions(obj)
+        T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
+        bbox = np.linalg.norm(rest.max(0) - rest.min(0))
+        if method == "ARAP":
+            ref, r = S.arap_reference(obj, d, handle, fixed, bind_T, T)
+            gap = abs(float(ref.energy(got)) - r.energy) / r.energy
+            R.check("ARAP: the same minimum as one uninterrupted solve (energy gap %.1e)" % gap,
+                    r.converged and gap <= 1e-5)
+        else:
+            ref = S.solver.deformed_positions(obj, d)
+            err = np.abs(got - ref).max() / bbox
+            R.check("LAPLACIAN: the worker's result is the direct solve's (%.1e)" % err,
+                    err < 1e-6)
+        # a frame's cold solve while a worker is running: it waits, then solves in full
+        with threaded_solves():
+            e.location = (1.0, 0.2, 0.5)
+            bpy.context.view_layer.update()
+            started = S.solver._cache[key].worker is not None
+            try:
+                cold = S.solver.deformed_positions(obj, d)
+                err = None
+            except S.solver.DeformKitError as ex:
+                cold, err = None, ex
+            R.check("%s: a cold solve during a worker's waits for it (no 'in use')" % method,
+                    started and err is None, err)
+            refine_until_settled()
+        S.solver.clear_cache()
+        S.handlers.enabled[0] = True
+        ref_cold = S.solver.deformed_positions(obj, d)
+        R.check("%s: ... and gives the cold result" % method,
+                cold is not None and np.abs(cold - ref_cold).max() / bbox < 1e-6)
+    S.solver.clear_cache()
+
+
 # the stand-in module (DEFORMKIT_MOCK=1) converges every solve at once: the arithmetic only
 MOCK = os.environ.get("DEFORMKIT_MOCK") == "1"
 for t in (test_budget_arithmetic,) + (() if MOCK else (
         test_cheap_drag_step_converges_to_the_minimum, test_undo_converges_before_showing,
-        test_refine_ticks_do_not_reread_groups_but_see_edits)):
+        test_refine_ticks_do_not_reread_groups_but_see_edits,
+        test_slow_solves_run_in_a_worker_thread)):
     R.run(t)
 R.finish()
