@@ -3,6 +3,7 @@
 
     OPENBLAS_NUM_THREADS=2 PYTHONPATH=build/python /usr/bin/python3 scripts/bench_scale.py \\
         [--levels 2] [--meshes armadillo,ogre] [--methods ARAP,LaplacianEdit] [--builtin]
+        [--openblas-timeout N]
 
 The armadillo (the armadillo-wave scenario) and the ogre (the lowest 10% fixed, the
 vertices within 10% of the diagonal of the highest point a handle lifted by 5% of the
@@ -20,6 +21,14 @@ translation of the handle, which the affine basis reproduces) and three times fr
 equivalent transform (what the add-on sends); the median of each is printed, with whether
 the basis was used. Bind is also given in CPU seconds (user + system of the process during
 the constructor): on a shared machine the wall time is mostly other people's load.
+--openblas-timeout N sets OPENBLAS_THREAD_TIMEOUT=N for the measuring processes unless the
+environment already sets it (default 0: OpenBLAS's own, 28): how long OpenBLAS's idle worker
+spins (sched_yield) before it sleeps, 2^N cycles. CHOLMOD's factorization calls BLAS on many
+small fronts, and on a loaded 2-core machine the spinning worker can take the core the
+factorization needs: two paired binds of Laplacian editing at 692k (tmp harness) took
+31.2 / 18.8 s wall with 21.5 / 4.4 s of system time by default and 16.7 / 10.3 s with
+2.2 / 3.1 s at 4, but two paired runs of this script 14.7 / 15.9 s by default and
+12.1 / 19.1 s at 4 (the same CPU time): not a settled gain, so not the default.
 --builtin also times Blender's built-in Laplacian Deform on the same mesh, fixed set and
 drag (bind and one drag, in `blender -b`): the issue's reference. A script, not a test.
 """
@@ -178,7 +187,11 @@ def main():
     ap.add_argument("--meshes", default="armadillo,ogre")
     ap.add_argument("--methods", default="ARAP,LaplacianEdit")
     ap.add_argument("--builtin", action="store_true")
+    ap.add_argument("--openblas-timeout", type=int, default=0)
     a = ap.parse_args()
+    if a.openblas_timeout > 0:  # read by OpenBLAS when the spawned child loads it
+        os.environ.setdefault("OPENBLAS_THREAD_TIMEOUT", str(a.openblas_timeout))
+    print("OPENBLAS_THREAD_TIMEOUT=%s" % os.environ.get("OPENBLAS_THREAD_TIMEOUT", "(default)"))
     ctx = mp.get_context("spawn")
     for name in a.meshes.split(","):
         V, F, fixed, hand, t = scenario(name, a.levels)
