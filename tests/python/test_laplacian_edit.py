@@ -558,6 +558,44 @@ def random_affine(rng, scale=0.3):
     return T
 
 
+@pytest.mark.parametrize("detail", ["fixed", "local_frame"])
+def test_basis_from_positions_on_a_grid(detail):
+    # the small counterpart of the armadillo test below (which the sanitized run leaves out):
+    # affine images of the rest handle positions take the basis and equal the
+    # back-substitution; other positions back-substitute
+    v, f, fixed, handle = grid_setup(bump=0.05)
+    handles = [handle[: len(handle) // 2], handle[len(handle) // 2:]]   # two columns each
+    mesh = deformkit.Mesh(v, f)
+    a = deformkit.LaplacianEdit(mesh, handles, fixed=fixed, detail=detail)
+    b = deformkit.LaplacianEdit(mesh, handles, fixed=fixed, detail=detail, basis="off")
+    rng = np.random.default_rng(3)
+    Ts = [random_affine(rng, 0.2) for _ in handles]
+    tg = np.vstack([v[h] @ T[:3, :3].T + T[:3, 3] for h, T in zip(handles, Ts)])
+    xa, xb = np.asarray(a.solve(tg).positions), np.asarray(b.solve(tg).positions)
+    assert a.stats["basis_solves"] == 1 and b.stats["basis_solves"] == 0
+    assert np.abs(xa - v).max() > 0.1
+    assert np.abs(xa - xb).max() <= 1e-10
+    assert np.array_equal(xa[np.concatenate(handles)], tg)
+    tg[0] += 1e-4                                   # no longer affine: back-substituted
+    xa, xb = np.asarray(a.solve(tg).positions), np.asarray(b.solve(tg).positions)
+    assert a.stats["basis_solves"] == 1
+    assert np.abs(xa - xb).max() <= 1e-10
+    # a handle whose vertices lie on a line: only a translation is determined by them, so
+    # rotated targets back-substitute, translated ones take the basis
+    line = np.flatnonzero(np.arange(len(v)) % 17 == 16)             # the x = 1 column
+    c = deformkit.LaplacianEdit(mesh, [line], fixed=fixed, detail=detail)
+    d = deformkit.LaplacianEdit(mesh, [line], fixed=fixed, detail=detail, basis="off")
+    tg = v[line] + [0.1, 0.2, 0.3]
+    xa, xb = np.asarray(c.solve(tg).positions), np.asarray(d.solve(tg).positions)
+    assert np.abs(xa - xb).max() <= 1e-10
+    assert c.stats["basis_solves"] == 1
+    tg = v[line] @ random_affine(rng)[:3, :3].T
+    xa, xb = np.asarray(c.solve(tg).positions), np.asarray(d.solve(tg).positions)
+    assert c.stats["basis_solves"] == 1
+    assert np.abs(xa - xb).max() <= 1e-10
+
+
+@pytest.mark.heavy
 @pytest.mark.skipif(not (SHARED / "scenarios" / "armadillo-wave.json").exists(),
                     reason="shared scenarios not available")
 @pytest.mark.parametrize("kw", [{}, {"detail": "membrane"}, {"constraints": "soft"},
