@@ -3,6 +3,7 @@
 
     OPENBLAS_NUM_THREADS=2 PYTHONPATH=build/python /usr/bin/python3 scripts/bench_scale.py \\
         [--levels 2] [--meshes armadillo,ogre] [--methods ARAP,LaplacianEdit] [--builtin]
+        [--openblas-timeout N]
 
 The armadillo (the armadillo-wave scenario) and the ogre (the lowest 10% fixed, the
 vertices within 10% of the diagonal of the highest point a handle lifted by 5% of the
@@ -15,6 +16,19 @@ edge do). Each method runs in a fresh process (spawn), so that its peak memory i
                   relative to the converged one (ARAP)
   converge        the rest of that solve to the tolerance, resumed (ARAP), or the solve
                   (Laplacian editing: one solve is the result)
+Laplacian editing's drag is timed three times from positions (the benchmark's update: a
+translation of the handle, which the affine basis reproduces) and three times from the
+equivalent transform (what the add-on sends); the median of each is printed, with whether
+the basis was used. Bind is also given in CPU seconds (user + system of the process during
+the constructor): on a shared machine the wall time is mostly other people's load.
+--openblas-timeout N sets OPENBLAS_THREAD_TIMEOUT=N for the measuring processes unless the
+environment already sets it (default 0: OpenBLAS's own, 28): how long OpenBLAS's idle worker
+spins (sched_yield) before it sleeps, 2^N cycles. CHOLMOD's factorization calls BLAS on many
+small fronts, and on a loaded 2-core machine the spinning worker can take the core the
+factorization needs: two paired binds of Laplacian editing at 692k (tmp harness) took
+31.2 / 18.8 s wall with 21.5 / 4.4 s of system time by default and 16.7 / 10.3 s with
+2.2 / 3.1 s at 4, but two paired runs of this script 14.7 / 15.9 s by default and
+12.1 / 19.1 s at 4 (the same CPU time): not a settled gain, so not the default.
 --builtin also times Blender's built-in Laplacian Deform on the same mesh, fixed set and
 drag (bind and one drag, in `blender -b`): the issue's reference. A script, not a test.
 """
@@ -72,6 +86,11 @@ def peak_mb():
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
+def cpu_s():
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
 def run_method(q, method, V, F, fixed, hand, t):
     try:
         _run_method(q, method, V, F, fixed, hand, t)
@@ -84,9 +103,10 @@ def _run_method(q, method, V, F, fixed, hand, t):
     out = {"start_mb": peak_mb()}
     mesh = dk.Mesh(V, F)
     cls = getattr(dk, method)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), cpu_s()
     obj = cls(mesh, handles=[hand], fixed=fixed)
     out["bind_s"] = time.perf_counter() - t0
+    out["bind_cpu_s"] = cpu_s() - c0
     out["bind_peak_mb"] = peak_mb()
     obj.solve(V[hand], energy=False)  # the bind pose, as the add-on's Bind solves it
     tg = V[hand] + t
@@ -102,9 +122,21 @@ def _run_method(q, method, V, F, fixed, hand, t):
         out["iterations"] = 1 + int(r.iterations)
         out["converged"] = bool(r.converged)
     else:
-        t0 = time.perf_counter()
-        obj.solve(tg, energy=False)
-        out["first_s"] = out["converge_s"] = time.perf_counter() - t0
+        T = np.eye(4)
+        T[:3, 3] = t
+        pos, tra = [], []
+        before = obj.stats["basis_solves"]
+        for _ in range(3):
+            t0 = time.perf_counter()
+            obj.solve(tg, energy=False)
+            pos.append(time.perf_counter() - t0)
+            t0 = time.perf_counter()
+            obj.solve(transforms=T[None], energy=False)
+            tra.append(time.perf_counter() - t0)
+        out["first_s"] = out["converge_s"] = float(np.median(pos))
+        out["transform_s"] = float(np.median(tra))
+        out["basis"] = "basis (%d columns, %d of 6 solves)" % (
+            obj.stats["basis_columns"], obj.stats["basis_solves"] - before)
     out["peak_mb"] = peak_mb()
     q.put(out)
 
@@ -155,7 +187,11 @@ def main():
     ap.add_argument("--meshes", default="armadillo,ogre")
     ap.add_argument("--methods", default="ARAP,LaplacianEdit")
     ap.add_argument("--builtin", action="store_true")
+    ap.add_argument("--openblas-timeout", type=int, default=0)
     a = ap.parse_args()
+    if a.openblas_timeout > 0:  # read by OpenBLAS when the spawned child loads it
+        os.environ.setdefault("OPENBLAS_THREAD_TIMEOUT", str(a.openblas_timeout))
+    print("OPENBLAS_THREAD_TIMEOUT=%s" % os.environ.get("OPENBLAS_THREAD_TIMEOUT", "(default)"))
     ctx = mp.get_context("spawn")
     for name in a.meshes.split(","):
         V, F, fixed, hand, t = scenario(name, a.levels)
@@ -170,8 +206,10 @@ def main():
             if "error" in r:
                 print("  %-14s failed: %s" % (method, r["error"]), flush=True)
                 continue
-            line = ("  %-14s bind %6.1f s  peak %6.0f MB  first update %7.3f s"
-                    % (method, r["bind_s"], r["peak_mb"], r["first_s"]))
+            line = ("  %-14s bind %6.1f s (%.1f s CPU)  peak %6.0f MB  first update %7.3f s"
+                    % (method, r["bind_s"], r["bind_cpu_s"], r["peak_mb"], r["first_s"]))
+            if "transform_s" in r:
+                line += "  from a transform %.3f s  [%s]" % (r["transform_s"], r["basis"])
             if "energy" in r:
                 line += ("  (energy %.3gx converged)  converged in %.1f s, %d iterations%s"
                          % (r["first_energy"] / max(r["energy"], 1e-300), r["converge_s"],

@@ -32,8 +32,11 @@
  * solution is affine in the entries of the handle transforms, bind also precomputes (for up
  * to 16 handles and 128 MB) x = g0 + sum_{h,a} T_h[d][a] G_{h,a} (3 + 4 H columns, one multi-RHS
  * solve), so a solve from transforms (mode 1) needs no back-substitution at all (the
- * local-frame updates after it still do). If that basis cannot be allocated, mode 1 falls
- * back to back-substitution.
+ * local-frame updates after it still do). A solve from positions (mode 0) takes the basis too
+ * when one affine map per handle reproduces its targets to 1e-13 of their magnitude (a drag
+ * the caller computed per vertex; the maps are fitted in O(handle vertices)); other
+ * positions back-substitute. If that basis cannot be allocated, or options.basis is OFF,
+ * every solve back-substitutes.
  *
  * Local frames (slide 69, as Blender's Laplacian Deform): at every vertex an orthonormal
  * frame (n, u, n x u): n the area-weighted normal of the incident triangles, u the
@@ -82,6 +85,12 @@ typedef enum dk_le_constraint_mode {
     DK_LE_CONSTRAINTS_SOFT = 1  /**< least-squares rows of weight lambda * handle weight   */
 } dk_le_constraint_mode;
 
+/** Whether bind precomputes the affine basis (see the file comment). */
+typedef enum dk_le_basis {
+    DK_LE_BASIS_AUTO = 0, /**< built when it fits the limits (16 handles, 128 MB)           */
+    DK_LE_BASIS_OFF = 1   /**< never: every solve back-substitutes (tests, memory)          */
+} dk_le_basis;
+
 /** Options of one bind. Fill with dk_laplacian_edit_default_options, then change fields. */
 typedef struct dk_laplacian_edit_options {
     dk_le_weights weights;            /**< default COTANGENT                                */
@@ -92,6 +101,7 @@ typedef struct dk_laplacian_edit_options {
     int local_frame_iterations;       /**< frame updates after the first solve, 0..1000;
                                            default 1 (Blender)                               */
     double local_frame_tolerance;     /**< >= 0, relative to the bbox diagonal; default 1e-6 */
+    dk_le_basis basis;                /**< default AUTO                                     */
 } dk_laplacian_edit_options;
 
 /** Counters for tests and reports. */
@@ -102,6 +112,11 @@ typedef struct dk_laplacian_edit_counters {
     dk_index n_degenerate_frames; /**< vertices without a rest frame (local_frame only)      */
     int analysis_count;           /**< symbolic analyses done so far (bind + rebinds)        */
     int factorization_count;      /**< numeric factorizations done so far                    */
+    int basis_columns;            /**< columns of the affine basis (3 + 4 n_handles), 0 when
+                                       it was not built                                     */
+    int basis_solves;             /**< solves since bind that combined the basis instead of
+                                       back-substituting (from transforms, or from positions
+                                       that an affine map per handle reproduces)            */
 } dk_laplacian_edit_counters;
 
 typedef struct dk_laplacian_edit dk_laplacian_edit;

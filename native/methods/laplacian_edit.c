@@ -32,6 +32,8 @@ typedef struct le_system {
      * x_d = g0_d + sum_{h,a} T_h[d][a] G_{h,a}, columns g0_x, g0_y, g0_z, then G_{h,a} for
      * a = 0..3 (x, y, z, 1 of the rest positions of handle h). n_unknowns x (3 + 4 H). */
     double *basis;
+    double *fit;             /* n_handles x 16: the transforms fitted to positions given as
+                                targets (fit_transforms), when the basis exists          */
     unsigned char *row_active; /* n: the row of A has an unknown column                  */
 } le_system;
 
@@ -57,6 +59,7 @@ struct dk_laplacian_edit {
     dk_index n_fallback, n_degenerate_frames;
     le_system sys;
     int analysis_count, factorization_count;
+    int basis_solves;    /* solves that combined the affine basis (counters)              */
     /* solve buffers */
     double *x;           /* n x 3 column-major current positions                           */
     double *delta;       /* n x 3 column-major delta of the last solve                     */
@@ -102,6 +105,7 @@ static void system_free(le_system *s)
     free(s->targets);
     free(s->rhs);
     free(s->basis);
+    free(s->fit);
     free(s->row_active);
     memset(s, 0, sizeof *s);
 }
@@ -122,6 +126,7 @@ void dk_laplacian_edit_default_options(dk_laplacian_edit_options *o)
     o->tikhonov = 0.0;
     o->local_frame_iterations = 1;
     o->local_frame_tolerance = 1e-6;
+    o->basis = DK_LE_BASIS_AUTO;
 }
 
 static dk_status check_options(const dk_laplacian_edit_options *o, dk_error *err)
@@ -151,6 +156,10 @@ static dk_status check_options(const dk_laplacian_edit_options *o, dk_error *err
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "LaplacianEdit: local_frame_iterations must be in [0, 1000], got %d",
                             o->local_frame_iterations);
+    if (o->basis != DK_LE_BASIS_AUTO && o->basis != DK_LE_BASIS_OFF)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "LaplacianEdit: unknown basis mode %d (auto = 0, off = 1)",
+                            (int)o->basis);
     if (!(isfinite(o->local_frame_tolerance) && o->local_frame_tolerance >= 0.0))
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "LaplacianEdit: local_frame_tolerance must be finite and >= 0, "
@@ -1109,15 +1118,19 @@ static dk_status build_basis(dk_laplacian_edit *le, le_system *s, dk_error *err)
     dk_status st;
 
     free(s->basis);
-    s->basis = NULL;
-    if (H > LE_MAX_BASIS_HANDLES || (double)ncol * (double)nu > LE_MAX_BASIS_DOUBLES)
+    free(s->fit);
+    s->basis = s->fit = NULL;
+    if (le->opt.basis == DK_LE_BASIS_OFF || H > LE_MAX_BASIS_HANDLES ||
+        (double)ncol * (double)nu > LE_MAX_BASIS_DOUBLES)
         return DK_OK;
     s->basis = malloc(sizeof(double) * (size_t)nu * ncol);
+    s->fit = malloc(sizeof(double) * 16 * (size_t)H);
     r = malloc(sizeof(double) * (size_t)n);
-    if (!s->basis || !r) {
+    if (!s->basis || !s->fit || !r) {
         free(r);
         free(s->basis);
-        s->basis = NULL;
+        free(s->fit);
+        s->basis = s->fit = NULL;
         return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "LaplacianEdit: out of memory (basis)");
     }
     /* g0: handle values zero, fixed at rest, soft handle targets zero */
@@ -1169,7 +1182,8 @@ static dk_status build_basis(dk_laplacian_edit *le, le_system *s, dk_error *err)
     st = dk_cholesky_solve(s->chol, s->basis, (int)ncol, s->basis, err);
     if (st != DK_OK) {
         free(s->basis);
-        s->basis = NULL;
+        free(s->fit);
+        s->basis = s->fit = NULL;
         return dk_error_prefix(err, "LaplacianEdit basis");
     }
     return DK_OK;
@@ -1237,6 +1251,116 @@ static void basis_range(void *ctx, dk_index u0, dk_index u1, int part)
     }
 }
 
+/* Targets given as positions that some affine map of each handle's rest positions
+ * reproduces (a drag by translation, rotation or scale, computed by the caller per vertex)
+ * give the same result as that map given as a transform, so they can take the basis too.
+ * Finds such maps into s->fit (n_handles x 4 x 4, row-major): per handle, first the
+ * translation of its first vertex, else the least-squares affine map (centred normal
+ * equations, 3 x 3, refused when not well conditioned: planar, collinear or single-vertex
+ * handles that moved other than by a translation). Accepted when every target is
+ * reproduced to LE_FIT_TOLERANCE times the largest coordinate magnitude (rest or target)
+ * of the handle, i.e. to a few rounding errors of the caller's arithmetic; the result then
+ * differs from the back-substitution of the exact targets by the response to that misfit
+ * (and the handle vertices themselves are written from the given targets, exactly).
+ * Returns 1 when every handle fits, 0 otherwise (solve back-substitutes). O(handle
+ * vertices), no allocation. */
+#define LE_FIT_TOLERANCE 1e-13
+static int fit_transforms(const dk_laplacian_edit *le, le_system *s)
+{
+    const dk_constraints *c = s->con;
+    const double *P = le->mesh->positions; /* rest, row-major, internal numbering */
+    for (dk_index h = 0; h < c->n_handles; h++) {
+        const dk_index k0 = c->handle_start[h], k1 = c->handle_start[h + 1];
+        double *T = s->fit + 16 * (size_t)h;
+        double scale = 0.0, t[3];
+        const double *p0 = P + 3 * (size_t)c->handle_vertices[k0];
+        for (int d = 0; d < 3; d++)
+            t[d] = s->targets[3 * (size_t)k0 + d] - p0[d];
+        memset(T, 0, sizeof(double) * 16);
+        T[0] = T[5] = T[10] = T[15] = 1.0;
+        T[3] = t[0];
+        T[7] = t[1];
+        T[11] = t[2];
+        double misfit = 0.0;
+        for (dk_index k = k0; k < k1; k++) {
+            const double *p = P + 3 * (size_t)c->handle_vertices[k];
+            const double *q = s->targets + 3 * (size_t)k;
+            for (int d = 0; d < 3; d++) {
+                const double r = fabs(q[d] - p[d] - t[d]);
+                misfit = r > misfit ? r : misfit;
+                scale = fmax(scale, fmax(fabs(p[d]), fabs(q[d])));
+            }
+        }
+        const double tol = LE_FIT_TOLERANCE * scale;
+        if (misfit <= tol)
+            continue;
+        /* the least-squares affine map: L M = B with M = sum (p - pm)(p - pm)^T,
+         * B = sum (q - qm)(p - pm)^T, t = qm - L pm */
+        double pm[3] = {0, 0, 0}, qm[3] = {0, 0, 0}, M[9] = {0}, B[9] = {0}, Mi[9];
+        const double cnt = (double)(k1 - k0);
+        for (dk_index k = k0; k < k1; k++) {
+            const double *p = P + 3 * (size_t)c->handle_vertices[k];
+            const double *q = s->targets + 3 * (size_t)k;
+            for (int d = 0; d < 3; d++) {
+                pm[d] += p[d];
+                qm[d] += q[d];
+            }
+        }
+        for (int d = 0; d < 3; d++) {
+            pm[d] /= cnt;
+            qm[d] /= cnt;
+        }
+        for (dk_index k = k0; k < k1; k++) {
+            const double *p = P + 3 * (size_t)c->handle_vertices[k];
+            const double *q = s->targets + 3 * (size_t)k;
+            for (int a = 0; a < 3; a++)
+                for (int b = 0; b < 3; b++) {
+                    M[3 * a + b] += (p[a] - pm[a]) * (p[b] - pm[b]);
+                    B[3 * a + b] += (q[a] - qm[a]) * (p[b] - pm[b]);
+                }
+        }
+        /* inverse by cofactors; refused unless det > 1e-12 * (trace / 3)^3 */
+        Mi[0] = M[4] * M[8] - M[5] * M[7];
+        Mi[1] = M[2] * M[7] - M[1] * M[8];
+        Mi[2] = M[1] * M[5] - M[2] * M[4];
+        Mi[3] = M[5] * M[6] - M[3] * M[8];
+        Mi[4] = M[0] * M[8] - M[2] * M[6];
+        Mi[5] = M[2] * M[3] - M[0] * M[5];
+        Mi[6] = M[3] * M[7] - M[4] * M[6];
+        Mi[7] = M[1] * M[6] - M[0] * M[7];
+        Mi[8] = M[0] * M[4] - M[1] * M[3];
+        const double det = M[0] * Mi[0] + M[1] * Mi[3] + M[2] * Mi[6];
+        const double tr = (M[0] + M[4] + M[8]) / 3.0;
+        if (!(det > 1e-12 * tr * tr * tr) || !isfinite(det))
+            return 0;
+        for (int a = 0; a < 3; a++) {
+            double tt = qm[a];
+            for (int b = 0; b < 3; b++) {
+                double v = 0.0;
+                for (int e = 0; e < 3; e++)
+                    v += B[3 * a + e] * Mi[3 * e + b];
+                T[4 * a + b] = v / det;
+            }
+            for (int b = 0; b < 3; b++)
+                tt -= T[4 * a + b] * pm[b];
+            T[4 * a + 3] = tt;
+        }
+        misfit = 0.0;
+        for (dk_index k = k0; k < k1; k++) {
+            const double *p = P + 3 * (size_t)c->handle_vertices[k];
+            const double *q = s->targets + 3 * (size_t)k;
+            for (int d = 0; d < 3; d++) {
+                const double r = fabs(T[4 * d] * p[0] + T[4 * d + 1] * p[1] +
+                                      T[4 * d + 2] * p[2] + T[4 * d + 3] - q[d]);
+                misfit = r > misfit ? r : misfit;
+            }
+        }
+        if (!(misfit <= tol))
+            return 0;
+    }
+    return 1;
+}
+
 dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const dk_solve_request *rq,
                                   double *positions, dk_solve_info *info, dk_error *err)
 {
@@ -1275,10 +1399,12 @@ dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const dk_solve_request 
     }
     if (s->n_unknowns == 0) {
         /* every vertex constrained: x (targets and rest) is the result */
-    } else if (mode == 1 && s->basis) {
-        /* affine in the transforms: combine the precomputed basis (no back-substitution) */
-        solve_init_job job = {le, targets};
+    } else if (s->basis && (mode == 1 || fit_transforms(le, s))) {
+        /* affine in the transforms: combine the precomputed basis (no back-substitution);
+         * positions that an affine map per handle reproduces use the fitted maps */
+        solve_init_job job = {le, mode == 1 ? targets : s->fit};
         dk_team_run_halves(le->team, basis_range, &job, s->n_unknowns, LE_PARALLEL_MIN);
+        le->basis_solves++;
     } else {
         st = linear_solve(le, err);
         if (st != DK_OK)
@@ -1348,6 +1474,8 @@ void dk_laplacian_edit_get_counters(const dk_laplacian_edit *le, dk_laplacian_ed
     st->n_degenerate_frames = le->n_degenerate_frames;
     st->analysis_count = le->analysis_count;
     st->factorization_count = le->factorization_count;
+    st->basis_columns = le->sys.basis ? 3 + 4 * (int)le->sys.con->n_handles : 0;
+    st->basis_solves = le->basis_solves;
 }
 
 void dk_laplacian_edit_free(dk_laplacian_edit *le)

@@ -41,7 +41,9 @@ dk_trisolve *dk_trisolve_plan(const cholmod_factor *L, double min_entries, doubl
  *  n x nrhs (X may alias B), 1 <= nrhs <= 16. The second thread is `team`'s helper (NULL: a
  *  thread started for each of the two sweeps). Returns 0, or -1 when nrhs is out of that
  *  range or its workspace cannot be allocated
- *  (nothing written; the caller falls back). Allocates only when nrhs grows. */
+ *  (nothing written; the caller falls back). Allocates only when nrhs grows. More than 6
+ *  columns are solved in balanced blocks of at most 6 (one pass over the factor each, with
+ *  the register kernels), the largest first. */
 int dk_trisolve_solve(dk_trisolve *plan, dk_team *team, const double *b, int nrhs,
                       double *x);
 

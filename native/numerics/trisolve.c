@@ -797,10 +797,9 @@ static void panel_backward(const dk_trisolve *p, dk_team *team, double *w, int k
     }
 }
 
-int dk_trisolve_solve(dk_trisolve *p, dk_team *team, const double *b, int nrhs, double *x)
+/* The solve of dk_trisolve_solve for 1 <= nrhs <= 16 columns at once. */
+static int solve_block(dk_trisolve *p, dk_team *team, const double *b, int nrhs, double *x)
 {
-    if (!p || !b || !x || nrhs < 1 || nrhs > 16) /* more: cholmod_solve2 */
-        return -1;
     const int n = p->n, k = nrhs;
     const size_t nk = (size_t)n * (size_t)k;
     if (k > p->cap) {
@@ -857,5 +856,31 @@ int dk_trisolve_solve(dk_trisolve *p, dk_team *team, const double *b, int nrhs, 
     s0.back = s1.back = 1;
     s1.w = wa;
     both(team, &s0, &s1);
+    return 0;
+}
+
+/* Right-hand sides beyond the register kernels' 6 are solved in blocks of at most
+ * KERNEL_MAX columns: the generic loop of a 7-column solve took 2.5x the time of a 6-column
+ * one (1.22 s against 0.49 s through a 403 MB factor at 576k unknowns), so two passes over
+ * the factor with the kernels (4 + 3 columns: 0.70 s) beat one without. */
+#define KERNEL_MAX 6
+
+int dk_trisolve_solve(dk_trisolve *p, dk_team *team, const double *b, int nrhs, double *x)
+{
+    if (!p || !b || !x || nrhs < 1 || nrhs > 16) /* more: cholmod_solve2 */
+        return -1;
+    if (nrhs <= KERNEL_MAX)
+        return solve_block(p, team, b, nrhs, x);
+    /* balanced blocks, the largest first: only the first can need to grow the work arrays
+     * (the only failure), so a failure leaves x untouched (x may alias b). Columns are
+     * contiguous (column-major), so the blocks are independent solves. */
+    const int blocks = (nrhs + KERNEL_MAX - 1) / KERNEL_MAX;
+    const size_t n = (size_t)p->n;
+    for (int q = 0, done = 0; q < blocks; q++) {
+        const int cols = (nrhs - done + (blocks - q) - 1) / (blocks - q);
+        if (solve_block(p, team, b + n * (size_t)done, cols, x + n * (size_t)done) != 0)
+            return -1; /* q == 0: nothing written */
+        done += cols;
+    }
     return 0;
 }

@@ -7,6 +7,7 @@
 static const char *const weights_names[] = {"uniform", "cotangent", NULL};
 static const char *const detail_names[] = {"fixed", "membrane", "local_frame", NULL};
 static const char *const constraint_names[] = {"hard", "soft", NULL};
+static const char *const basis_names[] = {"auto", "off", NULL};
 
 static void default_options(void *o)
 {
@@ -17,10 +18,11 @@ static int parse_options(PyObject *kw, void *o, const char *context)
 {
     dk_laplacian_edit_options *opt = (dk_laplacian_edit_options *)o;
     int weights = (int)opt->weights, detail = (int)opt->detail;
-    int constraints = (int)opt->constraints;
+    int constraints = (int)opt->constraints, basis = (int)opt->basis;
     if (dk_py_opt_choice(kw, "weights", weights_names, &weights, context) < 0 ||
         dk_py_opt_choice(kw, "detail", detail_names, &detail, context) < 0 ||
         dk_py_opt_choice(kw, "constraints", constraint_names, &constraints, context) < 0 ||
+        dk_py_opt_choice(kw, "basis", basis_names, &basis, context) < 0 ||
         dk_py_opt_double(kw, "constraint_weight", &opt->constraint_weight) < 0 ||
         dk_py_opt_double(kw, "tikhonov", &opt->tikhonov) < 0 ||
         dk_py_opt_int(kw, "local_frame_iterations", &opt->local_frame_iterations) < 0 ||
@@ -29,6 +31,7 @@ static int parse_options(PyObject *kw, void *o, const char *context)
     opt->weights = (dk_le_weights)weights;
     opt->detail = (dk_le_detail)detail;
     opt->constraints = (dk_le_constraint_mode)constraints;
+    opt->basis = (dk_le_basis)basis;
     return 0;
 }
 
@@ -36,11 +39,12 @@ static PyObject *stats(dk_py_method *self)
 {
     dk_laplacian_edit_counters s;
     dk_laplacian_edit_get_counters(self->native, &s);
-    return Py_BuildValue("{s:i,s:i,s:i,s:i,s:i,s:i}", "n_unknowns", (int)s.n_unknowns,
+    return Py_BuildValue("{s:i,s:i,s:i,s:i,s:i,s:i,s:i,s:i}", "n_unknowns", (int)s.n_unknowns,
                          "n_soft_rows", (int)s.n_soft_rows, "n_cotangent_fallback",
                          (int)s.n_cotangent_fallback, "n_degenerate_frames",
                          (int)s.n_degenerate_frames, "analysis_count", s.analysis_count,
-                         "factorization_count", s.factorization_count);
+                         "factorization_count", s.factorization_count, "basis_columns",
+                         s.basis_columns, "basis_solves", s.basis_solves);
 }
 
 PyDoc_STRVAR(solve_doc,
@@ -59,7 +63,7 @@ PyDoc_STRVAR(lap_doc,
              "LaplacianEdit(mesh, handles, fixed=None, roi=None, handle_weights=None,\n"
              "              stiffness=None, weights='cotangent', detail='fixed',\n"
              "              constraints='hard', constraint_weight=1.0, tikhonov=0.0,\n"
-             "              local_frame_iterations=1, local_frame_tolerance=1e-6)\n\n"
+             "              local_frame_iterations=1, local_frame_tolerance=1e-6, basis='auto')\n\n"
              "Laplacian editing / least-squares meshes: minimises ||A x - delta||^2 with A the\n"
              "normalised umbrella operator (uniform or cotangent weights), delta = A x0\n"
              "('fixed', detail preserving but not rotation invariant), 0 ('membrane') or the\n"
@@ -68,7 +72,11 @@ PyDoc_STRVAR(lap_doc,
              "fixed vertices are eliminated ('hard'; handle vertices with weight < 1 become\n"
              "soft rows) or soft rows of weight constraint_weight * handle weight ('soft').\n"
              "tikhonov = mu adds mu^2 ||x - x0||^2. Vertices outside roi stay at rest.\n"
-             "stiffness is not supported (ValueError). See docs/methods/laplacian_edit.md.");
+             "stiffness is not supported (ValueError). basis='auto' precomputes the solution's\n"
+             "affine response to the handle transforms at bind (up to 16 handles, 128 MB), so\n"
+             "that drags by transforms, or by positions some affine map per handle reproduces,\n"
+             "skip the back-substitution; 'off' never builds it. See\n"
+             "docs/methods/laplacian_edit.md.");
 
 static PyGetSetDef lap_getset[] = {DK_PY_METHOD_GETSET, {NULL, NULL, NULL, NULL, NULL}};
 

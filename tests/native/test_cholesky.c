@@ -482,7 +482,8 @@ static void test_big_grid(void)
 /* Two-thread substitutions (dk_trisolve) against cholmod_solve2 on the same factor: an SPD
  * 2D grid (simplicial LL'), a 3D grid (supernodal LL') and an indefinite shifted 2D grid
  * (simplicial LDL'), for 1..6 right-hand sides (the specialised and the generic kernels),
- * 17 (beyond the kernels: cholmod_solve2), and in place (x aliasing b). */
+ * 7, 11 and 16 (solved in blocks of at most 6), 17 (beyond the plan: cholmod_solve2), and in
+ * place (x aliasing b; 3 and 11 columns). */
 static void check_parallel(dk_sparse *a, int indefinite, const char *name)
 {
     const dk_index n = a->n_rows;
@@ -498,7 +499,7 @@ static void check_parallel(dk_sparse *a, int indefinite, const char *name)
     }
     const double speedup = dk_cholesky_parallel_speedup(ch);
     CHECK_MSG(speedup >= 1.25, "%s: no two-thread plan (estimated speed-up %.2f)", name, speedup);
-    static const int counts[] = {1, 2, 3, 4, 5, 6, 17};
+    static const int counts[] = {1, 2, 3, 4, 5, 6, 7, 11, 16, 17};
     double *b = malloc(sizeof(double) * (size_t)n * 17), *x = malloc(sizeof(double) * (size_t)n * 17),
            *y = malloc(sizeof(double) * (size_t)n * 17);
     CHECK(b && x && y);
@@ -533,15 +534,17 @@ static void check_parallel(dk_sparse *a, int indefinite, const char *name)
             dk_team_free(team);
             free(z);
         }
-        if (k == 3) {
+        if (k == 3)
             printf("%s: n=%d, estimated speed-up %.2f, 3-RHS two-thread solve %.2f ms\n", name,
                    (int)n, speedup, 1e3 * (t1 - t0));
-            memcpy(y, b, sizeof(double) * (size_t)n * 3); /* in place */
-            CHECK(dk_cholesky_solve(ch, y, 3, y, &err) == DK_OK);
+        if (k == 3 || k == 11) {
+            memcpy(y, b, sizeof(double) * (size_t)n * (size_t)k); /* in place */
+            CHECK(dk_cholesky_solve(ch, y, k, y, &err) == DK_OK);
             diff = 0.0;
-            for (size_t i = 0; i < (size_t)n * 3; i++)
+            for (size_t i = 0; i < (size_t)n * (size_t)k; i++)
                 diff = fmax(diff, fabs(x[i] - y[i]));
-            CHECK_MSG(diff <= 1e-11 * big, "%s in place: differs by %.3g", name, diff);
+            CHECK_MSG(diff <= 1e-11 * big, "%s in place, %d columns: differs by %.3g", name, k,
+                      diff);
         }
     }
     free(b);

@@ -546,3 +546,113 @@ def test_solvers_work_in_a_forked_child():
     assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0, status
     # and the parent's objects still work with their helpers
     assert np.array_equal(np.asarray(le.solve(transforms=[T]).positions), want_le)
+
+
+def random_affine(rng, scale=0.3):
+    """A random rotation times a scale near 1, a small shear, and a translation: 4 x 4."""
+    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+    q *= np.sign(np.diag(r))
+    T = np.eye(4)
+    T[:3, :3] = q @ (np.diag(rng.uniform(0.8, 1.2, 3)) + 0.05 * rng.normal(size=(3, 3)))
+    T[:3, 3] = rng.normal(size=3) * scale
+    return T
+
+
+@pytest.mark.parametrize("detail", ["fixed", "local_frame"])
+def test_basis_from_positions_on_a_grid(detail):
+    # the small counterpart of the armadillo test below (which the sanitized run leaves out):
+    # affine images of the rest handle positions take the basis and equal the
+    # back-substitution; other positions back-substitute
+    v, f, fixed, handle = grid_setup(bump=0.05)
+    handles = [handle[: len(handle) // 2], handle[len(handle) // 2:]]   # two columns each
+    mesh = deformkit.Mesh(v, f)
+    a = deformkit.LaplacianEdit(mesh, handles, fixed=fixed, detail=detail)
+    b = deformkit.LaplacianEdit(mesh, handles, fixed=fixed, detail=detail, basis="off")
+    rng = np.random.default_rng(3)
+    Ts = [random_affine(rng, 0.2) for _ in handles]
+    tg = np.vstack([v[h] @ T[:3, :3].T + T[:3, 3] for h, T in zip(handles, Ts)])
+    xa, xb = np.asarray(a.solve(tg).positions), np.asarray(b.solve(tg).positions)
+    assert a.stats["basis_solves"] == 1 and b.stats["basis_solves"] == 0
+    assert np.abs(xa - v).max() > 0.1
+    assert np.abs(xa - xb).max() <= 1e-10
+    assert np.array_equal(xa[np.concatenate(handles)], tg)
+    tg[0] += 1e-4                                   # no longer affine: back-substituted
+    xa, xb = np.asarray(a.solve(tg).positions), np.asarray(b.solve(tg).positions)
+    assert a.stats["basis_solves"] == 1
+    assert np.abs(xa - xb).max() <= 1e-10
+    # a handle whose vertices lie on a line: only a translation is determined by them, so
+    # rotated targets back-substitute, translated ones take the basis
+    line = np.flatnonzero(np.arange(len(v)) % 17 == 16)             # the x = 1 column
+    c = deformkit.LaplacianEdit(mesh, [line], fixed=fixed, detail=detail)
+    d = deformkit.LaplacianEdit(mesh, [line], fixed=fixed, detail=detail, basis="off")
+    tg = v[line] + [0.1, 0.2, 0.3]
+    xa, xb = np.asarray(c.solve(tg).positions), np.asarray(d.solve(tg).positions)
+    assert np.abs(xa - xb).max() <= 1e-10
+    assert c.stats["basis_solves"] == 1
+    tg = v[line] @ random_affine(rng)[:3, :3].T
+    xa, xb = np.asarray(c.solve(tg).positions), np.asarray(d.solve(tg).positions)
+    assert c.stats["basis_solves"] == 1
+    assert np.abs(xa - xb).max() <= 1e-10
+
+
+@pytest.mark.heavy
+@pytest.mark.skipif(not (SHARED / "scenarios" / "armadillo-wave.json").exists(),
+                    reason="shared scenarios not available")
+@pytest.mark.parametrize("kw", [{}, {"detail": "membrane"}, {"constraints": "soft"},
+                                {"detail": "local_frame"}, {"tikhonov": 0.1, "soft_half": 1}])
+def test_basis_equals_factor_on_the_armadillo(kw):
+    # Drags given as positions that an affine map per handle reproduces take the affine basis
+    # (no back-substitution); they must equal the back-substitution of the same targets
+    # (basis='off') to rounding, meet the hard constraints exactly, and positions that no
+    # affine map reproduces must still back-substitute.
+    kw = dict(kw)
+    soft_half = kw.pop("soft_half", 0)
+    sc = json.loads((SHARED / "scenarios" / "armadillo-wave.json").read_text())
+    v, f = read_obj(SHARED / "scenarios" / sc["mesh"])
+    mesh = deformkit.Mesh(v, f)
+    hand = np.array(sc["handles"][0]["vertices"])
+    handles = [hand[: len(hand) // 2], hand[len(hand) // 2:]]        # two handles
+    fixed = np.array(sc["fixed"])
+    weights = None
+    if soft_half:  # the first handle's vertices soft (weight 0.5): unknowns with soft rows
+        weights = [np.full(len(handles[0]), 0.5), np.ones(len(handles[1]))]
+    a = deformkit.LaplacianEdit(mesh, handles, fixed=fixed, handle_weights=weights, **kw)
+    b = deformkit.LaplacianEdit(mesh, handles, fixed=fixed, handle_weights=weights,
+                                basis="off", **kw)
+    assert a.stats["basis_columns"] == 3 + 4 * 2
+    assert b.stats["basis_columns"] == 0
+    bbox = np.linalg.norm(v.max(0) - v.min(0))
+    rng = np.random.default_rng(19)
+    for trial in range(4):
+        Ts = [random_affine(rng, 0.1 * bbox) for _ in handles]
+        if trial == 0:  # translations only
+            for T in Ts:
+                T[:3, :3] = np.eye(3)
+        tg = np.vstack([v[h] @ T[:3, :3].T + T[:3, 3] for h, T in zip(handles, Ts)])
+        before = a.stats["basis_solves"]
+        ra, rb = a.solve(tg), b.solve(tg)
+        assert a.stats["basis_solves"] == before + 1               # the basis was used
+        xa, xb = np.asarray(ra.positions), np.asarray(rb.positions)
+        assert np.abs(xa - v).max() > 0.05 * bbox                    # a real deformation
+        assert np.abs(xa - xb).max() <= 1e-10 * bbox
+        assert ra.energy == pytest.approx(rb.energy, rel=1e-9)
+        if kw.get("constraints") != "soft":
+            hard = np.concatenate(handles[soft_half:])
+            tgh = tg[len(handles[0]) * soft_half:]
+            assert np.array_equal(xa[hard], tgh)                      # exactly the targets
+            assert np.array_equal(xa[fixed], v[fixed])
+        # the same maps given as transforms: the same result
+        xt = np.asarray(a.solve(transforms=np.array(Ts)).positions)
+        assert np.abs(xt - xb).max() <= 1e-10 * bbox
+    # not an affine image of the rest positions: back-substitution, still equal
+    tg = tg + rng.normal(size=tg.shape) * 1e-3 * bbox
+    before = a.stats["basis_solves"]
+    xa, xb = np.asarray(a.solve(tg).positions), np.asarray(b.solve(tg).positions)
+    assert a.stats["basis_solves"] == before
+    assert np.abs(xa - xb).max() <= 1e-10 * bbox
+
+
+def test_basis_option_is_checked():
+    v, f = grid(8, 6)
+    with pytest.raises(ValueError, match="basis"):
+        deformkit.LaplacianEdit(deformkit.Mesh(v, f), [[0]], fixed=[40], basis="sometimes")
