@@ -1054,7 +1054,9 @@ def edit_targets(e, T, source):
 # the GIL; the object is used by the worker alone meanwhile.
 ASYNC_MS = 50.0
 ASYNC_MIN_VERTICES = 200_000
-threaded_solves = [None]  # None: in the UI only (and not below the thresholds); True / False force it
+# None: in the UI only, above the thresholds; "auto": the thresholds also under blender -b
+# (benchmarks); True / False force it (tests)
+threaded_solves = [None]
 
 
 class _Worker:
@@ -1083,9 +1085,9 @@ def _async_wanted(e, interactive, cold, write):
     if not (interactive and write and not cold):
         return False
     force = threaded_solves[0]
-    if force is not None:
+    if force is True or force is False:
         return force
-    if bpy.app.background:
+    if force is None and bpy.app.background:
         return False
     if e.slice_ms is not None:
         return e.slice_ms > ASYNC_MS
