@@ -5,18 +5,26 @@
 # build-asan/ (AddressSanitizer + UndefinedBehaviorSanitizer, C library and C tests only).
 #
 # patchelf is for scripts/package.sh (it bundles the native libraries into the add-on zips).
+# python3-hypothesis is for the property suite (tests/python/test_properties.py), which runs
+# under Debian's python3 like the other Python tests (hypothesis is also pinned in
+# scripts/pins.txt's [tools] venv; Debian 12 ships 6.67, Debian 13 6.1xx: the suite uses
+# only API both have).
 #
-# usage: scripts/setup.sh [--asan] [--bench] [--no-build]
+# usage: scripts/setup.sh [--asan] [--bench] [--fuzz] [--no-build]
 #   --asan      also build the sanitized configuration
 #   --bench     also install what the benchmarks need (g++, CGAL, Eigen, scipy)
+#   --fuzz      also install what the fuzzers need (Debian's unversioned clang, and
+#               libclang-rt-dev, whose compiler-rt holds libFuzzer and the sanitizers'
+#               runtimes: only a Recommends of clang); scripts/fuzz.sh builds build-fuzz/
 #   --no-build  only install packages
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-asan=0; bench=0; build=1
+asan=0; bench=0; fuzz=0; build=1
 for arg in "$@"; do
   case "$arg" in
     --asan) asan=1 ;;
     --bench) bench=1 ;;
+    --fuzz) fuzz=1 ;;
     --no-build) build=0 ;;
     *) echo "setup.sh: unknown option $arg" >&2; exit 2 ;;
   esac
@@ -24,8 +32,9 @@ done
 
 packages=(cmake make gcc pkg-config libsuitesparse-dev libarpack2-dev liblapacke-dev
           libopenblas-dev python3-dev python3-numpy python3-scipy python3-pytest blender xvfb
-          xauth zip patchelf)
+          xauth zip patchelf python3-hypothesis)
 if [ "$bench" = 1 ]; then packages+=(g++ libcgal-dev libeigen3-dev); fi
+if [ "$fuzz" = 1 ]; then packages+=(clang libclang-rt-dev); fi
 
 missing=()
 for p in "${packages[@]}"; do
