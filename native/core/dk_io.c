@@ -525,6 +525,10 @@ static dk_status read_ply(const char *buf, size_t size, const char *name, dk_mes
     line++; /* the first data line (ascii line numbers are counted by ply_value) */
     for (int i = 0; i < n_elems; i++) {
         ply_elem *e = &elems[i];
+        /* An element without properties holds no data: its items take no bytes, and
+         * walking through a count of 2^31 of them did nothing for seconds (found by
+         * fuzz_mesh_ply; a header may list 16 such elements). */
+        if (e->n_props == 0) continue;
         for (long long item = 0; item < e->count; item++) {
             double xyz[3] = {0, 0, 0};
             for (int k = 0; k < e->n_props; k++) {
