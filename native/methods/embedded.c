@@ -95,6 +95,12 @@ void dk_embedded_default_options(dk_embedded_options *o)
     o->seed = 1;
 }
 
+/* The largest graph: n_nodes' bound, and what a radius may keep. */
+enum { ED_MAX_NODES = 100000 };
+/* The smallest radius, relative to the extent of the samples: below it the sampling grid's
+ * cell numbers would not fit an int64 (and no graph that small could be bound anyway). */
+#define ED_MIN_RADIUS 1e-12
+
 static dk_status check_options(const dk_embedded_options *o, dk_error *err)
 {
     const char *bad = NULL;
@@ -102,7 +108,7 @@ static dk_status check_options(const dk_embedded_options *o, dk_error *err)
         bad = "nodes must be surface (0) or vertices (1)";
     else if (!(o->radius >= 0.0 && isfinite(o->radius)))
         bad = "radius must be finite and >= 0";
-    else if (o->radius == 0.0 && (o->n_nodes < 1 || o->n_nodes > 100000))
+    else if (o->radius == 0.0 && (o->n_nodes < 1 || o->n_nodes > ED_MAX_NODES))
         bad = "n_nodes must be in 1..100000";
     else if (o->k < 1 || o->k > K_MAX)
         bad = "k must be in 1..16";
@@ -215,6 +221,7 @@ static dk_index eliminate(const double *pts, dk_index n, const dk_index *order, 
         const dk_index i = order[o];
         const double *p = pts + 3 * i;
         int64_t c[3];
+        /* r >= ED_MIN_RADIUS x the extent (sample_nodes): the cell numbers fit an int64 */
         for (int d = 0; d < 3; d++)
             c[d] = (int64_t)floor((p[d] - lo[d]) / r);
         int ok = 1;
@@ -292,8 +299,28 @@ static dk_status sample_nodes(dk_embedded *ed, dk_error *err)
     const double diag = sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
                              (hi[2] - lo[2]) * (hi[2] - lo[2]));
     dk_index count;
+    if (o->radius > 0.0 && o->radius < ED_MIN_RADIUS * diag) {
+        /* found by fuzz_method: radius 1e-300 made the grid's cell numbers overflow int64
+         * (undefined behaviour), and clamping them put every sample into one cell, a
+         * quadratic elimination of 200,000 samples */
+        st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                          "EmbeddedDeformation bind: radius %g is below %g of the surface's "
+                          "extent (%g); raise it", o->radius, ED_MIN_RADIUS, diag);
+        goto done;
+    }
     if (o->radius > 0.0) {
-        count = eliminate(cand, nc, order, o->radius, lo, kept, nc);
+        /* at most one node more than n_nodes allows, so that a radius far below the
+         * mesh's extent is refused here instead of binding a graph of up to 200,000 nodes
+         * for minutes (fuzz_method: radius 1e-300 on a 20-vertex grid) */
+        count = eliminate(cand, nc, order, o->radius, lo, kept,
+                          nc < ED_MAX_NODES + 1 ? nc : ED_MAX_NODES + 1);
+        if (count > ED_MAX_NODES) {
+            st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                              "EmbeddedDeformation bind: radius %g keeps more than %d nodes "
+                              "(the most n_nodes allows) on a surface %g across; raise it",
+                              o->radius, ED_MAX_NODES, diag);
+            goto done;
+        }
     } else { /* the smallest radius whose count does not exceed the request */
         double a = diag * 1e-4, b = diag;
         for (int it = 0; it < 40; it++) {

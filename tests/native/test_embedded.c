@@ -261,4 +261,39 @@ static void test_update_source(void)
     dk_mesh_free(m);
 }
 
-DK_TEST_MAIN(test_geodesic_influence, test_cut, test_update_source)
+/* What fuzz_method found (tests/fuzz/corpus/method/crash-embedded-*): a radius of 1e-300
+ * overflowed the sampling grid's int64 cell numbers (UBSan: undefined behaviour); clamping
+ * them instead made one cell of 200,000 samples, minutes of elimination. A radius below
+ * 1e-12 of the extent is refused, so is one that keeps more than 100000 nodes, and a tiny
+ * but meaningful radius on a vertex graph still binds (every vertex a node). */
+static void test_radius_bounds(void)
+{
+    dk_test_mesh t;
+    if (dk_test_grid(4, 1.0, 0.0, &t) != 0) return;
+    dk_mesh *m = dk_test_mesh_build(&t);
+    dk_test_mesh_free(&t);
+    if (!m) return;
+    const dk_index hv[2] = {0, 1}, sizes[1] = {2};
+    dk_constraint_desc c = {.n_handles = 1, .handle_sizes = sizes, .handle_vertices = hv};
+    dk_embedded_options o;
+    dk_embedded *ed = NULL;
+    dk_error e = {0};
+    const double tiny[3] = {1e-300, 4.9e-324, 1e-13};
+    for (int i = 0; i < 3; i++) {
+        dk_embedded_default_options(&o);
+        o.radius = tiny[i];
+        CHECK(dk_embedded_bind(m, &c, &o, &ed, &e) == DK_ERR_INVALID_ARGUMENT && !ed);
+        CHECK_MSG(strstr(e.message, "below 1e-12 of the surface's extent"), "%s", e.message);
+    }
+    dk_embedded_default_options(&o);
+    o.radius = 1e-10; /* surface samples: nearly all 200,000 would be nodes */
+    CHECK(dk_embedded_bind(m, &c, &o, &ed, &e) == DK_ERR_INVALID_ARGUMENT && !ed);
+    CHECK_MSG(strstr(e.message, "keeps more than 100000 nodes"), "%s", e.message);
+    o.nodes = DK_ED_NODES_VERTICES; /* 25 vertices: 25 nodes */
+    CHECK_MSG(dk_embedded_bind(m, &c, &o, &ed, &e) == DK_OK, "%s", e.message);
+    CHECK(dk_embedded_n_nodes(ed) == 25);
+    dk_embedded_free(ed);
+    dk_mesh_free(m);
+}
+
+DK_TEST_MAIN(test_geodesic_influence, test_cut, test_update_source, test_radius_bounds)
