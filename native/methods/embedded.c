@@ -322,7 +322,10 @@ static dk_status sample_nodes(dk_embedded *ed, dk_error *err)
             goto done;
         }
     } else { /* the smallest radius whose count does not exceed the request */
-        double a = diag * 1e-4, b = diag;
+        /* all candidates on one point (coincident vertices): any radius keeps one; a zero
+         * one made every cell number 0 / 0, NaN into an int64 (fuzz_method, UBSan) */
+        const double extent = diag > 0 ? diag : 1.0;
+        double a = extent * 1e-4, b = extent;
         for (int it = 0; it < 40; it++) {
             const double r = 0.5 * (a + b);
             const dk_index c = eliminate(cand, nc, order, r, lo, kept, nc);

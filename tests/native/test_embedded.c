@@ -294,6 +294,16 @@ static void test_radius_bounds(void)
     CHECK(dk_embedded_n_nodes(ed) == 25);
     dk_embedded_free(ed);
     dk_mesh_free(m);
+    /* a point set whose points coincide: the node bisection's radius was 0, every cell
+     * number 0 / 0 (NaN into an int64; crash-embedded-coincident-vertices-nan-cell). One
+     * node, so refused for having fewer than k + 1 */
+    const double same[15] = {0};
+    CHECK(dk_mesh_create(same, 5, NULL, 0, &m, &e) == DK_OK);
+    dk_embedded_default_options(&o);
+    o.k = 1;
+    CHECK(dk_embedded_bind(m, &c, &o, &ed, &e) != DK_OK && !ed);
+    CHECK_MSG(strstr(e.message, "node"), "%s", e.message);
+    dk_mesh_free(m);
 }
 
 /* Found by tests/python/test_properties.py: the default 200 nodes on a 5 x 5-cell grid make a
