@@ -7,15 +7,16 @@
 # patchelf is for scripts/package.sh (it bundles the native libraries into the add-on zips).
 # python3-hypothesis is for the property suite (tests/python/test_properties.py), which runs
 # under Debian's python3 like the other Python tests (hypothesis is also pinned in
-# scripts/pins.txt's [tools] venv; Debian 12 ships 6.67, Debian 13 6.1xx: the suite uses
-# only API both have).
+# scripts/pins.txt's [tools] venv; Debian 12 ships 6.67, Debian 13 a newer 6.x: the suite
+# uses only long-standing API).
 #
 # usage: scripts/setup.sh [--asan] [--bench] [--fuzz] [--no-build]
 #   --asan      also build the sanitized configuration
 #   --bench     also install what the benchmarks need (g++, CGAL, Eigen, scipy)
 #   --fuzz      also install what the fuzzers need (Debian's unversioned clang, and
-#               libclang-rt-dev, whose compiler-rt holds libFuzzer and the sanitizers'
-#               runtimes: only a Recommends of clang); scripts/fuzz.sh builds build-fuzz/
+#               libclang-rt-dev where the distribution has it: its compiler-rt holds
+#               libFuzzer and the sanitizers' runtimes, only a Recommends of clang);
+#               scripts/fuzz.sh builds build-fuzz/
 #   --no-build  only install packages
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -34,19 +35,23 @@ packages=(cmake make gcc pkg-config libsuitesparse-dev libarpack2-dev liblapacke
           libopenblas-dev python3-dev python3-numpy python3-scipy python3-pytest blender xvfb
           xauth zip patchelf python3-hypothesis)
 if [ "$bench" = 1 ]; then packages+=(g++ libcgal-dev libeigen3-dev); fi
-if [ "$fuzz" = 1 ]; then packages+=(clang libclang-rt-dev); fi
+# installed when the distribution has them (libclang-rt-dev is in Debian 12's llvm-defaults;
+# without it clang's Recommends bring the versioned runtime)
+optional=()
+if [ "$fuzz" = 1 ]; then packages+=(clang); optional+=(libclang-rt-dev); fi
 
-missing=()
-for p in "${packages[@]}"; do
-  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
-    missing+=("$p")
-  fi
-done
-if [ ${#missing[@]} -gt 0 ]; then
-  echo "setup: installing ${missing[*]}" >&2
+installed() { dpkg-query -W -f='${Status}' "$1" 2>/dev/null | grep -q "install ok installed"; }
+missing=(); missing_optional=()
+for p in "${packages[@]}"; do installed "$p" || missing+=("$p"); done
+for p in "${optional[@]}"; do installed "$p" || missing_optional+=("$p"); done
+if [ ${#missing[@]} -gt 0 ] || [ ${#missing_optional[@]} -gt 0 ]; then
   sudo_cmd=()
   if [ "$(id -u)" != 0 ]; then sudo_cmd=(sudo); fi
   "${sudo_cmd[@]}" apt-get update
+  for p in "${missing_optional[@]}"; do
+    if apt-cache show "$p" >/dev/null 2>&1; then missing+=("$p"); fi
+  done
+  echo "setup: installing ${missing[*]}" >&2
   DEBIAN_FRONTEND=noninteractive "${sudo_cmd[@]}" apt-get install -y "${missing[@]}"
 else
   echo "setup: all Debian packages present" >&2
