@@ -9,8 +9,10 @@
 # One process per harness (-jobs 1: the machine is shared). Every crash, leak, sanitizer
 # report, harness invariant (tests/fuzz/fuzz_input.h) or input slower than --timeout is a
 # failure: the input is saved under build-fuzz/artifacts/ and the script exits non-zero.
-# What a run finds new is kept in build-fuzz/corpus/<harness>/, not in the repository; a
-# bug's reproducer goes into tests/fuzz/corpus/<harness>/crash-<what> with its fix.
+# What a run finds new is kept in build-fuzz/corpus/<harness>/, not in the repository, and
+# is replayed first by the next run (on top of --seconds: fuzz_method runs ~8 inputs a
+# second; delete build-fuzz/corpus/ to start from the seeds again, as CI does); a bug's
+# reproducer goes into tests/fuzz/corpus/<harness>/crash-<what> with its fix.
 #
 # usage: scripts/fuzz.sh [--seconds N] [--timeout S] [--only HARNESS] [--no-setup]
 #   --seconds N   total fuzzing time, shared out as above (default 60: CI's bounded run;
