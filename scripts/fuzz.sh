@@ -42,8 +42,8 @@ fi
 build="$here/build-fuzz"
 cmake -S "$here" -B "$build" -DCMAKE_C_COMPILER=clang -DCMAKE_BUILD_TYPE=Release \
   -DDK_FUZZ=ON -DDK_TESTS=OFF -DDK_PYTHON=OFF >/dev/null &&
-  cmake --build "$build" -j2 >"$build.log" 2>&1 ||
-  { cat "$build.log" >&2; echo "fuzz: 0 passed, 1 failed"; exit 1; }
+  cmake --build "$build" -j2 >"$build/build.log" 2>&1 ||
+  { cat "$build/build.log" >&2; echo "fuzz: 0 passed, 1 failed"; exit 1; }
 
 harnesses=(fuzz_mesh_obj fuzz_mesh_off fuzz_mesh_ply fuzz_mesh_build fuzz_method)
 shares=(1 1 1 1 3)
