@@ -291,6 +291,7 @@ class ShapeKeyBake:
     kind = "SHAPE_KEYS"
 
     def __init__(self, context, obj, d, frame_start, frame_end):
+        solver.check_single_user(obj, "bake %s to shape keys" % d.name)
         prepare(obj, d, "SHAPE_KEYS")
         solver.check_input_is_rest(obj, d, "bake to shape keys")
         self.context, self.start, self.end = context, frame_start, frame_end

@@ -12,6 +12,13 @@ each behind one small function, so that the rest of the add-on reads the same ev
   bags), and 5.0 removed `Action.fcurves` (the panel's "animated, not baked" warning reads
   which paths an action animates).
 
+- Mesh corners: from 3.6 a mesh's corner vertices and edges and its edge vertices are the
+  hidden attributes ".corner_vert", ".corner_edge" and ".edge_verts", read at once with
+  foreach_get; before, only through Mesh.loops and Mesh.edges, element by element (17 ms
+  for the armadillo's 259k corners in 3.4): solver.quick_topology exists only from 3.6.
+  The positions likewise: the "position" attribute from 3.6 (solver.rest_positions), where
+  MeshVertex.co is 1-4 ms at 43k vertices in 4.2-5.0.
+
 Checked and needing nothing here (docs/addon.md, "Blender versions"): the add-on imports no OBJ through
 Blender (4.0 removed `import_scene.obj`), and its materials name no renamed BSDF input.
 """
@@ -20,6 +27,7 @@ import bpy
 
 VERSION = tuple(bpy.app.version)
 HAS_INTERFACE = hasattr(bpy.types, "NodeTreeInterface")          # 4.0+
+CORNER_ATTRIBUTES = VERSION >= (3, 6, 0)                          # ".corner_vert" etc.
 # File-path properties that may hold "//" (relative to the .blend) say so from 4.5 on (5.0
 # warns on every such value without it); 4.2 and 3.4 do not know the flag and silently drop
 # a property that names it.

@@ -2,9 +2,19 @@
 
 - Re-entrancy guarded (our attribute writes trigger another depsgraph update, which re-enters
   here; the guard plus "inputs unchanged -> skip" in solver.solve means it never loops).
-- Vertex groups are re-read only when the deformed object's geometry was updated by someone
-  else than us (weight paint, edit mode exit, group assignment), since that read is O(n).
+- Vertex groups are re-read only when the deformed object's geometry was updated (weight
+  paint, edit mode exit, group assignment), since that read is O(n). Our own attribute writes
+  never reach the handler as such an update: Blender evaluates a depsgraph callback's tags
+  in a second pass without callbacks, and the refine timer evaluates its writes itself,
+  guarded, right after evaluating whatever was pending before them (see refine()); the same
+  holds for the topology check below.
 - No bpy references are kept: objects are looked up by name each time.
+- Before solving, a deformer id seen on two objects (a Shift+D or Alt+D copy) is made the
+  copy's own (solver.ensure_own_uid). The mesh topology is checked in full (the fingerprint
+  stored at bind) headless, and in the UI on every geometry update of the object (the
+  add-on's own attribute writes bring none: measured, test_addon_probe), after Edit or
+  Sculpt Mode and after undo; Blender 3.6+ also compares the mesh's corner attributes on
+  every solve (solver.check_topology).
 - UI updates of iterative methods (ARAP) solve within a time budget; the `refine` timer
   finishes them once the handles stop, so dragging stays interactive and the result still
   converges. Frame changes, bakes, scripts and blender -b always solve to convergence, and so
@@ -60,18 +70,26 @@ def _run(scene, depsgraph, cold=False):
                         geometry.add(idd.name)
                     elif isinstance(idd, bpy.types.Mesh):
                         geometry.add(("mesh", idd.name))
-        any_deformed = False
-        for obj in _deformed_objects(scene):
-            any_deformed = True
-            if obj.mode == "EDIT":
-                continue
+        ui = force_interactive[0] or not bpy.app.background
+        objs = list(_deformed_objects(scene))
+        _claim_duplicates(objs)
+        any_deformed = bool(objs)
+        for obj in objs:
+            if obj.mode in ("EDIT", "SCULPT"):
+                # modes that may change the topology: checked in full once out of them
+                solver.mark_unverified(obj)
+                if obj.mode == "EDIT":
+                    continue
             changed = (obj.name in geometry or ("mesh", obj.data.name) in geometry)
             # re-read groups on every geometry update of the object, ours included: skipping
             # our own writes could hide a group edit made in the same update
             check = changed
+            # the topology: headless always, in the UI (drags, playback) on every geometry
+            # update of the object (solver.check_topology: Blender 3.6+ compare three
+            # attributes on every solve anyway, 3.4-3.5 read every corner)
             solver.evaluate_object(obj, depsgraph, check_groups=check, cold=cold,
-                                   interactive=not cold and (force_interactive[0]
-                                                             or not bpy.app.background))
+                                   interactive=not cold and ui,
+                                   check_topology=not ui or changed)
         if cold and depsgraph is not None and any_deformed:
             # Frame change: this depsgraph (the viewport's or a render's) may have been
             # evaluated before the offsets were written (here, or by the handler call of
@@ -89,6 +107,30 @@ def _run(scene, depsgraph, cold=False):
         _busy[0] = False
 
 
+def _flush_updates():
+    """Evaluates the context's view layer (a no-op when nothing is tagged)."""
+    view_layer = getattr(bpy.context, "view_layer", None)
+    if view_layer is None:
+        return
+    try:
+        view_layer.update()
+    except Exception as ex:  # a timer must never raise
+        print("DeformKit refine error: %s: %s" % (type(ex).__name__, ex))
+
+
+def _claim_duplicates(objs):
+    """A deformer id seen on two objects of the scene (Shift+D, Alt+D): the copy gets its
+    own (solver.ensure_own_uid), also when its modifier is hidden and it is not solved."""
+    seen = {}
+    for obj in objs:
+        for d in obj.deformkit.deformers:
+            seen.setdefault(d.uid, []).append((obj, d))
+    for holders in seen.values():
+        if len(holders) > 1:
+            for obj, d in holders:
+                solver.ensure_own_uid(obj, d)
+
+
 def refine():
     """Timer: continues the interactive solves that stopped at their time budget (ARAP while
     dragging), one budget per tick, until they converge; a new drag just updates the targets
@@ -103,6 +145,16 @@ def refine():
     if all(solver.settling(k) for k in keys):
         return 0.05  # previews only, the handles still moving: their full results wait
     keys = [k for k in keys if not solver.settling(k)]
+    # Our own attribute writes must not cost a vertex-group re-read (a Python pass over every
+    # vertex: ~30 ms at 43k, ~0.5 s at 692k). A write from the depsgraph handler never does:
+    # Blender evaluates what a depsgraph_update_post callback tagged at once, in a second pass
+    # without callbacks. A write from this timer would reach the handler with the next main
+    # loop's update, merged with whatever the artist did meanwhile, so the handler cannot
+    # tell it apart and re-reads. Hence here: (1) evaluate what is pending *before* the
+    # write, with the handler live (anyone else's group or mesh edit is handled as always),
+    # (2) solve and write, (3) evaluate again with the handler guarded, in this same call,
+    # where nothing but our write can have happened since (1).
+    _flush_updates()
     _busy[0] = True
     before = set(solver.pending())
     try:
@@ -119,6 +171,7 @@ def refine():
                 continue
             solver.evaluate_object(obj, depsgraph, interactive=True, refine=True,
                                    only={k[1] for k in keys if k[0] == name})
+        _flush_updates()  # our writes only: the handler is guarded (_busy)
         _redraw_if_changed(before)
     except Exception as ex:  # a timer must never raise either
         print("DeformKit refine error: %s: %s" % (type(ex).__name__, ex))

@@ -32,7 +32,11 @@ def _get_deformer(op, context, obj):
     i = op.deformer_index if op.deformer_index >= 0 else dks.active_index
     if not 0 <= i < len(dks.deformers):
         raise solver.DeformKitError("no deformer at index %d" % i)
-    return dks.deformers[i]
+    d = dks.deformers[i]
+    # a duplicate's copy gets its own uid before anything acts on its attribute (removing,
+    # unbinding or applying a linked copy's would act on the original's)
+    solver.ensure_own_uid(obj, d)
+    return d
 
 
 class _Base:
@@ -369,6 +373,7 @@ class DEFORMKIT_OT_apply(_Base, bpy.types.Operator):
         if obj.mode == "EDIT":
             raise solver.DeformKitError("leave Edit Mode to apply")
         me = obj.data
+        solver.check_single_user(obj, "apply %s" % d.name)
         if self.mode == "MESH" and me.shape_keys is not None:
             raise solver.DeformKitError("mesh '%s' has shape keys: apply as a new shape key "
                                         "instead" % me.name)

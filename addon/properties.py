@@ -134,6 +134,15 @@ _deformer_ann = {
     "bound": BoolProperty(name="Bound", default=False),
     "bind_n_vertices": IntProperty(name="Vertices at Bind", default=0),
     "bind_n_faces": IntProperty(name="Faces at Bind", default=0),
+    # solver.topology_fingerprint of the mesh at bind (connectivity and vertex order): a
+    # short string, so a file saved with it opens (and renders) without the add-on
+    "bind_topology": StringProperty(name="Topology at Bind",
+                                    description="Fingerprint of the mesh's faces and vertex "
+                                                "order at bind"),
+    # the object that holds this uid (solver.ensure_own_uid): a copy (Shift+D, Alt+D) still
+    # names the original and gets a uid, attribute and cache of its own
+    "owner": StringProperty(name="Owner", description="The object this deformer's id "
+                                                      "belongs to"),
     "status": StringProperty(name="Status"),
     "status_is_error": BoolProperty(default=False),
     "status_overlap": StringProperty(name="Overlapping Groups",
@@ -200,6 +209,7 @@ def new_deformer(obj, method_id):
     dks = obj.deformkit
     d = dks.deformers.add()
     d.uid = _new_uid()
+    d.owner = obj.name
     d.method = method_id
     d.name = unique_name(dks, methods.get(method_id).label, skip=d)
     dks.active_index = len(dks.deformers) - 1

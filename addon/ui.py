@@ -276,7 +276,9 @@ def draw_deformer_summary(layout, obj, i, d, handle=None, width=40):
     m = methods.BY_ID.get(d.method)
     title = "%s: %s" % (obj.name, d.name) if handle is None else \
         "%s: %s, handle '%s'" % (obj.name, d.name, handle.name)
-    box.label(text=title, icon=m.icon if m else "QUESTION")
+    # wrapped like the status: the sidebar is narrow, and "Grid: Defor... handle 'tip'" said
+    # neither which deformer nor which handle
+    draw_wrapped(box, title, m.icon if m else "QUESTION", width)
     draw_wrapped(box, solver.status_text(d), "ERROR" if d.status_is_error else "INFO", width,
                  alert=d.status_is_error)
     draw_rebinding(box, obj, d)

@@ -2,7 +2,8 @@
 # Sets up a Debian machine for DeformKit and builds it. Safe to run again and again: installs
 # only the Debian packages that are missing (apt-get update first, then apt-get install -y),
 # then configures and builds with CMake into build/ (Release) and, with --asan, into
-# build-asan/ (AddressSanitizer + UndefinedBehaviorSanitizer, C library and C tests only).
+# build-asan/ (AddressSanitizer + UndefinedBehaviorSanitizer: the C library, the C tests and the
+# Python module, which scripts/test.sh runs with the sanitizer runtimes preloaded).
 #
 # patchelf is for scripts/package.sh (it bundles the native libraries into the add-on zips).
 # python3-hypothesis is for the property suite (tests/python/test_properties.py), which runs

@@ -4,7 +4,9 @@
 #      harnesses for a bounded minute in all (scripts/fuzz.sh --seconds 60: the mesh readers,
 #      mesh construction, every method's bind and solve; clang, ASan+UBSan),
 #   2. Python module tests (pytest under Debian's /usr/bin/python3; the property suite
-#      tests/python/test_properties.py with its bounded, derandomized "ci" profile),
+#      tests/python/test_properties.py with its bounded, derandomized "ci" profile), and
+#      again with the module of the ASan+UBSan build (the sanitizer runtimes preloaded;
+#      leaving out the tests marked heavy: whole scanned meshes solved to convergence),
 #   3. the packages: scripts/package.sh builds the wheel and the two add-on zips into dist/
 #      (and validates the extension in every Blender 4.2+ here); the wheel is installed into
 #      a clean virtual environment and smoke-tested there,
@@ -54,6 +56,14 @@ if [ "$quick" = 0 ]; then
   run_suite "fuzzers (60 s)" scripts/fuzz.sh --no-setup --seconds 60
 fi
 run_suite "Python tests" "$PY" -m pytest -q tests/python
+if [ "$quick" = 0 ]; then
+  # detect_leaks=0: the interpreter keeps memory at exit that LeakSanitizer would report (the
+  # C tests run with leak detection on)
+  run_suite "Python tests (ASan+UBSan)" env \
+    LD_PRELOAD="$(gcc -print-file-name=libasan.so) $(gcc -print-file-name=libubsan.so)" \
+    ASAN_OPTIONS=detect_leaks=0 PYTHONPATH="$here/build-asan/python" \
+    "$PY" -m pytest -q -p no:cacheprovider -m "not heavy" tests/python
+fi
 run_suite "package" scripts/package.sh --no-setup
 run_suite "wheel in a clean venv" tests/wheel/test_wheel.sh
 

@@ -1,11 +1,13 @@
 /* DeformKit: two-way data parallelism (see dk_parallel.h). */
-#define _POSIX_C_SOURCE 200809L
+#define _GNU_SOURCE /* RTLD_NOLOAD; includes POSIX 2008 */
 #include "dk_parallel.h"
 
+#include <dlfcn.h>
 #include <pthread.h>
 #include <signal.h>
 #include <stdatomic.h>
 #include <stdlib.h>
+#include <string.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -225,4 +227,23 @@ void dk_team_free(dk_team *t)
     /* in a forked child the helper does not exist and the mutex may have been copied in any
      * state: free the memory only */
     free(t);
+}
+
+void dk_openmp_after_fork_child(void)
+{
+    /* The runtime is looked up, not linked: it is whatever the process's CHOLMOD was built
+     * with (libgomp on Linux); RTLD_NOLOAD finds it only when it is already loaded. */
+    static const char *const runtimes[] = {"libgomp.so.1", "libomp.so", "libiomp5.so"};
+    for (size_t k = 0; k < sizeof runtimes / sizeof runtimes[0]; k++) {
+        void *h = dlopen(runtimes[k], RTLD_LAZY | RTLD_NOLOAD);
+        if (!h)
+            continue;
+        void *sym = dlsym(h, "omp_set_max_active_levels");
+        if (sym) {
+            void (*set_levels)(int);
+            memcpy(&set_levels, &sym, sizeof set_levels); /* object to function pointer */
+            set_levels(0);
+        }
+        dlclose(h);
+    }
 }

@@ -49,4 +49,17 @@ void dk_team_park(dk_team *team);
 /** Stops and joins the helper and frees the team (NULL is fine). No pass may be running. */
 void dk_team_free(dk_team *team);
 
+/** Call in a child process just after fork(), on the thread that forked (the only thread of
+ *  the child): makes every OpenMP parallel region this thread starts from now on run on this
+ *  thread alone. CHOLMOD runs its supernodal loops in OpenMP teams; GNU libgomp keeps the
+ *  team of threads a thread led in its thread-local state and reuses it, so in a forked child
+ *  the forking thread's next parallel region hands work to threads that exist only in the
+ *  parent (a crash in GOMP_parallel or a hang). With the thread's max-active-levels ICV at 0
+ *  (a per-thread OpenMP setting, not a DeformKit global) its regions run on one thread and
+ *  never touch that team; threads the child creates later start clean teams and keep full
+ *  parallelism. CHOLMOD's OpenMP loops are its light ones (the heavy work is BLAS, whose
+ *  OpenBLAS pool has its own fork handler), so the cost is small. Does nothing when no
+ *  OpenMP runtime is loaded in the process. Never fails. */
+void dk_openmp_after_fork_child(void);
+
 #endif

@@ -23,6 +23,7 @@
 #include "dk_constraints.h"
 #include "dk_mesh.h"
 #include "dk_status.h"
+#include <stdint.h>
 
 #ifdef __cplusplus
 extern "C" {
@@ -209,4 +210,15 @@ dk_status dk_energy_result_check(double energy, const char *who, dk_error *err);
 #ifdef __cplusplus
 }
 #endif
+/** The memory (bytes) a bind of method `ops` on `mesh` with `options` (the method's options
+ *  struct, or NULL for its defaults) needs at its peak, including its first solve: a model
+ *  fitted to measured peak RSS (memory_estimate.c; the ratios are in docs/benchmarks.md).
+ *  It reads the vertex count and, where they change the size, the options: EigenDeformation
+ *  n_eigenvectors and refine (K = the larger; the dense basis is K x n), EmbeddedDeformation
+ *  k. The Cholesky factor is modelled here (fill ~ n log n) and checked exactly from the
+ *  symbolic analysis (nnz(L)) before the numeric factorization. DK_ERR_INVALID_ARGUMENT for
+ *  NULL arguments or a method without a model. */
+dk_status dk_method_estimate_memory(const dk_method_ops *ops, const dk_mesh *mesh,
+                                    const void *options, uint64_t *bytes, dk_error *err);
+
 #endif

@@ -13,9 +13,11 @@
 #include <cholmod.h>
 #include <math.h>
 #include <stdint.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "dk_memory.h"
 #include "dk_trisolve.h"
 
 _Static_assert(sizeof(dk_index) == sizeof(int), "dk_index must match CHOLMOD_INT (int)");
@@ -209,6 +211,24 @@ dk_status dk_cholesky_factorize(dk_cholesky *chol, const dk_sparse *a, dk_error 
                             "Cholesky factorize: sparsity pattern differs from the one analysed");
 
     cholmod_common *c = &chol->common;
+    if (chol->factor->xtype == CHOLMOD_PATTERN) {
+        /* The first numeric factorization allocates the factor (known from the symbolic
+         * analysis: nnz(L) entries, or xsize for a supernodal one) and the BLAS's buffers:
+         * refused here, before allocating, when it cannot fit (issue 18, class 4; under
+         * RLIMIT_AS OpenBLAS's allocator would retry forever). Later factorizations reuse
+         * the factor's memory. */
+        const cholmod_factor *L = chol->factor;
+        const double entries = L->is_super ? (double)L->xsize : c->lnz;
+        const double need = entries * (sizeof(double) + sizeof(dk_index)) * 2.0 /* the
+                            factor and the two-thread solve plan's copy */
+                            + (L->is_super ? (double)L->maxcsize * sizeof(double) : 0.0) +
+                            (double)n * 64.0;
+        char what[96];
+        snprintf(what, sizeof what, "the factorization (n = %d, nnz(L) = %.0f)", (int)n,
+                 entries);
+        st = dk_memory_check((uint64_t)need, "Cholesky factorize", what, err);
+        if (st != DK_OK) return st;
+    }
     cholmod_sparse view = sparse_view(a);
     dk_trisolve_free(chol->plan); /* it points into the factor's arrays */
     chol->plan = NULL;

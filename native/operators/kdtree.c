@@ -8,9 +8,9 @@
  *
  * A query keeps its k best candidates in a bounded max-heap ordered by (squared distance,
  * index), so ties are broken by the smaller index exactly like a sort of all points would.
- * The far side of a split is visited when its lower bound (distance to the splitting
- * plane)^2 is <= the current k-th best, so equal distances with smaller indices are never
- * pruned. Queries only read the tree; each call to dk_kdtree_knn allocates its own heap.
+ * A side of a split is visited when its cell's lower bound (the squared distance to the
+ * cell's box, accumulated from the splitting planes down from the points' bounding box) is
+ * <= the current k-th best, so equal distances with smaller indices are never pruned. Queries only read the tree; each call to dk_kdtree_knn allocates its own heap.
  */
 #include <math.h>
 #include <stdlib.h>
@@ -177,9 +177,26 @@ static void heap_offer(knn_heap *h, double d2, dk_index id)
     h->id[i] = id;
 }
 
-static void search(const dk_kdtree *t, const double *q, dk_index lo, dk_index hi, knn_heap *h)
+/* The lower bound of the squared distance from the query to a cell, from the query's
+ * offsets to the cell along each axis (0 where the query is within the cell's extent).
+ * Evaluated in the order the point distances are, so that, rounding being monotone, a
+ * point of the cell never computes closer than its cell's bound: the pruning stays exact. */
+static double cell_bound(const double *off)
 {
+    return off[0] * off[0] + off[1] * off[1] + off[2] * off[2];
+}
+
+/* Descends [lo, hi) whose cell is `off` away from q (per axis). A side is skipped when its
+ * cell's bound exceeds the current k-th best. The bound counts every axis (the offsets
+ * accumulate down the tree, as in Arya and Mount's incremental distance): with the plane
+ * distance alone, a query far from all points (most of a mesh, for a small handle set)
+ * visited nearly the whole tree -- 82% of Falloff's bind at 173k vertices. */
+static void search(const dk_kdtree *t, const double *q, dk_index lo, dk_index hi,
+                   const double *cell_off, knn_heap *h)
+{
+    double off[3] = {cell_off[0], cell_off[1], cell_off[2]};
     while (hi > lo) {
+        if (h->size == h->k && cell_bound(off) > h->d2[0]) return;
         dk_index mid = lo + (hi - lo) / 2;
         const double *p = t->pts + 3 * mid;
         double dx = q[0] - p[0], dy = q[1] - p[1], dz = q[2] - p[2];
@@ -190,9 +207,10 @@ static void search(const dk_kdtree *t, const double *q, dk_index lo, dk_index hi
         dk_index nlo, nhi, flo, fhi;
         if (diff < 0) nlo = lo, nhi = mid, flo = mid + 1, fhi = hi;
         else nlo = mid + 1, nhi = hi, flo = lo, fhi = mid;
-        search(t, q, nlo, nhi, h);
-        if (h->size == h->k && diff * diff > h->d2[0]) return;
-        lo = flo, hi = fhi; /* tail: the far side */
+        search(t, q, nlo, nhi, off, h);
+        /* the far side lies beyond the splitting plane: |diff| away along ax, at least */
+        if (fabs(diff) > off[ax]) off[ax] = fabs(diff);
+        lo = flo, hi = fhi; /* tail: the far side, its bound tested at the loop's top */
     }
 }
 
@@ -224,9 +242,20 @@ dk_status dk_kdtree_knn(const dk_kdtree *tree, const double *queries, dk_index n
         return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "kdtree knn: out of memory for k = %d",
                             (int)k);
     }
+    /* the root cell: the points' bounding box */
+    double box_lo[3] = {INFINITY, INFINITY, INFINITY}, box_hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (dk_index i = 0; i < tree->n; i++)
+        for (int d = 0; d < 3; d++) {
+            if (tree->pts[3 * i + d] < box_lo[d]) box_lo[d] = tree->pts[3 * i + d];
+            if (tree->pts[3 * i + d] > box_hi[d]) box_hi[d] = tree->pts[3 * i + d];
+        }
     for (dk_index qi = 0; qi < n_queries; qi++) {
+        const double *q = queries + 3 * qi;
+        double off[3];
+        for (int d = 0; d < 3; d++)
+            off[d] = q[d] < box_lo[d] ? box_lo[d] - q[d] : q[d] > box_hi[d] ? q[d] - box_hi[d] : 0.0;
         h.size = 0;
-        search(tree, queries + 3 * qi, 0, tree->n, &h);
+        search(tree, q, 0, tree->n, off, &h);
         /* pop the heap from the worst: fills the outputs back to front */
         for (dk_index s = k - 1; s >= 0; s--) {
             double d2 = h.d2[0];

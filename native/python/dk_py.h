@@ -15,6 +15,7 @@
 
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
+#include <pthread.h>
 #include <stdint.h>
 
 #include "dk_mesh.h"
@@ -103,9 +104,55 @@ typedef struct dk_py_state {
     PyObject *solve_result_type;
     PyThread_type_lock arpack_lock;
     PyObject *numpy_frombuffer; /* None if numpy is missing */
+    /* the fork gate (dk_py_native_begin): */
+    pthread_mutex_t gate_mu;
+    pthread_cond_t gate_cv;
+    int gate_ready;             /* gate_mu and gate_cv are initialised */
+    int in_flight;              /* native calls running (under gate_mu) */
+    int forks_pending;          /* os.fork calls waiting or forking (under gate_mu) */
+    /* the method types and their specs, for their classmethods (estimate_memory): the type
+     * pointers are compared, never followed (the module holds the types) */
+    const void *method_type[16];
+    const void *method_spec[16];
+    int n_method_types;
 } dk_py_state;
 
 dk_py_state *dk_py_get_state(PyObject *module);
+
+/** The state of the module that defined `obj`'s type (a type created with the module), or
+ *  NULL with no exception set. */
+dk_py_state *dk_py_state_of(PyObject *obj);
+
+/* ------------------------------------------------------------------ the fork gate ------ */
+/* Issue 18, class 3. os.fork() in one thread while another is inside a native call copies
+ * that call's half-done state into the child, where the thread does not exist: OpenBLAS's
+ * own fork handler (which stops its thread pool) then waits forever for a worker that is
+ * running that call's job (the *parent* hangs in fork), an ARPACK lock or an object's busy
+ * flag stays taken in the child. So the heavy native calls (binds, solves, factorizations,
+ * eigensolves, geodesics) pass through a gate: the package's os.register_at_fork handlers
+ * close it before a fork -- waiting, without the GIL, for the calls in flight to return --
+ * and open it after; a call that starts meanwhile waits at the gate. Calls that never touch
+ * BLAS, OpenMP or a helper thread (Laplacian assembly, k-d trees, mesh building) do not pass
+ * it. Both functions are called with the GIL released (DK_PY_BEGIN_NATIVE); st may be NULL
+ * (no gate). */
+void dk_py_native_begin(dk_py_state *st);
+void dk_py_native_end(dk_py_state *st);
+
+/** Py_BEGIN_ALLOW_THREADS plus the fork gate (`st` evaluated once, with the GIL held). */
+#define DK_PY_BEGIN_NATIVE(st)                                                             \
+    {                                                                                      \
+        dk_py_state *dk_gate_state_ = (st);                                                \
+        Py_BEGIN_ALLOW_THREADS                                                             \
+        dk_py_native_begin(dk_gate_state_);
+#define DK_PY_END_NATIVE                                                                   \
+        dk_py_native_end(dk_gate_state_);                                                  \
+        Py_END_ALLOW_THREADS                                                               \
+    }
+
+/** The handlers the package registers with os.register_at_fork (module.c). Return 0. */
+int dk_py_fork_before(dk_py_state *st);
+void dk_py_fork_after_parent(dk_py_state *st);
+void dk_py_fork_after_child(dk_py_state *st);
 
 /* ------------------------------------------------------------------ solve results ------ */
 

@@ -44,7 +44,8 @@ typedef struct dk_py_method {
     const dk_mesh *mesh;
     void *native;                                              /* the bound method object */
     PyObject *handles, *fixed, *roi, *handle_weights, *stiffness; /* as last bound         */
-    int busy;
+    int busy;                /* a call is running on the object ...                      */
+    long busy_pid;           /* ... in this process (getpid() when it was entered)       */
 } dk_py_method;
 
 /** What is a method's own. */
@@ -96,6 +97,7 @@ struct dk_py_method_spec {
 PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs);
 PyObject *dk_py_method_rebind(PyObject *obj, PyObject *args, PyObject *kwargs);
 PyObject *dk_py_method_energy(PyObject *obj, PyObject *arg);
+PyObject *dk_py_method_estimate_memory(PyObject *cls, PyObject *args, PyObject *kwargs);
 PyObject *dk_py_method_get_mesh(PyObject *obj, void *closure);
 PyObject *dk_py_method_get_n_vertices(PyObject *obj, void *closure);
 PyObject *dk_py_method_get_n_handles(PyObject *obj, void *closure);
@@ -104,13 +106,16 @@ PyObject *dk_py_method_get_stats(PyObject *obj, void *closure);
 PyObject *dk_py_method_get_warnings(PyObject *obj, void *closure);
 extern const char dk_py_method_rebind_doc[];
 extern const char dk_py_method_energy_doc[];
+extern const char dk_py_method_estimate_memory_doc[];
 
 #define DK_PY_METHOD_METHODS(solve_doc)                                                    \
     {"solve", (PyCFunction)(void (*)(void))dk_py_method_solve, METH_VARARGS | METH_KEYWORDS, \
      solve_doc},                                                                           \
         {"rebind", (PyCFunction)(void (*)(void))dk_py_method_rebind,                       \
          METH_VARARGS | METH_KEYWORDS, dk_py_method_rebind_doc},                           \
-        {"energy", dk_py_method_energy, METH_O, dk_py_method_energy_doc}
+        {"energy", dk_py_method_energy, METH_O, dk_py_method_energy_doc},                  \
+        {"estimate_memory", (PyCFunction)(void (*)(void))dk_py_method_estimate_memory,      \
+         METH_VARARGS | METH_KEYWORDS | METH_CLASS, dk_py_method_estimate_memory_doc}
 
 #define DK_PY_METHOD_GETSET                                                                \
     {"mesh", dk_py_method_get_mesh, NULL, "the bound deformkit.Mesh", NULL},               \
@@ -137,7 +142,12 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
 int dk_py_method_register(PyObject *module, const dk_py_method_spec *spec, newfunc tp_new);
 
 /** Enters the object for one native call (RuntimeError when busy or unbound); leave with
- *  self->busy = 0. For a spec's extra methods. */
+ *  self->busy = 0. For a spec's extra methods. An object that is busy in another process --
+ *  a thread of the parent had entered it when this process forked, and that thread does not
+ *  exist here -- is taken over (issue 18, class 3): the fork gate (dk_py.h) guarantees that
+ *  its native call was not running at the fork, so its native state is whole. Every native
+ *  call on a method object that releases the GIL must therefore pass the gate
+ *  (DK_PY_BEGIN_NATIVE). */
 int dk_py_method_enter(dk_py_method *self);
 
 /* Reading options: each takes `key` out of the dict `kw` when present (absent: `*value`

@@ -769,6 +769,76 @@ dk_py_state *dk_py_get_state(PyObject *module)
     return (dk_py_state *)PyModule_GetState(module);
 }
 
+dk_py_state *dk_py_state_of(PyObject *obj)
+{
+    PyObject *module = PyType_GetModule(Py_TYPE(obj));
+    if (!module) {
+        PyErr_Clear();
+        return NULL;
+    }
+    return dk_py_get_state(module);
+}
+
+/* ------------------------------------------------------------------ the fork gate ------ */
+
+void dk_py_native_begin(dk_py_state *st)
+{
+    if (!st || !st->gate_ready)
+        return;
+    pthread_mutex_lock(&st->gate_mu);
+    while (st->forks_pending > 0)
+        pthread_cond_wait(&st->gate_cv, &st->gate_mu);
+    st->in_flight++;
+    pthread_mutex_unlock(&st->gate_mu);
+}
+
+void dk_py_native_end(dk_py_state *st)
+{
+    if (!st || !st->gate_ready)
+        return;
+    pthread_mutex_lock(&st->gate_mu);
+    if (--st->in_flight == 0 && st->forks_pending > 0)
+        pthread_cond_broadcast(&st->gate_cv);
+    pthread_mutex_unlock(&st->gate_mu);
+}
+
+int dk_py_fork_before(dk_py_state *st)
+{
+    if (!st || !st->gate_ready)
+        return 0;
+    Py_BEGIN_ALLOW_THREADS
+    pthread_mutex_lock(&st->gate_mu);
+    st->forks_pending++;
+    while (st->in_flight > 0)
+        pthread_cond_wait(&st->gate_cv, &st->gate_mu);
+    pthread_mutex_unlock(&st->gate_mu);
+    Py_END_ALLOW_THREADS
+    return 0;
+}
+
+void dk_py_fork_after_parent(dk_py_state *st)
+{
+    if (!st || !st->gate_ready)
+        return;
+    pthread_mutex_lock(&st->gate_mu);
+    if (st->forks_pending > 0)
+        st->forks_pending--;
+    pthread_cond_broadcast(&st->gate_cv);
+    pthread_mutex_unlock(&st->gate_mu);
+}
+
+void dk_py_fork_after_child(dk_py_state *st)
+{
+    if (!st || !st->gate_ready)
+        return;
+    /* the child has one thread: nobody is in flight or waiting; the mutex was unlocked at
+     * the fork but the condition may count waiters of the parent, so both start afresh */
+    pthread_mutex_init(&st->gate_mu, NULL);
+    pthread_cond_init(&st->gate_cv, NULL);
+    st->in_flight = 0;
+    st->forks_pending = 0;
+}
+
 PyObject *dk_py_new_solve_result(PyObject *module, PyObject *positions, double energy,
                                  int iterations, int converged)
 {

@@ -10,6 +10,8 @@
 #include "dk_py.h"
 
 #include "dk_method.h"
+#include "dk_memory.h"
+#include "dk_parallel.h"
 
 #include <string.h>
 
@@ -146,7 +148,114 @@ static PyObject *py_method_info(PyObject *module, PyObject *arg)
                          (f & DK_METHOD_SOFT_REGIONS) ? Py_True : Py_False);
 }
 
+/* ------------------------------------------------------------------ memory ------------- */
+
+PyDoc_STRVAR(available_memory_doc,
+             "available_memory() -> dict\n\n"
+             "What a bind may still take now (issue 19, item 4): 'bytes', the least of\n"
+             "'address_space' (RLIMIT_AS minus the process's VmSize), 'cgroup' (the cgroup v2\n"
+             "memory.max minus memory.current) and 'mem_available' (/proc/meminfo); each is\n"
+             "None when there is no such limit; 'limit' names the tightest ('RLIMIT_AS\n"
+             "headroom', 'cgroup memory.max headroom', 'MemAvailable' or 'no limit');\n"
+             "'thread_reserve', the address space the numerics' thread pools may take on\n"
+             "first use, which binds keep free below RLIMIT_AS.");
+
+static PyObject *opt_bytes(uint64_t v)
+{
+    if (v == UINT64_MAX)
+        Py_RETURN_NONE;
+    return PyLong_FromUnsignedLongLong((unsigned long long)v);
+}
+
+static PyObject *py_available_memory(PyObject *module, PyObject *unused)
+{
+    dk_memory_available a;
+    (void)module;
+    (void)unused;
+    dk_memory_query(&a);
+    PyObject *vals[5] = {opt_bytes(a.bytes), opt_bytes(a.address_space), opt_bytes(a.cgroup),
+                         opt_bytes(a.mem_available), opt_bytes(dk_memory_thread_reserve())};
+    PyObject *d = NULL;
+    if (vals[0] && vals[1] && vals[2] && vals[3] && vals[4])
+        d = Py_BuildValue("{s:O,s:s,s:O,s:O,s:O,s:O}", "bytes", vals[0], "limit",
+                          dk_memory_limit_name(a.limit), "address_space", vals[1], "cgroup",
+                          vals[2], "mem_available", vals[3], "thread_reserve", vals[4]);
+    for (int i = 0; i < 5; i++)
+        Py_XDECREF(vals[i]);
+    return d;
+}
+
+/* ------------------------------------------------------------------ fork --------------- */
+
+PyDoc_STRVAR(after_fork_child_doc,
+             "_after_fork_in_child()\n\n"
+             "Registered by the deformkit package with os.register_at_fork(after_in_child=...):\n"
+             "runs in a forked child on the thread that forked (issue 18, class 3). Makes\n"
+             "OpenMP regions started from this thread run on it alone (its OpenMP team\n"
+             "exists only in the parent) and gives the module a fresh ARPACK lock (another\n"
+             "thread may have held it at the fork; that thread does not exist here).");
+
+/* Why fork handlers and not a pid check per call: the hazards are per process and per
+ * thread -- only the thread that forked carries an OpenMP team whose threads stayed in the
+ * parent; a call in flight in another thread at the fork must not be copied half-done (the
+ * fork gate, dk_py.h) -- and the handlers run exactly there, at the right moments. They are
+ * registered through os.register_at_fork (deformkit/__init__.py), which keeps them in the
+ * interpreter, so the C library and the module keep no global of their own: what they touch
+ * (the gate, the ARPACK lock) is module state. A method object entered but not yet inside
+ * its native call at the fork is handled per object, by the pid recorded when it was
+ * entered (dk_py_method_enter). Forks that bypass os.fork (a C extension calling fork()
+ * without PyOS_AfterFork_Child) are not covered: the interpreter itself is not usable in
+ * such a child. */
+static PyObject *py_after_fork_child(PyObject *module, PyObject *unused)
+{
+    dk_py_state *st = dk_py_get_state(module);
+    (void)unused;
+    dk_openmp_after_fork_child();
+    dk_py_fork_after_child(st);
+    if (st && st->arpack_lock) {
+        if (PyThread_acquire_lock(st->arpack_lock, NOWAIT_LOCK)) {
+            PyThread_release_lock(st->arpack_lock); /* free at the fork: keep it */
+        } else {
+            /* held by a thread that did not survive the fork: it would never be released.
+             * Replaced, and the held one dropped (freeing a held lock is undefined). */
+            PyThread_type_lock fresh = PyThread_allocate_lock();
+            if (!fresh)
+                return PyErr_NoMemory();
+            st->arpack_lock = fresh;
+        }
+    }
+    Py_RETURN_NONE;
+}
+
+PyDoc_STRVAR(before_fork_doc,
+             "_before_fork()\n\n"
+             "Registered with os.register_at_fork(before=...): closes the fork gate and waits\n"
+             "(without the GIL) until no heavy native call runs in another thread, so that\n"
+             "none is copied half-done into the child (dk_py.h, the fork gate).");
+
+static PyObject *py_before_fork(PyObject *module, PyObject *unused)
+{
+    (void)unused;
+    dk_py_fork_before(dk_py_get_state(module));
+    Py_RETURN_NONE;
+}
+
+PyDoc_STRVAR(after_fork_parent_doc,
+             "_after_fork_in_parent()\n\n"
+             "Registered with os.register_at_fork(after_in_parent=...): opens the fork gate.");
+
+static PyObject *py_after_fork_parent(PyObject *module, PyObject *unused)
+{
+    (void)unused;
+    dk_py_fork_after_parent(dk_py_get_state(module));
+    Py_RETURN_NONE;
+}
+
 static PyMethodDef module_methods[] = {
+    {"available_memory", py_available_memory, METH_NOARGS, available_memory_doc},
+    {"_before_fork", py_before_fork, METH_NOARGS, before_fork_doc},
+    {"_after_fork_in_parent", py_after_fork_parent, METH_NOARGS, after_fork_parent_doc},
+    {"_after_fork_in_child", py_after_fork_child, METH_NOARGS, after_fork_child_doc},
     {"_method_info", py_method_info, METH_O, method_info_doc},
     {"_read_doubles", (PyCFunction)(void (*)(void))py_read_doubles,
      METH_VARARGS | METH_KEYWORDS, read_doubles_doc},
@@ -172,6 +281,16 @@ static int module_exec(PyObject *module)
         PyErr_NoMemory();
         return -1;
     }
+    if (pthread_mutex_init(&st->gate_mu, NULL) != 0) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    if (pthread_cond_init(&st->gate_cv, NULL) != 0) {
+        pthread_mutex_destroy(&st->gate_mu);
+        PyErr_NoMemory();
+        return -1;
+    }
+    st->gate_ready = 1;
     numpy = PyImport_ImportModule("numpy");
     if (numpy) {
         st->numpy_frombuffer = PyObject_GetAttrString(numpy, "frombuffer");
@@ -243,6 +362,11 @@ static void module_free(void *module)
     if (st && st->arpack_lock) {
         PyThread_free_lock(st->arpack_lock);
         st->arpack_lock = NULL;
+    }
+    if (st && st->gate_ready) {
+        pthread_cond_destroy(&st->gate_cv);
+        pthread_mutex_destroy(&st->gate_mu);
+        st->gate_ready = 0;
     }
 }
 

@@ -19,6 +19,8 @@
 #include "dk_cholesky.h"
 #include "dk_sparse.h"
 
+#include <unistd.h>
+
 typedef struct CholeskyObject {
     PyObject_HEAD
     dk_cholesky *chol;
@@ -26,6 +28,7 @@ typedef struct CholeskyObject {
     Py_ssize_t n_triplets;
     dk_index *rows, *cols; /* the triplets' positions, kept for refactorize (PyMem) */
     int busy;
+    long busy_pid;         /* getpid() of the process that set busy */
 } CholeskyObject;
 
 /* Relative asymmetry allowed: round-off of an assembly that sums the same terms in another
@@ -34,12 +37,17 @@ typedef struct CholeskyObject {
 
 static int enter(CholeskyObject *self)
 {
+    /* busy in the parent when this process forked: its native call was not running (the
+     * fork gate, dk_py.h), so the factor is whole; the thread that set it is not here */
+    if (self->busy && self->busy_pid != (long)getpid())
+        self->busy = 0;
     if (self->busy) {
         PyErr_SetString(PyExc_RuntimeError,
                         "SparseCholesky: the object is in use by another thread");
         return -1;
     }
     self->busy = 1;
+    self->busy_pid = (long)getpid();
     return 0;
 }
 
@@ -107,13 +115,13 @@ static PyObject *cholesky_new(PyTypeObject *type, PyObject *args, PyObject *kwar
         dk_py_read_doubles(vals_obj, r.rows, 0, "values", &v) < 0 ||
         check_finite(&v, "SparseCholesky") < 0)
         goto fail;
-    Py_BEGIN_ALLOW_THREADS
+    DK_PY_BEGIN_NATIVE((dk_py_state *)PyType_GetModuleState(type))
     st = assemble((dk_index)n, r.rows, r.data, c.data, v.data, &a, &err);
     if (st == DK_OK)
         st = dk_cholesky_analyze(a, &chol, &err);
     if (st == DK_OK)
         st = dk_cholesky_factorize(chol, a, &err);
-    Py_END_ALLOW_THREADS
+    DK_PY_END_NATIVE
     dk_sparse_free(a);
     dk_py_doubles_release(&v);
     if (st != DK_OK) {
@@ -178,11 +186,11 @@ static PyObject *cholesky_refactorize(PyObject *obj, PyObject *arg)
         self->busy = 0;
         return NULL;
     }
-    Py_BEGIN_ALLOW_THREADS
+    DK_PY_BEGIN_NATIVE(dk_py_state_of(obj))
     st = assemble(self->n, self->n_triplets, self->rows, self->cols, v.data, &a, &err);
     if (st == DK_OK)
         st = dk_cholesky_factorize(self->chol, a, &err);
-    Py_END_ALLOW_THREADS
+    DK_PY_END_NATIVE
     dk_sparse_free(a);
     dk_py_doubles_release(&v);
     self->busy = 0;
@@ -235,7 +243,7 @@ static PyObject *cholesky_solve(PyObject *obj, PyObject *arg)
             goto fail;
         }
     }
-    Py_BEGIN_ALLOW_THREADS
+    DK_PY_BEGIN_NATIVE(dk_py_state_of(obj))
     if (k == 1) {
         st = dk_cholesky_solve(self->chol, b.data, 1, xdata, &err);
     } else {
@@ -249,7 +257,7 @@ static PyObject *cholesky_solve(PyObject *obj, PyObject *arg)
                 for (Py_ssize_t j = 0; j < k; j++)
                     xdata[i * k + j] = work[j * n + i];
     }
-    Py_END_ALLOW_THREADS
+    DK_PY_END_NATIVE
     PyMem_Free(work);
     dk_py_doubles_release(&b);
     self->busy = 0;

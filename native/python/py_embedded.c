@@ -167,9 +167,9 @@ static PyObject *ed_normals(PyObject *obj, PyObject *args, PyObject *kwargs)
     PyObject *res = dk_py_new_doubles(2, self->mesh->n_vertices, 3, &out);
     dk_status st = DK_OK;
     if (res) {
-        Py_BEGIN_ALLOW_THREADS
+        DK_PY_BEGIN_NATIVE(dk_py_state_of(obj))
         st = dk_embedded_normals(self->native, in.data, out, &err);
-        Py_END_ALLOW_THREADS
+        DK_PY_END_NATIVE
     }
     dk_py_doubles_release(&in);
     self->busy = 0;
@@ -196,9 +196,9 @@ static PyObject *ed_deformed(PyObject *obj, PyObject *unused)
     PyObject *res = dk_py_new_doubles(2, self->mesh->n_vertices, 3, &out);
     dk_status st = DK_OK;
     if (res) {
-        Py_BEGIN_ALLOW_THREADS
+        DK_PY_BEGIN_NATIVE(dk_py_state_of(obj))
         st = dk_embedded_deformed(self->native, out, &err);
-        Py_END_ALLOW_THREADS
+        DK_PY_END_NATIVE
     }
     self->busy = 0;
     if (res && st != DK_OK) {
@@ -231,9 +231,9 @@ static PyObject *ed_update_source(PyObject *obj, PyObject *arg)
         return NULL;
     }
     dk_status st;
-    Py_BEGIN_ALLOW_THREADS
+    DK_PY_BEGIN_NATIVE(dk_py_state_of(obj))
     st = dk_embedded_update_source(self->native, in.data, &err);
-    Py_END_ALLOW_THREADS
+    DK_PY_END_NATIVE
     self->busy = 0;
     dk_py_doubles_release(&in);
     if (st != DK_OK)
@@ -266,9 +266,9 @@ static PyObject *ed_embed(PyObject *obj, PyObject *arg)
     PyObject *c = b ? dk_py_new_doubles(2, np, 3, &out) : NULL;
     dk_status st = DK_OK;
     if (c) {
-        Py_BEGIN_ALLOW_THREADS
+        DK_PY_BEGIN_NATIVE(dk_py_state_of(obj))
         st = dk_embedded_embed(self->native, pts.data, np, nb, w, out, &err);
-        Py_END_ALLOW_THREADS
+        DK_PY_END_NATIVE
     }
     dk_py_doubles_release(&pts);
     self->busy = 0;

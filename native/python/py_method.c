@@ -1,10 +1,13 @@
 /* DeformKit CPython module: the generic deformation-method type (dk_py_method.h). */
 #include "dk_py_method.h"
 
+#include "dk_memory.h"
+
 #include <math.h>
 #include <stddef.h>
 #include <stdio.h>
 #include <string.h>
+#include <unistd.h>
 
 #define OPTIONS_MAX 256
 
@@ -159,6 +162,13 @@ fail:
 
 int dk_py_method_enter(dk_py_method *self)
 {
+    const long pid = (long)getpid();
+    /* Busy in another process: the parent's thread that entered the object does not exist
+     * here. The fork gate (dk_py.h) guarantees that no native call on it was running at the
+     * fork -- that thread was reading its inputs, waiting at the gate, or back from its
+     * native call and waiting for the GIL -- so the native state is whole: take it over. */
+    if (self->busy && self->busy_pid != pid)
+        self->busy = 0;
     if (self->busy) {
         PyErr_Format(PyExc_RuntimeError, "%s: the object is in use by another thread",
                      self->spec->name);
@@ -169,6 +179,7 @@ int dk_py_method_enter(dk_py_method *self)
         return -1;
     }
     self->busy = 1;
+    self->busy_pid = pid;
     return 0;
 }
 
@@ -259,13 +270,29 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
         return NULL;
     }
     dk_py_state *state = spec->serialise_bind ? dk_py_get_state(module) : NULL;
-    Py_BEGIN_ALLOW_THREADS
+    /* refused before anything big is allocated when it cannot fit (issue 18 class 4) */
+    uint64_t need = 0;
+    st = dk_method_estimate_memory(spec->ops, mesh, &opt, &need, &err);
+    if (st == DK_OK) {
+        char what[96];
+        snprintf(what, sizeof what, "binding %lld vertices", (long long)mesh->n_vertices);
+        st = dk_memory_check(need, spec->name, what, &err);
+    }
+    if (st != DK_OK) {
+        if (spec->release_options)
+            spec->release_options(&opt);
+        dk_py_lap_constraints_release(&con);
+        dk_py_doubles_release(&stiff);
+        Py_DECREF(mine);
+        return dk_py_raise(&err, NULL);
+    }
+    DK_PY_BEGIN_NATIVE(dk_py_get_state(module))
     if (state)
         PyThread_acquire_lock(state->arpack_lock, WAIT_LOCK);
     st = spec->ops->bind(mesh, &con.desc, &opt, &native, &err);
     if (state)
         PyThread_release_lock(state->arpack_lock);
-    Py_END_ALLOW_THREADS
+    DK_PY_END_NATIVE
     if (spec->release_options)
         spec->release_options(&opt);
     dk_py_lap_constraints_release(&con);
@@ -429,9 +456,9 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
     };
     if (spec->apply_extra)
         spec->apply_extra(self, pending.bytes, saved.bytes);
-    Py_BEGIN_ALLOW_THREADS
+    DK_PY_BEGIN_NATIVE(dk_py_get_state(module))
     st = spec->ops->solve(self->native, &rq, out, &info, &err);
-    Py_END_ALLOW_THREADS
+    DK_PY_END_NATIVE
     if (st != DK_OK && spec->apply_extra)
         spec->apply_extra(self, saved.bytes, NULL); /* the call raised: put it back */
     dk_py_doubles_release(&in);
@@ -453,6 +480,62 @@ fail:
     Py_DECREF(transforms);
     return NULL;
 }
+
+/* ------------------------------------------------------------------ estimate_memory ---- */
+
+PyObject *dk_py_method_estimate_memory(PyObject *cls, PyObject *args, PyObject *kwargs)
+{
+    static char *kwlist[] = {"mesh", NULL};
+    PyObject *module = PyType_GetModule((PyTypeObject *)cls);
+    dk_py_state *state = module ? dk_py_get_state(module) : NULL;
+    const dk_py_method_spec *spec = NULL;
+    PyObject *mine = NULL, *rest = NULL, *mesh_obj;
+    union {
+        max_align_t align;
+        unsigned char bytes[OPTIONS_MAX];
+    } opt;
+    dk_error err = {0};
+    uint64_t bytes = 0;
+    char where[80];
+
+    if (!state)
+        return NULL;
+    for (int i = 0; i < state->n_method_types; i++)
+        if (state->method_type[i] == (const void *)cls)
+            spec = state->method_spec[i];
+    if (!spec) {
+        PyErr_SetString(PyExc_TypeError, "estimate_memory: not a deformkit method class");
+        return NULL;
+    }
+    snprintf(where, sizeof where, "%s.estimate_memory()", spec->name);
+    if (split_keywords(kwargs, kwlist, &mine, &rest) < 0)
+        return NULL;
+    spec->default_options(&opt);
+    int ok = PyArg_ParseTupleAndKeywords(args, mine, "O:estimate_memory", kwlist, &mesh_obj) &&
+             spec->parse_options(rest, &opt, spec->name) == 0 &&
+             refuse_leftovers(rest, where) == 0;
+    const dk_mesh *mesh = ok ? dk_py_mesh_get(module, mesh_obj, "mesh") : NULL;
+    dk_status st = mesh ? dk_method_estimate_memory(spec->ops, mesh, &opt, &bytes, &err)
+                        : DK_OK;
+    if (spec->release_options)
+        spec->release_options(&opt);
+    Py_DECREF(mine);
+    Py_DECREF(rest);
+    if (!mesh)
+        return NULL;
+    if (st != DK_OK)
+        return dk_py_raise(&err, where);
+    return PyLong_FromUnsignedLongLong((unsigned long long)bytes);
+}
+
+const char dk_py_method_estimate_memory_doc[] =
+             "estimate_memory(mesh, **options) -> int (classmethod)\n\n"
+             "The bytes a bind of this method on `mesh` with these options (the\n"
+             "constructor's own keywords) needs at its peak, first solve included: a model\n"
+             "fitted to measured peak RSS (docs/benchmarks.md, Memory). A bind whose estimate\n"
+             "does not fit deformkit.available_memory() is refused with MemoryError before\n"
+             "allocating; so is a factorization whose exact size (from the symbolic\n"
+             "analysis) does not.";
 
 /* ------------------------------------------------------------------ rebind, energy ----- */
 
@@ -488,9 +571,9 @@ PyObject *dk_py_method_rebind(PyObject *obj, PyObject *args, PyObject *kwargs)
         self->busy = 0;
         return NULL;
     }
-    Py_BEGIN_ALLOW_THREADS
+    DK_PY_BEGIN_NATIVE(dk_py_state_of(obj))
     st = self->spec->ops->rebind(self->native, &con.desc, &err);
-    Py_END_ALLOW_THREADS
+    DK_PY_END_NATIVE
     dk_py_lap_constraints_release(&con);
     dk_py_doubles_release(&stiff);
     self->busy = 0;
@@ -532,9 +615,9 @@ PyObject *dk_py_method_energy(PyObject *obj, PyObject *arg)
             self->busy = 0;
             return NULL;
         }
-    Py_BEGIN_ALLOW_THREADS
+    DK_PY_BEGIN_NATIVE(dk_py_state_of(obj))
     st = self->spec->ops->energy(self->native, x.data, &e, &err);
-    Py_END_ALLOW_THREADS
+    DK_PY_END_NATIVE
     dk_py_doubles_release(&x);
     self->busy = 0;
     if (st != DK_OK)
@@ -677,6 +760,12 @@ int dk_py_method_register(PyObject *module, const dk_py_method_spec *spec, newfu
     PyObject *type = PyType_FromModuleAndSpec(module, &type_spec, NULL);
     if (!type)
         return -1;
+    dk_py_state *state = dk_py_get_state(module);
+    if (state && state->n_method_types < 16) {
+        state->method_type[state->n_method_types] = type;
+        state->method_spec[state->n_method_types] = spec;
+        state->n_method_types++;
+    }
     int r = PyModule_AddObjectRef(module, spec->name, type);
     Py_DECREF(type);
     return r;

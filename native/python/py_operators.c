@@ -227,8 +227,8 @@ static PyObject *py_mass_matrix(PyObject *module, PyObject *args, PyObject *kwar
 /* ------------------------------------------------------------------ geodesics ----------- */
 
 /** Runs the chosen geodesic method; `distance` has n_vertices entries. GIL released. */
-static int geodesic_native(const dk_mesh *mesh, const char *method, double time_factor,
-                           const dk_py_indices *src, double *distance)
+static int geodesic_native(dk_py_state *gate, const dk_mesh *mesh, const char *method,
+                           double time_factor, const dk_py_indices *src, double *distance)
 {
     dk_error err = {0};
     dk_status st = DK_OK;
@@ -251,13 +251,13 @@ static int geodesic_native(const dk_mesh *mesh, const char *method, double time_
         Py_END_ALLOW_THREADS
         PyMem_Free(hops);
     } else if (strcmp(method, "heat") == 0) {
-        Py_BEGIN_ALLOW_THREADS
+        DK_PY_BEGIN_NATIVE(gate)
         dk_heat_geodesic *heat = NULL;
         st = dk_heat_create(mesh, time_factor, &heat, &err);
         if (st == DK_OK)
             st = dk_heat_distance(heat, src->data, (dk_index)src->rows, distance, &err);
         dk_heat_free(heat);
-        Py_END_ALLOW_THREADS
+        DK_PY_END_NATIVE
     } else {
         PyErr_Format(PyExc_ValueError,
                      "method must be 'heat', 'dijkstra' or 'hops', got '%s'", method);
@@ -301,7 +301,7 @@ static PyObject *py_geodesic_distance(PyObject *module, PyObject *args, PyObject
     if (read_sources(sobj, mesh, &src) < 0)
         return NULL;
     result = dk_py_new_doubles(1, mesh->n_vertices, 0, &d);
-    if (result && geodesic_native(mesh, method, time_factor, &src, d) < 0)
+    if (result && geodesic_native(dk_py_get_state(module), mesh, method, time_factor, &src, d) < 0)
         Py_CLEAR(result);
     dk_py_indices_release(&src);
     return result;
@@ -344,9 +344,9 @@ static PyObject *heat_new(PyTypeObject *type, PyObject *args, PyObject *kwargs)
         PyErr_SetString(PyExc_ValueError, "time_factor must be positive and finite");
         return NULL;
     }
-    Py_BEGIN_ALLOW_THREADS
+    DK_PY_BEGIN_NATIVE((dk_py_state *)PyType_GetModuleState(type))
     st = dk_heat_create(mesh, time_factor, &heat, &err);
-    Py_END_ALLOW_THREADS
+    DK_PY_END_NATIVE
     if (st != DK_OK)
         return dk_py_raise(&err, "HeatGeodesic");
     lock = PyThread_allocate_lock();
@@ -435,11 +435,11 @@ static PyObject *heat_distance(PyObject *self, PyObject *args, PyObject *kwargs)
         dk_py_indices_release(&src);
         return NULL;
     }
-    Py_BEGIN_ALLOW_THREADS
+    DK_PY_BEGIN_NATIVE(dk_py_get_state(module))
     PyThread_acquire_lock(h->lock, WAIT_LOCK);
     st = dk_heat_distance(h->heat, src.data, (dk_index)src.rows, d, &err);
     PyThread_release_lock(h->lock);
-    Py_END_ALLOW_THREADS
+    DK_PY_END_NATIVE
     dk_py_indices_release(&src);
     if (st != DK_OK) {
         Py_DECREF(result);
@@ -560,7 +560,7 @@ static PyObject *py_laplacian_eigenpairs(PyObject *module, PyObject *args, PyObj
     if (!evecs)
         goto done;
 
-    Py_BEGIN_ALLOW_THREADS
+    DK_PY_BEGIN_NATIVE(state)
     st = dk_laplacian_cotangent(mesh, &l, &err);
     if (st == DK_OK)
         st = dk_mass_matrix(mesh, kind, mass, &err);
@@ -573,7 +573,7 @@ static PyObject *py_laplacian_eigenpairs(PyObject *module, PyObject *args, PyObj
         for (Py_ssize_t i = 0; i < n; ++i)
             for (int j = 0; j < k; ++j)
                 vecs[i * k + j] = colmajor[(Py_ssize_t)j * n + i];
-    Py_END_ALLOW_THREADS
+    DK_PY_END_NATIVE
     if (st != DK_OK) {
         dk_py_raise(&err, "laplacian_eigenpairs");
         goto done;
@@ -856,10 +856,10 @@ static PyObject *py_harmonic_material(PyObject *module, PyObject *args, PyObject
     result = dk_py_new_doubles(1, by_edge ? mesh->n_edges : mesh->n_vertices, 0, &out);
     uv = by_edge ? PyMem_Malloc(((size_t)mesh->n_vertices + 1) * sizeof *uv) : NULL;
     if (result && (!by_edge || uv)) {
-        Py_BEGIN_ALLOW_THREADS
+        DK_PY_BEGIN_NATIVE(dk_py_get_state(module))
         st = dk_harmonic_interpolation(mesh, idx.data, val.data, (dk_index)idx.rows, fallback,
                                        by_edge ? uv : out, by_edge ? out : NULL, &err);
-        Py_END_ALLOW_THREADS
+        DK_PY_END_NATIVE
         if (st != DK_OK) {
             Py_CLEAR(result);
             dk_py_raise(&err, "harmonic_material");

@@ -21,7 +21,7 @@ PNG2 = os.path.join(OUT, "modifiers_tab_last_method.png")
 PNG3 = os.path.join(OUT, "viewport_show_graph.png")
 # the panel in each state an artist meets (DEFORMKIT_SHOT=states, a third run): one image
 # each, kept in docs/images after being looked at
-STATES = ("unbound", "bound", "rebinding", "baked", "overlap_error", "handle_target")
+STATES = ("unbound", "bound", "rebinding", "baked", "overlap_error", "handle_target", "sidebar")
 STATE_PNGS = [os.path.join(OUT, "panel_%s.png" % s) for s in STATES]
 
 try:
@@ -44,7 +44,9 @@ def launch():
     r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
     r2 = subprocess.run(cmd, env=dict(env, DEFORMKIT_SHOT="graph"), capture_output=True,
                         text=True, timeout=300)
-    r3 = subprocess.run(cmd, env=dict(env, DEFORMKIT_SHOT="states"), capture_output=True,
+    # the states run clicks the sidebar's tab with simulated events
+    cmd3 = cmd[:-2] + ["--enable-event-simulate"] + cmd[-2:]
+    r3 = subprocess.run(cmd3, env=dict(env, DEFORMKIT_SHOT="states"), capture_output=True,
                         text=True, timeout=300)
     log = (r.stdout + r.stderr + "\n--- Show Graph run ---\n" + r2.stdout + r2.stderr +
            "\n--- panel states run ---\n" + r3.stdout + r3.stderr)
@@ -221,23 +223,68 @@ def in_blender():
         bpy.context.view_layer.objects.active = e
         e.select_set(True)
         yield "handle_target"
+        # back to a bound state for the sidebar: the two handle vertices out of the fixed group
+        obj.vertex_groups["fixed"].remove([int(handle[0]), int(handle[1])])
+        bpy.context.view_layer.update()
+        S.solver.evaluate_object(obj, bpy.context.evaluated_depsgraph_get(), check_groups=True)
+        R.check("bound again for the sidebar", d.bound and not d.status_is_error, d.status)
+        # the 3D View's sidebar on its DeformKit tab, the handle's empty still selected: the
+        # deformer's status and Bind stay in view while the artist moves the handle. The
+        # window suite runs in Debian's Blender 3.4, which has no Python setter for a
+        # sidebar's tab (Region.active_panel_category came in 4.1), so the tab is clicked
+        # with a simulated event; the panel's draw records that it ran, so a click that
+        # missed the tab fails the check instead of shooting the Item tab.
+        win = bpy.context.window_manager.windows[0]
+        area = max(win.screen.areas, key=lambda a: a.width * a.height)
+        area.type = "VIEW_3D"
+        yield None  # the new editor's regions exist from the next tick on
+        area.spaces.active.show_region_ui = True
+        yield None
+        reg = next(r for r in area.regions if r.type == "UI")
+        if hasattr(reg, "active_panel_category"):
+            reg.active_panel_category = "DeformKit"
+        else:
+            # the fourth tab (Item, Tool, View, DeformKit) at the factory UI scale: its
+            # middle is 172 px below the region's top, 14 px from its right edge
+            x, y = reg.x + reg.width - 14, reg.y + reg.height - 172
+            win.event_simulate(type="MOUSEMOVE", value="NOTHING", x=x, y=y)
+            win.event_simulate(type="LEFTMOUSE", value="PRESS", x=x, y=y)
+            win.event_simulate(type="LEFTMOUSE", value="RELEASE", x=x, y=y)
+        sidebar_drawn.clear()
+        yield "sidebar"
+        R.check("the sidebar's DeformKit tab drew the deformer", bool(sidebar_drawn))
+
+    sidebar_drawn = []
+    from addon import ui
+    panel = ui.DEFORMKIT_PT_sidebar
+    original_draw = panel.draw
+
+    def recording_draw(self, context):
+        obj = context.object
+        sidebar_drawn.append(obj.name if obj is not None else None)
+        original_draw(self, context)
+    panel.draw = recording_draw
 
     def shoot_states():
         gen = states()
 
         def tick():
             try:
-                name = next(gen, None)
-                if name is None:
+                name = next(gen, "")
+                if name == "":
                     finish()
+                    return None
+                if name is None:  # a step that needs the next event loop tick
+                    bpy.app.timers.register(tick, first_interval=0.2)
                     return None
                 win = bpy.context.window_manager.windows[0]
                 area = max(win.screen.areas, key=lambda a: a.width * a.height)
 
                 def shot(name=name, win=win, area=area):
                     path = os.path.join(OUT, "panel_%s.png" % name)
-                    area.spaces.active.context = \
-                        "OBJECT" if name == "handle_target" else "MODIFIER"
+                    if area.type == "PROPERTIES":
+                        area.spaces.active.context = \
+                            "OBJECT" if name == "handle_target" else "MODIFIER"
                     window_shot(win, area, path)
                     R.check("panel state %s shot" % name, os.path.exists(path))
                     bpy.app.timers.register(tick, first_interval=0.1)

@@ -127,6 +127,34 @@ static void test_ties(void)
     compare_with_brute(p, N, q, 30, 27, "lattice k=27");
 }
 
+/* Queries far outside the points' box, in every direction, and around a flat patch: the
+ * case the per-axis cell bound prunes (a handle's few vertices queried from the whole mesh).
+ * The lattice far queries have many exactly equal distances, which must not be pruned. */
+static void test_far_queries(void)
+{
+    enum { S = 8, N = S * S * S, NQ = 64 };
+    static double p[3 * N], flat[3 * N], q[3 * NQ];
+    int c = 0;
+    for (int x = 0; x < S; x++)
+        for (int y = 0; y < S; y++)
+            for (int z = 0; z < S; z++, c++) {
+                p[3 * c] = x, p[3 * c + 1] = y, p[3 * c + 2] = z;
+                flat[3 * c] = x + 0.1 * rnd(), flat[3 * c + 1] = y * S + z, flat[3 * c + 2] = 0.0;
+            }
+    for (int i = 0; i < NQ; i++) {
+        /* a direction from the 26 around the box, at 3 to 300 box sizes */
+        int dir = i % 26, scale = 3 * (1 + (i % 4) * 33);
+        int d[3] = {dir % 3 - 1, (dir / 3) % 3 - 1, (dir / 9) % 3 - 1};
+        if (!d[0] && !d[1] && !d[2]) d[2] = 1;
+        for (int k = 0; k < 3; k++)
+            q[3 * i + k] = 3.5 + d[k] * scale * S + ((i % 5 == 0) ? 0.0 : rnd());
+    }
+    compare_with_brute(p, N, q, NQ, 1, "far lattice k=1");
+    compare_with_brute(p, N, q, NQ, 8, "far lattice k=8");
+    compare_with_brute(flat, N, q, NQ, 1, "far flat patch k=1");
+    compare_with_brute(flat, N, q, NQ, 5, "far flat patch k=5");
+}
+
 static void test_k_equals_n_and_small(void)
 {
     double p[3 * 17], q[3 * 4];
@@ -220,4 +248,4 @@ static void test_timing(void)
     free(idx);
 }
 
-DK_TEST_MAIN(test_random, test_ties, test_k_equals_n_and_small, test_timing)
+DK_TEST_MAIN(test_random, test_ties, test_far_queries, test_k_equals_n_and_small, test_timing)

@@ -28,6 +28,33 @@ except ImportError as exc:  # pragma: no cover - only when misconfigured
         returncode=1,
     )
 
+def _under_address_sanitizer():
+    """True when AddressSanitizer's runtime is loaded (the module built with DK_SANITIZE and
+    run with it preloaded, as scripts/test.sh does)."""
+    try:
+        with open("/proc/self/maps") as f:
+            return "libasan" in f.read()
+    except OSError:
+        return False
+
+
+# ASan keeps freed memory in quarantine and maps shadow memory, so a process's resident size
+# grows however well the module frees and exceeds any estimate of a bind's: tests that
+# measure it skip there (leaks are LeakSanitizer's job in the C tests, which run with leak
+# detection on)
+UNDER_ASAN = _under_address_sanitizer()
+measures_rss = pytest.mark.skipif(
+    UNDER_ASAN, reason="AddressSanitizer's shadow memory and quarantine grow the resident size")
+
+
+
+def pytest_configure(config):
+    config.addinivalue_line(
+        "markers", "heavy: a whole real scanned mesh solved to convergence; the sanitized run "
+        "(scripts/test.sh, 5-10x slower) leaves these out with -m 'not heavy', since smaller "
+        "tests take the same code paths")
+
+
 SHARED_MESHES = pathlib.Path(
     os.environ.get("DK_SHARED_DIR", pathlib.Path(__file__).resolve().parents[2] / ".." / "shared")
 ) / "meshes"

@@ -429,6 +429,7 @@ def test_bad_input():
     np.testing.assert_array_equal(held.solve(v[handle] + 0.1).positions[len(v):], vc[len(v):])
 
 
+@pytest.mark.heavy
 @pytest.mark.skipif(not (SHARED / "scenarios" / "arm-lift.json").exists(),
                     reason="shared scenarios not available")
 def test_arm_lift_scenario():
@@ -501,6 +502,7 @@ def test_tolerance_override_and_repeated_warm_solves():
         arap.solve(t, tolerance=-1.0)
 
 
+@pytest.mark.heavy
 @pytest.mark.skipif(not (SHARED / "scenarios" / "bunny-ear-pull.json").exists(),
                     reason="shared scenarios not available")
 def test_predicted_drag_on_a_scanned_mesh():

@@ -291,6 +291,7 @@ def test_every_vertex_constrained_gives_the_constrained_motion(name):
         np.testing.assert_allclose(r.positions[rest], v[rest], atol=1e-12)
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("name", dk.METHODS)
 def test_stanford_bunny_with_its_loose_vertices(name, shared_mesh):
     """The real example: the Stanford bunny carries 1,113 vertices on no face. Every method

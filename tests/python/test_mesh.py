@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import deformkit
-from conftest import make_grid, make_icosphere, numpy_edges
+from conftest import make_grid, make_icosphere, measures_rss, numpy_edges
 
 TET_V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
 TET_F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
@@ -244,6 +244,7 @@ def _rss_bytes():
         return int(fh.read().split()[1]) * 4096
 
 
+@measures_rss
 def test_repeated_construction_does_not_grow_memory():
     v, f = make_icosphere(3)  # 642 vertices: a leaked mesh is ~100 kB
     bad = f.copy()

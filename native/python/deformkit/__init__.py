@@ -17,6 +17,8 @@ int32/int64, or nested sequences; outputs are numpy arrays when numpy is importa
 See docs/python-api.md for the full contract.
 """
 
+import os as _os
+
 from . import _native
 
 __version__ = "0.1.0"
@@ -29,3 +31,10 @@ globals().update({name: getattr(_native, name) for name in __all__})
 METHODS = tuple(_native._methods)
 
 __all__ += ["METHODS", "__version__"]
+
+# A child forked from a process that used DeformKit (multiprocessing's "fork" start method)
+# binds and solves like the parent: see _native._after_fork_in_child and docs/reliability.md
+# (issue 18, class 3).
+_os.register_at_fork(before=_native._before_fork,
+                     after_in_parent=_native._after_fork_in_parent,
+                     after_in_child=_native._after_fork_in_child)

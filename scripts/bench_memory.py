@@ -1,0 +1,75 @@
+#!/usr/bin/env python3
+"""Issue 19 item 4: each method's memory estimate against the measured peak.
+
+    PYTHONPATH=build/python /usr/bin/python3 scripts/bench_memory.py \\
+        [--meshes arm,armadillo] [--levels 0] [--methods ARAP,LaplacianEdit,...]
+
+For every mesh and method, in a fresh process (spawn, so that the peak is its own): the
+growth of the peak resident set (VmHWM) over the resident set before the bind, through the
+bind and its first solve, next to `<Method>.estimate_memory(mesh)`; the ratio peak /
+estimate must stay below 1 (the estimate is what a bind is refused by). --levels
+midpoint-subdivides the meshes (bench_scale.py's scenario: the armadillo at 2 levels is
+692k vertices). A script, not a test: tests/python/test_memory.py checks the bound on the
+arm.
+"""
+import argparse
+import multiprocessing as mp
+import os
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import bench_scale as bs  # noqa: E402
+
+
+def status(key):
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith(key + ":"):
+                return int(line.split()[1]) * 1024
+    return 0
+
+
+def measure(q, method, V, F, fixed, hand, t):
+    try:
+        import deformkit as dk
+        mesh = dk.Mesh(V, F)
+        cls = getattr(dk, method)
+        est = cls.estimate_memory(mesh)
+        before = status("VmRSS")
+        obj = cls(mesh, handles=[hand], fixed=fixed)
+        obj.solve(V[hand] + t, energy=False)
+        q.put({"peak": status("VmHWM") - before, "estimate": est})
+    except Exception as ex:  # the parent waits on the queue: always answer
+        q.put({"error": "%s: %s" % (type(ex).__name__, ex)})
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--meshes", default="arm,armadillo")
+    ap.add_argument("--levels", type=int, default=0)
+    ap.add_argument("--methods", default="ARAP,LaplacianEdit,Falloff,EmbeddedDeformation,"
+                                         "EigenDeformation,LinearReconstruction")
+    a = ap.parse_args()
+    ctx = mp.get_context("spawn")
+    print("| mesh | vertices | method | peak MiB | estimate MiB | peak / estimate |")
+    print("| --- | --- | --- | --- | --- | --- |")
+    for name in a.meshes.split(","):
+        V, F, fixed, hand, t = bs.scenario(name, a.levels)
+        for method in a.methods.split(","):
+            q = ctx.Queue()
+            p = ctx.Process(target=measure, args=(q, method, V, F, fixed, hand, t))
+            p.start()
+            r = q.get()
+            p.join()
+            if "error" in r:
+                print("| %s | %d | %s | %s | | |" % (name, len(V), method, r["error"]))
+                continue
+            print("| %s | %d | %s | %.0f | %.0f | %.2f |" % (
+                name, len(V), method, r["peak"] / 2**20, r["estimate"] / 2**20,
+                r["peak"] / r["estimate"]), flush=True)
+
+
+if __name__ == "__main__":
+    main()
