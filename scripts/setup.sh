@@ -6,18 +6,27 @@
 # Python module, which scripts/test.sh runs with the sanitizer runtimes preloaded).
 #
 # patchelf is for scripts/package.sh (it bundles the native libraries into the add-on zips).
+# python3-hypothesis is for the property suite (tests/python/test_properties.py), which runs
+# under Debian's python3 like the other Python tests (hypothesis is also pinned in
+# scripts/pins.txt's [tools] venv; Debian 12 ships 6.67, Debian 13 a newer 6.x: the suite
+# uses only long-standing API).
 #
-# usage: scripts/setup.sh [--asan] [--bench] [--no-build]
+# usage: scripts/setup.sh [--asan] [--bench] [--fuzz] [--no-build]
 #   --asan      also build the sanitized configuration
 #   --bench     also install what the benchmarks need (g++, CGAL, Eigen, scipy)
+#   --fuzz      also install what the fuzzers need (Debian's unversioned clang, and
+#               libclang-rt-dev where the distribution has it: its compiler-rt holds
+#               libFuzzer and the sanitizers' runtimes, only a Recommends of clang);
+#               scripts/fuzz.sh builds build-fuzz/
 #   --no-build  only install packages
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-asan=0; bench=0; build=1
+asan=0; bench=0; fuzz=0; build=1
 for arg in "$@"; do
   case "$arg" in
     --asan) asan=1 ;;
     --bench) bench=1 ;;
+    --fuzz) fuzz=1 ;;
     --no-build) build=0 ;;
     *) echo "setup.sh: unknown option $arg" >&2; exit 2 ;;
   esac
@@ -25,20 +34,25 @@ done
 
 packages=(cmake make gcc pkg-config libsuitesparse-dev libarpack2-dev liblapacke-dev
           libopenblas-dev python3-dev python3-numpy python3-scipy python3-pytest blender xvfb
-          xauth zip patchelf)
+          xauth zip patchelf python3-hypothesis)
 if [ "$bench" = 1 ]; then packages+=(g++ libcgal-dev libeigen3-dev); fi
+# installed when the distribution has them (libclang-rt-dev is in Debian 12's llvm-defaults;
+# without it clang's Recommends bring the versioned runtime)
+optional=()
+if [ "$fuzz" = 1 ]; then packages+=(clang); optional+=(libclang-rt-dev); fi
 
-missing=()
-for p in "${packages[@]}"; do
-  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
-    missing+=("$p")
-  fi
-done
-if [ ${#missing[@]} -gt 0 ]; then
-  echo "setup: installing ${missing[*]}" >&2
+installed() { dpkg-query -W -f='${Status}' "$1" 2>/dev/null | grep -q "install ok installed"; }
+missing=(); missing_optional=()
+for p in "${packages[@]}"; do installed "$p" || missing+=("$p"); done
+for p in "${optional[@]}"; do installed "$p" || missing_optional+=("$p"); done
+if [ ${#missing[@]} -gt 0 ] || [ ${#missing_optional[@]} -gt 0 ]; then
   sudo_cmd=()
   if [ "$(id -u)" != 0 ]; then sudo_cmd=(sudo); fi
   "${sudo_cmd[@]}" apt-get update
+  for p in "${missing_optional[@]}"; do
+    if apt-cache show "$p" >/dev/null 2>&1; then missing+=("$p"); fi
+  done
+  echo "setup: installing ${missing[*]}" >&2
   DEBIAN_FRONTEND=noninteractive "${sudo_cmd[@]}" apt-get install -y "${missing[@]}"
 else
   echo "setup: all Debian packages present" >&2

@@ -1,9 +1,12 @@
 #!/usr/bin/env bash
 # Sets everything up and runs every DeformKit test:
-#   1. C tests (ctest) in the Release build and in the ASan+UBSan build,
-#   2. Python module tests (pytest under Debian's /usr/bin/python3), and again with the
-#      module of the ASan+UBSan build (the sanitizer runtimes preloaded; leaving out the
-#      tests marked heavy: whole scanned meshes solved to convergence),
+#   1. C tests (ctest) in the Release build and in the ASan+UBSan build, then the libFuzzer
+#      harnesses for a bounded minute in all (scripts/fuzz.sh --seconds 60: the mesh readers,
+#      mesh construction, every method's bind and solve; clang, ASan+UBSan),
+#   2. Python module tests (pytest under Debian's /usr/bin/python3; the property suite
+#      tests/python/test_properties.py with its bounded, derandomized "ci" profile), and
+#      again with the module of the ASan+UBSan build (the sanitizer runtimes preloaded;
+#      leaving out the tests marked heavy: whole scanned meshes solved to convergence),
 #   3. the packages: scripts/package.sh builds the wheel and the two add-on zips into dist/
 #      (and validates the extension in every Blender 4.2+ here); the wheel is installed into
 #      a clean virtual environment and smoke-tested there,
@@ -16,7 +19,7 @@
 # Ends with a matrix of Blender x suite, then one line "suites: N passed, N failed" that
 # counts each Blender's suites, and exits non-zero if any suite failed.
 #
-# usage: scripts/test.sh [--quick]     (--quick skips the sanitized build)
+# usage: scripts/test.sh [--quick]     (--quick skips the sanitized build and the fuzzers)
 set -uo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
@@ -27,7 +30,7 @@ t_start=$SECONDS
 if [ "$quick" = 1 ]; then
   scripts/setup.sh || { echo "suites: 0 passed, 1 failed"; exit 1; }
 else
-  scripts/setup.sh --asan || { echo "suites: 0 passed, 1 failed"; exit 1; }
+  scripts/setup.sh --asan --fuzz || { echo "suites: 0 passed, 1 failed"; exit 1; }
 fi
 scripts/venvs.sh || { echo "scripts/venvs.sh failed"; echo "suites: 0 passed, 1 failed"; exit 1; }
 
@@ -50,6 +53,7 @@ run_suite() {  # run_suite NAME COMMAND...
 run_suite "C tests" ctest --test-dir build --output-on-failure
 if [ "$quick" = 0 ]; then
   run_suite "C tests (ASan+UBSan)" ctest --test-dir build-asan --output-on-failure
+  run_suite "fuzzers (60 s)" scripts/fuzz.sh --no-setup --seconds 60
 fi
 run_suite "Python tests" "$PY" -m pytest -q tests/python
 if [ "$quick" = 0 ]; then

@@ -525,6 +525,10 @@ static dk_status read_ply(const char *buf, size_t size, const char *name, dk_mes
     line++; /* the first data line (ascii line numbers are counted by ply_value) */
     for (int i = 0; i < n_elems; i++) {
         ply_elem *e = &elems[i];
+        /* An element without properties holds no data: its items take no bytes, and
+         * walking through a count of 2^31 of them did nothing for seconds (found by
+         * fuzz_mesh_ply; a header may list 16 such elements). */
+        if (e->n_props == 0) continue;
         for (long long item = 0; item < e->count; item++) {
             double xyz[3] = {0, 0, 0};
             for (int k = 0; k < e->n_props; k++) {
@@ -595,6 +599,25 @@ static int ends_with(const char *s, const char *suffix)
     for (size_t i = 0; i < m; i++)
         if (tolower((unsigned char)s[n - m + i]) != suffix[i]) return 0;
     return 1;
+}
+
+/* Parses `len` bytes at buf (NUL-terminated at buf[len]); the format from `name`'s
+ * extension, else sniffed from the first bytes. On failure `*out` is zeroed. */
+static dk_status parse_mesh(const char *buf, size_t len, const char *name, dk_mesh_file *out,
+                            dk_error *err)
+{
+    dk_status st;
+    if (ends_with(name, ".ply") || (len >= 3 && strncmp(buf, "ply", 3) == 0))
+        st = read_ply(buf, len, name, out, err);
+    else if (ends_with(name, ".off") || (len >= 3 && strncmp(buf, "OFF", 3) == 0))
+        st = read_off(buf, name, out, err);
+    else if (ends_with(name, ".obj"))
+        st = read_obj(buf, name, out, err);
+    else
+        st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                          "%s: unknown mesh format (expected .obj, .off or .ply)", name);
+    if (st) memset(out, 0, sizeof *out);
+    return st;
 }
 
 dk_status dk_read_mesh_file(const char *path, dk_mesh_file *out, dk_error *err)
@@ -684,18 +707,31 @@ dk_status dk_read_mesh_file(const char *path, dk_mesh_file *out, dk_error *err)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s: read error", path);
     }
     buf[len] = '\0';
-    dk_status st;
-    if (ends_with(path, ".ply") || (len >= 3 && strncmp(buf, "ply", 3) == 0))
-        st = read_ply(buf, len, name, out, err);
-    else if (ends_with(path, ".off") || (len >= 3 && strncmp(buf, "OFF", 3) == 0))
-        st = read_off(buf, name, out, err);
-    else if (ends_with(path, ".obj"))
-        st = read_obj(buf, name, out, err);
-    else
-        st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
-                          "%s: unknown mesh format (expected .obj, .off or .ply)", name);
+    dk_status st = parse_mesh(buf, len, name, out, err);
     free(buf);
-    if (st) memset(out, 0, sizeof *out);
+    return st;
+}
+
+dk_status dk_read_mesh_memory(const char *data, size_t size, const char *name,
+                              dk_mesh_file *out, dk_error *err)
+{
+    if (!out) return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "read mesh: out is NULL");
+    memset(out, 0, sizeof *out);
+    if (!name) return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "read mesh: name is NULL");
+    if (!data && size)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "read mesh: data is NULL");
+    if ((uint64_t)size > (uint64_t)DK_MESH_FILE_MAX_BYTES)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "%s: is %llu bytes, more than the %lld-byte limit of mesh files "
+                            "(DK_MESH_FILE_MAX_BYTES)", name, (unsigned long long)size,
+                            (long long)DK_MESH_FILE_MAX_BYTES);
+    /* the parsers want a NUL after the data */
+    char *buf = malloc(size + 1);
+    if (!buf) return OOM(name);
+    if (size) memcpy(buf, data, size);
+    buf[size] = '\0';
+    dk_status st = parse_mesh(buf, size, name, out, err);
+    free(buf);
     return st;
 }
 

@@ -20,6 +20,7 @@
 #ifndef DK_IO_H
 #define DK_IO_H
 
+#include <stddef.h>
 #include <stdint.h>
 
 #include "dk_mesh.h"
@@ -52,6 +53,14 @@ typedef struct dk_mesh_file {
  *  extensions are sniffed from the first bytes). On success `*out` owns the arrays; on
  *  failure `*out` is zeroed and nothing needs freeing. */
 dk_status dk_read_mesh_file(const char *path, dk_mesh_file *out, dk_error *err);
+
+/** Parses a mesh file already in memory: `size` bytes at `data` (NULL allowed when size is
+ *  0; need not be NUL-terminated; copied), as dk_read_mesh_file would parse a file of that
+ *  content called `name` (its extension picks the format, as there, and messages name it).
+ *  For callers that hold the bytes (an archive member, a download) and for the fuzzers.
+ *  Refuses more than DK_MESH_FILE_MAX_BYTES. On failure `*out` is zeroed. */
+dk_status dk_read_mesh_memory(const char *data, size_t size, const char *name,
+                              dk_mesh_file *out, dk_error *err);
 
 /** Frees the arrays of `file` and zeroes it; NULL and a zeroed struct are allowed. */
 void dk_mesh_file_free(dk_mesh_file *file);

@@ -85,7 +85,9 @@ typedef struct dk_embedded_options {
     dk_ed_node_source nodes;  /**< default DK_ED_NODES_SURFACE                             */
     int n_nodes;              /**< the node count wanted (the bisection meets it within
                                    a few %), 1..100000; default 200; ignored when radius > 0 */
-    double radius;            /**< > 0: the sampling radius itself (mesh units)            */
+    double radius;            /**< > 0: the sampling radius itself (mesh units); a radius
+                                   below 1e-12 of the mesh's extent, or one that keeps more
+                                   than 100000 nodes (n_nodes' bound), is refused         */
     int k;                    /**< nearest nodes per point, 1..16 (k+1 <= nodes); default 4 */
     dk_ed_distance distance;  /**< default DK_ED_DISTANCE_EUCLIDEAN                        */
     /** The cut (section 7's stroke between the leg and the hand): two disjoint vertex sets,

@@ -95,6 +95,12 @@ void dk_embedded_default_options(dk_embedded_options *o)
     o->seed = 1;
 }
 
+/* The largest graph: n_nodes' bound, and what a radius may keep. */
+enum { ED_MAX_NODES = 100000 };
+/* The smallest radius, relative to the extent of the samples: below it the sampling grid's
+ * cell numbers would not fit an int64 (and no graph that small could be bound anyway). */
+#define ED_MIN_RADIUS 1e-12
+
 static dk_status check_options(const dk_embedded_options *o, dk_error *err)
 {
     const char *bad = NULL;
@@ -102,7 +108,7 @@ static dk_status check_options(const dk_embedded_options *o, dk_error *err)
         bad = "nodes must be surface (0) or vertices (1)";
     else if (!(o->radius >= 0.0 && isfinite(o->radius)))
         bad = "radius must be finite and >= 0";
-    else if (o->radius == 0.0 && (o->n_nodes < 1 || o->n_nodes > 100000))
+    else if (o->radius == 0.0 && (o->n_nodes < 1 || o->n_nodes > ED_MAX_NODES))
         bad = "n_nodes must be in 1..100000";
     else if (o->k < 1 || o->k > K_MAX)
         bad = "k must be in 1..16";
@@ -215,6 +221,7 @@ static dk_index eliminate(const double *pts, dk_index n, const dk_index *order, 
         const dk_index i = order[o];
         const double *p = pts + 3 * i;
         int64_t c[3];
+        /* r >= ED_MIN_RADIUS x the extent (sample_nodes): the cell numbers fit an int64 */
         for (int d = 0; d < 3; d++)
             c[d] = (int64_t)floor((p[d] - lo[d]) / r);
         int ok = 1;
@@ -292,10 +299,33 @@ static dk_status sample_nodes(dk_embedded *ed, dk_error *err)
     const double diag = sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
                              (hi[2] - lo[2]) * (hi[2] - lo[2]));
     dk_index count;
+    if (o->radius > 0.0 && o->radius < ED_MIN_RADIUS * diag) {
+        /* found by fuzz_method: radius 1e-300 made the grid's cell numbers overflow int64
+         * (undefined behaviour), and clamping them put every sample into one cell, a
+         * quadratic elimination of 200,000 samples */
+        st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                          "EmbeddedDeformation bind: radius %g is below %g of the surface's "
+                          "extent (%g); raise it", o->radius, ED_MIN_RADIUS, diag);
+        goto done;
+    }
     if (o->radius > 0.0) {
-        count = eliminate(cand, nc, order, o->radius, lo, kept, nc);
+        /* at most one node more than n_nodes allows, so that a radius far below the
+         * mesh's extent is refused here instead of binding a graph of up to 200,000 nodes
+         * for minutes (fuzz_method: radius 1e-300 on a 20-vertex grid) */
+        count = eliminate(cand, nc, order, o->radius, lo, kept,
+                          nc < ED_MAX_NODES + 1 ? nc : ED_MAX_NODES + 1);
+        if (count > ED_MAX_NODES) {
+            st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                              "EmbeddedDeformation bind: radius %g keeps more than %d nodes "
+                              "(the most n_nodes allows) on a surface %g across; raise it",
+                              o->radius, ED_MAX_NODES, diag);
+            goto done;
+        }
     } else { /* the smallest radius whose count does not exceed the request */
-        double a = diag * 1e-4, b = diag;
+        /* all candidates on one point (coincident vertices): any radius keeps one; a zero
+         * one made every cell number 0 / 0, NaN into an int64 (fuzz_method, UBSan) */
+        const double extent = diag > 0 ? diag : 1.0;
+        double a = extent * 1e-4, b = extent;
         for (int it = 0; it < 40; it++) {
             const double r = 0.5 * (a + b);
             const dk_index c = eliminate(cand, nc, order, r, lo, kept, nc);
@@ -679,14 +709,39 @@ done:
     return st;
 }
 
-/* Edges between every two nodes influencing a common vertex; the directed adjacency. */
+static dk_index uf_find(dk_index *parent, dk_index a)
+{
+    while (parent[a] != a) {
+        parent[a] = parent[parent[a]];
+        a = parent[a];
+    }
+    return a;
+}
+
+/* Edges between every two nodes influencing a common vertex; the directed adjacency.
+ *
+ * A graph dense for its mesh (n_nodes near or above the vertex count) can fall apart into
+ * pieces that influence neighbouring vertices but share none: a piece that reaches no
+ * handle then stays at the identity, and its vertices at rest while the surface around them
+ * moves (found by tests/python/test_properties.py: translating both ends of a 30-vertex grid
+ * left its 20 inner vertices behind, "converged" at F = 2e-9). So wherever a mesh edge joins
+ * two vertices whose nodes lie in different pieces, their first nodes are joined too (not
+ * across a cut), in mesh-edge order; a graph that is connected along the surface -- every
+ * graph of the paper's density -- gets no extra edge. */
 static dk_status edges(dk_embedded *ed, dk_error *err)
 {
     const dk_index n = ed->n, k = ed->k, m = ed->m;
-    const int64_t cap = (int64_t)n * k * (k - 1) / 2 + 1;
+    const dk_mesh *mesh = ed->mesh;
+    const int64_t cap = (int64_t)n * k * (k - 1) / 2 + (int64_t)mesh->n_edges + 1;
     int64_t *pairs = malloc((size_t)cap * sizeof *pairs), np = 0;
-    if (!pairs)
+    dk_index *parent = malloc(((size_t)m + 1) * sizeof *parent);
+    if (!pairs || !parent) {
+        free(pairs);
+        free(parent);
         return oom(err, "graph edges");
+    }
+    for (dk_index j = 0; j < m; j++)
+        parent[j] = j;
     for (dk_index v = 0; v < n; v++)
         for (dk_index p = 0; p < k; p++)
             for (dk_index q = p + 1; q < k; q++) {
@@ -699,7 +754,25 @@ static dk_status edges(dk_embedded *ed, dk_error *err)
                     b = t;
                 }
                 pairs[np++] = (int64_t)a * m + b;
+                parent[uf_find(parent, a)] = uf_find(parent, b);
             }
+    for (dk_index e = 0; e < mesh->n_edges; e++) {
+        dk_index a = ed->nb[(size_t)mesh->edges[2 * e] * k];
+        dk_index b = ed->nb[(size_t)mesh->edges[2 * e + 1] * k];
+        if (a < 0 || b < 0 || (ed->nside && across(ed->nside[a], ed->nside[b])))
+            continue;
+        const dk_index ra = uf_find(parent, a), rb = uf_find(parent, b);
+        if (ra == rb)
+            continue;
+        parent[ra] = rb;
+        if (a > b) {
+            const dk_index t = a;
+            a = b;
+            b = t;
+        }
+        pairs[np++] = (int64_t)a * m + b;
+    }
+    free(parent);
     qsort(pairs, (size_t)np, sizeof *pairs, cmp_i64);
     int64_t ne = 0;
     for (int64_t i = 0; i < np; i++)

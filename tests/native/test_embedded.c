@@ -261,4 +261,90 @@ static void test_update_source(void)
     dk_mesh_free(m);
 }
 
-DK_TEST_MAIN(test_geodesic_influence, test_cut, test_update_source)
+/* What fuzz_method found (tests/fuzz/corpus/method/crash-embedded-*): a radius of 1e-300
+ * overflowed the sampling grid's int64 cell numbers (UBSan: undefined behaviour); clamping
+ * them instead made one cell of 200,000 samples, minutes of elimination. A radius below
+ * 1e-12 of the extent is refused, so is one that keeps more than 100000 nodes, and a tiny
+ * but meaningful radius on a vertex graph still binds (every vertex a node). */
+static void test_radius_bounds(void)
+{
+    dk_test_mesh t;
+    if (dk_test_grid(4, 1.0, 0.0, &t) != 0) return;
+    dk_mesh *m = dk_test_mesh_build(&t);
+    dk_test_mesh_free(&t);
+    if (!m) return;
+    const dk_index hv[2] = {0, 1}, sizes[1] = {2};
+    dk_constraint_desc c = {.n_handles = 1, .handle_sizes = sizes, .handle_vertices = hv};
+    dk_embedded_options o;
+    dk_embedded *ed = NULL;
+    dk_error e = {0};
+    const double tiny[3] = {1e-300, 4.9e-324, 1e-13};
+    for (int i = 0; i < 3; i++) {
+        dk_embedded_default_options(&o);
+        o.radius = tiny[i];
+        CHECK(dk_embedded_bind(m, &c, &o, &ed, &e) == DK_ERR_INVALID_ARGUMENT && !ed);
+        CHECK_MSG(strstr(e.message, "below 1e-12 of the surface's extent"), "%s", e.message);
+    }
+    dk_embedded_default_options(&o);
+    o.radius = 1e-10; /* surface samples: nearly all 200,000 would be nodes */
+    CHECK(dk_embedded_bind(m, &c, &o, &ed, &e) == DK_ERR_INVALID_ARGUMENT && !ed);
+    CHECK_MSG(strstr(e.message, "keeps more than 100000 nodes"), "%s", e.message);
+    o.nodes = DK_ED_NODES_VERTICES; /* 25 vertices: 25 nodes */
+    CHECK_MSG(dk_embedded_bind(m, &c, &o, &ed, &e) == DK_OK, "%s", e.message);
+    CHECK(dk_embedded_n_nodes(ed) == 25);
+    dk_embedded_free(ed);
+    dk_mesh_free(m);
+    /* a point set whose points coincide: the node bisection's radius was 0, every cell
+     * number 0 / 0 (NaN into an int64; crash-embedded-coincident-vertices-nan-cell). One
+     * node, so refused for having fewer than k + 1 */
+    const double same[15] = {0};
+    CHECK(dk_mesh_create(same, 5, NULL, 0, &m, &e) == DK_OK);
+    dk_embedded_default_options(&o);
+    o.k = 1;
+    CHECK(dk_embedded_bind(m, &c, &o, &ed, &e) != DK_OK && !ed);
+    CHECK_MSG(strstr(e.message, "node"), "%s", e.message);
+    dk_mesh_free(m);
+}
+
+/* Found by tests/python/test_properties.py: the default 200 nodes on a 5 x 5-cell grid make a
+ * graph whose pieces influence neighbouring vertices but share none; translating both ends
+ * left the inner vertices exactly at rest ("converged", F = 2e-9). The pieces are now
+ * joined along the mesh's edges, so every vertex follows (most of the way: a graph that
+ * much denser than its mesh is floppy, docs/reliability.md). */
+static void test_dense_graph_is_connected_along_the_surface(void)
+{
+    dk_test_mesh t;
+    if (dk_test_grid(5, 1.0, 0.2, &t) != 0) return;
+    dk_mesh *m = dk_test_mesh_build(&t);
+    if (!m) { dk_test_mesh_free(&t); return; }
+    dk_index hv[12], sizes[2] = {6, 6};
+    for (int j = 0; j < 6; j++) {
+        hv[j] = j * 6;          /* x = 0 column */
+        hv[6 + j] = j * 6 + 5;  /* x = 1 column */
+    }
+    dk_constraint_desc c = {.n_handles = 2, .handle_sizes = sizes, .handle_vertices = hv};
+    dk_embedded *ed = NULL;
+    dk_error e = {0};
+    double T[32] = {0}, *x = malloc(3 * (size_t)m->n_vertices * sizeof *x);
+    for (int h = 0; h < 2; h++) {
+        T[16 * h] = T[16 * h + 5] = T[16 * h + 10] = T[16 * h + 15] = 1;
+        T[16 * h + 11] = 1.0; /* up by 1 */
+    }
+    CHECK_MSG(x && dk_embedded_bind(m, &c, NULL, &ed, &e) == DK_OK, "%s", e.message);
+    if (ed && x) {
+        CHECK(dk_embedded_n_nodes(ed) > m->n_vertices); /* the dense case */
+        dk_solve_request rq = {.targets = T, .target_kind = DK_TARGETS_TRANSFORMS};
+        CHECK_MSG(dk_embedded_solve(ed, &rq, x, NULL, &e) == DK_OK, "%s", e.message);
+        double least = INFINITY;
+        for (dk_index v = 0; v < m->n_vertices; v++)
+            least = fmin(least, x[3 * v + 2] - t.positions[3 * v + 2]);
+        CHECK_MSG(least > 0.5, "a vertex moved up by only %g of 1", least);
+    }
+    dk_embedded_free(ed);
+    free(x);
+    dk_mesh_free(m);
+    dk_test_mesh_free(&t);
+}
+
+DK_TEST_MAIN(test_geodesic_influence, test_cut, test_update_source, test_radius_bounds,
+             test_dense_graph_is_connected_along_the_surface)

@@ -322,5 +322,60 @@ static void test_obj_index_messages(void)
               "%s", err.message);
 }
 
+/* dk_read_mesh_memory parses as dk_read_mesh_file does (same format choice by the name's
+ * extension, same messages), needs no NUL at the end, and refuses NULL arguments. */
+static void test_read_from_memory(void)
+{
+    dk_mesh_file a, b;
+    dk_error err = {0};
+    const char *off = "OFF\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n";
+    CHECK(read_text("test_io_tmp_m.off", off, &a, &err) == DK_OK);
+    /* no NUL after the data: ASan would see a read past the end */
+    const size_t n = strlen(off);
+    char *exact = malloc(n);
+    if (!exact) return;
+    memcpy(exact, off, n);
+    CHECK_MSG(dk_read_mesh_memory(exact, n, "mem.off", &b, &err) == DK_OK, "%s", err.message);
+    CHECK(a.n_vertices == b.n_vertices && a.n_polygons == b.n_polygons &&
+          a.n_indices == b.n_indices);
+    if (a.n_indices == b.n_indices && a.n_vertices == b.n_vertices) {
+        CHECK(memcmp(a.indices, b.indices, sizeof(dk_index) * (size_t)a.n_indices) == 0);
+        CHECK(memcmp(a.positions, b.positions, sizeof(double) * 3 * (size_t)a.n_vertices) == 0);
+    }
+    dk_mesh_file_free(&a);
+    dk_mesh_file_free(&b);
+    CHECK(dk_read_mesh_memory(exact, n - 4, "mem.off", &b, &err) == DK_ERR_INVALID_ARGUMENT);
+    CHECK_MSG(strstr(err.message, "mem.off line 8"), "%s", err.message);
+    CHECK(b.positions == NULL && b.n_vertices == 0);
+    free(exact);
+    CHECK(dk_read_mesh_memory("v 0 0 0\n", 8, "x.stl", &b, &err) == DK_ERR_INVALID_ARGUMENT);
+    CHECK(dk_read_mesh_memory(NULL, 4, "x.obj", &b, &err) == DK_ERR_INVALID_ARGUMENT);
+    CHECK(dk_read_mesh_memory("", 0, NULL, &b, &err) == DK_ERR_INVALID_ARGUMENT);
+    CHECK(dk_read_mesh_memory(NULL, 0, "empty.obj", &b, &err) == DK_OK && b.n_vertices == 0);
+    dk_mesh_file_free(&b);
+}
+
+/* What the fuzzers found in the readers (tests/fuzz/corpus/mesh_ply/crash-*). */
+static void test_fuzz_findings(void)
+{
+    dk_mesh_file f;
+    dk_error err = {0};
+    /* 16 elements of 2^31 - 1 items without properties: no data, yet the reader walked
+     * through every item (3.4e10 empty steps: minutes; fuzz_mesh_ply's timeout) */
+    char ply[2048] = "ply\nformat binary_little_endian 1.0\nelement vertex 1\n"
+                     "property float x\nproperty float y\nproperty float z\n";
+    for (int i = 0; i < 15; i++)
+        strcat(ply, "element junk 2147483647\n");
+    strcat(ply, "end_header\n");
+    size_t n = strlen(ply);
+    const float xyz[3] = {1, 2, 3};
+    memcpy(ply + n, xyz, sizeof xyz);
+    n += sizeof xyz;
+    CHECK_MSG(dk_read_mesh_memory(ply, n, "junk.ply", &f, &err) == DK_OK, "%s", err.message);
+    CHECK(f.n_vertices == 1 && f.n_polygons == 0 && f.positions[2] == 3.0);
+    dk_mesh_file_free(&f);
+}
+
 DK_TEST_MAIN(test_real_meshes, test_obj_syntax, test_off_syntax, test_ply_syntax,
-             test_write_roundtrip, test_refuses_non_regular_files, test_obj_index_messages)
+             test_write_roundtrip, test_refuses_non_regular_files, test_obj_index_messages,
+             test_read_from_memory, test_fuzz_findings)

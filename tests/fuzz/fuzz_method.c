@@ -1,0 +1,489 @@
+/* Fuzzes every method of dk_methods() through the contract (dk_method.h): bind, solve,
+ * energy, stats, rebind and free.
+ *
+ * The input decodes, front to back, into
+ *   1. the method (one byte, modulo the number of methods);
+ *   2. a small mesh: mostly a W x H grid (2..6 each way) with bumps, jitter, coincident
+ *      vertices, dropped or flipped triangles, loose vertices and a scale from 1e-150 to
+ *      1e70; sometimes arbitrary polygons over up to 24 vertices;
+ *   3. constraint groups: 0..3 handles of 0..4 vertices with optional weights, fixed
+ *      vertices, an optional region of interest and optional stiffness (indices sometimes
+ *      out of range, groups sometimes overlapping);
+ *   4. the method's own options, each field valid most of the time and otherwise on a
+ *      boundary (0, negative, NaN, Inf, 1e300, an enum one past its names);
+ *   5. up to four solve requests (positions or transforms near the handles' rest, moved by
+ *      up to a few bounding-box diagonals, sometimes raw doubles; any start, iteration cap
+ *      and skip_energy), then a rebind with new groups and a solve after it.
+ * Short inputs decode to small valid cases, so most inputs get through bind into solve.
+ *
+ * Checked besides the sanitizers (each is a promise of the contract):
+ *   - a failure has a message; a bind that failed returns no object;
+ *   - a solve that succeeded returns finite positions, and a finite energy unless skipped;
+ *   - energy() of a solve's result is finite or an error;
+ *   - a solve or rebind that failed changed nothing: stats, energy() of the rest positions
+ *     and the first request's cold solve are bit for bit as before;
+ *   - two cold solves of the first request are bit-identical, whatever came between. */
+#include <stddef.h>
+#include <stdint.h>
+
+#include "dk_arap.h"
+#include "dk_eigen.h"
+#include "dk_embedded.h"
+#include "dk_falloff.h"
+#include "dk_fundamental.h"
+#include "dk_laplacian_edit.h"
+#include "dk_method.h"
+#include "fuzz_input.h"
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
+
+enum { MAX_V = 48, MAX_P = 96, MAX_HANDLES = 3, MAX_HV = 12, MAX_FIXED = 8, MAX_REQUESTS = 4 };
+
+/* ------------------------------------------------------------------ the mesh ----------- */
+
+static dk_mesh *decode_mesh(dk_fuzz_input *in)
+{
+    double pos[3 * MAX_V];
+    dk_index sizes[MAX_P], idx[4 * MAX_P];
+    dk_index n = 0, np = 0;
+    int64_t ni = 0;
+    static const double scales[8] = {1, 1, 1, 1, 1e-6, 1e6, 1e70, 1e-150};
+    const uint8_t kind = dk_fuzz_u8(in);
+    if (kind % 8 != 7) {
+        const int W = 2 + dk_fuzz_below(in, 5), H = 2 + dk_fuzz_below(in, 5);
+        const uint8_t look = dk_fuzz_u8(in);
+        const double scale = scales[look % 8];
+        for (int j = 0; j < H; j++)
+            for (int i = 0; i < W; i++, n++) {
+                const uint8_t b = (look & 8) ? dk_fuzz_u8(in) : 0;
+                pos[3 * n] = scale * (i + ((look & 16) ? 0.1 * ((b & 7) - 3.5) / 3.5 : 0));
+                pos[3 * n + 1] = scale * (j + ((look & 16) ? 0.1 * (((b >> 3) & 7) - 3.5) / 3.5 : 0));
+                pos[3 * n + 2] = scale * 0.2 * (((b >> 6) & 3) - 1.5);
+            }
+        if (look & 32) { /* a vertex onto its neighbour: zero-area triangles */
+            const dk_index v = dk_fuzz_below(in, n - 1);
+            memcpy(pos + 3 * v, pos + 3 * (v + 1), 3 * sizeof(double));
+        }
+        const int drop = (look & 64) != 0;
+        for (int j = 0; j + 1 < H; j++)
+            for (int i = 0; i + 1 < W; i++) {
+                const uint8_t q = (drop || (look & 128)) ? dk_fuzz_u8(in) : 0;
+                if (drop && q % 8 == 0) continue; /* a hole */
+                const dk_index a = j * W + i, b = a + 1, c = a + W, d = c + 1;
+                const int flip = (look & 128) && q % 16 == 1;
+                if (q & 16) { /* split along b-c or a-d */
+                    dk_index t[6] = {a, b, d, a, d, c};
+                    for (int k = 0; k < 6; k++) idx[ni++] = t[k];
+                } else {
+                    dk_index t[6] = {a, b, c, b, d, c};
+                    for (int k = 0; k < 6; k++) idx[ni++] = t[k];
+                }
+                if (flip) {
+                    const dk_index tmp = idx[ni - 1];
+                    idx[ni - 1] = idx[ni - 2];
+                    idx[ni - 2] = tmp;
+                }
+                sizes[np++] = 3;
+                sizes[np++] = 3;
+            }
+        const int loose = (look >> 1) & 3; /* 0..3 loose vertices (3: a loose triangle) */
+        for (int k = 0; k < loose && n < MAX_V; k++, n++) {
+            pos[3 * n] = scale * (W + 1 + k);
+            pos[3 * n + 1] = scale * 0.5 * k;
+            pos[3 * n + 2] = scale;
+        }
+        if (loose == 3) {
+            sizes[np++] = 3;
+            idx[ni++] = n - 3, idx[ni++] = n - 2, idx[ni++] = n - 1;
+        }
+    } else {
+        n = 3 + dk_fuzz_below(in, 22);
+        const int raw = dk_fuzz_u8(in) % 8 == 0;
+        for (int i = 0; i < 3 * n; i++)
+            pos[i] = raw ? dk_fuzz_raw_double(in) : (double)(dk_fuzz_u8(in) % 5) - 2.0;
+        const int want = dk_fuzz_below(in, 32);
+        for (int p = 0; p < want && ni + 4 <= 4 * MAX_P; p++) {
+            const dk_index k = 3 + dk_fuzz_below(in, 2);
+            sizes[np++] = k;
+            for (dk_index c = 0; c < k; c++)
+                idx[ni++] = dk_fuzz_below(in, n);
+        }
+    }
+    dk_mesh *m = NULL;
+    dk_error err = {0};
+    if (dk_mesh_from_polygons(pos, n, sizes, np, idx, ni, &m, &err) != DK_OK)
+        return NULL;
+    return m;
+}
+
+/* ------------------------------------------------------------------ constraints -------- */
+
+typedef struct groups {
+    dk_index sizes[MAX_HANDLES], hv[MAX_HV], fixed[MAX_FIXED], roi[MAX_V];
+    double weights[MAX_HV], stiffness[MAX_V];
+    dk_constraint_desc desc;
+} groups;
+
+static dk_index decode_vertex(dk_fuzz_input *in, dk_index n)
+{
+    const uint8_t b = dk_fuzz_u8(in);
+    if (b == 255) return n;  /* out of range */
+    if (b == 254) return -1;
+    return b % n;
+}
+
+static void decode_groups(dk_fuzz_input *in, dk_index n, groups *g)
+{
+    memset(g, 0, sizeof *g);
+    const uint8_t shape = dk_fuzz_u8(in);
+    /* one handle is the common case; none is refused */
+    const int nh = shape % 8 == 0 ? 0 : 1 + (shape % 8) % MAX_HANDLES;
+    dk_index total = 0;
+    for (int h = 0; h < nh; h++) {
+        const uint8_t c = dk_fuzz_u8(in);
+        dk_index k = c % 16 == 0 ? 0 : 1 + c % 4;
+        if (total + k > MAX_HV) k = MAX_HV - total;
+        g->sizes[h] = k;
+        for (dk_index i = 0; i < k; i++)
+            g->hv[total + i] = decode_vertex(in, n);
+        total += k;
+    }
+    g->desc.n_handles = nh;
+    g->desc.handle_sizes = g->sizes;
+    g->desc.handle_vertices = g->hv;
+    if (shape & 8) {
+        for (dk_index i = 0; i < total; i++)
+            g->weights[i] = dk_fuzz_u8(in) % 8 == 0 ? dk_fuzz_real(in, 1.0)
+                                                     : (1 + dk_fuzz_u8(in) % 8) / 8.0;
+        g->desc.handle_weights = g->weights;
+    }
+    const dk_index nf = (shape >> 4) % 4 == 0 ? 0 : dk_fuzz_below(in, MAX_FIXED + 1);
+    for (dk_index i = 0; i < nf; i++)
+        g->fixed[i] = decode_vertex(in, n);
+    g->desc.n_fixed = nf;
+    g->desc.fixed_vertices = g->fixed;
+    if ((shape >> 6) == 3) {
+        const dk_index nr = 1 + dk_fuzz_below(in, n);
+        for (dk_index i = 0; i < nr; i++)
+            g->roi[i] = decode_vertex(in, n);
+        g->desc.n_roi = nr;
+        g->desc.roi_vertices = g->roi;
+    }
+    if ((shape >> 6) == 2) {
+        for (dk_index v = 0; v < n; v++)
+            g->stiffness[v] = dk_fuzz_u8(in) % 8 == 0 ? dk_fuzz_real(in, 1.0)
+                                                       : 0.25 * (1 + dk_fuzz_u8(in) % 8);
+        g->desc.stiffness = g->stiffness;
+    }
+}
+
+/* ------------------------------------------------------------------ options ------------ */
+
+typedef union options {
+    dk_arap_options arap;
+    dk_laplacian_edit_options le;
+    dk_falloff_options falloff;
+    dk_embedded_options embedded;
+    dk_eigen_options eigen;
+    dk_fundamental_options fundamental;
+} options;
+
+typedef struct extras {
+    dk_index cut_a[4], cut_b[4];
+    double material[3 * MAX_P + 2];
+} extras;
+
+/* Fills the options of the method called `name`; returns NULL (the defaults) one time in
+ * eight. */
+static const void *decode_options(dk_fuzz_input *in, const char *name, const dk_mesh *m,
+                                  options *o, extras *x)
+{
+    if (dk_fuzz_u8(in) % 8 == 0) return NULL;
+    const double diag = m->bbox_diagonal > 0 ? m->bbox_diagonal : 1;
+    if (strcmp(name, "ARAP") == 0) {
+        dk_arap_options *a = &o->arap;
+        dk_arap_default_options(a);
+        a->energy = (dk_arap_energy_kind)dk_fuzz_enum(in, 2);
+        a->weights = (dk_arap_weight_kind)dk_fuzz_enum(in, 3);
+        a->max_iterations = dk_fuzz_int(in, 1, 40, 0);
+        a->tolerance = dk_fuzz_real(in, 1e-6);
+        a->acceleration = (dk_arap_acceleration)dk_fuzz_enum(in, 3);
+        a->anderson_depth = dk_fuzz_int(in, 1, 20, 1);
+        a->cg_iterations = dk_fuzz_int(in, 1, 100, 1);
+        a->predict = dk_fuzz_int(in, 0, 1, 1);
+        return a;
+    }
+    if (strcmp(name, "LaplacianEdit") == 0) {
+        dk_laplacian_edit_options *l = &o->le;
+        dk_laplacian_edit_default_options(l);
+        l->weights = (dk_le_weights)dk_fuzz_enum(in, 2);
+        l->detail = (dk_le_detail)dk_fuzz_enum(in, 3);
+        l->constraints = (dk_le_constraint_mode)dk_fuzz_enum(in, 2);
+        l->constraint_weight = dk_fuzz_real(in, 1.0);
+        l->tikhonov = dk_fuzz_u8(in) % 2 ? dk_fuzz_real(in, 1e-3) : 0;
+        l->local_frame_iterations = dk_fuzz_int(in, 0, 30, 0);
+        l->local_frame_tolerance = dk_fuzz_real(in, 1e-6);
+        return l;
+    }
+    if (strcmp(name, "Falloff") == 0) {
+        dk_falloff_options *f = &o->falloff;
+        dk_falloff_default_options(f);
+        f->distance = (dk_falloff_distance)dk_fuzz_enum(in, 4);
+        f->range = dk_fuzz_u8(in) % 2 ? dk_fuzz_real(in, f->distance == DK_FALLOFF_HOPS
+                                                              ? 3.0 : 0.3 * diag)
+                                      : 0;
+        f->reach = (dk_falloff_reach)dk_fuzz_enum(in, 2);
+        f->k = dk_fuzz_u8(in) % 2 ? dk_fuzz_real(in, 1.0) : 0;
+        f->heat_time_factor = dk_fuzz_u8(in) % 4 ? 0 : dk_fuzz_real(in, 1.0);
+        return f;
+    }
+    if (strcmp(name, "EmbeddedDeformation") == 0) {
+        dk_embedded_options *e = &o->embedded;
+        dk_embedded_default_options(e);
+        e->nodes = (dk_ed_node_source)dk_fuzz_enum(in, 2);
+        e->n_nodes = dk_fuzz_int(in, 1, 40, 1);
+        e->radius = dk_fuzz_u8(in) % 4 ? 0 : dk_fuzz_real(in, 0.25 * diag);
+        e->k = dk_fuzz_int(in, 1, 8, 1);
+        e->distance = (dk_ed_distance)dk_fuzz_enum(in, 2);
+        const uint8_t cut = dk_fuzz_u8(in);
+        if (cut % 8 == 0) {
+            e->n_cut_a = 1 + cut / 64, e->n_cut_b = 1 + (cut / 8) % 4;
+            for (int i = 0; i < e->n_cut_a; i++) x->cut_a[i] = decode_vertex(in, m->n_vertices);
+            for (int i = 0; i < e->n_cut_b; i++) x->cut_b[i] = decode_vertex(in, m->n_vertices);
+            e->cut_a = x->cut_a, e->cut_b = x->cut_b;
+        }
+        e->w_rot = dk_fuzz_real(in, 1.0);
+        e->w_reg = dk_fuzz_real(in, 10.0);
+        e->w_con = dk_fuzz_real(in, 100.0);
+        e->tolerance = dk_fuzz_real(in, 1e-6);
+        e->max_iterations = dk_fuzz_int(in, 1, 20, 0);
+        e->seed = dk_fuzz_u32(in);
+        return e;
+    }
+    if (strcmp(name, "EigenDeformation") == 0) {
+        dk_eigen_options *e = &o->eigen;
+        dk_eigen_default_options(e);
+        e->n_eigenvectors = dk_fuzz_int(in, 0, 40, 1);
+        e->refine = dk_fuzz_int(in, 0, 60, 1);
+        e->laplacian = (dk_eigen_laplacian)dk_fuzz_enum(in, 2);
+        e->bsw_width = dk_fuzz_real(in, 1.0);
+        return e;
+    }
+    if (strcmp(name, "LinearReconstruction") == 0) {
+        dk_fundamental_options *f = &o->fundamental;
+        dk_fundamental_default_options(f);
+        f->w = dk_fuzz_real(in, 1.0);
+        f->orientation = dk_fuzz_int(in, 0, 1, 1);
+        const uint8_t mat = dk_fuzz_u8(in);
+        if (mat % 4 == 0) {
+            /* the edge count, or one off it (refused); the array has room for one more */
+            f->n_material = m->n_edges + (mat / 4) % 3 - 1;
+            if (f->n_material < 0) f->n_material = 0;
+            for (dk_index e = 0; e < m->n_edges + 1 && e < 3 * MAX_P + 2; e++)
+                x->material[e] = dk_fuzz_u8(in) % 8 == 0 ? dk_fuzz_real(in, 1.0)
+                                                          : 0.25 * (1 + dk_fuzz_u8(in) % 8);
+            f->material = x->material;
+        }
+        return f;
+    }
+    dk_fuzz_check(0, "a method the harness does not know: %s", name);
+    return NULL;
+}
+
+/* ------------------------------------------------------------------ requests ----------- */
+
+typedef struct request {
+    dk_solve_request rq;
+    double targets[16 * MAX_HV > 3 * MAX_HV ? 16 * MAX_HV : 3 * MAX_HV];
+} request;
+
+/* A request for the handles of `g` (the groups bound): targets near their rest. */
+static void decode_request(dk_fuzz_input *in, const dk_mesh *m, const groups *g, request *r)
+{
+    memset(r, 0, sizeof *r);
+    const double diag = m->bbox_diagonal > 0 ? m->bbox_diagonal : 1;
+    const uint8_t c = dk_fuzz_u8(in);
+    r->rq.target_kind = c % 32 == 31 ? (dk_target_kind)2 : (dk_target_kind)(c % 2);
+    r->rq.start = (dk_start)((c >> 1) % 3);
+    if ((c >> 3) % 8 == 7) r->rq.start = (dk_start)3; /* refused */
+    const uint8_t it = dk_fuzz_u8(in);
+    r->rq.max_iterations = it % 4 ? 0 : it % 64 == 4 ? -1 : (it >> 2) % 20;
+    r->rq.skip_energy = it % 128 == 127 ? 2 : (it >> 7);
+    r->rq.targets = r->targets;
+    const int raw = dk_fuzz_u8(in) % 32 == 0;
+    dk_index off = 0;
+    for (dk_index h = 0; h < g->desc.n_handles; h++) {
+        const dk_index k = g->sizes[h];
+        if (r->rq.target_kind == DK_TARGETS_TRANSFORMS) {
+            double *T = r->targets + 16 * h;
+            for (int i = 0; i < 16; i++)
+                T[i] = i % 5 == 0 ? 1.0 : 0.0;
+            for (int i = 0; i < 12; i++) {
+                const uint8_t b = dk_fuzz_u8(in);
+                T[i] += raw ? dk_fuzz_raw_double(in)
+                            : (i % 4 == 3 ? diag : 0.5) * ((double)(b % 33) - 16) / 16.0;
+            }
+            if (dk_fuzz_u8(in) % 32 == 0) T[12] = 0.5; /* not an affine transform: refused */
+        } else {
+            for (dk_index i = 0; i < k; i++) {
+                const dk_index v = g->hv[off + i];
+                const double *p = m->positions + 3 * (v >= 0 && v < m->n_vertices ? v : 0);
+                for (int d = 0; d < 3; d++) {
+                    const uint8_t b = dk_fuzz_u8(in);
+                    r->targets[3 * (off + i) + d] =
+                        raw ? dk_fuzz_raw_double(in)
+                            : p[d] + 2.0 * diag * ((double)(b % 33) - 16) / 16.0;
+                }
+            }
+        }
+        off += k;
+    }
+}
+
+/* ------------------------------------------------------------------ the checks --------- */
+
+static int same_bits(const double *a, const double *b, size_t n)
+{
+    return memcmp(a, b, n * sizeof(double)) == 0;
+}
+
+typedef struct state {
+    dk_method_stats stats;
+    double energy_rest; /* energy() of the rest positions, NaN when it failed */
+    dk_status energy_status;
+} state;
+
+static void observe(const dk_method_ops *ops, void *obj, const dk_mesh *m, state *s)
+{
+    dk_error err = {0};
+    memset(s, 0, sizeof *s);
+    ops->stats(obj, &s->stats);
+    s->energy_rest = NAN;
+    s->energy_status = ops->energy(obj, m->positions, &s->energy_rest, &err);
+    if (s->energy_status != DK_OK)
+        dk_fuzz_check(err.message[0], "%s energy failed without a message", ops->name);
+}
+
+static void same_state(const dk_method_ops *ops, const state *a, const state *b,
+                       const char *after)
+{
+    dk_fuzz_check(memcmp(&a->stats, &b->stats, sizeof a->stats) == 0,
+                  "%s: a %s that failed changed the stats", ops->name, after);
+    dk_fuzz_check(a->energy_status == b->energy_status &&
+                      (a->energy_status != DK_OK ||
+                       memcmp(&a->energy_rest, &b->energy_rest, sizeof(double)) == 0),
+                  "%s: a %s that failed changed energy(rest): %.17g -> %.17g", ops->name,
+                  after, a->energy_rest, b->energy_rest);
+}
+
+/* Solves; checks what a success promises and that a failure has a message. */
+static dk_status solve(const dk_method_ops *ops, void *obj, const dk_mesh *m,
+                       const dk_solve_request *rq, double *x)
+{
+    dk_error err = {0};
+    dk_solve_info info;
+    memset(&info, 0, sizeof info);
+    const dk_status st = ops->solve(obj, rq, x, &info, &err);
+    if (st != DK_OK) {
+        dk_fuzz_check(err.message[0], "%s solve failed (%d) without a message", ops->name,
+                      (int)st);
+        return st;
+    }
+    for (int64_t i = 0; i < 3 * (int64_t)m->n_vertices; i++)
+        dk_fuzz_check(isfinite(x[i]), "%s solve returned a non-finite coordinate %lld",
+                      ops->name, (long long)i);
+    dk_fuzz_check(rq->skip_energy || isfinite(info.energy),
+                  "%s solve returned energy %g", ops->name, info.energy);
+    double e = NAN;
+    if (ops->energy(obj, x, &e, &err) == DK_OK)
+        dk_fuzz_check(isfinite(e), "%s energy() returned %g without an error", ops->name, e);
+    else
+        dk_fuzz_check(err.message[0], "%s energy failed without a message", ops->name);
+    return st;
+}
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
+{
+    dk_fuzz_input in = dk_fuzz_begin(data, size);
+    const dk_method_ops *const *all = dk_methods();
+    int n_methods = 0;
+    while (all[n_methods]) n_methods++;
+    const dk_method_ops *ops = all[dk_fuzz_below(&in, n_methods)];
+
+    dk_mesh *m = decode_mesh(&in);
+    if (!m) return 0;
+    const size_t N = 3 * (size_t)m->n_vertices;
+    groups g, g2;
+    options o;
+    extras x;
+    memset(&o, 0, sizeof o);
+    memset(&x, 0, sizeof x);
+    decode_groups(&in, m->n_vertices, &g);
+    const void *opts = decode_options(&in, ops->name, m, &o, &x);
+
+    void *obj = NULL;
+    dk_error err = {0};
+    dk_status st = ops->bind(m, &g.desc, opts, &obj, &err);
+    if (st != DK_OK) {
+        dk_fuzz_check(obj == NULL, "%s bind failed (%d) but returned an object", ops->name,
+                      (int)st);
+        dk_fuzz_check(err.message[0], "%s bind failed (%d) without a message", ops->name,
+                      (int)st);
+        dk_mesh_free(m);
+        return 0;
+    }
+    dk_fuzz_check(obj != NULL, "%s bind succeeded without an object", ops->name);
+    double *x0 = malloc(N * sizeof(double)), *x1 = malloc(N * sizeof(double));
+    if (!x0 || !x1) goto out;
+    state before, after;
+    observe(ops, obj, m, &before);
+    dk_fuzz_check(before.stats.n_vertices == m->n_vertices, "%s stats: %d vertices of %d",
+                  ops->name, (int)before.stats.n_vertices, (int)m->n_vertices);
+
+    /* the first request, cold: the reference every later cold solve of it must equal */
+    request first, r;
+    decode_request(&in, m, &g, &first);
+    first.rq.start = DK_START_COLD;
+    const int have_first = solve(ops, obj, m, &first.rq, x0) == DK_OK;
+
+    const int n_requests = dk_fuzz_below(&in, MAX_REQUESTS + 1);
+    for (int k = 0; k < n_requests; k++) {
+        decode_request(&in, m, &g, &r);
+        observe(ops, obj, m, &before);
+        if (solve(ops, obj, m, &r.rq, x1) != DK_OK) {
+            observe(ops, obj, m, &after);
+            same_state(ops, &before, &after, "solve");
+        }
+    }
+    if (have_first) {
+        dk_fuzz_check(solve(ops, obj, m, &first.rq, x1) == DK_OK,
+                      "%s: a cold solve that succeeded before now fails", ops->name);
+        dk_fuzz_check(same_bits(x0, x1, N), "%s: two cold solves of one request differ",
+                      ops->name);
+    }
+
+    /* a rebind with new groups; a failed one changes nothing */
+    decode_groups(&in, m->n_vertices, &g2);
+    observe(ops, obj, m, &before);
+    if (ops->rebind(obj, &g2.desc, &err) != DK_OK) {
+        dk_fuzz_check(err.message[0], "%s rebind failed without a message", ops->name);
+        observe(ops, obj, m, &after);
+        same_state(ops, &before, &after, "rebind");
+        if (have_first) {
+            dk_fuzz_check(solve(ops, obj, m, &first.rq, x1) == DK_OK,
+                          "%s: after a failed rebind the first request fails", ops->name);
+            dk_fuzz_check(same_bits(x0, x1, N),
+                          "%s: after a failed rebind the first request's result differs",
+                          ops->name);
+        }
+    } else {
+        decode_request(&in, m, &g2, &r);
+        solve(ops, obj, m, &r.rq, x1);
+    }
+out:
+    free(x0);
+    free(x1);
+    ops->free(obj);
+    dk_mesh_free(m);
+    return 0;
+}
