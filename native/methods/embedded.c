@@ -1549,21 +1549,11 @@ dk_status dk_embedded_deformed(const dk_embedded *ed, double *positions, dk_erro
 /* The inverse transpose of a 3 x 3 (row-major) into it, or 0 when singular. */
 static int inverse_transpose(const double *R, double *o)
 {
-    const double c00 = R[4] * R[8] - R[5] * R[7], c01 = R[5] * R[6] - R[3] * R[8];
-    const double c02 = R[3] * R[7] - R[4] * R[6];
-    const double det = R[0] * c00 + R[1] * c01 + R[2] * c02;
+    const double det = dk_mat3_cofactor(R, o); /* (R^-1)^T = cofactor matrix / det */
     if (!(fabs(det) > 1e-300) || !isfinite(det))
         return 0;
-    /* (R^-1)^T = cofactor matrix / det */
-    o[0] = c00 / det;
-    o[1] = c01 / det;
-    o[2] = c02 / det;
-    o[3] = (R[2] * R[7] - R[1] * R[8]) / det;
-    o[4] = (R[0] * R[8] - R[2] * R[6]) / det;
-    o[5] = (R[1] * R[6] - R[0] * R[7]) / det;
-    o[6] = (R[1] * R[5] - R[2] * R[4]) / det;
-    o[7] = (R[2] * R[3] - R[0] * R[5]) / det;
-    o[8] = (R[0] * R[4] - R[1] * R[3]) / det;
+    for (int k = 0; k < 9; k++)
+        o[k] /= det;
     return 1;
 }
 

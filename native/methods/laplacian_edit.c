@@ -1320,16 +1320,7 @@ static int fit_transforms(const dk_laplacian_edit *le, le_system *s)
                 }
         }
         /* inverse by cofactors; refused unless det > 1e-12 * (trace / 3)^3 */
-        Mi[0] = M[4] * M[8] - M[5] * M[7];
-        Mi[1] = M[2] * M[7] - M[1] * M[8];
-        Mi[2] = M[1] * M[5] - M[2] * M[4];
-        Mi[3] = M[5] * M[6] - M[3] * M[8];
-        Mi[4] = M[0] * M[8] - M[2] * M[6];
-        Mi[5] = M[2] * M[3] - M[0] * M[5];
-        Mi[6] = M[3] * M[7] - M[4] * M[6];
-        Mi[7] = M[1] * M[6] - M[0] * M[7];
-        Mi[8] = M[0] * M[4] - M[1] * M[3];
-        const double det = M[0] * Mi[0] + M[1] * Mi[3] + M[2] * Mi[6];
+        const double det = dk_mat3_cofactor(M, Mi); /* M symmetric: Mi is its adjugate */
         const double tr = (M[0] + M[4] + M[8]) / 3.0;
         if (!(det > 1e-12 * tr * tr * tr) || !isfinite(det))
             return 0;

@@ -129,6 +129,10 @@ void dk_kdtree_free(dk_kdtree *tree);
  *  fast enough to call per vertex per ARAP iteration. Returns trace(R^T A). */
 double dk_closest_rotation(const double a[9], double r[9]);
 
+/** The cofactor matrix c of the 3x3 matrix x (both row-major, 9 doubles; c = det(x) x^-T,
+ *  so x^-1 = c^T / det(x)). Returns det(x). Allocation-free; x and c must not overlap. */
+double dk_mat3_cofactor(const double x[9], double c[9]);
+
 #ifdef __cplusplus
 }
 #endif

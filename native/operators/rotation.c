@@ -121,8 +121,7 @@ static void closest_rotation_horn(const double a[9], double r[9])
     r[8] = ww - xx - yy + zz;
 }
 
-/* Cofactor matrix c of x (c = det(x) x^-T); returns det(x). */
-static inline double cofactor3(const double x[9], double c[9])
+double dk_mat3_cofactor(const double x[9], double c[9])
 {
     c[0] = x[4] * x[8] - x[5] * x[7];
     c[1] = x[5] * x[6] - x[3] * x[8];
@@ -142,7 +141,7 @@ static int polar_newton(double x[9], double r[9])
     int scaled = 1;
     for (int it = 0; it < 24; it++) {
         double c[9];
-        double det = cofactor3(x, c);
+        double det = dk_mat3_cofactor(x, c);
         if (!(det > 0.0)) return 0;
         double g = 1.0;
         if (scaled) {
@@ -183,10 +182,10 @@ double dk_closest_rotation(const double a[9], double r[9])
     for (int i = 0; i < 9; i++) x[i] = a[i] * inv, s2 += x[i] * x[i];
     inv = 1.0 / sqrt(s2);
     for (int i = 0; i < 9; i++) x[i] *= inv;
-    cofactor3(x, c);
+    dk_mat3_cofactor(x, c);
     double b[9], cb[9];
     for (int i = 0; i < 9; i++) b[i] = x[i] + c[i];
-    double detb = cofactor3(b, cb);
+    double detb = dk_mat3_cofactor(b, cb);
     if (!(detb > 1e-6) || !polar_newton(b, r)) closest_rotation_horn(x, r);
 
     double tr = 0.0;
