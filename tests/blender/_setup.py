@@ -233,6 +233,28 @@ def reset_scene():
     solver.clear_cache()
 
 
+def evaluated_frames_probe(seen, name="Grid"):
+    """A frame_change_post handler that records `name`'s evaluated positions per frame in
+    `seen` (what a render of that frame shows)."""
+    def probe(scene, depsgraph):
+        me = bpy.data.objects[name].evaluated_get(depsgraph).data
+        co = np.empty(len(me.vertices) * 3, np.float32)
+        me.vertices.foreach_get("co", co)
+        seen[scene.frame_current] = co.reshape(-1, 3)
+    return probe
+
+
+def tiny_workbench_render(sc, size, filepath):
+    """A camera over the origin and a `size` x `size` Workbench render into `filepath`."""
+    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
+    sc.collection.objects.link(cam)
+    sc.camera = cam
+    cam.location = (0, 0, 5)
+    sc.render.engine = "BLENDER_WORKBENCH"
+    sc.render.resolution_x = sc.render.resolution_y = size
+    sc.render.filepath = filepath
+
+
 def make_grid(name="Grid", nx=12, ny=6, size=(2.0, 1.0), bumpy=True):
     """A bumpy nx x ny grid of quads in the XY plane, centred at the origin."""
     verts, faces = [], []

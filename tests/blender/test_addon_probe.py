@@ -494,19 +494,8 @@ def test_render_animation():
         sc.frame_set(f)
         want[f] = direct(obj, d, cold=True)
     seen = {}
-
-    def probe(scene, depsgraph):
-        me = bpy.data.objects["Grid"].evaluated_get(depsgraph).data
-        co = np.empty(len(me.vertices) * 3, np.float32)
-        me.vertices.foreach_get("co", co)
-        seen[scene.frame_current] = co.reshape(-1, 3)
-    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
-    sc.collection.objects.link(cam)
-    sc.camera = cam
-    cam.location = (0, 0, 5)
-    sc.render.engine = "BLENDER_WORKBENCH"
-    sc.render.resolution_x = sc.render.resolution_y = 8
-    sc.render.filepath = os.path.join(S.OUTPUT, "probe_render", "f")
+    probe = S.evaluated_frames_probe(seen)
+    S.tiny_workbench_render(sc, 8, os.path.join(S.OUTPUT, "probe_render", "f"))
     sc.frame_set(1)
     bpy.app.handlers.frame_change_post.append(probe)
     try:
