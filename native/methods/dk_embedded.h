@@ -84,7 +84,9 @@ typedef enum dk_ed_distance {
 typedef struct dk_embedded_options {
     dk_ed_node_source nodes;  /**< default DK_ED_NODES_SURFACE                             */
     int n_nodes;              /**< the node count wanted (the bisection meets it within
-                                   a few %), 1..100000; default 200; ignored when radius > 0 */
+                                   a few %), 1..100000; default 200; at most the vertex
+                                   count is used (a graph denser than its mesh is floppy);
+                                   ignored when radius > 0                                */
     double radius;            /**< > 0: the sampling radius itself (mesh units); a radius
                                    below 1e-12 of the mesh's extent, or one that keeps more
                                    than 100000 nodes (n_nodes' bound), is refused         */

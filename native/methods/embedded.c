@@ -325,13 +325,17 @@ static dk_status sample_nodes(dk_embedded *ed, dk_error *err)
         /* all candidates on one point (coincident vertices): any radius keeps one; a zero
          * one made every cell number 0 / 0, NaN into an int64 (fuzz_method, UBSan) */
         const double extent = diag > 0 ? diag : 1.0;
+        /* at most one node per vertex: a graph denser than its mesh only adds freedom the
+         * vertices cannot hold (the paper's graphs are far coarser than their meshes); the
+         * add-on's default 200 nodes on a 50-vertex grid bulged 13% past the handle */
+        const dk_index wanted = o->n_nodes < m->n_vertices ? o->n_nodes : m->n_vertices;
         double a = extent * 1e-4, b = extent;
         for (int it = 0; it < 40; it++) {
             const double r = 0.5 * (a + b);
             const dk_index c = eliminate(cand, nc, order, r, lo, kept, nc);
             if (c < 0)
                 break;
-            if (c > o->n_nodes)
+            if (c > wanted)
                 a = r;
             else
                 b = r;

@@ -57,6 +57,8 @@ def one_method(mid):
     hv = got[handle]
     want_h = (np.c_[rest[handle], np.ones(len(handle))] @ Ts[-1][0].T)[:, :3]
     # like a Hook: exactly, or for penalty handles (the native contract's flag) most of the way
+    # (embedded deformation on this 72-vertex grid: 72 nodes, the request capped at the vertex
+    # count, leave the handle 6% of its move behind; docs/methods/embedded.md)
     m = S.methods.get(mid)
     flags = S.dk._native._method_info(m.native_class)
     penalty, soft = flags["penalty_handles"], flags["soft_regions"]
@@ -64,7 +66,7 @@ def one_method(mid):
     if soft:  # a least-squares fit (eigen deformation): most of the way, on average
         herr = np.abs(hv - want_h).max(axis=1).mean()
     R.check("%s handle vertices follow the target like a Hook" % mid,
-            herr < (0.25 * hmove if soft else 0.05 * hmove if penalty else 1e-4), (herr, hmove))
+            herr < (0.25 * hmove if soft else 0.08 * hmove if penalty else 1e-4), (herr, hmove))
     ferr = np.abs(got[fixed] - rest[fixed]).max(axis=1)
     R.check("%s fixed vertices stay" % mid,
             ferr.mean() < 0.25 * hmove if soft else ferr.max() < 1e-5, ferr.max())

@@ -184,9 +184,13 @@ def test_deform_end_to_end():
                 ferr.mean() < 0.1 if soft else ferr.max() < 1e-5, ferr.max())
         free = [i for i in range(nx * ny) if i not in set(fixed) | set(handle)]
         dz = (got[free] - rest[free])[:, 2]
+        # between 0 and the handle's lift; penalty-handle methods (embedded deformation: a
+        # least-squares model with free rotations) within their handle tolerance of it
         R.check("%s the rest of the mesh moved in between" % mid,
-                dz.max() > (0.05 if soft else 0.1) and dz.max() < 0.4 + 1e-6
-                and dz.min() > (-0.05 if soft else -1e-3),
+                dz.max() > (0.05 if soft else 0.1)
+                and dz.max() < 0.4 + (0.02 if flags["penalty_handles"] else 1e-6)
+                and dz.min() > (-0.05 if soft else -0.02 if flags["penalty_handles"]
+                                else -1e-3),
                 (dz.min(), dz.max()))
         R.check("%s base mesh untouched" % mid, np.abs(S.rest_positions(obj) - rest).max() == 0)
 
