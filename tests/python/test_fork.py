@@ -263,18 +263,7 @@ def test_child_of_an_idle_parent_keeps_its_objects(scene):
         finally:
             os._exit(code)
     os.close(w)
-    deadline = time.monotonic() + CHILD_TIMEOUT
-    while time.monotonic() < deadline:
-        done, status = os.waitpid(pid, os.WNOHANG)
-        if done:
-            break
-        time.sleep(0.05)
-    else:
-        os.kill(pid, signal.SIGKILL)
-        os.waitpid(pid, 0)
-        pytest.fail("the child hung")
-    out = json.loads(_read_all(r))
-    assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0
+    out = json.loads(_wait_os_child(pid, r))  # asserts the child exited with status 0
     for name in dk.METHODS:
         inherited, fresh = out[name]
         assert inherited < 1e-6 and fresh < 1e-6, (name, inherited, fresh)
