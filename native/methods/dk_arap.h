@@ -135,7 +135,11 @@ dk_status dk_arap_rebind(dk_arap *arap, const dk_constraint_desc *constraints, d
  *  Laplacian editing. DK_START_RESUME: when the targets equal the previous call's and that
  *  call ended normally, iterations continue exactly where it stopped (Anderson history
  *  included), so a solve cut into slices by `max_iterations` gives the same result as one
- *  long solve; otherwise as WARM. request->max_iterations > 0 overrides the option for this
+ *  long solve; otherwise as WARM. request->preview: the start alone, no iterations
+ *  (info.iterations 0): with the response basis (dk_arap_basis) an O(n) combination, the
+ *  predicted start chosen over the plain one by the energies of a fixed sample of cells
+ *  (~16k), and the start's local step left to the solve that resumes it (or done when the
+ *  energy is asked for). request->max_iterations > 0 overrides the option for this
  *  call; the energy is always reported (it costs nothing extra). Writes `positions`
  *  (n_vertices x 3, row-major) and `info` (may be NULL): energy E of the returned positions
  *  (with their optimal rotations), iterations (local/global iterations or Newton steps),

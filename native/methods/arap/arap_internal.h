@@ -64,6 +64,8 @@
  * Newton: 0.19 and 3e-3 on two of them), and 10% less time in all. Warm drag starts are at
  * ~5e-4, so drags are unaffected. */
 #define NEWTON_FAR 0.03
+/* A preview compares its two starts (plain, predicted) on about this many cells. */
+#define PREVIEW_SAMPLE 16384
 
 typedef struct arap_system {
     dk_constraints *con;
@@ -223,6 +225,11 @@ void arap_system_free(arap_system *s);
 double arap_local_energy(const dk_arap *ar, const arap_system *s, const double *x,
                          double *rot);
 void arap_rotations_rhs(const dk_arap *ar, arap_system *s, const double *rot);
+/* the energy of one block of 64 consecutive cells in every `stride` (rotations refined from
+ * ar->rot, which is left as it is) plus every soft penalty: the preview's cheap comparison
+ * of two starts (warm_start.c) */
+double arap_sampled_energy(const dk_arap *ar, const arap_system *s, const double *x,
+                           dk_index stride);
 void arap_build_rhs_const(const dk_arap *ar, arap_system *s, const double *x);
 void arap_scatter(const arap_system *s, const double *xu, double *x);
 void arap_gather(const arap_system *s, const double *x, double *xu);
