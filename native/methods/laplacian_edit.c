@@ -901,6 +901,7 @@ fail:
 static dk_status rebind_impl(dk_laplacian_edit *le, const dk_constraint_desc *desc,
                              le_system *s, dk_error *err)
 {
+    const int analyses = le->analysis_count, factorizations = le->factorization_count;
     dk_status st = build_system_caller(le, desc, s, err);
     if (st != DK_OK)
         return st;
@@ -908,6 +909,10 @@ static dk_status rebind_impl(dk_laplacian_edit *le, const dk_constraint_desc *de
     st = factor(le, &le->sys, s, "LaplacianEdit rebind factorization", err);
     if (st != DK_OK) {
         system_free(s);
+        if (st == DK_ERR_CANCELLED) {
+            le->analysis_count = analyses;
+            le->factorization_count = factorizations;
+        }
         return st;
     }
     /* A cancellation is possible in the basis, which uses le->x and le->delta as scratch:
@@ -943,6 +948,10 @@ static dk_status rebind_impl(dk_laplacian_edit *le, const dk_constraint_desc *de
             }
         }
         system_free(s);
+    }
+    if (st == DK_ERR_CANCELLED) { /* changes nothing, the counters neither */
+        le->analysis_count = analyses;
+        le->factorization_count = factorizations;
     }
     free(saved_delta);
     return st;

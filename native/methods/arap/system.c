@@ -384,8 +384,10 @@ static dk_status factor(dk_arap *ar, arap_system *old, arap_system *s, dk_error 
                                   old ? &old->a : NULL, same, DK_CSYS_REFACTOR_ALWAYS,
                                   ar->team, &counts, ar->prog,
                                   ar->prog_base + ARAP_PHASE_ANALYZE, err);
-    ar->analysis_count = counts.analysis_count;
-    ar->factorization_count = counts.factorization_count;
+    if (st != DK_ERR_CANCELLED) { /* a cancelled rebind changes nothing, its counters too */
+        ar->analysis_count = counts.analysis_count;
+        ar->factorization_count = counts.factorization_count;
+    }
     if (st == DK_OK)
         return DK_OK;
     /* the caller's vertex of the failing column, not the internal matrix column */
