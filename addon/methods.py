@@ -103,8 +103,10 @@ class Method:
     # True: the Region group, when set, is the region the handle moves (eigen deformation's
     # R) and goes to the native handles, with the first handle's transform
     region_is_handle: bool = False
-    # True: the native constructor takes progress=callable(fraction) -> stop; the UI bind
-    # shows the fraction and Esc stops the native work (solver.BindJob)
+    # True: the native constructor takes progress=callable(fraction) -> stop (fraction a
+    # deformkit.BindProgress: a float with the phase's name in .phase); the UI bind shows
+    # the phase and fraction, and Esc stops the native work at its next report
+    # (solver.BindJob)
     bind_progress: bool = False
 
 
@@ -115,6 +117,7 @@ METHODS = [
         native_class="ARAP",
         description="As-rigid-as-possible: keeps local shape, bends and twists naturally",
         icon="MOD_SIMPLEDEFORM",
+        bind_progress=True,
         maps=("stiffness",),
         material_label="Stiffness",
         stiffness_option="stiffness_scale",
@@ -187,6 +190,7 @@ METHODS = [
         native_class="LaplacianEdit",
         description="Laplacian surface editing: one linear solve per update",
         icon="MOD_SMOOTH",
+        bind_progress=True,
         maps=("handle_weights",),
         options=[
             Option("weights", "ENUM", "cotangent", "Edge Weights",

@@ -74,11 +74,14 @@ struct dk_laplacian_edit {
     int prog_base;
 };
 
-/* The phases of a bind and of a rebind (dk_progress.h), weighted by their cost measured on
- * the 692k-vertex armadillo (scripts/bench_scale.py's mesh, 2 subdivisions; defaults:
- * cotangent, fixed detail, hard constraints, one handle: 7 basis columns) on the shared
- * 2-core machine, in seconds. The rebind's phases are the bind's from LE_PHASE_CONSTRAINTS
- * on, in the same order. */
+/* The phases of a bind and of a rebind (dk_progress.h), weighted by their cost in seconds
+ * measured on the 692k-vertex armadillo (scripts/bench_scale.py's armadillo-wave, 2
+ * subdivisions; defaults: cotangent, fixed detail, hard constraints, one handle: 7 basis
+ * columns) on the shared 2-core machine (load ~6), timed between the callback's reports
+ * (issue 19 item 3): 18.5 and 18.7 s in all, the factorization of the normal equations
+ * (a two-ring stencil: a much denser factor than ARAP's) 14.2-14.4 s of it, which is the
+ * longest stretch without a report. The rebind's phases are the bind's from
+ * LE_PHASE_CONSTRAINTS on, in the same order. */
 enum {
     LE_PHASE_CONSTRAINTS = 0, /* the constraints, unknowns, component check              */
     LE_PHASE_ASSEMBLE = 1,    /* the normal equations                                     */
@@ -87,16 +90,16 @@ enum {
     LE_PHASE_BASIS = 4        /* the affine basis: its right-hand sides and solves        */
 };
 static const dk_progress_phase le_bind_phases[] = {
-    {"renumber", 0.5},    /* dk_reorder_create                                           */
-    {"operator", 0.5},    /* the differential operator, rest deltas (and frames)         */
-    {"constraints", 0.2}, /* LE_PHASE_CONSTRAINTS ...                                    */
-    {"assemble", 1.0},
-    {"analyze", 1.5},
-    {"factorize", 4.0},
-    {"basis", 3.0}};
+    {"renumber", 0.60},    /* dk_reorder_create                                          */
+    {"operator", 0.27},    /* the differential operator, rest deltas (and frames)        */
+    {"constraints", 0.04}, /* LE_PHASE_CONSTRAINTS ...                                   */
+    {"assemble", 0.41},
+    {"analyze", 1.75},
+    {"factorize", 14.3},
+    {"basis", 1.30}};
 static const dk_progress_phase le_rebind_phases[] = {
-    {"constraints", 0.2}, {"assemble", 1.0}, {"analyze", 1.5}, {"factorize", 4.0},
-    {"basis", 3.0}};
+    {"constraints", 0.04}, {"assemble", 0.41}, {"analyze", 1.75}, {"factorize", 14.3},
+    {"basis", 1.30}};
 #define LE_BIND_PHASE_BASE 2 /* LE_PHASE_CONSTRAINTS in le_bind_phases */
 
 static dk_status le_phase(const dk_laplacian_edit *le, int k, dk_error *err)
