@@ -241,6 +241,7 @@ METHODS = [
         native_class="Falloff",
         description="Attenuated handle displacement by distance from the handle",
         icon="SMOOTHCURVE",
+        bind_progress=True,
         maps=("handle_weights",),
         bind_args=lambda *a: falloff_args(*a),
         options=[

@@ -564,7 +564,8 @@ BIND_PHASES = {
     "renumber": "renumbering", "cells": "building cells", "operator": "building the operator",
     "constraints": "reading constraints", "system": "building the system",
     "assemble": "assembling", "analyze": "analysing", "factorize": "factorizing",
-    "basis": "handle basis", "eigenvectors": "eigenvectors", "done": "finishing",
+    "basis": "handle basis", "heat": "heat method", "distances": "distances",
+    "eigenvectors": "eigenvectors", "done": "finishing",
 }
 
 

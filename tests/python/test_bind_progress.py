@@ -1,6 +1,6 @@
 """Bind progress and cancellation (issue 19, item 3): progress=callable(fraction) on the
-constructors of ARAP, LaplacianEdit and EigenDeformation and on rebind of ARAP and
-LaplacianEdit. The callable gets a deformkit.BindProgress (a float with `.phase`); a true
+constructors of ARAP, LaplacianEdit, Falloff and EigenDeformation and on rebind of ARAP,
+LaplacianEdit and Falloff. The callable gets a deformkit.BindProgress (a float with `.phase`); a true
 return stops the bind (RuntimeError), an exception stops it and propagates, and a rebind
 that stopped leaves the object solving its old constraints exactly as before."""
 
@@ -38,6 +38,7 @@ PHASES = {
              "factorize"},
     "LaplacianEdit": {"renumber", "operator", "constraints", "assemble", "analyze",
                       "factorize", "basis"},
+    "Falloff": {"distances"},  # distance="hops"; "geodesic" adds "heat" (below)
 }
 METHODS = sorted(PHASES)
 
@@ -120,6 +121,16 @@ def test_exception_in_callback_propagates(name):
         with pytest.raises(ZeroDivisionError, match="raised by the callback at %d" % k):
             bind(name, progress=rec)
         assert len(rec.seen) == k + 1  # not called again after it raised
+
+
+def test_falloff_geodesic_reports_the_heat_factorization():
+    rec = Recorder()
+    bind("Falloff", distance="geodesic", progress=rec)
+    check_sequence(rec.seen)
+    phases = [x.phase for x in rec.seen]
+    assert phases[0] == "heat" and phases[-1] == "done" and "distances" in phases
+    with pytest.raises(RuntimeError, match="cancelled in phase heat"):
+        bind("Falloff", distance="geodesic", progress=Recorder(stop_at=0))
 
 
 def test_eigen_reports_through_the_same_callback():
