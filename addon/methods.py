@@ -292,6 +292,7 @@ METHODS.append(Method(
                 "shape, each an affine transformation kept close to a rotation; handles "
                 "pull as soft constraints",
     icon="MOD_LATTICE",
+    bind_progress=True,
     maps=("cut",),
     cut_options=("cut_a", "cut_b"),
     cold_solve={"warm_start": False},

@@ -565,6 +565,7 @@ BIND_PHASES = {
     "constraints": "reading constraints", "system": "building the system",
     "assemble": "assembling", "analyze": "analysing", "factorize": "factorizing",
     "basis": "handle basis", "heat": "heat method", "distances": "distances",
+    "nodes": "placing nodes", "weights": "node weights", "edges": "graph edges",
     "eigenvectors": "eigenvectors", "done": "finishing",
 }
 
