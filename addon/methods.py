@@ -108,6 +108,10 @@ class Method:
     # the phase and fraction, and Esc stops the native work at its next report
     # (solver.BindJob)
     bind_progress: bool = False
+    # True: the native object has response_basis() (ARAP's warm-start response to each
+    # handle's affine motion): while a solve runs in a worker thread, each update shows the
+    # last result moved by it to the handles' current transforms (solver._basis_preview)
+    response_basis: bool = False
 
 
 METHODS = [
@@ -127,6 +131,7 @@ METHODS = [
         iteration_cap="max_iterations",
         inner_iterations="cg_iterations",
         inner_when=("acceleration", "newton"),
+        response_basis=True,
         options=[
             Option("energy", "ENUM", "spokes", "Keep Rigid",
                    "Which pieces of the surface the solve keeps rigid",

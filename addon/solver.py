@@ -58,7 +58,8 @@ class _Entry:
     __slots__ = ("native", "dkmesh", "rest", "extent", "n_vertices", "n_faces", "settings",
                  "groups", "last_inputs", "method_id", "verified", "pending", "pending_its",
                  "handles", "source", "preview_at", "material", "material_shown", "slice_cost",
-                 "moved_at", "quick", "worker", "slice_ms", "graph_shown")
+                 "moved_at", "quick", "worker", "slice_ms", "graph_shown", "basis",
+                 "result_pos", "result_T", "preview_inputs")
 
 
 def mark_settings_changed():
@@ -659,6 +660,7 @@ class BindJob:
         e.slice_cost, e.moved_at = {}, 0.0
         e.quick = quick_topology(me)
         e.worker, e.slice_ms, e.graph_shown = None, None, None
+        e.basis, e.result_pos, e.result_T, e.preview_inputs = None, None, None, None
         _cache[(obj.name, d.uid)] = e
         return e
 
@@ -675,6 +677,9 @@ def _build(obj, d, kw, groups_key, entry=None, threaded=False):
             entry.source = None if methods.get(d.method).follows_input else entry.rest
             entry.verified = True
             entry.last_inputs = None
+            # other handles: another basis, and no result to move by it
+            entry.basis, entry.result_pos, entry.result_T = None, None, None
+            entry.preview_inputs = None
             return entry
         except NATIVE_ERRORS:
             pass  # fall back to a full bind, which reports the error properly
@@ -1147,7 +1152,8 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
     if ce is not None and ce.worker is not None and ce.worker.thread.is_alive():
         if interactive and write and not cold and not check_groups:
             ce.pending = True  # the timer polls it
-            return None
+            T, _, inputs = _solve_inputs(obj, d, ce, depsgraph)
+            return _basis_preview(obj, d, ce, T, inputs)
         _wait_for_worker(key)
     # the topology in full (check_topology) for Apply, bakes, scripts and blender -b (None:
     # all but interactive solves); the UI's handler asks for it after a geometry update the
@@ -1157,13 +1163,17 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
                    full_check=full)
     w, e.worker = e.worker, None
     shown = None
+    T, source, inputs = _solve_inputs(obj, d, e, depsgraph)
     if w is not None:  # a worker's solve ended: its result shows now (if still wanted)
         if w.error is not None:
             e.pending = False
             raise w.error
         if interactive and write and not cold:
-            shown = _finish_solve(obj, d, e, key, w.plan, w.result, w.ms)
-    T, source, inputs = _solve_inputs(obj, d, e, depsgraph)
+            plan_w = w.plan
+            if inputs != w.plan["inputs"] and _has_basis(e):
+                # the handles moved on: the preview from this result is what shows (below)
+                plan_w = dict(w.plan, write=False)
+            shown = _finish_solve(obj, d, e, key, plan_w, w.result, w.ms)
     if shown is not None and inputs == w.plan["inputs"]:
         return shown  # the worker's result is for the targets as they are
     if not force and e.last_inputs == inputs:
@@ -1171,13 +1181,47 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
     plan = _plan_solve(obj, d, e, key, T, source, inputs, cold, write, interactive,
                        resume and shown is None)
     if _async_wanted(e, interactive, cold, write):
+        _fetch_basis(e, methods.get(d.method))  # the object is idle now
         e.worker = _Worker(e, plan)
         e.pending = True
-        return shown
+        preview = _basis_preview(obj, d, e, T, inputs)
+        return shown if preview is None else preview
     t0 = time.perf_counter()
     res = _native_call(plan["label"] + " solve", e.native.solve, **plan["goal"], **plan["kw"])
     ms = (time.perf_counter() - t0) * 1000.0
     return _finish_solve(obj, d, e, key, plan, res, ms)
+
+
+def _has_basis(e):
+    return e.basis is not None and e.basis is not False
+
+
+def _fetch_basis(e, m):
+    """The native response basis (methods.Method.response_basis), fetched once per binding,
+    while the object is idle (False: it has none)."""
+    if m.response_basis and e.basis is None:
+        b = _native_call(m.label + " response basis", e.native.response_basis)
+        e.basis = False if b is None else b
+
+
+def _basis_preview(obj, d, e, T, inputs):
+    """While a worker thread solves (issue 19): the last finished result moved by the
+    response basis to the handles' current transforms T -- the plain warm start's positions,
+    x0 + B (T - T0), no solve: ~10 ms at 692k vertices -- written as the shown result, so
+    that the mesh follows the handle between the worker's results. Returns the positions,
+    or None (no basis, no result yet, or nothing moved since the last preview)."""
+    if not _has_basis(e) or e.result_pos is None or inputs == e.preview_inputs:
+        return None
+    T0 = e.result_T
+    if T0 is None or T0.shape != T.shape or e.basis.shape[1] != 4 * len(T):
+        return None
+    C = (T - T0)[:, :3, :].transpose(0, 2, 1).reshape(-1, 3)
+    pos = e.result_pos + e.basis @ C
+    off = np.empty(pos.shape, dtype=np.float32)
+    np.subtract(pos, e.source, out=off, casting="unsafe")
+    write_offset(obj, d, off, retime=False)
+    e.preview_inputs = inputs
+    return pos
 
 
 def _solve_inputs(obj, d, e, depsgraph):
@@ -1242,6 +1286,10 @@ def _finish_solve(obj, d, e, key, plan, res, ms):
     cap, n_inner = plan["cap"], plan["n_inner"]
     e.slice_ms = ms
     pos = np.asarray(res.positions, dtype=np.float64).reshape(-1, 3)
+    # the base of the response-basis previews (_basis_preview): the object's own last result
+    Tg = plan["goal"].get("transforms")
+    e.result_pos = pos if Tg is not None else None
+    e.result_T = None if Tg is None else np.asarray(Tg, dtype=np.float64)
     # inner: the inner count of a slice's iterations when cut below the bound one (ARAP: CG
     # iterations per Newton step), else None
     rt = dict(ms=ms, iterations=int(res.iterations), converged=bool(res.converged),
@@ -1274,6 +1322,7 @@ def _finish_solve(obj, d, e, key, plan, res, ms):
         np.subtract(pos, e.source, out=off, casting="unsafe")
         write_offset(obj, d, off, retime=plan["cold"])
         e.last_inputs = plan["inputs"]
+        e.preview_inputs = None
         _written_at_undo[key] = _undo_serial[0]
     return pos
 

@@ -15,7 +15,9 @@ each a depsgraph update as the UI makes it (interactive solves), measured two wa
            Blender's timer would, every 5 ms) installs the worker's result
 Each drag starts from the handle at rest, settled.
 and prints, per way, the update's median / max time, the time from the last move to the
-first installed result of its targets, and to the settled result. A script, not a test.
+first installed result of its targets, and to the settled result, and (ARAP) the energy of
+what the last move showed (threaded: the response-basis preview from the last finished
+result) over the settled result's. A script, not a test.
 """
 import os
 import statistics
@@ -96,10 +98,23 @@ def drag(obj, d, e, rest, t, steps, threaded):
         times.append((time.perf_counter() - t0) * 1000.0)
         if threaded:  # a timer tick between drag events, as in the UI
             S.handlers.refine()
+    shown = shown_positions(obj, d)  # what the last move showed (ARAP: a basis preview)
     first, end = settle(obj, d)
     S.solver.threaded_solves[0] = None
     S.handlers.force_interactive[0] = False
-    return times, first, end
+    ratio = None
+    ent = S.solver._cache.get((obj.name, d.uid))
+    if d.method == "ARAP" and ent is not None:  # its energy over the settled result's
+        ratio = float(ent.native.energy(shown)) / float(ent.native.energy(
+            shown_positions(obj, d)))
+    return times, first, end, ratio
+
+
+def shown_positions(obj, d):
+    me = obj.data
+    off = np.empty(len(me.vertices) * 3, dtype=np.float32)
+    me.attributes[d.attribute_name].data.foreach_get("vector", off)
+    return S.rest_positions(obj) + off.reshape(-1, 3)
 
 
 def main():
@@ -123,12 +138,15 @@ def main():
         bpy.ops.deformkit.bind()
         print("%s: bind %.1f s (%s)" % (method, time.perf_counter() - t0, d.status), flush=True)
         for threaded in (False, True):
-            times, first, end = drag(obj, d, e, rest, np.asarray(t), a.steps, threaded)
+            times, first, end, ratio = drag(obj, d, e, rest, np.asarray(t), a.steps,
+                                            threaded)
             print("  %-8s update median %.0f ms, max %.0f ms; after the last move: first "
-                  "result %s, settled %.1f s (%s)"
+                  "result %s, settled %.1f s (%s)%s"
                   % ("threaded" if threaded else "sync", statistics.median(times), max(times),
                      "-" if first is None else "%.2f s" % first, end,
-                     S.solver.solve_summary(obj, d)), flush=True)
+                     S.solver.solve_summary(obj, d),
+                     "" if ratio is None else "; shown at the last move: %.3fx the settled "
+                     "energy" % ratio), flush=True)
         S.solver.clear_cache()
 
 

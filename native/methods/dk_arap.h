@@ -65,6 +65,17 @@ typedef enum dk_arap_acceleration {
     DK_ARAP_ACCEL_NEWTON = 2
 } dk_arap_acceleration;
 
+/** Whether bind precomputes the warm start's response basis: 4 columns per handle (up to
+ *  16 handles and 128 MB), the global step's response to each handle moved by an affine
+ *  map, so that warm starts after such a move (a drag by translation, rotation or scale,
+ *  given as transforms or as the positions such a map gives) combine columns in O(n)
+ *  instead of back-substituting through the factor. Costs one solve of 4 columns per
+ *  handle at bind and rebind. Results equal the substituted starts' to rounding. */
+typedef enum dk_arap_basis {
+    DK_ARAP_BASIS_AUTO = 0, /**< built when it fits the limits (the default)               */
+    DK_ARAP_BASIS_OFF = 1   /**< never: warm starts back-substitute (tests, memory)         */
+} dk_arap_basis;
+
 /** Per-iteration observer: called after every iteration (and once with iteration 0 for the
  *  initial guess) with the energy of the accepted iterate. Returning non-zero stops the
  *  solve with DK_ERR_CANCELLED. Must not call back into the same object. */
@@ -87,6 +98,7 @@ typedef struct dk_arap_options {
     int predict;                       /**< warm starts may extrapolate along the drag
                                             (the secant of the last two solutions, see
                                             dk_arap_solve); 0 or 1, default 1             */
+    dk_arap_basis basis;               /**< default DK_ARAP_BASIS_AUTO                    */
     dk_arap_iteration_fn on_iteration; /**< optional, NULL by default                     */
     void *user;                        /**< passed to on_iteration                        */
     dk_phase_progress_fn progress;     /**< bind progress (dk_progress.h), NULL by default:
@@ -141,7 +153,11 @@ void dk_arap_set_progress(dk_arap *arap, dk_phase_progress_fn progress, void *us
  *  Laplacian editing. DK_START_RESUME: when the targets equal the previous call's and that
  *  call ended normally, iterations continue exactly where it stopped (Anderson history
  *  included), so a solve cut into slices by `max_iterations` gives the same result as one
- *  long solve; otherwise as WARM. request->max_iterations > 0 overrides the option for this
+ *  long solve; otherwise as WARM. request->preview: the start alone, no iterations
+ *  (info.iterations 0): with the response basis (dk_arap_basis) an O(n) combination, the
+ *  predicted start chosen over the plain one by the energies of a fixed sample of cells
+ *  (~16k), and the start's local step left to the solve that resumes it (or done when the
+ *  energy is asked for). request->max_iterations > 0 overrides the option for this
  *  call; the energy is always reported (it costs nothing extra). Writes `positions`
  *  (n_vertices x 3, row-major) and `info` (may be NULL): energy E of the returned positions
  *  (with their optimal rotations), iterations (local/global iterations or Newton steps),
@@ -189,6 +205,28 @@ const dk_constraints *dk_arap_constraints(const dk_arap *arap);
 
 /** The contract's counters (dk_method.h); zeros for NULL. */
 void dk_arap_stats(const dk_arap *arap, dk_method_stats *stats);
+
+/** ARAP's own counters. */
+typedef struct dk_arap_counters {
+    int basis_columns; /**< columns of the response basis (4 per handle), 0 when not built */
+    int basis_starts;  /**< warm starts since bind that combined it instead of substituting */
+} dk_arap_counters;
+
+/** Fills `counters` (zeros for NULL). */
+void dk_arap_get_counters(const dk_arap *arap, dk_arap_counters *counters);
+
+/** The response basis (dk_arap_basis) as the linear map it is, in the caller's vertex
+ *  numbering, into `out` (n_vertices x 4 n_handles, row-major): column 4h + j of vertex v is
+ *  the move of v in the global step (rotations held) per unit of handle h's affine
+ *  coordinate j (x, y, z of the rest position, or 1), so that for handles moved from
+ *  transforms T0_h to T_h (4x4 each)
+ *      x_v = x0_v + sum_{h,j} out[v][4h + j] (T_h - T0_h)[0..2][j]
+ *  is a warm start from x0 without its rotations (the plain one, dk_arap_solve). Hard handle
+ *  vertices get their own coordinates (so they land on their targets exactly), fixed ones 0.
+ *  Read-only and cheap next to a solve: a caller can show such an update while another
+ *  thread solves (the add-on does, on meshes whose solves outlast a drag event).
+ *  DK_ERR_INVALID_ARGUMENT when the basis was not built (stats: basis_columns 0). */
+dk_status dk_arap_response_basis(const dk_arap *arap, double *out, dk_error *err);
 
 /** Frees; NULL allowed. */
 void dk_arap_free(dk_arap *arap);

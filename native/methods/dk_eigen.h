@@ -94,7 +94,7 @@ dk_status dk_eigen_solve(dk_eigen *e, const dk_solve_request *request, double *p
                          dk_solve_info *info, dk_error *err);
 
 /** The fast preview while dragging (1) or the full result (0, the default) for the next
- *  solves. The preview is Steps 1-2 only, shown on the mesh as v + (p* - p): the skeleton's
+ *  solves (a request's `preview` asks the same for one solve). The preview is Steps 1-2 only, shown on the mesh as v + (p* - p): the skeleton's
  *  motion carried to every vertex with its detail vector unrotated (the skeleton itself, at
  *  m = 8, is a blob, not a preview an artist can read). A preview solve reports
  *  iterations 0. */

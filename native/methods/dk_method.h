@@ -58,6 +58,14 @@ typedef struct dk_solve_request {
                                      it (direct methods ignore it)                         */
     int skip_energy;            /**< 1: do not evaluate the energy (info.energy is NaN), for
                                      interactive updates that never show it                */
+    int preview;                /**< 1: the fastest result the method can show while the
+                                     handle moves, not its full solve: ARAP its start (the
+                                     previous solution plus the global step's response,
+                                     no iterations: info.iterations 0), EigenDeformation
+                                     Steps 1-2 (dk_eigen.h); the other methods' solves are
+                                     already their fastest and ignore it. A later request
+                                     with start RESUME and the same targets continues
+                                     from the preview                                      */
 } dk_solve_request;
 
 /** What one solve did. Fields a method does not have are 0. */

@@ -827,7 +827,8 @@ dk_status dk_eigen_solve(dk_eigen *e, const dk_solve_request *rq, double *positi
     const level *L = &e->lv[0];
     step1_step2_rhs(e, L);
     fit(e, L->m, e->b, e->pstar);
-    if (e->preview) { /* the skeleton's motion, details unrotated */
+    const int preview = rq->preview || e->preview;
+    if (preview) { /* the skeleton's motion, details unrotated */
         for (size_t i = 0; i < 3 * (size_t)e->n; i++)
             positions[i] = e->mesh->positions[i] + (e->pstar[i] - L->p[i]);
     } else if (e->n_levels == 1) {
@@ -868,7 +869,7 @@ dk_status dk_eigen_solve(dk_eigen *e, const dk_solve_request *rq, double *positi
     if (st != DK_OK)
         return st;
     if (info) {
-        info->iterations = e->preview ? 0 : e->n_levels;
+        info->iterations = preview ? 0 : e->n_levels;
         info->converged = 1;
         info->energy = energy;
     }

@@ -1412,99 +1412,21 @@ static void basis_range(void *ctx, dk_index u0, dk_index u1, int part)
 /* Targets given as positions that some affine map of each handle's rest positions
  * reproduces (a drag by translation, rotation or scale, computed by the caller per vertex)
  * give the same result as that map given as a transform, so they can take the basis too.
- * Finds such maps into s->fit (n_handles x 4 x 4, row-major): per handle, first the
- * translation of its first vertex, else the least-squares affine map (centred normal
- * equations, 3 x 3, refused when not well conditioned: planar, collinear or single-vertex
- * handles that moved other than by a translation). Accepted when every target is
- * reproduced to LE_FIT_TOLERANCE times the largest coordinate magnitude (rest or target)
- * of the handle, i.e. to a few rounding errors of the caller's arithmetic; the result then
- * differs from the back-substitution of the exact targets by the response to that misfit
- * (and the handle vertices themselves are written from the given targets, exactly).
- * Returns 1 when every handle fits, 0 otherwise (solve back-substitutes). O(handle
- * vertices), no allocation. */
+ * Finds such maps into s->fit (n_handles x 4 x 4, row-major) with dk_affine_fit, accepted
+ * when every target is reproduced to LE_FIT_TOLERANCE times the largest coordinate
+ * magnitude (rest or target) of the handle, i.e. to a few rounding errors of the caller's
+ * arithmetic; the result then differs from the back-substitution of the exact targets by
+ * the response to that misfit (and the handle vertices themselves are written from the
+ * given targets, exactly). Returns 1 when every handle fits, 0 otherwise (solve
+ * back-substitutes). O(handle vertices), no allocation. */
 #define LE_FIT_TOLERANCE 1e-13
 static int fit_transforms(const dk_laplacian_edit *le, le_system *s)
 {
     const dk_constraints *c = s->con;
-    const double *P = le->mesh->positions; /* rest, row-major, internal numbering */
     for (dk_index h = 0; h < c->n_handles; h++) {
         const dk_index k0 = c->handle_start[h], k1 = c->handle_start[h + 1];
-        double *T = s->fit + 16 * (size_t)h;
-        double scale = 0.0, t[3];
-        const double *p0 = P + 3 * (size_t)c->handle_vertices[k0];
-        for (int d = 0; d < 3; d++)
-            t[d] = s->targets[3 * (size_t)k0 + d] - p0[d];
-        memset(T, 0, sizeof(double) * 16);
-        T[0] = T[5] = T[10] = T[15] = 1.0;
-        T[3] = t[0];
-        T[7] = t[1];
-        T[11] = t[2];
-        double misfit = 0.0;
-        for (dk_index k = k0; k < k1; k++) {
-            const double *p = P + 3 * (size_t)c->handle_vertices[k];
-            const double *q = s->targets + 3 * (size_t)k;
-            for (int d = 0; d < 3; d++) {
-                const double r = fabs(q[d] - p[d] - t[d]);
-                misfit = r > misfit ? r : misfit;
-                scale = fmax(scale, fmax(fabs(p[d]), fabs(q[d])));
-            }
-        }
-        const double tol = LE_FIT_TOLERANCE * scale;
-        if (misfit <= tol)
-            continue;
-        /* the least-squares affine map: L M = B with M = sum (p - pm)(p - pm)^T,
-         * B = sum (q - qm)(p - pm)^T, t = qm - L pm */
-        double pm[3] = {0, 0, 0}, qm[3] = {0, 0, 0}, M[9] = {0}, B[9] = {0}, Mi[9];
-        const double cnt = (double)(k1 - k0);
-        for (dk_index k = k0; k < k1; k++) {
-            const double *p = P + 3 * (size_t)c->handle_vertices[k];
-            const double *q = s->targets + 3 * (size_t)k;
-            for (int d = 0; d < 3; d++) {
-                pm[d] += p[d];
-                qm[d] += q[d];
-            }
-        }
-        for (int d = 0; d < 3; d++) {
-            pm[d] /= cnt;
-            qm[d] /= cnt;
-        }
-        for (dk_index k = k0; k < k1; k++) {
-            const double *p = P + 3 * (size_t)c->handle_vertices[k];
-            const double *q = s->targets + 3 * (size_t)k;
-            for (int a = 0; a < 3; a++)
-                for (int b = 0; b < 3; b++) {
-                    M[3 * a + b] += (p[a] - pm[a]) * (p[b] - pm[b]);
-                    B[3 * a + b] += (q[a] - qm[a]) * (p[b] - pm[b]);
-                }
-        }
-        /* inverse by cofactors; refused unless det > 1e-12 * (trace / 3)^3 */
-        const double det = dk_mat3_cofactor(M, Mi); /* M symmetric: Mi is its adjugate */
-        const double tr = (M[0] + M[4] + M[8]) / 3.0;
-        if (!(det > 1e-12 * tr * tr * tr) || !isfinite(det))
-            return 0;
-        for (int a = 0; a < 3; a++) {
-            double tt = qm[a];
-            for (int b = 0; b < 3; b++) {
-                double v = 0.0;
-                for (int e = 0; e < 3; e++)
-                    v += B[3 * a + e] * Mi[3 * e + b];
-                T[4 * a + b] = v / det;
-            }
-            for (int b = 0; b < 3; b++)
-                tt -= T[4 * a + b] * pm[b];
-            T[4 * a + 3] = tt;
-        }
-        misfit = 0.0;
-        for (dk_index k = k0; k < k1; k++) {
-            const double *p = P + 3 * (size_t)c->handle_vertices[k];
-            const double *q = s->targets + 3 * (size_t)k;
-            for (int d = 0; d < 3; d++) {
-                const double r = fabs(T[4 * d] * p[0] + T[4 * d + 1] * p[1] +
-                                      T[4 * d + 2] * p[2] + T[4 * d + 3] - q[d]);
-                misfit = r > misfit ? r : misfit;
-            }
-        }
-        if (!(misfit <= tol))
+        if (!dk_affine_fit(le->mesh->positions, c->handle_vertices + k0, k1 - k0,
+                           s->targets + 3 * (size_t)k0, LE_FIT_TOLERANCE, s->fit + 16 * (size_t)h))
             return 0;
     }
     return 1;

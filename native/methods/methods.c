@@ -51,6 +51,8 @@ dk_status dk_solve_request_check(const dk_solve_request *rq, const char *who, dk
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "%s: max_iterations is %d, must be >= 0 (0: the bound option)",
                             who, rq->max_iterations);
+    if (rq->preview != 0 && rq->preview != 1)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s: preview must be 0 or 1", who);
     if (rq->skip_energy != 0 && rq->skip_energy != 1)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s: skip_energy must be 0 or 1",
                             who);

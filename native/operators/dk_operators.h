@@ -133,6 +133,19 @@ double dk_closest_rotation(const double a[9], double r[9]);
  *  so x^-1 = c^T / det(x)). Returns det(x). Allocation-free; x and c must not overlap. */
 double dk_mat3_cofactor(const double x[9], double c[9]);
 
+/* ---------------------------------------------------------------- affine fits ---------- */
+
+/** An affine map T (4x4 row-major, bottom row 0 0 0 1) with q_k = T [p_k; 1] for the
+ *  `count` points p_k = rest[3 verts[k] .. 3 verts[k] + 2] (rest: n x 3 row-major, verts:
+ *  count indices into it) and their images q (count x 3 row-major). Tries the translation of
+ *  the first point, then the least-squares map (centred normal equations, 3 x 3, solved with
+ *  their pseudo-inverse, so that a planar or collinear set gets a map on its own span).
+ *  Returns 1 when T reproduces every q_k to rel_tol times the largest
+ *  coordinate magnitude (rest or image) of the points, 0 otherwise (T is then not to be
+ *  used). count 0: the zero map, 1. O(count), allocation-free. */
+int dk_affine_fit(const double *rest, const dk_index *verts, dk_index count, const double *q,
+                  double rel_tol, double T[16]);
+
 #ifdef __cplusplus
 }
 #endif

@@ -10,6 +10,7 @@
 static const char *const energy_names[] = {"spokes", "spokes_and_rims", NULL};
 static const char *const weights_names[] = {"cotangent", "clamped_cotangent", "uniform", NULL};
 static const char *const accel_names[] = {"none", "anderson", "newton", NULL};
+static const char *const basis_names[] = {"auto", "off", NULL};
 
 static void default_options(void *o)
 {
@@ -20,7 +21,7 @@ static int parse_options(PyObject *kw, void *o, const char *context)
 {
     dk_arap_options *opt = (dk_arap_options *)o;
     int energy = (int)opt->energy, weights = (int)opt->weights;
-    int accel = (int)opt->acceleration;
+    int accel = (int)opt->acceleration, basis = (int)opt->basis;
     if (dk_py_opt_choice(kw, "energy", energy_names, &energy, context) < 0 ||
         dk_py_opt_choice(kw, "weights", weights_names, &weights, context) < 0 ||
         dk_py_opt_int(kw, "max_iterations", &opt->max_iterations) < 0 ||
@@ -28,8 +29,10 @@ static int parse_options(PyObject *kw, void *o, const char *context)
         dk_py_opt_choice(kw, "acceleration", accel_names, &accel, context) < 0 ||
         dk_py_opt_int(kw, "anderson_depth", &opt->anderson_depth) < 0 ||
         dk_py_opt_bool(kw, "predict", &opt->predict) < 0 ||
-        dk_py_opt_int(kw, "cg_iterations", &opt->cg_iterations) < 0)
+        dk_py_opt_int(kw, "cg_iterations", &opt->cg_iterations) < 0 ||
+        dk_py_opt_choice(kw, "basis", basis_names, &basis, context) < 0)
         return -1;
+    opt->basis = (dk_arap_basis)basis;
     opt->energy = (dk_arap_energy_kind)energy;
     opt->weights = (dk_arap_weight_kind)weights;
     opt->acceleration = (dk_arap_acceleration)accel;
@@ -102,10 +105,13 @@ static PyObject *stats(dk_py_method *self)
 {
     const dk_constraints *k = dk_arap_constraints(self->native);
     dk_method_stats ms;
+    dk_arap_counters ac;
     dk_arap_stats(self->native, &ms);
-    return Py_BuildValue("{s:i,s:i,s:i,s:i}", "n_unknowns", (int)ms.n_unknowns, "n_free",
-                         (int)k->n_free, "analysis_count", ms.analysis_count,
-                         "factorization_count", ms.factorization_count);
+    dk_arap_get_counters(self->native, &ac);
+    return Py_BuildValue("{s:i,s:i,s:i,s:i,s:i,s:i}", "n_unknowns", (int)ms.n_unknowns,
+                         "n_free", (int)k->n_free, "analysis_count", ms.analysis_count,
+                         "factorization_count", ms.factorization_count, "basis_columns",
+                         ac.basis_columns, "basis_starts", ac.basis_starts);
 }
 
 static PyObject *get_handle_sizes(PyObject *obj, void *c)
@@ -127,8 +133,8 @@ static PyObject *get_handle_sizes(PyObject *obj, void *c)
 
 PyDoc_STRVAR(solve_doc,
              "solve(targets=None, transforms=None, warm_start=True, max_iterations=None,\n"
-             "      resume=False, energy=True, tolerance=None, cg_iterations=None)\n"
-             "      -> SolveResult\n\n"
+             "      resume=False, energy=True, preview=False, tolerance=None,\n"
+             "      cg_iterations=None) -> SolveResult\n\n"
              "targets: (sum of handle sizes) x 3 positions, concatenated in handle order;\n"
              "transforms: n_handles x 4 x 4 affine transforms of the rest pose. warm_start\n"
              "starts from the previous solution (else from the naive Laplacian-editing guess).\n"
@@ -140,6 +146,10 @@ PyDoc_STRVAR(solve_doc,
              "call only (None: as bound); fewer make cheaper, less complete steps with the\n"
              "same stopping test (the add-on's time-budgeted slices); a resume with another\n"
              "count ends at a point that test accepts, not bit for bit one long solve.\n"
+             "preview=True returns the start alone (iterations 0): the previous solution\n"
+             "plus the global step's response to the handles' move, combined from the bind's\n"
+             "response basis when each handle moved by an affine map (O(n), no\n"
+             "back-substitution); a later resume=True with the same targets refines it.\n"
              "Returns the positions, the ARAP energy of those positions, the iterations used\n"
              "and whether the relative energy change fell below the tolerance.");
 
@@ -147,7 +157,7 @@ PyDoc_STRVAR(arap_doc,
              "ARAP(mesh, handles, fixed=None, roi=None, handle_weights=None, stiffness=None,\n"
              "     energy='spokes', weights='clamped_cotangent', max_iterations=100,\n"
              "     tolerance=1e-6, acceleration='newton', anderson_depth=5, predict=True,\n"
-             "     cg_iterations=12)\n\n"
+             "     cg_iterations=12, basis='auto')\n\n"
              "As-rigid-as-possible deformation (Sorkine & Alexa 2007; 'spokes_and_rims' after\n"
              "Chao et al. 2010). Fixed vertices, vertices outside roi and handle vertices of\n"
              "weight 1 are eliminated exactly; handle weights w < 1 become soft penalties\n"
@@ -158,7 +168,10 @@ PyDoc_STRVAR(arap_doc,
              "local/global step; an energy line search). Stops when a local/global step\n"
              "changes the energy by at most tolerance (relative; Newton: predicted before the\n"
              "step). predict: warm starts may extrapolate along the drag (secant of the last\n"
-             "two solutions). See docs/methods/arap.md.");
+             "two solutions). basis='auto' precomputes, 4 columns per handle (up to 16\n"
+             "handles, 128 MB), the global step's response to each handle's affine motion, so\n"
+             "warm starts after such a move need no back-substitution ('off': never).\n"
+             "See docs/methods/arap.md.");
 
 static PyGetSetDef arap_getset[] = {
     DK_PY_METHOD_GETSET,
@@ -166,7 +179,44 @@ static PyGetSetDef arap_getset[] = {
     {NULL, NULL, NULL, NULL, NULL},
 };
 
-static PyMethodDef arap_methods[] = {DK_PY_METHOD_METHODS(solve_doc), {NULL, NULL, 0, NULL}};
+/* response_basis() -> (n_vertices, 4 n_handles) array, or None when not built */
+static PyObject *arap_response_basis(PyObject *obj, PyObject *unused)
+{
+    dk_py_method *self = (dk_py_method *)obj;
+    dk_arap_counters ac;
+    dk_error err = {0};
+    double *out;
+    (void)unused;
+    if (dk_py_method_enter(self) < 0)
+        return NULL;
+    dk_arap_get_counters(self->native, &ac);
+    if (ac.basis_columns == 0) {
+        self->busy = 0;
+        Py_RETURN_NONE;
+    }
+    PyObject *res = dk_py_new_doubles(2, self->mesh->n_vertices, ac.basis_columns, &out);
+    dk_status st = res ? dk_arap_response_basis(self->native, out, &err) : DK_OK;
+    self->busy = 0;
+    if (res && st != DK_OK) {
+        Py_DECREF(res);
+        return dk_py_raise(&err, "ARAP.response_basis");
+    }
+    return res;
+}
+
+PyDoc_STRVAR(response_basis_doc,
+             "response_basis() -> ndarray (n_vertices, 4 * n_handles), or None\n\n"
+             "The warm start's response basis as a linear map: for handles moved from\n"
+             "transforms T0 to T (n_handles x 4 x 4), positions x0 + B @ C with\n"
+             "C[4h + j, d] = (T - T0)[h, d, j] are the global step's response with the\n"
+             "rotations held (the plain warm start from x0, no solve). Hard handle vertices\n"
+             "land on their targets, fixed ones stay. None when basis='off' or over the\n"
+             "limits. Cheap to apply while another thread solves.");
+
+static PyMethodDef arap_methods[] = {
+    DK_PY_METHOD_METHODS(solve_doc),
+    {"response_basis", arap_response_basis, METH_NOARGS, response_basis_doc},
+    {NULL, NULL, 0, NULL}};
 
 /* progress=: the shared callback (dk_py.h), phases named by the native bind / rebind */
 static void bind_progress(void *options, dk_py_progress *p)

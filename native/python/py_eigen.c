@@ -1,6 +1,6 @@
 /* DeformKit CPython module: deformkit.EigenDeformation (native/methods/dk_eigen.h), on the
- * generic method type (dk_py_method.h). What is its own: its options, the preview keyword
- * and the skeleton, eigenvalues and weights. The translation / rotation / pivot forms of
+ * generic method type (dk_py_method.h). What is its own: its options (the preview keyword
+ * of solve is the contract's, dk_solve_request.preview) and the skeleton, eigenvalues and weights. The translation / rotation / pivot forms of
  * solve are in the Python package (deformkit/__init__.py). */
 #include "dk_py_method.h"
 
@@ -60,26 +60,6 @@ static int parse_options(PyObject *kw, void *o, const char *context)
         return -1;
     opt->laplacian = (dk_eigen_laplacian)lap;
     return 0;
-}
-
-/* solve(preview=False): Steps 1-2 only (the drag preview) or the full result; read first,
- * set when the whole call has been validated (apply_extra) */
-static int solve_extra(dk_py_method *self, PyObject *kw, void *pending, const char *context)
-{
-    int *preview = (int *)pending;
-    (void)context;
-    (void)self;
-    *preview = 0;
-    if (kw && dk_py_opt_bool(kw, "preview", preview) < 0)
-        return -1;
-    return 0;
-}
-
-static void apply_extra(dk_py_method *self, const void *pending, void *saved)
-{
-    if (saved)
-        *(int *)saved = dk_eigen_preview(self->native);
-    dk_eigen_set_preview(self->native, *(const int *)pending);
 }
 
 /* solve(translation=t, rotation=r, pivot=p): the paper's one motion of R, as transforms
@@ -255,8 +235,6 @@ static const dk_py_method_spec eig_spec = {
     .parse_options = parse_options,
     .bind_progress = bind_progress,
     .solve_motion = solve_motion,
-    .solve_extra = solve_extra,
-    .apply_extra = apply_extra,
     .serialise_bind = 1,
     .getset = eig_getset,
     .methods = eig_methods,

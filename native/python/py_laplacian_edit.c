@@ -49,7 +49,9 @@ static PyObject *stats(dk_py_method *self)
 
 PyDoc_STRVAR(solve_doc,
              "solve(targets=None, transforms=None, warm_start=True, max_iterations=None,\n"
-             "      resume=False, energy=True) -> SolveResult\n\n"
+             "      resume=False, energy=True, preview=False) -> SolveResult\n\n"
+             "preview=True (the contract's keyword) solves as usual: this method has no\n"
+             "faster result to show.\n"
              "targets: (sum of handle sizes) x 3 positions, concatenated in handle order;\n"
              "transforms: n_handles x 4 x 4 affine transforms of the rest pose. Returns the\n"
              "deformed positions, the energy ||A x - delta||^2 (+ soft and Tikhonov terms) at\n"

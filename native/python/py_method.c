@@ -382,12 +382,12 @@ static void method_dealloc(PyObject *obj)
 PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
 {
     static char *kwlist[] = {"targets", "transforms", "warm_start", "max_iterations",
-                             "resume", "energy", NULL};
+                             "resume", "energy", "preview", NULL};
     dk_py_method *self = (dk_py_method *)obj;
     const dk_py_method_spec *spec = self->spec;
     PyObject *targets = Py_None, *transforms = Py_None, *maxit_obj = Py_None;
     PyObject *mine = NULL, *rest = NULL, *positions, *module;
-    int warm = 1, resume = 0, want_energy = 1, maxit = 0, mode;
+    int warm = 1, resume = 0, want_energy = 1, maxit = 0, preview = 0, mode;
     dk_py_doubles in = {0};
     dk_solve_info info;
     dk_method_stats ms;
@@ -402,12 +402,12 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
 
     memset(&pending, 0, sizeof pending);
     memset(&saved, 0, sizeof saved);
-    snprintf(fmt, sizeof fmt, "|OOpOpp:solve");
+    snprintf(fmt, sizeof fmt, "|OOpOppp:solve");
     snprintf(ctx, sizeof ctx, "%s.solve", spec->name);
     if (split_keywords(kwargs, kwlist, &mine, &rest) < 0)
         return NULL;
     int ok = PyArg_ParseTupleAndKeywords(args, mine, fmt, kwlist, &targets, &transforms,
-                                         &warm, &maxit_obj, &resume, &want_energy);
+                                         &warm, &maxit_obj, &resume, &want_energy, &preview);
     Py_INCREF(targets);
     Py_INCREF(transforms);
     Py_DECREF(mine);
@@ -464,6 +464,7 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
         .start = resume ? DK_START_RESUME : warm ? DK_START_WARM : DK_START_COLD,
         .max_iterations = maxit,
         .skip_energy = !want_energy,
+        .preview = preview,
     };
     if (spec->apply_extra)
         spec->apply_extra(self, pending.bytes, saved.bytes);

@@ -228,8 +228,9 @@ def shown_offset(obj, d):
 
 def test_slow_solves_run_in_a_worker_thread():
     """With solves in worker threads (what the UI does for a solve slower than ASYNC_MS or a
-    mesh of ASYNC_MIN_VERTICES), a drag update returns without writing (the shown result
-    stays), the refine timer installs the worker's result, and the end is the same minimum
+    mesh of ASYNC_MIN_VERTICES), a drag update returns at once: ARAP's shows the last result
+    moved by the response basis, Laplacian editing's writes nothing (the shown result
+    stays); the refine timer installs the worker's result, and the end is the same minimum
     as one uninterrupted solve; a frame's cold solve while a worker runs waits for it."""
     for method in ("ARAP", "LAPLACIAN"):
         S.reset_scene()
@@ -243,8 +244,34 @@ def test_slow_solves_run_in_a_worker_thread():
             e.rotation_euler = Euler((0.0, -0.3, 0.0))
             bpy.context.view_layer.update()
             ent = S.solver._cache[key]
-            R.check("%s: the drag update started a worker and wrote nothing yet" % method,
-                    ent.worker is not None and np.array_equal(shown_offset(obj, d), before))
+            if method == "ARAP":
+                # the update shows the bind result moved by the response basis: the plain
+                # warm start, which an independent object's preview gives
+                T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
+                ref = S.dk.ARAP(S.dk.Mesh(S.rest_positions(obj), S.solver.triangles(obj.data)),
+                                [handle], fixed=fixed, predict=False)
+                ref.solve(transforms=bind_T, warm_start=False)
+                want = np.asarray(ref.solve(transforms=T, preview=True, energy=False).positions)
+                got = S.rest_positions(obj) + shown_offset(obj, d)
+                err = np.abs(got - want).max()
+                R.check("ARAP: the drag update started a worker and shows the basis preview "
+                        "(%.1e from the native preview)" % err,
+                        ent.worker is not None and err < 1e-5
+                        and np.abs(got - S.rest_positions(obj)).max() > 0.05)
+                # a second move while the worker runs: the preview follows the handle
+                e.location = (1.1, 0.1, 0.45)
+                bpy.context.view_layer.update()
+                T2 = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
+                busy = ent.worker is not None and ent.worker.thread.is_alive()
+                ref.solve(transforms=bind_T, warm_start=False)
+                want2 = np.asarray(ref.solve(transforms=T2, preview=True, energy=False).positions)
+                got2 = S.rest_positions(obj) + shown_offset(obj, d)
+                R.check("ARAP: ... and a move while it runs shows the preview for that move "
+                        "(busy %s, %.1e)" % (busy, np.abs(got2 - want2).max()),
+                        not busy or np.abs(got2 - want2).max() < 1e-5)
+            else:
+                R.check("%s: the drag update started a worker and wrote nothing yet" % method,
+                        ent.worker is not None and np.array_equal(shown_offset(obj, d), before))
             R.check("%s: ... and the solve is pending (the panel says refining)" % method,
                     key in S.solver.pending() and S.solver.refining(obj, d))
             R.check("%s: the refine timer settles it" % method, refine_until_settled())

@@ -13,7 +13,7 @@
  *      boundary (0, negative, NaN, Inf, 1e300, an enum one past its names);
  *   5. up to four solve requests (positions or transforms near the handles' rest, moved by
  *      up to a few bounding-box diagonals, sometimes raw doubles; any start, iteration cap
- *      and skip_energy), then a rebind with new groups and a solve after it.
+ *      skip_energy and preview), then a rebind with new groups and a solve after it.
  * Short inputs decode to small valid cases, so most inputs get through bind into solve.
  *
  * Checked besides the sanitizers (each is a promise of the contract):
@@ -309,6 +309,7 @@ static void decode_request(dk_fuzz_input *in, const dk_mesh *m, const groups *g,
     const uint8_t it = dk_fuzz_u8(in);
     r->rq.max_iterations = it % 4 ? 0 : it % 64 == 4 ? -1 : (it >> 2) % 20;
     r->rq.skip_energy = it % 128 == 127 ? 2 : (it >> 7);
+    r->rq.preview = (c >> 6) == 3 ? 1 : 0; /* a quarter of the requests are previews */
     r->rq.targets = r->targets;
     const int raw = dk_fuzz_u8(in) % 32 == 0;
     dk_index off = 0;

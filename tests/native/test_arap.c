@@ -1155,6 +1155,136 @@ static void test_warm_rotations_and_cold_reproducibility(void)
     plane_free(&s);
 }
 
+/* The warm start's response basis (response_basis.c): previews (starts alone) combined from
+ * it equal those of an object that back-substitutes (basis off), with exact handles and the
+ * reported energy that of the positions; non-affine targets, a fixed vertex moved by a
+ * rebind and two handles; the counters say which path each start took. */
+static double max_abs_diff(const double *a, const double *b, size_t n)
+{
+    double m = 0.0;
+    for (size_t i = 0; i < n; i++)
+        m = fmax(m, fabs(a[i] - b[i]));
+    return m;
+}
+
+static dk_arap_counters arap_counters(const dk_arap *ar)
+{
+    dk_arap_counters c;
+    dk_arap_get_counters(ar, &c);
+    return c;
+}
+
+static void test_response_basis(void)
+{
+    plane_setup s;
+    if (plane_make(&s, 14) != 0) {
+        CHECK(0);
+        return;
+    }
+    const dk_mesh *m = s.mesh;
+    const size_t n3 = 3 * (size_t)m->n_vertices;
+    dk_index sizes[1] = {s.n_handle};
+    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    dk_arap_options o, off;
+    dk_arap_default_options(&o);
+    off = o;
+    off.basis = DK_ARAP_BASIS_OFF;
+    dk_arap *a = NULL, *b = NULL;
+    dk_error e = {0};
+    double *x = malloc(sizeof(double) * n3), *y = malloc(sizeof(double) * n3);
+    double t[3 * 64];
+    if (!x || !y || dk_arap_bind(m, &d, &o, &a, &e) != DK_OK ||
+        dk_arap_bind(m, &d, &off, &b, &e) != DK_OK) {
+        CHECK_MSG(0, "%s", e.message);
+        goto out;
+    }
+    CHECK(arap_counters(a).basis_columns == 4 && arap_counters(b).basis_columns == 0);
+    /* 1. a drag by rigid motions of the (collinear) handle: previews, some refined */
+    int predicted = 0;
+    for (int k = 1; k <= 6; k++) {
+        bend_targets(&s, 0.12 * k, t);
+        dk_solve_info ia, ib;
+        const dk_solve_request rq = {.targets = t, .start = DK_START_WARM, .preview = 1};
+        CHECK(dk_arap_solve(a, &rq, x, &ia, &e) == DK_OK);
+        CHECK(dk_arap_solve(b, &rq, y, &ib, &e) == DK_OK);
+        CHECK(ia.iterations == 0 && ib.iterations == 0 && ia.predicted == ib.predicted);
+        predicted += ia.predicted;
+        CHECK_MSG(max_abs_diff(x, y, n3) < 1e-12, "step %d: preview differs by %g", k,
+                  max_abs_diff(x, y, n3));
+        CHECK_NEAR(ia.energy, ib.energy, 1e-11 * ib.energy);
+        CHECK_NEAR(arap_energy(a, x), ia.energy, 1e-12 * ia.energy);
+        for (dk_index h = 0; h < s.n_handle; h++)
+            for (int c = 0; c < 3; c++)
+                CHECK(x[3 * (size_t)s.handle[h] + (size_t)c] == t[3 * h + c]);
+        if (k != 5) { /* the handle rests: the refining solve continues the preview */
+            const dk_solve_request rr = {.targets = t, .start = DK_START_RESUME};
+            CHECK(dk_arap_solve(a, &rr, x, &ia, &e) == DK_OK);
+            CHECK(dk_arap_solve(b, &rr, y, &ib, &e) == DK_OK);
+            CHECK(ia.iterations > 0 && ia.converged && ib.converged);
+            CHECK_NEAR(ia.energy, ib.energy, 1e-8 * ib.energy);
+        }
+    }
+    CHECK_MSG(predicted > 0, "no preview continued the drag");
+    CHECK(arap_counters(a).basis_starts == 5 && arap_counters(b).basis_starts == 0);
+    /* 2. targets no affine map gives: substituted, the same start */
+    {
+        double tp[3 * 64];
+        bend_targets(&s, 0.8, tp);
+        tp[3 * 3 + 2] += 1e-3;
+        const dk_solve_request rq = {.targets = tp, .start = DK_START_WARM, .preview = 1};
+        CHECK(dk_arap_solve(a, &rq, x, NULL, &e) == DK_OK);
+        CHECK(dk_arap_solve(b, &rq, y, NULL, &e) == DK_OK);
+        CHECK(arap_counters(a).basis_starts == 5);
+        CHECK(max_abs_diff(x, y, n3) < 1e-12);
+    }
+    /* 3. a rebind fixes a vertex that had moved: that start substitutes, later ones combine */
+    {
+        dk_index fixed2[65];
+        memcpy(fixed2, s.fixed, sizeof(dk_index) * (size_t)s.n_fixed);
+        fixed2[s.n_fixed] = s.handle[4] - 1; /* next to the handle: it moved */
+        dk_constraint_desc d2 = d;
+        d2.n_fixed = s.n_fixed + 1;
+        d2.fixed_vertices = fixed2;
+        CHECK(dk_arap_rebind(a, &d2, &e) == DK_OK && dk_arap_rebind(b, &d2, &e) == DK_OK);
+        bend_targets(&s, 0.9, t);
+        const dk_solve_request rq = {.targets = t, .start = DK_START_WARM, .preview = 1};
+        CHECK(dk_arap_solve(a, &rq, x, NULL, &e) == DK_OK);
+        CHECK(dk_arap_solve(b, &rq, y, NULL, &e) == DK_OK);
+        CHECK(arap_counters(a).basis_starts == 5 && max_abs_diff(x, y, n3) < 1e-12);
+        bend_targets(&s, 1.0, t);
+        CHECK(dk_arap_solve(a, &rq, x, NULL, &e) == DK_OK);
+        CHECK(dk_arap_solve(b, &rq, y, NULL, &e) == DK_OK);
+        CHECK(arap_counters(a).basis_starts == 6 && max_abs_diff(x, y, n3) < 1e-12);
+    }
+    /* 4. two handles, each translated its own way */
+    {
+        dk_index sizes2[2] = {s.n_handle / 2, s.n_handle - s.n_handle / 2};
+        dk_constraint_desc d2 = d;
+        d2.n_handles = 2;
+        d2.handle_sizes = sizes2;
+        CHECK(dk_arap_rebind(a, &d2, &e) == DK_OK && dk_arap_rebind(b, &d2, &e) == DK_OK);
+        CHECK(arap_counters(a).basis_columns == 8);
+        for (int k = 1; k <= 2; k++) {
+            for (dk_index h = 0; h < s.n_handle; h++)
+                for (int c = 0; c < 3; c++)
+                    t[3 * h + c] = m->positions[3 * (size_t)s.handle[h] + (size_t)c] +
+                                   (h < sizes2[0] ? 0.1 * k * (c == 2) : -0.05 * k * (c == 0));
+            const dk_solve_request rq = {.targets = t, .start = DK_START_WARM, .preview = 1};
+            CHECK(dk_arap_solve(a, &rq, x, NULL, &e) == DK_OK);
+            CHECK(dk_arap_solve(b, &rq, y, NULL, &e) == DK_OK);
+            CHECK(max_abs_diff(x, y, n3) < 1e-12);
+        }
+        /* both combine: the old solution's handles were an affine image of rest too */
+        CHECK_MSG(arap_counters(a).basis_starts == 8, "starts %d", arap_counters(a).basis_starts);
+    }
+out:
+    dk_arap_free(a);
+    dk_arap_free(b);
+    free(x);
+    free(y);
+    plane_free(&s);
+}
+
 static void test_errors(void)
 {
     plane_setup s;
@@ -1351,7 +1481,7 @@ static void test_big_mesh_threaded_local_step(void)
     dk_test_mesh_free(&tm);
 }
 
-DK_TEST_MAIN(test_newton_quadratic, test_newton_soft_stiffness, test_resume, test_cg_override, test_predictor, test_zero_drag, test_rigid_motion, test_bend, test_twist, test_clamping,
+DK_TEST_MAIN(test_newton_quadratic, test_newton_soft_stiffness, test_resume, test_cg_override, test_predictor, test_response_basis, test_zero_drag, test_rigid_motion, test_bend, test_twist, test_clamping,
              test_stiffness_soft_warm_rebind, test_warm_rotations_and_cold_reproducibility,
              test_errors,
              test_big_mesh_threaded_local_step)

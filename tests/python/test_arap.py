@@ -574,3 +574,55 @@ def test_vertex_numbering_does_not_change_the_result(energy):
     c = deformkit.ARAP(deformkit.Mesh(v2, f2), [handle], fixed=fixed)
     assert c.stats["n_held"] == 3 and "first: vertex %d)" % n in c.warnings[0]
     np.testing.assert_array_equal(c.solve(t).positions[n:], v2[n:])
+
+
+def _bend_transform(angle):
+    c, s = math.cos(angle), math.sin(angle)
+    T = np.eye(4)
+    T[:3, :3] = [[c, 0, -s], [0, 1, 0], [s, 0, c]]
+    T[2, 3] = 0.6
+    return T
+
+
+def test_preview_is_the_warm_start_from_the_response_basis():
+    """solve(preview=True) is the start alone: no iterations, the handles exact, the energy
+    that of its positions. With predict=False it is the plain warm start, which the exported
+    response_basis() gives too (x0 + B @ C); basis='off' back-substitutes the same start; a
+    resume refines it to the minimum a cold solve finds."""
+    v, f, fixed, hand = plane_setup(16)
+    mesh = deformkit.Mesh(v, f)
+    objs = {b: deformkit.ARAP(mesh, [hand], fixed=fixed, predict=False, basis=b)
+            for b in ("auto", "off")}
+    assert objs["auto"].stats["basis_columns"] == 4 and objs["off"].stats["basis_columns"] == 0
+    T0, T1 = _bend_transform(0.3), _bend_transform(0.45)
+    x0 = {b: np.asarray(o.solve(transforms=T0[None]).positions) for b, o in objs.items()}
+    B = objs["auto"].response_basis()
+    assert B.shape == (len(v), 4) and objs["off"].response_basis() is None
+    assert np.array_equal(B[fixed], np.zeros((len(fixed), 4)))
+    assert np.array_equal(B[hand], np.column_stack([v[hand], np.ones(len(hand))]))
+    p = {b: o.solve(transforms=T1[None], preview=True) for b, o in objs.items()}
+    xa = np.asarray(p["auto"].positions)
+    assert p["auto"].iterations == 0 and not p["auto"].converged
+    assert objs["auto"].stats["basis_starts"] == 1 and objs["off"].stats["basis_starts"] == 0
+    C = (T1 - T0)[None, :3, :].transpose(0, 2, 1).reshape(-1, 3)
+    assert np.abs(xa - (x0["auto"] + B @ C)).max() <= 1e-10
+    assert np.abs(xa - np.asarray(p["off"].positions)).max() <= 1e-10
+    assert np.abs(xa[hand] - bend(v, hand, 0.45)).max() <= 1e-12
+    assert np.abs(xa[fixed] - v[fixed]).max() == 0.0
+    assert p["auto"].energy == pytest.approx(reference_energy(v, f, xa), rel=1e-9)
+    assert np.abs(xa - x0["auto"]).max() > 0.05          # it moved the free vertices too
+    # an energy-free preview gives the same positions (its local step waits for the resume)
+    q = objs["auto"].solve(transforms=T1[None], preview=True, energy=False, resume=True)
+    assert math.isnan(q.energy) and np.array_equal(np.asarray(q.positions), xa)
+    r = objs["auto"].solve(transforms=T1[None], resume=True)
+    cold = deformkit.ARAP(mesh, [hand], fixed=fixed).solve(transforms=T1[None])
+    assert r.converged and r.iterations > 0
+    assert r.energy == pytest.approx(cold.energy, rel=1e-4) and r.energy < p["auto"].energy
+    # targets given as the positions such a map gives take the basis too; others do not
+    n = objs["auto"].stats["basis_starts"]
+    objs["auto"].solve(bend(v, hand, 0.5), preview=True)
+    assert objs["auto"].stats["basis_starts"] == n + 1
+    bent = bend(v, hand, 0.55)
+    bent[3] += 0.01
+    objs["auto"].solve(bent, preview=True)
+    assert objs["auto"].stats["basis_starts"] == n + 1

@@ -120,6 +120,29 @@ def test_positions_and_transforms_agree(name, scene):
 
 
 @pytest.mark.parametrize("name,scene", CASES, ids=IDS)
+def test_preview_is_fast_path_or_the_solve(name, scene):
+    # solve(preview=True): ARAP's start (no iterations), EigenDeformation's Steps 1-2, and
+    # for every other method its ordinary solve; a preview then a resume ends where a warm
+    # solve does (to the method's tolerance)
+    _, v, f, handles, fixed = scene
+    T = [transform(rotation(0.3))] * len(handles)
+    a, b = bind(name, scene), bind(name, scene)
+    p = a.solve(transforms=T, preview=True)
+    q = b.solve(transforms=T)
+    assert np.isfinite(np.asarray(p.positions)).all()
+    if name == "ARAP":
+        assert p.iterations == 0
+        np.testing.assert_allclose(np.asarray(p.positions)[np.concatenate(handles)],
+                                   np.asarray(q.positions)[np.concatenate(handles)], atol=1e-12)
+    elif name == "EigenDeformation":
+        assert p.iterations == 0
+    else:
+        np.testing.assert_allclose(p.positions, q.positions, atol=1e-12)
+    r = a.solve(transforms=T, resume=True) if info(name)["iterative"] else a.solve(transforms=T)
+    np.testing.assert_allclose(r.positions, q.positions, atol=1e-4)
+
+
+@pytest.mark.parametrize("name,scene", CASES, ids=IDS)
 def test_rebind_equals_fresh_bind(name, scene):
     _, v, f, handles, fixed = scene
     T = [transform(rotation(0.3))] * len(handles)

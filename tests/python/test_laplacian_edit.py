@@ -580,8 +580,9 @@ def test_basis_from_positions_on_a_grid(detail):
     xa, xb = np.asarray(a.solve(tg).positions), np.asarray(b.solve(tg).positions)
     assert a.stats["basis_solves"] == 1
     assert np.abs(xa - xb).max() <= 1e-10
-    # a handle whose vertices lie on a line: only a translation is determined by them, so
-    # rotated targets back-substitute, translated ones take the basis
+    # a handle whose vertices lie on a line: the map is fitted on the line's span (the
+    # pseudo-inverse), so translated and rotated targets both take the basis and still equal
+    # the back-substitution (only the targets' values enter the result); a bent line does not
     line = np.flatnonzero(np.arange(len(v)) % 17 == 16)             # the x = 1 column
     c = deformkit.LaplacianEdit(mesh, [line], fixed=fixed, detail=detail)
     d = deformkit.LaplacianEdit(mesh, [line], fixed=fixed, detail=detail, basis="off")
@@ -591,7 +592,11 @@ def test_basis_from_positions_on_a_grid(detail):
     assert c.stats["basis_solves"] == 1
     tg = v[line] @ random_affine(rng)[:3, :3].T
     xa, xb = np.asarray(c.solve(tg).positions), np.asarray(d.solve(tg).positions)
-    assert c.stats["basis_solves"] == 1
+    assert c.stats["basis_solves"] == 2
+    assert np.abs(xa - xb).max() <= 1e-10
+    tg[len(line) // 2] += [0.0, 0.0, 0.05]
+    xa, xb = np.asarray(c.solve(tg).positions), np.asarray(d.solve(tg).positions)
+    assert c.stats["basis_solves"] == 2
     assert np.abs(xa - xb).max() <= 1e-10
 
 

@@ -15,6 +15,7 @@ void dk_arap_default_options(dk_arap_options *o)
     o->anderson_depth = 5;
     o->cg_iterations = 12;
     o->predict = 1;
+    o->basis = DK_ARAP_BASIS_AUTO;
     o->on_iteration = NULL;
     o->user = NULL;
     o->progress = NULL;
@@ -68,6 +69,9 @@ static dk_status check_options(const dk_arap_options *o, dk_error *err)
     if (o->predict != 0 && o->predict != 1)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "ARAP: predict is %d, must be 0 or 1",
                             o->predict);
+    if (o->basis != DK_ARAP_BASIS_AUTO && o->basis != DK_ARAP_BASIS_OFF)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP: unknown basis mode %d (auto = 0, off = 1)", (int)o->basis);
     if (o->anderson_depth < 1 || o->anderson_depth > MAX_ANDERSON_DEPTH)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "ARAP: anderson_depth is %d, must be in [1, %d]", o->anderson_depth,
@@ -211,7 +215,10 @@ static dk_status solve_impl(dk_arap *ar, const dk_solve_request *rq, double *pos
         return st;
     arap_system *s = &ar->sys;
     const int warm_start = rq->start != DK_START_COLD;
-    const int maxit = rq->max_iterations > 0 ? rq->max_iterations : ar->opt.max_iterations;
+    /* a preview is the start alone: no iterations */
+    const int maxit = rq->preview ? 0
+                      : rq->max_iterations > 0 ? rq->max_iterations
+                                               : ar->opt.max_iterations;
 
     /* 1. the targets, expanded per handle vertex */
     st = dk_constraints_targets(s->con, ar->mesh->positions, rq->targets, (int)rq->target_kind,
@@ -245,7 +252,13 @@ static dk_status solve_impl(dk_arap *ar, const dk_solve_request *rq, double *pos
     arap_progress p = {0};
     if (resume)
         p.energy = s->last_energy; /* ar->x, s->xu, s->rhs, ar->rot: as the last call left them */
-    else if ((st = arap_start(ar, s, warm_start && ar->have_prev, &p.energy, err)) != DK_OK)
+    else if ((st = arap_start(ar, s, warm_start && ar->have_prev, rq->preview, &p.energy,
+                              err)) != DK_OK)
+        return st;
+    /* a preview's local step is done when the energy is asked for, or by the first
+     * iteration of the solve that refines it */
+    if (s->start_pending && (!rq->skip_energy || maxit > 0) &&
+        (st = arap_start_complete(ar, s, &p.energy, err)) != DK_OK)
         return st;
 
     /* 3. the iterations */
@@ -361,6 +374,46 @@ void dk_arap_stats(const dk_arap *ar, dk_method_stats *stats)
     stats->n_unknowns = ar->sys.nu;
     stats->analysis_count = ar->analysis_count;
     stats->factorization_count = ar->factorization_count;
+}
+
+void dk_arap_get_counters(const dk_arap *ar, dk_arap_counters *counters)
+{
+    if (!counters)
+        return;
+    memset(counters, 0, sizeof *counters);
+    if (!ar)
+        return;
+    counters->basis_columns = ar->sys.zcols;
+    counters->basis_starts = ar->basis_starts;
+}
+
+dk_status dk_arap_response_basis(const dk_arap *ar, double *out, dk_error *err)
+{
+    if (!ar || !out)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP response basis: object and out must not be NULL");
+    const arap_system *s = &ar->sys;
+    if (!s->zb)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP response basis: not built (basis='off', more than 16 "
+                            "handles, over 128 MB, or nothing to solve)");
+    const dk_constraints *c = s->con;
+    const size_t ncol = (size_t)s->zcols, nu = (size_t)s->nu;
+    const double *rest = ar->mesh->positions;
+    for (dk_index v = 0; v < ar->n; v++) {
+        double *row = out + ncol * (size_t)ar->ro->perm[v];
+        const dk_index u = s->unk[v], h = c->role[v];
+        memset(row, 0, ncol * sizeof(double));
+        if (u >= 0) {
+            for (size_t k = 0; k < ncol; k++)
+                row[k] = s->zb[k * nu + (size_t)u];
+        } else if (h >= 0) {
+            for (int j = 0; j < 3; j++)
+                row[4 * (size_t)h + (size_t)j] = rest[3 * (size_t)v + (size_t)j];
+            row[4 * (size_t)h + 3] = 1.0;
+        }
+    }
+    return DK_OK;
 }
 
 /* ---------------------------------------------------------------- the method contract --- */

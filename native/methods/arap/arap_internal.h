@@ -65,6 +65,8 @@
  * Newton: 0.19 and 3e-3 on two of them), and 10% less time in all. Warm drag starts are at
  * ~5e-4, so drags are unaffected. */
 #define NEWTON_FAR 0.03
+/* A preview compares its two starts (plain, predicted) on about this many cells. */
+#define PREVIEW_SAMPLE 16384
 
 typedef struct arap_system {
     dk_constraints *con;
@@ -100,6 +102,8 @@ typedef struct arap_system {
     double *warm;         /* 6 nu: the two warm-start responses (plain, predicted)       */
     int resumable, aa_hist, aa_head, aa_have_pair;
     int predicted;        /* the last warm start used the secant predictor                */
+    int start_pending;    /* the iterate is a lazy start (a preview): its rotations, energy
+                             and right-hand side are not computed yet (arap_start_complete) */
     double last_energy;
     double aa_gram[MAX_ANDERSON_DEPTH * MAX_ANDERSON_DEPTH];
     /* Newton (acceleration NEWTON) only, see newton_step: per cell K_c^-1 at the current
@@ -121,6 +125,14 @@ typedef struct arap_system {
     struct nt_entry { float h[3]; dk_index cell; } *nt;
     struct nt_term { float e[3], w; dk_index a, b; } *ntt; /* the cell terms, packed */
     double *nt_r, *nt_z, *nt_p, *nt_q, *nt_d, *nt_z0;
+    /* The warm start's response basis (response_basis.c; NULL when not built): per handle h
+     * and j < 4, the column Z_{h,j} = A^-1 r_{h,j} (nu each, column (4h + j) of zb), the
+     * global step's response to the hard vertices of h moved by their rest coordinate j
+     * (x, y, z, or 1); zverts/zstart: those hard vertices per handle; zdx (3 per vertex) and
+     * zfit (2 x 16 per handle): the fits' scratch. */
+    double *zb, *zdx, *zfit;
+    dk_index *zverts, *zstart;
+    int zcols;
 } arap_system;
 
 struct dk_arap {
@@ -149,6 +161,7 @@ struct dk_arap {
     double *prev2;
     int n_hist;
     int analysis_count, factorization_count;
+    int basis_starts;     /* warm starts that combined the response basis                 */
     dk_team *team;        /* the passes' and the factor's helper thread (NULL: per pass)  */
     /* during a bind or rebind only (NULL otherwise): its progress reporter, and the index
      * of ARAP_PHASE_CONSTRAINTS in its phase table (the system's phases follow it) */
@@ -237,15 +250,36 @@ void arap_system_free(arap_system *s);
 double arap_local_energy(const dk_arap *ar, const arap_system *s, const double *x,
                          double *rot);
 void arap_rotations_rhs(const dk_arap *ar, arap_system *s, const double *rot);
+/* the energy of one block of 64 consecutive cells in every `stride` (rotations refined from
+ * ar->rot, which is left as it is) plus every soft penalty: the preview's cheap comparison
+ * of two starts (warm_start.c) */
+double arap_sampled_energy(const dk_arap *ar, const arap_system *s, const double *x,
+                           dk_index stride);
 void arap_build_rhs_const(const dk_arap *ar, arap_system *s, const double *x);
 void arap_scatter(const arap_system *s, const double *xu, double *x);
 void arap_gather(const arap_system *s, const double *x, double *xu);
 
 /* warm_start.c: sets the iterate where a solve starts (ar->x, ar->rot, s->xu, s->rhs) and
- * its energy; `warm`: from the previous solution (there must be one). After the solve,
- * arap_keep_history records its end for the next warm start's predictor. */
-dk_status arap_start(dk_arap *ar, arap_system *s, int warm, double *energy, dk_error *err);
+ * its energy; `warm`: from the previous solution (there must be one). `lazy` (a preview):
+ * positions only (ar->x, s->xu), the predictor taken whenever the drag goes on, energy NaN,
+ * s->start_pending set; arap_start_complete then does the rest (rotations, energy,
+ * right-hand side) before any iteration. After the solve, arap_keep_history records its end
+ * for the next warm start's predictor. */
+dk_status arap_start(dk_arap *ar, arap_system *s, int warm, int lazy, double *energy,
+                     dk_error *err);
+dk_status arap_start_complete(dk_arap *ar, arap_system *s, double *energy, dk_error *err);
 void arap_keep_history(dk_arap *ar, arap_system *s, int warm_start);
+
+/* response_basis.c: builds the basis after the factorization (skipped, zb NULL, when off,
+ * over the limits or out of memory: it is only a speed-up); frees it; and, when the moves
+ * of the eliminated vertices from the base x1 (plain) and from x1 + alpha (x1 - x2)
+ * (predict) to ar->x are one affine map per handle with the fixed ones unmoved, writes the
+ * responses into w (3 nu each, column-major, plain then predicted) and returns 1; else 0
+ * (nothing written: back-substitute). */
+void arap_response_basis_build(dk_arap *ar, arap_system *s);
+void arap_response_basis_free(arap_system *s);
+int arap_response_basis_apply(dk_arap *ar, arap_system *s, const double *x1, const double *x2,
+                              double alpha, int predict, double *w);
 
 /* anderson.c, newton.c: iterate from p until converged or max_iterations in all */
 dk_status arap_iterate_local_global(dk_arap *ar, arap_system *s, int max_iterations,

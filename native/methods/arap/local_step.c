@@ -355,6 +355,54 @@ double arap_local_energy(const dk_arap *ar, const arap_system *s, const double *
     return energy;
 }
 
+typedef struct sample_job {
+    const dk_arap *ar;
+    const arap_system *s;
+    const double *x;
+    dk_index stride;
+    double energy[2];
+} sample_job;
+
+/* Sample blocks [k0, k1) of arap_sampled_energy (a dk_range_fn): block k is the cells
+ * k stride SAMPLE_BLOCK .. + SAMPLE_BLOCK - 1 (consecutive cells share their neighbours'
+ * cache lines in the locality order; single cells stride apart cost a miss each). */
+#define SAMPLE_BLOCK 64
+static void sample_part(void *ctx, dk_index k0, dk_index k1, int part)
+{
+    sample_job *j = ctx;
+    const dk_index n = j->ar->n;
+    double energy = 0.0;
+    for (dk_index k = k0; k < k1; k++) {
+        const dk_index i0 = k * j->stride * SAMPLE_BLOCK;
+        const dk_index i1 = n - i0 > SAMPLE_BLOCK ? i0 + SAMPLE_BLOCK : n;
+        for (dk_index i = i0; i < i1; i++) {
+            double a[9], r[9];
+            cell_covariance(j->ar, j->x, i, a);
+            memcpy(r, j->ar->rot + 9 * (size_t)i, sizeof r);
+            if (!refine_rotation(a, r))
+                dk_closest_rotation(a, r);
+            energy += cell_energy(j->ar, j->s, j->x, i, r);
+        }
+    }
+    j->energy[part] = energy;
+}
+
+double arap_sampled_energy(const dk_arap *ar, const arap_system *s, const double *x,
+                           dk_index stride)
+{
+    sample_job job = {ar, s, x, stride, {0.0, 0.0}};
+    const dk_index span = stride * SAMPLE_BLOCK, m = (ar->n + span - 1) / span;
+    dk_team_run_halves(ar->team, sample_part, &job, m, 64);
+    double energy = job.energy[0] + job.energy[1];
+    if (s->have_targets)
+        for (dk_index u = 0; u < s->nu; u++) {
+            dk_index v = s->unknowns[u];
+            if (s->soft_k[v] > 0.0)
+                energy += s->soft_k[v] * dist2(x + 3 * v, s->targets + 3 * s->target_of[v]);
+        }
+    return energy;
+}
+
 /* Constant part of the right-hand side: couplings to eliminated vertices at positions x,
  * and the soft targets. */
 void arap_build_rhs_const(const dk_arap *ar, arap_system *s, const double *x)

@@ -50,6 +50,7 @@ void arap_system_free(arap_system *s)
     free(s->nt_q);
     free(s->nt_d);
     free(s->nt_z0);
+    arap_response_basis_free(s);
     memset(s, 0, sizeof *s);
 }
 
@@ -460,5 +461,8 @@ dk_status arap_system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_sy
         arap_system_free(s);
         return st;
     }
-    return factor(ar, old && old->nu > 0 ? old : NULL, s, err);
+    st = factor(ar, old && old->nu > 0 ? old : NULL, s, err);
+    if (st == DK_OK)
+        arap_response_basis_build(ar, s);
+    return st;
 }

@@ -50,6 +50,43 @@ static double drag_alpha(const dk_arap *ar, const arap_system *s)
     return alpha;
 }
 
+/* The warm start's responses by back-substitution: the border terms' moves, then one solve
+ * of 3 (plain) or 6 (and predicted) columns into s->warm (zeroed by the caller). */
+static dk_status substituted_response(dk_arap *ar, arap_system *s, double alpha, int predict,
+                                      int *moved_out, dk_error *err)
+{
+    const dk_index nu = s->nu;
+    const size_t N3 = 3 * (size_t)nu;
+    const double *x1 = ar->prev, *x2 = ar->prev2;
+    double *w = s->warm;
+    int moved = 0;
+    /* only the terms across the constraints' borders (a few % of all), in order */
+    for (int64_t bt = 0; bt < s->n_bterms; bt++) {
+        const int64_t t = s->bterms[bt];
+        const dk_index a = ar->ta[t], b = ar->tb[t];
+        const dk_index ua = s->unk[a], ub = s->unk[b];
+        const dk_index u = ua >= 0 ? ua : ub, known = ua >= 0 ? b : a;
+        for (int d = 0; d < 3; d++) {
+            const size_t k = 3 * (size_t)known + (size_t)d;
+            const double dx = ar->x[k] - ar->prev[k];
+            if (dx != 0.0) {
+                w[(size_t)d * nu + u] += s->tws[t] * dx;
+                moved = 1;
+            }
+            if (predict)
+                w[N3 + (size_t)d * nu + u] +=
+                    s->tws[t] * (ar->x[k] - (x1[k] + alpha * (x1[k] - x2[k])));
+        }
+    }
+    if (moved || predict) {
+        const dk_status st = dk_cholesky_solve(s->chol, w, predict ? 6 : 3, w, err);
+        if (st != DK_OK)
+            return dk_error_prefix(err, "ARAP solve");
+    }
+    *moved_out = moved;
+    return DK_OK;
+}
+
 /* Warm start after a handle move: a base plus the response of the global step
  * (previous rotations held) to how far the constrained vertices are from the
  * base, x0 = base + A^-1 (b(new known) - b(base known)). This spreads a handle's
@@ -71,8 +108,8 @@ static double drag_alpha(const dk_arap *ar, const arap_system *s)
  * 4 iterations per step (an interactive budget) the energy after each step is
  * 5-14x closer to the step's minimum. Soft handles' own target changes are not in
  * the response: this is only a starting point, and the iterations do the rest. */
-static dk_status start_warm(dk_arap *ar, arap_system *s, double *energy, int *have_energy,
-                            dk_error *err)
+static dk_status start_warm(dk_arap *ar, arap_system *s, int lazy, double *energy,
+                            int *have_energy, dk_error *err)
 {
     dk_status st;
     const dk_index nu = s->nu;
@@ -82,36 +119,38 @@ static dk_status start_warm(dk_arap *ar, arap_system *s, double *energy, int *ha
     const int predict = alpha > 0.0;
     const size_t N3 = 3 * (size_t)nu;
     double *w = s->warm; /* columns 0-2: plain response; 3-5: predicted one */
-    memset(w, 0, (predict ? 2 : 1) * N3 * sizeof(double));
-    /* only the terms across the constraints' borders (a few % of all), in order */
-    for (int64_t bt = 0; bt < s->n_bterms; bt++) {
-        const int64_t t = s->bterms[bt];
-        const dk_index a = ar->ta[t], b = ar->tb[t];
-        const dk_index ua = s->unk[a], ub = s->unk[b];
-        const dk_index u = ua >= 0 ? ua : ub, known = ua >= 0 ? b : a;
-        for (int d = 0; d < 3; d++) {
-            const size_t k = 3 * (size_t)known + (size_t)d;
-            const double dx = ar->x[k] - ar->prev[k];
-            if (dx != 0.0) {
-                w[(size_t)d * nu + u] += s->tws[t] * dx;
-                moved = 1;
-            }
-            if (predict)
-                w[N3 + (size_t)d * nu + u] +=
-                    s->tws[t] * (ar->x[k] - (x1[k] + alpha * (x1[k] - x2[k])));
-        }
-    }
-    if (moved || predict) {
-        st = dk_cholesky_solve(s->chol, w, predict ? 6 : 3, w, err);
+    if (arap_response_basis_apply(ar, s, x1, x2, alpha, predict, w)) {
+        moved = 1; /* combined from the bind's columns: no back-substitution */
+    } else {
+        memset(w, 0, (predict ? 2 : 1) * N3 * sizeof(double));
+        st = substituted_response(ar, s, alpha, predict, &moved, err);
         if (st != DK_OK)
-            return dk_error_prefix(err, "ARAP solve");
+            return st;
     }
     /* the plain start (ar->x holds the previous solution on the unknowns) */
     if (moved)
         for (dk_index u = 0; u < nu; u++)
             for (int d = 0; d < 3; d++)
                 ar->x[3 * s->unknowns[u] + d] += w[(size_t)d * nu + u];
-    if (predict) {
+    if (predict && lazy) {
+        /* a preview: the two starts compared on a fixed sample of ~PREVIEW_SAMPLE cells
+         * (all of them on small meshes; on two threads) instead of two passes over every
+         * cell (~0.2 s at 692k vertices, five times the rest of the start): on the
+         * 692k armadillo's first drag step after a converged solve, taking the predictor
+         * unchecked gave 1.10x the step's minimum (docs/methods/arap.md, "Preview"). */
+        const dk_index stride = ar->n > PREVIEW_SAMPLE ? ar->n / PREVIEW_SAMPLE : 1;
+        const double e_plain = arap_sampled_energy(ar, s, ar->x, stride);
+        arap_gather(s, ar->x, s->xu); /* keep the plain start */
+        for (dk_index u = 0; u < nu; u++)
+            for (int d = 0; d < 3; d++) {
+                const size_t k = 3 * (size_t)s->unknowns[u] + (size_t)d;
+                ar->x[k] = x1[k] + alpha * (x1[k] - x2[k]) + w[N3 + (size_t)d * nu + u];
+            }
+        if (arap_sampled_energy(ar, s, ar->x, stride) <= e_plain)
+            s->predicted = 1;
+        else
+            arap_scatter(s, s->xu, ar->x);
+    } else if (predict) {
         const double e_plain = arap_local_energy(ar, s, ar->x, ar->rot);
         arap_gather(s, ar->x, s->xu); /* keep the plain start */
         for (dk_index u = 0; u < nu; u++)
@@ -132,7 +171,8 @@ static dk_status start_warm(dk_arap *ar, arap_system *s, double *energy, int *ha
     return DK_OK;
 }
 
-dk_status arap_start(dk_arap *ar, arap_system *s, int warm, double *energy_out, dk_error *err)
+dk_status arap_start(dk_arap *ar, arap_system *s, int warm, int lazy, double *energy_out,
+                     dk_error *err)
 {
     double energy = 0.0;
     int have_energy = 0;
@@ -141,18 +181,38 @@ dk_status arap_start(dk_arap *ar, arap_system *s, int warm, double *energy_out, 
     if (!warm)
         s->cut = 0; /* a cold start remembers nothing of the cut steps (newton.c) */
     place_known(ar, s, warm ? ar->prev : ar->mesh->positions);
-    arap_build_rhs_const(ar, s, ar->x);
-    st = warm ? start_warm(ar, s, &energy, &have_energy, err) : start_cold(ar, s, err);
+    if (!(lazy && warm)) /* a lazy warm start needs it only in arap_start_complete */
+        arap_build_rhs_const(ar, s, ar->x);
+    st = warm ? start_warm(ar, s, lazy, &energy, &have_energy, err) : start_cold(ar, s, err);
     if (st != DK_OK)
         return st;
+    s->aa_hist = s->aa_head = s->aa_have_pair = 0;
+    if (lazy) { /* the local step waits for the iterations (arap_start_complete) */
+        arap_gather(s, ar->x, s->xu);
+        s->start_pending = 1;
+        *energy_out = NAN;
+        return DK_OK;
+    }
+    s->start_pending = 0;
     if (!have_energy)
         energy = arap_local_energy(ar, s, ar->x, ar->rot);
     arap_rotations_rhs(ar, s, ar->rot);
     if (ar->opt.on_iteration && ar->opt.on_iteration(ar->opt.user, 0, energy))
         return dk_error_set(err, DK_ERR_CANCELLED, "ARAP solve: cancelled by the observer");
-    s->aa_hist = s->aa_head = s->aa_have_pair = 0;
     arap_gather(s, ar->x, s->xu);
     *energy_out = energy;
+    return DK_OK;
+}
+
+dk_status arap_start_complete(dk_arap *ar, arap_system *s, double *energy_out, dk_error *err)
+{
+    arap_build_rhs_const(ar, s, ar->x); /* from the eliminated vertices, which are in place */
+    const double energy = arap_local_energy(ar, s, ar->x, ar->rot);
+    arap_rotations_rhs(ar, s, ar->rot);
+    s->start_pending = 0;
+    *energy_out = energy;
+    if (ar->opt.on_iteration && ar->opt.on_iteration(ar->opt.user, 0, energy))
+        return dk_error_set(err, DK_ERR_CANCELLED, "ARAP solve: cancelled by the observer");
     return DK_OK;
 }
 
