@@ -104,7 +104,8 @@ typedef struct dk_arap_options {
     dk_phase_progress_fn progress;     /**< bind progress (dk_progress.h), NULL by default:
                                             called with the phases renumber, cells,
                                             constraints, system, assemble, analyze,
-                                            factorize, and "done" at 1; a non-zero return
+                                            factorize, basis (the response basis), and
+                                            "done" at 1; a non-zero return
                                             cancels the bind (DK_ERR_CANCELLED, nothing
                                             leaked). Asked between phases and every few
                                             thousand steps of the long loops; not during
@@ -137,8 +138,10 @@ dk_status dk_arap_rebind(dk_arap *arap, const dk_constraint_desc *constraints, d
 
 /** The progress callback of the following rebinds (NULL: none, as after bind): the phases
  *  constraints, system, assemble, analyze (skipped when the analysis is reused), factorize,
- *  then "done" at 1. A non-zero return cancels the rebind with DK_ERR_CANCELLED, and the
- *  object keeps its previous constraints, factor and warm start exactly. */
+ *  basis, then "done" at 1. A non-zero return cancels the rebind with DK_ERR_CANCELLED, and
+ *  the object keeps its previous constraints, factor, basis, counters and warm start
+ *  exactly; a cancellation at the basis after the analysis was reused refactors the
+ *  previous values (the factorization's time) to give the analysis back. */
 void dk_arap_set_progress(dk_arap *arap, dk_phase_progress_fn progress, void *user);
 
 /** Solves for the handle targets of `request` (dk_method.h). Starts (request->start):

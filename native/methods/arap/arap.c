@@ -24,21 +24,23 @@ void dk_arap_default_options(dk_arap_options *o)
 
 /* The phases of a bind and of a rebind (dk_progress.h), weighted by their measured cost in
  * seconds: binds of the 692k-vertex armadillo (scripts/bench_scale.py's armadillo-wave, 2
- * subdivisions; defaults: spokes, clamped cotangent, Newton) on the shared 2-core machine
- * (load ~6), timed between the callback's reports (issue 19 item 3; 7.2 s in all, the
- * factorization 2.6-3.8 s over two runs). The system's phases follow
- * ARAP_PHASE_CONSTRAINTS in the same order in both tables. */
+ * subdivisions, one handle; defaults: spokes, clamped cotangent, Newton, the response
+ * basis) on the shared 2-core machine, timed between the callback's reports (issue 19 item
+ * 3): 4.6 and 4.8 s in all, the factorization 1.7-1.9 s (2.6-3.8 s at load ~6), the
+ * longest stretch without a report. The system's phases follow ARAP_PHASE_CONSTRAINTS in
+ * the same order in both tables. */
 static const dk_progress_phase bind_phases[] = {
-    {"renumber", 0.70},    /* dk_reorder_create: the locality order, the renumbered mesh */
-    {"cells", 0.80},       /* cotangent weights and the cells' terms                       */
-    {"constraints", 0.07}, /* ARAP_PHASE_CONSTRAINTS ...                                  */
-    {"system", 0.40},
-    {"assemble", 0.60},
-    {"analyze", 0.90},
-    {"factorize", 3.20}};
+    {"renumber", 0.54},    /* dk_reorder_create: the locality order, the renumbered mesh */
+    {"cells", 0.65},       /* cotangent weights and the cells' terms                       */
+    {"constraints", 0.06}, /* ARAP_PHASE_CONSTRAINTS ...                                  */
+    {"system", 0.35},
+    {"assemble", 0.32},
+    {"analyze", 0.83},
+    {"factorize", 1.80},
+    {"basis", 0.10}};      /* the response basis: 4 columns per handle                     */
 static const dk_progress_phase rebind_phases[] = {
-    {"constraints", 0.07}, {"system", 0.40}, {"assemble", 0.60}, {"analyze", 0.90},
-    {"factorize", 3.20}};
+    {"constraints", 0.06}, {"system", 0.35}, {"assemble", 0.32}, {"analyze", 0.83},
+    {"factorize", 1.80}, {"basis", 0.10}};
 #define BIND_PHASE_BASE 2 /* ARAP_PHASE_CONSTRAINTS in bind_phases */
 
 static dk_status check_options(const dk_arap_options *o, dk_error *err)

@@ -176,7 +176,9 @@ enum {
     ARAP_PHASE_SYSTEM = 1,      /* solve buffers, right-hand-side map, component check      */
     ARAP_PHASE_ASSEMBLE = 2,    /* the reduced matrix                                      */
     ARAP_PHASE_ANALYZE = 3,     /* CHOLMOD's symbolic analysis (uninterruptible)            */
-    ARAP_PHASE_FACTORIZE = 4    /* CHOLMOD's numeric factorization (uninterruptible)        */
+    ARAP_PHASE_FACTORIZE = 4,   /* CHOLMOD's numeric factorization (uninterruptible)        */
+    ARAP_PHASE_BASIS = 5        /* the warm start's response basis: one solve of 4 columns
+                                   per handle (uninterruptible)                            */
 };
 
 /* dk_progress_begin / dk_progress_tick for a system phase of the running bind or rebind */

@@ -461,7 +461,29 @@ dk_status arap_system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_sy
         arap_system_free(s);
         return st;
     }
-    st = factor(ar, old && old->nu > 0 ? old : NULL, s, err);
+    const dk_csys_counts before = {ar->analysis_count, ar->factorization_count};
+    if (old && old->nu == 0)
+        old = NULL;
+    const int had_factor = old && old->chol;
+    st = factor(ar, old, s, err);
+    if (st == DK_OK && (st = arap_phase(ar, ARAP_PHASE_BASIS, err)) != DK_OK) {
+        /* cancelled before the basis: a rebind that took over the old analysis (the same
+         * unknowns) gives it back, refactored with the old values -- that stop costs the
+         * factorization -- and its counters stay as they were */
+        if (had_factor && !old->chol && s->chol) {
+            old->chol = s->chol;
+            s->chol = NULL;
+            dk_error ignored = {0};
+            if (dk_cholesky_factorize(old->chol, &old->a, &ignored) != DK_OK) {
+                dk_cholesky_free(old->chol); /* cannot happen: it factored before */
+                old->chol = NULL;
+            }
+        }
+        ar->analysis_count = before.analysis_count;
+        ar->factorization_count = before.factorization_count;
+        arap_system_free(s);
+        return st;
+    }
     if (st == DK_OK)
         arap_response_basis_build(ar, s);
     return st;
