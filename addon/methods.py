@@ -103,8 +103,10 @@ class Method:
     # True: the Region group, when set, is the region the handle moves (eigen deformation's
     # R) and goes to the native handles, with the first handle's transform
     region_is_handle: bool = False
-    # True: the native constructor takes progress=callable(fraction) -> stop; the UI bind
-    # shows the fraction and Esc stops the native work (solver.BindJob)
+    # True: the native constructor takes progress=callable(fraction) -> stop (fraction a
+    # deformkit.BindProgress: a float with the phase's name in .phase); the UI bind shows
+    # the phase and fraction, and Esc stops the native work at its next report
+    # (solver.BindJob)
     bind_progress: bool = False
     # True: the native object has response_basis() (ARAP's warm-start response to each
     # handle's affine motion): while a solve runs in a worker thread, each update shows the
@@ -119,6 +121,7 @@ METHODS = [
         native_class="ARAP",
         description="As-rigid-as-possible: keeps local shape, bends and twists naturally",
         icon="MOD_SIMPLEDEFORM",
+        bind_progress=True,
         maps=("stiffness",),
         material_label="Stiffness",
         stiffness_option="stiffness_scale",
@@ -192,6 +195,7 @@ METHODS = [
         native_class="LaplacianEdit",
         description="Laplacian surface editing: one linear solve per update",
         icon="MOD_SMOOTH",
+        bind_progress=True,
         maps=("handle_weights",),
         options=[
             Option("weights", "ENUM", "cotangent", "Edge Weights",
@@ -242,6 +246,7 @@ METHODS = [
         native_class="Falloff",
         description="Attenuated handle displacement by distance from the handle",
         icon="SMOOTHCURVE",
+        bind_progress=True,
         maps=("handle_weights",),
         bind_args=lambda *a: falloff_args(*a),
         options=[
@@ -292,6 +297,7 @@ METHODS.append(Method(
                 "shape, each an affine transformation kept close to a rotation; handles "
                 "pull as soft constraints",
     icon="MOD_LATTICE",
+    bind_progress=True,
     maps=("cut",),
     cut_options=("cut_a", "cut_b"),
     cold_solve={"warm_start": False},

@@ -317,12 +317,11 @@ class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
         if self._thread.is_alive():
-            frac = self._job.fraction
+            frac, phase = self._job.fraction, self._job.progress_text()
             context.workspace.status_text_set(
                 "DeformKit: binding %s (%s) %.1f s%s, Esc to cancel"
                 % (self._name, plural(self._job.n_vertices, "vertex"),
-                   time.perf_counter() - self._t0,
-                   "" if frac is None else ", eigenvectors %.0f%%" % (100 * frac)))
+                   time.perf_counter() - self._t0, ", " + phase if phase else ""))
             if frac is not None:
                 context.window_manager.progress_update(frac)
             return {"RUNNING_MODAL"}

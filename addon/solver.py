@@ -560,6 +560,17 @@ def material_map(dk, dkmesh, paint, kw, opts):
     return 0.5 * (u[edges[:, 0]] + u[edges[:, 1]])
 
 
+# What the status bar calls the native binds' phases (deformkit.BindProgress.phase).
+BIND_PHASES = {
+    "renumber": "renumbering", "cells": "building cells", "operator": "building the operator",
+    "constraints": "reading constraints", "system": "building the system",
+    "assemble": "assembling", "analyze": "analysing", "factorize": "factorizing",
+    "basis": "handle basis", "heat": "heat method", "distances": "distances",
+    "nodes": "placing nodes", "weights": "node weights", "edges": "graph edges",
+    "eigenvectors": "eigenvectors", "done": "finishing",
+}
+
+
 class BindJob:
     """One full bind, split so that the native precomputation (factorizations: seconds on big
     meshes) can run off the main thread while the UI stays live:
@@ -585,7 +596,7 @@ class BindJob:
             args["material"] = self.material = material_map(dk, self.dkmesh, paint, kw,
                                                             d.options)
         args.update(methods.bind_kwargs(m, d.options, self.rest, kw, self.dkmesh))
-        self.fraction, self.cancelled = None, False
+        self.fraction, self.phase, self.cancelled = None, None, False
         if m.bind_progress:  # called from the worker thread: plain attribute writes only
             args["progress"] = self._progress
         for k in ("fixed", "roi"):
@@ -596,8 +607,19 @@ class BindJob:
         self.native, self.error, self.seconds = None, None, 0.0
 
     def _progress(self, fraction):
-        self.fraction = fraction
+        # the phase first: the main thread reads fraction, then phase (progress_text)
+        self.phase = getattr(fraction, "phase", None)
+        self.fraction = float(fraction)
         return self.cancelled
+
+    def progress_text(self):
+        """The bind's phase and fraction for the status bar ("factorizing 62%"), "" before
+        the first report or for a method without bind progress."""
+        frac = self.fraction
+        if frac is None:
+            return ""
+        phase = self.phase
+        return "%s %.0f%%" % (BIND_PHASES.get(phase, phase or "bind"), 100 * frac)
 
     def run(self):
         t0 = time.perf_counter()

@@ -83,12 +83,16 @@ static int same_values(const dk_sparse *a, const dk_sparse *b)
 
 dk_status dk_csys_factor(const dk_sparse *a, dk_cholesky **chol, dk_cholesky **old_chol,
                          const dk_sparse *old_a, int same_pattern, dk_csys_refactor policy,
-                         dk_team *team, dk_csys_counts *counts, dk_error *err)
+                         dk_team *team, dk_csys_counts *counts, dk_progress *progress,
+                         int analyze_phase, dk_error *err)
 {
     dk_status st;
     *chol = NULL;
     if (old_chol && *old_chol && same_pattern) {
         /* the same pattern: keep the symbolic analysis */
+        if (!(policy == DK_CSYS_REFACTOR_IF_CHANGED && same_values(a, old_a)) &&
+            (st = dk_progress_begin(progress, analyze_phase + 1, err)) != DK_OK)
+            return st; /* before anything moved: old_chol is untouched */
         *chol = *old_chol;
         *old_chol = NULL;
         if (policy == DK_CSYS_REFACTOR_IF_CHANGED && same_values(a, old_a))
@@ -108,11 +112,18 @@ dk_status dk_csys_factor(const dk_sparse *a, dk_cholesky **chol, dk_cholesky **o
         }
         return st;
     }
+    if ((st = dk_progress_begin(progress, analyze_phase, err)) != DK_OK)
+        return st;
     st = dk_cholesky_analyze(a, chol, err);
     if (st != DK_OK)
         return st;
     dk_cholesky_set_team(*chol, team);
     counts->analysis_count++;
+    if ((st = dk_progress_begin(progress, analyze_phase + 1, err)) != DK_OK) {
+        dk_cholesky_free(*chol);
+        *chol = NULL;
+        return st;
+    }
     st = dk_cholesky_factorize(*chol, a, err);
     if (st == DK_OK) {
         counts->factorization_count++;

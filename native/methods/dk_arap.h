@@ -33,6 +33,7 @@
 #include "dk_constraints.h"
 #include "dk_mesh.h"
 #include "dk_method.h"
+#include "dk_progress.h"
 #include "dk_status.h"
 
 #ifdef __cplusplus
@@ -100,6 +101,18 @@ typedef struct dk_arap_options {
     dk_arap_basis basis;               /**< default DK_ARAP_BASIS_AUTO                    */
     dk_arap_iteration_fn on_iteration; /**< optional, NULL by default                     */
     void *user;                        /**< passed to on_iteration                        */
+    dk_phase_progress_fn progress;     /**< bind progress (dk_progress.h), NULL by default:
+                                            called with the phases renumber, cells,
+                                            constraints, system, assemble, analyze,
+                                            factorize, basis (the response basis), and
+                                            "done" at 1; a non-zero return
+                                            cancels the bind (DK_ERR_CANCELLED, nothing
+                                            leaked). Asked between phases and every few
+                                            thousand steps of the long loops; not during
+                                            CHOLMOD's analysis and factorization, which
+                                            cannot be interrupted. For the bind only: the
+                                            object does not keep it                       */
+    void *progress_user;               /**< passed to progress                            */
 } dk_arap_options;
 
 typedef struct dk_arap dk_arap;
@@ -122,6 +135,14 @@ dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraint
  *  (for example only the handle groups, their weights or the stiffness changed). On failure
  *  the object keeps its previous constraints. The previous solution stays as warm start. */
 dk_status dk_arap_rebind(dk_arap *arap, const dk_constraint_desc *constraints, dk_error *err);
+
+/** The progress callback of the following rebinds (NULL: none, as after bind): the phases
+ *  constraints, system, assemble, analyze (skipped when the analysis is reused), factorize,
+ *  basis, then "done" at 1. A non-zero return cancels the rebind with DK_ERR_CANCELLED, and
+ *  the object keeps its previous constraints, factor, basis, counters and warm start
+ *  exactly; a cancellation at the basis after the analysis was reused refactors the
+ *  previous values (the factorization's time) to give the analysis back. */
+void dk_arap_set_progress(dk_arap *arap, dk_phase_progress_fn progress, void *user);
 
 /** Solves for the handle targets of `request` (dk_method.h). Starts (request->start):
  *  DK_START_WARM from the previous solution when there is one, plus the global step's

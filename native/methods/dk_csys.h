@@ -15,6 +15,7 @@
 #include "dk_constraints.h"
 #include "dk_mesh.h"
 #include "dk_parallel.h"
+#include "dk_progress.h"
 #include "dk_sparse.h"
 #include "dk_status.h"
 
@@ -77,10 +78,17 @@ typedef struct dk_csys_counts {
  *  even that fail, *old_chol is freed and NULL). Otherwise a new analysis, which runs its
  *  substitutions on `team` (may be NULL). Counts into `counts`. On failure *chol is NULL
  *  and the status and message are the analysis' or factorization's (DK_ERR_NOT_POSITIVE_
- *  DEFINITE, ...), for the caller to prefix. */
+ *  DEFINITE, ...), for the caller to prefix.
+ *  `progress` (may be NULL): the caller's reporter, whose phase `analyze_phase` is the
+ *  symbolic analysis and `analyze_phase + 1` the numeric factorization. Each is entered
+ *  (dk_progress_begin) before it starts -- the analysis is skipped when it is taken over --
+ *  and a request to stop there returns DK_ERR_CANCELLED with *chol NULL and *old_chol as it
+ *  was. Neither CHOLMOD call can be interrupted: the longest stretch without a question is
+ *  the numeric factorization (docs/reliability.md gives it at 692k vertices). */
 dk_status dk_csys_factor(const dk_sparse *a, dk_cholesky **chol, dk_cholesky **old_chol,
                          const dk_sparse *old_a, int same_pattern, dk_csys_refactor policy,
-                         dk_team *team, dk_csys_counts *counts, dk_error *err);
+                         dk_team *team, dk_csys_counts *counts, dk_progress *progress,
+                         int analyze_phase, dk_error *err);
 
 /** 1 when a and b have the same dimensions and pattern (column starts and row indices). */
 int dk_csys_same_pattern(const dk_sparse *a, const dk_sparse *b);

@@ -61,6 +61,7 @@
 #include "dk_constraints.h"
 #include "dk_mesh.h"
 #include "dk_method.h"
+#include "dk_progress.h"
 #include "dk_status.h"
 
 #ifdef __cplusplus
@@ -103,6 +104,13 @@ typedef struct dk_embedded_options {
     double tolerance;         /**< eps of the stopping tests, > 0; default 1e-6            */
     int max_iterations;       /**< Gauss-Newton iterations per solve, >= 1; default 30     */
     uint64_t seed;            /**< the sampling's random seed; default 1                   */
+    dk_phase_progress_fn progress; /**< bind progress (dk_progress.h), NULL by default: the
+                                        phases nodes, weights (asked every 65536 vertices'
+                                        queries, or 8192 steps of the geodesic search),
+                                        edges, constraints, analyze, then "done" at 1; a
+                                        non-zero return cancels the bind (DK_ERR_CANCELLED,
+                                        nothing leaked). For the bind only                 */
+    void *progress_user;      /**< passed to progress                                      */
 } dk_embedded_options;
 
 typedef struct dk_embedded dk_embedded;
@@ -122,6 +130,11 @@ dk_status dk_embedded_bind(const dk_mesh *mesh, const dk_constraint_desc *constr
  *  the object keeps its previous constraints. */
 dk_status dk_embedded_rebind(dk_embedded *ed, const dk_constraint_desc *constraints,
                              dk_error *err);
+
+/** The progress callback of the following rebinds (NULL: none, as after bind): the phases
+ *  constraints and analyze, then "done" at 1. A non-zero return cancels the rebind with
+ *  DK_ERR_CANCELLED, and the object keeps its previous constraints. */
+void dk_embedded_set_progress(dk_embedded *ed, dk_phase_progress_fn progress, void *user);
 
 /** Solves for the handle targets of `request` (dk_method.h: positions or one transform per
  *  handle; DK_START_WARM / RESUME from the previous node transformations, COLD from the

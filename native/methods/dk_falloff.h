@@ -45,6 +45,7 @@
 #include "dk_constraints.h"
 #include "dk_mesh.h"
 #include "dk_method.h"
+#include "dk_progress.h"
 #include "dk_status.h"
 
 #ifdef __cplusplus
@@ -77,6 +78,15 @@ typedef struct dk_falloff_options {
     dk_falloff_reach reach;       /**< default RANGE                                        */
     double k;                     /**< exponent parameter, finite; default 0 (linear)      */
     double heat_time_factor;      /**< GEODESIC: dk_heat_create's factor (<= 0: default)    */
+    dk_phase_progress_fn progress; /**< bind progress (dk_progress.h), NULL by default: the
+                                        phases heat (GEODESIC only: the heat method's
+                                        factorization, uninterruptible) and distances
+                                        (asked between handle groups and every 8192
+                                        vertices of each group's labelled search), then
+                                        "done" at 1; a non-zero return cancels the bind
+                                        (DK_ERR_CANCELLED, nothing leaked). For the bind
+                                        only: the object does not keep it              */
+    void *progress_user;          /**< passed to progress                                  */
 } dk_falloff_options;
 
 typedef struct dk_falloff dk_falloff;
@@ -97,6 +107,11 @@ dk_status dk_falloff_bind(const dk_mesh *mesh, const dk_constraint_desc *desc,
 /** New constraints, same mesh and options (the heat-method factorization is reused). On
  *  failure the object keeps its previous constraints. */
 dk_status dk_falloff_rebind(dk_falloff *f, const dk_constraint_desc *desc, dk_error *err);
+
+/** The progress callback of the following rebinds (NULL: none, as after bind): the phase
+ *  distances, then "done" at 1. A non-zero return cancels the rebind with DK_ERR_CANCELLED,
+ *  and the object keeps its previous constraints and weights. */
+void dk_falloff_set_progress(dk_falloff *f, dk_phase_progress_fn progress, void *user);
 
 /** Deformed positions (n x 3) for the handle targets of `request` (dk_method.h; a direct
  *  method: start and max_iterations change nothing). `info` (may be NULL): energy = the sum

@@ -60,6 +60,7 @@
 #include "dk_constraints.h"
 #include "dk_mesh.h"
 #include "dk_method.h"
+#include "dk_progress.h"
 #include "dk_status.h"
 
 #ifdef __cplusplus
@@ -102,6 +103,18 @@ typedef struct dk_laplacian_edit_options {
                                            default 1 (Blender)                               */
     double local_frame_tolerance;     /**< >= 0, relative to the bbox diagonal; default 1e-6 */
     dk_le_basis basis;                /**< default AUTO                                     */
+    dk_phase_progress_fn progress;    /**< bind progress (dk_progress.h), NULL by default:
+                                           the phases renumber, operator, constraints,
+                                           assemble, analyze, factorize, basis, and "done"
+                                           at 1; a non-zero return cancels the bind
+                                           (DK_ERR_CANCELLED, nothing leaked). Asked between
+                                           phases, every few thousand unknowns of the
+                                           assembly and between the basis' solves (g0's 3
+                                           columns, then 4 per handle); not during CHOLMOD's
+                                           analysis and factorization, which cannot be
+                                           interrupted. For the bind only: the object does
+                                           not keep it                                      */
+    void *progress_user;              /**< passed to progress                               */
 } dk_laplacian_edit_options;
 
 /** Counters for tests and reports. */
@@ -141,6 +154,16 @@ dk_status dk_laplacian_edit_bind(const dk_mesh *mesh, const dk_constraint_desc *
  *  previous constraints and stays usable. */
 dk_status dk_laplacian_edit_rebind(dk_laplacian_edit *le, const dk_constraint_desc *desc,
                                    dk_error *err);
+
+/** The progress callback of the following rebinds (NULL: none, as after bind): the phases
+ *  constraints, assemble, analyze (skipped when the analysis is reused), factorize (skipped
+ *  when the values are unchanged too), basis, then "done" at 1. A non-zero return cancels
+ *  the rebind with DK_ERR_CANCELLED and the object keeps its previous constraints, factor,
+ *  basis and last solve's deltas exactly; a cancellation in the basis after the analysis was
+ *  reused refactors the previous values (the factorization's time) to give the analysis
+ *  back. */
+void dk_laplacian_edit_set_progress(dk_laplacian_edit *le, dk_phase_progress_fn progress,
+                                    void *user);
 
 /** Deformed positions (n x 3, row-major) for the handle targets of `request`
  *  (dk_method.h): a direct method, so request->start and max_iterations change nothing;

@@ -71,7 +71,19 @@ struct dk_embedded {
     int analysis_count, factorization_count;
     dk_team *team;              /* the factor's two-thread substitutions' helper (NULL: per
                                    sweep)                                                   */
+    dk_progress *prog;          /* during a bind or rebind only (NULL otherwise)             */
 };
+
+/* The phases of a bind and of a rebind (dk_progress.h), weighted by their cost in seconds
+ * measured on the 692k-vertex armadillo (scripts/bench_scale.py's armadillo-wave, 2
+ * subdivisions; defaults: 200 surface nodes, k = 4, Euclidean) on the shared 2-core
+ * machine, timed between the callback's reports: 3.3 and 4.0 s in all, the longest stretch
+ * without a report the edges' sort (~1 s). */
+static const dk_progress_phase ed_bind_phases[] = {
+    {"nodes", 0.43}, {"weights", 1.2}, {"edges", 1.7}, {"constraints", 0.25}, {"analyze", 0.03}};
+static const dk_progress_phase ed_rebind_phases[] = {{"constraints", 0.25}, {"analyze", 0.03}};
+/* the vertices one k-d tree query of the weights takes between two progress reports */
+enum { ED_QUERY_CHUNK = 65536 };
 
 static dk_status oom(dk_error *err, const char *what)
 {
@@ -93,6 +105,8 @@ void dk_embedded_default_options(dk_embedded_options *o)
     o->tolerance = 1e-6;
     o->max_iterations = 30;
     o->seed = 1;
+    o->progress = NULL;
+    o->progress_user = NULL;
 }
 
 /* The largest graph: n_nodes' bound, and what a radius may keep. */
@@ -418,15 +432,24 @@ static void eq4(const dk_index *idx, const double *dist, dk_index k, dk_index *n
 /* The k nearest of the tree's nodes for `n` points, with the weights of eq. 4, into nb and w
  * (n x k each). Needs k + 1 <= the tree's nodes. `only` (n, or NULL for all) skips the
  * points where it is 0. */
+/* `prog` (may be NULL): the queries run in chunks of ED_QUERY_CHUNK points with a report
+ * of the phase's part (the fraction of the points done) between them; the results are
+ * those of one query (each point's neighbours do not depend on the others). */
 static dk_status embed_points(const dk_kdtree *tree, const double *points, dk_index n,
                               dk_index k, const unsigned char *only, dk_index *nb, double *w,
-                              dk_error *err)
+                              dk_progress *prog, dk_error *err)
 {
     const size_t k1 = (size_t)k + 1;
     dk_index *idx = malloc(((size_t)n * k1 + 1) * sizeof *idx);
     double *d2 = malloc(((size_t)n * k1 + 1) * sizeof *d2);
-    dk_status st = idx && d2 ? dk_kdtree_knn(tree, points, n, k + 1, idx, d2, err)
-                             : oom(err, "weights");
+    dk_status st = idx && d2 ? DK_OK : oom(err, "weights");
+    for (dk_index v0 = 0; st == DK_OK && v0 < n; v0 += ED_QUERY_CHUNK) {
+        const dk_index c = n - v0 < ED_QUERY_CHUNK ? n - v0 : ED_QUERY_CHUNK;
+        st = dk_progress_part(prog, (double)v0 / n, err);
+        if (st == DK_OK)
+            st = dk_kdtree_knn(tree, points + 3 * (size_t)v0, c, k + 1, idx + (size_t)v0 * k1,
+                               d2 + (size_t)v0 * k1, err);
+    }
     for (dk_index v = 0; st == DK_OK && v < n; v++) {
         if (only && !only[v])
             continue;
@@ -509,7 +532,10 @@ static dk_status geodesic_weights(dk_embedded *ed, const dk_index *anchor,
     size_t size = 0;
     for (dk_index j = 0; st == DK_OK && j < m; j++)
         label_push(heap, &size, (ed_label){anchor_d[j], anchor[j], j});
+    int64_t pops = 0; /* ~(k + 1) n labels settle: the progress of the search */
     while (st == DK_OK && size > 0) {
+        if ((st = dk_progress_tick(ed->prog, (double)++pops, (double)n * k1, err)) != DK_OK)
+            break;
         const ed_label x = label_pop(heap, &size);
         dk_index *mine = lab + (size_t)x.v * k1;
         int seen = cnt[x.v] == (dk_index)k1;
@@ -619,7 +645,7 @@ static dk_status euclidean_weights(dk_embedded *ed, const unsigned char *todo,
     st = dk_kdtree_create(sub ? sub : ed->g, sub ? ns : m, &tree, err);
     if (st == DK_OK)
         st = embed_points(tree, ed->mesh->positions, n, k, only ? only : todo, ed->nb, ed->w,
-                          err);
+                          ed->prog, err);
     for (dk_index v = 0; st == DK_OK && glob && v < n; v++)
         if (only[v])
             for (dk_index q = 0; q < k; q++) {
@@ -746,7 +772,12 @@ static dk_status edges(dk_embedded *ed, dk_error *err)
     }
     for (dk_index j = 0; j < m; j++)
         parent[j] = j;
-    for (dk_index v = 0; v < n; v++)
+    /* progress: the two loops are the first half of the phase, the sort (uninterruptible,
+     * ~1 s of the 1.7 at 692k) the second */
+    const double work = 2.0 * ((double)n + (double)mesh->n_edges);
+    dk_status st = DK_OK;
+    for (dk_index v = 0; v < n && st == DK_OK; v++) {
+        st = dk_progress_tick(ed->prog, v, work, err);
         for (dk_index p = 0; p < k; p++)
             for (dk_index q = p + 1; q < k; q++) {
                 dk_index a = ed->nb[(size_t)v * k + p], b = ed->nb[(size_t)v * k + q];
@@ -760,7 +791,10 @@ static dk_status edges(dk_embedded *ed, dk_error *err)
                 pairs[np++] = (int64_t)a * m + b;
                 parent[uf_find(parent, a)] = uf_find(parent, b);
             }
-    for (dk_index e = 0; e < mesh->n_edges; e++) {
+    }
+    for (dk_index e = 0; e < mesh->n_edges && st == DK_OK; e++) {
+        if ((st = dk_progress_tick(ed->prog, (double)n + e, work, err)) != DK_OK)
+            break;
         dk_index a = ed->nb[(size_t)mesh->edges[2 * e] * k];
         dk_index b = ed->nb[(size_t)mesh->edges[2 * e + 1] * k];
         if (a < 0 || b < 0 || (ed->nside && across(ed->nside[a], ed->nside[b])))
@@ -777,6 +811,12 @@ static dk_status edges(dk_embedded *ed, dk_error *err)
         pairs[np++] = (int64_t)a * m + b;
     }
     free(parent);
+    if (st == DK_OK)
+        st = dk_progress_part(ed->prog, 0.5, err);
+    if (st != DK_OK) {
+        free(pairs);
+        return st;
+    }
     qsort(pairs, (size_t)np, sizeof *pairs, cmp_i64);
     int64_t ne = 0;
     for (int64_t i = 0; i < np; i++)
@@ -1051,16 +1091,23 @@ static dk_status matrix(dk_embedded *ed, ed_system *s, dk_error *err)
     return DK_OK;
 }
 
+/* `phase`: the index of "constraints" in the running bind's or rebind's phase table (the
+ * analysis follows it). */
 static dk_status system_build(dk_embedded *ed, const dk_constraint_desc *desc, ed_system *s,
-                              dk_error *err)
+                              int phase, dk_error *err)
 {
     memset(s, 0, sizeof *s);
-    dk_status st = dk_constraints_create(ed->mesh, desc, &s->con, err);
+    dk_status st = dk_progress_begin(ed->prog, phase, err);
+    if (st != DK_OK)
+        return st;
+    st = dk_constraints_create(ed->mesh, desc, &s->con, err);
     if (st != DK_OK)
         return dk_error_prefix(err, "EmbeddedDeformation");
     st = classify(ed, s, err);
     if (st == DK_OK)
         st = block_pattern(ed, s, err);
+    if (st == DK_OK)
+        st = dk_progress_begin(ed->prog, phase + 1, err);
     if (st == DK_OK)
         st = matrix(ed, s, err);
     if (st != DK_OK)
@@ -1459,6 +1506,13 @@ dk_status dk_embedded_bind(const dk_mesh *mesh, const dk_constraint_desc *constr
         ed->opt = *options;
     else
         dk_embedded_default_options(&ed->opt);
+    dk_progress prog;
+    dk_progress_init(&prog, ed->opt.progress, ed->opt.progress_user, ed_bind_phases,
+                     (int)(sizeof ed_bind_phases / sizeof ed_bind_phases[0]),
+                     "EmbeddedDeformation bind");
+    ed->opt.progress = NULL; /* the caller's callback is for this bind only */
+    ed->opt.progress_user = NULL;
+    ed->prog = &prog;
     ed->mesh = mesh;
     ed->n = mesh->n_vertices;
     ed->k = ed->opt.k;
@@ -1471,11 +1525,11 @@ dk_status dk_embedded_bind(const dk_mesh *mesh, const dk_constraint_desc *constr
         else
             st = oom(err, "positions");
     }
-    if (st == DK_OK) /* 1. the nodes */
+    if (st == DK_OK && (st = dk_progress_begin(&prog, 0, err)) == DK_OK) /* 1. the nodes */
         st = sample_nodes(ed, err);
-    if (st == DK_OK) /* 2. each vertex's nodes and weights (eq. 4) */
+    if (st == DK_OK && (st = dk_progress_begin(&prog, 1, err)) == DK_OK) /* 2. eq. 4 */
         st = weights(ed, err);
-    if (st == DK_OK) /* 3. the graph's edges */
+    if (st == DK_OK && (st = dk_progress_begin(&prog, 2, err)) == DK_OK) /* 3. the edges */
         st = edges(ed, err);
     if (st == DK_OK) { /* 4. the transformations, identity */
         ed->x = malloc((12 * (size_t)ed->m + 1) * sizeof *ed->x);
@@ -1485,12 +1539,14 @@ dk_status dk_embedded_bind(const dk_mesh *mesh, const dk_constraint_desc *constr
             identity(ed->x, ed->m);
     }
     if (st == DK_OK) /* 5. the constraints: fixed nodes, positional terms, J^T J's pattern */
-        st = system_build(ed, constraints, &ed->sys, err);
+        st = system_build(ed, constraints, &ed->sys, 3, err);
+    ed->prog = NULL;
     if (st != DK_OK) {
         dk_embedded_free(ed);
         return st;
     }
     ed->energy = 0.0;
+    dk_progress_done(&prog);
     *out = ed;
     return DK_OK;
 }
@@ -1503,12 +1559,27 @@ dk_status dk_embedded_rebind(dk_embedded *ed, const dk_constraint_desc *constrai
                             "EmbeddedDeformation rebind: object and constraints must not be "
                             "NULL");
     ed_system s;
-    dk_status st = system_build(ed, constraints, &s, err);
+    dk_progress prog;
+    dk_progress_init(&prog, ed->opt.progress, ed->opt.progress_user, ed_rebind_phases,
+                     (int)(sizeof ed_rebind_phases / sizeof ed_rebind_phases[0]),
+                     "EmbeddedDeformation rebind");
+    ed->prog = &prog;
+    dk_status st = system_build(ed, constraints, &s, 0, err);
+    ed->prog = NULL;
     if (st != DK_OK)
         return st;
+    dk_progress_done(&prog);
     system_free(&ed->sys);
     ed->sys = s;
     return DK_OK;
+}
+
+void dk_embedded_set_progress(dk_embedded *ed, dk_phase_progress_fn progress, void *user)
+{
+    if (!ed)
+        return;
+    ed->opt.progress = progress;
+    ed->opt.progress_user = progress ? user : NULL;
 }
 
 /* ------------------------------------------------------------------ normals, points --- */
@@ -1643,7 +1714,7 @@ dk_status dk_embedded_embed(const dk_embedded *ed, const double *points, dk_inde
     dk_kdtree *tree = NULL;
     dk_status st = nb && w ? dk_kdtree_create(ed->g, ed->m, &tree, err) : oom(err, "embed");
     if (st == DK_OK)
-        st = embed_points(tree, points, n_points, k, NULL, nb, w, err);
+        st = embed_points(tree, points, n_points, k, NULL, nb, w, NULL, err);
     for (dk_index p = 0; st == DK_OK && out && p < n_points; p++) {
         const double *x0 = points + 3 * p;
         double o[3] = {0.0, 0.0, 0.0};

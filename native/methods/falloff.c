@@ -25,7 +25,19 @@ struct dk_falloff {
     double unit;     /* 1 for hops, the mean edge length otherwise                    */
     dk_heat_geodesic *heat;
     falloff_state st;
+    dk_progress *prog; /* during a bind or rebind only (NULL otherwise) */
 };
+
+/* The phases of a bind (dk_progress.h), weighted by their cost measured on the 692k-vertex
+ * armadillo (scripts/bench_scale.py's armadillo-wave, 2 subdivisions, one handle) on the
+ * shared 2-core machine, in seconds: geodesic binds 42 s, of which the heat method's
+ * factorization (dk_heat_create, uninterruptible) all but the 3.3 s its rebind takes; the
+ * other distances have the distances phase only (hops 1.1 s, euclidean 5-9 s). Within it,
+ * each handle group has an equal share, half of it the labelled search (asked every 8192
+ * vertices it settles), the rest its distance (one call of the operator, uninterruptible)
+ * and weights. */
+static const dk_progress_phase geodesic_phases[] = {{"heat", 39.0}, {"distances", 3.3}};
+static const dk_progress_phase distance_phases[] = {{"distances", 1.0}};
 
 static void state_free(falloff_state *s)
 {
@@ -48,6 +60,8 @@ void dk_falloff_default_options(dk_falloff_options *o)
     o->reach = DK_FALLOFF_REACH_RANGE;
     o->k = 0.0;
     o->heat_time_factor = 0.0;
+    o->progress = NULL;
+    o->progress_user = NULL;
 }
 
 double dk_falloff_profile(double i, double n, double k)
@@ -138,12 +152,17 @@ static double dist3(const double *a, const double *b)
 }
 
 /* `label` gets first_label + the position in `sources`; `dist` and `eu` are scratch. */
+/* Progress (may be NULL): the search is group g of n_groups, reported as the first half of
+ * the group's share of the phase. */
 static dk_status labelled_search(const dk_mesh *m, const dk_index *sources, dk_index n_sources,
                                  dk_index first_label, int unit_weights, double *dist,
-                                 double *eu, dk_index *label, dk_error *err)
+                                 double *eu, dk_index *label, dk_progress *prog, dk_index g,
+                                 dk_index n_groups, dk_error *err)
 {
     const dk_index n = m->n_vertices;
     heap hp = {NULL, 0, 0};
+    int64_t pops = 0;
+    dk_status st = DK_OK;
     for (dk_index i = 0; i < n; i++) {
         dist[i] = eu[i] = INFINITY;
         label[i] = -1;
@@ -158,6 +177,11 @@ static dk_status labelled_search(const dk_mesh *m, const dk_index *sources, dk_i
             goto oom;
     }
     while (hp.size > 0) {
+        if ((st = dk_progress_tick(prog, (double)g + 0.5 * (double)++pops / (double)n,
+                                   (double)n_groups, err)) != DK_OK) {
+            free(hp.h);
+            return st;
+        }
         heap_item it = heap_pop(&hp);
         const double *ps = m->positions + 3 * sources[it.label - first_label];
         if (it.d != dist[it.v] || it.e != eu[it.v] || it.label != label[it.v])
@@ -197,11 +221,15 @@ static dk_status group_distances(dk_falloff *f, falloff_state *s, dk_index g, do
     const dk_index n = m->n_vertices;
     const dk_index b = s->con->handle_start[g], e = s->con->handle_start[g + 1];
     const dk_index *src = s->con->handle_vertices + b;
+    const dk_index G = s->con->n_handles;
     dk_status st;
 
     switch (f->opt.distance) {
     case DK_FALLOFF_HOPS:
-        st = labelled_search(m, src, e - b, b, 1, scratch_d, scratch_e, label, err);
+        st = labelled_search(m, src, e - b, b, 1, scratch_d, scratch_e, label, f->prog, g, G,
+                             err);
+        if (st == DK_OK)
+            st = dk_progress_part(f->prog, (g + 0.5) / G, err);
         if (st != DK_OK)
             return st;
         st = dk_hop_distance(m, src, e - b, scratch_i, err);
@@ -212,7 +240,10 @@ static dk_status group_distances(dk_falloff *f, falloff_state *s, dk_index g, do
         return DK_OK;
     case DK_FALLOFF_DIJKSTRA:
     case DK_FALLOFF_GEODESIC:
-        st = labelled_search(m, src, e - b, b, 0, scratch_d, scratch_e, label, err);
+        st = labelled_search(m, src, e - b, b, 0, scratch_d, scratch_e, label, f->prog, g, G,
+                             err);
+        if (st == DK_OK)
+            st = dk_progress_part(f->prog, (g + 0.5) / G, err);
         if (st != DK_OK)
             return st;
         if (f->opt.distance == DK_FALLOFF_DIJKSTRA)
@@ -298,8 +329,12 @@ static dk_status build_state(dk_falloff *f, const dk_constraint_desc *desc, fall
         s->hpos[s->con->handle_vertices[k]] = k;
     for (dk_index g = 0; g < s->con->n_handles; g++) {
         double *dist = s->dist + (size_t)g * n, *w = s->weight + (size_t)g * n;
-        st = group_distances(f, s, g, dist, s->label + (size_t)g * n, scratch_i, scratch_d,
-                             scratch_e, err);
+        st = dk_progress_part(f->prog, (double)g / s->con->n_handles, err);
+        if (st == DK_OK)
+            st = group_distances(f, s, g, dist, s->label + (size_t)g * n, scratch_i, scratch_d,
+                                 scratch_e, err);
+        if (st == DK_OK)
+            st = dk_progress_part(f->prog, (g + 0.9) / s->con->n_handles, err);
         if (st != DK_OK)
             goto done;
         s->range[g] = group_reach(f, s, dist);
@@ -323,6 +358,7 @@ dk_status dk_falloff_bind(const dk_mesh *mesh, const dk_constraint_desc *desc,
 {
     dk_falloff *f;
     dk_status st;
+    dk_progress prog;
 
     if (!out)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "Falloff bind: out is NULL");
@@ -374,6 +410,17 @@ dk_status dk_falloff_bind(const dk_mesh *mesh, const dk_constraint_desc *desc,
     }
     if (f->opt.range == 0.0)
         f->opt.range = 10.0 * f->unit;
+    {
+        const int geo = f->opt.distance == DK_FALLOFF_GEODESIC;
+        dk_progress_init(&prog, f->opt.progress, f->opt.progress_user,
+                         geo ? geodesic_phases : distance_phases, geo ? 2 : 1, "Falloff bind");
+        f->opt.progress = NULL; /* the caller's callback is for this bind only */
+        f->opt.progress_user = NULL;
+        f->prog = &prog;
+        st = dk_progress_begin(&prog, 0, err);
+        if (st != DK_OK)
+            goto fail;
+    }
     if (f->opt.distance == DK_FALLOFF_GEODESIC) {
         if (mesh->n_faces == 0) {
             st = dk_error_set(err, DK_ERR_DEGENERATE,
@@ -385,10 +432,15 @@ dk_status dk_falloff_bind(const dk_mesh *mesh, const dk_constraint_desc *desc,
             dk_error_prefix(err, "Falloff bind");
             goto fail;
         }
+        st = dk_progress_begin(&prog, 1, err); /* distances */
+        if (st != DK_OK)
+            goto fail;
     }
     st = build_state(f, desc, &f->st, err);
     if (st != DK_OK)
         goto fail;
+    f->prog = NULL;
+    dk_progress_done(&prog);
     *out = f;
     return DK_OK;
 fail:
@@ -402,12 +454,28 @@ dk_status dk_falloff_rebind(dk_falloff *f, const dk_constraint_desc *desc, dk_er
     dk_status st;
     if (!f)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "Falloff rebind: object is NULL");
-    st = build_state(f, desc, &s, err);
+    dk_progress prog;
+    dk_progress_init(&prog, f->opt.progress, f->opt.progress_user, distance_phases, 1,
+                     "Falloff rebind");
+    f->prog = &prog;
+    st = dk_progress_begin(&prog, 0, err);
+    if (st == DK_OK)
+        st = build_state(f, desc, &s, err);
+    f->prog = NULL;
     if (st != DK_OK)
         return st;
+    dk_progress_done(&prog);
     state_free(&f->st);
     f->st = s;
     return DK_OK;
+}
+
+void dk_falloff_set_progress(dk_falloff *f, dk_phase_progress_fn progress, void *user)
+{
+    if (!f)
+        return;
+    f->opt.progress = progress;
+    f->opt.progress_user = progress ? user : NULL;
 }
 
 /* ------------------------------------------------------------------ solve --------------- */

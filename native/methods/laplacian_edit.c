@@ -12,6 +12,7 @@
 #include "dk_csys.h"
 #include "dk_operators.h"
 #include "dk_parallel.h"
+#include "dk_progress.h"
 #include "dk_reorder.h"
 #include "dk_sparse.h"
 
@@ -67,7 +68,44 @@ struct dk_laplacian_edit {
                             the rows delta - A_e x_e while assemble_rhs runs              */
     double *face_cross;  /* n_faces x 3 face cross products (local frames)                */
     dk_team *team;       /* the passes' and the factor's helper thread (NULL: per pass)    */
+    /* during a bind or rebind only (NULL otherwise): its progress reporter, and the index
+     * of LE_PHASE_CONSTRAINTS in its phase table */
+    dk_progress *prog;
+    int prog_base;
 };
+
+/* The phases of a bind and of a rebind (dk_progress.h), weighted by their cost in seconds
+ * measured on the 692k-vertex armadillo (scripts/bench_scale.py's armadillo-wave, 2
+ * subdivisions; defaults: cotangent, fixed detail, hard constraints, one handle: 7 basis
+ * columns) on the shared 2-core machine (load ~6), timed between the callback's reports
+ * (issue 19 item 3): 18.5 and 18.7 s in all, the factorization of the normal equations
+ * (a two-ring stencil: a much denser factor than ARAP's) 14.2-14.4 s of it, which is the
+ * longest stretch without a report. The rebind's phases are the bind's from
+ * LE_PHASE_CONSTRAINTS on, in the same order. */
+enum {
+    LE_PHASE_CONSTRAINTS = 0, /* the constraints, unknowns, component check              */
+    LE_PHASE_ASSEMBLE = 1,    /* the normal equations                                     */
+    LE_PHASE_ANALYZE = 2,     /* CHOLMOD's symbolic analysis (uninterruptible)            */
+    LE_PHASE_FACTORIZE = 3,   /* CHOLMOD's numeric factorization (uninterruptible)        */
+    LE_PHASE_BASIS = 4        /* the affine basis: its right-hand sides and solves        */
+};
+static const dk_progress_phase le_bind_phases[] = {
+    {"renumber", 0.60},    /* dk_reorder_create                                          */
+    {"operator", 0.27},    /* the differential operator, rest deltas (and frames)        */
+    {"constraints", 0.04}, /* LE_PHASE_CONSTRAINTS ...                                   */
+    {"assemble", 0.41},
+    {"analyze", 1.75},
+    {"factorize", 14.3},
+    {"basis", 1.30}};
+static const dk_progress_phase le_rebind_phases[] = {
+    {"constraints", 0.04}, {"assemble", 0.41}, {"analyze", 1.75}, {"factorize", 14.3},
+    {"basis", 1.30}};
+#define LE_BIND_PHASE_BASE 2 /* LE_PHASE_CONSTRAINTS in le_bind_phases */
+
+static dk_status le_phase(const dk_laplacian_edit *le, int k, dk_error *err)
+{
+    return dk_progress_begin(le->prog, le->prog_base + k, err);
+}
 
 /* Passes over at least this many vertices run on two threads (dk_team_run_halves on the
  * object's team, whose helper waits between passes): below it the hand-off (a few us
@@ -83,14 +121,21 @@ static void mark_active_rows(const dk_laplacian_edit *le, le_system *s);
 static dk_status build_basis(dk_laplacian_edit *le, le_system *s, dk_error *err);
 
 /* The affine basis only speeds up solves from transforms: when it cannot be built (out of
- * memory) the solves fall back to back-substitution, so the failure is not an error. */
-static void try_build_basis(dk_laplacian_edit *le, le_system *s)
+ * memory) the solves fall back to back-substitution, so the failure is not an error. A
+ * cancellation is (DK_ERR_CANCELLED, into err). */
+static dk_status try_build_basis(dk_laplacian_edit *le, le_system *s, dk_error *err)
 {
-    dk_error ignored;
+    dk_error own;
     if (s->n_unknowns == 0)
-        return;
-    dk_error_clear(&ignored);
-    (void)build_basis(le, s, &ignored);
+        return DK_OK;
+    dk_error_clear(&own);
+    const dk_status st = build_basis(le, s, &own);
+    if (st == DK_ERR_CANCELLED) {
+        if (err)
+            *err = own;
+        return st;
+    }
+    return DK_OK;
 }
 
 static void system_free(le_system *s)
@@ -127,6 +172,8 @@ void dk_laplacian_edit_default_options(dk_laplacian_edit_options *o)
     o->local_frame_iterations = 1;
     o->local_frame_tolerance = 1e-6;
     o->basis = DK_LE_BASIS_AUTO;
+    o->progress = NULL;
+    o->progress_user = NULL;
 }
 
 static dk_status check_options(const dk_laplacian_edit_options *o, dk_error *err)
@@ -500,6 +547,9 @@ static dk_status assemble_normal(const dk_laplacian_edit *le, le_system *s, doub
             mark[u] = -1;
         nnz = 0;
         for (dk_index u = 0; u < nu; u++) {
+            if ((st = dk_progress_tick(le->prog, (double)pass * nu + u, 2.0 * nu, err)) !=
+                DK_OK)
+                goto done;
             const dk_index j = s->unknowns[u];
             const dk_index rb = m->ring_start[j], re = m->ring_start[j + 1];
             dk_index len = 0;
@@ -674,7 +724,9 @@ static dk_status build_system(dk_laplacian_edit *le, const dk_constraint_desc *d
         if (st != DK_OK)
             goto fail;
     }
-    st = assemble_normal(le, s, mu2, err);
+    st = le_phase(le, LE_PHASE_ASSEMBLE, err);
+    if (st == DK_OK)
+        st = assemble_normal(le, s, mu2, err);
     if (st != DK_OK)
         goto fail;
     s->rhs = malloc(sizeof(double) * 3 * (size_t)s->n_unknowns);
@@ -700,7 +752,10 @@ static dk_status build_system_caller(dk_laplacian_edit *le, const dk_constraint_
     memset(s, 0, sizeof *s);
     if (!desc)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "LaplacianEdit: constraints are NULL");
-    dk_status st = dk_reorder_desc_create(le->ro, le->caller_mesh, desc, &rd, err);
+    dk_status st = le_phase(le, LE_PHASE_CONSTRAINTS, err);
+    if (st != DK_OK)
+        return st;
+    st = dk_reorder_desc_create(le->ro, le->caller_mesh, desc, &rd, err);
     if (st != DK_OK)
         return dk_error_prefix(err, "LaplacianEdit");
     st = build_system(le, &rd.desc, s, err);
@@ -725,7 +780,8 @@ static dk_status factor(dk_laplacian_edit *le, le_system *old, le_system *s, con
     dk_csys_counts counts = {le->analysis_count, le->factorization_count};
     dk_status st = dk_csys_factor(s->normal, &s->chol, old ? &old->chol : NULL,
                                   old ? old->normal : NULL, same, DK_CSYS_REFACTOR_IF_CHANGED,
-                                  le->team, &counts, err);
+                                  le->team, &counts, le->prog, le->prog_base + LE_PHASE_ANALYZE,
+                                  err);
     le->analysis_count = counts.analysis_count;
     le->factorization_count = counts.factorization_count;
     if (st == DK_ERR_NOT_POSITIVE_DEFINITE && err && err->column > 0 &&
@@ -735,7 +791,7 @@ static dk_status factor(dk_laplacian_edit *le, le_system *old, le_system *s, con
                             "(degenerate triangles around it, or a part held only along a "
                             "line)", what,
                             (long)le->ro->perm[s->unknowns[err->column - 1]]);
-    return st == DK_OK ? DK_OK : dk_error_prefix(err, "%s", what);
+    return st == DK_OK || st == DK_ERR_CANCELLED ? st : dk_error_prefix(err, "%s", what);
 }
 
 /* ------------------------------------------------------------------ bind / rebind ------- */
@@ -747,6 +803,7 @@ dk_status dk_laplacian_edit_bind(const dk_mesh *mesh, const dk_constraint_desc *
     dk_laplacian_edit *le;
     dk_status st;
     dk_index n;
+    dk_progress prog;
 
     if (!out)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "LaplacianEdit bind: out is NULL");
@@ -765,7 +822,24 @@ dk_status dk_laplacian_edit_bind(const dk_mesh *mesh, const dk_constraint_desc *
     if (!le)
         return oom(err, "object");
     le->caller_mesh = mesh;
+    if (options)
+        le->opt = *options;
+    else
+        dk_laplacian_edit_default_options(&le->opt);
+    st = check_options(&le->opt, err);
+    if (st != DK_OK)
+        goto fail;
+    dk_progress_init(&prog, le->opt.progress, le->opt.progress_user, le_bind_phases,
+                     (int)(sizeof le_bind_phases / sizeof le_bind_phases[0]),
+                     "LaplacianEdit bind");
+    le->opt.progress = NULL; /* the caller's callback is for this bind only */
+    le->opt.progress_user = NULL;
+    le->prog = &prog;
+    le->prog_base = LE_BIND_PHASE_BASE;
     le->team = dk_team_create(); /* NULL (no thread available) is fine: passes start threads */
+    st = dk_progress_begin(&prog, 0, err); /* renumber */
+    if (st != DK_OK)
+        goto fail;
     st = dk_reorder_create(mesh, DK_REORDER_SORT_FACES, &le->ro, err);
     if (st != DK_OK) {
         dk_error_prefix(err, "LaplacianEdit bind");
@@ -773,11 +847,7 @@ dk_status dk_laplacian_edit_bind(const dk_mesh *mesh, const dk_constraint_desc *
     }
     le->mesh = le->ro->mesh;
     n = le->n = mesh->n_vertices;
-    if (options)
-        le->opt = *options;
-    else
-        dk_laplacian_edit_default_options(&le->opt);
-    st = check_options(&le->opt, err);
+    st = dk_progress_begin(&prog, 1, err); /* operator */
     if (st != DK_OK)
         goto fail;
     le->rest = malloc(sizeof(double) * 3 * (size_t)n);
@@ -812,16 +882,81 @@ dk_status dk_laplacian_edit_bind(const dk_mesh *mesh, const dk_constraint_desc *
     st = factor(le, NULL, &le->sys, "LaplacianEdit factorization", err);
     if (st != DK_OK)
         goto fail;
-    try_build_basis(le, &le->sys);
+    st = try_build_basis(le, &le->sys, err);
+    if (st != DK_OK)
+        goto fail;
     if (le->opt.detail == DK_LE_DETAIL_MEMBRANE)
         memset(le->delta, 0, sizeof(double) * 3 * (size_t)n);
     else
         memcpy(le->delta, le->delta_rest, sizeof(double) * 3 * (size_t)n);
     dk_team_park(le->team);
+    le->prog = NULL;
+    dk_progress_done(&prog);
     *out = le;
     return DK_OK;
 fail:
     dk_laplacian_edit_free(le);
+    return st;
+}
+
+/* The new system of a rebind into *s; on failure (a cancellation too) le is as it was
+ * and *s is freed. */
+static dk_status rebind_impl(dk_laplacian_edit *le, const dk_constraint_desc *desc,
+                             le_system *s, dk_error *err)
+{
+    const int analyses = le->analysis_count, factorizations = le->factorization_count;
+    dk_status st = build_system_caller(le, desc, s, err);
+    if (st != DK_OK)
+        return st;
+    const int had_factor = le->sys.chol != NULL;
+    st = factor(le, &le->sys, s, "LaplacianEdit rebind factorization", err);
+    if (st != DK_OK) {
+        system_free(s);
+        if (st == DK_ERR_CANCELLED) {
+            le->analysis_count = analyses;
+            le->factorization_count = factorizations;
+        }
+        return st;
+    }
+    /* A cancellation is possible in the basis, which uses le->x and le->delta as scratch:
+     * the delta of the last solve, which energy() reads, is kept to be put back. */
+    double *saved_delta = NULL;
+    const size_t n3 = 3 * (size_t)le->n;
+    if (le->prog && le->prog->fn && le->opt.detail == DK_LE_DETAIL_LOCAL_FRAME) {
+        saved_delta = malloc(sizeof(double) * n3);
+        if (!saved_delta)
+            st = oom(err, "rebind");
+        else
+            memcpy(saved_delta, le->delta, sizeof(double) * n3);
+    }
+    if (st == DK_OK)
+        st = try_build_basis(le, s, err);
+    if (st != DK_OK) {
+        if (saved_delta)
+            memcpy(le->delta, saved_delta, sizeof(double) * n3);
+        if (had_factor && !le->sys.chol && s->chol) {
+            /* the analysis was taken over (same unknowns): give it back, refactored with
+             * the previous values -- the cancellation costs that factorization */
+            le->sys.chol = s->chol;
+            s->chol = NULL;
+            dk_error ignored = {0};
+            const dk_index nnz = le->sys.normal->col_start[le->sys.n_unknowns];
+            const int same_values =
+                memcmp(le->sys.normal->values, s->normal->values, sizeof(double) * (size_t)nnz) ==
+                0; /* the same pattern, since the analysis was taken over */
+            if (!same_values &&
+                dk_cholesky_factorize(le->sys.chol, le->sys.normal, &ignored) != DK_OK) {
+                dk_cholesky_free(le->sys.chol); /* cannot happen: it factored before */
+                le->sys.chol = NULL;
+            }
+        }
+        system_free(s);
+    }
+    if (st == DK_ERR_CANCELLED) { /* changes nothing, the counters neither */
+        le->analysis_count = analyses;
+        le->factorization_count = factorizations;
+    }
+    free(saved_delta);
     return st;
 }
 
@@ -833,16 +968,18 @@ dk_status dk_laplacian_edit_rebind(dk_laplacian_edit *le, const dk_constraint_de
 
     if (!le)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "LaplacianEdit rebind: object is NULL");
-    st = build_system_caller(le, desc, &s, err);
+    dk_progress prog;
+    dk_progress_init(&prog, le->opt.progress, le->opt.progress_user, le_rebind_phases,
+                     (int)(sizeof le_rebind_phases / sizeof le_rebind_phases[0]),
+                     "LaplacianEdit rebind");
+    le->prog = &prog;
+    le->prog_base = 0;
+    st = rebind_impl(le, desc, &s, err);
+    le->prog = NULL;
+    dk_team_park(le->team);
     if (st != DK_OK)
         return st;
-    st = factor(le, &le->sys, &s, "LaplacianEdit rebind factorization", err);
-    if (st != DK_OK) {
-        system_free(&s);
-        return st;
-    }
-    try_build_basis(le, &s);
-    dk_team_park(le->team);
+    dk_progress_done(&prog);
     system_free(&le->sys);
     le->sys = s;
     if (le->opt.detail == DK_LE_DETAIL_MEMBRANE)
@@ -1123,6 +1260,9 @@ static dk_status build_basis(dk_laplacian_edit *le, le_system *s, dk_error *err)
     if (le->opt.basis == DK_LE_BASIS_OFF || H > LE_MAX_BASIS_HANDLES ||
         (double)ncol * (double)nu > LE_MAX_BASIS_DOUBLES)
         return DK_OK;
+    st = le_phase(le, LE_PHASE_BASIS, err);
+    if (st != DK_OK)
+        return st;
     s->basis = malloc(sizeof(double) * (size_t)nu * ncol);
     s->fit = malloc(sizeof(double) * 16 * (size_t)H);
     r = malloc(sizeof(double) * (size_t)n);
@@ -1144,9 +1284,14 @@ static dk_status build_basis(dk_laplacian_edit *le, le_system *s, dk_error *err)
     else
         memcpy(le->delta, le->delta_rest, sizeof(double) * 3 * (size_t)n);
     assemble_rhs(le, s, s->basis);
+    /* Progress: the right-hand sides are ~1/4 of the phase, the solves the rest (measured
+     * at 692k with one handle); asked after every column and every solve. */
+    const double rhs_share = 0.25;
+    st = DK_OK;
     /* G_{h,a}: the map from P_a (x, y, z, 1 of the rest handle positions) to the rhs */
-    for (dk_index h = 0; h < H; h++)
-        for (int a = 0; a < 4; a++) {
+    for (dk_index h = 0; h < H && st == DK_OK; h++)
+        for (int a = 0; a < 4 && st == DK_OK; a++) {
+            st = dk_progress_part(le->prog, rhs_share * (4.0 * h + a) / (4.0 * H), err);
             double *col = s->basis + (size_t)nu * (3 + 4 * (size_t)h + (size_t)a);
             memset(col, 0, sizeof(double) * (size_t)nu);
             for (dk_index i = 0; i < n; i++) {
@@ -1179,12 +1324,25 @@ static dk_status build_basis(dk_laplacian_edit *le, le_system *s, dk_error *err)
     for (dk_index k = 0; k < s->con->n_handle_vertices; k++)
         for (int d = 0; d < 3; d++)
             s->targets[3 * k + d] = le->rest[(size_t)d * n + s->con->handle_vertices[k]];
-    st = dk_cholesky_solve(s->chol, s->basis, (int)ncol, s->basis, err);
+    /* The solves: g0's 3 columns, then each handle's 4, so that a cancellation is seen
+     * between them (one multi-column solve cannot be interrupted). Always so, with a
+     * callback or not, so that the basis does not depend on whether progress is asked. */
+    for (size_t c0 = 0; c0 < ncol && st == DK_OK;) {
+        const size_t w = c0 == 0 ? 3 : 4;
+        st = dk_progress_part(le->prog, rhs_share + (1.0 - rhs_share) * (double)c0 / ncol, err);
+        if (st == DK_OK) {
+            st = dk_cholesky_solve(s->chol, s->basis + (size_t)nu * c0, (int)w,
+                                   s->basis + (size_t)nu * c0, err);
+            if (st != DK_OK)
+                dk_error_prefix(err, "LaplacianEdit basis");
+        }
+        c0 += w;
+    }
     if (st != DK_OK) {
         free(s->basis);
         free(s->fit);
         s->basis = s->fit = NULL;
-        return dk_error_prefix(err, "LaplacianEdit basis");
+        return st;
     }
     return DK_OK;
 }
@@ -1389,6 +1547,15 @@ void dk_laplacian_edit_get_counters(const dk_laplacian_edit *le, dk_laplacian_ed
     st->factorization_count = le->factorization_count;
     st->basis_columns = le->sys.basis ? 3 + 4 * (int)le->sys.con->n_handles : 0;
     st->basis_solves = le->basis_solves;
+}
+
+void dk_laplacian_edit_set_progress(dk_laplacian_edit *le, dk_phase_progress_fn progress,
+                                    void *user)
+{
+    if (!le)
+        return;
+    le->opt.progress = progress;
+    le->opt.progress_user = progress ? user : NULL;
 }
 
 void dk_laplacian_edit_free(dk_laplacian_edit *le)

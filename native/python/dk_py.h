@@ -112,12 +112,49 @@ typedef struct dk_py_state {
     int forks_pending;          /* os.fork calls waiting or forking (under gate_mu) */
     /* the method types and their specs, for their classmethods (estimate_memory): the type
      * pointers are compared, never followed (the module holds the types) */
+    PyObject *progress_type;    /* deformkit.BindProgress (dk_py_progress)              */
     const void *method_type[16];
     const void *method_spec[16];
     int n_method_types;
 } dk_py_state;
 
 dk_py_state *dk_py_get_state(PyObject *module);
+
+/* ------------------------------------------------------------------ bind progress ------ */
+/* progress=callable(fraction) -> bool of the methods' constructors and rebind (issue 19,
+ * item 3). `fraction` is a deformkit.BindProgress: a float in [0, 1] (non-decreasing over
+ * one bind, ending at 1) whose `phase` attribute names the step ("factorize", ...). It is
+ * called from the binding thread with the GIL taken for the call; a true return stops the
+ * bind (RuntimeError "... cancelled ..."), and an exception stops it too and propagates
+ * from the constructor or rebind unchanged. */
+typedef struct dk_py_progress {
+    PyObject *callable;  /* owned; NULL: no callback                                      */
+    PyObject *type;      /* owned: deformkit.BindProgress                                 */
+    PyObject *exc_type, *exc_value, *exc_tb; /* what the callable raised (owned), or NULL */
+    const char *phase;   /* the phase name dk_py_progress_fraction reports                */
+} dk_py_progress;
+
+/** Takes the key "progress" out of the keyword dict `kw` (may be NULL) into `p` (zeroed
+ *  first): None or absent is no callback, a non-callable a TypeError naming `context`.
+ *  `module` is the deformkit module. Returns 0, or -1 with an exception set (p releasable).*/
+int dk_py_progress_take(PyObject *kw, PyObject *module, const char *context,
+                        dk_py_progress *p);
+
+/** The native callbacks (user = a dk_py_progress with a callable): with a phase name
+ *  (dk_phase_progress_fn), and fraction-only with p->phase (dk_progress_fn). After the
+ *  callable raised, every further call returns 1 without calling it. */
+int dk_py_progress_phase(void *user, const char *phase, double fraction);
+int dk_py_progress_fraction(void *user, double fraction);
+
+/** After a failed native call that reported to `p`: raises what the callable raised when it
+ *  did (and returns NULL), else dk_py_raise(err, context). */
+PyObject *dk_py_progress_raise(dk_py_progress *p, const dk_error *err, const char *context);
+
+/** Drops the references of `p` (and any exception it still holds). */
+void dk_py_progress_release(dk_py_progress *p);
+
+/** Creates deformkit.BindProgress into the module and its state. Returns 0 or -1. */
+int dk_py_progress_init_type(PyObject *module, dk_py_state *st);
 
 /** The state of the module that defined `obj`'s type (a type created with the module), or
  *  NULL with no exception set. */

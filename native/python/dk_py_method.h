@@ -82,6 +82,15 @@ struct dk_py_method_spec {
      *  or NULL with an exception set. Combining them with targets or transforms is a
      *  TypeError. */
     PyObject *(*solve_motion)(dk_py_method *self, PyObject *kw, const char *context);
+    /** Optional: the method reports bind progress. Installs the shared callback (dk_py.h:
+     *  dk_py_progress_phase, or dk_py_progress_fraction for a fraction-only native
+     *  callback, setting p->phase) with user `p` into the native `options`; the generic
+     *  constructor then takes progress= (dk_py_progress_take) and raises what the callback
+     *  raised. */
+    void (*bind_progress)(void *options, dk_py_progress *p);
+    /** Optional: the native object's rebind reports progress: installs the callback for
+     *  the following rebinds (p NULL: removes it); rebind(progress=...) then exists. */
+    void (*rebind_progress)(void *native, dk_py_progress *p);
     /** 1: the bind runs under the module's ARPACK lock (ARPACK is not reentrant). */
     int serialise_bind;
     /** Optional: the `stats` dict; default: the contract's counters. */

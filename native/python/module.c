@@ -303,7 +303,7 @@ static int module_exec(PyObject *module)
         PyErr_Clear();
         st->numpy_frombuffer = Py_NewRef(Py_None);
     }
-    if (init_solve_result(module, st) < 0)
+    if (init_solve_result(module, st) < 0 || dk_py_progress_init_type(module, st) < 0)
         return -1;
 #define DK_PY_INIT_PART(part)                                                              \
     if (dk_py_init_##part(module) < 0)                                                     \
@@ -340,6 +340,7 @@ static int module_traverse(PyObject *module, visitproc visit, void *arg)
         Py_VISIT(st->mesh_type);
         Py_VISIT(st->solve_result_type);
         Py_VISIT(st->numpy_frombuffer);
+        Py_VISIT(st->progress_type);
     }
     return 0;
 }
@@ -351,6 +352,7 @@ static int module_clear(PyObject *module)
         Py_CLEAR(st->mesh_type);
         Py_CLEAR(st->solve_result_type);
         Py_CLEAR(st->numpy_frombuffer);
+        Py_CLEAR(st->progress_type);
     }
     return 0;
 }

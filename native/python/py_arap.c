@@ -218,6 +218,18 @@ static PyMethodDef arap_methods[] = {
     {"response_basis", arap_response_basis, METH_NOARGS, response_basis_doc},
     {NULL, NULL, 0, NULL}};
 
+/* progress=: the shared callback (dk_py.h), phases named by the native bind / rebind */
+static void bind_progress(void *options, dk_py_progress *p)
+{
+    ((dk_arap_options *)options)->progress = dk_py_progress_phase;
+    ((dk_arap_options *)options)->progress_user = p;
+}
+
+static void rebind_progress(void *native, dk_py_progress *p)
+{
+    dk_arap_set_progress((dk_arap *)native, p ? dk_py_progress_phase : NULL, p);
+}
+
 static const dk_py_method_spec arap_spec = {
     .name = "ARAP",
     .type_name = "deformkit.ARAP",
@@ -230,6 +242,8 @@ static const dk_py_method_spec arap_spec = {
     .solve_extra = solve_extra,
     .apply_extra = apply_extra,
     .stats = stats,
+    .bind_progress = bind_progress,
+    .rebind_progress = rebind_progress,
     .getset = arap_getset,
     .methods = arap_methods,
 };

@@ -16,31 +16,14 @@ static void default_options(void *o)
     dk_eigen_default_options((dk_eigen_options *)o);
 }
 
-/* progress=callable: called (from the binding thread, with the GIL taken for the call) with
- * the fraction of eigenvectors found; a true return value cancels the bind, and so does an
- * exception (reported as unraisable: the bind then fails with its own RuntimeError). */
-static int progress_trampoline(void *user, double fraction)
-{
-    PyGILState_STATE g = PyGILState_Ensure();
-    PyObject *r = PyObject_CallFunction((PyObject *)user, "d", fraction);
-    int stop;
-    if (!r) {
-        PyErr_WriteUnraisable((PyObject *)user);
-        stop = 1;
-    } else {
-        stop = PyObject_IsTrue(r) == 1;
-        Py_DECREF(r);
-    }
-    PyGILState_Release(g);
-    return stop;
-}
-
-static void release_options(void *o)
+/* progress=: the shared callback (dk_py.h); the native one reports the fraction of
+ * eigenvectors found, named "eigenvectors" */
+static void bind_progress(void *o, dk_py_progress *p)
 {
     dk_eigen_options *opt = (dk_eigen_options *)o;
-    Py_XDECREF((PyObject *)opt->progress_user);
-    opt->progress_user = NULL;
-    opt->progress = NULL;
+    p->phase = "eigenvectors";
+    opt->progress = dk_py_progress_fraction;
+    opt->progress_user = p;
 }
 
 static int parse_options(PyObject *kw, void *o, const char *context)
@@ -70,21 +53,6 @@ static int parse_options(PyObject *kw, void *o, const char *context)
                          context);
             return -1;
         }
-    }
-    PyObject *cb = dk_py_opt_object(kw, "progress");
-    if (!cb && PyErr_Occurred())
-        return -1;
-    if (cb == Py_None)
-        Py_CLEAR(cb);
-    if (cb && !PyCallable_Check(cb)) {
-        Py_DECREF(cb);
-        PyErr_Format(PyExc_TypeError, "%s: progress must be callable (fraction) -> bool",
-                     context);
-        return -1;
-    }
-    if (cb) { /* owned until release_options */
-        opt->progress = progress_trampoline;
-        opt->progress_user = cb;
     }
     if (dk_py_opt_int(kw, "refine", &opt->refine) < 0 ||
         dk_py_opt_double(kw, "bsw_width", &opt->bsw_width) < 0 ||
@@ -265,7 +233,7 @@ static const dk_py_method_spec eig_spec = {
     .options_size = sizeof(dk_eigen_options),
     .default_options = default_options,
     .parse_options = parse_options,
-    .release_options = release_options,
+    .bind_progress = bind_progress,
     .solve_motion = solve_motion,
     .serialise_bind = 1,
     .getset = eig_getset,

@@ -294,7 +294,7 @@ PyDoc_STRVAR(ed_doc,
              "EmbeddedDeformation(mesh, handles, fixed=None, roi=None, handle_weights=None,\n"
              "    stiffness=None, nodes='surface', n_nodes=200, radius=0.0, k=4,\n"
              "    distance='euclidean', cut=None, w_rot=1.0, w_reg=10.0, w_con=100.0,\n"
-             "    tolerance=1e-6, max_iterations=30, seed=1)\n\n"
+             "    tolerance=1e-6, max_iterations=30, seed=1, progress=None)\n\n"
              "Embedded deformation (Sumner, Schmid & Pauly 2007): a deformation graph of\n"
              "nodes sampled uniformly on the surface (or among the vertices), one affine\n"
              "transformation per node, each vertex moved by its k nearest nodes (in space, or\n"
@@ -323,6 +323,18 @@ static PyMethodDef ed_methods[] = {
     {NULL, NULL, 0, NULL},
 };
 
+/* progress=: the shared callback (dk_py.h), phases named by the native bind / rebind */
+static void bind_progress(void *options, dk_py_progress *p)
+{
+    ((dk_embedded_options *)options)->progress = dk_py_progress_phase;
+    ((dk_embedded_options *)options)->progress_user = p;
+}
+
+static void rebind_progress(void *native, dk_py_progress *p)
+{
+    dk_embedded_set_progress((dk_embedded *)native, p ? dk_py_progress_phase : NULL, p);
+}
+
 static const dk_py_method_spec ed_spec = {
     .name = "EmbeddedDeformation",
     .type_name = "deformkit.EmbeddedDeformation",
@@ -332,6 +344,8 @@ static const dk_py_method_spec ed_spec = {
     .default_options = default_options,
     .parse_options = parse_options,
     .release_options = release_options,
+    .bind_progress = bind_progress,
+    .rebind_progress = rebind_progress,
     .getset = ed_getset,
     .methods = ed_methods,
 };

@@ -75,7 +75,7 @@ PyDoc_STRVAR(solve_doc,
 PyDoc_STRVAR(falloff_doc,
              "Falloff(mesh, handles, fixed=None, roi=None, handle_weights=None,\n"
              "        stiffness=None, distance='hops', range=0.0, reach='range', k=0.0,\n"
-             "        heat_time_factor=0.0)\n\n"
+             "        heat_time_factor=0.0, progress=None)\n\n"
              "Attenuated handle displacement (lecture slides 5-7): every free vertex moves by\n"
              "S(d) times the displacement of its nearest handle vertex (or S(d) (T p - p) for\n"
              "transforms), S(i) = 1 - (i/(n+1))^(k+1) for k >= 0, (1 - i/(n+1))^(1-k) for\n"
@@ -85,7 +85,8 @@ PyDoc_STRVAR(falloff_doc,
              "reach='fixed': each group's range is its distance to the nearest fixed vertex\n"
              "(the pull fades out where the fixed part begins; `range` for a group that\n"
              "reaches none). `ranges` holds the range of each group.\n"
-             "Several groups add up. stiffness is not supported (ValueError). See\n"
+             "Several groups add up. stiffness is not supported (ValueError). progress: as\n"
+             "ARAP's (phases heat -- geodesic only -- and distances). See\n"
              "docs/methods/falloff.md.");
 
 static PyObject *get_ranges(PyObject *obj, void *c)
@@ -116,6 +117,18 @@ static PyMethodDef falloff_methods[] = {
     {NULL, NULL, 0, NULL},
 };
 
+/* progress=: the shared callback (dk_py.h), phases named by the native bind / rebind */
+static void bind_progress(void *options, dk_py_progress *p)
+{
+    ((dk_falloff_options *)options)->progress = dk_py_progress_phase;
+    ((dk_falloff_options *)options)->progress_user = p;
+}
+
+static void rebind_progress(void *native, dk_py_progress *p)
+{
+    dk_falloff_set_progress((dk_falloff *)native, p ? dk_py_progress_phase : NULL, p);
+}
+
 static const dk_py_method_spec falloff_spec = {
     .name = "Falloff",
     .type_name = "deformkit.Falloff",
@@ -124,6 +137,8 @@ static const dk_py_method_spec falloff_spec = {
     .options_size = sizeof(dk_falloff_options),
     .default_options = default_options,
     .parse_options = parse_options,
+    .bind_progress = bind_progress,
+    .rebind_progress = rebind_progress,
     .getset = falloff_getset,
     .methods = falloff_methods,
 };

@@ -65,7 +65,8 @@ PyDoc_STRVAR(lap_doc,
              "LaplacianEdit(mesh, handles, fixed=None, roi=None, handle_weights=None,\n"
              "              stiffness=None, weights='cotangent', detail='fixed',\n"
              "              constraints='hard', constraint_weight=1.0, tikhonov=0.0,\n"
-             "              local_frame_iterations=1, local_frame_tolerance=1e-6, basis='auto')\n\n"
+             "              local_frame_iterations=1, local_frame_tolerance=1e-6, basis='auto',\n"
+             "              progress=None)\n\n"
              "Laplacian editing / least-squares meshes: minimises ||A x - delta||^2 with A the\n"
              "normalised umbrella operator (uniform or cotangent weights), delta = A x0\n"
              "('fixed', detail preserving but not rotation invariant), 0 ('membrane') or the\n"
@@ -77,12 +78,28 @@ PyDoc_STRVAR(lap_doc,
              "stiffness is not supported (ValueError). basis='auto' precomputes the solution's\n"
              "affine response to the handle transforms at bind (up to 16 handles, 128 MB), so\n"
              "that drags by transforms, or by positions some affine map per handle reproduces,\n"
-             "skip the back-substitution; 'off' never builds it. See\n"
+             "skip the back-substitution; 'off' never builds it. progress(fraction) is\n"
+             "called during the bind with a deformkit.BindProgress (fraction.phase: renumber,\n"
+             "operator, constraints, assemble, analyze, factorize, basis, then 'done' at 1);\n"
+             "a true return or an exception stops it (the exception propagates). See\n"
              "docs/methods/laplacian_edit.md.");
 
 static PyGetSetDef lap_getset[] = {DK_PY_METHOD_GETSET, {NULL, NULL, NULL, NULL, NULL}};
 
 static PyMethodDef lap_methods[] = {DK_PY_METHOD_METHODS(solve_doc), {NULL, NULL, 0, NULL}};
+
+/* progress=: the shared callback (dk_py.h), phases named by the native bind / rebind */
+static void bind_progress(void *options, dk_py_progress *p)
+{
+    ((dk_laplacian_edit_options *)options)->progress = dk_py_progress_phase;
+    ((dk_laplacian_edit_options *)options)->progress_user = p;
+}
+
+static void rebind_progress(void *native, dk_py_progress *p)
+{
+    dk_laplacian_edit_set_progress((dk_laplacian_edit *)native,
+                                   p ? dk_py_progress_phase : NULL, p);
+}
 
 static const dk_py_method_spec lap_spec = {
     .name = "LaplacianEdit",
@@ -93,6 +110,8 @@ static const dk_py_method_spec lap_spec = {
     .default_options = default_options,
     .parse_options = parse_options,
     .stats = stats,
+    .bind_progress = bind_progress,
+    .rebind_progress = rebind_progress,
     .getset = lap_getset,
     .methods = lap_methods,
 };

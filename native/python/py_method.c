@@ -239,10 +239,13 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
     } opt;
     dk_py_lap_constraints con;
     dk_py_doubles stiff;
+    dk_py_progress prog;
     void *native = NULL;
     dk_error err = {0};
     dk_status st;
     char fmt[64], where[80];
+
+    memset(&prog, 0, sizeof prog);
 
     if (!module)
         return NULL;
@@ -257,15 +260,19 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
     spec->default_options(&opt);
     int ok = PyArg_ParseTupleAndKeywords(args, mine, fmt, kwlist, &mesh_obj, &handles, &fixed,
                                          &roi, &hw, &stiffness) &&
+             (!spec->bind_progress || dk_py_progress_take(rest, module, spec->name, &prog) == 0) &&
              spec->parse_options(rest, &opt, spec->name) == 0 &&
              refuse_leftovers(rest, where) == 0;
     Py_DECREF(rest);
+    if (ok && prog.callable)
+        spec->bind_progress(&opt, &prog);
     /* mesh_obj ... borrow from `mine`, which stays alive until the end */
     const dk_mesh *mesh = ok ? dk_py_mesh_get(module, mesh_obj, "mesh") : NULL;
     if (!mesh || read_all(spec, handles, fixed, roi, hw, stiffness, mesh->n_vertices,
                           spec->name, &con, &stiff) < 0) {
         if (spec->release_options)
             spec->release_options(&opt);
+        dk_py_progress_release(&prog);
         Py_DECREF(mine);
         return NULL;
     }
@@ -283,6 +290,7 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
             spec->release_options(&opt);
         dk_py_lap_constraints_release(&con);
         dk_py_doubles_release(&stiff);
+        dk_py_progress_release(&prog);
         Py_DECREF(mine);
         return dk_py_raise(&err, NULL);
     }
@@ -299,8 +307,11 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
     dk_py_doubles_release(&stiff);
     if (st != DK_OK) {
         Py_DECREF(mine);
-        return dk_py_raise(&err, spec->name);
+        PyObject *r = dk_py_progress_raise(&prog, &err, spec->name);
+        dk_py_progress_release(&prog);
+        return r;
     }
+    dk_py_progress_release(&prog);
     allocfunc alloc = (allocfunc)PyType_GetSlot(type, Py_tp_alloc);
     dk_py_method *self = alloc ? (dk_py_method *)alloc(type, 0) : NULL;
     if (!self) {
@@ -512,9 +523,14 @@ PyObject *dk_py_method_estimate_memory(PyObject *cls, PyObject *args, PyObject *
     if (split_keywords(kwargs, kwlist, &mine, &rest) < 0)
         return NULL;
     spec->default_options(&opt);
+    dk_py_progress prog; /* progress= is a bind keyword too: accepted, not called */
+    memset(&prog, 0, sizeof prog);
     int ok = PyArg_ParseTupleAndKeywords(args, mine, "O:estimate_memory", kwlist, &mesh_obj) &&
+             (!spec->bind_progress || dk_py_progress_take(rest, module, where, &prog) == 0) &&
              spec->parse_options(rest, &opt, spec->name) == 0 &&
              refuse_leftovers(rest, where) == 0;
+    if (spec->bind_progress)
+        dk_py_progress_release(&prog);
     const dk_mesh *mesh = ok ? dk_py_mesh_get(module, mesh_obj, "mesh") : NULL;
     dk_status st = mesh ? dk_method_estimate_memory(spec->ops, mesh, &opt, &bytes, &err)
                         : DK_OK;
@@ -545,16 +561,33 @@ PyObject *dk_py_method_rebind(PyObject *obj, PyObject *args, PyObject *kwargs)
     static char *kwlist[] = {"handles", "fixed", "roi", "handle_weights", "stiffness", NULL};
     dk_py_method *self = (dk_py_method *)obj;
     PyObject *handles = NULL, *fixed = NULL, *roi = NULL, *hw = NULL, *stiffness = NULL;
+    PyObject *kw = NULL;
     dk_py_lap_constraints con;
     dk_py_doubles stiff;
+    dk_py_progress prog;
     dk_error err = {0};
     dk_status st;
     char ctx[80];
 
     snprintf(ctx, sizeof ctx, "%s.rebind", self->spec->name);
+    memset(&prog, 0, sizeof prog);
+    /* progress=: only for a method whose rebind reports (else a TypeError, as any unknown
+     * keyword) */
+    if (kwargs && self->spec->rebind_progress && PyDict_GetItemString(kwargs, "progress")) {
+        PyObject *module = PyType_GetModule(Py_TYPE(obj));
+        kw = PyDict_Copy(kwargs);
+        if (!kw || !module || dk_py_progress_take(kw, module, ctx, &prog) < 0) {
+            Py_XDECREF(kw);
+            return NULL;
+        }
+        kwargs = kw;
+    }
     if (!PyArg_ParseTupleAndKeywords(args, kwargs, "|OOOOO:rebind", kwlist, &handles, &fixed,
-                                     &roi, &hw, &stiffness))
+                                     &roi, &hw, &stiffness)) {
+        Py_XDECREF(kw);
+        dk_py_progress_release(&prog);
         return NULL;
+    }
     if (!handles)
         handles = self->handles;
     if (!fixed)
@@ -565,23 +598,35 @@ PyObject *dk_py_method_rebind(PyObject *obj, PyObject *args, PyObject *kwargs)
         hw = handles == self->handles ? self->handle_weights : Py_None;
     if (!stiffness)
         stiffness = self->stiffness;
+    /* handles ... borrow from `kw` (when copied), which lives until the end */
+    PyObject *result = NULL;
     if (dk_py_method_enter(self) < 0)
-        return NULL;
+        goto out;
     if (read_all(self->spec, handles, fixed, roi, hw, stiffness, self->mesh->n_vertices, ctx,
                  &con, &stiff) < 0) {
         self->busy = 0;
-        return NULL;
+        goto out;
     }
+    if (prog.callable)
+        self->spec->rebind_progress(self->native, &prog);
     DK_PY_BEGIN_NATIVE(dk_py_state_of(obj))
     st = self->spec->ops->rebind(self->native, &con.desc, &err);
     DK_PY_END_NATIVE
+    if (prog.callable)
+        self->spec->rebind_progress(self->native, NULL);
     dk_py_lap_constraints_release(&con);
     dk_py_doubles_release(&stiff);
     self->busy = 0;
-    if (st != DK_OK)
-        return dk_py_raise(&err, ctx);
+    if (st != DK_OK) {
+        result = dk_py_progress_raise(&prog, &err, ctx);
+        goto out;
+    }
     remember(self, handles, fixed, roi, hw, stiffness);
-    Py_RETURN_NONE;
+    result = Py_NewRef(Py_None);
+out:
+    dk_py_progress_release(&prog);
+    Py_XDECREF(kw);
+    return result;
 }
 
 const char dk_py_method_rebind_doc[] =
@@ -590,7 +635,9 @@ const char dk_py_method_rebind_doc[] =
              "not given keep their bound value (pass an empty list for fixed to clear it;\n"
              "new handles without handle_weights get weight 1). What can be kept is kept:\n"
              "the symbolic analysis when the set of unknowns is unchanged, the previous\n"
-             "solution as warm start. On error the previous constraints stay bound.";
+             "solution as warm start. On error the previous constraints stay bound.\n"
+             "progress=callable(fraction) (ARAP, LaplacianEdit): as the constructor's; a\n"
+             "cancelled rebind keeps the previous constraints exactly.";
 
 PyObject *dk_py_method_energy(PyObject *obj, PyObject *arg)
 {

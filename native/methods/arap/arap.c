@@ -18,7 +18,30 @@ void dk_arap_default_options(dk_arap_options *o)
     o->basis = DK_ARAP_BASIS_AUTO;
     o->on_iteration = NULL;
     o->user = NULL;
+    o->progress = NULL;
+    o->progress_user = NULL;
 }
+
+/* The phases of a bind and of a rebind (dk_progress.h), weighted by their measured cost in
+ * seconds: binds of the 692k-vertex armadillo (scripts/bench_scale.py's armadillo-wave, 2
+ * subdivisions, one handle; defaults: spokes, clamped cotangent, Newton, the response
+ * basis) on the shared 2-core machine, timed between the callback's reports (issue 19 item
+ * 3): 4.6 and 4.8 s in all, the factorization 1.7-1.9 s (2.6-3.8 s at load ~6), the
+ * longest stretch without a report. The system's phases follow ARAP_PHASE_CONSTRAINTS in
+ * the same order in both tables. */
+static const dk_progress_phase bind_phases[] = {
+    {"renumber", 0.54},    /* dk_reorder_create: the locality order, the renumbered mesh */
+    {"cells", 0.65},       /* cotangent weights and the cells' terms                       */
+    {"constraints", 0.06}, /* ARAP_PHASE_CONSTRAINTS ...                                  */
+    {"system", 0.35},
+    {"assemble", 0.32},
+    {"analyze", 0.83},
+    {"factorize", 1.80},
+    {"basis", 0.10}};      /* the response basis: 4 columns per handle                     */
+static const dk_progress_phase rebind_phases[] = {
+    {"constraints", 0.06}, {"system", 0.35}, {"assemble", 0.32}, {"analyze", 0.83},
+    {"factorize", 1.80}, {"basis", 0.10}};
+#define BIND_PHASE_BASE 2 /* ARAP_PHASE_CONSTRAINTS in bind_phases */
 
 static dk_status check_options(const dk_arap_options *o, dk_error *err)
 {
@@ -103,14 +126,23 @@ dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraint
     ar->caller_mesh = mesh;
     ar->team = dk_team_create(); /* NULL (no thread available) is fine: passes start threads */
     ar->opt = opt;
+    dk_progress prog;
+    dk_progress_init(&prog, opt.progress, opt.progress_user, bind_phases,
+                     (int)(sizeof bind_phases / sizeof bind_phases[0]), "ARAP bind");
+    ar->prog = &prog;
+    ar->prog_base = BIND_PHASE_BASE;
     ar->cg = opt.cg_iterations;
     ar->n = mesh->n_vertices;
-    st = dk_reorder_create(mesh, 0, &ar->ro, err);
+    st = dk_progress_begin(&prog, 0, err); /* renumber */
+    if (st == DK_OK)
+        st = dk_reorder_create(mesh, 0, &ar->ro, err);
     if (st != DK_OK) {
         dk_arap_free(ar);
-        return dk_error_prefix(err, "ARAP bind");
+        return st == DK_ERR_CANCELLED ? st : dk_error_prefix(err, "ARAP bind");
     }
     ar->mesh = ar->ro->mesh;
+    ar->opt.progress = NULL; /* the caller's callback is for this bind only */
+    ar->opt.progress_user = NULL;
     ar->x = malloc(((size_t)ar->n * 3 + 1) * sizeof *ar->x);
     ar->rot = malloc(((size_t)ar->n * 9 + 1) * sizeof *ar->rot);
     ar->prev = malloc(((size_t)ar->n * 3 + 1) * sizeof *ar->prev);
@@ -128,14 +160,18 @@ dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraint
         dk_arap_free(ar);
         return dk_error_prefix(err, "ARAP");
     }
-    st = arap_build_cells(ar, err);
+    st = dk_progress_begin(&prog, 1, err); /* cells */
+    if (st == DK_OK)
+        st = arap_build_cells(ar, err);
     if (st == DK_OK)
         st = arap_system_build(ar, &rd.desc, NULL, &ar->sys, err);
     dk_reorder_desc_free(&rd);
+    ar->prog = NULL;
     if (st != DK_OK) {
         dk_arap_free(ar);
         return st;
     }
+    dk_progress_done(&prog);
     *out = ar;
     return DK_OK;
 }
@@ -150,10 +186,17 @@ dk_status dk_arap_rebind(dk_arap *ar, const dk_constraint_desc *constraints, dk_
     dk_status st = dk_reorder_desc_create(ar->ro, ar->caller_mesh, constraints, &rd, err);
     if (st != DK_OK)
         return dk_error_prefix(err, "ARAP");
+    dk_progress prog;
+    dk_progress_init(&prog, ar->opt.progress, ar->opt.progress_user, rebind_phases,
+                     (int)(sizeof rebind_phases / sizeof rebind_phases[0]), "ARAP rebind");
+    ar->prog = &prog;
+    ar->prog_base = 0;
     st = arap_system_build(ar, &rd.desc, &ar->sys, &s, err);
+    ar->prog = NULL;
     dk_reorder_desc_free(&rd);
     if (st != DK_OK)
         return st;
+    dk_progress_done(&prog);
     arap_system_free(&ar->sys);
     ar->sys = s;
     ar->n_hist = 0; /* other constraints: the drag history no longer predicts */
@@ -270,6 +313,14 @@ dk_status dk_arap_set_tolerance(dk_arap *ar, double tolerance, dk_error *err)
                             "ARAP: tolerance is %g, must be finite and >= 0", tolerance);
     ar->opt.tolerance = tolerance;
     return DK_OK;
+}
+
+void dk_arap_set_progress(dk_arap *ar, dk_phase_progress_fn progress, void *user)
+{
+    if (!ar)
+        return;
+    ar->opt.progress = progress;
+    ar->opt.progress_user = progress ? user : NULL;
 }
 
 double dk_arap_tolerance(const dk_arap *ar)

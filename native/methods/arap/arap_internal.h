@@ -45,6 +45,7 @@
 #include "dk_csys.h"
 #include "dk_operators.h"
 #include "dk_parallel.h"
+#include "dk_progress.h"
 #include "dk_reorder.h"
 #include "dk_sparse.h"
 
@@ -162,7 +163,33 @@ struct dk_arap {
     int analysis_count, factorization_count;
     int basis_starts;     /* warm starts that combined the response basis                 */
     dk_team *team;        /* the passes' and the factor's helper thread (NULL: per pass)  */
+    /* during a bind or rebind only (NULL otherwise): its progress reporter, and the index
+     * of ARAP_PHASE_CONSTRAINTS in its phase table (the system's phases follow it) */
+    dk_progress *prog;
+    int prog_base;
 };
+
+/* The phases of a bind and a rebind, relative to ARAP_PHASE_CONSTRAINTS (arap.c has the
+ * tables and their measured weights). */
+enum {
+    ARAP_PHASE_CONSTRAINTS = 0, /* validating the constraints, the unknowns, the weights    */
+    ARAP_PHASE_SYSTEM = 1,      /* solve buffers, right-hand-side map, component check      */
+    ARAP_PHASE_ASSEMBLE = 2,    /* the reduced matrix                                      */
+    ARAP_PHASE_ANALYZE = 3,     /* CHOLMOD's symbolic analysis (uninterruptible)            */
+    ARAP_PHASE_FACTORIZE = 4,   /* CHOLMOD's numeric factorization (uninterruptible)        */
+    ARAP_PHASE_BASIS = 5        /* the warm start's response basis: one solve of 4 columns
+                                   per handle (uninterruptible)                            */
+};
+
+/* dk_progress_begin / dk_progress_tick for a system phase of the running bind or rebind */
+static inline dk_status arap_phase(const dk_arap *ar, int k, dk_error *err)
+{
+    return dk_progress_begin(ar->prog, ar->prog_base + k, err);
+}
+static inline dk_status arap_tick(const dk_arap *ar, double done, double total, dk_error *err)
+{
+    return dk_progress_tick(ar->prog, done, total, err);
+}
 
 /* The progress of one solve's iterations, handed from the start to the iteration loop. */
 typedef struct arap_progress {

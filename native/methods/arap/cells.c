@@ -45,7 +45,10 @@ dk_status arap_build_cells(dk_arap *ar, dk_error *err)
     for (dk_index v = 0; v < n; v++)
         start[v + 1] += start[v];
     memcpy(fill, start, (size_t)n * sizeof *fill);
+    const double work = (double)nf + (double)n; /* the two loops below, for progress */
     for (dk_index f = 0; f < nf; f++) {
+        if ((st = arap_tick(ar, f, work, err)) != DK_OK)
+            goto done;
         const dk_index *t = m->faces + 3 * f;
         double l0 = dist2(p + 3 * t[1], p + 3 * t[2]), l1 = dist2(p + 3 * t[2], p + 3 * t[0]),
                l2 = dist2(p + 3 * t[0], p + 3 * t[1]);
@@ -70,6 +73,8 @@ dk_status arap_build_cells(dk_arap *ar, dk_error *err)
     /* Sort each cell by edge, merge duplicates, detect non-manifold spokes, clamp. */
     int64_t out = 0;
     for (dk_index i = 0; i < n; i++) {
+        if ((st = arap_tick(ar, (double)nf + i, work, err)) != DK_OK)
+            goto done;
         raw_term *c = raw + start[i];
         dk_index len = start[i + 1] - start[i];
         for (dk_index s = 1; s < len; s++) {

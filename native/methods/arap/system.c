@@ -83,12 +83,18 @@ static dk_status assemble(const dk_arap *ar, arap_system *s, dk_error *err)
     dk_index *count = calloc((size_t)nu + 1, sizeof *count);
     if (!count)
         return oom(err, "matrix assembly");
+    const double work = 2.0 * (double)ar->n_terms + (double)nu; /* the three loops below */
     for (int64_t t = 0; t < ar->n_terms; t++) {
         dk_index ua = s->unk[ar->ta[t]], ub = s->unk[ar->tb[t]];
         if (ua >= 0)
             count[ua + 1] += 1 + (ub >= 0);
         if (ub >= 0)
             count[ub + 1] += 1 + (ua >= 0);
+        const dk_status cs = arap_tick(ar, (double)t, work, err);
+        if (cs != DK_OK) {
+            free(count);
+            return cs;
+        }
     }
     for (dk_index u = 0; u < nu; u++)
         count[u + 1] += count[u] + 1; /* + the diagonal */
@@ -106,7 +112,9 @@ static dk_status assemble(const dk_arap *ar, arap_system *s, dk_error *err)
         ent[count[u]].row = u;
         ent[count[u]].val = s->soft_k[s->unknowns[u]];
     }
-    for (int64_t t = 0; t < ar->n_terms; t++) {
+    dk_status st = DK_OK;
+    for (int64_t t = 0; t < ar->n_terms && st == DK_OK; t++) {
+        st = arap_tick(ar, (double)ar->n_terms + (double)t, work, err);
         dk_index ua = s->unk[ar->ta[t]], ub = s->unk[ar->tb[t]];
         double w = s->tws[t];
         if (ua >= 0) {
@@ -123,7 +131,8 @@ static dk_status assemble(const dk_arap *ar, arap_system *s, dk_error *err)
     free(fill);
     /* Sort and merge each column in place. */
     int64_t nnz = 0;
-    for (dk_index u = 0; u < nu; u++) {
+    for (dk_index u = 0; u < nu && st == DK_OK; u++) {
+        st = arap_tick(ar, 2.0 * (double)ar->n_terms + (double)u, work, err);
         entry *c = ent + count[u];
         dk_index len = count[u + 1] - count[u];
         for (dk_index i = 1; i < len; i++) {
@@ -143,6 +152,11 @@ static dk_status assemble(const dk_arap *ar, arap_system *s, dk_error *err)
             ent[nnz++] = e;
         }
         count[u] = (dk_index)col_start;
+    }
+    if (st != DK_OK) { /* cancelled */
+        free(count);
+        free(ent);
+        return st;
     }
     count[nu] = (dk_index)nnz;
     s->a.n_rows = s->a.n_cols = nu;
@@ -202,6 +216,9 @@ static dk_status build_rhs_map(const dk_arap *ar, arap_system *s, dk_error *err)
     for (int pass = 0; pass < 2; pass++) {
         k = 0;
         for (dk_index u = 0; u < nu; u++) {
+            const dk_status st = arap_tick(ar, (double)pass * nu + u, 2.0 * nu, err);
+            if (st != DK_OK)
+                return st; /* rg_start, rg: freed with the system */
             const dk_index v = s->unknowns[u];
             if (pass == 0)
                 s->rg_start[u] = k;
@@ -251,13 +268,17 @@ static dk_status classify(const dk_arap *ar, arap_system *s, dk_error *err)
     dk_csys_target_rows(c, s->target_of);
     /* Weights with stiffness, the ARAP diagonal, then the soft penalties. */
     double diag = 0.0, escale = 0.0;
-    for (dk_index i = 0; i < n; i++)
+    for (dk_index i = 0; i < n; i++) {
+        const dk_status st = arap_tick(ar, i, n, err);
+        if (st != DK_OK)
+            return st;
         for (dk_index t = ar->cell_start[i]; t < ar->cell_start[i + 1]; t++) {
             s->tws[t] = c->stiffness[i] * ar->tw[t];
             diag += 2.0 * s->tws[t];
             const double *e = ar->te + 3 * t;
             escale += s->tws[t] * (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
         }
+    }
     s->lambda = n > 0 ? diag / n : 0.0;
     s->escale = escale;
     const dk_index nu = dk_csys_number_unknowns(n, classify_vertex, s, s->unk, NULL, s->soft_k,
@@ -362,9 +383,12 @@ static dk_status factor(dk_arap *ar, arap_system *old, arap_system *s, dk_error 
     const int same = old && same_unknowns(old, s, ar->n); /* explicit zeros: same pattern */
     dk_status st = dk_csys_factor(&s->a, &s->chol, old ? &old->chol : NULL,
                                   old ? &old->a : NULL, same, DK_CSYS_REFACTOR_ALWAYS,
-                                  ar->team, &counts, err);
-    ar->analysis_count = counts.analysis_count;
-    ar->factorization_count = counts.factorization_count;
+                                  ar->team, &counts, ar->prog,
+                                  ar->prog_base + ARAP_PHASE_ANALYZE, err);
+    if (st != DK_ERR_CANCELLED) { /* a cancelled rebind changes nothing, its counters too */
+        ar->analysis_count = counts.analysis_count;
+        ar->factorization_count = counts.factorization_count;
+    }
     if (st == DK_OK)
         return DK_OK;
     /* the caller's vertex of the failing column, not the internal matrix column */
@@ -372,6 +396,8 @@ static dk_status factor(dk_arap *ar, arap_system *old, arap_system *s, dk_error 
     if (st == DK_ERR_NOT_POSITIVE_DEFINITE && err && err->column > 0 && err->column <= s->nu)
         vertex = (long)ar->ro->perm[s->unknowns[err->column - 1]];
     arap_system_free(s);
+    if (st == DK_ERR_CANCELLED)
+        return st;
     if (st == DK_ERR_NOT_POSITIVE_DEFINITE) {
         const int clamped = ar->opt.weights != DK_ARAP_WEIGHTS_COTANGENT;
         char at[48] = "";
@@ -393,7 +419,10 @@ dk_status arap_system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_sy
 {
     const dk_index n = ar->n;
     memset(s, 0, sizeof *s);
-    dk_status st = dk_constraints_create(ar->mesh, desc, &s->con, err);
+    dk_status st = arap_phase(ar, ARAP_PHASE_CONSTRAINTS, err);
+    if (st != DK_OK)
+        return st;
+    st = dk_constraints_create(ar->mesh, desc, &s->con, err);
     if (st != DK_OK)
         return dk_error_prefix(err, "ARAP");
     const dk_constraints *c = s->con;
@@ -413,6 +442,8 @@ dk_status arap_system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_sy
     if (st == DK_OK && s->nu == 0)
         return DK_OK; /* nothing to solve: no system, no factor (solve_impl) */
     if (st == DK_OK)
+        st = arap_phase(ar, ARAP_PHASE_SYSTEM, err);
+    if (st == DK_OK)
         st = solve_buffers(ar, s, err);
     if (st == DK_OK)
         st = build_rhs_map(ar, s, err);
@@ -421,6 +452,8 @@ dk_status arap_system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_sy
     if (st == DK_OK)
         st = check_components(ar, s, err);
     if (st == DK_OK)
+        st = arap_phase(ar, ARAP_PHASE_ASSEMBLE, err);
+    if (st == DK_OK)
         st = assemble(ar, s, err);
     if (st == DK_OK && newton)
         st = newton_rows(s, err);
@@ -428,7 +461,29 @@ dk_status arap_system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_sy
         arap_system_free(s);
         return st;
     }
-    st = factor(ar, old && old->nu > 0 ? old : NULL, s, err);
+    const dk_csys_counts before = {ar->analysis_count, ar->factorization_count};
+    if (old && old->nu == 0)
+        old = NULL;
+    const int had_factor = old && old->chol;
+    st = factor(ar, old, s, err);
+    if (st == DK_OK && (st = arap_phase(ar, ARAP_PHASE_BASIS, err)) != DK_OK) {
+        /* cancelled before the basis: a rebind that took over the old analysis (the same
+         * unknowns) gives it back, refactored with the old values -- that stop costs the
+         * factorization -- and its counters stay as they were */
+        if (had_factor && !old->chol && s->chol) {
+            old->chol = s->chol;
+            s->chol = NULL;
+            dk_error ignored = {0};
+            if (dk_cholesky_factorize(old->chol, &old->a, &ignored) != DK_OK) {
+                dk_cholesky_free(old->chol); /* cannot happen: it factored before */
+                old->chol = NULL;
+            }
+        }
+        ar->analysis_count = before.analysis_count;
+        ar->factorization_count = before.factorization_count;
+        arap_system_free(s);
+        return st;
+    }
     if (st == DK_OK)
         arap_response_basis_build(ar, s);
     return st;

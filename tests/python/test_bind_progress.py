@@ -1,0 +1,195 @@
+"""Bind progress and cancellation (issue 19, item 3): progress=callable(fraction) on the
+constructors of ARAP, LaplacianEdit, Falloff, EmbeddedDeformation and EigenDeformation and
+on rebind of the first four. The callable gets a deformkit.BindProgress (a float with `.phase`); a true
+return stops the bind (RuntimeError), an exception stops it and propagates, and a rebind
+that stopped leaves the object solving its old constraints exactly as before."""
+
+import numpy as np
+import pytest
+
+import deformkit as dk
+
+
+def grid(n, bump=0.05):
+    """(n+1)^2 vertices on the unit square, sine bumps, alternating diagonals."""
+    x, y = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1))
+    z = bump * np.sin(5 * np.pi * x) * np.sin(3 * np.pi * y)
+    v = np.column_stack([x.ravel(), y.ravel(), z.ravel()])
+    f = []
+    for j in range(n):
+        for i in range(n):
+            a = j * (n + 1) + i
+            b, c, d = a + 1, a + n + 1, a + n + 2
+            f += [(a, b, d), (a, d, c)] if (i + j) % 2 else [(a, b, c), (b, d, c)]
+    return v, np.array(f, dtype=np.int64)
+
+
+N = 90  # 8,281 vertices: the native loops report a few times in between their phases
+V, F = grid(N)
+COLS = np.arange(len(V)) % (N + 1)
+FIXED = np.flatnonzero(COLS <= 1)
+HANDLE = np.flatnonzero(COLS >= N - 1)
+OTHER = np.flatnonzero((COLS >= N // 2) & (COLS <= N // 2 + 1))  # a handle in the middle
+MESH = dk.Mesh(V, F)
+TARGETS = V[HANDLE] + [0.05, 0.0, 0.25]
+
+PHASES = {
+    "ARAP": {"renumber", "cells", "constraints", "system", "assemble", "analyze",
+             "factorize", "basis"},
+    "LaplacianEdit": {"renumber", "operator", "constraints", "assemble", "analyze",
+                      "factorize", "basis"},
+    "Falloff": {"distances"},  # distance="hops"; "geodesic" adds "heat" (below)
+    "EmbeddedDeformation": {"nodes", "weights", "edges", "constraints", "analyze"},
+}
+METHODS = sorted(PHASES)
+
+
+class Recorder:
+    def __init__(self, stop_at=None, raise_at=None):
+        self.seen, self.stop_at, self.raise_at = [], stop_at, raise_at
+
+    def __call__(self, fraction):
+        self.seen.append(fraction)
+        k = len(self.seen) - 1
+        if k == self.raise_at:
+            raise ZeroDivisionError("raised by the callback at %d" % k)
+        return k == self.stop_at
+
+
+def stops(seen):
+    """The reports a test stops at: each phase's first and the one after it (inside its
+    loop, when it has one); never the last ("done": the bind is whole by then)."""
+    ph = [x.phase for x in seen]
+    return [k for k in range(len(seen) - 1)
+            if k <= 1 or ph[k] != ph[k - 1] or ph[k - 1] != ph[k - 2]]
+
+
+def check_sequence(seen):
+    fr = [float(x) for x in seen]
+    assert all(isinstance(x, dk.BindProgress) and isinstance(x, float) for x in seen)
+    assert all(0.0 <= x <= 1.0 for x in fr)
+    assert all(a <= b for a, b in zip(fr, fr[1:])), fr
+    assert fr[-1] == 1.0
+
+
+def bind(name, **kw):
+    return getattr(dk, name)(MESH, handles=[HANDLE], fixed=FIXED, **kw)
+
+
+@pytest.mark.parametrize("name", METHODS)
+def test_bind_reports_named_phases(name):
+    rec = Recorder()
+    obj = bind(name, progress=rec)
+    check_sequence(rec.seen)
+    phases = [x.phase for x in rec.seen]
+    assert set(phases) == PHASES[name] | {"done"}
+    assert phases[-1] == "done" and phases.count("done") == 1
+    # the phases come in one order, each once (a block of reports)
+    blocks = [p for i, p in enumerate(phases) if i == 0 or p != phases[i - 1]]
+    assert len(blocks) == len(set(blocks))
+    assert len(rec.seen) > len(blocks)  # reports inside the long loops too
+    # the same result as without a callback
+    plain = bind(name)
+    a, b = obj.solve(TARGETS), plain.solve(TARGETS)
+    assert np.array_equal(np.asarray(a.positions), np.asarray(b.positions))
+
+
+@pytest.mark.parametrize("name", METHODS)
+def test_bind_stops_at_every_report(name):
+    whole = _whole_bind(name)
+    calls = len(whole)
+    for k in stops(whole):
+        rec = Recorder(stop_at=k)
+        with pytest.raises(RuntimeError, match="cancelled"):
+            bind(name, progress=rec)
+        assert len(rec.seen) == k + 1  # asked no more after the stop
+    # a stop at the last report ("done": the bind is whole) changes nothing
+    obj = bind(name, progress=Recorder(stop_at=calls - 1))
+    assert obj.n_vertices == len(V)
+
+
+def _whole_bind(name):
+    rec = Recorder()
+    bind(name, progress=rec)
+    return rec.seen
+
+
+@pytest.mark.parametrize("name", METHODS)
+def test_exception_in_callback_propagates(name):
+    calls = len(_whole_bind(name))
+    for k in (0, calls // 2, calls - 2):
+        rec = Recorder(raise_at=k)
+        with pytest.raises(ZeroDivisionError, match="raised by the callback at %d" % k):
+            bind(name, progress=rec)
+        assert len(rec.seen) == k + 1  # not called again after it raised
+
+
+def test_falloff_geodesic_reports_the_heat_factorization():
+    rec = Recorder()
+    bind("Falloff", distance="geodesic", progress=rec)
+    check_sequence(rec.seen)
+    phases = [x.phase for x in rec.seen]
+    assert phases[0] == "heat" and phases[-1] == "done" and "distances" in phases
+    with pytest.raises(RuntimeError, match="cancelled in phase heat"):
+        bind("Falloff", distance="geodesic", progress=Recorder(stop_at=0))
+
+
+def test_eigen_reports_through_the_same_callback():
+    v, f = grid(24)
+    region = np.flatnonzero(np.arange(len(v)) % 25 >= 23)
+    rec = Recorder()
+    dk.EigenDeformation(dk.Mesh(v, f), handles=[region], n_eigenvectors=8, refine=0,
+                        progress=rec)
+    check_sequence(rec.seen)
+    assert {x.phase for x in rec.seen} == {"eigenvectors"}
+    with pytest.raises(ZeroDivisionError):
+        dk.EigenDeformation(dk.Mesh(v, f), handles=[region], n_eigenvectors=8, refine=0,
+                            progress=Recorder(raise_at=0))
+
+
+@pytest.mark.parametrize("name", METHODS)
+@pytest.mark.parametrize("change", ["new unknowns", "same unknowns"])
+def test_cancelled_rebind_keeps_the_old_constraints(name, change):
+    obj = bind(name, handle_weights=[np.full(len(HANDLE), 0.9)])
+    before = np.asarray(obj.solve(TARGETS, warm_start=False).positions).copy()
+    def counters():  # the bound state's counters (basis_solves counts solves, not binds)
+        return {k: v for k, v in obj.stats.items() if k != "basis_solves"}
+
+    stats = counters()
+    if change == "new unknowns":
+        kw = dict(handles=[OTHER])
+    else:  # the same unknown vertices, other values (soft handle weights)
+        kw = dict(handles=[HANDLE], handle_weights=[np.full(len(HANDLE), 0.6)])
+    twin = bind(name, handle_weights=[np.full(len(HANDLE), 0.9)])
+    rec = Recorder()
+    twin.rebind(progress=rec, **kw)
+    check_sequence(rec.seen)
+    assert rec.seen[-1].phase == "done"
+    for k in stops(rec.seen):
+        stop = Recorder(stop_at=k) if k % 2 else Recorder(raise_at=k)
+        stats = counters()  # just before (a solve may count too: Gauss-Newton factors)
+        with pytest.raises(RuntimeError if k % 2 else ZeroDivisionError):
+            obj.rebind(progress=stop, **kw)
+        assert counters() == stats
+        after = np.asarray(obj.solve(TARGETS, warm_start=False).positions)
+        assert np.array_equal(before, after), (k, stop.seen[-1].phase)
+    obj.rebind(progress=Recorder(), **kw)  # not stopped: the new constraints
+    if change == "new unknowns":
+        assert obj.solve(V[OTHER]).positions is not None
+    elif name != "EmbeddedDeformation":  # (its handles are penalties of fixed weight)
+        assert not np.array_equal(before, np.asarray(obj.solve(TARGETS).positions))
+
+
+def test_bad_progress_is_refused():
+    for name in METHODS:
+        with pytest.raises(TypeError, match="progress must be callable"):
+            bind(name, progress=3)
+        obj = bind(name, progress=None)
+        with pytest.raises(TypeError, match="progress must be callable"):
+            obj.rebind(progress="no")
+    eig = dk.EigenDeformation(MESH, handles=[HANDLE], n_eigenvectors=8, refine=0)
+    with pytest.raises(TypeError):
+        eig.rebind(progress=lambda f: False)  # its rebind does not report
+    # estimate_memory takes the bind's keywords, progress= included (not called)
+    rec = Recorder()
+    assert dk.ARAP.estimate_memory(MESH, progress=rec) > 0 and rec.seen == []
