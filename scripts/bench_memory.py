@@ -16,6 +16,7 @@ import argparse
 import multiprocessing as mp
 import os
 import sys
+import time
 
 import numpy as np
 
@@ -38,9 +39,11 @@ def measure(q, method, V, F, fixed, hand, t):
         cls = getattr(dk, method)
         est = cls.estimate_memory(mesh)
         before = status("VmRSS")
+        t0 = time.perf_counter()
         obj = cls(mesh, handles=[hand], fixed=fixed)
+        bind_s = time.perf_counter() - t0
         obj.solve(V[hand] + t, energy=False)
-        q.put({"peak": status("VmHWM") - before, "estimate": est})
+        q.put({"peak": status("VmHWM") - before, "estimate": est, "bind_s": bind_s})
     except Exception as ex:  # the parent waits on the queue: always answer
         q.put({"error": "%s: %s" % (type(ex).__name__, ex)})
 
@@ -53,8 +56,8 @@ def main():
                                          "EigenDeformation,LinearReconstruction")
     a = ap.parse_args()
     ctx = mp.get_context("spawn")
-    print("| mesh | vertices | method | peak MiB | estimate MiB | peak / estimate |")
-    print("| --- | --- | --- | --- | --- | --- |")
+    print("| mesh | vertices | method | peak MiB | estimate MiB | peak / estimate | bind s |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
     for name in a.meshes.split(","):
         V, F, fixed, hand, t = bs.scenario(name, a.levels)
         for method in a.methods.split(","):
@@ -64,11 +67,11 @@ def main():
             r = q.get()
             p.join()
             if "error" in r:
-                print("| %s | %d | %s | %s | | |" % (name, len(V), method, r["error"]))
+                print("| %s | %d | %s | %s | | | |" % (name, len(V), method, r["error"]))
                 continue
-            print("| %s | %d | %s | %.0f | %.0f | %.2f |" % (
+            print("| %s | %d | %s | %.0f | %.0f | %.2f | %.1f |" % (
                 name, len(V), method, r["peak"] / 2**20, r["estimate"] / 2**20,
-                r["peak"] / r["estimate"]), flush=True)
+                r["peak"] / r["estimate"], r["bind_s"]), flush=True)
 
 
 if __name__ == "__main__":
