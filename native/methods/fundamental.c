@@ -651,7 +651,7 @@ static dk_status eliminate(const dk_fundamental *f, const dk_constraint_desc *de
     view.el = *s;
     st = assemble(&view, nu, ncon, &s->A, &s->B, err);
     if (st == DK_OK && nu > 0)
-        st = dk_cholesky_analyze(s->A, &s->chol, err);
+        st = dk_cholesky_analyze_compact(s->A, &s->chol, err);
     if (st == DK_OK && nu > 0) {
         st = dk_cholesky_factorize(s->chol, s->A, err);
         if (st == DK_ERR_NOT_POSITIVE_DEFINITE) {
