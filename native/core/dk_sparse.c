@@ -218,6 +218,57 @@ dk_status dk_sparse_from_triplets(dk_index n_rows, dk_index n_cols, int64_t n,
     return st;
 }
 
+dk_status dk_sparse_from_columns(dk_index n_rows, dk_index n_cols, const int64_t *start,
+                                 dk_index *rows, double *vals, dk_sparse **out, dk_error *err)
+{
+    static const char who[] = "sparse from columns";
+    dk_status st = DK_OK;
+    if (!out) {
+        st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s: out is NULL", who);
+    } else {
+        *out = NULL;
+        if (n_rows < 0 || n_cols < 0 || !start)
+            st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s: negative size (%ld x %ld) or "
+                              "no column starts", who, (long)n_rows, (long)n_cols);
+        else if (start[0] != 0)
+            st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s: start[0] is %lld, not 0", who,
+                              (long long)start[0]);
+        else if (start[n_cols] > 0 && (!rows || !vals))
+            st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s: NULL entry array", who);
+    }
+    for (dk_index j = 0; st == DK_OK && j < n_cols; j++) {
+        if (start[j + 1] < start[j]) {
+            st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s: start decreases at column %ld",
+                              who, (long)j);
+            break;
+        }
+        for (int64_t p = start[j]; p < start[j + 1]; p++)
+            if (rows[p] < 0 || rows[p] >= n_rows) {
+                st = dk_error_set(err, DK_ERR_INDEX, "%s: entry %lld of column %ld has row %ld, "
+                                  "out of range for a %ld x %ld matrix", who, (long long)p,
+                                  (long)j, (long)rows[p], (long)n_rows, (long)n_cols);
+                break;
+            }
+    }
+    if (st != DK_OK) {
+        free(rows);
+        free(vals);
+        return st;
+    }
+    if (start[n_cols] == 0) { /* finish_columns shrinks to at least one slot */
+        free(rows);
+        free(vals);
+        rows = malloc(sizeof(dk_index));
+        vals = malloc(sizeof(double));
+        if (!rows || !vals) {
+            free(rows);
+            free(vals);
+            return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "%s: out of memory", who);
+        }
+    }
+    return finish_columns(n_rows, n_cols, start, rows, vals, who, out, err);
+}
+
 /* ------------------------------------------------------------ products ------------------ */
 
 void dk_sparse_matvec(const dk_sparse *a, const double *x, double *y)

@@ -28,7 +28,8 @@ typedef struct elim {
     dk_index *face_handle;     /* F: the handle prescribing the frame, -2 fixed, -1 none     */
     dk_index *fa;              /* F: first of the 3 constrained slots holding the anchor
                                   frame row a regularized face is drawn to, or -1            */
-    dk_sparse *A, *B;          /* n_unk x n_unk; n_unk x n_con                               */
+    dk_sparse *A, *B;          /* n_unk x n_unk (upper triangle; freed once factored);
+                                  n_unk x n_con                                               */
     dk_cholesky *chol;
     double *zc, *rhs, *lin, *tgt; /* solve buffers                                           */
     /* The transform basis (NULL when not built): the solution is affine in the handles'
@@ -283,11 +284,17 @@ static dk_index slot(const dk_fundamental *f, const term *t)
     return f->el.fu[t->id] >= 0 ? f->el.fu[t->id] + t->k : -2 - (f->el.fc[t->id] + t->k);
 }
 
+/* The energy's matrices, assembled straight into columns in two passes over the residuals
+ * (issue 19, memory): the first counts each column's entries, the second writes them; A's
+ * upper triangle only (CHOLMOD reads no more). Triplets of the whole A (16 bytes an entry,
+ * plus 12 for dk_sparse_from_triplets's copy) were the bind's peak up to ~60k vertices:
+ * 28 bytes for each of ~230 per vertex, against 12 for each of ~120 now. */
 typedef struct assembly {
     const dk_fundamental *f;
-    dk_index *ar, *ac, *br, *bc;
+    int fill;                 /* 0: count into a_next[j + 1], b_next[j + 1]; 1: write      */
+    int64_t *a_next, *b_next; /* per column of A (n_unk + 1), of B (n_con + 1)             */
+    dk_index *ar, *br;
     double *av, *bv;
-    int64_t na, nb;
 } assembly;
 
 static void assemble_visit(void *ctx, double w, const term *t, int nt)
@@ -303,14 +310,67 @@ static void assemble_visit(void *ctx, double w, const term *t, int nt)
             if (t[i].c == 0.0 || t[j].c == 0.0)
                 continue;
             if (idx[j] >= 0) {
-                s->ar[s->na] = idx[i], s->ac[s->na] = idx[j];
-                s->av[s->na++] = w * t[i].c * t[j].c;
+                if (idx[i] > idx[j])
+                    continue; /* the lower triangle */
+                if (!s->fill) {
+                    s->a_next[idx[j] + 1]++;
+                } else {
+                    const int64_t p = s->a_next[idx[j]]++;
+                    s->ar[p] = idx[i], s->av[p] = w * t[i].c * t[j].c;
+                }
             } else {
-                s->br[s->nb] = idx[i], s->bc[s->nb] = -2 - idx[j];
-                s->bv[s->nb++] = w * t[i].c * t[j].c;
+                const dk_index col = -2 - idx[j];
+                if (!s->fill) {
+                    s->b_next[col + 1]++;
+                } else {
+                    const int64_t p = s->b_next[col]++;
+                    s->br[p] = idx[i], s->bv[p] = w * t[i].c * t[j].c;
+                }
             }
         }
     }
+}
+
+/* Counts, allocates and writes A (upper triangle) and B of the numbering in `view`. */
+static dk_status assemble(const dk_fundamental *view, dk_index nu, dk_index ncon, dk_sparse **A,
+                          dk_sparse **B, dk_error *err)
+{
+    const dk_index nb_cols = ncon > 0 ? ncon : 1;
+    assembly a = {view, 0, calloc((size_t)nu + 2, sizeof(int64_t)),
+                  calloc((size_t)nb_cols + 2, sizeof(int64_t)), NULL, NULL, NULL, NULL};
+    int64_t *a_start = malloc(((size_t)nu + 2) * sizeof(int64_t));
+    int64_t *b_start = malloc(((size_t)nb_cols + 2) * sizeof(int64_t));
+    dk_status st = DK_OK;
+    if (!a.a_next || !a.b_next || !a_start || !b_start) {
+        st = oom(err, "assembly");
+        goto done;
+    }
+    for_each_residual(view, assemble_visit, &a);
+    for (dk_index j = 0; j < nu; j++)
+        a.a_next[j + 1] += a.a_next[j];
+    for (dk_index j = 0; j < nb_cols; j++)
+        a.b_next[j + 1] += a.b_next[j];
+    memcpy(a_start, a.a_next, ((size_t)nu + 1) * sizeof(int64_t));
+    memcpy(b_start, a.b_next, ((size_t)nb_cols + 1) * sizeof(int64_t));
+    const size_t na = (size_t)a_start[nu], nbe = (size_t)b_start[nb_cols];
+    a.ar = malloc((na + 1) * sizeof(dk_index)), a.av = malloc((na + 1) * sizeof(double));
+    a.br = malloc((nbe + 1) * sizeof(dk_index)), a.bv = malloc((nbe + 1) * sizeof(double));
+    if (!a.ar || !a.av || !a.br || !a.bv) {
+        free(a.ar), free(a.av), free(a.br), free(a.bv);
+        st = oom(err, "assembly");
+        goto done;
+    }
+    a.fill = 1;
+    for_each_residual(view, assemble_visit, &a);
+    /* (both take the arrays, on every path) */
+    st = dk_sparse_from_columns(nu, nu, a_start, a.ar, a.av, A, err);
+    if (st == DK_OK)
+        st = dk_sparse_from_columns(nu, nb_cols, b_start, a.br, a.bv, B, err);
+    else
+        free(a.br), free(a.bv);
+done:
+    free(a.a_next), free(a.b_next), free(a_start), free(b_start);
+    return st;
 }
 
 typedef struct evaluation {
@@ -586,27 +646,12 @@ static dk_status eliminate(const dk_fundamental *f, const dk_constraint_desc *de
                                     "triangles only, so nothing places it: fix the mesh or "
                                     "constrain it", (int)v);
         }
-    /* the residual count: 3 per face (E_x) and 3 per interior edge (E_f), 16 pairs each */
-    const int64_t cap = 16 * (3 * (int64_t)F + 3 * (int64_t)m->n_edges) + 1;
-    assembly a = {f, malloc((size_t)cap * sizeof(dk_index)), malloc((size_t)cap * sizeof(dk_index)),
-                  malloc((size_t)cap * sizeof(dk_index)), malloc((size_t)cap * sizeof(dk_index)),
-                  malloc((size_t)cap * sizeof(double)), malloc((size_t)cap * sizeof(double)), 0, 0};
     /* (a scratch view of the numbering for slot()) */
     dk_fundamental view = *f;
     view.el = *s;
-    a.f = &view;
-    if (!a.ar || !a.ac || !a.br || !a.bc || !a.av || !a.bv) {
-        st = oom(err, "assembly");
-    } else {
-        for_each_residual(&view, assemble_visit, &a);
-        st = dk_sparse_from_triplets(nu, nu, a.na, a.ar, a.ac, a.av, &s->A, err);
-        if (st == DK_OK)
-            st = dk_sparse_from_triplets(nu, ncon > 0 ? ncon : 1, a.nb, a.br, a.bc, a.bv, &s->B,
-                                         err);
-    }
-    free(a.ar), free(a.ac), free(a.br), free(a.bc), free(a.av), free(a.bv);
+    st = assemble(&view, nu, ncon, &s->A, &s->B, err);
     if (st == DK_OK && nu > 0)
-        st = dk_cholesky_analyze(s->A, &s->chol, err);
+        st = dk_cholesky_analyze_compact(s->A, &s->chol, err);
     if (st == DK_OK && nu > 0) {
         st = dk_cholesky_factorize(s->chol, s->A, err);
         if (st == DK_ERR_NOT_POSITIVE_DEFINITE) {
@@ -625,6 +670,9 @@ static dk_status eliminate(const dk_fundamental *f, const dk_constraint_desc *de
         } else if (st != DK_OK)
             dk_error_prefix(err, "LinearReconstruction");
     }
+    /* A is in the factor now; solves need B and the factor only */
+    dk_sparse_free(s->A);
+    s->A = NULL;
     if (st == DK_OK) {
         s->zc = malloc((3 * (size_t)ncon + 1) * sizeof *s->zc);
         s->rhs = malloc((3 * (size_t)nu + 1) * sizeof *s->rhs);

@@ -50,7 +50,12 @@ void dk_eigs_options_default(dk_eigs_options *opt);
  *  n x k column-major (eigenvector j at eigenvectors + j*n). `*n_converged` (may be NULL) gets
  *  how many pairs converged; when fewer than k did, the call fails with
  *  DK_ERR_NO_CONVERGENCE saying how many, and the converged ones are in the outputs.
- *  `mass` must be positive everywhere (an error names the first vertex where it is not). */
+ *  `mass` must be positive everywhere (an error names the first vertex where it is not).
+ *  Memory (issue 19): the accepted vectors are built in `eigenvectors` itself, which is
+ *  therefore written also by a call that fails. Beyond it the call holds about
+ *  2 min(k, band_size) + 1 Krylov vectors (the Ritz vectors overwrite them), the band's
+ *  results (about band_size + band_size / 8 vectors touched), 16 vectors of margin past the
+ *  k-th pair when a cluster straddles it, and one sparse factor of L - sigma M. */
 dk_status dk_eigs_smallest(const dk_sparse *l, const double *mass, int k,
                            const dk_eigs_options *opt, double *eigenvalues,
                            double *eigenvectors, int *n_converged, dk_error *err);

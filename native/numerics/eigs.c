@@ -86,8 +86,9 @@ typedef struct eig_ctx {
     dk_cholesky *spd;       /* LL' for sigma < 0                                      */
     dk_cholesky *ldl;       /* LDL' for interior shifts                               */
     uint64_t seed;
-    /* ARPACK workspace, sized for the largest ncv used so far */
-    double *resid, *v, *workd, *workl, *z, *d;
+    /* ARPACK workspace, sized for the largest ncv used so far. The Ritz vectors of a run
+     * overwrite the first columns of the Krylov basis v (ritz_vectors): z is v. */
+    double *resid, *v, *workd, *workl, *d;
     double *ritz;           /* Ritz step: theta, e, S (ncv x ncv), selected S columns   */
     int *order;             /* ncv                                                       */
     int ws_ncv, ws_nev;
@@ -110,7 +111,7 @@ static void ctx_free(eig_ctx *c)
     free(c->l_diag);
     dk_cholesky_free(c->spd);
     dk_cholesky_free(c->ldl);
-    free(c->resid); free(c->v); free(c->workd); free(c->workl); free(c->z); free(c->d);
+    free(c->resid); free(c->v); free(c->workd); free(c->workl); free(c->d);
     free(c->ritz); free(c->order);
 }
 
@@ -235,11 +236,10 @@ static dk_status ensure_workspace(eig_ctx *c, int nev, int ncv, dk_error *err)
         }
     }
     if (nev > c->ws_nev) {
-        free(c->z); free(c->d);
-        c->z = malloc(n * (size_t)nev * sizeof(double));
+        free(c->d);
         c->d = malloc((size_t)nev * sizeof(double));
         c->ws_nev = nev;
-        if (!c->z || !c->d) {
+        if (!c->d) {
             c->ws_nev = 0;
             return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: out of memory");
         }
@@ -255,8 +255,9 @@ static dk_status ensure_workspace(eig_ctx *c, int nev, int ncv, dk_error *err)
 
 /* The `nev` eigenpairs nearest `sigma`, with the factorization of L - sigma M in `chol`.
  * On return c->d[0..*nconv-1] holds the eigenvalues (Rayleigh quotients) ascending and
- * c->z the matching M-orthonormal eigenvectors (column-major n x nconv). Fails with
- * DK_ERR_NO_CONVERGENCE (the converged pairs still in c->d, c->z) or DK_ERR_NUMERIC. */
+ * the first nconv columns of c->v the matching M-orthonormal eigenvectors (column-major
+ * n x nconv; they overwrite the Krylov basis). Fails with DK_ERR_NO_CONVERGENCE (the
+ * converged pairs still in c->d, c->v) or DK_ERR_NUMERIC. */
 static void deflate(const double *mass, const double *basis, int nb, dk_index n, double *y)
 {
     for (int pass = 0; pass < 2; pass++)
@@ -275,8 +276,12 @@ static void deflate(const double *mass, const double *basis, int nb, dk_index n,
  * The `want` converged pairs of largest |theta| are kept, the convergence test being
  * dsaupd's (Ritz estimate rnorm |s_ncv| <= tol max(eps^(2/3), |theta|)); each vector gets
  * the purification step z = V s + (s_ncv / theta) f = OP (V s) / theta (one step of inverse
- * iteration, as dseupd does in shift-invert mode). On return c->z holds `*got` vectors, in
- * no particular order (the caller sorts by Rayleigh quotient). */
+ * iteration, as dseupd does in shift-invert mode). On return the first `*got` columns of
+ * c->v hold the vectors, in no particular order (the caller sorts by Rayleigh quotient).
+ * V Q is formed in place, a block of rows at a time (row r of V Q needs row r of V only),
+ * so that the Ritz vectors need no n x nev array of their own (issue 19: 0.4 KB a vertex
+ * with 50-pair bands). */
+#define RITZ_ROWS 256
 static dk_status ritz_vectors(eig_ctx *c, int ncv, int want, const a_int *ipntr, int *got,
                               dk_error *err)
 {
@@ -317,11 +322,21 @@ static dk_status ritz_vectors(eig_ctx *c, int ncv, int want, const a_int *ipntr,
             for (int r = 0; r < ncv; r++) { const double u = qa[r]; qa[r] = qb[r]; qb[r] = u; }
         }
     if (m > 0) {
-        cblas_dgemm(CblasColMajor, CblasNoTrans, CblasNoTrans, (int)n, m, ncv, 1.0, c->v,
-                    (int)n, q, ncv, 0.0, c->z, (int)n);
+        double *blk = malloc((size_t)RITZ_ROWS * (size_t)m * sizeof(double));
+        if (!blk)
+            return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: out of memory (Ritz vectors)");
+        for (dk_index r0 = 0; r0 < n; r0 += RITZ_ROWS) {
+            const int rows = n - r0 < RITZ_ROWS ? (int)(n - r0) : RITZ_ROWS;
+            cblas_dgemm(CblasColMajor, CblasNoTrans, CblasNoTrans, rows, m, ncv, 1.0,
+                        c->v + r0, (int)n, q, ncv, 0.0, blk, rows);
+            for (int k = 0; k < m; k++)
+                memcpy(c->v + (size_t)k * n + r0, blk + (size_t)k * rows,
+                       (size_t)rows * sizeof(double));
+        }
+        free(blk);
         for (int k = 0; k < m; k++)
             cblas_daxpy((int)n, q[(size_t)k * ncv + ncv - 1] / c->d[k], c->resid, 1,
-                        c->z + (size_t)k * n, 1);
+                        c->v + (size_t)k * n, 1);
     }
     *got = m;
     return DK_OK;
@@ -385,7 +400,7 @@ static dk_status arpack_run(eig_ctx *c, dk_cholesky *chol, double sigma, int nev
     }
     /* Rayleigh quotients (accurate to the square of the vector error), then sort. */
     for (int j = 0; j < got; j++) {
-        double *x = c->z + (size_t)j * n;
+        double *x = c->v + (size_t)j * n;
         const double xm = m_dot(mass, x, x, n);
         l_matvec(c->l, x, scratch);
         double xl = 0.0;
@@ -397,7 +412,7 @@ static dk_status arpack_run(eig_ctx *c, dk_cholesky *chol, double sigma, int nev
     for (int j = 1; j < got; j++) { /* insertion sort with column swaps: nev is small */
         for (int i = j; i > 0 && c->d[i] < c->d[i - 1]; i--) {
             const double t = c->d[i]; c->d[i] = c->d[i - 1]; c->d[i - 1] = t;
-            double *a = c->z + (size_t)i * n, *b = c->z + (size_t)(i - 1) * n;
+            double *a = c->v + (size_t)i * n, *b = c->v + (size_t)(i - 1) * n;
             for (a_int r = 0; r < n; r++) { const double u = a[r]; a[r] = b[r]; b[r] = u; }
         }
     }
@@ -413,10 +428,20 @@ static dk_status arpack_run(eig_ctx *c, dk_cholesky *chol, double sigma, int nev
 /* ------------------------------------------------------------------ accepted store ------ */
 
 typedef struct store {
-    double *val;  /* ascending */
-    double *vec;  /* n x cap */
-    int m, cap;
+    double *val;   /* ascending */
+    double *vec;   /* n x split: columns [0, split)                                  */
+    double *extra; /* n x (cap - split): columns [split, cap), or NULL (split == cap) */
+    size_t n;
+    int m, cap, split;
 } store;
+
+/* Column j of a store. The accepted store keeps its first k columns in the caller's output
+ * (no n x k copy at the end: 2.4 KB a vertex for 300 pairs, issue 19) and the margin
+ * beyond k in `extra`; a band store is one block. */
+static double *scol(const store *s, int j)
+{
+    return j < s->split ? s->vec + (size_t)j * s->n : s->extra + (size_t)(j - s->split) * s->n;
+}
 
 static int count_below(const double *v, int m, double t)
 {
@@ -459,7 +484,7 @@ static dk_status merge_band(eig_ctx *c, store *s, const store *bd, double zeta,
             for (int b = 0; b < q; b++) {
                 double *y = zz + (size_t)b * n;
                 for (int a = 0; a < p; a++) {
-                    const double *x = s->vec + (size_t)(p0 + a) * n;
+                    const double *x = scol(s, p0 + a);
                     const double t = m_dot(c->mass, x, y, n);
                     for (dk_index i = 0; i < n; i++) y[i] -= t * x[i];
                 }
@@ -495,7 +520,8 @@ static dk_status merge_band(eig_ctx *c, store *s, const store *bd, double zeta,
             st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: out of memory (Rayleigh-Ritz)");
             goto done;
         }
-        memcpy(sv, s->vec + (size_t)p0 * n, (size_t)n * p * sizeof(double));
+        for (int a = 0; a < p; a++)
+            memcpy(sv + (size_t)a * n, scol(s, p0 + a), (size_t)n * sizeof(double));
         int col = p;
         for (int a = 0; a < q; a++) {
             if (gw[a] <= 0.5) continue;
@@ -530,7 +556,7 @@ static dk_status merge_band(eig_ctx *c, store *s, const store *bd, double zeta,
             goto done;
         }
         for (int a = 0; a < w; a++) {
-            double *x = s->vec + (size_t)(p0 + a) * n;
+            double *x = scol(s, p0 + a);
             memset(x, 0, (size_t)n * sizeof(double));
             for (int b = 0; b < w; b++) {
                 const double coef = h[(size_t)a * w + b];
@@ -543,7 +569,7 @@ static dk_status merge_band(eig_ctx *c, store *s, const store *bd, double zeta,
     }
     /* new pairs beyond the store's room are not needed (the store holds k + margin) */
     for (int j = j1; j < nb && s->m < s->cap; j++) {
-        memcpy(s->vec + (size_t)s->m * n, bd->vec + (size_t)j * n, (size_t)n * sizeof(double));
+        memcpy(scol(s, s->m), bd->vec + (size_t)j * n, (size_t)n * sizeof(double));
         s->val[s->m++] = bd->val[j];
     }
 done:
@@ -642,7 +668,8 @@ static int ncv_for(int nev, dk_index n, int attempt)
     return ncv;
 }
 
-/* Appends pair j of the last ARPACK run (c->d, c->z) to `s`, keeping it sorted. */
+/* Appends pair j of the last ARPACK run (c->d, c->v) to the band store `s` (one block),
+ * keeping it sorted. */
 static void store_insert(store *s, const eig_ctx *c, int j)
 {
     const size_t n = (size_t)c->n;
@@ -651,7 +678,7 @@ static void store_insert(store *s, const eig_ctx *c, int j)
     memmove(s->vec + (size_t)(at + 1) * n, s->vec + (size_t)at * n,
             (size_t)(s->m - at) * n * sizeof(double));
     memmove(s->val + at + 1, s->val + at, (size_t)(s->m - at) * sizeof(double));
-    memcpy(s->vec + (size_t)at * n, c->z + (size_t)j * n, n * sizeof(double));
+    memcpy(s->vec + (size_t)at * n, c->v + (size_t)j * n, n * sizeof(double));
     s->val[at] = c->d[j];
     s->m++;
 }
@@ -823,12 +850,18 @@ dk_status dk_eigs_smallest(const dk_sparse *l, const double *mass, int k,
     /* accepted pairs: bands stop adding new ones once k are there (plus a cluster's RR) */
     s.cap = single ? bd.cap : (k + 16 > bd.cap ? k + 16 : bd.cap);
     if (s.cap > n) s.cap = (int)n;
+    /* the accepted store's first k columns are the output itself */
+    s.n = bd.n = (size_t)n;
+    s.split = s.cap < k ? s.cap : k;
+    bd.split = bd.cap;
     s.val = malloc((size_t)s.cap * sizeof(double));
-    s.vec = malloc((size_t)n * s.cap * sizeof(double));
+    s.vec = eigenvectors;
+    s.extra = s.cap > s.split ? malloc((size_t)n * (size_t)(s.cap - s.split) * sizeof(double))
+                              : NULL;
     bd.val = malloc((size_t)bd.cap * sizeof(double));
     bd.vec = malloc((size_t)n * bd.cap * sizeof(double));
     scratch = malloc((size_t)n * sizeof(double));
-    if (!s.val || !s.vec || !bd.val || !bd.vec || !scratch) {
+    if (!s.val || (s.cap > s.split && !s.extra) || !bd.val || !bd.vec || !scratch) {
         st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: out of memory (%d vectors of %d)",
                           s.cap + bd.cap, (int)n);
         goto done;
@@ -851,8 +884,12 @@ dk_status dk_eigs_smallest(const dk_sparse *l, const double *mass, int k,
         if (st == DK_OK && !single && j > 0) bd.m = j;
     }
     memcpy(s.val, bd.val, (size_t)bd.m * sizeof(double));
-    memcpy(s.vec, bd.vec, (size_t)n * bd.m * sizeof(double));
+    for (int j = 0; j < bd.m; j++)
+        memcpy(scol(&s, j), bd.vec + (size_t)j * n, (size_t)n * sizeof(double));
     s.m = bd.m;
+    /* band 0's positive definite factor is not used again (later shifts are LDL') */
+    dk_cholesky_free(c.spd);
+    c.spd = NULL;
     if (st != DK_OK) goto partial;
     c.fraction = fmin(1.0, (double)s.m / k);
     if (o.progress && o.progress(o.progress_user, c.fraction)) {
@@ -949,7 +986,7 @@ dk_status dk_eigs_smallest(const dk_sparse *l, const double *mass, int k,
         }
     }
     memcpy(eigenvalues, s.val, (size_t)k * sizeof(double));
-    memcpy(eigenvectors, s.vec, (size_t)n * k * sizeof(double));
+    /* (the vectors are in place) */
     if (!single) {
         st = m_orthonormalise(mass, n, k, eigenvectors, err);
         if (st != DK_OK) goto done;
@@ -961,10 +998,8 @@ dk_status dk_eigs_smallest(const dk_sparse *l, const double *mass, int k,
 partial: {
         /* Hand back what there is: the accepted pairs, ascending. */
         const int m = s.m < k ? s.m : k;
-        if (m > 0) {
+        if (m > 0) /* (the vectors are in place) */
             memcpy(eigenvalues, s.val, (size_t)m * sizeof(double));
-            memcpy(eigenvectors, s.vec, (size_t)n * m * sizeof(double));
-        }
         if (n_converged) *n_converged = m;
         if (st == DK_ERR_NO_CONVERGENCE)
             dk_error_prefix(err, "%d of %d eigenpairs converged", m, k);
@@ -972,7 +1007,7 @@ partial: {
 done:
     free(scratch);
     free(s.val);
-    free(s.vec);
+    free(s.extra);
     free(bd.val);
     free(bd.vec);
     ctx_free(&c);

@@ -879,7 +879,64 @@ static void test_armadillo(void)
     free(m.tri);
 }
 
-DK_TEST_MAIN(test_small_against_lapack, test_parallel_solve, test_parallel_schedule_shapes, test_not_positive_definite,
+/* The upper triangle alone is enough, and dk_cholesky_analyze_compact gives the solution
+ * dk_cholesky_analyze gives, in a supernodal factor that stores fewer entries (no
+ * amalgamation zeros). */
+static void test_compact_upper(void)
+{
+    const int m = SANITIZED ? 14 : 22;
+    const dk_index n = m * m * m;
+    double *diag = malloc(sizeof(double) * n), *b = malloc(sizeof(double) * n);
+    double *x1 = malloc(sizeof(double) * n), *x2 = malloc(sizeof(double) * n);
+    dk_sparse *a = NULL, *u = NULL;
+    CHECK(diag && b && x1 && x2);
+    if (diag && b && x1 && x2) {
+        for (dk_index i = 0; i < n; i++) { diag[i] = 0.1; b[i] = rnd(); }
+        a = grid_laplacian(m, m, m, diag);
+        u = a ? csc_new(n, a->col_start[n]) : NULL;
+    }
+    CHECK(u != NULL);
+    if (u) {
+        int64_t q = 0; /* u: the upper triangle of a */
+        for (dk_index j = 0; j < n; j++) {
+            u->col_start[j] = (dk_index)q;
+            for (dk_index p = a->col_start[j]; p < a->col_start[j + 1]; p++)
+                if (a->row_index[p] <= j) {
+                    u->row_index[q] = a->row_index[p];
+                    u->values[q++] = a->values[p];
+                }
+        }
+        u->col_start[n] = (dk_index)q;
+        CHECK(q < a->col_start[n]);
+        dk_error err = {0};
+        dk_cholesky *full = NULL, *small = NULL;
+        CHECK_MSG(dk_cholesky_analyze(u, &full, &err) == DK_OK, "%s", err.message);
+        CHECK_MSG(dk_cholesky_analyze_compact(u, &small, &err) == DK_OK, "%s", err.message);
+        CHECK(full && small && dk_cholesky_factorize(full, u, &err) == DK_OK &&
+              dk_cholesky_factorize(small, u, &err) == DK_OK);
+        if (full && small) {
+            CHECK(dk_cholesky_solve(full, b, 1, x1, &err) == DK_OK);
+            CHECK(dk_cholesky_solve(small, b, 1, x2, &err) == DK_OK);
+            double worst = 0.0, scale = 0.0;
+            for (dk_index i = 0; i < n; i++) {
+                worst = fmax(worst, fabs(x1[i] - x2[i]));
+                scale = fmax(scale, fabs(x1[i]));
+            }
+            CHECK_MSG(worst <= 1e-12 * scale, "compact solution differs by %g", worst / scale);
+            CHECK(rel_residual(a, x1, b) < 1e-12); /* against both triangles */
+            CHECK(rel_residual(a, x2, b) < 1e-12);
+            const size_t m_full = dk_cholesky_memory(full), m_small = dk_cholesky_memory(small);
+            CHECK_MSG(m_small < m_full, "compact factor %zu bytes, default %zu", m_small, m_full);
+        }
+        dk_cholesky_free(full);
+        dk_cholesky_free(small);
+    }
+    csc_free(u);
+    csc_free(a);
+    free(diag); free(b); free(x1); free(x2);
+}
+
+DK_TEST_MAIN(test_small_against_lapack, test_compact_upper, test_parallel_solve, test_parallel_schedule_shapes, test_not_positive_definite,
              test_not_positive_definite_supernodal,
              test_refactorize_and_multi_rhs, test_bad_arguments, test_indefinite_inertia,
              test_big_grid, test_armadillo)

@@ -335,5 +335,66 @@ static void test_large_assembly(void)
     free(v);
 }
 
+/* dk_sparse_from_columns gives the matrix dk_sparse_from_triplets gives for the same
+ * entries, bucketed by column in a shuffled order; it takes its arrays on every path. */
+static void test_from_columns(void)
+{
+    const dk_index m = 37, n = 23;
+    const int64_t count = 900;
+    trip t = random_triplets(m, n, count);
+    dk_sparse *ref = from(t, m, n);
+    int64_t *start = calloc((size_t)n + 1, sizeof *start), *next = calloc((size_t)n + 1, sizeof *next);
+    dk_index *rows = malloc(sizeof(dk_index) * count);
+    double *vals = malloc(sizeof(double) * count);
+    CHECK(ref && start && next && rows && vals);
+    if (ref && start && next && rows && vals) {
+        for (int64_t k = 0; k < count; k++) start[t.c[k] + 1]++;
+        for (dk_index j = 0; j < n; j++) start[j + 1] += start[j];
+        memcpy(next, start, sizeof(int64_t) * ((size_t)n + 1));
+        for (int64_t k = count - 1; k >= 0; k--) { /* reversed: the order must not matter */
+            const int64_t p = next[t.c[k]]++;
+            rows[p] = t.r[k];
+            vals[p] = t.v[k];
+        }
+        dk_sparse *a = NULL;
+        dk_error err = {0};
+        CHECK_MSG(dk_sparse_from_columns(m, n, start, rows, vals, &a, &err) == DK_OK, "%s",
+                  err.message);
+        rows = NULL, vals = NULL; /* taken */
+        CHECK(a && well_formed(a));
+        if (a) {
+            CHECK(dk_sparse_nnz(a) == dk_sparse_nnz(ref));
+            double worst = 0.0;
+            for (dk_index j = 0; j < n; j++)
+                for (dk_index i = 0; i < m; i++)
+                    worst = fmax(worst, fabs(dk_sparse_get(a, i, j) - dk_sparse_get(ref, i, j)));
+            CHECK_MSG(worst < 1e-13, "from_columns differs from from_triplets by %g", worst);
+        }
+        dk_sparse_free(a);
+        /* a row out of range is refused (and the arrays still taken: ASan sees a leak else) */
+        dk_index *r2 = malloc(sizeof(dk_index) * 2);
+        double *v2 = malloc(sizeof(double) * 2);
+        int64_t st2[3] = {0, 1, 2};
+        CHECK(r2 && v2);
+        if (r2 && v2) {
+            r2[0] = 0, r2[1] = 5, v2[0] = v2[1] = 1.0;
+            a = NULL;
+            CHECK(dk_sparse_from_columns(3, 2, st2, r2, v2, &a, &err) == DK_ERR_INDEX);
+            CHECK(a == NULL && strstr(err.message, "row 5") != NULL);
+        } else {
+            free(r2), free(v2);
+        }
+        /* an empty matrix */
+        int64_t st0[4] = {0, 0, 0, 0};
+        CHECK(dk_sparse_from_columns(3, 3, st0, malloc(sizeof(dk_index)), malloc(sizeof(double)),
+                                     &a, &err) == DK_OK);
+        CHECK(a && dk_sparse_nnz(a) == 0 && well_formed(a));
+        dk_sparse_free(a);
+    }
+    free(rows), free(vals), free(start), free(next);
+    dk_sparse_free(ref);
+    trip_free(&t);
+}
+
 DK_TEST_MAIN(test_triplets_vs_dense, test_explicit_zero_kept, test_errors,
-             test_add_diagonal_submatrix_asymmetry, test_large_assembly)
+             test_add_diagonal_submatrix_asymmetry, test_large_assembly, test_from_columns)
