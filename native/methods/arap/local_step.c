@@ -329,6 +329,19 @@ void arap_rotations_rhs(const dk_arap *ar, arap_system *s, const double *rot)
                        ar->n_terms >= PARALLEL_TERMS ? 0 : s->nu + 1);
 }
 
+/* The soft handles' penalties at x (0 before the first solve's targets). */
+static double soft_penalties(const arap_system *s, const double *x)
+{
+    double energy = 0.0;
+    if (s->have_targets)
+        for (dk_index u = 0; u < s->nu; u++) {
+            dk_index v = s->unknowns[u];
+            if (s->soft_k[v] > 0.0)
+                energy += s->soft_k[v] * dist2(x + 3 * v, s->targets + 3 * s->target_of[v]);
+        }
+    return energy;
+}
+
 /* Local step and energy at positions x: rotations into rot (may be NULL: then only the
  * energy), returns E(x) including soft penalties (when targets are known); the caller gets
  * the next global step's right-hand side from rotations_rhs, once it keeps the iterate. On
@@ -346,13 +359,7 @@ double arap_local_energy(const dk_arap *ar, const arap_system *s, const double *
     } else {
         energy = cells_energy(ar, s, x, rot, 0, ar->n);
     }
-    if (s->have_targets)
-        for (dk_index u = 0; u < s->nu; u++) {
-            dk_index v = s->unknowns[u];
-            if (s->soft_k[v] > 0.0)
-                energy += s->soft_k[v] * dist2(x + 3 * v, s->targets + 3 * s->target_of[v]);
-        }
-    return energy;
+    return energy + soft_penalties(s, x);
 }
 
 typedef struct sample_job {
@@ -394,13 +401,7 @@ double arap_sampled_energy(const dk_arap *ar, const arap_system *s, const double
     const dk_index span = stride * SAMPLE_BLOCK, m = (ar->n + span - 1) / span;
     dk_team_run_halves(ar->team, sample_part, &job, m, 64);
     double energy = job.energy[0] + job.energy[1];
-    if (s->have_targets)
-        for (dk_index u = 0; u < s->nu; u++) {
-            dk_index v = s->unknowns[u];
-            if (s->soft_k[v] > 0.0)
-                energy += s->soft_k[v] * dist2(x + 3 * v, s->targets + 3 * s->target_of[v]);
-        }
-    return energy;
+    return energy + soft_penalties(s, x);
 }
 
 /* Constant part of the right-hand side: couplings to eliminated vertices at positions x,
