@@ -108,6 +108,9 @@ class Method:
     # the phase and fraction, and Esc stops the native work at its next report
     # (solver.BindJob)
     bind_progress: bool = False
+    # True: the native rebind takes progress= as well (a groups change on a big mesh
+    # re-binds in place in a worker thread, solver.GroupsRebindJob, and the panel shows it)
+    rebind_progress: bool = False
     # True: the native object has response_basis() (ARAP's warm-start response to each
     # handle's affine motion): while a solve runs in a worker thread, each update shows the
     # last result moved by it to the handles' current transforms (solver._basis_preview)
@@ -122,6 +125,7 @@ METHODS = [
         description="As-rigid-as-possible: keeps local shape, bends and twists naturally",
         icon="MOD_SIMPLEDEFORM",
         bind_progress=True,
+        rebind_progress=True,
         maps=("stiffness",),
         material_label="Stiffness",
         stiffness_option="stiffness_scale",
@@ -196,6 +200,7 @@ METHODS = [
         description="Laplacian surface editing: one linear solve per update",
         icon="MOD_SMOOTH",
         bind_progress=True,
+        rebind_progress=True,
         maps=("handle_weights",),
         options=[
             Option("weights", "ENUM", "cotangent", "Edge Weights",
@@ -247,6 +252,7 @@ METHODS = [
         description="Attenuated handle displacement by distance from the handle",
         icon="SMOOTHCURVE",
         bind_progress=True,
+        rebind_progress=True,
         maps=("handle_weights",),
         bind_args=lambda *a: falloff_args(*a),
         options=[
@@ -298,6 +304,7 @@ METHODS.append(Method(
                 "pull as soft constraints",
     icon="MOD_LATTICE",
     bind_progress=True,
+    rebind_progress=True,
     maps=("cut",),
     cut_options=("cut_a", "cut_b"),
     cold_solve={"warm_start": False},

@@ -26,8 +26,10 @@ def graph_lines(obj, d):
     e = solver._cache.get((obj.name, d.uid))
     if e is None or e.native is None:
         return None
-    if e.worker is not None and e.worker.thread.is_alive():
-        # the object is solving in a worker thread (solver._Worker): the last graph drawn
+    if (e.worker is not None and e.worker.thread.is_alive()) or solver._in_place_rebind(
+            (obj.name, d.uid)) is not None:
+        # the object is solving (solver._Worker) or re-binding for new groups
+        # (solver.GroupsRebindJob) in a worker thread: the last graph drawn
         return e.graph_shown
     g = np.asarray(e.native.nodes, dtype=np.float64)
     t = np.asarray(e.native.transforms, dtype=np.float64)[:, 9:12]

@@ -183,10 +183,9 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
 
 def draw_rebinding(layout, obj, d):
     """The re-bind that runs after an option or method change (solver.rebinding)."""
-    t = solver.rebinding(obj, d)
+    t = solver.rebind_text(obj, d)
     if t is not None:
-        layout.label(text="re-binding for the new settings: %.1f s (the last result shows)"
-                     % t, icon="SORTTIME")
+        layout.label(text=t, icon="SORTTIME")
 
 
 def draw_overlap(layout, d):

@@ -159,6 +159,14 @@ int dk_py_method_register(PyObject *module, const dk_py_method_spec *spec, newfu
  *  (DK_PY_BEGIN_NATIVE). */
 int dk_py_method_enter(dk_py_method *self);
 
+/** For getters that read the native object (with the GIL held, without entering it):
+ *  returns 1 when it is bound and no native call of this process runs on it, else 0 with a
+ *  RuntimeError set ("in use by another thread"). A solve or rebind in another thread
+ *  releases the GIL and may free and rebuild what a getter would read (a rebind replaces
+ *  the constraint sets, Embedded deformation's graph): reading it then is a use after
+ *  free, so every such getter asks this first. */
+int dk_py_method_readable(dk_py_method *self);
+
 /* Reading options: each takes `key` out of the dict `kw` when present (absent: `*value`
  * keeps its default) and converts it as PyArg_ParseTuple would ("i", "d", "p"), or matches
  * a choice against `names` (NULL-terminated; ValueError naming the accepted values). Return

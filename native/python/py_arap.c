@@ -116,6 +116,8 @@ static PyObject *stats(dk_py_method *self)
 
 static PyObject *get_handle_sizes(PyObject *obj, void *c)
 {
+    if (!dk_py_method_readable((dk_py_method *)obj))
+        return NULL;
     const dk_constraints *k = dk_arap_constraints(((dk_py_method *)obj)->native);
     PyObject *t = PyTuple_New(k->n_handles);
     (void)c;

@@ -96,6 +96,8 @@ static int parse_options(PyObject *kw, void *o, const char *context)
 
 static PyObject *get_nodes(PyObject *obj, void *c)
 {
+    if (!dk_py_method_readable((dk_py_method *)obj))
+        return NULL;
     dk_py_method *self = (dk_py_method *)obj;
     const dk_index m = dk_embedded_n_nodes(self->native);
     double *out;
@@ -108,6 +110,8 @@ static PyObject *get_nodes(PyObject *obj, void *c)
 
 static PyObject *get_transforms(PyObject *obj, void *c)
 {
+    if (!dk_py_method_readable((dk_py_method *)obj))
+        return NULL;
     dk_py_method *self = (dk_py_method *)obj;
     const dk_index m = dk_embedded_n_nodes(self->native);
     double *out;
@@ -120,6 +124,8 @@ static PyObject *get_transforms(PyObject *obj, void *c)
 
 static PyObject *get_edges(PyObject *obj, void *c)
 {
+    if (!dk_py_method_readable((dk_py_method *)obj))
+        return NULL;
     dk_py_method *self = (dk_py_method *)obj;
     const dk_index ne = dk_embedded_n_edges(self->native);
     dk_index *out;
@@ -132,6 +138,8 @@ static PyObject *get_edges(PyObject *obj, void *c)
 
 static PyObject *get_fixed_nodes(PyObject *obj, void *c)
 {
+    if (!dk_py_method_readable((dk_py_method *)obj))
+        return NULL;
     dk_py_method *self = (dk_py_method *)obj;
     const dk_index m = dk_embedded_n_nodes(self->native);
     (void)c;

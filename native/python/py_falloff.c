@@ -91,6 +91,8 @@ PyDoc_STRVAR(falloff_doc,
 
 static PyObject *get_ranges(PyObject *obj, void *c)
 {
+    if (!dk_py_method_readable((dk_py_method *)obj))
+        return NULL;
     dk_py_method *self = (dk_py_method *)obj;
     dk_method_stats ms;
     double *out;

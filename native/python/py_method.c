@@ -684,13 +684,26 @@ const char dk_py_method_energy_doc[] =
 /* Whether the object still has its native part (the garbage collector's tp_clear frees it
  * when the object is in a cycle; anything that reaches the object afterwards gets an
  * error instead of a NULL dereference). 0 with RuntimeError set when not. */
+int dk_py_method_readable(dk_py_method *self)
+{
+    if (!self->native || !self->mesh_obj) {
+        PyErr_Format(PyExc_RuntimeError, "%s: the object is not bound (it was cleared by the "
+                     "garbage collector)", self->spec->name);
+        return 0;
+    }
+    /* busy in another process: taken over as dk_py_method_enter does */
+    if (self->busy && self->busy_pid == (long)getpid()) {
+        PyErr_Format(PyExc_RuntimeError, "%s: the object is in use by another thread (a "
+                     "solve or rebind is running); read it when that call has returned",
+                     self->spec->name);
+        return 0;
+    }
+    return 1;
+}
+
 static int still_bound(dk_py_method *self)
 {
-    if (self->native && self->mesh_obj)
-        return 1;
-    PyErr_Format(PyExc_RuntimeError, "%s: the object is not bound (it was cleared by the "
-                 "garbage collector)", self->spec->name);
-    return 0;
+    return dk_py_method_readable(self);
 }
 
 PyObject *dk_py_method_get_mesh(PyObject *obj, void *c)

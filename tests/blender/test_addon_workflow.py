@@ -317,7 +317,78 @@ def test_option_change_rebinds_in_a_thread():
             (np.abs(threaded - sync).max(), np.abs(threaded - before).max()))
 
 
-for t in (test_option_change_rebinds_in_a_thread, test_falloff_reach_scales_with_the_model, test_point_cache_bake_shows_and_frees, test_shape_key_bake_shows_at_once_and_frees,
+def test_group_change_rebinds_in_place_in_a_thread():
+    """A vertex group's membership change on a big mesh re-binds the bound object in place
+    (its native rebind) in a worker thread in the UI, with the native progress in the panel:
+    at 692k vertices it re-factors for seconds and froze the handler. Meanwhile the last
+    result stays shown; a frame's solve waits for it; then the result is the one a
+    synchronous re-bind gives. (Forced here: a small mesh and blender -b re-bind
+    synchronously.)"""
+    import time
+    obj, d, e, handle = scene("LAPLACIAN")
+    e.location.z += 0.3
+    bpy.context.view_layer.update()
+    before = S.evaluated_positions(obj)
+    solver = S.addon.solver
+    key = (obj.name, d.uid)
+    native = solver._cache[key].native
+    vg = obj.vertex_groups["fixed"]
+    members = [v.index for v in obj.data.vertices if any(g.group == vg.index for g in v.groups)]
+    threshold = solver.REBIND_ASYNC_MIN_VERTICES[0]
+    solver.threaded_rebinds[0] = True
+    solver.REBIND_ASYNC_MIN_VERTICES[0] = 0
+    try:
+        vg.remove(members[1::2])
+        obj.data.update()
+        bpy.context.view_layer.update()
+        R.check("a group change starts an in-place re-bind in a thread",
+                solver._in_place_rebind(key) is not None)
+        R.check("meanwhile the last result stays shown",
+                np.abs(S.evaluated_positions(obj) - before).max() < 1e-6)
+        out = draw(ui.DEFORMKIT_PT_modifiers, obj)
+        R.check("the panel says it is re-binding", "re-binding" in text(out), text(out))
+        t0 = time.time()
+        while solver.rebinding() and time.time() - t0 < 30:
+            time.sleep(0.01)
+            S.handlers.poll_rebinds()
+        bpy.context.view_layer.update()
+        threaded = S.evaluated_positions(obj)
+        R.check("the same native object, re-bound", solver._cache[key].native is native and
+                not d.status_is_error, d.status)
+        # again, and a frame's (non-interactive) solve right away: it waits for the worker
+        vg.remove(members[0:4:2])
+        obj.data.update()
+        bpy.context.view_layer.update()
+        R.check("a second group change re-binds in a thread too",
+                solver._in_place_rebind(key) is not None)
+        got = solver.solve(obj, d, force=True)
+        R.check("a frame's solve waits for it and installs it",
+                solver._in_place_rebind(key) is None and got is not None)
+    finally:
+        solver.threaded_rebinds[0] = None
+        solver.REBIND_ASYNC_MIN_VERTICES[0] = threshold
+    solver.drop(obj.name, d.uid)  # the same groups, bound synchronously
+    solver.threaded_rebinds[0] = False
+    try:
+        vg.add(members[0:4:2], 1.0, "REPLACE")
+        obj.data.update()
+        bpy.context.view_layer.update()
+        sync_first = S.evaluated_positions(obj)
+        vg.remove(members[0:4:2])
+        obj.data.update()
+        bpy.context.view_layer.update()
+    finally:
+        solver.threaded_rebinds[0] = None
+    sync = S.evaluated_positions(obj)
+    R.check("the threaded re-bind showed what a synchronous one gives",
+            np.abs(threaded - sync_first).max() < 1e-6 and
+            np.abs(threaded - before).max() > 1e-4,
+            (np.abs(threaded - sync_first).max(), np.abs(threaded - before).max()))
+    R.check("and the frame's solve too", np.abs(np.asarray(got) - sync).max() < 1e-6,
+            np.abs(np.asarray(got) - sync).max())
+
+
+for t in (test_option_change_rebinds_in_a_thread, test_group_change_rebinds_in_place_in_a_thread, test_falloff_reach_scales_with_the_model, test_point_cache_bake_shows_and_frees, test_shape_key_bake_shows_at_once_and_frees,
           test_sidebar_and_handle_target, test_errors_with_a_way_out, test_keyed_factor_warns):
     R.run(t)
 R.finish()

@@ -627,3 +627,42 @@ def test_singular_systems_name_the_callers_vertex_not_a_matrix_column():
         assert int(re.search(r"at vertex (\d+)", msg).group(1)) in free, msg
         with pytest.raises(ValueError, match=r"try weights='clamped_cotangent'"):
             dk.ARAP(mesh, [[int(ip[0])]], fixed=[int(ip[3])], weights="cotangent")
+
+
+# ---- getters while another call has the object --------------------------------------------
+
+def _busy_readers(name):
+    """The getters of `name` that read the native object."""
+    own = {"ARAP": ["handle_sizes"], "Falloff": ["ranges"],
+           "EmbeddedDeformation": ["nodes", "transforms", "edges", "fixed_nodes"]}
+    return ["stats", "n_handles", "n_handle_vertices", "warnings"] + own.get(name, [])
+
+
+@pytest.mark.parametrize("name", ["ARAP", "LaplacianEdit", "Falloff", "EmbeddedDeformation"])
+def test_getters_refuse_while_a_rebind_runs(name):
+    """A rebind (or solve) in another thread releases the GIL and frees and rebuilds what the
+    getters read (the constraint sets, the deformation graph): a getter then read freed
+    memory. Now it raises "in use by another thread". The rebind's progress callback runs
+    while the object is in use, which makes the situation deterministic here."""
+    v, f = make_grid(24)
+    mesh = dk.Mesh(v, f)
+    cols = np.arange(len(v)) % 25
+    fixed, handle, other = (np.flatnonzero(cols <= 1), np.flatnonzero(cols >= 23),
+                            np.flatnonzero(cols == 12))
+    kw = {} if name == "Falloff" else dict(fixed=fixed)
+    obj = getattr(dk, name)(mesh, handles=[handle], **kw)
+    readers = _busy_readers(name)
+    before = {r: repr(getattr(obj, r)) for r in readers}
+    seen = []
+
+    def progress(fraction):
+        for r in readers:
+            with pytest.raises(RuntimeError, match="in use by another thread"):
+                getattr(obj, r)
+        seen.append(fraction.phase)
+        return False
+
+    obj.rebind(handles=[other], progress=progress)
+    assert seen
+    after = {r: repr(getattr(obj, r)) for r in readers}  # readable again, and rebound
+    assert after["n_handle_vertices"] == repr(len(other)) != before["n_handle_vertices"]
