@@ -22,6 +22,10 @@ def resolve_path(path, obj, d):
     return bpy.path.abspath(path)
 
 
+# How long a modal bake's tick waits for the frame it started (FrameBaker.step_async).
+QUICK_FRAME_S = 0.03
+
+
 class FrameBaker:
     """Steps through frames one at a time (so a modal operator can interleave UI events)."""
 
@@ -62,7 +66,53 @@ class FrameBaker:
         self.i += 1
         return f, pos
 
+    # ---- the modal bake's steps: the frame's native solve in a worker thread
+    # (solver.FrameSolve), so that the window stays live and Esc answers while a big mesh's
+    # frame solves (ARAP at 692k vertices: tens of seconds a frame)
+    pending = None  # (frame, solver.FrameSolve, start time) of the frame being solved
+
+    def step_begin(self):
+        """Starts solving the next frame in a worker thread."""
+        import time
+        f = self.frames[self.i]
+        self.scene.frame_set(f)
+        obj, d = self._objects()
+        dg = self.context.evaluated_depsgraph_get()
+        job = solver.solve(obj, d, dg, cold=True, write=False, force=True, defer=True)
+        self.pending = (f, job, time.perf_counter())
+
+    def step_poll(self):
+        """(frame, positions) once the frame started by step_begin is solved, else None."""
+        f, job, _ = self.pending
+        if not job.done():
+            return None
+        self.pending = None
+        obj, d = self._objects()
+        pos = job.result(obj, d)
+        self.i += 1
+        return f, pos
+
+    def solving(self):
+        """(frame, seconds) of the frame being solved, or None."""
+        import time
+        if self.pending is None:
+            return None
+        return self.pending[0], time.perf_counter() - self.pending[2]
+
+    def step_async(self):
+        """One tick of a modal bake: starts the next frame's solve, or returns (frame,
+        positions) when it is done (None meanwhile)."""
+        if self.pending is None:
+            self.step_begin()
+            # a small mesh's frame is solved within this: one tick a frame, as before (a
+            # tick of the window costs far more than the wait)
+            self.pending[1].thread.join(QUICK_FRAME_S)
+        return self.step_poll()
+
     def finish(self):
+        if self.pending is not None:  # cancelled while a frame solved: stop its slices
+            self.pending[1].cancel()
+            self.pending = None
         handlers.enabled[0] = self.handlers_were
         if self.scene.frame_current != self.saved_frame:
             self.scene.frame_set(self.saved_frame)
@@ -271,6 +321,14 @@ class PC2Bake:
         self.w.add(np.asarray(pos, dtype=np.float32))
         return f
 
+    def step_async(self):
+        """The modal bake's tick (FrameBaker.step_async): the frame baked, or None."""
+        r = self.fb.step_async()
+        if r is None:
+            return None
+        self.w.add(np.asarray(r[1], dtype=np.float32))
+        return r[0]
+
     def finish(self, ok):
         self.fb.finish()
         self.w.close()
@@ -306,6 +364,14 @@ class ShapeKeyBake:
         f, pos = self.fb.step()
         self.results.append((f, np.asarray(pos, dtype=np.float32)))
         return f
+
+    def step_async(self):
+        """The modal bake's tick (FrameBaker.step_async): the frame baked, or None."""
+        r = self.fb.step_async()
+        if r is None:
+            return None
+        self.results.append((r[0], np.asarray(r[1], dtype=np.float32)))
+        return r[0]
 
     def finish(self, ok):
         self.fb.finish()

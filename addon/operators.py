@@ -490,10 +490,16 @@ class DEFORMKIT_OT_bake(_Base, bpy.types.Operator):
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
         try:
-            f = self._job.step()
+            f = self._job.step_async()  # the frame's solve runs in a worker thread
         except solver.DeformKitError as ex:
             return self._end(context, False, str(ex))
         fb = self._job.fb
+        if f is None:  # still solving: the window stays live, Esc answers
+            f, secs = fb.solving()
+            context.workspace.status_text_set(
+                "DeformKit bake: frame %d (%d/%d), solving %.1f s, Esc to cancel"
+                % (f, fb.i + 1, len(fb.frames), secs))
+            return {"RUNNING_MODAL"}
         context.window_manager.progress_update(fb.i)
         context.workspace.status_text_set("DeformKit bake: frame %d (%d/%d), Esc to cancel"
                                           % (f, fb.i, len(fb.frames)))

@@ -1215,6 +1215,88 @@ class _Worker:
         self.thread.start()
 
 
+# A bake's frame solve in a worker thread (solve(defer=True)): iterative methods run in
+# slices of about this long, resumed (a resumed slice continues exactly where the last one
+# stopped: the same result as one solve), so that Esc stops a frame within about a slice
+# (a Newton step of ARAP at 692k vertices is 1.5-3 s: one per slice there).
+BAKE_SLICE_MS = 250.0
+
+
+class _Sliced:
+    """The native result of a sliced solve: the last slice's positions and convergence, the
+    slices' iterations added up."""
+    __slots__ = ("positions", "iterations", "converged", "energy")
+
+    def __init__(self, res, iterations):
+        self.positions, self.converged = res.positions, res.converged
+        self.energy, self.iterations = res.energy, iterations
+
+
+class FrameSolve:
+    """A non-interactive solve (a bake's frame) running in a worker thread: done() polls it,
+    result(obj, d) (main thread, once done) gives what deformed_positions gives, cancel()
+    stops an iterative method's solve after its current slice (the object stays busy until
+    then: other solves of it wait for or skip the worker as for an interactive one)."""
+
+    def __init__(self, key, e, plan, iterative):
+        import threading
+        self.key, self.e, self.plan, self.cancelled = key, e, plan, False
+        self.result_, self.error, self.ms = None, None, 0.0
+        # what an interactive solve compares with its inputs: never equal (its result is not
+        # one to show, solver.solve then solves for itself)
+        self.plan = dict(plan, inputs=None)
+        native_solve, label = e.native.solve, plan["label"]
+        goal, kw = plan["goal"], dict(plan["kw"])
+        cap = int(kw.get("max_iterations") or 0)
+
+        def run():
+            t0 = time.perf_counter()
+            try:
+                if not iterative or cap <= 0:
+                    self.result_ = _native_call(label + " solve", native_solve, **goal, **kw)
+                else:
+                    done, its, first = 0, 1, True
+                    while True:
+                        k = max(1, min(its, cap - done))
+                        t1 = time.perf_counter()
+                        res = _native_call(label + " solve", native_solve, **goal,
+                                           **dict(kw, max_iterations=k, resume=not first))
+                        ms = (time.perf_counter() - t1) * 1000.0
+                        first, done = False, done + int(res.iterations)
+                        if res.converged or done >= cap or self.cancelled:
+                            break
+                        its = max(1, int(k * BAKE_SLICE_MS / max(ms, 1e-3)))
+                    self.result_ = _Sliced(res, done)
+            except DeformKitError as ex:
+                self.error = ex
+            except Exception as ex:  # a worker must not die silently
+                self.error = DeformKitError("%s solve: %s: %s" % (label, type(ex).__name__, ex))
+            self.ms = (time.perf_counter() - t0) * 1000.0
+        self.thread = threading.Thread(target=run, name="DeformKit frame solve", daemon=True)
+        self.thread.start()
+
+    def done(self):
+        return not self.thread.is_alive()
+
+    def cancel(self):
+        self.cancelled = True
+
+    def result(self, obj, d):
+        self.thread.join()
+        e = self.e
+        if e.worker is self:
+            e.worker = None
+        if self.error is not None:
+            raise self.error
+        if self.cancelled:
+            raise DeformKitError("bake cancelled")
+        if _cache.get(self.key) is not e:
+            raise DeformKitError("'%s' was re-bound during the bake: bake again" % d.name)
+        pos = _finish_solve(obj, d, e, self.key, self.plan, self.result_, self.ms)
+        f = geonodes.factor(obj, d)
+        return e.source + f * (pos - e.source)
+
+
 def _async_wanted(e, interactive, cold, write):
     if not (interactive and write and not cold):
         return False
@@ -1242,14 +1324,15 @@ def _wait_for_worker(key):
 
 
 def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_groups=False,
-          interactive=False, resume=False, check_topology=None):
+          interactive=False, resume=False, check_topology=None, defer=False):
     """Solves `d` for the targets' current placement. Returns the n x 3 positions, or None when
     nothing changed since the last solve (unless `force`). Raises DeformKitError.
     `interactive` (UI updates): an iterative method stops at the time budget and is marked
     pending; the timer in handlers.py continues it (`resume`: from where it stopped, as one
     long solve would) with further interactive solves. A slow interactive solve runs in a
     worker thread (_async_wanted): the call returns None at once, and a later call (the
-    refine timer's) installs its result."""
+    refine timer's) installs its result. `defer` (non-interactive solves: bakes): the native
+    solve starts in a worker thread and a FrameSolve is returned instead of positions."""
     if not d.bound:
         raise DeformKitError("not bound: press Bind")
     check_object(obj, d)
@@ -1275,6 +1358,8 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
     e = _entry_for(obj, d, check_groups, threaded=not cold and _use_threads(interactive),
                    full_check=full)
     w, e.worker = e.worker, None
+    if isinstance(w, FrameSolve):
+        w = None  # a bake's frame (finished): its owner takes the result (FrameSolve.result)
     shown = None
     T, source, inputs = _solve_inputs(obj, d, e, depsgraph)
     if w is not None:  # a worker's solve ended: its result shows now (if still wanted)
@@ -1299,6 +1384,10 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
         e.pending = True
         preview = _basis_preview(obj, d, e, T, inputs)
         return shown if preview is None else preview
+    if defer:
+        job = FrameSolve(key, e, plan, methods.get(d.method).iterative)
+        e.worker = job
+        return job
     t0 = time.perf_counter()
     res = _native_call(plan["label"] + " solve", e.native.solve, **plan["goal"], **plan["kw"])
     ms = (time.perf_counter() - t0) * 1000.0

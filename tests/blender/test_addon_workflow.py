@@ -388,7 +388,60 @@ def test_group_change_rebinds_in_place_in_a_thread():
             np.abs(np.asarray(got) - sync).max())
 
 
-for t in (test_option_change_rebinds_in_a_thread, test_group_change_rebinds_in_place_in_a_thread, test_falloff_reach_scales_with_the_model, test_point_cache_bake_shows_and_frees, test_shape_key_bake_shows_at_once_and_frees,
+def test_modal_bake_frames_solve_in_a_worker_thread():
+    """The modal bake solves each frame in a worker thread (solver.FrameSolve), an iterative
+    method in resumed slices (so that Esc stops a big mesh's frame within about a slice):
+    the cache is the one the synchronous bake writes; a bake stopped while a frame solves
+    leaves the object solving as before."""
+    from addon import bake, pc2
+    obj, d, e, handle = scene("ARAP")
+    e.location.z = 0.0
+    e.keyframe_insert("location", frame=1)
+    e.location.z = 0.6
+    e.location.x = 0.4
+    e.keyframe_insert("location", frame=6)
+    bpy.context.scene.frame_set(1)
+    sync_path = os.path.join(S.OUTPUT, "sync.pc2")
+    async_path = os.path.join(S.OUTPUT, "async.pc2")
+    bake.bake_pc2(bpy.context, obj, d, 1, 6, sync_path)
+    solver = S.addon.solver
+    slice_ms, quick = solver.BAKE_SLICE_MS, bake.QUICK_FRAME_S
+    solver.BAKE_SLICE_MS = 1e-6  # one iteration a slice: the most resumed slices
+    bake.QUICK_FRAME_S = 0.0  # a tick does not wait for the frame it starts
+    try:
+        job = bake.PC2Bake(bpy.context, obj, d, 1, 6, async_path)
+        ticks, busy_seen = 0, False
+        while not job.done:
+            f = job.step_async()
+            busy_seen |= f is None and job.fb.solving() is not None
+            ticks += 1
+        job.finish(True)
+    finally:
+        solver.BAKE_SLICE_MS, bake.QUICK_FRAME_S = slice_ms, quick
+    a = np.array([np.asarray(x) for x in pc2.read(sync_path)[1]])
+    b = np.array([np.asarray(x) for x in pc2.read(async_path)[1]])
+    R.check("the modal bake's frames were solved in a worker (ticks between)",
+            busy_seen and ticks >= 12, ticks)
+    R.check("its cache equals the synchronous bake's", a.shape == b.shape and
+            np.abs(np.asarray(a) - np.asarray(b)).max() < 1e-6,
+            (a.shape, b.shape, np.abs(np.asarray(a) - np.asarray(b)).max()))
+    # stopped while a frame solves (Esc): the worker's slices stop, the object stays usable
+    job = bake.PC2Bake(bpy.context, obj, d, 1, 6, async_path)
+    try:
+        job.fb.step_begin()
+        pending = job.fb.pending[1]
+    finally:
+        job.finish(False)
+    pending.thread.join(30)
+    R.check("a stopped bake's frame solve ends", not pending.thread.is_alive())
+    R.check("and leaves no file", not os.path.exists(async_path + ".part"))
+    bpy.context.scene.frame_set(6)
+    got = np.asarray(solver.deformed_positions(obj, d))
+    R.check("then frames solve as before", np.abs(got.ravel() - a[-1]).max() < 1e-5,
+            np.abs(got.ravel() - a[-1]).max())
+
+
+for t in (test_option_change_rebinds_in_a_thread, test_modal_bake_frames_solve_in_a_worker_thread, test_group_change_rebinds_in_place_in_a_thread, test_falloff_reach_scales_with_the_model, test_point_cache_bake_shows_and_frees, test_shape_key_bake_shows_at_once_and_frees,
           test_sidebar_and_handle_target, test_errors_with_a_way_out, test_keyed_factor_warns):
     R.run(t)
 R.finish()
