@@ -1193,26 +1193,35 @@ ASYNC_MIN_VERTICES = 200_000
 threaded_solves = [None]
 
 
+def _start_thread(owner, name, what, work):
+    """Runs work() in a daemon thread `owner.thread`: a failure becomes `owner.error` (a
+    DeformKitError naming `what`; a worker must not die silently), its time `owner.ms`."""
+    import threading
+
+    def guarded():
+        t0 = time.perf_counter()
+        try:
+            work()
+        except DeformKitError as ex:
+            owner.error = ex
+        except Exception as ex:
+            owner.error = DeformKitError("%s: %s: %s" % (what, type(ex).__name__, ex))
+        owner.ms = (time.perf_counter() - t0) * 1000.0
+    owner.thread = threading.Thread(target=guarded, name=name, daemon=True)
+    owner.thread.start()
+
+
 class _Worker:
     """One native solve off the main thread: its plan (what solve() prepared) and outcome."""
     __slots__ = ("plan", "thread", "result", "error", "ms")
 
     def __init__(self, e, plan):
-        import threading
         self.plan, self.result, self.error, self.ms = plan, None, None, 0.0
         native_solve, label, goal, kw = e.native.solve, plan["label"], plan["goal"], plan["kw"]
 
         def run():
-            t0 = time.perf_counter()
-            try:
-                self.result = _native_call(label + " solve", native_solve, **goal, **kw)
-            except DeformKitError as ex:
-                self.error = ex
-            except Exception as ex:  # a worker must not die silently
-                self.error = DeformKitError("%s solve: %s: %s" % (label, type(ex).__name__, ex))
-            self.ms = (time.perf_counter() - t0) * 1000.0
-        self.thread = threading.Thread(target=run, name="DeformKit solve", daemon=True)
-        self.thread.start()
+            self.result = _native_call(label + " solve", native_solve, **goal, **kw)
+        _start_thread(self, "DeformKit solve", label + " solve", run)
 
 
 # A bake's frame solve in a worker thread (solve(defer=True)): iterative methods run in
@@ -1239,7 +1248,6 @@ class FrameSolve:
     then: other solves of it wait for or skip the worker as for an interactive one)."""
 
     def __init__(self, key, e, plan, iterative):
-        import threading
         self.key, self.e, self.plan, self.cancelled = key, e, plan, False
         self.result_, self.error, self.ms = None, None, 0.0
         # what an interactive solve compares with its inputs: never equal (its result is not
@@ -1250,30 +1258,22 @@ class FrameSolve:
         cap = int(kw.get("max_iterations") or 0)
 
         def run():
-            t0 = time.perf_counter()
-            try:
-                if not iterative or cap <= 0:
-                    self.result_ = _native_call(label + " solve", native_solve, **goal, **kw)
-                else:
-                    done, its, first = 0, 1, True
-                    while True:
-                        k = max(1, min(its, cap - done))
-                        t1 = time.perf_counter()
-                        res = _native_call(label + " solve", native_solve, **goal,
-                                           **dict(kw, max_iterations=k, resume=not first))
-                        ms = (time.perf_counter() - t1) * 1000.0
-                        first, done = False, done + int(res.iterations)
-                        if res.converged or done >= cap or self.cancelled:
-                            break
-                        its = max(1, int(k * BAKE_SLICE_MS / max(ms, 1e-3)))
-                    self.result_ = _Sliced(res, done)
-            except DeformKitError as ex:
-                self.error = ex
-            except Exception as ex:  # a worker must not die silently
-                self.error = DeformKitError("%s solve: %s: %s" % (label, type(ex).__name__, ex))
-            self.ms = (time.perf_counter() - t0) * 1000.0
-        self.thread = threading.Thread(target=run, name="DeformKit frame solve", daemon=True)
-        self.thread.start()
+            if not iterative or cap <= 0:
+                self.result_ = _native_call(label + " solve", native_solve, **goal, **kw)
+            else:
+                done, its, first = 0, 1, True
+                while True:
+                    k = max(1, min(its, cap - done))
+                    t1 = time.perf_counter()
+                    res = _native_call(label + " solve", native_solve, **goal,
+                                       **dict(kw, max_iterations=k, resume=not first))
+                    ms = (time.perf_counter() - t1) * 1000.0
+                    first, done = False, done + int(res.iterations)
+                    if res.converged or done >= cap or self.cancelled:
+                        break
+                    its = max(1, int(k * BAKE_SLICE_MS / max(ms, 1e-3)))
+                self.result_ = _Sliced(res, done)
+        _start_thread(self, "DeformKit frame solve", label + " solve", run)
 
     def done(self):
         return not self.thread.is_alive()

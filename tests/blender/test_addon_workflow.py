@@ -271,6 +271,23 @@ def test_falloff_reach_scales_with_the_model():
     R.check("a Range typed in is used", abs(float(np.asarray(native.ranges)[0]) - 0.123) < 1e-6)
 
 
+def shown_meanwhile_then_installed(obj, before):
+    """While a background re-bind of obj's deformer runs: the last result stays shown and
+    the panel says so; then waits for it (the poll timer's work) and returns what shows."""
+    import time
+    solver = S.addon.solver
+    R.check("meanwhile the last result stays shown",
+            np.abs(S.evaluated_positions(obj) - before).max() < 1e-6)
+    out = draw(ui.DEFORMKIT_PT_modifiers, obj)
+    R.check("the panel says it is re-binding", "re-binding" in text(out), text(out))
+    t0 = time.time()
+    while solver.rebinding() and time.time() - t0 < 30:
+        time.sleep(0.01)
+        S.handlers.poll_rebinds()
+    bpy.context.view_layer.update()
+    return S.evaluated_positions(obj)
+
+
 def test_option_change_rebinds_in_a_thread():
     """In the UI an option or method change re-binds in a worker thread (it froze the
     handler for 0.4-0.75 s at 43k): the last result stays shown and the panel says
@@ -288,16 +305,7 @@ def test_option_change_rebinds_in_a_thread():
         bpy.context.view_layer.update()
         R.check("a method change starts a background re-bind",
                 solver.rebinding(obj, d) is not None)
-        R.check("meanwhile the last result stays shown",
-                np.abs(S.evaluated_positions(obj) - before).max() < 1e-6)
-        out = draw(ui.DEFORMKIT_PT_modifiers, obj)
-        R.check("the panel says it is re-binding", "re-binding" in text(out), text(out))
-        t0 = time.time()
-        while solver.rebinding() and time.time() - t0 < 30:
-            time.sleep(0.01)
-            S.handlers.poll_rebinds()
-        bpy.context.view_layer.update()
-        threaded = S.evaluated_positions(obj)
+        threaded = shown_meanwhile_then_installed(obj, before)
     finally:
         solver.threaded_rebinds[0] = None
     R.check("the re-bind finished and is installed", not solver.rebinding() and
@@ -343,16 +351,7 @@ def test_group_change_rebinds_in_place_in_a_thread():
         bpy.context.view_layer.update()
         R.check("a group change starts an in-place re-bind in a thread",
                 solver._in_place_rebind(key) is not None)
-        R.check("meanwhile the last result stays shown",
-                np.abs(S.evaluated_positions(obj) - before).max() < 1e-6)
-        out = draw(ui.DEFORMKIT_PT_modifiers, obj)
-        R.check("the panel says it is re-binding", "re-binding" in text(out), text(out))
-        t0 = time.time()
-        while solver.rebinding() and time.time() - t0 < 30:
-            time.sleep(0.01)
-            S.handlers.poll_rebinds()
-        bpy.context.view_layer.update()
-        threaded = S.evaluated_positions(obj)
+        threaded = shown_meanwhile_then_installed(obj, before)
         R.check("the same native object, re-bound", solver._cache[key].native is native and
                 not d.status_is_error, d.status)
         # again, and a frame's (non-interactive) solve right away: it waits for the worker
