@@ -1,4 +1,5 @@
-/* Tests of dk_eigs_smallest: sphere harmonics, dense LAPACK reference, band-by-band mode
+/* Tests of dk_eigs_smallest: sphere harmonics, dense LAPACK reference, identical disconnected
+ * copies (full multiplicities), band-by-band mode
  * against single-band and dense results (no missing or duplicated eigenvalues), argument
  * checks, progress and cancellation. The meshes and operators are built here (icosphere,
  * cotangent Laplacian, barycentric mass) so the test depends only on the numerics layer. */
