@@ -503,6 +503,25 @@ static int cmp_double(const void *a, const void *b)
     return (x > y) - (x < y);
 }
 
+typedef struct progress_log {
+    int calls, cancel_at; /* cancel at the cancel_at-th report of a new fraction (0: never) */
+    double last;
+    int monotone, reports;
+} progress_log;
+
+/* The solver reports after each band and repeats the same fraction within a band (so that
+ * a cancel lands quickly); `reports` counts the new fractions. */
+static int progress_cb(void *user, double fraction)
+{
+    progress_log *pl = user;
+    if (fraction < pl->last || fraction < 0 || fraction > 1) pl->monotone = 0;
+    if (pl->calls == 0 || fraction != pl->last)
+        pl->reports++;
+    pl->last = fraction;
+    pl->calls++;
+    return pl->cancel_at > 0 && pl->reports >= pl->cancel_at;
+}
+
 /* `small` copies of a bumped icosphere (162 vertices: the dense path), `medium` copies of a
  * finer one (642: the sparse path) and one big bumped sphere (642), checked for each k of
  * `ks` against the merged dense spectra of the three shapes. */
@@ -584,6 +603,25 @@ static void check_copies(int small, int medium, const int *ks, int nk)
                 const double orth = orthonormality_error(all.mass, vec, all.n, k);
                 CHECK_MSG(res < 1e-7, "copies, k %d: residual %g", k, res);
                 CHECK_MSG(orth < 1e-8, "copies, k %d: M-orthonormality error %g", k, orth);
+                if (t == 0) {
+                    /* progress and cancellation on the split path: reports monotone up to
+                     * 1; a cancel at the first question (the counts) or at a later one
+                     * (inside a component) fails cleanly */
+                    progress_log pl = {0, 0, 0.0, 1, 0};
+                    opt.progress = progress_cb;
+                    opt.progress_user = &pl;
+                    CHECK(dk_eigs_smallest(all.l, all.mass, k, &opt, val, vec, &conv, &err) ==
+                          DK_OK);
+                    CHECK(pl.monotone && pl.last == 1.0 && pl.reports >= 2);
+                    for (int at = 1; at <= 3; at++) {
+                        progress_log cancel = {0, at, 0.0, 1, 0};
+                        opt.progress_user = &cancel;
+                        CHECK(dk_eigs_smallest(all.l, all.mass, k, &opt, val, vec, &conv,
+                                               &err) == DK_ERR_CANCELLED);
+                        CHECK(err.status == DK_ERR_CANCELLED && conv == 0);
+                    }
+                    opt.progress = NULL;
+                }
                 printf("identical copies (%d + %d): n=%d k=%d: residual %.2e, orthonormality %.2e\n",
                        SMALL, MEDIUM, all.n, k, res, orth);
             }
@@ -673,25 +711,6 @@ static void test_bands_equal_single(void)
     }
     free(v1); free(v2); free(x1); free(x2);
     problem_free(&p);
-}
-
-typedef struct progress_log {
-    int calls, cancel_at; /* cancel at the cancel_at-th report of a new fraction (0: never) */
-    double last;
-    int monotone, reports;
-} progress_log;
-
-/* The solver reports after each band and repeats the same fraction within a band (so that
- * a cancel lands quickly); `reports` counts the new fractions. */
-static int progress_cb(void *user, double fraction)
-{
-    progress_log *pl = user;
-    if (fraction < pl->last || fraction < 0 || fraction > 1) pl->monotone = 0;
-    if (pl->calls == 0 || fraction != pl->last)
-        pl->reports++;
-    pl->last = fraction;
-    pl->calls++;
-    return pl->cancel_at > 0 && pl->reports >= pl->cancel_at;
 }
 
 static void test_progress_and_cancel(void)
