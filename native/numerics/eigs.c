@@ -25,6 +25,9 @@
  * missing copies; a surplus (a duplicate) is an error. Pairs above tau are dropped (the next
  * band finds them again), so everything accepted is certified complete below its tau.
  *
+ * A disconnected L is split by component first, each solved as below ("disconnected L",
+ * near the end of this file).
+ *
  * Many eigenpairs (Vallet and Levy 2008): when k > band_size, later bands use a shift
  * sigma_b placed beyond the last accepted eigenvalue lambda_top, from the local spacing delta
  * of the accepted ones, so that the window of the nev eigenvalues nearest sigma_b reaches
@@ -795,13 +798,14 @@ static dk_status certify_band(eig_ctx *c, dk_cholesky *chol, double sigma, const
     }
 }
 
-dk_status dk_eigs_smallest(const dk_sparse *l, const double *mass, int k,
-                           const dk_eigs_options *opt, double *eigenvalues,
-                           double *eigenvectors, int *n_converged, dk_error *err)
+/* The k smallest pairs of a connected L (or one whose components the caller could not
+ * split off): the band-by-band search of the file comment. Inputs are checked. */
+static dk_status smallest_connected(const dk_sparse *l, const double *mass, int k,
+                                    const dk_eigs_options *opt, double *eigenvalues,
+                                    double *eigenvectors, int *n_converged, dk_error *err)
 {
     if (n_converged) *n_converged = 0;
-    dk_status st = check_inputs(l, mass, k, eigenvalues, eigenvectors, err);
-    if (st != DK_OK) return st;
+    dk_status st = DK_OK;
     dk_eigs_options o;
     dk_eigs_options_default(&o);
     if (opt) {
@@ -1011,5 +1015,450 @@ done:
     free(bd.val);
     free(bd.vec);
     ctx_free(&c);
+    return st;
+}
+
+/* ------------------------------------------------------------ disconnected L ----------- */
+
+/* A disconnected mesh (the ogre: 44 components, 18 of them identical) has a block-diagonal
+ * problem whose spectrum is the union of its components' spectra: eigenvalue 0 once per
+ * component, and every eigenvalue of a component repeated once per identical copy. Lanczos
+ * finds one vector per eigenspace (the rest only through rounding), so the band search
+ * above, which relies on deflated reruns to pick up the missing copies, was left short:
+ * the ogre subdivided twice failed its first band ("82 eigenvalues below 0.311", 33 of
+ * them missing after the first run: the 44-fold eigenvalue 0, with a shift -1e-6 mean
+ * that is only ~9 lambda_1 below it at that size; two deflated runs found 20 and 8, and
+ * the check gave up after its third count), and 40 copies of a sphere failed a later band
+ * at a 40-fold cluster. These multiplicities are the structure of the problem, not a
+ * numerical accident, so the problem is split along it: each component is solved on its
+ * own by the band search (which still handles a component's own multiple eigenvalues, a
+ * sphere's for instance, as before), and how many of the k pairs each component holds is
+ * read off the inertia: per component, the negative pivots of LDL' of L_c - tau M_c count
+ * its eigenvalues below tau, and tau is moved (regula falsi on the counts, every third
+ * step a bisection) until the counts sum to k. When the k-th eigenvalue is a copy shared
+ * by several components (the counts jump past k over an interval narrower than 1e-10
+ * relative), the copies are given to the components in order: which copies are taken is
+ * arbitrary, as a basis inside an eigenspace cut by k is anyway. Components of at most
+ * COMPONENT_DENSE_MAX vertices (or asked for more than half their spectrum) are solved
+ * densely. The vectors are zero outside their component, hence exactly M-orthogonal
+ * across components. Cost: one LDL' of every component per count (a few counts; one when a
+ * single component holds every eigenvalue below the first guess, as with the loose
+ * vertices' decoupled modes of docs/methods/eigen.md), then the components' own searches. */
+#define COMPONENT_DENSE_MAX 400
+
+typedef struct component {
+    dk_index n, first;  /* vertices: order[first .. first + n), ascending               */
+    dk_sparse l;        /* its block of L in local indices (sparse components)          */
+    double *mass;
+    double *dense_val;  /* all n eigenvalues (dense components)                         */
+    eig_ctx ctx;        /* the counting factorizations (sparse components)              */
+    int ctx_ready, cnt, cnt_lo, cnt_hi, k;
+} component;
+
+static int component_dense(const component *cp)
+{
+    return cp->n <= COMPONENT_DENSE_MAX;
+}
+
+/* All eigenpairs of a component densely (C = M^-1/2 L M^-1/2, x = M^-1/2 y): `val` gets
+ * n ascending eigenvalues, `vec` (may be NULL: values only) n x n vectors. */
+static dk_status component_dense_solve(const component *cp, double *val, double *vec,
+                                       dk_error *err)
+{
+    const dk_index n = cp->n;
+    double *a = calloc((size_t)n * (size_t)n, sizeof *a);
+    if (!a) return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: out of memory (dense "
+                                "component of %d vertices)", (int)n);
+    for (dk_index j = 0; j < n; j++)
+        for (dk_index p = cp->l.col_start[j]; p < cp->l.col_start[j + 1]; p++) {
+            const dk_index i = cp->l.row_index[p];
+            a[(size_t)j * n + i] = cp->l.values[p] / sqrt(cp->mass[i] * cp->mass[j]);
+        }
+    const lapack_int info = LAPACKE_dsyevd(LAPACK_COL_MAJOR, vec ? 'V' : 'N', 'U', n, a, n,
+                                           val);
+    if (info != 0) {
+        free(a);
+        return dk_error_set(err, DK_ERR_NUMERIC, "eigs: dense eigensolver failed on a "
+                            "component of %d vertices (LAPACK dsyevd info %d)", (int)n,
+                            (int)info);
+    }
+    if (vec)
+        for (dk_index j = 0; j < n; j++)
+            for (dk_index i = 0; i < n; i++)
+                vec[(size_t)j * n + i] = a[(size_t)j * n + i] / sqrt(cp->mass[i]);
+    free(a);
+    return DK_OK;
+}
+
+/* Each component's count of eigenvalues below tau (cp->cnt); `*total` their sum. */
+static dk_status count_below_tau(component *cp, int nc, double tau, int *total, dk_error *err)
+{
+    *total = 0;
+    for (int c = 0; c < nc; c++) {
+        component *q = cp + c;
+        if (q->dense_val) {
+            q->cnt = count_below(q->dense_val, (int)q->n, tau);
+        } else {
+            if (!q->ctx_ready) {
+                q->ctx.l = &q->l;
+                q->ctx.mass = q->mass;
+                q->ctx.n = q->n;
+                q->ctx_ready = 1;
+                dk_status st = ctx_build_shifted(&q->ctx, err);
+                if (st != DK_OK) return st;
+            }
+            dk_index neg = 0;
+            dk_status st = ctx_factor(&q->ctx, tau, 1, &neg, err);
+            if (st != DK_OK)
+                return dk_error_prefix(err, "eigs: counting the eigenvalues of a component of "
+                                       "%d vertices below %g", (int)q->n, tau);
+            q->cnt = (int)neg;
+        }
+        *total += q->cnt;
+    }
+    return DK_OK;
+}
+
+typedef struct sub_progress {
+    dk_progress_fn fn;
+    void *user;
+    double done, share;
+} sub_progress;
+
+static int sub_progress_cb(void *user, double fraction)
+{
+    const sub_progress *p = user;
+    return p->fn(p->user, p->done + p->share * fraction);
+}
+
+typedef struct val_index {
+    double v;
+    int i;
+} val_index;
+
+static int cmp_val_index(const void *a, const void *b)
+{
+    const val_index *x = a, *y = b;
+    if (x->v != y->v) return x->v < y->v ? -1 : 1;
+    return (x->i > y->i) - (x->i < y->i);
+}
+
+static dk_status smallest_by_components(const dk_sparse *l, const double *mass, int k,
+                                        const dk_eigs_options *opt, const dk_index *label,
+                                        int nc, double *eigenvalues, double *eigenvectors,
+                                        dk_error *err)
+{
+    const dk_index n = l->n_rows;
+    dk_status st = DK_OK;
+    component *cp = calloc((size_t)nc, sizeof *cp);
+    dk_index *order = malloc((size_t)n * sizeof *order);
+    dk_index *loc = malloc((size_t)n * sizeof *loc);
+    double *tmp = NULL;
+    val_index *perm = NULL;
+    if (!cp || !order || !loc) {
+        st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: out of memory (%d components)", nc);
+        goto done;
+    }
+    /* the vertices of each component, ascending (counting sort by label) */
+    for (dk_index v = 0; v < n; v++) cp[label[v]].n++;
+    for (int c = 1; c < nc; c++) cp[c].first = cp[c - 1].first + cp[c - 1].n;
+    for (int c = 0; c < nc; c++) cp[c].k = 0; /* (used as a fill counter below) */
+    for (dk_index v = 0; v < n; v++) {
+        component *q = cp + label[v];
+        loc[v] = q->k;
+        order[q->first + q->k++] = v;
+    }
+    double area = 0.0, gersh = 0.0;
+    for (dk_index v = 0; v < n; v++) area += mass[v];
+    for (int c = 0; c < nc; c++) {
+        component *q = cp + c;
+        q->k = 0;
+        int64_t nnz = 0;
+        for (dk_index a = 0; a < q->n; a++) {
+            const dk_index j = order[q->first + a];
+            nnz += l->col_start[j + 1] - l->col_start[j];
+        }
+        q->l.n_rows = q->l.n_cols = q->n;
+        q->l.col_start = malloc(((size_t)q->n + 1) * sizeof(dk_index));
+        q->l.row_index = malloc((size_t)(nnz > 0 ? nnz : 1) * sizeof(dk_index));
+        q->l.values = malloc((size_t)(nnz > 0 ? nnz : 1) * sizeof(double));
+        q->mass = malloc((size_t)q->n * sizeof(double));
+        if (!q->l.col_start || !q->l.row_index || !q->l.values || !q->mass) {
+            st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: out of memory (components)");
+            goto done;
+        }
+        dk_index w = 0;
+        for (dk_index a = 0; a < q->n; a++) {
+            const dk_index j = order[q->first + a];
+            q->l.col_start[a] = w;
+            q->mass[a] = mass[j];
+            for (dk_index p = l->col_start[j]; p < l->col_start[j + 1]; p++) {
+                q->l.row_index[w] = loc[l->row_index[p]];
+                q->l.values[w++] = l->values[p];
+                if (l->row_index[p] == j) gersh = fmax(gersh, 2.0 * fabs(l->values[p]) / mass[j]);
+            }
+        }
+        q->l.col_start[q->n] = w;
+        if (component_dense(q)) {
+            q->dense_val = malloc((size_t)q->n * sizeof(double));
+            if (!q->dense_val) {
+                st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: out of memory");
+                goto done;
+            }
+            st = component_dense_solve(q, q->dense_val, NULL, err);
+            if (st != DK_OK) goto done;
+        }
+    }
+
+    /* ---- tau with k eigenvalues below it: the share of each component */
+    {
+        int clo = 0, chi = 0;
+        double lo = 0.0; /* L is positive semidefinite: nothing below 0 */
+        double hi = 8.0 * PI * k / area; /* twice Weyl's lambda_k ~ 4 pi k / area */
+        const double top = 1.01 * gersh + DBL_MIN;
+        if (hi > top) hi = top;
+        for (int it = 0;; it++) {
+            if (opt->progress && opt->progress(opt->progress_user, 0.0)) {
+                st = dk_error_set(err, DK_ERR_CANCELLED, "eigs: cancelled");
+                goto done;
+            }
+            st = count_below_tau(cp, nc, hi, &chi, err);
+            if (st != DK_OK) goto done;
+            for (int c = 0; c < nc; c++) cp[c].cnt_hi = cp[c].cnt;
+            if (chi >= k) break;
+            if (hi >= top || it > 64) {
+                st = dk_error_set(err, DK_ERR_INTERNAL, "eigs: only %d eigenvalues below the "
+                                  "Gershgorin bound %g, k is %d", chi, hi, k);
+                goto done;
+            }
+            lo = hi;
+            clo = chi;
+            for (int c = 0; c < nc; c++) cp[c].cnt_lo = cp[c].cnt_hi;
+            hi = fmin(2.0 * hi, top);
+        }
+        /* One component holding every eigenvalue below hi (the loose vertices' modes of
+         * docs/methods/eigen.md sit above a Gershgorin bound): it alone holds the k
+         * smallest, no need to pin tau down */
+        int holders = 0;
+        for (int c = 0; c < nc; c++) holders += cp[c].cnt_hi > 0;
+        if (holders == 1)
+            for (int c = 0; c < nc; c++)
+                if (cp[c].cnt_hi > 0) {
+                    cp[c].cnt_hi = k;
+                    chi = k;
+                }
+        for (int it = 0; chi != k && hi - lo > 1e-10 * hi; it++) {
+            if (opt->progress && opt->progress(opt->progress_user, 0.0)) {
+                st = dk_error_set(err, DK_ERR_CANCELLED, "eigs: cancelled");
+                goto done;
+            }
+            double t = 0.5 * (lo + hi);
+            if (it % 3 != 2) { /* regula falsi on the counts, kept inside, every third bisection */
+                t = lo + (hi - lo) * ((k + 0.5 - clo) / (double)(chi - clo));
+                t = fmin(fmax(t, lo + 0.02 * (hi - lo)), hi - 0.02 * (hi - lo));
+            }
+            int ct = 0;
+            st = count_below_tau(cp, nc, t, &ct, err);
+            if (st != DK_OK) goto done;
+            if (ct >= k) {
+                hi = t;
+                chi = ct;
+                for (int c = 0; c < nc; c++) cp[c].cnt_hi = cp[c].cnt;
+            } else {
+                lo = t;
+                clo = ct;
+                for (int c = 0; c < nc; c++) cp[c].cnt_lo = cp[c].cnt;
+            }
+        }
+        /* the factors were for counting only */
+        for (int c = 0; c < nc; c++)
+            if (cp[c].ctx_ready) {
+                ctx_free(&cp[c].ctx);
+                memset(&cp[c].ctx, 0, sizeof cp[c].ctx);
+                cp[c].ctx_ready = 0;
+            }
+        if (chi == k) {
+            for (int c = 0; c < nc; c++) cp[c].k = cp[c].cnt_hi;
+        } else { /* the k-th eigenvalue is shared: its copies go to components in order */
+            int rem = k - clo;
+            for (int c = 0; c < nc; c++) {
+                const int extra = cp[c].cnt_hi - cp[c].cnt_lo;
+                const int add = extra < rem ? extra : rem;
+                cp[c].k = cp[c].cnt_lo + add;
+                rem -= add;
+            }
+        }
+    }
+
+    /* ---- each component's pairs, in the output columns [off, off + k_c): computed compact
+     * (n_c x k_c, at the start of that region) then spread to full columns in place */
+    int off = 0;
+    for (int c = 0; c < nc; c++) {
+        component *q = cp + c;
+        if (q->k == 0) continue;
+        const dk_index m = q->n;
+        double *base = eigenvectors + (size_t)off * n;
+        if (q->dense_val || q->k > m / 2) {
+            tmp = malloc((size_t)m * (size_t)m * sizeof(double));
+            double *val = q->dense_val ? q->dense_val : malloc((size_t)m * sizeof(double));
+            if (!tmp || !val) {
+                if (val != q->dense_val) free(val);
+                st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: out of memory (dense "
+                                  "component of %d vertices)", (int)m);
+                goto done;
+            }
+            st = component_dense_solve(q, val, tmp, err);
+            if (st == DK_OK) {
+                memcpy(eigenvalues + off, val, (size_t)q->k * sizeof(double));
+                memcpy(base, tmp, (size_t)m * (size_t)q->k * sizeof(double));
+            }
+            if (val != q->dense_val) free(val);
+            free(tmp);
+            tmp = NULL;
+            if (st != DK_OK) goto done;
+        } else {
+            dk_eigs_options o = *opt;
+            sub_progress sp = {opt->progress, opt->progress_user, (double)off / k,
+                               (double)q->k / k};
+            if (opt->progress) {
+                o.progress = sub_progress_cb;
+                o.progress_user = &sp;
+            }
+            st = smallest_connected(&q->l, q->mass, q->k, &o, eigenvalues + off, base, NULL,
+                                    err);
+            if (st != DK_OK) {
+                dk_error_prefix(err, "eigs: component %d of %d (%d vertices, %d pairs)", c + 1,
+                                nc, (int)m, q->k);
+                goto done;
+            }
+        }
+        /* Spread: column j moves from base + j m to base + j n, row a to row order[..]. Done
+         * from the last entry backwards, every write lands at or beyond the entries still
+         * to be read (j n + r >= j m + a for the row r of local a, as r >= a). */
+        for (int j = q->k - 1; j >= 0; j--) {
+            const double *src = base + (size_t)j * m;
+            double *dst = base + (size_t)j * n;
+            dk_index a = m - 1;
+            for (dk_index r = n - 1; r >= 0; r--) {
+                if (a >= 0 && order[q->first + a] == r) {
+                    const double x = src[a--];
+                    dst[r] = x;
+                } else {
+                    dst[r] = 0.0;
+                }
+            }
+        }
+        off += q->k;
+        if (opt->progress && opt->progress(opt->progress_user, (double)off / k)) {
+            st = dk_error_set(err, DK_ERR_CANCELLED, "eigs: cancelled after %d of %d "
+                              "eigenpairs", off, k);
+            goto done;
+        }
+    }
+    if (off != k) {
+        st = dk_error_set(err, DK_ERR_INTERNAL, "eigs: components hold %d pairs, not %d", off, k);
+        goto done;
+    }
+
+    /* ---- ascending overall: a permutation of the columns, applied cycle by cycle */
+    perm = malloc((size_t)k * sizeof *perm);
+    tmp = malloc((size_t)n * sizeof(double));
+    if (!perm || !tmp) {
+        st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: out of memory");
+        goto done;
+    }
+    for (int j = 0; j < k; j++) {
+        perm[j].v = eigenvalues[j];
+        perm[j].i = j;
+    }
+    qsort(perm, (size_t)k, sizeof *perm, cmp_val_index);
+    for (int j = 0; j < k; j++) eigenvalues[j] = perm[j].v;
+    for (int s0 = 0; s0 < k; s0++) {
+        if (perm[s0].i < 0 || perm[s0].i == s0) continue;
+        memcpy(tmp, eigenvectors + (size_t)s0 * n, (size_t)n * sizeof(double));
+        int j = s0;
+        for (;;) {
+            const int from = perm[j].i;
+            perm[j].i = -1;
+            if (from == s0) {
+                memcpy(eigenvectors + (size_t)j * n, tmp, (size_t)n * sizeof(double));
+                break;
+            }
+            memcpy(eigenvectors + (size_t)j * n, eigenvectors + (size_t)from * n,
+                   (size_t)n * sizeof(double));
+            j = from;
+        }
+    }
+done:
+    if (cp)
+        for (int c = 0; c < nc; c++) {
+            free(cp[c].l.col_start);
+            free(cp[c].l.row_index);
+            free(cp[c].l.values);
+            free(cp[c].mass);
+            free(cp[c].dense_val);
+            if (cp[c].ctx_ready) ctx_free(&cp[c].ctx);
+        }
+    free(cp);
+    free(order);
+    free(loc);
+    free(tmp);
+    free(perm);
+    return st;
+}
+
+/* Connected components of L's graph: `label` (n) gets each vertex's, `*nc` their number. */
+static dk_status components_of(const dk_sparse *l, dk_index *label, int *nc, dk_error *err)
+{
+    const dk_index n = l->n_rows;
+    dk_index *queue = malloc((size_t)n * sizeof *queue);
+    if (!queue) return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: out of memory");
+    for (dk_index v = 0; v < n; v++) label[v] = -1;
+    int c = 0;
+    for (dk_index s = 0; s < n; s++) {
+        if (label[s] >= 0) continue;
+        dk_index head = 0, tail = 0;
+        queue[tail++] = s;
+        label[s] = c;
+        while (head < tail) {
+            const dk_index j = queue[head++];
+            for (dk_index p = l->col_start[j]; p < l->col_start[j + 1]; p++) {
+                const dk_index i = l->row_index[p];
+                if (label[i] < 0) {
+                    label[i] = c;
+                    queue[tail++] = i;
+                }
+            }
+        }
+        c++;
+    }
+    free(queue);
+    *nc = c;
+    return DK_OK;
+}
+
+dk_status dk_eigs_smallest(const dk_sparse *l, const double *mass, int k,
+                           const dk_eigs_options *opt, double *eigenvalues,
+                           double *eigenvectors, int *n_converged, dk_error *err)
+{
+    if (n_converged) *n_converged = 0;
+    dk_status st = check_inputs(l, mass, k, eigenvalues, eigenvectors, err);
+    if (st != DK_OK) return st;
+    dk_index *label = malloc((size_t)l->n_rows * sizeof *label);
+    if (!label) return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "eigs: out of memory");
+    int nc = 1;
+    st = components_of(l, label, &nc, err);
+    if (st == DK_OK && nc == 1) {
+        free(label);
+        return smallest_connected(l, mass, k, opt, eigenvalues, eigenvectors, n_converged, err);
+    }
+    if (st == DK_OK) {
+        dk_eigs_options o;
+        dk_eigs_options_default(&o);
+        if (opt) o = *opt;
+        st = smallest_by_components(l, mass, k, &o, label, nc, eigenvalues, eigenvectors, err);
+        if (st == DK_OK && n_converged) *n_converged = k;
+    }
+    free(label);
     return st;
 }
