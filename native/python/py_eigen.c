@@ -121,6 +121,8 @@ static PyObject *solve_motion(dk_py_method *self, PyObject *kw, const char *cont
 
 static PyObject *get_skeleton(PyObject *obj, void *c)
 {
+    if (!dk_py_method_readable((dk_py_method *)obj))
+        return NULL;
     dk_py_method *self = (dk_py_method *)obj;
     const dk_index n = self->mesh->n_vertices;
     double *out;
@@ -133,18 +135,24 @@ static PyObject *get_skeleton(PyObject *obj, void *c)
 
 static PyObject *get_m(PyObject *obj, void *c)
 {
+    if (!dk_py_method_readable((dk_py_method *)obj))
+        return NULL;
     (void)c;
     return PyLong_FromLong(dk_eigen_m(((dk_py_method *)obj)->native));
 }
 
 static PyObject *get_delta3(PyObject *obj, void *c)
 {
+    if (!dk_py_method_readable((dk_py_method *)obj))
+        return NULL;
     (void)c;
     return PyFloat_FromDouble(dk_eigen_delta3(((dk_py_method *)obj)->native));
 }
 
 static PyObject *get_eigenvalues(PyObject *obj, void *c)
 {
+    if (!dk_py_method_readable((dk_py_method *)obj))
+        return NULL;
     dk_py_method *self = (dk_py_method *)obj;
     const int k = dk_eigen_k(self->native);
     double *out;
@@ -157,6 +165,8 @@ static PyObject *get_eigenvalues(PyObject *obj, void *c)
 
 static PyObject *get_weights(PyObject *obj, void *c)
 {
+    if (!dk_py_method_readable((dk_py_method *)obj))
+        return NULL;
     dk_py_method *self = (dk_py_method *)obj;
     const dk_index n = self->mesh->n_vertices;
     double *out;
