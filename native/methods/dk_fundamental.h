@@ -28,9 +28,15 @@
  *
  * Degenerate triangles (area below 1e-14 of the longest edge squared) have no frame: they
  * take no part in either energy. Boundary edges have one triangle's E_x term and no E_f.
- * Non-manifold edges are refused. Every connected component needs a constraint, and a
- * component held by fewer than three vertices needs an orientation constraint; the error
- * names the component by one of its vertices.
+ * Non-manifold edges are refused. A component without any constraint is held at rest
+ * (dk_constraints.h). Faces that meet at a vertex only (a part pinched onto the surface at
+ * its corners) or across a degenerate triangle are joined by no frame equation: at each
+ * such vertex a weak "bridge" ties their frames to the rest frames' relative rotation, so
+ * the part turns with its neighbours instead of leaving the system singular (zero at rest
+ * and for affine motions of the whole; see fundamental.c, pieces_and_bridges). A part that
+ * only degenerate triangles join to the rest needs a constraint of its own: the error names
+ * a vertex of it and the triangle. A part held by fewer than four vertices spanning space
+ * and no prescribed frame has its free shear regularized (see the docs).
  *
  * The energy a solve reports is w E_f + E_x at the returned positions and frames;
  * dk_fundamental_energy evaluates it for given positions with the last solve's frames.
