@@ -12,11 +12,40 @@
 
 #include "dk_cholesky.h"
 #include "dk_operators.h"
+#include "dk_progress.h"
 #include "dk_sparse.h"
 
 #define COT_MIN 1e-2
 #define COT_MAX 1e2
 #define PI 3.14159265358979323846
+
+/* The phases of a bind and of a rebind (dk_progress.h), weighted by their cost in seconds
+ * measured on the ogre subdivided once (248,324 vertices, 1.56M unknowns; bench_scale.py's
+ * ogre scenario: the lowest 10% fixed, one handle, so a 7-column transform basis) on the
+ * shared 2-core machine (load ~1.4), timed between the callback's reports: 17.7 s in all.
+ * On the 692k armadillo (load ~6, no basis: it would pass 256 MB) the same phases took
+ * 4.8, 0.25, 18.0, 42.0 and 114.4 s of 179 s, about the same shares; the factorization is
+ * the longest stretch without a report. Within "forms": the faces ~0.2 of it, the edge
+ * rotations ~0.7 (asked every few thousand edges), the pieces ~0.1. The rebind's phases
+ * are the bind's from FR_PHASE_CONSTRAINTS on, in the same order. */
+enum {
+    FR_PHASE_CONSTRAINTS = 0, /* the constraints, the numbering, the pieces' check          */
+    FR_PHASE_ASSEMBLE = 1,    /* the energy's matrices, two passes over the residuals       */
+    FR_PHASE_ANALYZE = 2,     /* CHOLMOD's symbolic analysis (uninterruptible)             */
+    FR_PHASE_FACTORIZE = 3,   /* CHOLMOD's numeric factorization (uninterruptible)         */
+    FR_PHASE_BASIS = 4        /* the transform basis: its right-hand sides and solves      */
+};
+static const dk_progress_phase fr_bind_phases[] = {
+    {"forms", 0.72},       /* the fundamental forms, the pieces and bridges              */
+    {"constraints", 0.02}, /* FR_PHASE_CONSTRAINTS ...                                  */
+    {"assemble", 2.30},
+    {"analyze", 3.83},
+    {"factorize", 10.0},
+    {"basis", 0.80}};
+static const dk_progress_phase fr_rebind_phases[] = {
+    {"constraints", 0.02}, {"assemble", 2.30}, {"analyze", 3.83}, {"factorize", 10.0},
+    {"basis", 0.80}};
+#define FR_BIND_PHASE_BASE 1 /* FR_PHASE_CONSTRAINTS in fr_bind_phases */
 
 /* What depends on the constraints, replaced as a whole by rebind. */
 typedef struct elim {
@@ -67,7 +96,16 @@ struct dk_fundamental {
                                   rest sum 3, target sum 3, cross moments 9) and R (9)       */
     double w_scaled;           /* w times the mean edge length squared: E_f is dimensionless
                                   and E_x a squared length, so this keeps w scale-free      */
+    /* during a bind or rebind only (NULL otherwise): its progress reporter, and the index
+     * of FR_PHASE_CONSTRAINTS in its phase table */
+    dk_progress *prog;
+    int prog_base;
 };
+
+static dk_status fr_phase(const dk_fundamental *f, int k, dk_error *err)
+{
+    return dk_progress_begin(f->prog, f->prog_base + k, err);
+}
 
 static dk_status oom(dk_error *err, const char *what)
 {
@@ -184,10 +222,15 @@ static double edge_angle(const dk_fundamental *f, dk_index t, int a, int b)
 /* Per interior edge: R_ij = Rz(theta_i) Rx(phi) Rz(-theta_j), the paper's three rotations:
  * theta_i aligns i's e_1 with the shared edge (m -> n as in face i), phi is the dihedral
  * angle turning i's normal into j's about the edge, theta_j is the edge's angle in j. */
-static void edge_rotations(dk_fundamental *f)
+static dk_status edge_rotations(dk_fundamental *f, dk_error *err)
 {
     const dk_mesh *m = f->mesh;
     for (dk_index e = 0; e < m->n_edges; e++) {
+        /* (the forms phase's share 0.2 to 0.9, see fr_bind_phases) */
+        const dk_status st = dk_progress_tick(f->prog, 0.2 * m->n_edges + 0.7 * e,
+                                              (double)m->n_edges, err);
+        if (st != DK_OK)
+            return st;
         const dk_index ti = m->edge_faces[2 * (size_t)e], tj = m->edge_faces[2 * (size_t)e + 1];
         f->has_R[e] = 0;
         if (ti < 0 || tj < 0 || m->edge_face_count[e] != 2 || f->degenerate[ti] ||
@@ -220,6 +263,7 @@ static void edge_rotations(dk_fundamental *f)
         mat_mul(R, r3, R);
         f->has_R[e] = 1;
     }
+    return DK_OK;
 }
 
 /* Union-find over faces: the root of t, halving the path on the way. */
@@ -427,11 +471,19 @@ typedef struct assembly {
     int64_t *a_next, *b_next; /* per column of A (n_unk + 1), of B (n_con + 1)             */
     dk_index *ar, *br;
     double *av, *bv;
+    /* progress: residuals visited in both passes, an estimate of one pass's count, and the
+     * first failure (a cancellation), after which the visits do nothing */
+    double visits, per_pass;
+    dk_status st;
+    dk_error *err;
 } assembly;
 
 static void assemble_visit(void *ctx, double w, const term *t, int nt)
 {
     assembly *s = ctx;
+    if (s->st != DK_OK ||
+        (s->st = dk_progress_tick(s->f->prog, s->visits++, 2.0 * s->per_pass, s->err)) != DK_OK)
+        return;
     dk_index idx[4];
     for (int i = 0; i < nt; i++)
         idx[i] = slot(s->f, t + i);
@@ -469,7 +521,9 @@ static dk_status assemble(const dk_fundamental *view, dk_index nu, dk_index ncon
 {
     const dk_index nb_cols = ncon > 0 ? ncon : 1;
     assembly a = {view, 0, calloc((size_t)nu + 2, sizeof(int64_t)),
-                  calloc((size_t)nb_cols + 2, sizeof(int64_t)), NULL, NULL, NULL, NULL};
+                  calloc((size_t)nb_cols + 2, sizeof(int64_t)), NULL, NULL, NULL, NULL,
+                  0.0, 3.0 * ((double)view->mesh->n_faces + (double)view->mesh->n_edges +
+                              (double)view->n_bridges), DK_OK, err};
     int64_t *a_start = malloc(((size_t)nu + 2) * sizeof(int64_t));
     int64_t *b_start = malloc(((size_t)nb_cols + 2) * sizeof(int64_t));
     dk_status st = DK_OK;
@@ -478,6 +532,8 @@ static dk_status assemble(const dk_fundamental *view, dk_index nu, dk_index ncon
         goto done;
     }
     for_each_residual(view, assemble_visit, &a);
+    if ((st = a.st) != DK_OK)
+        goto done;
     for (dk_index j = 0; j < nu; j++)
         a.a_next[j + 1] += a.a_next[j];
     for (dk_index j = 0; j < nb_cols; j++)
@@ -493,7 +549,12 @@ static dk_status assemble(const dk_fundamental *view, dk_index nu, dk_index ncon
         goto done;
     }
     a.fill = 1;
+    a.visits = a.per_pass; /* the second pass: the first one's share is done */
     for_each_residual(view, assemble_visit, &a);
+    if ((st = a.st) != DK_OK) {
+        free(a.ar), free(a.av), free(a.br), free(a.bv);
+        goto done;
+    }
     /* (both take the arrays, on every path) */
     st = dk_sparse_from_columns(nu, nu, a_start, a.ar, a.av, A, err);
     if (st == DK_OK)
@@ -719,9 +780,18 @@ static dk_status transform_basis(const dk_fundamental *f, elim *s, dk_error *err
             g[i] = -g[i];
     }
     free(e);
-    dk_status st = dk_cholesky_solve(s->chol, s->basis, (int)cols, s->basis, err);
-    if (st != DK_OK)
-        return dk_error_prefix(err, "LinearReconstruction (transform basis)");
+    /* The solves: the fixed values' 3 columns, then each handle's 4, so that a cancellation
+     * is seen between them; in these groups whether progress is asked or not, so that the
+     * basis does not depend on it. */
+    for (dk_index h = -1; h < nh; h++) {
+        const size_t q0 = h < 0 ? fixed0 : 4 * (size_t)h, nq = h < 0 ? 3 : 4;
+        dk_status st = dk_progress_part(f->prog, (double)(h + 1) / (double)(nh + 1), err);
+        if (st != DK_OK)
+            return st;
+        st = dk_cholesky_solve(s->chol, s->basis + q0 * nu, (int)nq, s->basis + q0 * nu, err);
+        if (st != DK_OK)
+            return dk_error_prefix(err, "LinearReconstruction (transform basis)");
+    }
     return DK_OK;
 }
 
@@ -731,7 +801,10 @@ static dk_status eliminate(const dk_fundamental *f, const dk_constraint_desc *de
     const dk_mesh *m = f->mesh;
     const dk_index n = m->n_vertices, F = m->n_faces;
     memset(s, 0, sizeof *s);
-    dk_status st = dk_constraints_create(m, desc, &s->con, err);
+    dk_status st = fr_phase(f, FR_PHASE_CONSTRAINTS, err);
+    if (st != DK_OK)
+        return st;
+    st = dk_constraints_create(m, desc, &s->con, err);
     if (st != DK_OK)
         return dk_error_prefix(err, "LinearReconstruction");
     const dk_constraints *c = s->con;
@@ -795,10 +868,12 @@ static dk_status eliminate(const dk_fundamental *f, const dk_constraint_desc *de
     /* (a scratch view of the numbering for slot()) */
     dk_fundamental view = *f;
     view.el = *s;
-    st = assemble(&view, nu, ncon, &s->A, &s->B, err);
-    if (st == DK_OK && nu > 0)
+    st = fr_phase(f, FR_PHASE_ASSEMBLE, err);
+    if (st == DK_OK)
+        st = assemble(&view, nu, ncon, &s->A, &s->B, err);
+    if (st == DK_OK && nu > 0 && (st = fr_phase(f, FR_PHASE_ANALYZE, err)) == DK_OK)
         st = dk_cholesky_analyze_compact(s->A, &s->chol, err);
-    if (st == DK_OK && nu > 0) {
+    if (st == DK_OK && nu > 0 && (st = fr_phase(f, FR_PHASE_FACTORIZE, err)) == DK_OK) {
         st = dk_cholesky_factorize(s->chol, s->A, err);
         if (st == DK_ERR_NOT_POSITIVE_DEFINITE) {
             /* name the caller's vertex (or face frame), not the matrix column */
@@ -827,7 +902,8 @@ static dk_status eliminate(const dk_fundamental *f, const dk_constraint_desc *de
         if (!s->zc || !s->rhs || !s->lin || !s->tgt)
             st = oom(err, "buffers");
     }
-    if (st == DK_OK)
+    if (st == DK_OK && s->con->n_handles > 0 && nu > 0 &&
+        (st = fr_phase(f, FR_PHASE_BASIS, err)) == DK_OK)
         st = transform_basis(f, s, err);
     return st;
 }
@@ -904,6 +980,14 @@ dk_status dk_fundamental_bind(const dk_mesh *mesh, const dk_constraint_desc *des
         return oom(err, "object");
     f->mesh = mesh;
     f->opt = opt;
+    dk_progress prog;
+    dk_progress_init(&prog, opt.progress, opt.progress_user, fr_bind_phases,
+                     (int)(sizeof fr_bind_phases / sizeof fr_bind_phases[0]),
+                     "LinearReconstruction bind");
+    f->opt.progress = NULL; /* the caller's callback is for this bind only */
+    f->opt.progress_user = NULL;
+    f->prog = &prog;
+    f->prog_base = FR_BIND_PHASE_BASE;
     f->w_scaled = opt.w * mesh->mean_edge_length * mesh->mean_edge_length;
     if (!(f->w_scaled > 0.0)) {
         free(f);
@@ -925,17 +1009,29 @@ dk_status dk_fundamental_bind(const dk_mesh *mesh, const dk_constraint_desc *des
         dk_fundamental_free(f);
         return oom(err, "fundamental forms");
     }
+    dk_status st = dk_progress_begin(&prog, 0, err); /* forms */
+    if (st != DK_OK) {
+        dk_fundamental_free(f);
+        return st;
+    }
     for (size_t e = 0; e < E; e++)
         f->material[e] = opt.material ? opt.material[e] : 1.0;
     f->opt.material = NULL; /* the copy is ours */
     f->opt.n_material = 0;
-    /* 1. the first fundamental form per face; 2. the second per interior edge (R_ij);
+    /* (the forms phase's shares: faces ~0.2, edge rotations ~0.7, pieces ~0.1)
+     * 1. the first fundamental form per face; 2. the second per interior edge (R_ij);
      * 3. the pieces and the bridges between groups of faces that meet at vertices only;
      * 4. the elimination of the constraints, the energy's matrices and their factor */
     faces(f);
-    edge_rotations(f);
+    if ((st = dk_progress_part(&prog, 0.2, err)) == DK_OK &&
+        (st = edge_rotations(f, err)) == DK_OK)
+        st = dk_progress_part(&prog, 0.9, err);
+    if (st != DK_OK) {
+        dk_fundamental_free(f);
+        return st;
+    }
     memcpy(f->frames, f->rest_frame, 9 * F * sizeof *f->frames);
-    dk_status st = pieces_and_bridges(f, err);
+    st = pieces_and_bridges(f, err);
     if (st != DK_OK) {
         dk_fundamental_free(f);
         return st;
@@ -948,6 +1044,8 @@ dk_status dk_fundamental_bind(const dk_mesh *mesh, const dk_constraint_desc *des
         return st;
     }
     elim_install(f, &s);
+    f->prog = NULL;
+    dk_progress_done(&prog);
     *out = f;
     return DK_OK;
 }
@@ -958,14 +1056,30 @@ dk_status dk_fundamental_rebind(dk_fundamental *f, const dk_constraint_desc *des
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "LinearReconstruction rebind: object and constraints must not be "
                             "NULL");
+    dk_progress prog;
+    dk_progress_init(&prog, f->opt.progress, f->opt.progress_user, fr_rebind_phases,
+                     (int)(sizeof fr_rebind_phases / sizeof fr_rebind_phases[0]),
+                     "LinearReconstruction rebind");
+    f->prog = &prog;
+    f->prog_base = 0;
     elim s;
-    dk_status st = eliminate(f, desc, &s, err);
+    dk_status st = eliminate(f, desc, &s, err); /* const f: on failure f is as it was */
+    f->prog = NULL;
     if (st != DK_OK) {
         elim_free(&s);
         return st;
     }
     elim_install(f, &s);
+    dk_progress_done(&prog);
     return DK_OK;
+}
+
+void dk_fundamental_set_progress(dk_fundamental *f, dk_phase_progress_fn progress, void *user)
+{
+    if (!f)
+        return;
+    f->opt.progress = progress;
+    f->opt.progress_user = progress ? user : NULL;
 }
 
 /* ------------------------------------------------------------------ solve -------------- */
