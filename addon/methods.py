@@ -407,6 +407,8 @@ METHODS.append(Method(
                 "Li): edge lengths and dihedral angles kept by one linear solve for positions "
                 "and triangle frames",
     icon="MOD_TRIANGULATE",
+    bind_progress=True,
+    rebind_progress=True,
     maps=("material",),
     material_label="Material",
     options=[

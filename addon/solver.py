@@ -567,7 +567,7 @@ BIND_PHASES = {
     "assemble": "assembling", "analyze": "analysing", "factorize": "factorizing",
     "basis": "handle basis", "heat": "heat method", "distances": "distances",
     "nodes": "placing nodes", "weights": "node weights", "edges": "graph edges",
-    "eigenvectors": "eigenvectors", "done": "finishing",
+    "eigenvectors": "eigenvectors", "forms": "fundamental forms", "done": "finishing",
 }
 
 

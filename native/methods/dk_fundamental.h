@@ -28,9 +28,15 @@
  *
  * Degenerate triangles (area below 1e-14 of the longest edge squared) have no frame: they
  * take no part in either energy. Boundary edges have one triangle's E_x term and no E_f.
- * Non-manifold edges are refused. Every connected component needs a constraint, and a
- * component held by fewer than three vertices needs an orientation constraint; the error
- * names the component by one of its vertices.
+ * Non-manifold edges are refused. A component without any constraint is held at rest
+ * (dk_constraints.h). Faces that meet at a vertex only (a part pinched onto the surface at
+ * its corners) or across a degenerate triangle are joined by no frame equation: at each
+ * such vertex a weak "bridge" ties their frames to the rest frames' relative rotation, so
+ * the part turns with its neighbours instead of leaving the system singular (zero at rest
+ * and for affine motions of the whole; see fundamental.c, pieces_and_bridges). A part that
+ * only degenerate triangles join to the rest needs a constraint of its own: the error names
+ * a vertex of it and the triangle. A part held by fewer than four vertices spanning space
+ * and no prescribed frame has its free shear regularized (see the docs).
  *
  * The energy a solve reports is w E_f + E_x at the returned positions and frames;
  * dk_fundamental_energy evaluates it for given positions with the last solve's frames.
@@ -41,6 +47,7 @@
 #include "dk_constraints.h"
 #include "dk_mesh.h"
 #include "dk_method.h"
+#include "dk_progress.h"
 #include "dk_status.h"
 
 #ifdef __cplusplus
@@ -60,6 +67,17 @@ typedef struct dk_fundamental_options {
                                     finite: the material map m_e (1 = as built; < 1 softer);
                                     NULL = all 1. Copied at bind                           */
     dk_index n_material;       /**< entries of `material` (must be the mesh's edge count)   */
+    dk_phase_progress_fn progress; /**< bind progress (dk_progress.h), NULL by default: the
+                                    phases forms, constraints, assemble, analyze,
+                                    factorize, basis, and "done" at 1; a non-zero return
+                                    cancels the bind (DK_ERR_CANCELLED, nothing leaked).
+                                    Asked between phases, every few thousand residuals of
+                                    the assembly's two passes and between the transform
+                                    basis' solves (the fixed values' 3 columns, then 4 per
+                                    handle); not during CHOLMOD's analysis and
+                                    factorization, which cannot be interrupted. For the
+                                    bind only: the object does not keep it              */
+    void *progress_user;       /**< passed to progress                                      */
 } dk_fundamental_options;
 
 typedef struct dk_fundamental dk_fundamental;
@@ -77,6 +95,13 @@ dk_status dk_fundamental_bind(const dk_mesh *mesh, const dk_constraint_desc *con
  *  failure nothing changes. */
 dk_status dk_fundamental_rebind(dk_fundamental *f, const dk_constraint_desc *constraints,
                                 dk_error *err);
+
+/** The progress callback of the following rebinds (NULL: none, as after bind): the phases
+ *  constraints, assemble, analyze, factorize, basis (each rebind is a new elimination, so
+ *  all of them), then "done" at 1. A non-zero return cancels the rebind with
+ *  DK_ERR_CANCELLED and the object keeps its previous constraints, factor and transform
+ *  basis exactly (the new ones are built aside and dropped). */
+void dk_fundamental_set_progress(dk_fundamental *f, dk_phase_progress_fn progress, void *user);
 
 /** Deformed positions (n_vertices x 3) for `request` (a direct method). `info` (may be
  *  NULL): energy w E_f + E_x, iterations = converged = 1. Allocation-free. */

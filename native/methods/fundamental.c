@@ -12,11 +12,40 @@
 
 #include "dk_cholesky.h"
 #include "dk_operators.h"
+#include "dk_progress.h"
 #include "dk_sparse.h"
 
 #define COT_MIN 1e-2
 #define COT_MAX 1e2
 #define PI 3.14159265358979323846
+
+/* The phases of a bind and of a rebind (dk_progress.h), weighted by their cost in seconds
+ * measured on the ogre subdivided once (248,324 vertices, 1.56M unknowns; bench_scale.py's
+ * ogre scenario: the lowest 10% fixed, one handle, so a 7-column transform basis) on the
+ * shared 2-core machine (load ~1.4), timed between the callback's reports: 17.7 s in all.
+ * On the 692k armadillo (load ~6, no basis: it would pass 256 MB) the same phases took
+ * 4.8, 0.25, 18.0, 42.0 and 114.4 s of 179 s, about the same shares; the factorization is
+ * the longest stretch without a report. Within "forms": the faces ~0.2 of it, the edge
+ * rotations ~0.7 (asked every few thousand edges), the pieces ~0.1. The rebind's phases
+ * are the bind's from FR_PHASE_CONSTRAINTS on, in the same order. */
+enum {
+    FR_PHASE_CONSTRAINTS = 0, /* the constraints, the numbering, the pieces' check          */
+    FR_PHASE_ASSEMBLE = 1,    /* the energy's matrices, two passes over the residuals       */
+    FR_PHASE_ANALYZE = 2,     /* CHOLMOD's symbolic analysis (uninterruptible)             */
+    FR_PHASE_FACTORIZE = 3,   /* CHOLMOD's numeric factorization (uninterruptible)         */
+    FR_PHASE_BASIS = 4        /* the transform basis: its right-hand sides and solves      */
+};
+static const dk_progress_phase fr_bind_phases[] = {
+    {"forms", 0.72},       /* the fundamental forms, the pieces and bridges              */
+    {"constraints", 0.02}, /* FR_PHASE_CONSTRAINTS ...                                  */
+    {"assemble", 2.30},
+    {"analyze", 3.83},
+    {"factorize", 10.0},
+    {"basis", 0.80}};
+static const dk_progress_phase fr_rebind_phases[] = {
+    {"constraints", 0.02}, {"assemble", 2.30}, {"analyze", 3.83}, {"factorize", 10.0},
+    {"basis", 0.80}};
+#define FR_BIND_PHASE_BASE 1 /* FR_PHASE_CONSTRAINTS in fr_bind_phases */
 
 /* What depends on the constraints, replaced as a whole by rebind. */
 typedef struct elim {
@@ -50,14 +79,33 @@ struct dk_fundamental {
     double *rest_frame;        /* F x 9                                                      */
     double *R;                 /* n_edges x 9                                                */
     unsigned char *has_R;      /* n_edges                                                    */
+    /* Pieces and bridges (see pieces_and_bridges): the frame equations join faces across
+     * interior edges only, so faces meeting at a vertex alone (a part pinched on at its
+     * corners) or across a degenerate triangle are not joined by them. */
+    dk_index *piece;           /* n_vertices: the piece (vertices joined through faces that
+                                  have a frame), 0..n_pieces-1                               */
+    dk_index n_pieces;
+    dk_index *piece_rep;       /* n_pieces: a vertex of each, for messages                   */
+    dk_index n_bridges;
+    dk_index *bridge;          /* n_bridges x 2: faces i, j whose frames are tied weakly     */
+    double *bridge_R;          /* n_bridges x 9: f_i^T f_j of the rest frames              */
     elim el;                   /* the elimination of the current constraints             */
     double *frames;            /* F x 9: the last solve's frames                          */
-    double *comp_fit;          /* n_components x 25: per component, the sums for the
+    double *comp_fit;          /* n_pieces x 25: per piece, the sums for the
                                   rotation that best fits its constrained vertices (count,
                                   rest sum 3, target sum 3, cross moments 9) and R (9)       */
     double w_scaled;           /* w times the mean edge length squared: E_f is dimensionless
                                   and E_x a squared length, so this keeps w scale-free      */
+    /* during a bind or rebind only (NULL otherwise): its progress reporter, and the index
+     * of FR_PHASE_CONSTRAINTS in its phase table */
+    dk_progress *prog;
+    int prog_base;
 };
+
+static dk_status fr_phase(const dk_fundamental *f, int k, dk_error *err)
+{
+    return dk_progress_begin(f->prog, f->prog_base + k, err);
+}
 
 static dk_status oom(dk_error *err, const char *what)
 {
@@ -174,10 +222,15 @@ static double edge_angle(const dk_fundamental *f, dk_index t, int a, int b)
 /* Per interior edge: R_ij = Rz(theta_i) Rx(phi) Rz(-theta_j), the paper's three rotations:
  * theta_i aligns i's e_1 with the shared edge (m -> n as in face i), phi is the dihedral
  * angle turning i's normal into j's about the edge, theta_j is the edge's angle in j. */
-static void edge_rotations(dk_fundamental *f)
+static dk_status edge_rotations(dk_fundamental *f, dk_error *err)
 {
     const dk_mesh *m = f->mesh;
     for (dk_index e = 0; e < m->n_edges; e++) {
+        /* (the forms phase's share 0.2 to 0.9, see fr_bind_phases) */
+        const dk_status st = dk_progress_tick(f->prog, 0.2 * m->n_edges + 0.7 * e,
+                                              (double)m->n_edges, err);
+        if (st != DK_OK)
+            return st;
         const dk_index ti = m->edge_faces[2 * (size_t)e], tj = m->edge_faces[2 * (size_t)e + 1];
         f->has_R[e] = 0;
         if (ti < 0 || tj < 0 || m->edge_face_count[e] != 2 || f->degenerate[ti] ||
@@ -210,6 +263,120 @@ static void edge_rotations(dk_fundamental *f)
         mat_mul(R, r3, R);
         f->has_R[e] = 1;
     }
+    return DK_OK;
+}
+
+/* Union-find over faces: the root of t, halving the path on the way. */
+static dk_index uf_find(dk_index *parent, dk_index t)
+{
+    while (parent[t] != t)
+        t = parent[t] = parent[parent[t]];
+    return t;
+}
+
+/* Pieces and bridges. The frame equations (E_f) join two faces across an interior edge
+ * between non-degenerate faces; faces that meet at a vertex only, or across a degenerate
+ * triangle (which has no frame), are joined by the positions they share and by nothing
+ * else. E is invariant under an affine map of positions and frames together, per group of
+ * faces the frame equations join ("island"), as long as the maps agree at the vertices the
+ * islands share: an island pinned to the rest at three vertices (a part of a scan touching
+ * the surface at its corners: the ogre has one of 4 faces) keeps a free shear off the plane
+ * of those vertices, and the system is singular (the once-subdivided ogre's "singular at the
+ * frame of face 59943"; the ogre itself passed on rounding, with that island's frames
+ * undetermined). The paper's surfaces are edge-connected, so it says nothing here. Our
+ * choice: at every vertex where islands meet, one "bridge" per island not yet joined ties a
+ * face of it to a face of the other, f_j = f_i F_i^T F_j (the rest frames' relative
+ * rotation, the R_ij an edge would have) with the regularization's small weight. It is zero
+ * at rest and for any rigid or affine motion of the whole, linear (the transform basis stays
+ * exact), and it picks, among the equally good results, the one whose pinched part turns
+ * with its neighbours; elsewhere it changes nothing beyond rounding. With the bridges, all
+ * faces around a vertex are joined, so the pieces that need constraints of their own are
+ * the vertices joined through non-degenerate faces (a component cut by degenerate
+ * triangles only has several). Out of memory returns DK_ERR_OUT_OF_MEMORY. */
+static dk_status pieces_and_bridges(dk_fundamental *f, dk_error *err)
+{
+    const dk_mesh *m = f->mesh;
+    const dk_index n = m->n_vertices, F = m->n_faces;
+    dk_index *parent = malloc(((size_t)F + 1) * sizeof *parent);
+    dk_index *root_piece = malloc(((size_t)F + 1) * sizeof *root_piece);
+    dk_index cap = 0;
+    if (!parent || !root_piece) {
+        free(parent), free(root_piece);
+        return oom(err, "pieces");
+    }
+    for (dk_index t = 0; t < F; t++)
+        parent[t] = t, root_piece[t] = -1;
+    for (dk_index e = 0; e < m->n_edges; e++) /* the islands */
+        if (f->has_R[e]) {
+            const dk_index a = uf_find(parent, m->edge_faces[2 * (size_t)e]);
+            const dk_index b = uf_find(parent, m->edge_faces[2 * (size_t)e + 1]);
+            if (a != b)
+                parent[a < b ? b : a] = a < b ? a : b;
+        }
+    f->n_bridges = 0;
+    for (dk_index v = 0; v < n; v++) { /* the bridges, a spanning forest of the islands */
+        dk_index t0 = -1;
+        for (dk_index q = m->vf_start[v]; q < m->vf_start[v + 1]; q++) {
+            const dk_index t = m->vf_index[q];
+            if (f->degenerate[t])
+                continue;
+            if (t0 < 0) {
+                t0 = t;
+                continue;
+            }
+            const dk_index a = uf_find(parent, t0), b = uf_find(parent, t);
+            if (a == b)
+                continue;
+            parent[a < b ? b : a] = a < b ? a : b;
+            if (f->n_bridges == cap) {
+                const dk_index nc = cap ? 2 * cap : 16;
+                dk_index *nb = realloc(f->bridge, 2 * (size_t)nc * sizeof *nb);
+                if (nb)
+                    f->bridge = nb;
+                double *nr = nb ? realloc(f->bridge_R, 9 * (size_t)nc * sizeof *nr) : NULL;
+                if (nr)
+                    f->bridge_R = nr;
+                if (!nb || !nr) {
+                    free(parent), free(root_piece);
+                    return oom(err, "bridges");
+                }
+                cap = nc;
+            }
+            const double *Fi = f->rest_frame + 9 * (size_t)t0, *Fj = f->rest_frame + 9 * (size_t)t;
+            double *R = f->bridge_R + 9 * (size_t)f->n_bridges;
+            for (int i = 0; i < 3; i++) /* (F_i^T F_j)[i][j] = sum_d F_i[d][i] F_j[d][j] */
+                for (int j = 0; j < 3; j++)
+                    R[3 * i + j] = Fi[i] * Fj[j] + Fi[3 + i] * Fj[3 + j] + Fi[6 + i] * Fj[6 + j];
+            f->bridge[2 * (size_t)f->n_bridges] = t0;
+            f->bridge[2 * (size_t)f->n_bridges + 1] = t;
+            f->n_bridges++;
+        }
+    }
+    f->n_pieces = 0;
+    for (dk_index v = 0; v < n; v++) { /* a vertex's piece: its faces' root, or its own */
+        dk_index t0 = -1;
+        for (dk_index q = m->vf_start[v]; q < m->vf_start[v + 1] && t0 < 0; q++)
+            if (!f->degenerate[m->vf_index[q]])
+                t0 = m->vf_index[q];
+        if (t0 < 0) {
+            f->piece[v] = f->n_pieces++;
+            continue;
+        }
+        const dk_index r = uf_find(parent, t0);
+        if (root_piece[r] < 0)
+            root_piece[r] = f->n_pieces++;
+        f->piece[v] = root_piece[r];
+    }
+    free(parent), free(root_piece);
+    f->piece_rep = malloc(((size_t)f->n_pieces + 1) * sizeof *f->piece_rep);
+    f->comp_fit = malloc(25 * ((size_t)f->n_pieces + 1) * sizeof *f->comp_fit);
+    if (!f->piece_rep || !f->comp_fit)
+        return oom(err, "pieces");
+    for (dk_index c = 0; c < f->n_pieces; c++)
+        f->piece_rep[c] = -1;
+    for (dk_index v = n - 1; v >= 0; v--)
+        f->piece_rep[f->piece[v]] = v;
+    return DK_OK;
 }
 
 /* ------------------------------------------------------------------ residuals ---------- */
@@ -266,6 +433,15 @@ static void for_each_residual(const dk_fundamental *f, visit_fn visit, void *ctx
             visit(ctx, wgt, tt, 4);
         }
     }
+    for (dk_index b = 0; b < f->n_bridges; b++) { /* the bridges (pieces_and_bridges) */
+        const dk_index ti = f->bridge[2 * (size_t)b], tj = f->bridge[2 * (size_t)b + 1];
+        const double *R = f->bridge_R + 9 * (size_t)b;
+        for (int k = 0; k < 3; k++) {
+            const term tt[4] = {{tj, k, 1.0}, {ti, 0, -R[k]}, {ti, 1, -R[3 + k]},
+                                {ti, 2, -R[6 + k]}};
+            visit(ctx, REGULARIZATION * f->w_scaled, tt, 4);
+        }
+    }
     for (dk_index t = 0; f->el.fa && t < m->n_faces; t++) /* the regularization, where needed */
         if (f->el.fa[t] >= 0)
             for (int k = 0; k < 3; k++) {
@@ -295,11 +471,19 @@ typedef struct assembly {
     int64_t *a_next, *b_next; /* per column of A (n_unk + 1), of B (n_con + 1)             */
     dk_index *ar, *br;
     double *av, *bv;
+    /* progress: residuals visited in both passes, an estimate of one pass's count, and the
+     * first failure (a cancellation), after which the visits do nothing */
+    double visits, per_pass;
+    dk_status st;
+    dk_error *err;
 } assembly;
 
 static void assemble_visit(void *ctx, double w, const term *t, int nt)
 {
     assembly *s = ctx;
+    if (s->st != DK_OK ||
+        (s->st = dk_progress_tick(s->f->prog, s->visits++, 2.0 * s->per_pass, s->err)) != DK_OK)
+        return;
     dk_index idx[4];
     for (int i = 0; i < nt; i++)
         idx[i] = slot(s->f, t + i);
@@ -337,7 +521,9 @@ static dk_status assemble(const dk_fundamental *view, dk_index nu, dk_index ncon
 {
     const dk_index nb_cols = ncon > 0 ? ncon : 1;
     assembly a = {view, 0, calloc((size_t)nu + 2, sizeof(int64_t)),
-                  calloc((size_t)nb_cols + 2, sizeof(int64_t)), NULL, NULL, NULL, NULL};
+                  calloc((size_t)nb_cols + 2, sizeof(int64_t)), NULL, NULL, NULL, NULL,
+                  0.0, 3.0 * ((double)view->mesh->n_faces + (double)view->mesh->n_edges +
+                              (double)view->n_bridges), DK_OK, err};
     int64_t *a_start = malloc(((size_t)nu + 2) * sizeof(int64_t));
     int64_t *b_start = malloc(((size_t)nb_cols + 2) * sizeof(int64_t));
     dk_status st = DK_OK;
@@ -346,6 +532,8 @@ static dk_status assemble(const dk_fundamental *view, dk_index nu, dk_index ncon
         goto done;
     }
     for_each_residual(view, assemble_visit, &a);
+    if ((st = a.st) != DK_OK)
+        goto done;
     for (dk_index j = 0; j < nu; j++)
         a.a_next[j + 1] += a.a_next[j];
     for (dk_index j = 0; j < nb_cols; j++)
@@ -361,7 +549,12 @@ static dk_status assemble(const dk_fundamental *view, dk_index nu, dk_index ncon
         goto done;
     }
     a.fill = 1;
+    a.visits = a.per_pass; /* the second pass: the first one's share is done */
     for_each_residual(view, assemble_visit, &a);
+    if ((st = a.st) != DK_OK) {
+        free(a.ar), free(a.av), free(a.br), free(a.bv);
+        goto done;
+    }
     /* (both take the arrays, on every path) */
     st = dk_sparse_from_columns(nu, nu, a_start, a.ar, a.av, A, err);
     if (st == DK_OK)
@@ -436,33 +629,32 @@ static void elim_install(dk_fundamental *f, elim *s)
     rest_anchors(f);
 }
 
-/* Every component must be held by a constraint (else its translation is free). The
- * frames are linear unknowns, so the energy is invariant under any affine map of positions
- * and frames together: constraints pin that map only when the component's constrained
- * vertices span space (four not in a plane) or a face's frame is prescribed. A component
- * held more thinly (a planar rim, a line, one vertex) gets `thin` = 1: eliminate() then
- * draws its frames weakly (REGULARIZATION) to their rest frames turned by the rotation that
- * best fits the component's constrained vertices to their targets (solve), which picks,
- * among the equally good results, the one without a free shear, and keeps a rigid motion
- * of every constraint exact. */
+/* Every piece (pieces_and_bridges: a connected component, or a part of one that only
+ * degenerate triangles join to the rest) must be held by a constraint, else its translation
+ * is free. A component without any constraint is held at rest by dk_constraints already, so
+ * what is left to refuse is a part cut off by degenerate triangles: the error names a vertex
+ * of it and a degenerate triangle on its rim. The frames are linear unknowns, so the energy
+ * is invariant under any affine map of a piece's positions and frames together:
+ * constraints pin that map only when the piece's constrained vertices span space (four not
+ * in a plane) or a face's frame is prescribed. A piece held more thinly (a planar rim, a
+ * line, one vertex) gets `thin` = 1: eliminate() then draws its frames weakly
+ * (REGULARIZATION) to their rest frames turned by the rotation that best fits the piece's
+ * constrained vertices to their targets (solve), which picks, among the equally good
+ * results, the one without a free shear, and keeps a rigid motion of every constraint
+ * exact. */
 static dk_status check_components(const dk_fundamental *f, const elim *s, unsigned char *thin,
                                   dk_error *err)
 {
     const dk_mesh *m = f->mesh;
-    const dk_index nc = m->report.n_components > 0 ? m->report.n_components : 1;
-    dk_index *cv = calloc((size_t)nc, sizeof *cv), *cf = calloc((size_t)nc, sizeof *cf);
-    dk_index *rep = malloc((size_t)nc * sizeof *rep);
-    double *mom = calloc(9 * (size_t)nc, sizeof *mom), *mean = calloc(3 * (size_t)nc, sizeof *mean);
-    if (!cv || !cf || !rep || !mom || !mean) {
-        free(cv), free(cf), free(rep), free(mom), free(mean);
+    const dk_index nc = f->n_pieces;
+    dk_index *cv = calloc((size_t)nc + 1, sizeof *cv), *cf = calloc((size_t)nc + 1, sizeof *cf);
+    double *mom = calloc(9 * (size_t)nc + 1, sizeof *mom), *mean = calloc(3 * (size_t)nc + 1, sizeof *mean);
+    if (!cv || !cf || !mom || !mean) {
+        free(cv), free(cf), free(mom), free(mean);
         return oom(err, "components");
     }
-    for (dk_index c = 0; c < nc; c++)
-        rep[c] = -1;
     for (dk_index v = 0; v < m->n_vertices; v++) {
-        const dk_index c = m->component[v];
-        if (rep[c] < 0)
-            rep[c] = v;
+        const dk_index c = f->piece[v];
         if (s->vc[v] < 0)
             continue;
         cv[c]++;
@@ -470,7 +662,7 @@ static dk_status check_components(const dk_fundamental *f, const elim *s, unsign
             mean[3 * (size_t)c + d] += m->positions[3 * (size_t)v + d];
     }
     for (dk_index v = 0; v < m->n_vertices; v++) { /* the constrained vertices' covariance */
-        const dk_index c = m->component[v];
+        const dk_index c = f->piece[v];
         if (s->vc[v] < 0)
             continue;
         double q[3];
@@ -481,14 +673,30 @@ static dk_status check_components(const dk_fundamental *f, const elim *s, unsign
                 mom[9 * (size_t)c + 3 * a + b] += q[a] * q[b];
     }
     for (dk_index t = 0; t < m->n_faces; t++)
-        cf[m->component[m->faces[3 * (size_t)t]]] += s->fc[t] >= 0;
+        if (s->fc[t] >= 0)
+            cf[f->piece[m->faces[3 * (size_t)t]]]++;
     dk_status st = DK_OK;
     for (dk_index c = 0; c < nc && st == DK_OK; c++) {
         if (cv[c] == 0 && cf[c] == 0) {
-            st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
-                              "LinearReconstruction: the component containing vertex %d has no "
-                              "constraint: every component needs a handle or fixed vertices",
-                              (int)rep[c]);
+            const dk_index rep = f->piece_rep[c];
+            dk_index rim = -1; /* a degenerate triangle touching the piece */
+            for (dk_index t = 0; t < m->n_faces && rim < 0; t++)
+                if (f->degenerate[t])
+                    for (int k = 0; k < 3; k++)
+                        if (f->piece[m->faces[3 * (size_t)t + k]] == c)
+                            rim = t;
+            if (rim >= 0)
+                st = dk_error_set(err, DK_ERR_DEGENERATE,
+                                  "LinearReconstruction: the part containing vertex %d is joined "
+                                  "to the rest of its component only through degenerate "
+                                  "(zero-area) triangles such as face %d, which carry no "
+                                  "energy, and has no constraint of its own: fix those "
+                                  "triangles or constrain the part", (int)rep, (int)rim);
+            else
+                st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                                  "LinearReconstruction: the component containing vertex %d has "
+                                  "no constraint: every component needs a handle or fixed "
+                                  "vertices", (int)rep);
             break;
         }
         double ev[3];
@@ -498,7 +706,7 @@ static dk_status check_components(const dk_fundamental *f, const elim *s, unsign
         const int flat = info != 0 || !(ev[0] > 1e-6 * ev[2]);
         thin[c] = cf[c] == 0 && (cv[c] < 4 || flat);
     }
-    free(cv), free(cf), free(rep), free(mom), free(mean);
+    free(cv), free(cf), free(mom), free(mean);
     return st;
 }
 
@@ -572,9 +780,18 @@ static dk_status transform_basis(const dk_fundamental *f, elim *s, dk_error *err
             g[i] = -g[i];
     }
     free(e);
-    dk_status st = dk_cholesky_solve(s->chol, s->basis, (int)cols, s->basis, err);
-    if (st != DK_OK)
-        return dk_error_prefix(err, "LinearReconstruction (transform basis)");
+    /* The solves: the fixed values' 3 columns, then each handle's 4, so that a cancellation
+     * is seen between them; in these groups whether progress is asked or not, so that the
+     * basis does not depend on it. */
+    for (dk_index h = -1; h < nh; h++) {
+        const size_t q0 = h < 0 ? fixed0 : 4 * (size_t)h, nq = h < 0 ? 3 : 4;
+        dk_status st = dk_progress_part(f->prog, (double)(h + 1) / (double)(nh + 1), err);
+        if (st != DK_OK)
+            return st;
+        st = dk_cholesky_solve(s->chol, s->basis + q0 * nu, (int)nq, s->basis + q0 * nu, err);
+        if (st != DK_OK)
+            return dk_error_prefix(err, "LinearReconstruction (transform basis)");
+    }
     return DK_OK;
 }
 
@@ -584,7 +801,10 @@ static dk_status eliminate(const dk_fundamental *f, const dk_constraint_desc *de
     const dk_mesh *m = f->mesh;
     const dk_index n = m->n_vertices, F = m->n_faces;
     memset(s, 0, sizeof *s);
-    dk_status st = dk_constraints_create(m, desc, &s->con, err);
+    dk_status st = fr_phase(f, FR_PHASE_CONSTRAINTS, err);
+    if (st != DK_OK)
+        return st;
+    st = dk_constraints_create(m, desc, &s->con, err);
     if (st != DK_OK)
         return dk_error_prefix(err, "LinearReconstruction");
     const dk_constraints *c = s->con;
@@ -615,26 +835,6 @@ static dk_status eliminate(const dk_fundamental *f, const dk_constraint_desc *de
         }
     }
     s->n_unk = nu;
-    {
-        const dk_index ncomp = m->report.n_components > 0 ? m->report.n_components : 1;
-        unsigned char *thin = calloc((size_t)ncomp, 1);
-        s->fa = malloc(((size_t)F + 1) * sizeof *s->fa);
-        if (!thin || !s->fa) {
-            free(thin);
-            return oom(err, "numbering");
-        }
-        st = check_components(f, s, thin, err);
-        for (dk_index t = 0; t < F; t++) { /* anchors of the thinly held components' frames */
-            const int reg = st == DK_OK && s->fu[t] >= 0 && thin[m->component[m->faces[3 * (size_t)t]]];
-            s->fa[t] = reg ? ncon : -1;
-            ncon += reg ? 3 : 0;
-            s->any_anchor |= reg;
-        }
-        free(thin);
-        if (st != DK_OK)
-            return st;
-    }
-    s->n_con = ncon;
     for (dk_index v = 0; v < n; v++) /* a vertex on degenerate faces only has no energy */
         if (s->vu[v] >= 0 && m->vf_start[v + 1] > m->vf_start[v]) {
             int any = 0;
@@ -646,13 +846,34 @@ static dk_status eliminate(const dk_fundamental *f, const dk_constraint_desc *de
                                     "triangles only, so nothing places it: fix the mesh or "
                                     "constrain it", (int)v);
         }
+    {
+        unsigned char *thin = calloc((size_t)f->n_pieces + 1, 1);
+        s->fa = malloc(((size_t)F + 1) * sizeof *s->fa);
+        if (!thin || !s->fa) {
+            free(thin);
+            return oom(err, "numbering");
+        }
+        st = check_components(f, s, thin, err);
+        for (dk_index t = 0; t < F; t++) { /* anchors of the thinly held components' frames */
+            const int reg = st == DK_OK && s->fu[t] >= 0 && thin[f->piece[m->faces[3 * (size_t)t]]];
+            s->fa[t] = reg ? ncon : -1;
+            ncon += reg ? 3 : 0;
+            s->any_anchor |= reg;
+        }
+        free(thin);
+        if (st != DK_OK)
+            return st;
+    }
+    s->n_con = ncon;
     /* (a scratch view of the numbering for slot()) */
     dk_fundamental view = *f;
     view.el = *s;
-    st = assemble(&view, nu, ncon, &s->A, &s->B, err);
-    if (st == DK_OK && nu > 0)
+    st = fr_phase(f, FR_PHASE_ASSEMBLE, err);
+    if (st == DK_OK)
+        st = assemble(&view, nu, ncon, &s->A, &s->B, err);
+    if (st == DK_OK && nu > 0 && (st = fr_phase(f, FR_PHASE_ANALYZE, err)) == DK_OK)
         st = dk_cholesky_analyze_compact(s->A, &s->chol, err);
-    if (st == DK_OK && nu > 0) {
+    if (st == DK_OK && nu > 0 && (st = fr_phase(f, FR_PHASE_FACTORIZE, err)) == DK_OK) {
         st = dk_cholesky_factorize(s->chol, s->A, err);
         if (st == DK_ERR_NOT_POSITIVE_DEFINITE) {
             /* name the caller's vertex (or face frame), not the matrix column */
@@ -681,7 +902,8 @@ static dk_status eliminate(const dk_fundamental *f, const dk_constraint_desc *de
         if (!s->zc || !s->rhs || !s->lin || !s->tgt)
             st = oom(err, "buffers");
     }
-    if (st == DK_OK)
+    if (st == DK_OK && s->con->n_handles > 0 && nu > 0 &&
+        (st = fr_phase(f, FR_PHASE_BASIS, err)) == DK_OK)
         st = transform_basis(f, s, err);
     return st;
 }
@@ -702,6 +924,10 @@ void dk_fundamental_free(dk_fundamental *f)
     free(f->has_R);
     free(f->frames);
     free(f->comp_fit);
+    free(f->piece);
+    free(f->piece_rep);
+    free(f->bridge);
+    free(f->bridge_R);
     free(f);
 }
 
@@ -754,6 +980,14 @@ dk_status dk_fundamental_bind(const dk_mesh *mesh, const dk_constraint_desc *des
         return oom(err, "object");
     f->mesh = mesh;
     f->opt = opt;
+    dk_progress prog;
+    dk_progress_init(&prog, opt.progress, opt.progress_user, fr_bind_phases,
+                     (int)(sizeof fr_bind_phases / sizeof fr_bind_phases[0]),
+                     "LinearReconstruction bind");
+    f->opt.progress = NULL; /* the caller's callback is for this bind only */
+    f->opt.progress_user = NULL;
+    f->prog = &prog;
+    f->prog_base = FR_BIND_PHASE_BASE;
     f->w_scaled = opt.w * mesh->mean_edge_length * mesh->mean_edge_length;
     if (!(f->w_scaled > 0.0)) {
         free(f);
@@ -769,30 +1003,49 @@ dk_status dk_fundamental_bind(const dk_mesh *mesh, const dk_constraint_desc *des
     f->frames = malloc(9 * F * sizeof *f->frames);
     f->R = malloc((9 * E + 1) * sizeof *f->R);
     f->has_R = malloc(E + 1);
-    f->comp_fit = malloc(25 * ((size_t)(mesh->report.n_components > 0 ? mesh->report.n_components
-                                                                        : 1)) * sizeof *f->comp_fit);
+    f->piece = malloc(((size_t)mesh->n_vertices + 1) * sizeof *f->piece);
     if (!f->material || !f->degenerate || !f->coord || !f->cot || !f->rest_frame || !f->frames ||
-        !f->R || !f->has_R || !f->comp_fit) {
+        !f->R || !f->has_R || !f->piece) {
         dk_fundamental_free(f);
         return oom(err, "fundamental forms");
+    }
+    dk_status st = dk_progress_begin(&prog, 0, err); /* forms */
+    if (st != DK_OK) {
+        dk_fundamental_free(f);
+        return st;
     }
     for (size_t e = 0; e < E; e++)
         f->material[e] = opt.material ? opt.material[e] : 1.0;
     f->opt.material = NULL; /* the copy is ours */
     f->opt.n_material = 0;
-    /* 1. the first fundamental form per face; 2. the second per interior edge (R_ij);
-     * 3. the elimination of the constraints, the energy's matrices and their factor */
+    /* (the forms phase's shares: faces ~0.2, edge rotations ~0.7, pieces ~0.1)
+     * 1. the first fundamental form per face; 2. the second per interior edge (R_ij);
+     * 3. the pieces and the bridges between groups of faces that meet at vertices only;
+     * 4. the elimination of the constraints, the energy's matrices and their factor */
     faces(f);
-    edge_rotations(f);
+    if ((st = dk_progress_part(&prog, 0.2, err)) == DK_OK &&
+        (st = edge_rotations(f, err)) == DK_OK)
+        st = dk_progress_part(&prog, 0.9, err);
+    if (st != DK_OK) {
+        dk_fundamental_free(f);
+        return st;
+    }
     memcpy(f->frames, f->rest_frame, 9 * F * sizeof *f->frames);
+    st = pieces_and_bridges(f, err);
+    if (st != DK_OK) {
+        dk_fundamental_free(f);
+        return st;
+    }
     elim s;
-    dk_status st = eliminate(f, desc, &s, err);
+    st = eliminate(f, desc, &s, err);
     if (st != DK_OK) {
         elim_free(&s);
         dk_fundamental_free(f);
         return st;
     }
     elim_install(f, &s);
+    f->prog = NULL;
+    dk_progress_done(&prog);
     *out = f;
     return DK_OK;
 }
@@ -803,14 +1056,30 @@ dk_status dk_fundamental_rebind(dk_fundamental *f, const dk_constraint_desc *des
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "LinearReconstruction rebind: object and constraints must not be "
                             "NULL");
+    dk_progress prog;
+    dk_progress_init(&prog, f->opt.progress, f->opt.progress_user, fr_rebind_phases,
+                     (int)(sizeof fr_rebind_phases / sizeof fr_rebind_phases[0]),
+                     "LinearReconstruction rebind");
+    f->prog = &prog;
+    f->prog_base = 0;
     elim s;
-    dk_status st = eliminate(f, desc, &s, err);
+    dk_status st = eliminate(f, desc, &s, err); /* const f: on failure f is as it was */
+    f->prog = NULL;
     if (st != DK_OK) {
         elim_free(&s);
         return st;
     }
     elim_install(f, &s);
+    dk_progress_done(&prog);
     return DK_OK;
+}
+
+void dk_fundamental_set_progress(dk_fundamental *f, dk_phase_progress_fn progress, void *user)
+{
+    if (!f)
+        return;
+    f->opt.progress = progress;
+    f->opt.progress_user = progress ? user : NULL;
 }
 
 /* ------------------------------------------------------------------ solve -------------- */
@@ -893,13 +1162,13 @@ dk_status dk_fundamental_solve(dk_fundamental *f, const dk_solve_request *rq, do
         memcpy(f->frames + 9 * (size_t)t, Ft, sizeof Ft);
     }
     if (f->el.any_anchor) { /* the regularization's anchors: rest frames, turned per component */
-        const dk_index ncomp = m->report.n_components > 0 ? m->report.n_components : 1;
+        const dk_index ncomp = f->n_pieces;
         memset(f->comp_fit, 0, 25 * (size_t)ncomp * sizeof *f->comp_fit);
         for (int pass = 0; pass < 2; pass++)
             for (dk_index v = 0; v < m->n_vertices; v++) {
                 if (f->el.vc[v] < 0)
                     continue;
-                double *cf = f->comp_fit + 25 * (size_t)m->component[v];
+                double *cf = f->comp_fit + 25 * (size_t)f->piece[v];
                 const double *p = m->positions + 3 * (size_t)v;
                 double q[3];
                 for (int d = 0; d < 3; d++)
@@ -919,7 +1188,7 @@ dk_status dk_fundamental_solve(dk_fundamental *f, const dk_solve_request *rq, do
         for (dk_index t = 0; t < m->n_faces; t++)
             if (f->el.fa[t] >= 0) {
                 double Ft[9];
-                mat_mul(f->comp_fit + 25 * (size_t)m->component[m->faces[3 * (size_t)t]] + 16,
+                mat_mul(f->comp_fit + 25 * (size_t)f->piece[m->faces[3 * (size_t)t]] + 16,
                         f->rest_frame + 9 * (size_t)t, Ft);
                 for (int d = 0; d < 3; d++)
                     for (int k = 0; k < 3; k++)

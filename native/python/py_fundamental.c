@@ -45,6 +45,8 @@ static int parse_options(PyObject *kw, void *o, const char *context)
 
 static PyObject *get_frames(PyObject *obj, void *c)
 {
+    if (!dk_py_method_readable((dk_py_method *)obj))
+        return NULL;
     dk_py_method *self = (dk_py_method *)obj;
     const dk_index nf = self->mesh->n_faces;
     double *out;
@@ -57,6 +59,8 @@ static PyObject *get_frames(PyObject *obj, void *c)
 
 static PyObject *get_transform_basis(PyObject *obj, void *c)
 {
+    if (!dk_py_method_readable((dk_py_method *)obj))
+        return NULL;
     (void)c;
     return PyBool_FromLong(dk_fundamental_has_transform_basis(((dk_py_method *)obj)->native));
 }
@@ -69,14 +73,19 @@ PyDoc_STRVAR(solve_doc,
 
 PyDoc_STRVAR(lr_doc,
              "LinearReconstruction(mesh, handles, fixed=None, w=1.0, orientation=False,\n"
-             "    material=None)\n\n"
+             "    material=None, progress=None)\n\n"
              "Surface deformation by linear reconstruction from the discrete fundamental\n"
              "forms (Li, after Wang, Liu & Tong 2012): edge lengths and dihedral angles of\n"
              "the rest mesh, a frame per triangle, and one sparse linear system for the\n"
              "positions and frames. Handles and fixed vertices are hard constraints; with\n"
              "orientation=True a handle's transform also turns its faces' frames. material:\n"
              "one value per edge (Mesh.edges order), multiplying the cotangent weights: < 1\n"
-             "is softer (stretches more, bends less). See docs/methods/fundamental.md.");
+             "is softer (stretches more, bends less). progress(fraction) is called during\n"
+             "the bind with a deformkit.BindProgress (fraction.phase: forms, constraints,\n"
+             "assemble, analyze, factorize, basis, then 'done' at 1); a true return or an\n"
+             "exception stops it (the exception propagates). rebind(progress=...) reports\n"
+             "the same from constraints on; a cancelled rebind keeps the previous binding.\n"
+             "See docs/methods/fundamental.md.");
 
 static PyGetSetDef lr_getset[] = {
     DK_PY_METHOD_GETSET,
@@ -97,6 +106,18 @@ static PyMethodDef lr_methods[] = {
     {NULL, NULL, 0, NULL},
 };
 
+/* progress=: the shared callback (dk_py.h), phases named by the native bind / rebind */
+static void bind_progress(void *options, dk_py_progress *p)
+{
+    ((dk_fundamental_options *)options)->progress = dk_py_progress_phase;
+    ((dk_fundamental_options *)options)->progress_user = p;
+}
+
+static void rebind_progress(void *native, dk_py_progress *p)
+{
+    dk_fundamental_set_progress((dk_fundamental *)native, p ? dk_py_progress_phase : NULL, p);
+}
+
 static const dk_py_method_spec lr_spec = {
     .name = "LinearReconstruction",
     .type_name = "deformkit.LinearReconstruction",
@@ -106,6 +127,8 @@ static const dk_py_method_spec lr_spec = {
     .default_options = default_options,
     .parse_options = parse_options,
     .release_options = release_options,
+    .bind_progress = bind_progress,
+    .rebind_progress = rebind_progress,
     .getset = lr_getset,
     .methods = lr_methods,
 };

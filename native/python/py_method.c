@@ -636,7 +636,7 @@ const char dk_py_method_rebind_doc[] =
              "new handles without handle_weights get weight 1). What can be kept is kept:\n"
              "the symbolic analysis when the set of unknowns is unchanged, the previous\n"
              "solution as warm start. On error the previous constraints stay bound.\n"
-             "progress=callable(fraction) (ARAP, LaplacianEdit): as the constructor's; a\n"
+             "progress=callable(fraction) (all but EigenDeformation): as the constructor's; a\n"
              "cancelled rebind keeps the previous constraints exactly.";
 
 PyObject *dk_py_method_energy(PyObject *obj, PyObject *arg)

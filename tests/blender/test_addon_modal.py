@@ -191,7 +191,7 @@ def bind_tests():
 
 
 def progress_bind_cancel_tests():
-    """The methods with bind progress (all but Linear Reconstruction) report their native
+    """The methods with bind progress (all of them) report their native
     phase to the worker, and Esc stops the native work itself (the callback tells the
     native bind to cancel at its next report), not just the wait for it."""
     # (the window's event loop here, Xvfb with software drawing on a loaded machine, resumes
@@ -209,7 +209,8 @@ def progress_bind_cancel_tests():
 
     for mid, kw in (("EIGEN", dict(nx=200, ny=100)), ("ARAP", dict(nx=60, ny=30)),
                     ("LAPLACIAN", dict(nx=60, ny=30)), ("FALLOFF", dict(nx=60, ny=30)),
-                    ("EMBEDDED", dict(nx=60, ny=30))):
+                    ("EMBEDDED", dict(nx=60, ny=30)),
+                    ("LINEAR_RECONSTRUCTION", dict(nx=60, ny=30))):
         if not S.native.has_class(S.methods.get(mid).native_class):
             continue
         S.reset_scene()

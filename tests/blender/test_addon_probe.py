@@ -478,13 +478,14 @@ def test_file_load_during_threaded_binds():
 # ---------------------------------------------------------------- bind progress ----------------
 
 def test_bind_progress_and_cancel_in_worker():
-    """The methods with bind progress (all but Linear Reconstruction) report the native bind's
+    """The methods with bind progress (all of them) report the native bind's
     phase and fraction to the worker's job (the Bind operator's status bar shows
     job.progress_text()), and a cancel stops the native work: the job ends with a
     'cancelled' error and the previous binding stays (issue 19, item 3)."""
     for mid, kw in (("ARAP", dict(nx=120, ny=60)), ("LAPLACIAN", dict(nx=120, ny=60)),
                     ("FALLOFF", dict(nx=120, ny=60)), ("EMBEDDED", dict(nx=120, ny=60)),
-                    ("EIGEN", dict(nx=60, ny=30))):
+                    ("EIGEN", dict(nx=60, ny=30)),
+                    ("LINEAR_RECONSTRUCTION", dict(nx=120, ny=60))):
         m = S.methods.get(mid)
         if not S.native.has_class(m.native_class):
             continue

@@ -1,5 +1,6 @@
 /* DeformKit: bind progress and cancellation (dk_progress.h) of ARAP, LaplacianEdit,
- * Falloff (geodesic: its heat factorization and its distances) and EmbeddedDeformation.
+ * Falloff (geodesic: its heat factorization and its distances), EmbeddedDeformation and
+ * LinearReconstruction.
  *
  * - the reporter itself: fractions from the phase weights, non-decreasing, in [0, 1], "done"
  *   at 1, a stop request turned into DK_ERR_CANCELLED, phases out of order refused;
@@ -15,6 +16,7 @@
 #include "dk_arap.h"
 #include "dk_embedded.h"
 #include "dk_falloff.h"
+#include "dk_fundamental.h"
 #include "dk_laplacian_edit.h"
 #include "dk_progress.h"
 #include "dk_test.h"
@@ -265,17 +267,30 @@ static void ed_set(void *self, dk_phase_progress_fn fn, void *user)
     dk_embedded_set_progress(self, fn, user);
 }
 
+static void fr_options(void *o, dk_phase_progress_fn fn, void *user)
+{
+    dk_fundamental_default_options(o);
+    ((dk_fundamental_options *)o)->progress = fn;
+    ((dk_fundamental_options *)o)->progress_user = user;
+}
+static void fr_set(void *self, dk_phase_progress_fn fn, void *user)
+{
+    dk_fundamental_set_progress(self, fn, user);
+}
+
 static const method methods[] = {
     {"ARAP", &dk_arap_ops, arap_options, arap_set, "cells", 8},
     {"LaplacianEdit", &dk_laplacian_edit_ops, le_options, le_set, "basis", 8},
     {"Falloff", &dk_falloff_ops, falloff_options, falloff_set, "distances", 3},
-    {"EmbeddedDeformation", &dk_embedded_ops, ed_options, ed_set, "weights", 6}};
+    {"EmbeddedDeformation", &dk_embedded_ops, ed_options, ed_set, "weights", 6},
+    {"LinearReconstruction", &dk_fundamental_ops, fr_options, fr_set, "assemble", 7}};
 
 typedef union options {
     dk_arap_options arap;
     dk_laplacian_edit_options le;
     dk_falloff_options falloff;
     dk_embedded_options ed;
+    dk_fundamental_options fr;
 } options;
 
 /* Two cold solves of the A set-up (positions and a transform) into out (2 x nv x 3), with

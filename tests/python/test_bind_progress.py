@@ -1,6 +1,6 @@
 """Bind progress and cancellation (issue 19, item 3): progress=callable(fraction) on the
-constructors of ARAP, LaplacianEdit, Falloff, EmbeddedDeformation and EigenDeformation and
-on rebind of the first four. The callable gets a deformkit.BindProgress (a float with `.phase`); a true
+constructors of ARAP, LaplacianEdit, Falloff, EmbeddedDeformation, LinearReconstruction and
+EigenDeformation and on rebind of all but the last. The callable gets a deformkit.BindProgress (a float with `.phase`); a true
 return stops the bind (RuntimeError), an exception stops it and propagates, and a rebind
 that stopped leaves the object solving its old constraints exactly as before."""
 
@@ -40,6 +40,8 @@ PHASES = {
                       "factorize", "basis"},
     "Falloff": {"distances"},  # distance="hops"; "geodesic" adds "heat" (below)
     "EmbeddedDeformation": {"nodes", "weights", "edges", "constraints", "analyze"},
+    "LinearReconstruction": {"forms", "constraints", "assemble", "analyze", "factorize",
+                             "basis"},
 }
 METHODS = sorted(PHASES)
 
@@ -176,7 +178,9 @@ def test_cancelled_rebind_keeps_the_old_constraints(name, change):
     obj.rebind(progress=Recorder(), **kw)  # not stopped: the new constraints
     if change == "new unknowns":
         assert obj.solve(V[OTHER]).positions is not None
-    elif name != "EmbeddedDeformation":  # (its handles are penalties of fixed weight)
+    elif name not in ("EmbeddedDeformation", "LinearReconstruction"):
+        # (EmbeddedDeformation's handles are penalties of fixed weight; LinearReconstruction's
+        # are hard constraints, whatever their weight)
         assert not np.array_equal(before, np.asarray(obj.solve(TARGETS).positions))
 
 

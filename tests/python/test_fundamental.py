@@ -238,6 +238,73 @@ def test_robustness_and_bad_input():
         dk.LinearReconstruction(mesh, handles=[top], w=0.0)
 
 
+def pinched_patch(v, f, t, lift=0.05):
+    """A 4-triangle patch (face t split 1-to-4, its midpoints lifted off the surface) joined
+    to the mesh at face t's three corners only: a part touching the surface at its corners,
+    as the ogre scan has one (its faces 59940-59943)."""
+    a, b, c = f[t]
+    n = np.cross(v[b] - v[a], v[c] - v[a])
+    n /= np.linalg.norm(n)
+    mid = [0.5 * (v[a] + v[b]) + lift * n, 0.5 * (v[b] + v[c]) + lift * n,
+           0.5 * (v[c] + v[a]) + lift * n]
+    k = len(v)
+    return np.r_[v, mid], np.r_[f, [[a, k, k + 2], [b, k + 1, k], [c, k + 2, k + 1],
+                                    [k, k + 1, k + 2]]]
+
+
+def test_a_part_joined_at_vertices_only_binds_and_follows():
+    """The frame equations join faces across edges; a patch touching the surface at three
+    vertices was its own group of frames, free to shear off the plane of those vertices, and
+    the bind failed ("the system is singular at vertex 162"; on the ogre subdivided once, "at
+    the frame of face 59943"). The bridges tie it to its neighbours: the rest comes back, a
+    rigid motion of the constraints moves it rigidly, and a drag moves it with its
+    surroundings."""
+    v, f = make_icosphere(2)
+    top, cap = np.where(v[:, 2] > 0.7)[0], np.where(v[:, 2] < -0.7)[0]
+    eq = int(np.nonzero(np.abs(v[f].mean(1)[:, 2]) < 0.2)[0][0])
+    w, g = pinched_patch(v, f, eq)
+    mesh = dk.Mesh(w, g)
+    assert mesh.n_components == 1 and mesh.report["n_nonmanifold_edges"] == 0
+    patch = np.arange(len(v), len(w))
+    for orientation in (False, True):
+        lr = dk.LinearReconstruction(mesh, handles=[top], fixed=cap, orientation=orientation)
+        assert np.abs(np.asarray(lr.solve(w[top]).positions) - w).max() < 1e-8
+        r = np.asarray(lr.solve(w[top] + [0.3, -0.2, 0.1]).positions)
+        assert np.isfinite(r).all()
+        # the patch moves with its corners (their mean displacement), not off on its own
+        corners = g[eq]
+        moved = (r[corners] - w[corners]).mean(0)
+        assert np.abs((r[patch] - w[patch]) - moved).max() < 0.5 * np.linalg.norm(moved)
+        T = random_rigid(7)
+        lr = dk.LinearReconstruction(mesh, handles=[top, cap], orientation=orientation)
+        r = np.asarray(lr.solve(transforms=[T, T]).positions)
+        assert np.abs(r - (w @ T[:3, :3].T + T[:3, 3])).max() < 1e-8
+        assert lr.transform_basis   # the bridges are linear: the basis stays exact
+
+
+def test_a_part_cut_off_by_degenerate_triangles_needs_its_own_constraint():
+    """A part joined to the rest only through a zero-area triangle is placed by nothing
+    (degenerate triangles carry no energy): refused, naming a vertex of the part and the
+    triangle, instead of "singular"; with a constraint of its own it binds."""
+    v, f = make_icosphere(2)
+    top, cap = np.where(v[:, 2] > 0.7)[0], np.where(v[:, 2] < -0.7)[0]
+    a = int(np.argmax(v[:, 0]))                     # the sphere's +x pole
+    g, gf = make_grid(3, 3)                          # flat, vertex i * 4 + j at (i/3, j/3)
+    g = v[a] + np.c_[0.5 + 0.6 * g[:, 0], 0.5 * (g[:, 1] - g[:, 0]), g[:, 2]]
+    b0, b1 = 0, 10                                   # (0, 0) and (2/3, 2/3): no grid edge
+    # a, b0, b1 on the line y = z = 0 through a: the joining triangle has zero area
+    w = np.r_[v, g]
+    faces = np.r_[f, gf + len(v), [[a, b0 + len(v), b1 + len(v)]]]
+    mesh = dk.Mesh(w, faces)
+    assert mesh.n_components == 1 and mesh.report["n_degenerate_faces"] == 1
+    with pytest.raises(ValueError, match=r"part containing vertex %d is joined .* degenerate "
+                       r".* face %d" % (len(v), len(faces) - 1)):
+        dk.LinearReconstruction(mesh, handles=[top], fixed=cap)
+    grid = np.arange(len(v), len(w))
+    lr = dk.LinearReconstruction(mesh, handles=[top], fixed=np.r_[cap, grid[[0, 3, 12, 15]]])
+    assert np.abs(np.asarray(lr.solve(w[top]).positions) - w).max() < 1e-8
+
+
 def test_harmonic_material_is_harmonic_and_takes_the_painted_values():
     """The paper's future work: a smooth map from a few painted values. L u = 0 away from
     the painted vertices (to 1e-10, with the clamped non-negative cotangent weights the

@@ -634,11 +634,13 @@ def test_singular_systems_name_the_callers_vertex_not_a_matrix_column():
 def _busy_readers(name):
     """The getters of `name` that read the native object."""
     own = {"ARAP": ["handle_sizes"], "Falloff": ["ranges"],
-           "EmbeddedDeformation": ["nodes", "transforms", "edges", "fixed_nodes"]}
+           "EmbeddedDeformation": ["nodes", "transforms", "edges", "fixed_nodes"],
+           "LinearReconstruction": ["frames", "transform_basis"]}
     return ["stats", "n_handles", "n_handle_vertices", "warnings"] + own.get(name, [])
 
 
-@pytest.mark.parametrize("name", ["ARAP", "LaplacianEdit", "Falloff", "EmbeddedDeformation"])
+@pytest.mark.parametrize("name", ["ARAP", "LaplacianEdit", "Falloff", "EmbeddedDeformation",
+                                  "LinearReconstruction"])
 def test_getters_refuse_while_a_rebind_runs(name):
     """A rebind (or solve) in another thread releases the GIL and frees and rebuilds what the
     getters read (the constraint sets, the deformation graph): a getter then read freed
