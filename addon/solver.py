@@ -567,7 +567,8 @@ BIND_PHASES = {
     "assemble": "assembling", "analyze": "analysing", "factorize": "factorizing",
     "basis": "handle basis", "heat": "heat method", "distances": "distances",
     "nodes": "placing nodes", "weights": "node weights", "edges": "graph edges",
-    "eigenvectors": "eigenvectors", "forms": "fundamental forms", "done": "finishing",
+    "eigenvectors": "eigenvectors", "forms": "fundamental forms", "regions": "regions",
+    "skeletons": "skeletons", "done": "finishing",
 }
 
 

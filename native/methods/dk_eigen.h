@@ -38,6 +38,7 @@
 
 #include "dk_constraints.h"
 #include "dk_mesh.h"
+#include "dk_progress.h"
 #include "dk_method.h"
 #include "dk_status.h"
 
@@ -67,8 +68,11 @@ typedef struct dk_eigen_options {
     dk_eigen_laplacian laplacian; /**< default DK_EIGEN_COTANGENT                         */
     double bsw_width;        /**< Belkin-Sun-Wang: sqrt(4h), the kernel's width, in mean edge
                                   lengths (> 0; default 1)                                */
-    dk_progress_fn progress; /**< bind progress (eigenvectors found); may be NULL; a
-                                  non-zero return cancels the bind                       */
+    dk_phase_progress_fn progress; /**< bind progress in named phases (dk_progress.h):
+                                  "regions", "operator", "eigenvectors" (the fraction of
+                                  the eigenpairs found), "skeletons", then "done"; may be
+                                  NULL; a non-zero return cancels the bind
+                                  (DK_ERR_CANCELLED, nothing kept)                        */
     void *progress_user;
 } dk_eigen_options;
 

@@ -30,6 +30,7 @@ typedef struct level {
 struct dk_eigen {
     const dk_mesh *mesh;
     dk_eigen_options opt;
+    dk_progress prog;        /* the bind's reporter (eigen_phases)                         */
     dk_index n;
     int K, m, n_levels;      /* n_levels 1 (one iteration) or 2 (section 4.3)              */
     double *evals, *U;       /* K; n x K column-major                                      */
@@ -161,6 +162,36 @@ static dk_status bsw_laplacian(const dk_mesh *mesh, double width, const double *
     return st;
 }
 
+/* The bind's phases (dk_progress.h). Weights: seconds measured on the 43k armadillo
+ * (the armadillo-wave handle, K = 300, cotangent; 2 cores at a load of ~2): the
+ * eigenvectors dominate at every size (713 s of the 1M ogre's bind, docs/methods/eigen.md). */
+enum { EIGEN_PHASE_REGIONS, EIGEN_PHASE_OPERATOR, EIGEN_PHASE_EIGENVECTORS,
+       EIGEN_PHASE_SKELETONS };
+static const dk_progress_phase eigen_phases[] = {
+    {"regions", 0.01},      /* EIGEN_PHASE_REGIONS: regions, g, w, delta_3                 */
+    {"operator", 0.02},     /* EIGEN_PHASE_OPERATOR: mass and Laplacian                    */
+    {"eigenvectors", 15.7}, /* EIGEN_PHASE_EIGENVECTORS: the band-by-band eigensolver      */
+    {"skeletons", 0.45},    /* EIGEN_PHASE_SKELETONS: U^T U, its factor, the skeletons     */
+};
+
+/* The eigensolver's fraction of pairs found, relayed as the part done of the eigenvectors
+ * phase; a stop there keeps the reporter's message ("cancelled in phase eigenvectors"). */
+typedef struct eigs_relay {
+    dk_progress *p;
+    dk_error err;
+    int stopped;
+} eigs_relay;
+
+static int relay_eigs_progress(void *user, double fraction)
+{
+    eigs_relay *r = user;
+    if (dk_progress_part(r->p, fraction, &r->err) != DK_OK) {
+        r->stopped = 1;
+        return 1;
+    }
+    return 0;
+}
+
 /* 1. the eigenvectors of the mesh Laplacian, and Phi's factor */
 static dk_status eigenvectors(dk_eigen *e, dk_error *err)
 {
@@ -171,6 +202,8 @@ static dk_status eigenvectors(dk_eigen *e, dk_error *err)
     e->U = malloc((size_t)n * (size_t)e->K * sizeof *e->U);
     e->chol = malloc((size_t)e->K * (size_t)e->K * sizeof *e->chol);
     dk_status st = (!mass || !e->evals || !e->U || !e->chol) ? oom(err, "eigenvectors") : DK_OK;
+    if (st == DK_OK)
+        st = dk_progress_begin(&e->prog, EIGEN_PHASE_OPERATOR, err);
     const int bsw = e->opt.laplacian == DK_EIGEN_BELKIN_SUN_WANG;
     if (st == DK_OK)
         st = dk_mass_matrix(e->mesh, bsw ? DK_MASS_BARYCENTRIC : DK_MASS_VORONOI, mass, err);
@@ -218,19 +251,30 @@ static dk_status eigenvectors(dk_eigen *e, dk_error *err)
         }
         free(row);
     }
+    if (st == DK_OK)
+        st = dk_progress_begin(&e->prog, EIGEN_PHASE_EIGENVECTORS, err);
     if (st == DK_OK) {
+        eigs_relay relay = {&e->prog, {0}, 0};
         if (n <= DENSE_MAX || e->K > n / 4) {
             st = dense_eigenpairs(l, mass, n, e->K, e->evals, e->U, err);
         } else {
             dk_eigs_options eo;
             dk_eigs_options_default(&eo);
-            eo.progress = e->opt.progress;
-            eo.progress_user = e->opt.progress_user;
+            if (e->opt.progress) {
+                eo.progress = relay_eigs_progress;
+                eo.progress_user = &relay;
+            }
             st = dk_eigs_smallest(l, mass, e->K, &eo, e->evals, e->U, NULL, err);
         }
-        if (st != DK_OK)
+        if (st == DK_ERR_CANCELLED && relay.stopped) {
+            if (err)
+                *err = relay.err; /* "EigenDeformation: cancelled in phase eigenvectors" */
+        } else if (st != DK_OK) {
             dk_error_prefix(err, "EigenDeformation: eigenvectors");
+        }
     }
+    if (st == DK_OK)
+        st = dk_progress_begin(&e->prog, EIGEN_PHASE_SKELETONS, err);
     if (st == DK_OK) { /* Phi = U^T U (the sum over the vertices of eq. 1), and its factor */
         cblas_dsyrk(CblasColMajor, CblasUpper, CblasTrans, e->K, (int)n, 1.0, e->U, (int)n, 0.0,
                     e->chol, e->K);
@@ -582,7 +626,11 @@ dk_status dk_eigen_bind(const dk_mesh *mesh, const dk_constraint_desc *desc,
     }
     /* 1. the regions; 2. the eigenvectors (K = max(m, n') so that a later rebind, whose
      * automatic m may differ, needs none); 3. the skeletons; 4. the request buffers */
-    st = regions(e, desc, &e->con, e->region, e->g, e->w, &e->delta3, err);
+    dk_progress_init(&e->prog, e->opt.progress, e->opt.progress_user, eigen_phases,
+                     (int)(sizeof eigen_phases / sizeof eigen_phases[0]), "EigenDeformation");
+    st = dk_progress_begin(&e->prog, EIGEN_PHASE_REGIONS, err);
+    if (st == DK_OK)
+        st = regions(e, desc, &e->con, e->region, e->g, e->w, &e->delta3, err);
     if (st == DK_OK) {
         const int m = choose_m(e, e->delta3);
         int K = m;
@@ -609,8 +657,10 @@ dk_status dk_eigen_bind(const dk_mesh *mesh, const dk_constraint_desc *desc,
     for (dk_index i = 0; i < e->con->n_handle_vertices; i++) /* before any solve: the rest */
         memcpy(e->target + 3 * (size_t)i,
                mesh->positions + 3 * (size_t)e->con->handle_vertices[i], 3 * sizeof(double));
+    dk_progress_done(&e->prog);
     e->opt.progress = NULL; /* the caller's callback is for this bind only */
     e->opt.progress_user = NULL;
+    dk_progress_init(&e->prog, NULL, NULL, eigen_phases, 1, "EigenDeformation");
     *out = e;
     return DK_OK;
 }

@@ -131,7 +131,6 @@ typedef struct dk_py_progress {
     PyObject *callable;  /* owned; NULL: no callback                                      */
     PyObject *type;      /* owned: deformkit.BindProgress                                 */
     PyObject *exc_type, *exc_value, *exc_tb; /* what the callable raised (owned), or NULL */
-    const char *phase;   /* the phase name dk_py_progress_fraction reports                */
 } dk_py_progress;
 
 /** Takes the key "progress" out of the keyword dict `kw` (may be NULL) into `p` (zeroed
@@ -140,11 +139,9 @@ typedef struct dk_py_progress {
 int dk_py_progress_take(PyObject *kw, PyObject *module, const char *context,
                         dk_py_progress *p);
 
-/** The native callbacks (user = a dk_py_progress with a callable): with a phase name
- *  (dk_phase_progress_fn), and fraction-only with p->phase (dk_progress_fn). After the
- *  callable raised, every further call returns 1 without calling it. */
+/** The native callback (dk_phase_progress_fn; user = a dk_py_progress with a callable).
+ *  After the callable raised, every further call returns 1 without calling it. */
 int dk_py_progress_phase(void *user, const char *phase, double fraction);
-int dk_py_progress_fraction(void *user, double fraction);
 
 /** After a failed native call that reported to `p`: raises what the callable raised when it
  *  did (and returns NULL), else dk_py_raise(err, context). */

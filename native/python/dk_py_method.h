@@ -83,8 +83,7 @@ struct dk_py_method_spec {
      *  TypeError. */
     PyObject *(*solve_motion)(dk_py_method *self, PyObject *kw, const char *context);
     /** Optional: the method reports bind progress. Installs the shared callback (dk_py.h:
-     *  dk_py_progress_phase, or dk_py_progress_fraction for a fraction-only native
-     *  callback, setting p->phase) with user `p` into the native `options`; the generic
+     *  dk_py_progress_phase) with user `p` into the native `options`; the generic
      *  constructor then takes progress= (dk_py_progress_take) and raises what the callback
      *  raised. */
     void (*bind_progress)(void *options, dk_py_progress *p);

@@ -16,13 +16,11 @@ static void default_options(void *o)
     dk_eigen_default_options((dk_eigen_options *)o);
 }
 
-/* progress=: the shared callback (dk_py.h); the native one reports the fraction of
- * eigenvectors found, named "eigenvectors" */
+/* progress=: the shared callback (dk_py.h), phases named by the native bind */
 static void bind_progress(void *o, dk_py_progress *p)
 {
     dk_eigen_options *opt = (dk_eigen_options *)o;
-    p->phase = "eigenvectors";
-    opt->progress = dk_py_progress_fraction;
+    opt->progress = dk_py_progress_phase;
     opt->progress_user = p;
 }
 
@@ -215,8 +213,8 @@ PyDoc_STRVAR(eig_doc,
              "by a least-squares fit to the handle regions' motion, and the details are\n"
              "added back in local frames. Each handle group is a region R that moves; every\n"
              "other vertex is held by the fit (fixed vertices are no different). m 'auto':\n"
-             "8, 50 or 300 from the regions' size (section 4.2). progress(fraction) is called\n"
-             "as eigenvectors are found; returning True cancels the bind (RuntimeError).\n"
+             "8, 50 or 300 from the regions' size (section 4.2). progress(fraction): as ARAP's\n"
+             "(phases regions, operator, eigenvectors, skeletons); True cancels the bind.\n"
              "It must not start another eigen computation. See docs/methods/eigen.md.");
 
 static PyGetSetDef eig_getset[] = {

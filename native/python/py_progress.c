@@ -99,12 +99,6 @@ int dk_py_progress_phase(void *user, const char *phase, double fraction)
     return stop;
 }
 
-int dk_py_progress_fraction(void *user, double fraction)
-{
-    dk_py_progress *p = user;
-    return dk_py_progress_phase(user, p ? p->phase : NULL, fraction);
-}
-
 PyObject *dk_py_progress_raise(dk_py_progress *p, const dk_error *err, const char *context)
 {
     if (p && p->exc_type) {

@@ -14,6 +14,7 @@
  *   cancellation in the basis refactors the old ones).
  * The meshes are generated (a bumpy grid, large enough for the loops to report). */
 #include "dk_arap.h"
+#include "dk_eigen.h"
 #include "dk_embedded.h"
 #include "dk_falloff.h"
 #include "dk_fundamental.h"
@@ -278,6 +279,19 @@ static void fr_set(void *self, dk_phase_progress_fn fn, void *user)
     dk_fundamental_set_progress(self, fn, user);
 }
 
+/* EigenDeformation: its bind only (its rebind does not report), on set-up B (it refuses
+ * handle weights), with few eigenvectors so that the test stays quick */
+static void eig_options(void *o, dk_phase_progress_fn fn, void *user)
+{
+    dk_eigen_default_options(o);
+    ((dk_eigen_options *)o)->n_eigenvectors = 8;
+    ((dk_eigen_options *)o)->refine = 0;
+    ((dk_eigen_options *)o)->progress = fn;
+    ((dk_eigen_options *)o)->progress_user = user;
+}
+static const method eigen_method = {"EigenDeformation", &dk_eigen_ops, eig_options, NULL,
+                                    "eigenvectors", 5};
+
 static const method methods[] = {
     {"ARAP", &dk_arap_ops, arap_options, arap_set, "cells", 8},
     {"LaplacianEdit", &dk_laplacian_edit_ops, le_options, le_set, "basis", 8},
@@ -291,6 +305,7 @@ typedef union options {
     dk_falloff_options falloff;
     dk_embedded_options ed;
     dk_fundamental_options fr;
+    dk_eigen_options eig;
 } options;
 
 /* Two cold solves of the A set-up (positions and a transform) into out (2 x nv x 3), with
@@ -307,7 +322,7 @@ static dk_status solve_pair(const method *m, void *obj, const setup *s, double *
     return m->ops->solve(obj, &rq, out + 3 * (size_t)s->nv, &info[1], &e);
 }
 
-static void test_bind(const method *m, const setup *s)
+static void test_bind(const method *m, const setup *s, const dk_constraint_desc *desc)
 {
     recorder *r = malloc(sizeof *r);
     if (!r) {
@@ -320,7 +335,7 @@ static void test_bind(const method *m, const setup *s)
     /* a whole bind: the sequence, and how many reports it made */
     recorder_reset(r, -1);
     m->options(&opt, record, r);
-    CHECK(m->ops->bind(s->mesh, &s->a, &opt, &obj, &e) == DK_OK);
+    CHECK(m->ops->bind(s->mesh, desc, &opt, &obj, &e) == DK_OK);
     const int phases = check_sequence(r, m->name);
     CHECK_MSG(phases >= m->min_phases, "%s: %d phases", m->name, phases);
     CHECK_MSG(count_phase(r, m->loop_phase) >= 2, "%s: %d reports in %s", m->name,
@@ -337,7 +352,7 @@ static void test_bind(const method *m, const setup *s)
         m->options(&opt, record, r);
         obj = (void *)1;
         dk_error_clear(&e);
-        const dk_status st = m->ops->bind(s->mesh, &s->a, &opt, &obj, &e);
+        const dk_status st = m->ops->bind(s->mesh, desc, &opt, &obj, &e);
         CHECK_MSG(st == DK_ERR_CANCELLED && obj == NULL && r->calls == k + 1,
                   "%s bind stopped at report %d (%s): status %d, %d reports, %s", m->name, k,
                   r->phase[k], (int)st, r->calls, e.message);
@@ -347,7 +362,7 @@ static void test_bind(const method *m, const setup *s)
     /* stopping at "done" changes nothing: the bind succeeded */
     recorder_reset(r, calls - 1);
     m->options(&opt, record, r);
-    CHECK(m->ops->bind(s->mesh, &s->a, &opt, &obj, &e) == DK_OK && obj != NULL);
+    CHECK(m->ops->bind(s->mesh, desc, &opt, &obj, &e) == DK_OK && obj != NULL);
     m->ops->free(obj);
     free(r);
 }
@@ -434,10 +449,11 @@ static void test_methods(void)
         return;
     }
     for (size_t i = 0; i < sizeof methods / sizeof methods[0]; i++) {
-        test_bind(&methods[i], &s);
+        test_bind(&methods[i], &s, &s.a);
         test_rebind(&methods[i], &s, &s.b, "new unknowns");
         test_rebind(&methods[i], &s, &s.c, "same unknowns, new values");
     }
+    test_bind(&eigen_method, &s, &s.b);
     setup_free(&s);
 }
 

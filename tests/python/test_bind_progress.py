@@ -143,10 +143,18 @@ def test_eigen_reports_through_the_same_callback():
     dk.EigenDeformation(dk.Mesh(v, f), handles=[region], n_eigenvectors=8, refine=0,
                         progress=rec)
     check_sequence(rec.seen)
-    assert {x.phase for x in rec.seen} == {"eigenvectors"}
+    phases = [x.phase for x in rec.seen]
+    assert [p for i, p in enumerate(phases) if i == 0 or phases[i - 1] != p] == [
+        "regions", "operator", "eigenvectors", "skeletons", "done"]
+    assert sum(p == "eigenvectors" for p in phases) > 2  # the eigensolver's bands report
     with pytest.raises(ZeroDivisionError):
         dk.EigenDeformation(dk.Mesh(v, f), handles=[region], n_eigenvectors=8, refine=0,
                             progress=Recorder(raise_at=0))
+    for k, name in ((0, "regions"), (phases.index("eigenvectors") + 1, "eigenvectors"),
+                    (phases.index("skeletons"), "skeletons")):
+        with pytest.raises(RuntimeError, match="EigenDeformation: cancelled in phase " + name):
+            dk.EigenDeformation(dk.Mesh(v, f), handles=[region], n_eigenvectors=8, refine=0,
+                                progress=Recorder(stop_at=k))
 
 
 @pytest.mark.parametrize("name", METHODS)
