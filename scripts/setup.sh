@@ -9,9 +9,10 @@
 # python3-hypothesis is for the property suite (tests/python/test_properties.py), which runs
 # under Debian's python3 like the other Python tests (hypothesis is also pinned in
 # scripts/pins.txt's [tools] venv; Debian 12 ships 6.67, Debian 13 6.130: the suite uses
-# only long-standing API). Checked on packages.debian.org (2026-12-02): every package below is
-# in trixie too (libarpack2-dev 3.9.1, python3-hypothesis 6.130.5); libclang-rt-dev is
-# optional (installed only where apt-cache knows it).
+# only long-standing API). Checked on packages.debian.org (2026-12-02): trixie has
+# libarpack2-dev 3.9.1, python3-hypothesis 6.130.5 and blender 4.3.2 (the add-on's headless
+# suites then run in Debian's 4.3 instead of 3.4); libclang-rt-dev is optional (installed
+# only where apt-cache knows it).
 #
 # usage: scripts/setup.sh [--asan] [--bench] [--fuzz] [--no-build]
 #   --asan      also build the sanitized configuration
