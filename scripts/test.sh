@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Sets everything up and runs every DeformKit test:
 #   1. C tests (ctest) in the Release build and in the ASan+UBSan build, then the libFuzzer
-#      harnesses for a bounded minute in all (scripts/fuzz.sh --seconds 60: the mesh readers,
+#      harnesses for a bounded 40 s in all (scripts/fuzz.sh --seconds 40: the mesh readers,
 #      mesh construction, every method's bind and solve; clang, ASan+UBSan),
 #   2. Python module tests (pytest under Debian's /usr/bin/python3; the property suite
 #      tests/python/test_properties.py with its bounded, derandomized "ci" profile), and
@@ -53,7 +53,7 @@ run_suite() {  # run_suite NAME COMMAND...
 run_suite "C tests" ctest --test-dir build --output-on-failure
 if [ "$quick" = 0 ]; then
   run_suite "C tests (ASan+UBSan)" ctest --test-dir build-asan --output-on-failure
-  run_suite "fuzzers (60 s)" scripts/fuzz.sh --no-setup --seconds 60
+  run_suite "fuzzers (40 s)" scripts/fuzz.sh --no-setup --seconds 40
 fi
 run_suite "Python tests" "$PY" -m pytest -q tests/python
 if [ "$quick" = 0 ]; then

@@ -105,6 +105,7 @@ def test_eigenpairs_match_arpack():
     np.testing.assert_allclose(U[:, :40].T @ (M[:, None] * U[:, :40]), np.eye(40), atol=1e-9)
 
 
+@pytest.mark.heavy  # 2.6 s here, ~10x sanitized; tests/native/test_eigs.c's copies test runs there
 def test_identical_components_give_whole_eigenspaces():
     """A bar and 40 identical copies of a bumped sphere (the ogre's 18 identical components,
     docs/methods/eigen.md): every eigenvalue of the sphere, 0 included, appears 40 times.
