@@ -1251,9 +1251,6 @@ class FrameSolve:
     def __init__(self, key, e, plan, iterative):
         self.key, self.e, self.plan, self.cancelled = key, e, plan, False
         self.result_, self.error, self.ms = None, None, 0.0
-        # what an interactive solve compares with its inputs: never equal (its result is not
-        # one to show, solver.solve then solves for itself)
-        self.plan = dict(plan, inputs=None)
         native_solve, label = e.native.solve, plan["label"]
         goal, kw = plan["goal"], dict(plan["kw"])
         cap = int(kw.get("max_iterations") or 0)
