@@ -11,6 +11,7 @@ static const char *const energy_names[] = {"spokes", "spokes_and_rims", NULL};
 static const char *const weights_names[] = {"cotangent", "clamped_cotangent", "uniform", NULL};
 static const char *const accel_names[] = {"none", "anderson", "newton", NULL};
 static const char *const basis_names[] = {"auto", "off", NULL};
+static const char *const cg_schedule_names[] = {"fixed", "growing", NULL};
 
 static void default_options(void *o)
 {
@@ -22,6 +23,7 @@ static int parse_options(PyObject *kw, void *o, const char *context)
     dk_arap_options *opt = (dk_arap_options *)o;
     int energy = (int)opt->energy, weights = (int)opt->weights;
     int accel = (int)opt->acceleration, basis = (int)opt->basis;
+    int cg_schedule = (int)opt->cg_schedule;
     if (dk_py_opt_choice(kw, "energy", energy_names, &energy, context) < 0 ||
         dk_py_opt_choice(kw, "weights", weights_names, &weights, context) < 0 ||
         dk_py_opt_int(kw, "max_iterations", &opt->max_iterations) < 0 ||
@@ -30,9 +32,11 @@ static int parse_options(PyObject *kw, void *o, const char *context)
         dk_py_opt_int(kw, "anderson_depth", &opt->anderson_depth) < 0 ||
         dk_py_opt_bool(kw, "predict", &opt->predict) < 0 ||
         dk_py_opt_int(kw, "cg_iterations", &opt->cg_iterations) < 0 ||
+        dk_py_opt_choice(kw, "cg_schedule", cg_schedule_names, &cg_schedule, context) < 0 ||
         dk_py_opt_choice(kw, "basis", basis_names, &basis, context) < 0)
         return -1;
     opt->basis = (dk_arap_basis)basis;
+    opt->cg_schedule = (dk_arap_cg_schedule)cg_schedule;
     opt->energy = (dk_arap_energy_kind)energy;
     opt->weights = (dk_arap_weight_kind)weights;
     opt->acceleration = (dk_arap_acceleration)accel;
@@ -159,7 +163,7 @@ PyDoc_STRVAR(arap_doc,
              "ARAP(mesh, handles, fixed=None, roi=None, handle_weights=None, stiffness=None,\n"
              "     energy='spokes', weights='clamped_cotangent', max_iterations=100,\n"
              "     tolerance=1e-6, acceleration='newton', anderson_depth=5, predict=True,\n"
-             "     cg_iterations=12, basis='auto')\n\n"
+             "     cg_iterations=12, cg_schedule='fixed', basis='auto')\n\n"
              "As-rigid-as-possible deformation (Sorkine & Alexa 2007; 'spokes_and_rims' after\n"
              "Chao et al. 2010). Fixed vertices, vertices outside roi and handle vertices of\n"
              "weight 1 are eliminated exactly; handle weights w < 1 become soft penalties\n"
@@ -167,7 +171,9 @@ PyDoc_STRVAR(arap_doc,
              "energy. acceleration: 'none' (the paper's local/global iteration), 'anderson'\n"
              "(Anderson-accelerated, with an energy safeguard) or 'newton' (default; inexact Newton\n"
              "steps, cg_iterations conjugate-gradient iterations each, preconditioned by the\n"
-             "local/global step; an energy line search). Stops when a local/global step\n"
+             "local/global step; an energy line search). cg_schedule='growing' doubles a\n"
+             "step's count while the last step gained at most 1e-3 of E and quadruples it\n"
+             "below 1e-5 (default 'fixed': cg_iterations always). Stops when a local/global step\n"
              "changes the energy by at most tolerance (relative; Newton: predicted before the\n"
              "step). predict: warm starts may extrapolate along the drag (secant of the last\n"
              "two solutions). basis='auto' precomputes, 4 columns per handle (up to 16\n"

@@ -966,6 +966,105 @@ out:
     plane_free(&s);
 }
 
+/* The CG schedule (dk_arap_cg_schedule): GROWING doubles a step's count while the
+ * steps gain at most 1e-3 of E and quadruples it below 1e-5; FIXED never does. Both reach
+ * the same minimum; GROWING in fewer Newton steps. Solved in slices of one step, so that
+ * each step's products can be read (resumed slices equal one long solve, test_resume). */
+static void cg_schedule_run(const plane_setup *s, dk_arap_cg_schedule schedule, int given,
+                            const double *t, double *x, int *steps, int *max_products,
+                            int *min_products, double *energy)
+{
+    const dk_mesh *m = s->mesh;
+    dk_index sizes[1] = {s->n_handle};
+    dk_constraint_desc d = {1, sizes, s->handle, NULL, s->n_fixed, s->fixed, 0, NULL, NULL};
+    dk_arap_options o;
+    dk_arap_default_options(&o);
+    o.tolerance = 1e-11;
+    o.max_iterations = 1000;
+    o.cg_iterations = 3;
+    o.cg_schedule = schedule;
+    dk_arap *a = NULL;
+    dk_error e = {0};
+    dk_solve_info info = {0};
+    *steps = 0;
+    *max_products = 0;
+    *min_products = 1 << 30;
+    if (dk_arap_bind(m, &d, &o, &a, &e) != DK_OK) {
+        CHECK_MSG(0, "%s", e.message);
+        return;
+    }
+    for (int k = 0; k < 1000 && !info.converged; k++) {
+        dk_solve_request rq = {.targets = t, .max_iterations = 1};
+        rq.start = k ? DK_START_RESUME : DK_START_COLD;
+        if (dk_arap_set_cg_iterations(a, given, &e) != DK_OK ||
+            dk_arap_solve(a, &rq, x, &info, &e) != DK_OK) {
+            CHECK_MSG(0, "%s", e.message);
+            break;
+        }
+        *steps += info.iterations;
+        if (!info.converged) { /* the converging call's products include its test's */
+            *max_products = info.cg_iterations > *max_products ? info.cg_iterations
+                                                                : *max_products;
+            *min_products = info.cg_iterations < *min_products ? info.cg_iterations
+                                                                : *min_products;
+        }
+    }
+    CHECK(info.converged);
+    *energy = info.energy;
+    dk_arap_free(a);
+}
+
+static void test_cg_schedule(void)
+{
+    plane_setup s;
+    if (plane_make(&s, 12) != 0) {
+        CHECK(0);
+        return;
+    }
+    const dk_index n = s.mesh->n_vertices;
+    double t[3 * 64];
+    bend_targets(&s, 1.2, t);
+    double *x = malloc(sizeof(double) * 3 * n), *y = malloc(sizeof(double) * 3 * n);
+    int sg = 0, maxg = 0, ming = 0, sf = 0, maxf = 0, minf = 0;
+    double eg = 0.0, ef = 0.0;
+    if (x && y) {
+        cg_schedule_run(&s, DK_ARAP_CG_GROWING, 0, t, x, &sg, &maxg, &ming, &eg);
+        cg_schedule_run(&s, DK_ARAP_CG_FIXED, 0, t, y, &sf, &maxf, &minf, &ef);
+        printf("cg schedule (bend 1.2 rad, 3 CG iterations): growing %d steps, %d-%d products "
+               "a step; fixed %d steps, %d-%d\n", sg, ming, maxg, sf, minf, maxf);
+        CHECK_MSG(maxf <= 3, "fixed: a step of %d products", maxf);
+        CHECK_MSG(maxg == 12, "growing: at most %d products a step, not 3 << 2", maxg);
+        CHECK_MSG(sg < sf, "growing %d Newton steps, fixed %d", sg, sf);
+        CHECK_MSG(fabs(eg - ef) <= 1e-9 * ef, "energies %.15g and %.15g", eg, ef);
+        double dmax = 0.0;
+        for (dk_index i = 0; i < 3 * n; i++)
+            dmax = fmax(dmax, fabs(x[i] - y[i]));
+        CHECK_MSG(dmax <= 1e-5 * s.mesh->bbox_diagonal, "%.3g apart", dmax);
+        /* a count given per call is run as given (the add-on's budgeted slices): the same
+         * path as the fixed schedule, bit for bit */
+        int sx = 0, maxx = 0, minx = 0;
+        double ex = 0.0;
+        cg_schedule_run(&s, DK_ARAP_CG_GROWING, 3, t, x, &sx, &maxx, &minx, &ex);
+        CHECK_MSG(maxx <= 3 && sx == sf && ex == ef && memcmp(x, y, sizeof(double) * 3 * n) == 0,
+                  "given 3: %d steps, up to %d products", sx, maxx);
+    } else {
+        CHECK(0);
+    }
+    /* the option is validated */
+    dk_index sizes[1] = {s.n_handle};
+    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    dk_arap_options o;
+    dk_arap_default_options(&o);
+    o.cg_schedule = (dk_arap_cg_schedule)2; /* neither FIXED nor GROWING */
+    dk_arap *bad = NULL;
+    dk_error e = {0};
+    CHECK(dk_arap_bind(s.mesh, &d, &o, &bad, &e) == DK_ERR_INVALID_ARGUMENT && !bad);
+    CHECK(strstr(e.message, "cg_schedule") != NULL);
+    free(x);
+    free(y);
+    plane_free(&s);
+}
+
 static void test_predictor(void)
 {
     predictor_case(DK_ARAP_ACCEL_ANDERSON);
@@ -1481,7 +1580,7 @@ static void test_big_mesh_threaded_local_step(void)
     dk_test_mesh_free(&tm);
 }
 
-DK_TEST_MAIN(test_newton_quadratic, test_newton_soft_stiffness, test_resume, test_cg_override, test_predictor, test_response_basis, test_zero_drag, test_rigid_motion, test_bend, test_twist, test_clamping,
+DK_TEST_MAIN(test_newton_quadratic, test_newton_soft_stiffness, test_resume, test_cg_override, test_cg_schedule, test_predictor, test_response_basis, test_zero_drag, test_rigid_motion, test_bend, test_twist, test_clamping,
              test_stiffness_soft_warm_rebind, test_warm_rotations_and_cold_reproducibility,
              test_errors,
              test_big_mesh_threaded_local_step)

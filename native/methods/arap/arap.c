@@ -14,6 +14,7 @@ void dk_arap_default_options(dk_arap_options *o)
     o->acceleration = DK_ARAP_ACCEL_NEWTON;
     o->anderson_depth = 5;
     o->cg_iterations = 12;
+    o->cg_schedule = DK_ARAP_CG_FIXED;
     o->predict = 1;
     o->basis = DK_ARAP_BASIS_AUTO;
     o->on_iteration = NULL;
@@ -68,6 +69,10 @@ static dk_status check_options(const dk_arap_options *o, dk_error *err)
     if (o->cg_iterations < 1 || o->cg_iterations > 100)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "ARAP: cg_iterations is %d, must be in [1, 100]", o->cg_iterations);
+    if (o->cg_schedule != DK_ARAP_CG_GROWING && o->cg_schedule != DK_ARAP_CG_FIXED)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP: unknown cg_schedule %d (fixed = 0, growing = 1)",
+                            (int)o->cg_schedule);
     if (o->predict != 0 && o->predict != 1)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "ARAP: predict is %d, must be 0 or 1",
                             o->predict);
@@ -132,6 +137,7 @@ dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraint
     ar->prog = &prog;
     ar->prog_base = BIND_PHASE_BASE;
     ar->cg = opt.cg_iterations;
+    ar->cg_scheduled = 1;
     ar->n = mesh->n_vertices;
     st = dk_progress_begin(&prog, 0, err); /* renumber */
     if (st == DK_OK)
@@ -252,6 +258,8 @@ static dk_status solve_impl(dk_arap *ar, const dk_solve_request *rq, double *pos
     const int resume = rq->start == DK_START_RESUME && ar->have_prev && s->resumable &&
                        memcmp(s->targets, s->targets_prev, nhv3 * sizeof(double)) == 0;
     arap_progress p = {0};
+    if (!resume)
+        s->cg_level = 0; /* the CG schedule starts again (newton.c) */
     if (resume)
         p.energy = s->last_energy; /* ar->x, s->xu, s->rhs, ar->rot: as the last call left them */
     else if ((st = arap_start(ar, s, warm_start && ar->have_prev, rq->preview, &p.energy,
@@ -337,6 +345,7 @@ dk_status dk_arap_set_cg_iterations(dk_arap *ar, int cg_iterations, dk_error *er
                             "ARAP: cg_iterations is %d, must be in [1, 100] (0: as bound)",
                             cg_iterations);
     ar->cg = cg_iterations > 0 ? cg_iterations : ar->opt.cg_iterations;
+    ar->cg_scheduled = cg_iterations == 0; /* a count asked for is run as asked */
     return DK_OK;
 }
 

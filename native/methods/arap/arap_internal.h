@@ -121,6 +121,10 @@ typedef struct arap_system {
      * where the test's local/global prediction is small while the minimum is still away).
      * Cleared by a whole step and by a cold start; kept across warm starts. */
     int cut;
+    /* the CG schedule's level (dk_arap_cg_schedule GROWING): whole Newton steps run
+     * cg_iterations << cg_level iterations; set after each step from its relative decrease
+     * (newton.c, cg_level_after), 0 at every start that is not a resume */
+    int cg_level;
     dk_index *a_vrow; /* per entry of a: the vertex of its row (products in the mesh layout) */
     struct nt_entry { float h[3]; dk_index cell; } *nt;
     struct nt_term { float e[3], w; dk_index a, b; } *ntt; /* the cell terms, packed */
@@ -145,6 +149,8 @@ struct dk_arap {
     dk_arap_options opt;
     int cg;               /* CG iterations per Newton step of the next solves
                              (dk_arap_set_cg_iterations; opt.cg_iterations as bound)       */
+    int cg_scheduled;     /* 1: the bound count, scaled by opt.cg_schedule (newton.c); 0: a
+                             count given to dk_arap_set_cg_iterations, run as given          */
     dk_index n;
     int64_t n_terms;
     dk_index *cell_start, *ta, *tb;

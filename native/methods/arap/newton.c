@@ -12,7 +12,8 @@
  * numbers per map entry (R_c g is stored with each right-hand side). A Newton step solves
  * H d = -g approximately by preconditioned conjugate gradients, preconditioner A^-1 (the
  * bound factor), from d = 0: its first iterate is the local/global step; at most
- * cg_iterations Hessian products (ar->cg: as bound, or dk_arap_set_cg_iterations); a direction of non-positive curvature ends it (the first
+ * cg_iterations Hessian products (ar->cg: as bound, scaled by the schedule, cg_level_after;
+ * or as given to dk_arap_set_cg_iterations); a direction of non-positive curvature ends it (the first
  * one: the local/global step is used). Then a line search on E (t = 1, 1/2, 1/4, 1/8;
  * accept when E does not increase), and if it fails, the local/global step (which never
  * increases E). Far from a minimum (the local/global step promises more than NEWTON_FAR of
@@ -179,6 +180,9 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
     double *r = s->nt_r, *z = s->nt_z, *p = s->nt_p, *q = s->nt_q, *d = s->nt_d;
     double *z0 = s->nt_z0, ignored;
     const int whole = ar->cg >= ar->opt.cg_iterations;
+    const int cg = ar->cg_scheduled && ar->opt.cg_schedule == DK_ARAP_CG_GROWING
+                       ? ar->cg << s->cg_level
+                       : ar->cg;
     *newton_converged = 0;
     hv_job job = {ar, s, ar->x, r, s->rhs, {0.0, 0.0}};
     dk_team_run_halves(ar->team, hv_rows_part, &job, nu, rows_min); /* r = -g */
@@ -198,7 +202,7 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
     job.v = s->vfull;
     job.out = q;
     job.rhs = NULL;
-    for (int k = 0; k < ar->cg; k++) {
+    for (int k = 0; k < cg; k++) {
         dk_team_run_halves(ar->team, hv_cells_part, &job, ar->n, cells_min);
         dk_team_run_halves(ar->team, hv_rows_part, &job, nu, rows_min);
         (*cg_total)++;
@@ -223,7 +227,7 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
             vec_job vj = {s, VEC_STEP, alpha, d, r, p, q, NULL};
             dk_team_run_halves(ar->team, vec_part, &vj, nu, rows_min);
         }
-        if (k + 1 == ar->cg)
+        if (k + 1 == cg)
             break;
         st = dk_cholesky_solve(s->chol, r, 3, z, err);
         if (st != DK_OK)
@@ -264,6 +268,16 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
 }
 
 
+/* The CG schedule (dk_arap_cg_schedule GROWING) after a step that took E from `energy` to
+ * `e_new`: level 0 (cg_iterations) while a step gains more than 1e-3 of E, 1 (twice) down to
+ * 1e-5, 2 (four times) below. The thresholds are the tenth session's (173k armadillo); the
+ * eleventh's measurements, why it is opt-in: docs/methods/arap.md, "A CG count that grows". */
+static int cg_level_after(double energy, double e_new)
+{
+    const double gain = energy > 0.0 ? (energy - e_new) / energy : 0.0;
+    return gain > 1e-3 ? 0 : gain > 1e-5 ? 1 : 2;
+}
+
 dk_status arap_iterate_newton(dk_arap *ar, arap_system *s, int maxit, arap_progress *p,
                               dk_error *err)
 {
@@ -281,6 +295,8 @@ dk_status arap_iterate_newton(dk_arap *ar, arap_system *s, int maxit, arap_progr
             return dk_error_prefix(err, "ARAP solve");
         /* or a step that did not lower E at all (rounding level: stagnation) */
         converged = e_new <= tiny || newton_converged || (energy - e_new) <= 0.0;
+        if (!newton_converged)
+            s->cg_level = cg_level_after(energy, e_new);
         energy = e_new;
         if (ar->opt.on_iteration && ar->opt.on_iteration(ar->opt.user, it, energy))
             return dk_error_set(err, DK_ERR_CANCELLED, "ARAP solve: cancelled by the observer");
