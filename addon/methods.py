@@ -168,7 +168,8 @@ METHODS = [
                    min=1, max=100000, advanced=True),
             Option("tolerance", "FLOAT", 1e-6, "Tolerance",
                    "How settled the shape must be for a solve to stop (a step would change "
-                   "the energy by less than this fraction): smaller is more exact and slower",
+                   "the energy by less than this fraction; Newton: and the energy left above "
+                   "the minimum is estimated below it): smaller is more exact and slower",
                    min=0.0, max=1.0, advanced=True),
             # item order is stored in files: new items go last. Default: Newton (faster to
             # convergence and closer to the minimum, docs/methods/arap.md)

@@ -106,7 +106,10 @@ typedef struct dk_arap_options {
                                             tolerance * E_prev. NEWTON: stop when the best
                                             step along the local/global direction would
                                             lower E by at most tolerance * E (predicted by
-                                            the quadratic model, before any step is taken)*/
+                                            the quadratic model, before any step is taken)
+                                            and the gap to the minimum extrapolated from
+                                            the last steps' decreases is at most
+                                            tolerance * E too (docs/methods/arap.md)  */
     dk_arap_acceleration acceleration; /**< default DK_ARAP_ACCEL_NEWTON                  */
     int anderson_depth;                /**< 1..20, default 5                              */
     int cg_iterations;                 /**< NEWTON: conjugate-gradient iterations (Hessian

@@ -258,8 +258,10 @@ static dk_status solve_impl(dk_arap *ar, const dk_solve_request *rq, double *pos
     const int resume = rq->start == DK_START_RESUME && ar->have_prev && s->resumable &&
                        memcmp(s->targets, s->targets_prev, nhv3 * sizeof(double)) == 0;
     arap_progress p = {0};
-    if (!resume)
-        s->cg_level = 0; /* the CG schedule starts again (newton.c) */
+    if (!resume) {
+        s->cg_level = 0;       /* the CG schedule starts again (newton.c) */
+        arap_gap_restart(s, 0); /* and the decreases the stopping test extrapolates */
+    }
     if (resume)
         p.energy = s->last_energy; /* ar->x, s->xu, s->rhs, ar->rot: as the last call left them */
     else if ((st = arap_start(ar, s, warm_start && ar->have_prev, rq->preview, &p.energy,

@@ -125,6 +125,11 @@ typedef struct arap_system {
      * cg_iterations << cg_level iterations; set after each step from its relative decrease
      * (newton.c, cg_level_after), 0 at every start that is not a resume */
     int cg_level;
+    /* the extrapolated-gap stopping test (newton.c, gap_small): the last Newton step's
+     * decrease of E and the last two ratios of consecutive decreases ([0] the newer; 0:
+     * not measured), all since the last start that was not a resume (arap_gap_restart);
+     * and the ratio the solve before ended with (0: none since the last cold start) */
+    double nt_decrease, nt_ratio[2], nt_ratio_before;
     dk_index *a_vrow; /* per entry of a: the vertex of its row (products in the mesh layout) */
     struct nt_entry { float h[3]; dk_index cell; } *nt;
     struct nt_term { float e[3], w; dk_index a, b; } *ntt; /* the cell terms, packed */
@@ -292,6 +297,9 @@ int arap_response_basis_apply(dk_arap *ar, arap_system *s, const double *x1, con
 /* anderson.c, newton.c: iterate from p until converged or max_iterations in all */
 dk_status arap_iterate_local_global(dk_arap *ar, arap_system *s, int max_iterations,
                                     arap_progress *p, dk_error *err);
+/* A start that is not a resume: the stopping test's decreases start again, the ratio the
+ * last solve ended with is kept for the new one's first steps (cold: forgotten too). */
+void arap_gap_restart(arap_system *s, int cold);
 dk_status arap_iterate_newton(dk_arap *ar, arap_system *s, int max_iterations,
                               arap_progress *p, dk_error *err);
 

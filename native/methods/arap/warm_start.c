@@ -178,8 +178,10 @@ dk_status arap_start(dk_arap *ar, arap_system *s, int warm, int lazy, double *en
     int have_energy = 0;
     dk_status st;
     s->predicted = 0;
-    if (!warm)
-        s->cut = 0; /* a cold start remembers nothing of the cut steps (newton.c) */
+    if (!warm) { /* a cold start remembers nothing of the cut steps or ratios (newton.c) */
+        s->cut = 0;
+        arap_gap_restart(s, 1);
+    }
     place_known(ar, s, warm ? ar->prev : ar->mesh->positions);
     if (!(lazy && warm)) /* a lazy warm start needs it only in arap_start_complete */
         arap_build_rhs_const(ar, s, ar->x);
