@@ -128,7 +128,7 @@ typedef struct arap_system {
     /* the extrapolated-gap stopping test (newton.c, gap_small): the last Newton step's
      * decrease of E and the last two ratios of consecutive decreases ([0] the newer; 0:
      * not measured), all since the last start that was not a resume (arap_gap_restart);
-     * and the ratio the solve before ended with (0: none since the last cold start) */
+     * and the rate the solve before ended with (0: none since the last cold start) */
     double nt_decrease, nt_ratio[2], nt_ratio_before;
     dk_index *a_vrow; /* per entry of a: the vertex of its row (products in the mesh layout) */
     struct nt_entry { float h[3]; dk_index cell; } *nt;

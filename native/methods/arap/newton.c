@@ -178,16 +178,23 @@ static void vec_part(void *ctx, dk_index u0, dk_index u1, int part)
  * docs/methods/arap.md, "Where the stopping test stops"). With decreases shrinking by rho
  * per step, what is left after a step of decrease d is d (rho + rho^2 + ...) =
  * d rho / (1 - rho). The paper has no stopping test; our choices, each from the 43k/173k
- * step-by-step traces of that section: rho is the largest of the last two measured ratios
- * (truncated-CG Newton steps alternate long and short ones at 43k: 2.5, then 0.03) and of
- * the ratio the solve before ended with (a drag's first steps shrink fast, 0.01 then 0.13,
- * before the slow modes set the rate again: that rate is the mesh's, not the drag's);
- * capped at RATIO_CAP so that decreases that do not shrink still stop once d is small.
- * Nothing measured (a cold start's first two steps): the first-iterate test alone. */
+ * step-by-step traces of that section: the rate is the geometric mean of the last two
+ * measured ratios, the per-step rate over two steps (truncated-CG Newton steps alternate
+ * long and short ones at 43k: 2.5, then 0.03, where the larger alone would call a fast
+ * solve stalled), rho the larger of it and of the rate the solve before ended with (a
+ * drag's first steps shrink fast, 0.01 then 0.13, before the slow modes set the rate again:
+ * that rate is the mesh's, not the drag's); capped at RATIO_CAP so that decreases that do
+ * not shrink still stop once d is small. Nothing measured (a cold start's first two
+ * steps): the first-iterate test alone. */
 #define RATIO_CAP 0.99
+static double rate(const arap_system *s)
+{
+    return s->nt_ratio[1] > 0.0 ? sqrt(s->nt_ratio[0] * s->nt_ratio[1]) : s->nt_ratio[0];
+}
+
 static int gap_small(const arap_system *s, double bound)
 {
-    double rho = s->nt_ratio[0] > s->nt_ratio[1] ? s->nt_ratio[0] : s->nt_ratio[1];
+    double rho = rate(s);
     if (s->nt_ratio_before > rho)
         rho = s->nt_ratio_before;
     if (!(s->nt_decrease > 0.0 && rho > 0.0))
@@ -212,7 +219,7 @@ static void record_decrease(arap_system *s, double energy, double e_new)
 
 void arap_gap_restart(arap_system *s, int cold)
 {
-    const double r = s->nt_ratio[0] > s->nt_ratio[1] ? s->nt_ratio[0] : s->nt_ratio[1];
+    const double r = rate(s);
     if (cold)
         s->nt_ratio_before = 0.0;
     else if (r > 0.0)
