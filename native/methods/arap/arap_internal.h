@@ -297,7 +297,7 @@ int arap_response_basis_apply(dk_arap *ar, arap_system *s, const double *x1, con
 /* anderson.c, newton.c: iterate from p until converged or max_iterations in all */
 dk_status arap_iterate_local_global(dk_arap *ar, arap_system *s, int max_iterations,
                                     arap_progress *p, dk_error *err);
-/* A start that is not a resume: the stopping test's decreases start again, the ratio the
+/* A start that is not a resume: the stopping test's decreases start again, the rate the
  * last solve ended with is kept for the new one's first steps (cold: forgotten too). */
 void arap_gap_restart(arap_system *s, int cold);
 dk_status arap_iterate_newton(dk_arap *ar, arap_system *s, int max_iterations,

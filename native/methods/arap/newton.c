@@ -273,8 +273,9 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
         /* The stopping test, on the first iterate: alpha rz0 is the decrease of the
          * quadratic model for the best step along the local/global direction, which is at
          * least what a local/global step would achieve; at most tolerance * E: converged,
-         * the local/global test predicted instead of taken (so that one tolerance means the
-         * same for every acceleration). Nothing moves. */
+         * the local/global test predicted instead of taken, when the extrapolated gap is
+         * small too (gap_small: what makes tolerance bound the energy left above the
+         * minimum, which the local/global solvers' per-step test does not). Nothing moves. */
         if (k == 0 && alpha * rz <= ar->opt.tolerance * energy && !s->cut &&
             gap_small(s, ar->opt.tolerance * energy)) {
             *newton_converged = 1;
