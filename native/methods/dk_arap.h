@@ -100,7 +100,7 @@ typedef int (*dk_arap_iteration_fn)(void *user, int iteration, double energy);
 typedef struct dk_arap_options {
     dk_arap_energy_kind energy;        /**< default DK_ARAP_SPOKES                        */
     dk_arap_weight_kind weights;       /**< default DK_ARAP_WEIGHTS_CLAMPED_COTANGENT     */
-    int max_iterations;                /**< >= 1, default 100                             */
+    int max_iterations;                /**< >= 1, default 1000                            */
     double tolerance;                  /**< >= 0, default 1e-6. NONE / ANDERSON: stop when
                                             the last iteration lowered E by at most
                                             tolerance * E_prev. NEWTON: stop when the best

@@ -161,7 +161,7 @@ PyDoc_STRVAR(solve_doc,
 
 PyDoc_STRVAR(arap_doc,
              "ARAP(mesh, handles, fixed=None, roi=None, handle_weights=None, stiffness=None,\n"
-             "     energy='spokes', weights='clamped_cotangent', max_iterations=100,\n"
+             "     energy='spokes', weights='clamped_cotangent', max_iterations=1000,\n"
              "     tolerance=1e-6, acceleration='newton', anderson_depth=5, predict=True,\n"
              "     cg_iterations=12, cg_schedule='fixed', basis='auto')\n\n"
              "As-rigid-as-possible deformation (Sorkine & Alexa 2007; 'spokes_and_rims' after\n"
