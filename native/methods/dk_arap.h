@@ -109,7 +109,8 @@ typedef struct dk_arap_options {
                                             the quadratic model, before any step is taken)
                                             and the gap to the minimum extrapolated from
                                             the last steps' decreases is at most
-                                            tolerance * E too (docs/methods/arap.md)  */
+                                            tolerance * E too, after a step that met no
+                                            negative curvature (docs/methods/arap.md)  */
     dk_arap_acceleration acceleration; /**< default DK_ARAP_ACCEL_NEWTON                  */
     int anderson_depth;                /**< 1..20, default 5                              */
     int cg_iterations;                 /**< NEWTON: conjugate-gradient iterations (Hessian

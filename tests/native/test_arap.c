@@ -12,6 +12,7 @@
 #include <string.h>
 
 #include "dk_arap.h"
+#include "arap/arap_internal.h" /* test_stopping_indefinite sets the step's record */
 #include "dk_test.h"
 #include "dk_test_meshes.h"
 
@@ -1131,6 +1132,51 @@ static void test_stopping_gap(void)
     plane_free(&s);
 }
 
+/* The stopping test waits after a step whose CG met negative curvature (arap_internal.h,
+ * nt_indefinite): resumed at a converged minimum, a solve stops again at once, but not when
+ * the last step is recorded as indefinite (the 692k armadillo's plateau, newton.c): then it
+ * takes a step, which at the minimum meets no negative curvature, and stops after it. */
+static void test_stopping_indefinite(void)
+{
+    plane_setup s;
+    if (plane_make(&s, 12) != 0) {
+        CHECK(0);
+        return;
+    }
+    dk_index sizes[1] = {s.n_handle};
+    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    dk_arap_options o;
+    dk_arap_default_options(&o);
+    dk_arap *a = NULL;
+    dk_error e = {0};
+    double t[3 * 64], *x = malloc(sizeof(double) * 3 * s.mesh->n_vertices);
+    if (!x || dk_arap_bind(s.mesh, &d, &o, &a, &e) != DK_OK) {
+        CHECK_MSG(0, "%s", e.message);
+        free(x);
+        plane_free(&s);
+        return;
+    }
+    bend_targets(&s, 1.0, t);
+    dk_solve_info first = {0}, again = {0}, flagged = {0}, after = {0};
+    const dk_solve_request resume1 = {.targets = t, .start = DK_START_RESUME, .max_iterations = 1};
+    int ok = dk_arap_solve(a, &(dk_solve_request){.targets = t, .start = DK_START_COLD}, x,
+                           &first, &e) == DK_OK &&
+             dk_arap_solve(a, &resume1, x, &again, &e) == DK_OK;
+    a->sys.nt_indefinite = 1; /* as if the last step's CG had met negative curvature */
+    ok = ok && dk_arap_solve(a, &resume1, x, &flagged, &e) == DK_OK &&
+         dk_arap_solve(a, &resume1, x, &after, &e) == DK_OK;
+    CHECK_MSG(ok, "%s", e.message);
+    CHECK(first.converged && again.converged && again.energy == first.energy);
+    CHECK_MSG(!flagged.converged && flagged.energy <= first.energy,
+              "flagged: converged %d, E %.17g vs %.17g", flagged.converged, flagged.energy,
+              first.energy);
+    CHECK_MSG(after.converged && a->sys.nt_indefinite == 0, "after: converged %d",
+              after.converged);
+    dk_arap_free(a);
+    free(x);
+    plane_free(&s);
+}
+
 static void test_predictor(void)
 {
     predictor_case(DK_ARAP_ACCEL_ANDERSON);
@@ -1646,7 +1692,7 @@ static void test_big_mesh_threaded_local_step(void)
     dk_test_mesh_free(&tm);
 }
 
-DK_TEST_MAIN(test_newton_quadratic, test_newton_soft_stiffness, test_resume, test_cg_override, test_cg_schedule, test_stopping_gap, test_predictor, test_response_basis, test_zero_drag, test_rigid_motion, test_bend, test_twist, test_clamping,
+DK_TEST_MAIN(test_newton_quadratic, test_newton_soft_stiffness, test_resume, test_cg_override, test_cg_schedule, test_stopping_gap, test_stopping_indefinite, test_predictor, test_response_basis, test_zero_drag, test_rigid_motion, test_bend, test_twist, test_clamping,
              test_stiffness_soft_warm_rebind, test_warm_rotations_and_cold_reproducibility,
              test_errors,
              test_big_mesh_threaded_local_step)

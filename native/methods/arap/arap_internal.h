@@ -130,6 +130,13 @@ typedef struct arap_system {
      * not measured), all since the last start that was not a resume (arap_gap_restart);
      * and the rate the solve before ended with (0: none since the last cold start) */
     double nt_decrease, nt_ratio[2], nt_ratio_before;
+    /* the last Newton step's CG met a clearly negative curvature (newton.c,
+     * NEGATIVE_CURVATURE): E is not locally convex at the iterate, a saddle-like region where
+     * steps can shrink for a while before they grow again, so the stopping test waits for
+     * a step that did not (measured: 692k vertices, growing CG counts, a plateau of five
+     * short steps whose decreases made the gap extrapolation stop 1.1e-4 of E above the
+     * minimum). 0 at every start that is not a resume (arap_gap_restart) */
+    int nt_indefinite;
     dk_index *a_vrow; /* per entry of a: the vertex of its row (products in the mesh layout) */
     struct nt_entry { float h[3]; dk_index cell; } *nt;
     struct nt_term { float e[3], w; dk_index a, b; } *ntt; /* the cell terms, packed */

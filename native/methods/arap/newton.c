@@ -21,7 +21,9 @@
  * iterate, the quadratic
  * model's decrease for the best step along the local/global direction (alpha_0 r_0.z_0) is
  * at most tolerance * E: the local/global test, predicted instead of taken; and the gap to
- * the minimum extrapolated from the last steps' decreases is too (gap_small). Cells
+ * the minimum extrapolated from the last steps' decreases is too (gap_small), and the last
+ * step's CG met no clearly negative curvature (nt_indefinite: E is not locally convex
+ * there, and the decreases of such steps say nothing of the gap). Cells
  * whose K is not safely positive definite (degenerate) have their rotation held in H (a
  * positive semi-definite simplification, like Gauss-Newton). */
 
@@ -225,7 +227,16 @@ void arap_gap_restart(arap_system *s, int cold)
     else if (r > 0.0)
         s->nt_ratio_before = r;
     s->nt_decrease = s->nt_ratio[0] = s->nt_ratio[1] = 0.0;
+    s->nt_indefinite = 0;
 }
+
+/* A CG iteration whose curvature p.Hp is below -NEGATIVE_CURVATURE times r.z (the
+ * preconditioned residual's norm, so the ratio is of the order of a Rayleigh quotient of
+ * A^-1 H, in (0, 1] where E is convex) sets s->nt_indefinite. Far below rounding: the
+ * products read the cell data in float (~1e-7 relative), and a closed mesh with nothing
+ * fixed has an exactly flat direction (its rigid rotation) that must not count. The
+ * measured ones are -5e-3 to -3.4 (the 692k armadillo). */
+#define NEGATIVE_CURVATURE 1e-6
 
 static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double *e_new,
                              int *newton_converged, int *rejected, int *cg_total, dk_error *err)
@@ -251,8 +262,10 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
     if (rz0 > NEWTON_FAR * energy) { /* far from a minimum: the local/global step */
         *e_new = local_global_step(ar, s, z0);
         arap_rotations_rhs(ar, s, ar->rot);
+        s->nt_indefinite = 0;
         return DK_OK;
     }
+    int indefinite = 0;
     memcpy(p, z0, N * sizeof(double));
     memset(d, 0, N * sizeof(double));
     arap_scatter(s, p, s->vfull);
@@ -265,6 +278,7 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
         (*cg_total)++;
         const double pq = job.dot[0] + job.dot[1];
         if (!(pq > 0.0) || !(rz > 0.0)) {
+            indefinite = pq < -NEGATIVE_CURVATURE * rz;
             if (k == 0) /* non-positive curvature at once: the local/global step */
                 memcpy(d, p, N * sizeof(double));
             break;
@@ -275,9 +289,10 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
          * least what a local/global step would achieve; at most tolerance * E: converged,
          * the local/global test predicted instead of taken, when the extrapolated gap is
          * small too (gap_small: what makes tolerance bound the energy left above the
-         * minimum, which the local/global solvers' per-step test does not). Nothing moves. */
+         * minimum, which the local/global solvers' per-step test does not), and when the
+         * last step met no clear negative curvature (nt_indefinite). Nothing moves. */
         if (k == 0 && alpha * rz <= ar->opt.tolerance * energy && !s->cut &&
-            gap_small(s, ar->opt.tolerance * energy)) {
+            !s->nt_indefinite && gap_small(s, ar->opt.tolerance * energy)) {
             *newton_converged = 1;
             *e_new = energy;
             return DK_OK;
@@ -322,6 +337,7 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
     }
     arap_rotations_rhs(ar, s, ar->rot);
     s->cut = !whole;
+    s->nt_indefinite = indefinite;
     *e_new = e;
     return DK_OK;
 }
