@@ -162,7 +162,7 @@ METHODS = [
                            "Every edge counts the same, whatever the triangles' shapes: a "
                            "rougher result that shifts with the mesh's density")),
                    advanced=True),
-            # 1000: a guard against stalls, above the 138-176 steps an honest 1e-6 takes at
+            # 1000: a guard against stalls, above the 88-268 steps an honest 1e-6 takes at
             # 692k vertices (a bake's frames and the refine solve stop at it)
             Option("max_iterations", "INT", 1000, "Max Iterations",
                    "Most steps one solve takes: raise it when the panel says 'not "
