@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Sets everything up and runs every DeformKit test:
-#   1. C tests (ctest) in the Release build and in the ASan+UBSan build, then the libFuzzer
+#   1. C tests (ctest, one per core at a time) in the Release build and in the ASan+UBSan build, then the libFuzzer
 #      harnesses for a bounded 40 s in all (scripts/fuzz.sh --seconds 40: the mesh readers,
 #      mesh construction, every method's bind and solve; clang, ASan+UBSan),
 #   2. Python module tests (pytest under Debian's /usr/bin/python3; the property suite
@@ -50,9 +50,11 @@ run_suite() {  # run_suite NAME COMMAND...
   fi
 }
 
-run_suite "C tests" ctest --test-dir build --output-on-failure
+# the C tests two at a time (each is its own process; the machines have two cores)
+jobs="$(nproc 2>/dev/null || echo 2)"
+run_suite "C tests" ctest --test-dir build --output-on-failure -j"$jobs"
 if [ "$quick" = 0 ]; then
-  run_suite "C tests (ASan+UBSan)" ctest --test-dir build-asan --output-on-failure
+  run_suite "C tests (ASan+UBSan)" ctest --test-dir build-asan --output-on-failure -j"$jobs"
   run_suite "fuzzers (40 s)" scripts/fuzz.sh --no-setup --seconds 40
 fi
 run_suite "Python tests" "$PY" -m pytest -q tests/python

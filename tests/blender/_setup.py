@@ -19,6 +19,7 @@ sys.path."""
 import importlib.util
 import os
 import sys
+import time
 import traceback
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -211,13 +212,16 @@ class Results:
         return cond
 
     def run(self, fn):
-        """Runs one test function; an exception is one failure (with its traceback)."""
+        """Runs one test function; an exception is one failure (with its traceback). Prints
+        its wall time (the suites' logs say where CI's minutes go)."""
+        start = time.perf_counter()
         try:
             fn()
         except Exception:
             self.failed += 1
             print("FAIL %s raised:" % fn.__name__)
             traceback.print_exc()
+        print("time %s: %.1f s" % (fn.__name__, time.perf_counter() - start))
 
     def finish(self):
         print("%s: %d passed, %d failed" % (self.name, self.passed, self.failed))

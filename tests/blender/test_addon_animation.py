@@ -2,6 +2,7 @@
 PC2 (operator and headless batch), chunked bakes joined equal one bake, the Mesh Cache modifier
 plays the cache back; bake to shape keys; batch failures exit non-zero; Embedded Deformation
 on a mesh animated by an Armature modifier above it (section 5 of Sumner et al.)."""
+import concurrent.futures
 import os
 import subprocess
 import sys
@@ -107,16 +108,23 @@ def run_batch(*args, blend=BLEND):
     return r
 
 
+def run_batches(*calls):
+    """run_batch for each (args, blend) of `calls`, three processes at a time (as a farm runs
+    its chunks side by side; each one's start-up is most of its time here), results in order."""
+    with concurrent.futures.ThreadPoolExecutor(max_workers=3) as pool:
+        futures = [pool.submit(run_batch, *args, blend=blend) for args, blend in calls]
+        return [f.result() for f in futures]
+
+
 def test_chunked_bake_equals_single():
     out = {k: os.path.join(S.OUTPUT, "anim_%s.pc2" % k) for k in ("all", "a", "b", "joined")}
     for p in out.values():
         if os.path.exists(p):
             os.remove(p)
-    r = run_batch("--object", "Grid", "--frames", "1-20", "--out", out["all"])
+    r, r1, r2 = run_batches(*[(("--object", "Grid", "--frames", fr, "--out", out[k]), BLEND)
+                              for fr, k in (("1-20", "all"), ("1-8", "a"), ("9-20", "b"))])
     R.check("single batch bake exits 0", r.returncode == 0, r.stderr[-1500:])
     R.check("progress lines on stderr", "frame 20 (20/20, 100%)" in r.stderr, r.stderr[-500:])
-    r1 = run_batch("--object", "Grid", "--frames", "1-8", "--out", out["a"])
-    r2 = run_batch("--object", "Grid", "--frames", "9-20", "--out", out["b"])
     R.check("chunk bakes exit 0", r1.returncode == 0 and r2.returncode == 0, r1.stderr[-800:] + r2.stderr[-800:])
     r3 = run_batch("--join", out["b"], out["a"], "--out", out["joined"], blend=None)
     R.check("join exits 0", r3.returncode == 0, r3.stderr[-800:])
@@ -144,11 +152,15 @@ def test_chunked_bake_equals_single():
 
 
 def test_batch_failures():
-    r = run_batch("--object", "Nope", "--frames", "1-3", "--out", os.path.join(S.OUTPUT, "x.pc2"))
+    x = [os.path.join(S.OUTPUT, "x%d.pc2" % i) for i in range(3)]
+    bad = run_batches((("--object", "Nope", "--frames", "1-3", "--out", x[0]), BLEND),
+                      (("--object", "Tip", "--frames", "1-3", "--out", x[1]), BLEND),
+                      (("--object", "Grid", "--frames", "5-1", "--out", x[2]), BLEND))
+    r = bad[0]
     R.check("unknown object: non-zero exit + message", r.returncode != 0 and "no object named" in r.stderr, r.stderr[-300:])
-    r = run_batch("--object", "Tip", "--frames", "1-3", "--out", os.path.join(S.OUTPUT, "x.pc2"))
+    r = bad[1]
     R.check("non-mesh object: non-zero exit", r.returncode != 0 and "not a mesh" in r.stderr, r.stderr[-300:])
-    r = run_batch("--object", "Grid", "--frames", "5-1", "--out", os.path.join(S.OUTPUT, "x.pc2"))
+    r = bad[2]
     R.check("empty range: non-zero exit", r.returncode != 0, r.stderr[-300:])
 
 
@@ -199,7 +211,9 @@ def test_shape_key_bake():
 
 def test_every_method_plays_and_bakes_in_chunks():
     """The other registered methods (the suite above uses the first): playback equals the
-    direct cold solve, and two chunked batch bakes joined equal one bake, bit for bit."""
+    direct cold solve, and two chunked batch bakes joined equal one bake, bit for bit. The
+    scenes are saved first, then every method's bakes run side by side (run_batches)."""
+    outs = {}
     for m in S.methods.METHODS:
         if m.id == MID or not S.native.has_class(m.native_class):
             continue
@@ -222,16 +236,21 @@ def test_every_method_plays_and_bakes_in_chunks():
         for p in out.values():
             if os.path.exists(p):
                 os.remove(p)
-        rs = [run_batch("--object", "Grid", "--frames", fr, "--out", out[k], blend=blend)
-              for fr, k in (("1-20", "all"), ("1-8", "a"), ("9-20", "b"))]
-        rs.append(run_batch("--join", out["a"], out["b"], "--out", out["joined"], blend=None))
-        R.check("%s batch bakes and join exit 0" % m.id, all(r.returncode == 0 for r in rs),
+        outs[m.id] = (blend, out)
+    chunks = (("1-20", "all"), ("1-8", "a"), ("9-20", "b"))
+    bakes = run_batches(*[(("--object", "Grid", "--frames", fr, "--out", out[k]), blend)
+                          for blend, out in outs.values() for fr, k in chunks])
+    joins = run_batches(*[(("--join", out["a"], out["b"], "--out", out["joined"]), None)
+                          for blend, out in outs.values()])
+    for i, (mid, (blend, out)) in enumerate(outs.items()):
+        rs = bakes[3 * i:3 * i + 3] + [joins[i]]
+        R.check("%s batch bakes and join exit 0" % mid, all(r.returncode == 0 for r in rs),
                 " | ".join(r.stderr[-400:] for r in rs if r.returncode))
         if all(r.returncode == 0 for r in rs):
             _, f1 = pc2.read(out["all"])
             _, f2 = pc2.read(out["joined"])
             diff = max(float(np.abs(np.array(a) - np.array(b)).max()) for a, b in zip(f1, f2))
-            R.check("%s chunked bake equals single bake" % m.id,
+            R.check("%s chunked bake equals single bake" % mid,
                     len(f1) == len(f2) == 20 and diff == 0.0, diff)
 
 
