@@ -178,7 +178,12 @@ void dk_arap_set_progress(dk_arap *arap, dk_phase_progress_fn progress, void *us
  *  Laplacian editing. DK_START_RESUME: when the targets equal the previous call's and that
  *  call ended normally, iterations continue exactly where it stopped (Anderson history
  *  included), so a solve cut into slices by `max_iterations` gives the same result as one
- *  long solve; otherwise as WARM. request->preview: the start alone, no iterations
+ *  long solve; otherwise as WARM. DK_START_GIVEN: from request->start_positions (checked
+ *  finite before anything changes), eliminated vertices put at their targets (hard
+ *  handles) or rest (fixed), the local step's rotations from identities: the result
+ *  depends on the request alone, and the drag history starts again, as after COLD (the
+ *  use: a coarse level's converged result prolonged to this mesh, a cached frame's result;
+ *  docs/methods/arap.md, "A given start"). request->preview: the start alone, no iterations
  *  (info.iterations 0): with the response basis (dk_arap_basis) an O(n) combination, the
  *  predicted start chosen over the plain one by the energies of a fixed sample of cells
  *  (~16k), and the start's local step left to the solve that resumes it (or done when the

@@ -138,7 +138,8 @@ void dk_embedded_set_progress(dk_embedded *ed, dk_phase_progress_fn progress, vo
 
 /** Solves for the handle targets of `request` (dk_method.h: positions or one transform per
  *  handle; DK_START_WARM / RESUME from the previous node transformations, COLD from the
- *  identity; max_iterations > 0 overrides the option). Writes the deformed vertices
+ *  identity, GIVEN refused with DK_ERR_INVALID_ARGUMENT: positions do not determine the
+ *  nodes' affine maps; max_iterations > 0 overrides the option). Writes the deformed vertices
  *  (n_vertices x 3, eq. 2) and info: energy F, iterations, converged (eq. 12).
  *  Allocation-free. */
 dk_status dk_embedded_solve(dk_embedded *ed, const dk_solve_request *request,

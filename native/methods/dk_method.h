@@ -43,10 +43,16 @@ typedef enum dk_start {
     DK_START_COLD = 0,   /**< from the rest state only: the result depends on this request
                               alone (frames, renders, bakes)                               */
     DK_START_WARM = 1,   /**< from the previous solution when there is one (dragging)      */
-    DK_START_RESUME = 2  /**< when the targets equal the previous request's and it ended
+    DK_START_RESUME = 2, /**< when the targets equal the previous request's and it ended
                               normally: continue exactly where it stopped, so that a solve
                               cut into slices by max_iterations equals one long solve;
                               otherwise as WARM                                            */
+    DK_START_GIVEN = 3   /**< from request->start_positions (a coarse level's prolonged
+                              result, a cached frame, another method's output) with the
+                              constrained vertices put in place: the result depends on
+                              this request alone, as for COLD. A method whose iterate is
+                              not the positions (EmbeddedDeformation: node transforms)
+                              refuses it                                                   */
 } dk_start;
 
 /** One solve. Zero-initialise, then set what differs from the defaults. */
@@ -66,6 +72,9 @@ typedef struct dk_solve_request {
                                      already their fastest and ignore it. A later request
                                      with start RESUME and the same targets continues
                                      from the preview                                      */
+    const double *start_positions; /**< start DK_START_GIVEN: n_vertices x 3, row-major, in
+                                     the mesh's vertex order, finite; must be NULL for the
+                                     other starts                                          */
 } dk_solve_request;
 
 /** What one solve did. Fields a method does not have are 0. */
@@ -119,12 +128,16 @@ typedef enum dk_method_flags {
                                                 solver's tolerance rather than exactly
                                                 (embedded deformation); fixed vertices are
                                                 still exact                               */
-    DK_METHOD_SOFT_REGIONS = 32            /**< handles are regions that guide a smooth
+    DK_METHOD_SOFT_REGIONS = 32,           /**< handles are regions that guide a smooth
                                                 least-squares fit (eigen deformation): met
                                                 approximately, and every vertex outside them
                                                 is held approximately, fixed or not; a
                                                 handle covering the whole mesh moves it
                                                 exactly                                   */
+    DK_METHOD_GIVEN_START = 64             /**< iterative, and its iterate is the positions:
+                                                DK_START_GIVEN starts there (ARAP). Direct
+                                                methods ignore that start; iterative ones
+                                                without this flag refuse it               */
 } dk_method_flags;
 
 /** The functions of one method; every entry is set. `self` is the method's object. */
@@ -199,10 +212,16 @@ const dk_method_ops *const *dk_methods(void);
 const dk_method_ops *dk_method_find(const char *name);
 
 /** Checks the parts of a request every method checks the same way: a non-NULL request and
- *  targets, known target kind and start, max_iterations >= 0. `who` prefixes the message
- *  ("ARAP solve"). */
+ *  targets, known target kind and start, start_positions given exactly for DK_START_GIVEN,
+ *  max_iterations >= 0. `who` prefixes the message ("ARAP solve"). */
 dk_status dk_solve_request_check(const dk_solve_request *request, const char *who,
                                  dk_error *err);
+
+/** Checks a DK_START_GIVEN request's start_positions (n_vertices x 3): every coordinate
+ *  finite (DK_ERR_NONFINITE naming the first bad vertex otherwise). A method that starts
+ *  from them calls it before it changes anything. */
+dk_status dk_start_positions_check(const double *start_positions, dk_index n_vertices,
+                                   const char *who, dk_error *err);
 
 /** Checks a solve's result before it is returned: every position finite, and the energy
  *  finite unless `check_energy` is 0 (the request skipped it: NaN by contract). Every

@@ -1414,6 +1414,11 @@ dk_status dk_embedded_solve(dk_embedded *ed, const dk_solve_request *rq, double 
     dk_status st = dk_solve_request_check(rq, "EmbeddedDeformation solve", err);
     if (st != DK_OK)
         return st;
+    if (rq->start == DK_START_GIVEN) /* positions do not determine the graph's affine maps */
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EmbeddedDeformation solve: it cannot start from given positions "
+                            "(its iterate is the graph's node transformations); use a cold or "
+                            "warm start");
     ed_system *s = &ed->sys;
     st = dk_constraints_targets(s->con, ed->p, rq->targets, (int)rq->target_kind,
                                 s->targets, err);

@@ -43,10 +43,17 @@ dk_status dk_solve_request_check(const dk_solve_request *rq, const char *who, dk
                             "%s: target kind %d is neither positions (0) nor transforms (1)",
                             who, (int)rq->target_kind);
     if (rq->start != DK_START_COLD && rq->start != DK_START_WARM &&
-        rq->start != DK_START_RESUME)
+        rq->start != DK_START_RESUME && rq->start != DK_START_GIVEN)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
-                            "%s: start %d is not cold (0), warm (1) or resume (2)", who,
-                            (int)rq->start);
+                            "%s: start %d is not cold (0), warm (1), resume (2) or given (3)",
+                            who, (int)rq->start);
+    if ((rq->start == DK_START_GIVEN) != (rq->start_positions != NULL))
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            rq->start_positions ? "%s: start_positions are given but the start "
+                                                  "is not DK_START_GIVEN"
+                                                : "%s: start DK_START_GIVEN needs "
+                                                  "start_positions",
+                            who);
     if (rq->max_iterations < 0)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "%s: max_iterations is %d, must be >= 0 (0: the bound option)",
@@ -80,6 +87,18 @@ dk_status dk_solve_result_check(const double *positions, dk_index n_vertices, do
                             "result is %g); the positions are finite: solve without the "
                             "energy (energy=False, skip_energy) to get them",
                             who, energy, largest);
+    return DK_OK;
+}
+
+dk_status dk_start_positions_check(const double *start_positions, dk_index n_vertices,
+                                   const char *who, dk_error *err)
+{
+    for (int64_t i = 0; i < 3 * (int64_t)n_vertices; i++)
+        if (!isfinite(start_positions[i]))
+            return dk_error_set(err, DK_ERR_NONFINITE,
+                                "%s: start_positions are not finite (vertex %lld coordinate "
+                                "%c is %g)",
+                                who, (long long)(i / 3), "xyz"[i % 3], start_positions[i]);
     return DK_OK;
 }
 

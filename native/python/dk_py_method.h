@@ -7,9 +7,10 @@
  *       binds with the GIL released; `options` are the method's own keywords, read by its
  *       spec's parse_options into its native options struct;
  *   solve(targets=None, transforms=None, warm_start=True, max_iterations=None, resume=False,
- *         energy=True, **extra) -> SolveResult
- *       exactly one of targets / transforms; warm_start, resume and max_iterations matter for
- *       iterative methods only; energy=False lets a method skip its energy (NaN); `extra`
+ *         energy=True, preview=False, start_positions=None, **extra) -> SolveResult
+ *       exactly one of targets / transforms; warm_start, resume, start_positions (n x 3:
+ *       DK_START_GIVEN, not with resume) and max_iterations matter for iterative methods
+ *       only; energy=False lets a method skip its energy (NaN); `extra`
  *       are the method's own solve keywords (its spec's solve_extra);
  *   rebind(handles=None, fixed=None, roi=None, handle_weights=None, stiffness=None)
  *       arguments not given keep their bound value;

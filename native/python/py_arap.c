@@ -139,8 +139,8 @@ static PyObject *get_handle_sizes(PyObject *obj, void *c)
 
 PyDoc_STRVAR(solve_doc,
              "solve(targets=None, transforms=None, warm_start=True, max_iterations=None,\n"
-             "      resume=False, energy=True, preview=False, tolerance=None,\n"
-             "      cg_iterations=None) -> SolveResult\n\n"
+             "      resume=False, energy=True, preview=False, start_positions=None,\n"
+             "      tolerance=None, cg_iterations=None) -> SolveResult\n\n"
              "targets: (sum of handle sizes) x 3 positions, concatenated in handle order;\n"
              "transforms: n_handles x 4 x 4 affine transforms of the rest pose. warm_start\n"
              "starts from the previous solution (else from the naive Laplacian-editing guess).\n"
@@ -156,6 +156,10 @@ PyDoc_STRVAR(solve_doc,
              "plus the global step's response to the handles' move, combined from the bind's\n"
              "response basis when each handle moved by an affine map (O(n), no\n"
              "back-substitution); a later resume=True with the same targets refines it.\n"
+             "start_positions (n x 3, any buffer; not with resume) starts from those\n"
+             "positions instead, constrained vertices put in place and their optimal\n"
+             "rotations taken: a coarse level's result prolonged to this mesh, or a cached\n"
+             "frame; the result then depends on this call alone, as for warm_start=False.\n"
              "Returns the positions, the ARAP energy of those positions, the iterations used\n"
              "and whether the relative energy change fell below the tolerance.");
 

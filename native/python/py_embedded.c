@@ -291,9 +291,11 @@ static PyObject *ed_embed(PyObject *obj, PyObject *arg)
 
 PyDoc_STRVAR(solve_doc,
              "solve(targets=None, transforms=None, warm_start=True, max_iterations=None,\n"
-             "      resume=False, energy=True, preview=False) -> SolveResult\n\n"
+             "      resume=False, energy=True, preview=False, start_positions=None)\n"
+             "      -> SolveResult\n\n"
              "preview=True (the contract's keyword) solves as usual: this method has no\n"
-             "faster result to show.\n"
+             "faster result to show. start_positions (the contract's keyword) raises\n"
+             "ValueError: positions do not determine the nodes' affine maps.\n"
              "Gauss-Newton with Levenberg-Marquardt damping on the node transformations.\n"
              "Returns the deformed vertices (eq. 2), F = w_rot E_rot + w_reg E_reg + w_con\n"
              "E_con, the iterations and whether the tests of eq. 12 held.");

@@ -63,7 +63,8 @@ static PyObject *falloff_weights(PyObject *obj, PyObject *arg)
 
 PyDoc_STRVAR(solve_doc,
              "solve(targets=None, transforms=None, warm_start=True, max_iterations=None,\n"
-             "      resume=False, energy=True, preview=False) -> SolveResult\n\n"
+             "      resume=False, energy=True, preview=False, start_positions=None)\n"
+             "      -> SolveResult\n\n"
              "preview=True (the contract's keyword) solves as usual: this method has no\n"
              "faster result to show.\n"
              "targets: (sum of handle sizes) x 3 positions, concatenated in handle order;\n"

@@ -382,13 +382,14 @@ static void method_dealloc(PyObject *obj)
 PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
 {
     static char *kwlist[] = {"targets", "transforms", "warm_start", "max_iterations",
-                             "resume", "energy", "preview", NULL};
+                             "resume", "energy", "preview", "start_positions", NULL};
     dk_py_method *self = (dk_py_method *)obj;
     const dk_py_method_spec *spec = self->spec;
     PyObject *targets = Py_None, *transforms = Py_None, *maxit_obj = Py_None;
+    PyObject *start_obj = Py_None;
     PyObject *mine = NULL, *rest = NULL, *positions, *module;
     int warm = 1, resume = 0, want_energy = 1, maxit = 0, preview = 0, mode;
-    dk_py_doubles in = {0};
+    dk_py_doubles in = {0}, start = {0};
     dk_solve_info info;
     dk_method_stats ms;
     dk_error err = {0};
@@ -402,12 +403,13 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
 
     memset(&pending, 0, sizeof pending);
     memset(&saved, 0, sizeof saved);
-    snprintf(fmt, sizeof fmt, "|OOpOppp:solve");
+    snprintf(fmt, sizeof fmt, "|OOpOpppO:solve");
     snprintf(ctx, sizeof ctx, "%s.solve", spec->name);
     if (split_keywords(kwargs, kwlist, &mine, &rest) < 0)
         return NULL;
     int ok = PyArg_ParseTupleAndKeywords(args, mine, fmt, kwlist, &targets, &transforms,
-                                         &warm, &maxit_obj, &resume, &want_energy, &preview);
+                                         &warm, &maxit_obj, &resume, &want_energy, &preview,
+                                         &start_obj);
     Py_INCREF(targets);
     Py_INCREF(transforms);
     Py_DECREF(mine);
@@ -422,6 +424,11 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
             ok = 0;
         } else
             maxit = (int)v;
+    }
+    if (ok && start_obj != Py_None && resume) {
+        PyErr_Format(PyExc_ValueError, "%s: give start_positions or resume=True, not both "
+                     "(a resumed solve continues from where the last one stopped)", ctx);
+        ok = 0;
     }
     module = ok ? PyType_GetModule(Py_TYPE(obj)) : NULL;
     if (!module || dk_py_method_enter(self) < 0)
@@ -453,15 +460,35 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
     if (dk_py_lap_read_solve_input(targets, transforms, ms.n_handles, ms.n_handle_vertices,
                                    ctx, &in, &mode) < 0)
         goto fail_busy;
+    if (start_obj != Py_None) { /* read and checked for every method, used by some */
+        if (dk_py_read_doubles(start_obj, self->mesh->n_vertices, 3, "start_positions",
+                               &start) < 0) {
+            dk_py_doubles_release(&in);
+            goto fail_busy;
+        }
+        for (Py_ssize_t k = 0; k < 3 * start.rows; k++)
+            if (!isfinite(start.data[k])) {
+                PyErr_Format(PyExc_ValueError, "%s: start_positions of vertex %zd are not "
+                             "finite", ctx, k / 3);
+                dk_py_doubles_release(&in);
+                dk_py_doubles_release(&start);
+                goto fail_busy;
+            }
+    }
     positions = dk_py_new_doubles(2, self->mesh->n_vertices, 3, &out);
     if (!positions) {
         dk_py_doubles_release(&in);
+        dk_py_doubles_release(&start);
         goto fail_busy;
     }
     const dk_solve_request rq = {
         .targets = in.data,
         .target_kind = (dk_target_kind)mode,
-        .start = resume ? DK_START_RESUME : warm ? DK_START_WARM : DK_START_COLD,
+        .start = start.data ? DK_START_GIVEN
+                 : resume   ? DK_START_RESUME
+                 : warm     ? DK_START_WARM
+                            : DK_START_COLD,
+        .start_positions = start.data,
         .max_iterations = maxit,
         .skip_energy = !want_energy,
         .preview = preview,
@@ -474,6 +501,7 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
     if (st != DK_OK && spec->apply_extra)
         spec->apply_extra(self, saved.bytes, NULL); /* the call raised: put it back */
     dk_py_doubles_release(&in);
+    dk_py_doubles_release(&start);
     self->busy = 0;
     Py_DECREF(rest);
     Py_DECREF(targets);

@@ -12,8 +12,9 @@
  *   4. the method's own options, each field valid most of the time and otherwise on a
  *      boundary (0, negative, NaN, Inf, 1e300, an enum one past its names);
  *   5. up to four solve requests (positions or transforms near the handles' rest, moved by
- *      up to a few bounding-box diagonals, sometimes raw doubles; any start, iteration cap
- *      skip_energy and preview), then a rebind with new groups and a solve after it.
+ *      up to a few bounding-box diagonals, sometimes raw doubles; any start, the given one
+ *      from the rest positions; iteration cap, skip_energy and preview), then a rebind
+ *      with new groups and a solve after it.
  * Short inputs decode to small valid cases, so most inputs get through bind into solve.
  *
  * Checked besides the sanitizers (each is a promise of the contract):
@@ -305,7 +306,11 @@ static void decode_request(dk_fuzz_input *in, const dk_mesh *m, const groups *g,
     const uint8_t c = dk_fuzz_u8(in);
     r->rq.target_kind = c % 32 == 31 ? (dk_target_kind)2 : (dk_target_kind)(c % 2);
     r->rq.start = (dk_start)((c >> 1) % 3);
-    if ((c >> 3) % 8 == 7) r->rq.start = (dk_start)3; /* refused */
+    if ((c >> 3) % 8 == 7) r->rq.start = (dk_start)4; /* refused */
+    if ((c >> 3) % 8 == 6) { /* from the rest positions (refused by methods without it) */
+        r->rq.start = DK_START_GIVEN;
+        r->rq.start_positions = m->positions;
+    }
     const uint8_t it = dk_fuzz_u8(in);
     r->rq.max_iterations = it % 4 ? 0 : it % 64 == 4 ? -1 : (it >> 2) % 20;
     r->rq.skip_energy = it % 128 == 127 ? 2 : (it >> 7);

@@ -1132,6 +1132,93 @@ static void test_stopping_gap(void)
     plane_free(&s);
 }
 
+/* DK_START_GIVEN: from its own converged result a solve stops at once at the same minimum;
+ * from other positions it depends on the request alone (bit for bit after other solves);
+ * start_positions without that start, that start without them, and non-finite ones are
+ * refused, and a refused call changes nothing (a twin object without it agrees bit for
+ * bit afterwards, drag history included). */
+static void test_given_start(void)
+{
+    plane_setup s;
+    if (plane_make(&s, 12) != 0) {
+        CHECK(0);
+        return;
+    }
+    const dk_index n = s.mesh->n_vertices;
+    dk_index sizes[1] = {s.n_handle};
+    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    dk_arap *a = NULL, *b = NULL;
+    dk_error e = {0};
+    double t[3 * 64], t2[3 * 64];
+    double *x = malloc(sizeof(double) * 3 * n), *y = malloc(sizeof(double) * 3 * n);
+    double *z = malloc(sizeof(double) * 3 * n), *start = malloc(sizeof(double) * 3 * n);
+    if (!x || !y || !z || !start || dk_arap_bind(s.mesh, &d, NULL, &a, &e) != DK_OK ||
+        dk_arap_bind(s.mesh, &d, NULL, &b, &e) != DK_OK) {
+        CHECK_MSG(0, "%s", e.message);
+        goto done;
+    }
+    bend_targets(&s, 1.0, t);
+    bend_targets(&s, 1.1, t2);
+    dk_solve_info ic, ig;
+    dk_solve_request rq = {.targets = t, .start = DK_START_COLD};
+    CHECK(dk_arap_solve(a, &rq, x, &ic, &e) == DK_OK && ic.converged);
+    CHECK(dk_arap_solve(b, &rq, y, NULL, &e) == DK_OK);
+    /* from its own minimum */
+    rq.start = DK_START_GIVEN;
+    rq.start_positions = x;
+    CHECK(dk_arap_solve(a, &rq, z, &ig, &e) == DK_OK);
+    CHECK_MSG(ig.converged && ig.iterations <= 2 &&
+                  fabs(ig.energy - ic.energy) <= 1e-12 * ic.energy,
+              "from the minimum: %d iterations, E %.15g vs %.15g", ig.iterations, ig.energy,
+              ic.energy);
+    double worst = 0.0;
+    for (dk_index k = 0; k < 3 * n; k++)
+        worst = fmax(worst, fabs(z[k] - x[k]));
+    CHECK_MSG(worst < 1e-8, "from the minimum it moved %.3g", worst);
+    /* from bumped rest positions: the request alone decides */
+    for (dk_index k = 0; k < 3 * n; k++)
+        start[k] = s.mesh->positions[k] + 0.01 * sin(7.0 * (double)k);
+    rq.start_positions = start;
+    CHECK(dk_arap_solve(a, &rq, x, &ic, &e) == DK_OK && ic.converged);
+    rq = (dk_solve_request){.targets = t2, .start = DK_START_WARM};
+    CHECK(dk_arap_solve(a, &rq, z, NULL, &e) == DK_OK);
+    rq = (dk_solve_request){.targets = t, .start = DK_START_GIVEN, .start_positions = start};
+    CHECK(dk_arap_solve(a, &rq, z, &ig, &e) == DK_OK);
+    CHECK(memcmp(x, z, sizeof(double) * 3 * (size_t)n) == 0 && ig.iterations == ic.iterations);
+    for (dk_index k = 0; k < s.n_fixed; k++) /* eliminated vertices in place, exactly */
+        CHECK(memcmp(z + 3 * s.fixed[k], s.mesh->positions + 3 * s.fixed[k],
+                     3 * sizeof(double)) == 0);
+    for (dk_index k = 0; k < s.n_handle; k++)
+        CHECK(memcmp(z + 3 * s.handle[k], t + 3 * k, 3 * sizeof(double)) == 0);
+    /* refusals, each before anything changes */
+    rq = (dk_solve_request){.targets = t2, .start = DK_START_GIVEN};
+    CHECK(dk_arap_solve(b, &rq, z, NULL, &e) == DK_ERR_INVALID_ARGUMENT);
+    rq = (dk_solve_request){.targets = t2, .start = DK_START_WARM, .start_positions = start};
+    CHECK(dk_arap_solve(b, &rq, z, NULL, &e) == DK_ERR_INVALID_ARGUMENT);
+    start[3 * 5 + 1] = NAN;
+    rq = (dk_solve_request){.targets = t2, .start = DK_START_GIVEN, .start_positions = start};
+    CHECK(dk_arap_solve(b, &rq, z, NULL, &e) == DK_ERR_NONFINITE);
+    CHECK_MSG(strstr(e.message, "vertex 5") != NULL, "%s", e.message);
+    /* b's history is its cold solve for t, if the refused calls left it: a fresh twin */
+    dk_arap_free(a);
+    a = NULL;
+    CHECK(dk_arap_bind(s.mesh, &d, NULL, &a, &e) == DK_OK);
+    rq = (dk_solve_request){.targets = t, .start = DK_START_COLD};
+    CHECK(dk_arap_solve(a, &rq, x, NULL, &e) == DK_OK);
+    rq = (dk_solve_request){.targets = t2, .start = DK_START_WARM};
+    CHECK(dk_arap_solve(a, &rq, x, NULL, &e) == DK_OK);
+    CHECK(dk_arap_solve(b, &rq, z, NULL, &e) == DK_OK);
+    CHECK(memcmp(x, z, sizeof(double) * 3 * (size_t)n) == 0);
+done:
+    dk_arap_free(a);
+    dk_arap_free(b);
+    free(x);
+    free(y);
+    free(z);
+    free(start);
+    plane_free(&s);
+}
+
 /* The stopping test waits after a step whose CG met negative curvature (arap_internal.h,
  * nt_indefinite): resumed at a converged minimum, a solve stops again at once, but not when
  * the last step is recorded as indefinite (the 692k armadillo's plateau, newton.c): then it
@@ -1692,7 +1779,7 @@ static void test_big_mesh_threaded_local_step(void)
     dk_test_mesh_free(&tm);
 }
 
-DK_TEST_MAIN(test_newton_quadratic, test_newton_soft_stiffness, test_resume, test_cg_override, test_cg_schedule, test_stopping_gap, test_stopping_indefinite, test_predictor, test_response_basis, test_zero_drag, test_rigid_motion, test_bend, test_twist, test_clamping,
+DK_TEST_MAIN(test_newton_quadratic, test_newton_soft_stiffness, test_resume, test_cg_override, test_cg_schedule, test_stopping_gap, test_stopping_indefinite, test_given_start, test_predictor, test_response_basis, test_zero_drag, test_rigid_motion, test_bend, test_twist, test_clamping,
              test_stiffness_soft_warm_rebind, test_warm_rotations_and_cold_reproducibility,
              test_errors,
              test_big_mesh_threaded_local_step)

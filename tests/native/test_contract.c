@@ -206,6 +206,28 @@ static void check_method(const dk_method_ops *ops, scene *s)
     CHECK_MSG(memcmp(x, y, N * sizeof(double)) == 0 && info.iterations == info2.iterations,
               "%s on %s: two cold solves differ", ops->name, s->name);
 
+    /* a given start from the cold result: a method that starts from positions returns it
+     * (one step, the same minimum), other iterative ones refuse, direct ones ignore it */
+    {
+        const dk_solve_request given = {.targets = t, .start = DK_START_GIVEN,
+                                        .start_positions = x};
+        const dk_status got = ops->solve(m, &given, y, &info2, &e);
+        if (ops->flags & DK_METHOD_GIVEN_START) {
+            CHECK_MSG(got == DK_OK && (ops->flags & DK_METHOD_ITERATIVE), "%s: %s", ops->name,
+                      e.message);
+            CHECK_MSG(max_diff(x, y, N) <= 1e-6 * s->diag && info2.iterations <= 2,
+                      "%s on %s: a start at its own result moved %g in %d iterations",
+                      ops->name, s->name, max_diff(x, y, N), info2.iterations);
+        } else if (ops->flags & DK_METHOD_ITERATIVE) {
+            CHECK_MSG(got == DK_ERR_INVALID_ARGUMENT, "%s: a given start gave status %d",
+                      ops->name, (int)got);
+        } else {
+            CHECK_MSG(got == DK_OK && memcmp(x, y, N * sizeof(double)) == 0,
+                      "%s on %s: a direct method's given start changed the result", ops->name,
+                      s->name);
+        }
+    }
+
     /* rebind with the same constraints = a fresh bind */
     CHECK_MSG(ops->rebind(m, &s->desc, &e) == DK_OK, "%s: rebind: %s", ops->name, e.message);
     CHECK(ops->bind(s->mesh, &s->desc, NULL, &fresh, &e) == DK_OK);
@@ -266,6 +288,10 @@ static void check_method(const dk_method_ops *ops, scene *s)
         {"negative max_iterations", {.targets = t, .max_iterations = -1},
          DK_ERR_INVALID_ARGUMENT},
         {"skip_energy not 0/1", {.targets = t, .skip_energy = 3}, DK_ERR_INVALID_ARGUMENT},
+        {"start_positions without the given start", {.targets = t, .start_positions = x},
+         DK_ERR_INVALID_ARGUMENT},
+        {"the given start without start_positions", {.targets = t, .start = DK_START_GIVEN},
+         DK_ERR_INVALID_ARGUMENT},
         {"NaN target", {.targets = tn}, DK_ERR_NONFINITE},
     };
     if (tn) {

@@ -12,6 +12,9 @@ one handle cap:
 - with nothing fixed, a rigid motion (or translation) of every handle is reproduced where the
   method promises it, and the handles are always met;
 - cold solves are deterministic, bit for bit;
+- start_positions: a method with given_start returns its converged result from it, puts the
+  constrained vertices in place and depends on the request alone; other iterative methods
+  refuse it, direct ones ignore it;
 - every malformed input raises the same exception type from every method, and a refused
   call leaves the object answering as before.
 """
@@ -81,7 +84,7 @@ def test_registries_agree():
         assert isinstance(getattr(dk, name), type)
         assert set(info(name)) == {"iterative", "transforms_as_positions",
                                    "translation_invariant", "rigid_invariant",
-                                   "penalty_handles", "soft_regions"}
+                                   "penalty_handles", "soft_regions", "given_start"}
     with pytest.raises(KeyError):
         info("NoSuchMethod")
 
@@ -356,3 +359,55 @@ def test_rebind_into_and_out_of_every_vertex_constrained(name):
     a = m.solve(targets, **cold(name))
     b = getattr(dk, name)(mesh, handles=handles, fixed=fixed).solve(targets, **cold(name))
     np.testing.assert_allclose(a.positions, b.positions, atol=1e-12)
+
+
+BAD_STARTS = [
+    ("NaN start", lambda v: dict(start_positions=np.full(v.shape, np.nan))),
+    ("start with a vertex too few", lambda v: dict(start_positions=v[:-1])),
+    ("start and resume", lambda v: dict(start_positions=v, resume=True)),
+]
+
+
+@pytest.mark.parametrize("name,scene", CASES, ids=IDS)
+def test_given_start(name, scene):
+    """start_positions: a method that starts from positions (given_start) puts the
+    constrained vertices in place, returns a converged result from it unchanged, and
+    depends on the request alone; other iterative methods refuse it; direct ones ignore it.
+    Malformed starts raise ValueError from every method and change nothing."""
+    _, v, f, handles, fixed = scene
+    m = bind(name, scene)
+    T = [transform(rotation(0.5))] * len(handles)
+    a = m.solve(transforms=T, **cold(name))
+    for what, args in BAD_STARTS:
+        with pytest.raises(ValueError):
+            m.solve(transforms=T, **args(v))
+    assert np.array_equal(m.solve(transforms=T, **cold(name)).positions, a.positions)
+    noisy = v + np.random.default_rng(3).normal(0, 0.02, v.shape)
+    if info(name)["given_start"]:
+        assert info(name)["iterative"]
+        # from its own converged result: the same minimum, at once
+        b = m.solve(transforms=T, start_positions=a.positions)
+        assert b.converged and b.iterations <= 2
+        assert abs(b.energy - a.energy) <= 1e-9 * max(a.energy, 1e-12)
+        np.testing.assert_allclose(b.positions, a.positions, atol=1e-6)
+        # the start alone: constrained vertices in place, the others where given
+        p = m.solve(transforms=T, start_positions=noisy, preview=True)
+        held = np.concatenate(handles + [np.asarray(fixed)])
+        free = np.setdiff1d(np.arange(len(v)), held)
+        np.testing.assert_allclose(p.positions[fixed], v[fixed], atol=0)
+        np.testing.assert_allclose(p.positions[handles[0]], a.positions[handles[0]],
+                                   atol=1e-12)
+        assert np.array_equal(p.positions[free], noisy[free])
+        # the request alone decides: the same result after other solves in between
+        c = m.solve(transforms=T, start_positions=noisy)
+        m.solve(transforms=[transform(rotation(-0.3), (0.2, 0, 0))] * len(handles))
+        d = m.solve(transforms=T, start_positions=noisy)
+        assert np.array_equal(c.positions, d.positions) and c.iterations == d.iterations
+        assert c.converged and abs(c.energy - a.energy) <= 1e-4 * a.energy
+    elif info(name)["iterative"]:
+        with pytest.raises(ValueError, match="given positions"):
+            m.solve(transforms=T, start_positions=v)
+        assert np.array_equal(m.solve(transforms=T, **cold(name)).positions, a.positions)
+    else:
+        b = m.solve(transforms=T, start_positions=noisy)
+        assert np.array_equal(b.positions, a.positions)

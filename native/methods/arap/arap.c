@@ -225,7 +225,12 @@ static dk_status solve_impl(dk_arap *ar, const dk_solve_request *rq, double *pos
     if (st != DK_OK)
         return st;
     arap_system *s = &ar->sys;
-    const int warm_start = rq->start != DK_START_COLD;
+    const double *given = rq->start == DK_START_GIVEN ? rq->start_positions : NULL;
+    if (given && (st = dk_start_positions_check(given, ar->n, "ARAP solve", err)) != DK_OK)
+        return st; /* before anything changes */
+    /* warm: from the previous solution; a given start, like a cold one, depends on the
+     * request alone and starts the drag history again */
+    const int warm_start = rq->start == DK_START_WARM || rq->start == DK_START_RESUME;
     /* a preview is the start alone: no iterations */
     const int maxit = rq->preview ? 0
                       : rq->max_iterations > 0 ? rq->max_iterations
@@ -267,8 +272,8 @@ static dk_status solve_impl(dk_arap *ar, const dk_solve_request *rq, double *pos
     }
     if (resume)
         p.energy = s->last_energy; /* ar->x, s->xu, s->rhs, ar->rot: as the last call left them */
-    else if ((st = arap_start(ar, s, warm_start && ar->have_prev, rq->preview, &p.energy,
-                              err)) != DK_OK)
+    else if ((st = arap_start(ar, s, given, warm_start && ar->have_prev, rq->preview,
+                              &p.energy, err)) != DK_OK)
         return st;
     /* a preview's local step is done when the energy is asked for, or by the first
      * iteration of the solve that refines it */
@@ -437,6 +442,7 @@ dk_status dk_arap_response_basis(const dk_arap *ar, double *out, dk_error *err)
 /* the contract's table (dk_method.h): the adapters cast to this method's types */
 DK_METHOD_OPS(dk_arap_ops, "ARAP",
               DK_METHOD_ITERATIVE | DK_METHOD_TRANSFORMS_AS_POSITIONS |
-              DK_METHOD_TRANSLATION_INVARIANT | DK_METHOD_RIGID_INVARIANT,
+              DK_METHOD_TRANSLATION_INVARIANT | DK_METHOD_RIGID_INVARIANT |
+              DK_METHOD_GIVEN_START,
               dk_arap, dk_arap, dk_arap_options);
 

@@ -280,13 +280,15 @@ void arap_scatter(const arap_system *s, const double *xu, double *x);
 void arap_gather(const arap_system *s, const double *x, double *xu);
 
 /* warm_start.c: sets the iterate where a solve starts (ar->x, ar->rot, s->xu, s->rhs) and
- * its energy; `warm`: from the previous solution (there must be one). `lazy` (a preview):
+ * its energy; `given` (DK_START_GIVEN, n x 3 in the caller's vertex order, checked finite):
+ * from those positions, `warm` and `lazy` ignored; `warm`: from the previous solution (there
+ * must be one). `lazy` (a preview):
  * positions only (ar->x, s->xu), the predictor taken whenever the drag goes on, energy NaN,
  * s->start_pending set; arap_start_complete then does the rest (rotations, energy,
  * right-hand side) before any iteration. After the solve, arap_keep_history records its end
  * for the next warm start's predictor. */
-dk_status arap_start(dk_arap *ar, arap_system *s, int warm, int lazy, double *energy,
-                     dk_error *err);
+dk_status arap_start(dk_arap *ar, arap_system *s, const double *given, int warm, int lazy,
+                     double *energy, dk_error *err);
 dk_status arap_start_complete(dk_arap *ar, arap_system *s, double *energy, dk_error *err);
 void arap_keep_history(dk_arap *ar, arap_system *s, int warm_start);
 

@@ -7,7 +7,8 @@ static void place_known(dk_arap *ar, arap_system *s, const double *from)
 {
     const dk_index n = ar->n;
     const double *rest = ar->mesh->positions;
-    memcpy(ar->x, from, 3 * (size_t)n * sizeof(double));
+    if (from != ar->x)
+        memcpy(ar->x, from, 3 * (size_t)n * sizeof(double));
     for (dk_index v = 0; v < n; v++)
         if (s->unk[v] < 0)
             for (int d = 0; d < 3; d++)
@@ -15,14 +16,19 @@ static void place_known(dk_arap *ar, arap_system *s, const double *from)
                     s->target_of[v] >= 0 ? s->targets[3 * s->target_of[v] + d] : rest[3 * v + d];
 }
 
-/* The cold start: the global step with identity rotations (naive Laplacian editing). */
-static dk_status start_cold(dk_arap *ar, arap_system *s, dk_error *err)
+/* Identity rotations. They also start the local steps' refinement (cells_energy), so that
+ * a cold or given solve depends on its input only, bit for bit, whatever was solved before. */
+static void identity_rotations(dk_arap *ar)
 {
-    /* identities also start the local steps' refinement (cells_energy), so that a cold
-     * solve depends on its input only, bit for bit, whatever was solved before */
     static const double id[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
     for (dk_index v = 0; v < ar->n; v++)
         memcpy(ar->rot + 9 * (size_t)v, id, sizeof id);
+}
+
+/* The cold start: the global step with identity rotations (naive Laplacian editing). */
+static dk_status start_cold(dk_arap *ar, arap_system *s, dk_error *err)
+{
+    identity_rotations(ar);
     arap_rotations_rhs(ar, s, ar->rot);
     dk_status st = dk_cholesky_solve(s->chol, s->rhs, 3, s->gu, err);
     if (st != DK_OK)
@@ -171,21 +177,30 @@ static dk_status start_warm(dk_arap *ar, arap_system *s, int lazy, double *energ
     return DK_OK;
 }
 
-dk_status arap_start(dk_arap *ar, arap_system *s, int warm, int lazy, double *energy_out,
-                     dk_error *err)
+dk_status arap_start(dk_arap *ar, arap_system *s, const double *given, int warm, int lazy,
+                     double *energy_out, dk_error *err)
 {
     double energy = 0.0;
     int have_energy = 0;
-    dk_status st;
+    dk_status st = DK_OK;
     s->predicted = 0;
+    if (given) /* the caller's iterate: no previous solution, no preview of one */
+        warm = lazy = 0;
     if (!warm) { /* a cold start remembers nothing of the cut steps or ratios (newton.c) */
         s->cut = 0;
         arap_gap_restart(s, 1);
     }
-    place_known(ar, s, warm ? ar->prev : ar->mesh->positions);
+    if (given) { /* the given positions, constrained vertices in place, their rotations */
+        dk_reorder_rows_in(ar->ro, given, ar->x);
+        identity_rotations(ar);
+    }
+    place_known(ar, s, given ? ar->x : warm ? ar->prev : ar->mesh->positions);
     if (!(lazy && warm)) /* a lazy warm start needs it only in arap_start_complete */
         arap_build_rhs_const(ar, s, ar->x);
-    st = warm ? start_warm(ar, s, lazy, &energy, &have_energy, err) : start_cold(ar, s, err);
+    if (warm)
+        st = start_warm(ar, s, lazy, &energy, &have_energy, err);
+    else if (!given)
+        st = start_cold(ar, s, err);
     if (st != DK_OK)
         return st;
     s->aa_hist = s->aa_head = s->aa_have_pair = 0;
