@@ -50,6 +50,7 @@ struct dk_eigen {
     /* scratch, allocated at bind */
     double *ptil, *pstar, *normals, *b, *next;
     double *cm;              /* n x 3 column-major, for the products with U                 */
+    double tiny;             /* a skeleton edge shorter than this defines no frame (FRAME_*) */
 };
 
 static dk_status oom(dk_error *err, const char *what)
@@ -337,10 +338,23 @@ static void vertex_normals(const dk_mesh *mesh, const double *p, double *nrm)
     }
 }
 
+/* How short a skeleton edge may be and still define a frame: FRAME_REL of the mesh's bounding
+ * box diagonal plus FRAME_ABS of its largest coordinate (rounding in the fit grows with the
+ * coordinates). Our choice, the paper has none: a skeleton collapsed to a point (m smaller
+ * than a mesh's number of parts gives a part the constant eigenvector alone) is a point up to
+ * rounding, ~1e-15 of the coordinates, and a frame taken from that noise turns at random
+ * between the rest skeleton and p* (the ogre's 44 parts at m = 50 moved 3 of them by up to
+ * 3 units at zero drag). At the threshold, rounding turns a frame by ~1e-9 rad; no skeleton
+ * an artist can see is that small. Such a vertex takes the transformation-based detail. */
+#define FRAME_REL 1e-6
+#define FRAME_ABS 1e-9
+
 /* The frame of vertex i at positions p with normal nrm_i, from the edge to neighbour j:
  * rows F[0] = the edge projected on the tangent plane, F[1] = normal x F[0], F[2] = normal.
- * Returns 0 when the normal or the projected edge is too short to define it. */
-static int frame(const double *p, const double *nrm, dk_index i, dk_index j, double F[9])
+ * Returns 0 when the normal, the edge or the projected edge is too short to define it: the
+ * edge under tiny, the area-weighted normal (twice the one-ring's area) under tiny^2. */
+static int frame(const double *p, const double *nrm, dk_index i, dk_index j, double tiny,
+                 double F[9])
 {
     const double *ni = nrm + 3 * (size_t)i;
     const double nl = sqrt(ni[0] * ni[0] + ni[1] * ni[1] + ni[2] * ni[2]);
@@ -348,7 +362,7 @@ static int frame(const double *p, const double *nrm, dk_index i, dk_index j, dou
                           p[3 * (size_t)j + 1] - p[3 * (size_t)i + 1],
                           p[3 * (size_t)j + 2] - p[3 * (size_t)i + 2]};
     const double el = sqrt(ed[0] * ed[0] + ed[1] * ed[1] + ed[2] * ed[2]);
-    if (!(nl > 0.0) || !(el > 0.0) || !isfinite(nl) || !isfinite(el))
+    if (!(nl > tiny * tiny) || !(el > tiny) || !isfinite(nl) || !isfinite(el))
         return 0;
     double z[3] = {ni[0] / nl, ni[1] / nl, ni[2] / nl};
     const double dn = ed[0] * z[0] + ed[1] * z[1] + ed[2] * z[2];
@@ -366,6 +380,21 @@ static int frame(const double *p, const double *nrm, dk_index i, dk_index j, dou
     return 1;
 }
 
+/* FRAME_REL of the bounding box diagonal plus FRAME_ABS of the largest coordinate. */
+static double frame_threshold(const dk_mesh *mesh)
+{
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    double big = 0.0;
+    for (size_t q = 0; q < 3 * (size_t)mesh->n_vertices; q++) {
+        const double x = mesh->positions[q];
+        lo[q % 3] = fmin(lo[q % 3], x);
+        hi[q % 3] = fmax(hi[q % 3], x);
+        big = fmax(big, fabs(x));
+    }
+    const double dx = hi[0] - lo[0], dy = hi[1] - lo[1], dz = hi[2] - lo[2];
+    return FRAME_REL * sqrt(dx * dx + dy * dy + dz * dz) + FRAME_ABS * big;
+}
+
 /* Chooses each vertex's frame edge on the rest skeleton (the first neighbour that gives a
  * valid frame) and records the detail vectors' coordinates in it. */
 static void record_frames(const dk_eigen *e, level *L, double *nrm)
@@ -376,7 +405,7 @@ static void record_frames(const dk_eigen *e, level *L, double *nrm)
         double F[9];
         L->frame_nb[i] = -1;
         for (dk_index q = mesh->ring_start[i]; q < mesh->ring_start[i + 1]; q++)
-            if (frame(L->p, nrm, i, mesh->ring_index[q], F)) {
+            if (frame(L->p, nrm, i, mesh->ring_index[q], e->tiny, F)) {
                 L->frame_nb[i] = mesh->ring_index[q];
                 break;
             }
@@ -624,6 +653,7 @@ dk_status dk_eigen_bind(const dk_mesh *mesh, const dk_constraint_desc *desc,
         dk_eigen_free(e);
         return oom(err, "buffers");
     }
+    e->tiny = frame_threshold(mesh);
     /* 1. the regions; 2. the eigenvectors (K = max(m, n') so that a later rebind, whose
      * automatic m may differ, needs none); 3. the skeletons; 4. the request buffers */
     dk_progress_init(&e->prog, e->opt.progress, e->opt.progress_user, eigen_phases,
@@ -794,7 +824,8 @@ static void step3(dk_eigen *e, const level *L, const double *pstar, int blend, d
             memcpy(d2, d, sizeof d2);
         }
         double F[9], d1[3];
-        const int ok = L->frame_nb[i] >= 0 && frame(pstar, e->normals, i, L->frame_nb[i], F);
+        const int ok =
+            L->frame_nb[i] >= 0 && frame(pstar, e->normals, i, L->frame_nb[i], e->tiny, F);
         if (ok)
             for (int r = 0; r < 3; r++)
                 d1[r] = F[r] * c[0] + F[3 + r] * c[1] + F[6 + r] * c[2];
