@@ -143,12 +143,13 @@ typedef struct dk_arap dk_arap;
 void dk_arap_default_options(dk_arap_options *options);
 
 /** Binds: validates the constraints (dk_constraints_create), builds the cells, assembles the
- *  reduced matrix and factors it. Refuses (naming the vertex or edge): non-manifold edges
- *  (DK_ERR_TOPOLOGY), no unknown vertex (DK_ERR_INVALID_ARGUMENT "no free vertex"), a
- *  connected component or isolated vertex with unknowns but no eliminated vertex
- *  (DK_ERR_DEGENERATE, "component"), a reduced matrix that is not positive definite
- *  (DK_ERR_DEGENERATE: degenerate triangles or negative cotangent weights). `options` may be
- *  NULL (defaults). The mesh must outlive the object. */
+ *  reduced matrix and factors it. Refuses a reduced matrix that is not positive definite
+ *  (DK_ERR_DEGENERATE: degenerate triangles or negative cotangent weights) and bad
+ *  constraints or options (naming the vertex, group or option). Accepts: non-manifold edges
+ *  (a spoke sums the half-cotangents of all its triangles), a connected component or
+ *  isolated vertex without any constraint (held at rest, counted in the stats), no free
+ *  vertex at all (a solve returns the constrained motion). `options` may be NULL
+ *  (defaults). The mesh must outlive the object. */
 dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraints,
                        const dk_arap_options *options, dk_arap **out, dk_error *err);
 

@@ -70,7 +70,10 @@ dk_status arap_build_cells(dk_arap *ar, dk_error *err)
             }
         }
     }
-    /* Sort each cell by edge, merge duplicates, detect non-manifold spokes, clamp. */
+    /* Sort each cell by edge, merge duplicates, clamp. A spoke on a non-manifold edge (more
+     * than two triangles) sums the half-cotangents of all of them: the energy is a sum over
+     * triangles, which needs no manifold (scanned meshes carry such edges; the beast of
+     * ../shared/meshes has one). */
     int64_t out = 0;
     for (dk_index i = 0; i < n; i++) {
         if ((st = arap_tick(ar, (double)nf + i, work, err)) != DK_OK)
@@ -92,14 +95,6 @@ dk_status arap_build_cells(dk_arap *ar, dk_error *err)
             dk_index e = s + 1;
             while (e < len && c[e].a == merged.a && c[e].b == merged.b)
                 merged.w += c[e++].w;
-            if ((merged.a == i || merged.b == i) && e - s > 2) {
-                const dk_index ca = ar->ro->perm[merged.a], cb = ar->ro->perm[merged.b];
-                st = dk_error_set(err, DK_ERR_TOPOLOGY,
-                                  "ARAP: edge (%d, %d) is non-manifold (%d incident "
-                                  "triangles)", (int)(ca < cb ? ca : cb), (int)(ca < cb ? cb : ca),
-                                  (int)(e - s));
-                goto done;
-            }
             if (ar->opt.weights == DK_ARAP_WEIGHTS_CLAMPED_COTANGENT && merged.w < 0.0)
                 merged.w = 0.0;
             raw[out++] = merged; /* out <= start[i] + s: never overwrites unread terms */
