@@ -28,7 +28,9 @@
  *
  * Degenerate triangles (area below 1e-14 of the longest edge squared) have no frame: they
  * take no part in either energy. Boundary edges have one triangle's E_x term and no E_f.
- * Non-manifold edges are refused. A component without any constraint is held at rest
+ * A non-manifold edge joins each of its faces to the next in their order about it by a
+ * frame equation with the rest frames' relative rotation (fundamental.c, fin_pairs), so it
+ * keeps its bending stiffness. A component without any constraint is held at rest
  * (dk_constraints.h). Faces that meet at a vertex only (a part pinched onto the surface at
  * its corners) or across a degenerate triangle are joined by no frame equation: at each
  * such vertex a weak "bridge" ties their frames to the rest frames' relative rotation, so

@@ -86,6 +86,11 @@ struct dk_fundamental {
                                   have a frame), 0..n_pieces-1                               */
     dk_index n_pieces;
     dk_index *piece_rep;       /* n_pieces: a vertex of each, for messages                   */
+    /* Fins (see fin_pairs): a non-manifold edge's faces, joined by frame equations between
+     * neighbours in their order around the edge. */
+    dk_index n_fins;
+    dk_index *fin;             /* n_fins x 3: faces i, j and their edge                      */
+    double *fin_R;             /* n_fins x 9: f_i^T f_j of the rest frames                   */
     dk_index n_bridges;
     dk_index *bridge;          /* n_bridges x 2: faces i, j whose frames are tied weakly     */
     double *bridge_R;          /* n_bridges x 9: f_i^T f_j of the rest frames              */
@@ -274,6 +279,101 @@ static dk_index uf_find(dk_index *parent, dk_index t)
     return t;
 }
 
+/* F_i^T F_j of the rest frames of faces i and j, into R (row-major): the relative rotation
+ * the paper's R_ij gives at rest, for faces that no manifold edge joins. */
+static void rest_relative(const dk_fundamental *f, dk_index i, dk_index j, double R[9])
+{
+    const double *Fi = f->rest_frame + 9 * (size_t)i, *Fj = f->rest_frame + 9 * (size_t)j;
+    for (int a = 0; a < 3; a++) /* (F_i^T F_j)[a][b] = sum_d F_i[d][a] F_j[d][b] */
+        for (int b = 0; b < 3; b++)
+            R[3 * a + b] = Fi[a] * Fj[b] + Fi[3 + a] * Fj[3 + b] + Fi[6 + a] * Fj[6 + b];
+}
+
+/* The angle about edge (a, b) of face t's third corner, from the reference direction u0
+ * (perpendicular to the unit edge direction d). */
+static double fin_angle(const dk_mesh *m, dk_index t, dk_index a, dk_index b, const double d[3],
+                        const double u0[3], double u[3])
+{
+    dk_index c = m->faces[3 * (size_t)t];
+    for (int k = 0; k < 3; k++)
+        if (m->faces[3 * (size_t)t + k] != a && m->faces[3 * (size_t)t + k] != b)
+            c = m->faces[3 * (size_t)t + k];
+    const double *pa = m->positions + 3 * (size_t)a, *pc = m->positions + 3 * (size_t)c;
+    double w[3] = {pc[0] - pa[0], pc[1] - pa[1], pc[2] - pa[2]};
+    const double along = w[0] * d[0] + w[1] * d[1] + w[2] * d[2];
+    for (int k = 0; k < 3; k++)
+        u[k] = w[k] - along * d[k];
+    if (!u0)
+        return 0.0;
+    const double x[3] = {d[1] * u0[2] - d[2] * u0[1], d[2] * u0[0] - d[0] * u0[2],
+                         d[0] * u0[1] - d[1] * u0[0]};
+    return atan2(x[0] * u[0] + x[1] * u[1] + x[2] * u[2], u0[0] * u[0] + u0[1] * u[1] + u0[2] * u[2]);
+}
+
+/* Fins. A non-manifold edge (k > 2 faces) has no pair of faces the paper's E_f term is
+ * defined for; the paper's surfaces are manifold. Our choice: order the edge's non-degenerate
+ * faces by angle about it and join each to the next, around the cycle (k pairs; one pair
+ * when only two are non-degenerate), by the frame equation f_j = f_i F_i^T F_j, which is the
+ * R_ij a manifold edge between them would have at rest, with E_f's weight for that pair's
+ * cotangents. So a fin keeps its bending stiffness (treating the edge as a boundary would
+ * hinge the sheets on it, held only by the bridges' weak terms), and the energy stays zero
+ * at rest and for any rigid or affine motion. The beast of ../shared/meshes has one such edge. */
+static dk_status fin_pairs(dk_fundamental *f, dk_error *err)
+{
+    const dk_mesh *m = f->mesh;
+    f->n_fins = 0;
+    if (m->report.n_nonmanifold_edges == 0)
+        return DK_OK;
+    size_t cap = 0, maxk = 0;
+    for (dk_index e = 0; e < m->n_edges; e++)
+        if (m->edge_face_count[e] > 2) {
+            cap += (size_t)m->edge_face_count[e];
+            maxk = (size_t)m->edge_face_count[e] > maxk ? (size_t)m->edge_face_count[e] : maxk;
+        }
+    f->fin = malloc((3 * cap + 1) * sizeof *f->fin);
+    f->fin_R = malloc((9 * cap + 1) * sizeof *f->fin_R);
+    dk_index *ring = malloc((maxk + 1) * sizeof *ring);
+    double *ang = malloc((maxk + 1) * sizeof *ang);
+    if (!f->fin || !f->fin_R || !ring || !ang) {
+        free(ring), free(ang);
+        return oom(err, "fins");
+    }
+    for (dk_index e = 0; e < m->n_edges; e++) {
+        if (m->edge_face_count[e] <= 2)
+            continue;
+        const dk_index a = m->edges[2 * (size_t)e], b = m->edges[2 * (size_t)e + 1];
+        const double *pa = m->positions + 3 * (size_t)a, *pb = m->positions + 3 * (size_t)b;
+        double d[3] = {pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]}, u0[3], u[3];
+        const double dl = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+        if (!(dl > 0.0))
+            continue;
+        for (int k = 0; k < 3; k++)
+            d[k] /= dl;
+        size_t k = 0;
+        for (dk_index q = m->vf_start[a]; q < m->vf_start[a + 1] && k < maxk; q++) {
+            const dk_index t = m->vf_index[q];
+            if (f->degenerate[t] || corner_of(m, t, b) < 0)
+                continue;
+            if (k == 0)
+                fin_angle(m, t, a, b, d, NULL, u0);
+            /* insertion sort by angle: k is a handful */
+            const double at = k == 0 ? 0.0 : fin_angle(m, t, a, b, d, u0, u);
+            size_t p = k++;
+            while (p > 0 && ang[p - 1] > at)
+                ring[p] = ring[p - 1], ang[p] = ang[p - 1], p--;
+            ring[p] = t, ang[p] = at;
+        }
+        for (size_t p = 0; k >= 2 && p < (k == 2 ? 1 : k); p++) {
+            dk_index *fp = f->fin + 3 * (size_t)f->n_fins;
+            fp[0] = ring[p], fp[1] = ring[(p + 1) % k], fp[2] = e;
+            rest_relative(f, fp[0], fp[1], f->fin_R + 9 * (size_t)f->n_fins);
+            f->n_fins++;
+        }
+    }
+    free(ring), free(ang);
+    return DK_OK;
+}
+
 /* Pieces and bridges. The frame equations (E_f) join two faces across an interior edge
  * between non-degenerate faces; faces that meet at a vertex only, or across a degenerate
  * triangle (which has no frame), are joined by the positions they share and by nothing
@@ -313,6 +413,12 @@ static dk_status pieces_and_bridges(dk_fundamental *f, dk_error *err)
             if (a != b)
                 parent[a < b ? b : a] = a < b ? a : b;
         }
+    for (dk_index q = 0; q < f->n_fins; q++) { /* and the fins (fin_pairs) */
+        const dk_index a = uf_find(parent, f->fin[3 * (size_t)q]);
+        const dk_index b = uf_find(parent, f->fin[3 * (size_t)q + 1]);
+        if (a != b)
+            parent[a < b ? b : a] = a < b ? a : b;
+    }
     f->n_bridges = 0;
     for (dk_index v = 0; v < n; v++) { /* the bridges, a spanning forest of the islands */
         dk_index t0 = -1;
@@ -342,11 +448,7 @@ static dk_status pieces_and_bridges(dk_fundamental *f, dk_error *err)
                 }
                 cap = nc;
             }
-            const double *Fi = f->rest_frame + 9 * (size_t)t0, *Fj = f->rest_frame + 9 * (size_t)t;
-            double *R = f->bridge_R + 9 * (size_t)f->n_bridges;
-            for (int i = 0; i < 3; i++) /* (F_i^T F_j)[i][j] = sum_d F_i[d][i] F_j[d][j] */
-                for (int j = 0; j < 3; j++)
-                    R[3 * i + j] = Fi[i] * Fj[j] + Fi[3 + i] * Fj[3 + j] + Fi[6 + i] * Fj[6 + j];
+            rest_relative(f, t0, t, f->bridge_R + 9 * (size_t)f->n_bridges);
             f->bridge[2 * (size_t)f->n_bridges] = t0;
             f->bridge[2 * (size_t)f->n_bridges + 1] = t;
             f->n_bridges++;
@@ -427,6 +529,22 @@ static void for_each_residual(const dk_fundamental *f, visit_fn visit, void *ctx
         const double we = f->cot[3 * (size_t)ti + ki] + f->cot[3 * (size_t)tj + kj];
         const double wgt = f->w_scaled / (f->material[e] * we);
         const double *R = f->R + 9 * (size_t)e;
+        for (int k = 0; k < 3; k++) {
+            const term tt[4] = {{tj, k, 1.0}, {ti, 0, -R[k]}, {ti, 1, -R[3 + k]},
+                                {ti, 2, -R[6 + k]}};
+            visit(ctx, wgt, tt, 4);
+        }
+    }
+    for (dk_index q = 0; q < f->n_fins; q++) { /* E_f on the fins (fin_pairs) */
+        const dk_index ti = f->fin[3 * (size_t)q], tj = f->fin[3 * (size_t)q + 1];
+        const dk_index e = f->fin[3 * (size_t)q + 2];
+        const int ki = corner_of(m, ti, m->edges[2 * (size_t)e]) ^
+                       corner_of(m, ti, m->edges[2 * (size_t)e + 1]) ^ 3;
+        const int kj = corner_of(m, tj, m->edges[2 * (size_t)e]) ^
+                       corner_of(m, tj, m->edges[2 * (size_t)e + 1]) ^ 3;
+        const double we = f->cot[3 * (size_t)ti + ki] + f->cot[3 * (size_t)tj + kj];
+        const double wgt = f->w_scaled / (f->material[e] * we);
+        const double *R = f->fin_R + 9 * (size_t)q;
         for (int k = 0; k < 3; k++) {
             const term tt[4] = {{tj, k, 1.0}, {ti, 0, -R[k]}, {ti, 1, -R[3 + k]},
                                 {ti, 2, -R[6 + k]}};
@@ -523,7 +641,7 @@ static dk_status assemble(const dk_fundamental *view, dk_index nu, dk_index ncon
     assembly a = {view, 0, calloc((size_t)nu + 2, sizeof(int64_t)),
                   calloc((size_t)nb_cols + 2, sizeof(int64_t)), NULL, NULL, NULL, NULL,
                   0.0, 3.0 * ((double)view->mesh->n_faces + (double)view->mesh->n_edges +
-                              (double)view->n_bridges), DK_OK, err};
+                              (double)view->n_bridges + (double)view->n_fins), DK_OK, err};
     int64_t *a_start = malloc(((size_t)nu + 2) * sizeof(int64_t));
     int64_t *b_start = malloc(((size_t)nb_cols + 2) * sizeof(int64_t));
     dk_status st = DK_OK;
@@ -928,6 +1046,8 @@ void dk_fundamental_free(dk_fundamental *f)
     free(f->piece_rep);
     free(f->bridge);
     free(f->bridge_R);
+    free(f->fin);
+    free(f->fin_R);
     free(f);
 }
 
@@ -943,15 +1063,6 @@ dk_status dk_fundamental_bind(const dk_mesh *mesh, const dk_constraint_desc *des
                             "LinearReconstruction: mesh and constraints must not be NULL");
     if (mesh->n_faces == 0)
         return dk_error_set(err, DK_ERR_TOPOLOGY, "LinearReconstruction: the mesh has no faces");
-    if (mesh->report.n_nonmanifold_edges > 0) {
-        const dk_index e = mesh->report.first_nonmanifold_edge;
-        return dk_error_set(err, DK_ERR_TOPOLOGY,
-                            "LinearReconstruction: %d non-manifold edges (the first joins "
-                            "vertices %d and %d): a frame equation needs two faces per edge",
-                            (int)mesh->report.n_nonmanifold_edges,
-                            e >= 0 ? (int)mesh->edges[2 * (size_t)e] : -1,
-                            e >= 0 ? (int)mesh->edges[2 * (size_t)e + 1] : -1);
-    }
     dk_fundamental_options opt;
     if (options)
         opt = *options;
@@ -1020,7 +1131,8 @@ dk_status dk_fundamental_bind(const dk_mesh *mesh, const dk_constraint_desc *des
     f->opt.n_material = 0;
     /* (the forms phase's shares: faces ~0.2, edge rotations ~0.7, pieces ~0.1)
      * 1. the first fundamental form per face; 2. the second per interior edge (R_ij);
-     * 3. the pieces and the bridges between groups of faces that meet at vertices only;
+     * 3. the fins' frame equations, the pieces and the bridges between groups of faces that
+     * meet at vertices only;
      * 4. the elimination of the constraints, the energy's matrices and their factor */
     faces(f);
     if ((st = dk_progress_part(&prog, 0.2, err)) == DK_OK &&
@@ -1031,7 +1143,8 @@ dk_status dk_fundamental_bind(const dk_mesh *mesh, const dk_constraint_desc *des
         return st;
     }
     memcpy(f->frames, f->rest_frame, 9 * F * sizeof *f->frames);
-    st = pieces_and_bridges(f, err);
+    if ((st = fin_pairs(f, err)) == DK_OK)
+        st = pieces_and_bridges(f, err);
     if (st != DK_OK) {
         dk_fundamental_free(f);
         return st;

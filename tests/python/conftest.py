@@ -110,6 +110,29 @@ def make_grid(nx=8, ny=6, bump=0.0, jitter=0.0, seed=0):
     return verts, np.array(faces, dtype=np.int64)
 
 
+def make_book(pages=3, n=6, spine=8):
+    """`pages` flat grids of n x spine vertices glued along a common spine (the line x = 0):
+    every spine edge has one triangle per page, so all are non-manifold for pages > 2.
+    Page k leaves the spine at angle 2 pi k / pages. Returns (v, f, page index per vertex)."""
+    zs = np.linspace(0.0, 1.0, spine)
+    v = [[0.0, 0.0, z] for z in zs]
+    page = [-1] * spine
+    f = []
+    for k in range(pages):
+        a = 2 * np.pi * k / pages
+        base = len(v)
+        for i in range(1, n):
+            for z in zs:
+                v.append([i / (n - 1) * np.cos(a), i / (n - 1) * np.sin(a), z])
+                page.append(k)
+        idx = lambda i, j: j if i == 0 else base + (i - 1) * spine + j  # noqa: E731
+        for i in range(n - 1):
+            for j in range(spine - 1):
+                f += [[idx(i, j), idx(i + 1, j), idx(i + 1, j + 1)],
+                      [idx(i, j), idx(i + 1, j + 1), idx(i, j + 1)]]
+    return np.array(v), np.array(f), np.array(page)
+
+
 def numpy_edges(faces):
     """Unique undirected edges (a < b), sorted lexicographically."""
     e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])

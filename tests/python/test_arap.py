@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import deformkit
+from conftest import make_book
 
 SHARED = pathlib.Path(__file__).resolve().parents[2] / ".." / "shared"
 
@@ -481,34 +482,11 @@ def test_bad_input():
     np.testing.assert_array_equal(held.solve(v[handle] + 0.1).positions[len(v):], vc[len(v):])
 
 
-def book(pages=3, n=6, spine=8):
-    """`pages` flat grids of n x spine vertices glued along a common spine (the line x = 0):
-    every spine edge has 2 * pages triangles, so every one is non-manifold for pages > 1.
-    Page k leaves the spine at angle 2 pi k / pages. Returns (v, f, page index per vertex)."""
-    zs = np.linspace(0.0, 1.0, spine)
-    v = [[0.0, 0.0, z] for z in zs]
-    page = [-1] * spine
-    f = []
-    for k in range(pages):
-        a = 2 * np.pi * k / pages
-        base = len(v)
-        for i in range(1, n):
-            for z in zs:
-                v.append([i / (n - 1) * np.cos(a), i / (n - 1) * np.sin(a), z])
-                page.append(k)
-        idx = lambda i, j: j if i == 0 else base + (i - 1) * spine + j  # noqa: E731
-        for i in range(n - 1):
-            for j in range(spine - 1):
-                f += [[idx(i, j), idx(i + 1, j), idx(i + 1, j + 1)],
-                      [idx(i, j), idx(i + 1, j + 1), idx(i, j + 1)]]
-    return np.array(v), np.array(f), np.array(page)
-
-
 def test_non_manifold_edges_sum_all_their_triangles():
     # a book of three pages on one spine (scanned meshes carry such edges; the beast of
     # ../shared/meshes has one): ARAP binds, meets its constraints exactly, and its result
     # is a local minimum of the energy summed over every triangle of each edge
-    v, f, page = book()
+    v, f, page = make_book()
     mesh = deformkit.Mesh(v, f)
     assert mesh.report["n_nonmanifold_edges"] == 7
     rim = np.isclose(np.linalg.norm(v[:, :2], axis=1), 1.0)
