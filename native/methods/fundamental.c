@@ -498,6 +498,29 @@ typedef struct term {
 
 typedef void (*visit_fn)(void *ctx, double weight, const term *t, int nt);
 
+/* The weight of E_f's residuals across edge e between faces ti and tj (eq. 6):
+ * w / (material_e (cot alpha + cot beta)), the angles opposite e in the two faces. */
+static double frame_weight(const dk_fundamental *f, dk_index ti, dk_index tj, dk_index e)
+{
+    const dk_mesh *m = f->mesh;
+    const dk_index a = m->edges[2 * (size_t)e], b = m->edges[2 * (size_t)e + 1];
+    const int ki = corner_of(m, ti, a) ^ corner_of(m, ti, b) ^ 3;
+    const int kj = corner_of(m, tj, a) ^ corner_of(m, tj, b) ^ 3;
+    const double we = f->cot[3 * (size_t)ti + ki] + f->cot[3 * (size_t)tj + kj];
+    return f->w_scaled / (f->material[e] * we);
+}
+
+/* The three residuals f_j - f_i R (one per entry k of the frame rows), with weight wgt. */
+static void visit_frame_pair(dk_index ti, dk_index tj, const double R[9], double wgt,
+                             visit_fn visit, void *ctx)
+{
+    for (int k = 0; k < 3; k++) {
+        const term tt[4] = {{tj, k, 1.0}, {ti, 0, -R[k]}, {ti, 1, -R[3 + k]},
+                            {ti, 2, -R[6 + k]}};
+        visit(ctx, wgt, tt, 4);
+    }
+}
+
 /* Every residual of E = w E_f + E_x (eqs. 5-7), the same for each coordinate. */
 static void for_each_residual(const dk_fundamental *f, visit_fn visit, void *ctx)
 {
@@ -517,49 +540,21 @@ static void for_each_residual(const dk_fundamental *f, visit_fn visit, void *ctx
             visit(ctx, wgt, tt, 4);
         }
     }
-    for (dk_index e = 0; e < m->n_edges; e++) { /* E_f: f_j - f_i R_ij, per entry k */
+    for (dk_index e = 0; e < m->n_edges; e++) { /* E_f: f_j - f_i R_ij across interior edges */
         if (!f->has_R[e])
             continue;
         const dk_index ti = m->edge_faces[2 * (size_t)e], tj = m->edge_faces[2 * (size_t)e + 1];
-        /* cot alpha + cot beta: the angles opposite the edge in both faces */
-        const int ki = corner_of(m, ti, m->edges[2 * (size_t)e]) ^
-                       corner_of(m, ti, m->edges[2 * (size_t)e + 1]) ^ 3;
-        const int kj = corner_of(m, tj, m->edges[2 * (size_t)e]) ^
-                       corner_of(m, tj, m->edges[2 * (size_t)e + 1]) ^ 3;
-        const double we = f->cot[3 * (size_t)ti + ki] + f->cot[3 * (size_t)tj + kj];
-        const double wgt = f->w_scaled / (f->material[e] * we);
-        const double *R = f->R + 9 * (size_t)e;
-        for (int k = 0; k < 3; k++) {
-            const term tt[4] = {{tj, k, 1.0}, {ti, 0, -R[k]}, {ti, 1, -R[3 + k]},
-                                {ti, 2, -R[6 + k]}};
-            visit(ctx, wgt, tt, 4);
-        }
+        visit_frame_pair(ti, tj, f->R + 9 * (size_t)e, frame_weight(f, ti, tj, e), visit, ctx);
     }
     for (dk_index q = 0; q < f->n_fins; q++) { /* E_f on the fins (fin_pairs) */
         const dk_index ti = f->fin[3 * (size_t)q], tj = f->fin[3 * (size_t)q + 1];
         const dk_index e = f->fin[3 * (size_t)q + 2];
-        const int ki = corner_of(m, ti, m->edges[2 * (size_t)e]) ^
-                       corner_of(m, ti, m->edges[2 * (size_t)e + 1]) ^ 3;
-        const int kj = corner_of(m, tj, m->edges[2 * (size_t)e]) ^
-                       corner_of(m, tj, m->edges[2 * (size_t)e + 1]) ^ 3;
-        const double we = f->cot[3 * (size_t)ti + ki] + f->cot[3 * (size_t)tj + kj];
-        const double wgt = f->w_scaled / (f->material[e] * we);
-        const double *R = f->fin_R + 9 * (size_t)q;
-        for (int k = 0; k < 3; k++) {
-            const term tt[4] = {{tj, k, 1.0}, {ti, 0, -R[k]}, {ti, 1, -R[3 + k]},
-                                {ti, 2, -R[6 + k]}};
-            visit(ctx, wgt, tt, 4);
-        }
+        visit_frame_pair(ti, tj, f->fin_R + 9 * (size_t)q, frame_weight(f, ti, tj, e), visit,
+                         ctx);
     }
-    for (dk_index b = 0; b < f->n_bridges; b++) { /* the bridges (pieces_and_bridges) */
-        const dk_index ti = f->bridge[2 * (size_t)b], tj = f->bridge[2 * (size_t)b + 1];
-        const double *R = f->bridge_R + 9 * (size_t)b;
-        for (int k = 0; k < 3; k++) {
-            const term tt[4] = {{tj, k, 1.0}, {ti, 0, -R[k]}, {ti, 1, -R[3 + k]},
-                                {ti, 2, -R[6 + k]}};
-            visit(ctx, REGULARIZATION * f->w_scaled, tt, 4);
-        }
-    }
+    for (dk_index b = 0; b < f->n_bridges; b++) /* the bridges (pieces_and_bridges) */
+        visit_frame_pair(f->bridge[2 * (size_t)b], f->bridge[2 * (size_t)b + 1],
+                         f->bridge_R + 9 * (size_t)b, REGULARIZATION * f->w_scaled, visit, ctx);
     for (dk_index t = 0; f->el.fa && t < m->n_faces; t++) /* the regularization, where needed */
         if (f->el.fa[t] >= 0)
             for (int k = 0; k < 3; k++) {
