@@ -236,12 +236,15 @@ class DEFORMKIT_OT_remove_handle(_Base, bpy.types.Operator):
 
 
 def _report_bound(op, obj, d, ms):
-    """The bind's report: a warning when nothing can show the result."""
+    """The bind's report: a warning when nothing can show the result, or when the native
+    object warns (loose geometry held at rest, a floppy deformation graph)."""
     msg = "%s %s (%.0f ms)" % (d.name, solver.idle_status(d), ms)
     hidden = bake.hidden_reason(obj, d)
     baked = bake.state(obj, d)
-    if hidden or baked:
-        op.report({"WARNING"}, "%s, but %s" % (msg, hidden or baked["text"]))
+    buts = ([hidden or baked["text"]] if hidden or baked else []) + list(
+        solver.bind_warnings(obj, d))
+    if buts:
+        op.report({"WARNING"}, "%s, but %s" % (msg, "; ".join(buts)))
     else:
         op.report({"INFO"}, msg)
 

@@ -920,6 +920,18 @@ def bind(obj, d, depsgraph=None):
     return bind_end(obj, d, job, mats, depsgraph)
 
 
+def bind_warnings(obj, d):
+    """What the bound native object says the artist should know (loose geometry held at rest,
+    a deformation graph denser than its mesh): a tuple of str, empty when unbound."""
+    e = _cache.get((obj.name, d.uid))
+    if e is None or e.native is None:
+        return ()
+    try:
+        return tuple(getattr(e.native, "warnings", ()))
+    except RuntimeError:  # a worker thread is solving on it: the report goes without
+        return ()
+
+
 def unbind(obj, d):
     drop(obj.name, d.uid)
     d.bound = False

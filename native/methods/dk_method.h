@@ -103,6 +103,9 @@ typedef struct dk_method_stats {
                                       geometry, dk_constraints.h)                          */
     dk_index n_held_components;  /**< the components they make up                          */
     dk_index first_held;         /**< the smallest held vertex, -1 when none                */
+    dk_index n_graph_nodes;      /**< nodes of the deformation graph (embedded deformation),
+                                      0 for methods without one; more nodes than vertices
+                                      make a floppy graph (docs/methods/embedded.md)       */
 } dk_method_stats;
 
 /** Fills the held-vertex counters of `stats` from the method's constraints (NULL: none).

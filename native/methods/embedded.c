@@ -1785,6 +1785,7 @@ void dk_embedded_stats(const dk_embedded *ed, dk_method_stats *st)
     st->n_handle_vertices = ed->sys.con->n_handle_vertices;
     dk_constraints_held_stats(ed->sys.con, NULL, st);
     st->n_unknowns = 12 * ed->sys.n_free;
+    st->n_graph_nodes = ed->m;
     st->analysis_count = ed->analysis_count;
     st->factorization_count = ed->factorization_count;
 }

@@ -801,6 +801,19 @@ PyObject *dk_py_method_get_stats(PyObject *obj, void *c)
     return d;
 }
 
+/* Appends msg (a new reference, NULL on failure) to the list; -1 on failure. */
+static int append_warning(PyObject *list, PyObject *msg)
+{
+    if (!msg)
+        return -1;
+    const int rc = PyList_Append(list, msg);
+    Py_DECREF(msg);
+    return rc;
+}
+
+/* What the bound object's stats say the user should know: loose geometry held at rest, and
+ * a deformation graph denser than its mesh (floppy: its inner vertices can lag behind the
+ * handles even at a small energy; docs/methods/embedded.md, "Edges"). */
 PyObject *dk_py_method_get_warnings(PyObject *obj, void *c)
 {
     dk_py_method *self = (dk_py_method *)obj;
@@ -809,20 +822,31 @@ PyObject *dk_py_method_get_warnings(PyObject *obj, void *c)
     if (!still_bound(self))
         return NULL;
     self->spec->ops->stats(self->native, &ms);
-    if (ms.n_held == 0)
-        return PyTuple_New(0);
-    PyObject *msg = PyUnicode_FromFormat(
-        "%zd %s in %zd connected component%s with no handle or fixed vertex %s held at "
-        "rest (first: vertex %zd); constrain a vertex there to move %s",
-        (Py_ssize_t)ms.n_held, ms.n_held == 1 ? "vertex" : "vertices",
-        (Py_ssize_t)ms.n_held_components,
-        ms.n_held_components == 1 ? "" : "s", ms.n_held == 1 ? "is" : "are",
-        (Py_ssize_t)ms.first_held, ms.n_held_components == 1 ? "it" : "them");
-    if (!msg)
+    PyObject *list = PyList_New(0);
+    if (!list)
         return NULL;
-    PyObject *t = PyTuple_Pack(1, msg);
-    Py_DECREF(msg);
+    if (ms.n_held > 0 &&
+        append_warning(list, PyUnicode_FromFormat(
+            "%zd %s in %zd connected component%s with no handle or fixed vertex %s held at "
+            "rest (first: vertex %zd); constrain a vertex there to move %s",
+            (Py_ssize_t)ms.n_held, ms.n_held == 1 ? "vertex" : "vertices",
+            (Py_ssize_t)ms.n_held_components, ms.n_held_components == 1 ? "" : "s",
+            ms.n_held == 1 ? "is" : "are", (Py_ssize_t)ms.first_held,
+            ms.n_held_components == 1 ? "it" : "them")) < 0)
+        goto fail;
+    if (ms.n_graph_nodes > ms.n_vertices &&
+        append_warning(list, PyUnicode_FromFormat(
+            "the deformation graph has %zd nodes for %zd vertices: a graph denser than its "
+            "mesh is floppy, and vertices between the handles can lag behind them; use fewer "
+            "nodes (a smaller n_nodes or a larger radius)",
+            (Py_ssize_t)ms.n_graph_nodes, (Py_ssize_t)ms.n_vertices)) < 0)
+        goto fail;
+    PyObject *t = PyList_AsTuple(list);
+    Py_DECREF(list);
     return t;
+fail:
+    Py_DECREF(list);
+    return NULL;
 }
 
 /* ------------------------------------------------------------------ registration ------- */

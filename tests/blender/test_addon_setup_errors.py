@@ -142,6 +142,42 @@ def test_topology_change():
     R.check("bind again clears the error", d.bound and not d.status_is_error, d.status)
 
 
+class _Reports:
+    """Stands in for an operator: records what it reports."""
+    def __init__(self):
+        self.reports = []
+
+    def report(self, kind, msg):
+        self.reports.append((set(kind), msg))
+
+
+def test_bind_reports_native_warnings():
+    """Loose geometry is held at rest (docs/python-api.md): the bind's report says so in the
+    report bar, as a warning, and a clean bind's report is plain information."""
+    from addon import operators
+    obj, d, e, fixed, handle = fresh()
+    bpy.ops.deformkit.bind()
+    op = _Reports()
+    operators._report_bound(op, obj, d, 1.0)
+    R.check("clean bind: an INFO report, no warning: %r" % op.reports,
+            S.solver.bind_warnings(obj, d) == () and op.reports and op.reports[-1][0] == {"INFO"})
+    n = len(obj.data.vertices)
+    bm = bmesh.new()
+    bm.from_mesh(obj.data)
+    bm.verts.new((5.0, 5.0, 5.0))
+    bm.to_mesh(obj.data)
+    bm.free()
+    obj.data.update()
+    bpy.ops.deformkit.bind()
+    w = S.solver.bind_warnings(obj, d)
+    R.check("loose vertex: the native warning %r" % (w,),
+            len(w) == 1 and "held at rest (first: vertex %d)" % n in w[0])
+    operators._report_bound(op, obj, d, 1.0)
+    kind, msg = op.reports[-1]
+    R.check("loose vertex: a WARNING report with it: %r" % msg,
+            kind == {"WARNING"} and "but 1 vertex in 1 connected component" in msg)
+
+
 def test_edit_mode_is_skipped():
     obj, d, e, fixed, handle = fresh()
     bpy.ops.deformkit.bind()
@@ -191,6 +227,7 @@ def test_add_handle_from_selection():
 
 for t in (test_no_handles, test_missing_group, test_empty_group, test_no_target, test_overlap_fixed, test_handles_overlap,
           test_deleted_target_after_bind, test_non_mesh, test_no_faces, test_topology_change,
+          test_bind_reports_native_warnings,
           test_edit_mode_is_skipped, test_no_deformer, test_add_handle_from_selection):
     R.run(t)
 R.finish()

@@ -127,6 +127,9 @@ static void check_method(const dk_method_ops *ops, scene *s)
                   st.n_handle_vertices == s->n_hv,
               "%s on %s: stats %d %d %d", ops->name, s->name, (int)st.n_vertices,
               (int)st.n_handles, (int)st.n_handle_vertices);
+    /* a deformation graph's node count: embedded deformation only (py warnings read it) */
+    CHECK_MSG((strcmp(ops->name, "EmbeddedDeformation") == 0) == (st.n_graph_nodes > 0),
+              "%s on %s: n_graph_nodes %d", ops->name, s->name, (int)st.n_graph_nodes);
 
     /* zero drag, cold and warm */
     for (dk_index k = 0; k < s->n_hv; k++)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import deformkit as dk
-from conftest import make_icosphere
+from conftest import make_grid, make_icosphere
 
 
 def bumpy_plane(n=60, bumps=6, seed=3):
@@ -407,3 +407,23 @@ def test_update_source_follows_an_animated_mesh():
     assert np.abs(g1 - g0).max() > 0.1
     first = np.array(surf.solve(bend(v)[handle]).positions)    # no motion: the new source
     assert np.abs(first - bend(v)).max() < 1e-12
+
+
+def test_a_graph_denser_than_its_mesh_is_warned_of():
+    """A radius that puts more nodes than vertices on a small grid makes a floppy graph
+    (docs/methods/embedded.md, "Edges"): translating both ends leaves inner vertices behind at
+    a small energy. The object says so in `warnings`; the default graph (capped at the vertex
+    count) is exact and says nothing."""
+    v, f = make_grid(5, 4, bump=0.15, jitter=0.3, seed=3)
+    left, right = np.where(v[:, 0] <= 1e-9)[0], np.where(v[:, 0] >= 1 - 1e-9)[0]
+    t = np.array([0.3, 0.2, 0.1])
+    targets = np.vstack([v[left] + t, v[right] + t])
+    mesh = dk.Mesh(v, f)
+    ok = dk.EmbeddedDeformation(mesh, handles=[left, right])
+    assert len(ok.nodes) <= len(v) and ok.warnings == ()
+    assert np.abs(np.asarray(ok.solve(targets).positions) - v - t).max() < 1e-9
+    dense = dk.EmbeddedDeformation(mesh, handles=[left, right], radius=0.05)
+    lag = np.abs(np.asarray(dense.solve(targets).positions) - v - t).max()
+    assert len(dense.nodes) > len(v) and lag > 1e-3 * np.linalg.norm(t)  # the floppiness
+    (w,) = dense.warnings
+    assert "has %d nodes for %d vertices" % (len(dense.nodes), len(v)) in w and "fewer" in w
