@@ -59,7 +59,7 @@ class _Entry:
                  "groups", "last_inputs", "method_id", "verified", "pending", "pending_its",
                  "handles", "source", "preview_at", "material", "material_shown", "slice_cost",
                  "moved_at", "quick", "worker", "slice_ms", "graph_shown", "basis",
-                 "result_pos", "result_T", "preview_inputs")
+                 "result_pos", "result_T", "preview_inputs", "warned")
 
 
 def mark_settings_changed():
@@ -662,6 +662,7 @@ class BindJob:
         e.quick = quick_topology(me)
         e.worker, e.slice_ms, e.graph_shown = None, None, None
         e.basis, e.result_pos, e.result_T, e.preview_inputs = None, None, None, None
+        e.warned = None  # bind_warnings
         _cache[(obj.name, d.uid)] = e
         return e
 
@@ -677,6 +678,7 @@ def _install_groups(entry, d, kw, groups_key):
     # other handles: another basis, and no result to move by it
     entry.basis, entry.result_pos, entry.result_T = None, None, None
     entry.preview_inputs = None
+    entry.warned = None  # new constraints: other loose parts
     return entry
 
 
@@ -922,14 +924,17 @@ def bind(obj, d, depsgraph=None):
 
 def bind_warnings(obj, d):
     """What the bound native object says the artist should know (loose geometry held at rest,
-    a deformation graph denser than its mesh): a tuple of str, empty when unbound."""
+    a deformation graph denser than its mesh): a tuple of str, empty when unbound. Read once
+    per native object (the panel asks on every redraw; a worker thread may be solving)."""
     e = _cache.get((obj.name, d.uid))
     if e is None or e.native is None:
         return ()
-    try:
-        return tuple(getattr(e.native, "warnings", ()))
-    except RuntimeError:  # a worker thread is solving on it: the report goes without
-        return ()
+    if e.warned is None:
+        try:
+            e.warned = tuple(getattr(e.native, "warnings", ()))
+        except RuntimeError:  # in use by a worker thread: ask again at the next redraw
+            return ()
+    return e.warned
 
 
 def unbind(obj, d):

@@ -165,6 +165,8 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
         if hidden:
             draw_wrapped(layout, "%s: nothing shows the result" % hidden, "HIDE_ON", width,
                          alert=True)
+        for w in solver.bind_warnings(obj, d) if d.bound else ():
+            draw_wrapped(layout, w, "ERROR", width)
         why = bake.animated_reason(obj, d) if d.bound and bake.state(obj, d) is None else None
         if why:
             draw_wrapped(layout.box(), "Animated (%s) and not baked: without DeformKit, this "
