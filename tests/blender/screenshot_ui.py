@@ -21,7 +21,7 @@ PNG2 = os.path.join(OUT, "modifiers_tab_last_method.png")
 PNG3 = os.path.join(OUT, "viewport_show_graph.png")
 # the panel in each state an artist meets (DEFORMKIT_SHOT=states, a third run): one image
 # each, kept in docs/images after being looked at
-STATES = ("unbound", "bound", "rebinding", "baked", "overlap_error", "handle_target", "sidebar")
+STATES = ("unbound", "bound", "bound_warning", "rebinding", "baked", "overlap_error", "handle_target", "sidebar")
 STATE_PNGS = [os.path.join(OUT, "panel_%s.png" % s) for s in STATES]
 
 try:
@@ -192,6 +192,27 @@ def in_blender():
             e.location.z += 0.4
             bpy.context.view_layer.update()
         yield "bound"
+        # a loose vertex: the bind warns, and the panel keeps the warning under the status
+        import bmesh
+        bm = bmesh.new()
+        bm.from_mesh(obj.data)
+        bm.verts.new((1.2, 0.5, 0.6))
+        bm.to_mesh(obj.data)
+        bm.free()
+        obj.data.update()
+        with bpy.context.temp_override(**S.ui_context()):
+            bpy.ops.deformkit.bind()
+        R.check("the loose vertex's warning", len(S.solver.bind_warnings(obj, d)) == 1)
+        yield "bound_warning"
+        bm = bmesh.new()
+        bm.from_mesh(obj.data)
+        bm.verts.ensure_lookup_table()
+        bm.verts.remove(bm.verts[len(bm.verts) - 1])
+        bm.to_mesh(obj.data)
+        bm.free()
+        obj.data.update()
+        with bpy.context.temp_override(**S.ui_context()):
+            bpy.ops.deformkit.bind()
         S.solver.threaded_rebinds[0] = True
         d.options.weights = "uniform" if d.options.weights != "uniform" else "cotangent"
         bpy.context.view_layer.update()
