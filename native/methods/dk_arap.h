@@ -14,7 +14,7 @@
  *                    triangle's half weight cot(opposite angle) / 2 (the same edge appearing
  *                    in two incident triangles gets the sum of both halves)
  * Weights: per triangle edge a half weight h = cot(opposite angle) / 2 (cotangent; 0 for a
- * triangle with area < 1e-14 * longest edge^2) or 1/2 (uniform); each cell's entries for the
+ * degenerate triangle, dk_triangle_degenerate) or 1/2 (uniform); each cell's entries for the
  * same edge are summed (so a spoke weighs w_ij = (cot alpha + cot beta) / 2), and the
  * clamped kind replaces every summed weight w by max(w, 0). DEFAULT: clamped cotangent, since
  * a negative weight makes its cell's term concave in that edge: the local/global iteration is

@@ -26,7 +26,7 @@
  * gives its linear part; positions give the rotation that best fits the handle's rest
  * vertices to the targets (Kabsch). Fixed faces keep their rest frames.
  *
- * Degenerate triangles (area below 1e-14 of the longest edge squared) have no frame: they
+ * Degenerate triangles (dk_triangle_degenerate, dk_operators.h) have no frame: they
  * take no part in either energy. Boundary edges have one triangle's E_x term and no E_f.
  * A non-manifold edge joins each of its faces to the next in their order about it by a
  * frame equation with the rest frames' relative rotation (fundamental.c, fin_pairs), so it

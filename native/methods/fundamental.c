@@ -176,7 +176,8 @@ static void faces(dk_fundamental *f)
         const double lmax = fmax(l01, fmax(l02, l12));
         double *co = f->coord + 6 * (size_t)t, *ct = f->cot + 3 * (size_t)t;
         double *F = f->rest_frame + 9 * (size_t)t;
-        f->degenerate[t] = !(0.5 * nl > 1e-14 * lmax * lmax) || !(l01 > 0.0) || !(l02 > 0.0);
+        f->degenerate[t] = dk_triangle_degenerate(p0, p1, p2, nl, lmax * lmax) || !(l01 > 0.0) ||
+                           !(l02 > 0.0);
         if (f->degenerate[t]) {
             memset(co, 0, 6 * sizeof *co);
             memset(ct, 0, 3 * sizeof *ct);

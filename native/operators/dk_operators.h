@@ -22,10 +22,25 @@ extern "C" {
  *  "umbrella" operator of the slides is D^-1 L with D = diag(L). */
 dk_status dk_laplacian_uniform(const dk_mesh *mesh, dk_sparse **out, dk_error *err);
 
+/** Whether a triangle is degenerate: too thin for its cotangents, normal or area to mean
+ *  anything. Either its area is below 1e-14 * (its longest edge)^2, or its height over the
+ *  longest edge is within the rounding of its coordinates: below 64 * DBL_EPSILON times its
+ *  largest absolute coordinate. The second rule makes a triangle that is degenerate in
+ *  exact arithmetic (three collinear corners) stay degenerate wherever the mesh sits: turned
+ *  or moved, its stored corners are off the line by a few rounding units, which the first
+ *  rule alone read as a real sliver with cotangents of 1e12 (the ogre of ../shared/meshes,
+ *  turned: a Laplacian whose rows no longer summed to 0). Every operator and method that
+ *  skips degenerate triangles asks this.
+ *  p0, p1, p2: the corners (3 doubles each); twice_area: |(p1 - p0) x (p2 - p0)| as the
+ *  caller computed it; longest2: the squared length of its longest edge. Non-finite
+ *  input is degenerate. */
+int dk_triangle_degenerate(const double *p0, const double *p1, const double *p2,
+                           double twice_area, double longest2);
+
 /** Cotangent weights of every edge at the given positions (n_vertices x 3; pass
  *  mesh->positions for the rest shape): w_e = (cot alpha + cot beta) / 2 over the (one or
- *  two, or more on non-manifold edges) opposite angles. A triangle whose area is below
- *  1e-14 * (its longest edge)^2 contributes 0 to its three edges instead of an infinite
+ *  two, or more on non-manifold edges) opposite angles. A degenerate triangle
+ *  (dk_triangle_degenerate) contributes 0 to its three edges instead of an infinite
  *  cotangent, so the result is always finite. Weights may be negative (obtuse angles);
  *  clamping is the caller's choice. `weights` has n_edges entries. */
 void dk_cotangent_weights(const dk_mesh *mesh, const double *positions, double *weights);

@@ -151,7 +151,8 @@ static void face_geometry(const dk_mesh *mesh, double *cot, double *grad)
                          e[0][0] * e[1][1] - e[0][1] * e[1][0]};
         double twice_area = sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2]);
         double longest = fmax(len2[0], fmax(len2[1], len2[2]));
-        if (!(0.5 * twice_area > 1e-14 * longest)) {
+        if (dk_triangle_degenerate(x + 3 * tri[0], x + 3 * tri[1], x + 3 * tri[2], twice_area,
+                                   longest)) {
             for (int k = 0; k < 3; k++) cot[3 * f + k] = 0.0;
             for (int k = 0; k < 9; k++) grad[9 * f + k] = 0.0;
             continue;

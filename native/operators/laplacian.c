@@ -5,13 +5,31 @@
  * pattern is the same for every weighting (n + 2 * n_edges entries, full diagonal even on
  * isolated vertices) and no triplet sort is needed. Sign convention: dk_operators.h.
  */
+#include <float.h>
 #include <math.h>
 #include <stdlib.h>
 
 #include "dk_operators.h"
 
-/* Degenerate triangles: area below this times the longest edge squared contribute 0. */
-#define DK_DEGENERATE_RATIO 1e-14
+/* Degenerate triangles (dk_triangle_degenerate): area below DEGENERATE_RATIO times the
+ * longest edge squared, or height below ROUNDING_UNITS * DBL_EPSILON times the largest
+ * absolute coordinate (the coordinates' own rounding, with room for the few operations that
+ * computed them: a turn, a shift, a file's decimal digits). */
+#define DEGENERATE_RATIO 1e-14
+#define ROUNDING_UNITS 64.0
+
+int dk_triangle_degenerate(const double *p0, const double *p1, const double *p2,
+                           double twice_area, double longest2)
+{
+    if (!(0.5 * twice_area > DEGENERATE_RATIO * longest2))
+        return 1; /* also NaN */
+    double scale = 0.0;
+    for (int d = 0; d < 3; d++)
+        scale = fmax(scale, fmax(fabs(p0[d]), fmax(fabs(p1[d]), fabs(p2[d]))));
+    /* height = twice_area / longest edge */
+    return !(twice_area > ROUNDING_UNITS * DBL_EPSILON * scale * sqrt(longest2)) ||
+           !isfinite(scale);
+}
 
 void dk_cotangent_weights(const dk_mesh *mesh, const double *positions, double *weights)
 {
@@ -31,7 +49,7 @@ void dk_cotangent_weights(const dk_mesh *mesh, const double *positions, double *
         double cz = e[0][0] * e[1][1] - e[0][1] * e[1][0];
         double twice_area = sqrt(cx * cx + cy * cy + cz * cz);
         double longest = fmax(len2[0], fmax(len2[1], len2[2]));
-        if (!(0.5 * twice_area > DK_DEGENERATE_RATIO * longest)) continue;
+        if (dk_triangle_degenerate(p[0], p[1], p[2], twice_area, longest)) continue;
         for (int k = 0; k < 3; k++) {
             /* angle at corner k, between the edges to corners k+1 and k+2:
              * cot = (u . v) / |u x v| with u = p[k+1]-p[k] = e[k+2], v = p[k+2]-p[k] = -e[k+1] */

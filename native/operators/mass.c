@@ -5,7 +5,7 @@
  * (|PR|^2 cot Q + |PQ|^2 cot R) / 8; in an obtuse triangle the obtuse corner gets area / 2
  * and the two others area / 4. The cotangents are computed as dot / (2 * area), so a right
  * angle gives exactly 0 and the three parts of a non-obtuse triangle sum to its area.
- * A triangle whose area is below 1e-14 * (longest edge)^2 (the same rule as the cotangent
+ * A degenerate triangle (dk_triangle_degenerate: the same rule as the cotangent
  * weights) contributes nothing, so every mass is finite and vertices only on degenerate
  * triangles (and isolated vertices) get 0.
  */
@@ -36,7 +36,8 @@ dk_status dk_mass_matrix(const dk_mesh *mesh, dk_mass_kind kind, double *mass, d
         double cz = e[0][0] * e[1][1] - e[0][1] * e[1][0];
         double area = 0.5 * sqrt(cx * cx + cy * cy + cz * cz);
         double longest = fmax(len2[0], fmax(len2[1], len2[2]));
-        if (!(area > 1e-14 * longest)) continue;
+        if (dk_triangle_degenerate(x + 3 * t[0], x + 3 * t[1], x + 3 * t[2], 2.0 * area, longest))
+            continue;
         if (kind == DK_MASS_BARYCENTRIC) {
             for (int k = 0; k < 3; k++) mass[t[k]] += area / 3.0;
             continue;

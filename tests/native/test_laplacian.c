@@ -276,6 +276,51 @@ static void test_degenerate(void)
     dk_mesh_free(m);
 }
 
+/* The same mesh, 1000x smaller, turned about a skew axis and moved 30 units away: the
+ * collinear corners are now off their line by rounding (~1e-15), which the area rule alone
+ * read as a sliver with cotangents of ~1e12 (the turned ogre: rows that no longer summed to
+ * 0). dk_triangle_degenerate's rounding rule keeps it degenerate, so the weights are the
+ * unmoved ones. */
+static void test_degenerate_moved(void)
+{
+    const double p[] = {0, 0, 0, 1, 0, 0, 2, 0, 0, 1, 1, 0, 5, 5, 5};
+    const dk_index f[] = {0, 1, 3, 1, 2, 3, 0, 2, 1};
+    const double c = cos(2.1), s = sin(2.1), r = sqrt(0.98);
+    const double a[3] = {0.3 / r, -0.5 / r, 0.8 / r}; /* unit axis */
+    double R[9], q[15];
+    for (int i = 0; i < 3; i++) /* Rodrigues: R = c I + s [a]x + (1 - c) a a^T */
+        for (int j = 0; j < 3; j++)
+            R[3 * i + j] = (i == j ? c : 0.0) + (1.0 - c) * a[i] * a[j];
+    R[1] -= s * a[2], R[2] += s * a[1], R[3] += s * a[2];
+    R[5] -= s * a[0], R[6] -= s * a[1], R[7] += s * a[0];
+    const double t[3] = {20.0, -30.0, 10.0};
+    for (int v = 0; v < 5; v++)
+        for (int i = 0; i < 3; i++)
+            q[3 * v + i] = t[i] + 1e-3 * (R[3 * i] * p[3 * v] + R[3 * i + 1] * p[3 * v + 1] +
+                                          R[3 * i + 2] * p[3 * v + 2]);
+    const double e01[3] = {q[3] - q[0], q[4] - q[1], q[5] - q[2]};
+    const double e02[3] = {q[6] - q[0], q[7] - q[1], q[8] - q[2]};
+    const double x[3] = {e01[1] * e02[2] - e01[2] * e02[1], e01[2] * e02[0] - e01[0] * e02[2],
+                         e01[0] * e02[1] - e01[1] * e02[0]};
+    const double twice = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
+    CHECK_MSG(twice > 2e-14 * 4e-6, "the turned triangle's area %g is above the area rule", twice);
+    CHECK(dk_triangle_degenerate(q, q + 3, q + 6, twice, 4e-6));
+    CHECK(!dk_triangle_degenerate(q, q + 3, q + 9, 1e-6, 2e-6)); /* a real one, right angle */
+    dk_mesh *m = NULL;
+    dk_error err = {0};
+    CHECK(dk_mesh_create(q, 5, f, 3, &m, &err) == DK_OK);
+    if (!m) return;
+    double w[16];
+    dk_cotangent_weights(m, m->positions, w);
+    CHECK_MSG(w[dk_mesh_find_edge(m, 0, 2)] == 0.0, "edge 0-2: %g", w[dk_mesh_find_edge(m, 0, 2)]);
+    CHECK_NEAR(w[dk_mesh_find_edge(m, 0, 1)], 0.5, 1e-9);
+    CHECK_NEAR(w[dk_mesh_find_edge(m, 1, 3)], 1.0, 1e-9);
+    double mass[5];
+    CHECK(dk_mass_matrix(m, DK_MASS_VORONOI, mass, &err) == DK_OK);
+    CHECK_NEAR(mass[0] + mass[1] + mass[2] + mass[3], 1e-6, 1e-15); /* the two real triangles */
+    dk_mesh_free(m);
+}
+
 static void test_armadillo_timing(void)
 {
     char path[1024];
@@ -312,4 +357,4 @@ static void test_armadillo_timing(void)
 }
 
 DK_TEST_MAIN(test_hand_example, test_linear_precision, test_sphere_psd_and_uniform,
-             test_degenerate, test_armadillo_timing)
+             test_degenerate, test_degenerate_moved, test_armadillo_timing)

@@ -14,7 +14,7 @@ static double half_cot(const double *p0, const double *p1, const double *p2, dou
     double c[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
                    u[0] * v[1] - u[1] * v[0]};
     double twice_area = sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
-    if (!(0.5 * twice_area >= 1e-14 * longest2))
+    if (dk_triangle_degenerate(p0, p1, p2, twice_area, longest2))
         return 0.0;
     return 0.5 * (u[0] * v[0] + u[1] * v[1] + u[2] * v[2]) / twice_area;
 }
