@@ -4,8 +4,10 @@ and moved; zero drag is rest, constraints met, converged, nothing flung away).
 
 The sweep found three bugs no synthetic mesh showed: EigenDeformation's frames read from
 rounding noise on the ogre (zero drag moved parts by 3 units), and ARAP and
-LinearReconstruction refusing the whole beast for one non-manifold edge. Marked heavy: about
-two minutes, the sanitized run leaves it out.
+LinearReconstruction refusing the whole beast for one non-manifold edge; its moved-scene check
+(the same scene turned and shifted gives the moved result) found collinear triangles read as
+slivers once turned (dk_triangle_degenerate). Marked heavy: about two minutes, the sanitized
+run leaves it out.
 """
 import importlib.util
 import pathlib
