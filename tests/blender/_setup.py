@@ -292,6 +292,19 @@ def group(obj, name, indices, weights=None):
     return vg
 
 
+def add_loose_vertex(obj, co):
+    """Adds a vertex on no face or edge (loose geometry, held at rest by every method) at the
+    end of obj's mesh; returns its index."""
+    import bmesh
+    bm = bmesh.new()
+    bm.from_mesh(obj.data)
+    bm.verts.new(co)
+    bm.to_mesh(obj.data)
+    bm.free()
+    obj.data.update()
+    return len(obj.data.vertices) - 1
+
+
 def empty(name, location=(0, 0, 0)):
     e = bpy.data.objects.new(name, None)
     bpy.context.scene.collection.objects.link(e)

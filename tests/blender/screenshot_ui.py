@@ -194,12 +194,7 @@ def in_blender():
         yield "bound"
         # a loose vertex: the bind warns, and the panel keeps the warning under the status
         import bmesh
-        bm = bmesh.new()
-        bm.from_mesh(obj.data)
-        bm.verts.new((1.2, 0.5, 0.6))
-        bm.to_mesh(obj.data)
-        bm.free()
-        obj.data.update()
+        S.add_loose_vertex(obj, (1.2, 0.5, 0.6))
         with bpy.context.temp_override(**S.ui_context()):
             bpy.ops.deformkit.bind()
         R.check("the loose vertex's warning", len(S.solver.bind_warnings(obj, d)) == 1)

@@ -161,13 +161,7 @@ def test_bind_reports_native_warnings():
     operators._report_bound(op, obj, d, 1.0)
     R.check("clean bind: an INFO report, no warning: %r" % op.reports,
             S.solver.bind_warnings(obj, d) == () and op.reports and op.reports[-1][0] == {"INFO"})
-    n = len(obj.data.vertices)
-    bm = bmesh.new()
-    bm.from_mesh(obj.data)
-    bm.verts.new((5.0, 5.0, 5.0))
-    bm.to_mesh(obj.data)
-    bm.free()
-    obj.data.update()
+    n = S.add_loose_vertex(obj, (5.0, 5.0, 5.0))
     bpy.ops.deformkit.bind()
     w = S.solver.bind_warnings(obj, d)
     R.check("loose vertex: the native warning %r" % (w,),

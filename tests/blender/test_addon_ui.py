@@ -184,18 +184,12 @@ def test_states():
 def test_bind_warnings_in_the_panel():
     """A bound deformer whose native object warns (here a loose vertex, held at rest) shows the
     warning in its panel, not only in the bind's report, which vanishes."""
-    import bmesh
     S.reset_scene()
     obj, d, e, fixed, handle = S.grid_setup("ARAP")
     bpy.ops.deformkit.bind()
     text = lambda calls: " ".join(c[6:] for c in calls if c.startswith("label "))
     R.check("no warning in a clean bind's panel", "held at rest" not in text(draw_all(obj, "clean")))
-    bm = bmesh.new()
-    bm.from_mesh(obj.data)
-    bm.verts.new((5.0, 5.0, 5.0))
-    bm.to_mesh(obj.data)
-    bm.free()
-    obj.data.update()
+    S.add_loose_vertex(obj, (5.0, 5.0, 5.0))
     bpy.ops.deformkit.bind()
     shown = text(draw_all(obj, "loose vertex"))
     R.check("the panel shows the loose-vertex warning: %r" % shown,
