@@ -259,7 +259,7 @@ def animated_reason(obj, d):
     mod = geonodes.find_modifier(obj, d)
     ad = obj.animation_data
     if mod is not None and ad is not None:
-        path = 'modifiers["%s"]%s' % (mod.name, geonodes.factor_path(mod))
+        path = geonodes.factor_data_path(mod)
         if any(fc.data_path == path for fc in ad.drivers):
             return "its Factor is driven"
         try:

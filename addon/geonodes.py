@@ -133,7 +133,7 @@ def is_ours(mod):
 
 def _attribute_of(mod):
     try:
-        return mod[_socket_id(mod.node_group, "Attribute")]
+        return compat.modifier_input(mod, _socket_id(mod.node_group, "Attribute"))
     except KeyError:
         return None
 
@@ -161,10 +161,7 @@ def find_modifier(obj, deformer):
 def repair(mod, deformer):
     """Puts the modifier's Attribute input back if it was edited, and records the
     modifier's current name (the user may rename it). Not for draw code (it writes)."""
-    key = attribute_key(mod.node_group)
-    if mod.get(key) != deformer.attribute_name:
-        mod[key] = deformer.attribute_name
-        mod.id_data.update_tag()
+    compat.set_modifier_input(mod, attribute_key(mod.node_group), deformer.attribute_name)
     if deformer.modifier_name != mod.name:
         deformer.modifier_name = mod.name
 
@@ -176,13 +173,49 @@ def ensure_modifier(obj, deformer):
         ng = ensure_node_group()
         mod = obj.modifiers.new(deformer.name, "NODES")
         mod.node_group = ng
-        mod[factor_key(ng)] = 1.0
-        mod[attribute_key(ng)] = deformer.attribute_name
-    elif mod.node_group.name == GROUP_NAME:
-        _hide_plumbing(mod.node_group)
+        compat.set_modifier_input(mod, factor_key(ng), 1.0)
+        compat.set_modifier_input(mod, attribute_key(ng), deformer.attribute_name)
+        made = True
+    else:
+        made = False
+        if mod.node_group.name == GROUP_NAME:
+            _hide_plumbing(mod.node_group)
     repair(mod, deformer)
     ensure_input_name(mod, deformer)
+    if made:
+        watch_factor_edits()
     return mod
+
+
+# owner of the message-bus subscriptions of watch_factor_edits (cleared and made anew there)
+_WATCH_OWNER = object()
+
+
+def _factor_edited():
+    """A Factor was edited in the UI: re-evaluates every object with a DeformKit modifier
+    (only the Geometry Nodes offset runs again; no solve)."""
+    for obj in bpy.data.objects:
+        if any(is_ours(m) for m in getattr(obj, "modifiers", ())):
+            obj.update_tag()
+
+
+def watch_factor_edits():
+    """Subscribes _factor_edited to edits of the Factor of each DeformKit node group in the
+    file (compat.watch_modifier_input: needed in 5.2, harmless after). Called on load, undo
+    and redo, on registration, and when a modifier is made. Returns how many groups are
+    watched."""
+    bpy.msgbus.clear_by_owner(_WATCH_OWNER)
+    watched = set()
+    for obj in bpy.data.objects:
+        for mod in getattr(obj, "modifiers", ()):
+            if is_ours(mod) and mod.node_group.name not in watched:
+                try:
+                    key = factor_key(mod.node_group)
+                except KeyError:
+                    continue
+                if compat.watch_modifier_input(mod, key, _WATCH_OWNER, _factor_edited):
+                    watched.add(mod.node_group.name)
+    return len(watched)
 
 
 def ensure_input_name(mod, deformer):
@@ -193,10 +226,7 @@ def ensure_input_name(mod, deformer):
         if ng.name != GROUP_NAME:
             return False  # a renamed or foreign copy: leave it
         ng = ensure_node_group()
-    key = input_key(ng)
-    if mod.get(key) != deformer.input_attribute_name:
-        mod[key] = deformer.input_attribute_name
-        mod.id_data.update_tag()  # an ID property changed behind RNA: re-evaluate
+    compat.set_modifier_input(mod, input_key(ng), deformer.input_attribute_name)
     return True
 
 
@@ -204,12 +234,22 @@ def factor(obj, deformer):
     mod = find_modifier(obj, deformer)
     if mod is None:
         return 1.0
-    return float(mod[factor_key(mod.node_group)])
+    return float(compat.modifier_input(mod, factor_key(mod.node_group), 1.0))
 
 
-def factor_path(mod):
-    """RNA path of the modifier's Factor input (for layout.prop and keyframes)."""
-    return '["%s"]' % factor_key(mod.node_group)
+def set_factor(mod, value):
+    """Sets the modifier's Factor (and has the object re-evaluated)."""
+    compat.set_modifier_input(mod, factor_key(mod.node_group), float(value))
+
+
+def factor_prop(mod):
+    """(owner, property name) of the modifier's Factor: for layout.prop and keyframe_insert."""
+    return compat.modifier_input_prop(mod, factor_key(mod.node_group))
+
+
+def factor_data_path(mod):
+    """RNA path of the modifier's Factor from its object (its F-curves and drivers)."""
+    return compat.modifier_input_path(mod, factor_key(mod.node_group))
 
 
 def ensure_attribute(mesh, name):

@@ -26,7 +26,7 @@
 import bpy
 from bpy.app.handlers import persistent
 
-from . import solver
+from . import geonodes, solver
 
 _busy = [False]
 enabled = [True]   # tests and the benchmark may switch automatic solving off
@@ -215,12 +215,20 @@ def on_frame_change(scene, depsgraph=None):
 @persistent
 def on_load(*_args):
     solver.clear_cache()
+    geonodes.watch_factor_edits()
 
 
 @persistent
 def on_undo(*_args):
     # re-check everything, and solve each deformer in full before it shows again
     solver.mark_all_dirty()
+    geonodes.watch_factor_edits()
+
+
+def _watch_after_register():
+    # registration runs where bpy.data is not readable yet: the first timer tick can
+    geonodes.watch_factor_edits()
+    return None
 
 
 _HANDLERS = (
@@ -239,6 +247,7 @@ def register():
                     and getattr(f, "__module__", "") == fn.__module__]:
             lst.remove(old)
         lst.append(fn)
+    bpy.app.timers.register(_watch_after_register, first_interval=0.0)
 
 
 def unregister():
@@ -246,7 +255,8 @@ def unregister():
         for old in [f for f in lst if getattr(f, "__name__", "") == fn.__name__
                     and getattr(f, "__module__", "") == fn.__module__]:
             lst.remove(old)
-    for timer in (refine, poll_rebinds):
+    bpy.msgbus.clear_by_owner(geonodes._WATCH_OWNER)
+    for timer in (refine, poll_rebinds, _watch_after_register):
         if bpy.app.timers.is_registered(timer):
             bpy.app.timers.unregister(timer)
     solver.clear_cache()

@@ -39,37 +39,49 @@ def graph_lines(obj, d):
     return e.graph_shown
 
 
+EDGE_WIDTH = 1.5   # pixels
+NODE_SIZE = 7.0    # pixels
+
+
+def draw_graphs(graphs):
+    """Draws each (points, edges) of `graphs` (graph_lines' results) into the bound frame
+    buffer with the current view and projection matrices, on top of what is there."""
+    import gpu
+    from gpu_extras.batch import batch_for_shader
+    lines, points = compat.line_shader(), compat.point_shader()
+    viewport = gpu.state.viewport_get()
+    gpu.state.depth_test_set("NONE")
+    gpu.state.blend_set("ALPHA")
+    for pts, edges in graphs:
+        pos = pts.astype(np.float32).tolist()
+        if len(edges):
+            lines.bind()
+            lines.uniform_float("viewportSize", (float(viewport[2]), float(viewport[3])))
+            lines.uniform_float("lineWidth", EDGE_WIDTH)
+            lines.uniform_float("color", EDGE_COLOR)
+            batch_for_shader(lines, "LINES", {"pos": pos},
+                             indices=edges.tolist()).draw(lines)
+        gpu.state.point_size_set(NODE_SIZE)
+        points.bind()
+        points.uniform_float("color", NODE_COLOR)
+        batch_for_shader(points, "POINTS", {"pos": pos}).draw(points)
+    gpu.state.point_size_set(1.0)
+    gpu.state.blend_set("NONE")
+
+
 def _draw():
     try:
-        import gpu
-        from gpu_extras.batch import batch_for_shader
-        lines = []
+        graphs = []
         for obj in bpy.context.visible_objects:
             if obj.type != "MESH" or not hasattr(obj, "deformkit"):
                 continue
             for d in obj.deformkit.deformers:
                 r = graph_lines(obj, d)
                 if r is not None and len(r[0]):
-                    lines.append(r)
-        if not lines:
+                    graphs.append(r)
+        if not graphs:
             return
-        shader = compat.uniform_color_shader()
-        gpu.state.depth_test_set("NONE")
-        gpu.state.blend_set("ALPHA")
-        for pts, edges in lines:
-            pos = pts.astype(np.float32).tolist()
-            shader.bind()
-            if len(edges):
-                gpu.state.line_width_set(1.5)
-                shader.uniform_float("color", EDGE_COLOR)
-                batch_for_shader(shader, "LINES", {"pos": pos},
-                                 indices=edges.tolist()).draw(shader)
-            gpu.state.point_size_set(7.0)
-            shader.uniform_float("color", NODE_COLOR)
-            batch_for_shader(shader, "POINTS", {"pos": pos}).draw(shader)
-        gpu.state.point_size_set(1.0)
-        gpu.state.line_width_set(1.0)
-        gpu.state.blend_set("NONE")
+        draw_graphs(graphs)
         _state["draws"] += 1
     except Exception as ex:  # noqa: BLE001 (never raise from a draw callback)
         if _state["error"] is None:

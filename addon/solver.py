@@ -470,7 +470,7 @@ def ensure_own_uid(obj, d):
         if old is not None:
             me.color_attributes.remove(old)
     if mod is not None:
-        mod[geonodes.attribute_key(mod.node_group)] = d.attribute_name
+        compat.set_modifier_input(mod, geonodes.attribute_key(mod.node_group), d.attribute_name)
         geonodes.ensure_input_name(mod, d)
         geonodes.repair(mod, d)
     if d.bound:

@@ -114,7 +114,7 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
         col.use_property_decorate = True
         col.prop(d, "method")
         if mod is not None:
-            col.prop(mod, geonodes.factor_path(mod), text="Factor")
+            col.prop(*geonodes.factor_prop(mod), text="Factor")
         else:
             r = col.row()
             r.alert = True
@@ -367,6 +367,17 @@ def _draw_object_menu(self, context):
     self.layout.menu("DEFORMKIT_MT_add", icon="MOD_MESHDEFORM")
 
 
+def _draw_modifier_add_deform(self, context):
+    """The Add Modifier menu's Deform section (Blender 4.0+), where artists look for
+    deformers: every DeformKit method under a DeformKit heading, after Blender's own."""
+    if context.object is None or context.object.type != "MESH":
+        return
+    self.layout.separator()
+    self.layout.label(text="DeformKit")
+    for m in methods.METHODS:
+        self.layout.operator("deformkit.add_deformer", text=m.label, icon=m.icon).method = m.id
+
+
 def _draw_edit_menu(self, context):
     self.layout.separator()
     self.layout.operator("deformkit.add_handle_from_selection", icon="HOOK")
@@ -375,25 +386,28 @@ def _draw_edit_menu(self, context):
 CLASSES = [DEFORMKIT_UL_deformers, DEFORMKIT_UL_handles, DEFORMKIT_PT_modifiers, DEFORMKIT_MT_add,
            DEFORMKIT_PT_sidebar, DEFORMKIT_PT_handle_target]
 
+# (menu or panel, draw function appended to it, whether every supported Blender has it)
 _APPENDS = [
-    ("DATA_PT_modifiers", _draw_modifier_tab),
-    ("VIEW3D_MT_object", _draw_object_menu),
-    ("VIEW3D_MT_edit_mesh_vertices", _draw_edit_menu),
-    ("VIEW3D_MT_edit_mesh_context_menu", _draw_edit_menu),
+    ("DATA_PT_modifiers", _draw_modifier_tab, True),
+    ("VIEW3D_MT_object", _draw_object_menu, True),
+    ("VIEW3D_MT_edit_mesh_vertices", _draw_edit_menu, True),
+    ("VIEW3D_MT_edit_mesh_context_menu", _draw_edit_menu, True),
+    # the Add Modifier menu's Deform section: 4.0+ (3.4-3.6 list modifiers from an enum)
+    ("OBJECT_MT_modifier_add_deform", _draw_modifier_add_deform, False),
 ]
 
 
 def register():
     for c in CLASSES:
         bpy.utils.register_class(c)
-    for name, fn in _APPENDS:
+    for name, fn, _everywhere in _APPENDS:
         t = getattr(bpy.types, name, None)
         if t is not None:
             t.append(fn)
 
 
 def unregister():
-    for name, fn in _APPENDS:
+    for name, fn, _everywhere in _APPENDS:
         t = getattr(bpy.types, name, None)
         if t is not None:
             t.remove(fn)

@@ -1,7 +1,7 @@
 """Shared set-up for the add-on tests run inside Blender, either the blender program:
     blender -b --factory-startup --python-exit-code 1 --python tests/blender/test_addon_X.py
 or Blender as a Python module (a bpy wheel's virtual environment, scripts/venvs.sh):
-    build/venvs/bpy-5.0/bin/python tests/blender/test_addon_X.py
+    build/venvs/bpy-5.3/bin/python tests/blender/test_addon_X.py
 with PYTHONPATH=<build>/python. Puts the repo root on sys.path, imports the add-on (repo
 folder `addon/`) as the package `addon` and registers it. DEFORMKIT_MOCK=1 uses the stand-in
 module in tests/blender/mock (plumbing only).
@@ -193,7 +193,7 @@ if FROM_ZIP:
 else:
     import addon  # noqa: E402
     addon.register()
-from addon import solver, geonodes, native, handlers, methods, overlay  # noqa: E402,F401
+from addon import solver, geonodes, native, handlers, methods, overlay, compat  # noqa: E402,F401
 
 dk = native.load()
 

@@ -34,11 +34,11 @@ def build(method=MID):
         e.keyframe_insert("location", frame=f)
         e.keyframe_insert("rotation_euler", frame=f)
     mod = S.geonodes.find_modifier(obj, d)
-    key = S.geonodes.factor_path(mod)
-    mod[S.geonodes.factor_key()] = 1.0
-    mod.keyframe_insert(key, frame=1)
-    mod[S.geonodes.factor_key()] = 0.5
-    mod.keyframe_insert(key, frame=20)
+    owner, key = S.geonodes.factor_prop(mod)
+    S.geonodes.set_factor(mod, 1.0)
+    owner.keyframe_insert(key, frame=1)
+    S.geonodes.set_factor(mod, 0.5)
+    owner.keyframe_insert(key, frame=20)
     sc.frame_set(1)
     return obj, d, e, fixed, handle
 

@@ -73,13 +73,11 @@ def one_method(mid):
     R.check("%s base mesh untouched" % mid, np.abs(S.rest_positions(obj) - rest).max() == 0)
     # Factor of the GN modifier scales the offset (keyframable modifier input)
     mod = S.geonodes.find_modifier(obj, d)
-    mod[S.geonodes.factor_key()] = 0.5
-    obj.update_tag()
+    S.geonodes.set_factor(mod, 0.5)
     half = S.evaluated_positions(obj)
     R.check("%s factor 0.5 halves the offset" % mid,
             np.abs(half - (rest + 0.5 * (got - rest))).max() < TOL)
-    mod[S.geonodes.factor_key()] = 1.0
-    obj.update_tag()
+    S.geonodes.set_factor(mod, 1.0)
     # object transform: moving the deformed object together with the target changes nothing
     e.parent = obj
     e.matrix_parent_inverse = obj.matrix_world.inverted()
@@ -427,6 +425,44 @@ def test_show_graph():
     R.check("toggling does not change the mesh",
             np.abs(S.evaluated_positions(obj) - before).max() < 1e-7)
     d.options_embedded.show_graph = False
+    draw_graph_offscreen()
+
+
+def draw_graph_offscreen():
+    """Show Graph's drawing, offscreen where Blender as a module can draw (5.x: gpu.init):
+    two nodes and their edge in a 64 x 64 frame. Each node must cover about NODE_SIZE^2
+    pixels (5.3's Vulkan draws UNIFORM_COLOR points 1 pixel wide), the edge must show
+    between them, and no deprecation warning may be raised. Debian's Blender draws the
+    real viewport in screenshot_ui."""
+    import warnings
+    import gpu
+    from mathutils import Matrix
+    if not (S.AS_MODULE and hasattr(gpu, "init")):
+        print("note: no offscreen drawing in this Blender (Blender as a module before 5.0, "
+              "or the blender program headless)")
+        return
+    gpu.init()
+    pts = np.array([[-0.5, 0.0, 0.0], [0.5, 0.0, 0.0]])
+    off = gpu.types.GPUOffScreen(64, 64)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with off.bind():
+            fb = gpu.state.active_framebuffer_get()
+            fb.clear(color=(0.0, 0.0, 0.0, 0.0))
+            with gpu.matrix.push_pop():
+                gpu.matrix.load_matrix(Matrix.Identity(4))
+                gpu.matrix.load_projection_matrix(Matrix.Identity(4))
+                S.overlay.draw_graphs([(pts, np.array([[0, 1]], np.int32))])
+            buf = np.array(fb.read_color(0, 0, 64, 64, 4, 0, "FLOAT").to_list())
+    off.free()
+    node = np.abs(buf[..., :3] - np.array(S.overlay.NODE_COLOR[:3])).max(axis=-1) < 0.02
+    edge = buf[:, 22:42, 3] > 0   # between the nodes (at columns 16 and 48): the edge only
+    want = 0.6 * 2 * S.overlay.NODE_SIZE ** 2
+    R.check("Show Graph draws each node about %g pixels wide" % S.overlay.NODE_SIZE,
+            node.sum() >= want, (int(node.sum()), want))
+    R.check("Show Graph draws the edge between the nodes", edge.sum() >= 20, int(edge.sum()))
+    R.check("Show Graph's drawing raises no deprecation warning", not caught,
+            [str(w.message) for w in caught])
 
 
 def test_eigen_region_and_preview():

@@ -424,7 +424,8 @@ def test_duplicate_of_a_legacy_deformer():
         mod = S.geonodes.find_modifier(copy, dc)
         # undo what the copy's first update did: the same uid on both, no owners
         if dc.uid != d.uid:
-            mod[S.geonodes.attribute_key(mod.node_group)] = d.attribute_name
+            S.compat.set_modifier_input(mod, S.geonodes.attribute_key(mod.node_group),
+                                        d.attribute_name)
             dc.uid = d.uid
         d.owner = dc.owner = ""
     finally:

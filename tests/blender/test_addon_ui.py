@@ -134,8 +134,10 @@ def draw_all(obj, state):
                 continue
             fake = type("Fake", (), {"layout": Layout(calls)})()
             cls.draw(fake, CONTEXT)
-    for name, fn in ui._APPENDS:
+    for name, fn, everywhere in ui._APPENDS:
         if not hasattr(bpy.types, name):
+            if not everywhere:
+                continue
             problem("Blender %s has no %s to append to" % (bpy.app.version_string, name))
         fake = type("Fake", (), {"layout": Layout(calls)})()
         fn(fake, CONTEXT)
@@ -196,6 +198,36 @@ def test_bind_warnings_in_the_panel():
             "with no handle or fixed vertex is held at rest" in shown)
 
 
+def test_add_modifier_menu():
+    """Where Blender has the Add Modifier menu's Deform section (4.0+), DeformKit's methods are
+    listed there for a mesh, each adding its deformer; for a curve, nothing."""
+    S.reset_scene()
+    obj = S.make_grid()
+    menu = getattr(bpy.types, "OBJECT_MT_modifier_add_deform", None)
+    if menu is None:
+        R.check("no Deform section before 4.0 (Blender %s)" % bpy.app.version_string,
+                bpy.app.version < (4, 0, 0))
+        return
+    ui = S.addon.ui
+    R.check("DeformKit draws in the Deform section",
+            ui._draw_modifier_add_deform in getattr(menu, "_dyn_ui_initialize", lambda: [])())
+    calls = []
+    ui._draw_modifier_add_deform(type("Fake", (), {"layout": Layout(calls)})(), Context(obj))
+    got = [c for c in calls if c.startswith("operator deformkit.add_deformer")]
+    R.check("every method listed: %d entries" % len(got), len(got) == len(S.methods.METHODS)
+            and not PROBLEMS, (calls, PROBLEMS))
+    curve = bpy.data.objects.new("Curve", bpy.data.curves.new("Curve", "CURVE"))
+    calls = []
+    ui._draw_modifier_add_deform(type("Fake", (), {"layout": Layout(calls)})(), Context(curve))
+    R.check("nothing listed for a curve", calls == [], calls)
+    bpy.context.view_layer.objects.active = obj
+    bpy.ops.deformkit.add_deformer(method=S.methods.METHODS[-1].id)
+    R.check("the entry's operator adds the deformer",
+            len(obj.deformkit.deformers) == 1 and
+            S.geonodes.find_modifier(obj, obj.deformkit.deformers[0]) is not None)
+
+
 R.run(test_states)
+R.run(test_add_modifier_menu)
 R.run(test_bind_warnings_in_the_panel)
 R.finish()

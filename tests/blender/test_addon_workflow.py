@@ -207,13 +207,14 @@ def test_errors_with_a_way_out():
             np.abs(S.evaluated_positions(obj) - S.rest_positions(obj))[handle].max() > 0.1)
     # the Attribute input edited by hand: found by the modifier's name, repaired
     mod = S.geonodes.find_modifier(obj, d)
-    mod[S.geonodes.attribute_key(mod.node_group)] = "typo"
+    S.compat.set_modifier_input(mod, S.geonodes.attribute_key(mod.node_group), "typo")
     R.check("an edited Attribute input: the modifier is still found",
             S.geonodes.find_modifier(obj, d) == mod)
     e.location.z += 0.1
     bpy.context.view_layer.update()
     R.check("and repaired by the next update",
-            mod[S.geonodes.attribute_key(mod.node_group)] == d.attribute_name)
+            S.compat.modifier_input(mod, S.geonodes.attribute_key(mod.node_group))
+            == d.attribute_name)
     if hasattr(S.geonodes.compat.group_sockets(mod.node_group)[0], "hide_in_modifier"):
         hidden = {s.name for s in S.geonodes.compat.group_sockets(mod.node_group)
                   if getattr(s, "hide_in_modifier", False)}
@@ -230,9 +231,34 @@ def test_errors_with_a_way_out():
 def test_keyed_factor_warns():
     obj, d, e, handle = scene()
     mod = S.geonodes.find_modifier(obj, d)
-    obj.keyframe_insert('modifiers["%s"]%s' % (mod.name, S.geonodes.factor_path(mod)), frame=1)
+    obj.keyframe_insert(S.geonodes.factor_data_path(mod), frame=1)
     R.check("a keyed Factor: animated", bake.animated_reason(obj, d) == "its Factor is keyed",
             bake.animated_reason(obj, d))
+
+
+def test_factor_writes_and_edits_re_evaluate():
+    """The Factor written from the add-on's code re-evaluates the object in every Blender; an
+    edit in the panel too: in 5.2 such an edit re-evaluates nothing by itself, so a message-bus
+    subscription per node group (geonodes.watch_factor_edits) tags the objects. Blender as a
+    module runs no event loop, so the subscription's callback is called here directly."""
+    obj, d, e, handle = scene()
+    e.location.z += 0.3
+    bpy.context.view_layer.update()
+    rest = S.rest_positions(obj)
+    full = S.evaluated_positions(obj)
+    mod = S.geonodes.find_modifier(obj, d)
+    S.geonodes.set_factor(mod, 0.5)
+    R.check("set_factor(0.5): the object shows half the offset at once",
+            np.abs(S.evaluated_positions(obj) - (rest + 0.5 * (full - rest))).max() < 1e-5)
+    watched = S.geonodes.watch_factor_edits()
+    R.check("one node group watched for Factor edits where inputs are RNA (5.2+), none before",
+            watched == (1 if S.compat.MODIFIER_INPUTS_RNA else 0), watched)
+    owner, prop = S.geonodes.factor_prop(mod)
+    setattr(owner, prop, 0.25)   # what the panel's slider does
+    S.geonodes._factor_edited()
+    R.check("a Factor edited in the panel: the object shows it",
+            np.abs(S.evaluated_positions(obj) - (rest + 0.25 * (full - rest))).max() < 1e-5)
+    S.geonodes.set_factor(mod, 1.0)
 
 
 def test_falloff_reach_scales_with_the_model():
@@ -440,7 +466,7 @@ def test_modal_bake_frames_solve_in_a_worker_thread():
             np.abs(got.ravel() - a[-1]).max())
 
 
-for t in (test_option_change_rebinds_in_a_thread, test_modal_bake_frames_solve_in_a_worker_thread, test_group_change_rebinds_in_place_in_a_thread, test_falloff_reach_scales_with_the_model, test_point_cache_bake_shows_and_frees, test_shape_key_bake_shows_at_once_and_frees,
+for t in (test_factor_writes_and_edits_re_evaluate, test_option_change_rebinds_in_a_thread, test_modal_bake_frames_solve_in_a_worker_thread, test_group_change_rebinds_in_place_in_a_thread, test_falloff_reach_scales_with_the_model, test_point_cache_bake_shows_and_frees, test_shape_key_bake_shows_at_once_and_frees,
           test_sidebar_and_handle_target, test_errors_with_a_way_out, test_keyed_factor_warns):
     R.run(t)
 R.finish()
