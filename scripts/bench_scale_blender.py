@@ -1,7 +1,7 @@
 """Issue 19, item 3: does Blender freeze while a 692k-vertex mesh is dragged? The add-on in
 Blender, on the armadillo midpoint-subdivided twice (scripts/bench_scale.py's scenario):
 
-    PYTHONPATH=build/python build/venvs/bpy-5.0/bin/python scripts/bench_scale_blender.py \\
+    PYTHONPATH=build/python build/venvs/bpy-5.3/bin/python scripts/bench_scale_blender.py \\
         [--levels 2] [--methods ARAP,LAPLACIAN,FALLOFF] [--steps 8]
 
 (or `blender -b --factory-startup --python scripts/bench_scale_blender.py -- ...` for

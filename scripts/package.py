@@ -523,9 +523,11 @@ def blender_validators():
             log("note: Blender %s.%s has no `--command extension validate` (4.2+)"
                 % m.groups()[:2])
     venvs = os.path.join(ROOT, "build", "venvs")
-    for name in sorted(os.listdir(venvs)) if os.path.isdir(venvs) else []:
+    names = subprocess.run([os.path.join(ROOT, "scripts", "venvs.sh"), "--blenders"],
+                           capture_output=True, text=True, check=True).stdout.split()
+    for name in names:  # the pinned Blenders only, not stale environments of older pins
         py = os.path.join(venvs, name, "bin", "python")
-        if name.startswith("bpy-") and os.path.isfile(py):
+        if os.path.isfile(py):
             out.append((name, [py, "-c", VALIDATE_IN_BPY]))
     return out
 

@@ -12,7 +12,7 @@
 #      a clean virtual environment and smoke-tested there,
 #   4. the add-on in every Blender (tests/blender/run_all.sh): Debian's `blender` program,
 #      with the window suites under Xvfb, and each bpy-* environment of scripts/pins.txt
-#      (the official 4.5 LTS and newest 5.x releases as Python modules), each also installing
+#      (the official releases as Python modules: 4.5 LTS, 5.2 LTS, 5.3), each also installing
 #      its packaged zip into a clean user directory,
 #   5. the cross-Blender comparison: the same scenes give the same meshes in every Blender,
 #      and the newest reopens the others' saved files without the add-on.
@@ -32,7 +32,9 @@ if [ "$quick" = 1 ]; then
 else
   scripts/setup.sh --asan --fuzz || { echo "suites: 0 passed, 1 failed"; exit 1; }
 fi
-scripts/venvs.sh || { echo "scripts/venvs.sh failed"; echo "suites: 0 passed, 1 failed"; exit 1; }
+# a Blender whose CPython the machine lacks is skipped by venvs.sh (which says what to
+# install); its suites then fail below, and the rest still run
+scripts/venvs.sh || echo "scripts/venvs.sh: some environments could not be made (see above)"
 
 PY=/usr/bin/python3
 export PYTHONPATH="$here/build/python"

@@ -3,7 +3,7 @@ armadillo: the full topology fingerprint (solver.topology_fingerprint: the corne
 and each face's corner count, hashed), the quick check of Blender 3.6+ (solver.quick_topology,
 three hidden attributes compared with the cached copy) and the rest-position comparison.
     PYTHONPATH=build/python blender -b --factory-startup --python tests/blender/bench_topology.py
-    PYTHONPATH=build/python build/venvs/bpy-5.0/bin/python tests/blender/bench_topology.py
+    PYTHONPATH=build/python build/venvs/bpy-5.3/bin/python tests/blender/bench_topology.py
 Prints the median of 30 runs of each, in ms."""
 import os
 import sys

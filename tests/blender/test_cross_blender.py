@@ -2,14 +2,18 @@
 that older Blenders saved, without the add-on.
 
 Run in each Blender by tests/blender/run_all.sh (DEFORMKIT_BLENDER_LABEL names it: debian,
-bpy-4.5, bpy-5.0). It builds a few scenes (a bumpy grid with each method and a rotated and
-moved handle, and the shared arm with ARAP and Laplacian editing when ../shared is there),
-binds and solves them cold through the add-on, and writes into tests/blender/output/cross/:
-  <label>.npz    every object's evaluated positions, the mesh diagonals, the Blender version
-  <label>.blend  the scenes, saved with their bound deformers
+bpy-4.5, bpy-5.2, bpy-5.3). It builds a few scenes (a bumpy grid with each method and a
+rotated and moved handle, and the shared arm with ARAP and Laplacian editing when ../shared
+is there), binds and solves them cold through the add-on, keys each deformer's Factor (1 on
+frame 1, 0.5 on frame 11), and writes into tests/blender/output/cross/:
+  <label>.npz    every object's evaluated positions on frames 1 and 11, the mesh diagonals,
+                 the Blender version
+  <label>.blend  the scenes, saved with their bound, keyframed deformers
 Then, for every <other>.blend saved there by an older Blender, it opens that file in this
 Blender with no add-on and no native module (a subprocess) and checks that the evaluated
-meshes equal what the older Blender recorded, writing the figures to <label>.reloads.json.
+meshes on both frames equal what the older Blender recorded (so the keyed Factor still
+animates: from 5.2 its F-curve has a new data path, which Blender versions on load), writing
+the figures to <label>.reloads.json.
 tests/blender/compare_blenders.py compares the .npz files of all Blenders afterwards.
 """
 import json
@@ -28,6 +32,7 @@ os.makedirs(CROSS, exist_ok=True)
 LABEL = os.environ.get("DEFORMKIT_BLENDER_LABEL") or (
     "%s-%s" % ("bpy" if S.AS_MODULE else "blender", bpy.app.version_string.split()[0]))
 REL_TOL = 1e-6   # of the mesh diagonal (the issue's bound), on float32 positions
+FRAMES = {"pos": (1, 1.0), "half": (11, 0.5)}   # record prefix: (frame, keyed Factor)
 
 
 def grid_scene(mid, name):
@@ -84,35 +89,56 @@ def build_scenes():
         bpy.context.view_layer.update()
         # a cold solve, as frames and renders do: the result depends only on these inputs
         S.solver.solve(obj, d, bpy.context.evaluated_depsgraph_get(), cold=True, force=True)
-        out[obj.name] = S.evaluated_positions(obj)
-        rest = S.rest_positions(obj)
-        R.check("%s: deformed" % name, np.abs(out[obj.name] - rest).max() > 0.05)
+        mod = S.geonodes.find_modifier(obj, d)
+        owner, prop = S.geonodes.factor_prop(mod)
+        for frame, value in FRAMES.values():
+            S.geonodes.set_factor(mod, value)
+            owner.keyframe_insert(prop, frame=frame)
+    out = {}
+    for prefix, (frame, value) in FRAMES.items():
+        bpy.context.scene.frame_set(frame)
+        for o in bpy.context.view_layer.objects:
+            if o.type == "MESH" and len(o.deformkit.deformers):
+                out["%s:%s" % (prefix, o.name)] = S.evaluated_positions(o)
+    for o in bpy.context.view_layer.objects:
+        if o.type == "MESH" and len(o.deformkit.deformers):
+            rest, full = S.rest_positions(o), out["pos:" + o.name]
+            R.check("%s: deformed" % o.name, np.abs(full - rest).max() > 0.05)
+            half = out["half:" + o.name]
+            R.check("%s: the keyed Factor animates (0.5 on frame 11 halves the offset)"
+                    % o.name, np.abs(half - (rest + 0.5 * (full - rest))).max() < 1e-5,
+                    np.abs(half - (rest + 0.5 * (full - rest))).max())
     return out
 
 
 def test_record():
-    pos = build_scenes()
-    diag = {k: float(np.linalg.norm(v.max(axis=0) - v.min(axis=0))) for k, v in pos.items()}
+    rec = build_scenes()
+    names = sorted(k[len("pos:"):] for k in rec if k.startswith("pos:"))
+    diag = [float(np.linalg.norm(rec["pos:" + k].max(axis=0) - rec["pos:" + k].min(axis=0)))
+            for k in names]
+    bpy.context.scene.frame_set(1)
     blend = os.path.join(CROSS, LABEL + ".blend")
     bpy.ops.wm.save_as_mainfile(filepath=blend)
-    np.savez(os.path.join(CROSS, LABEL + ".npz"), names=np.array(sorted(pos)),
-             version=np.array(bpy.app.version), diag=np.array([diag[k] for k in sorted(pos)]),
-             **{"pos:" + k: v.astype(np.float32) for k, v in pos.items()})
-    R.check("recorded %d scenes in %s" % (len(pos), LABEL), len(pos) >= 3)
+    np.savez(os.path.join(CROSS, LABEL + ".npz"), names=np.array(names),
+             version=np.array(bpy.app.version), diag=np.array(diag),
+             **{k: v.astype(np.float32) for k, v in rec.items()})
+    R.check("recorded %d scenes in %s" % (len(names), LABEL), len(names) >= 3)
 
 
 EVAL_NO_ADDON = """
 import bpy, numpy as np, sys
 assert not hasattr(bpy.types.Object, "deformkit"), "the add-on is loaded"
 assert "deformkit" not in sys.modules, "the native module is loaded"
-dg = bpy.context.evaluated_depsgraph_get()
 out = {}
-for o in bpy.data.objects:
-    if o.type == "MESH":
-        me = o.evaluated_get(dg).to_mesh()
-        co = np.empty(len(me.vertices) * 3, np.float32)
-        me.vertices.foreach_get("co", co)
-        out["pos:" + o.name] = co.reshape(-1, 3)
+for prefix, frame in %r:
+    bpy.context.scene.frame_set(frame)
+    dg = bpy.context.evaluated_depsgraph_get()
+    for o in bpy.data.objects:
+        if o.type == "MESH":
+            me = o.evaluated_get(dg).to_mesh()
+            co = np.empty(len(me.vertices) * 3, np.float32)
+            me.vertices.foreach_get("co", co)
+            out[prefix + ":" + o.name] = co.reshape(-1, 3)
 np.savez(%r, **out)
 """
 
@@ -135,7 +161,8 @@ def test_reload_older_files():
         if os.path.exists(out):
             os.remove(out)
         cmd = S.blender_command(blend=os.path.join(CROSS, other + ".blend"),
-                                expr=EVAL_NO_ADDON % out)
+                                expr=EVAL_NO_ADDON % (
+                                    [(p, f) for p, (f, _) in FRAMES.items()], out))
         r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
         if not R.check("%s's file opens in %s without the add-on" % (other, LABEL),
                        r.returncode == 0 and os.path.exists(out),
@@ -144,14 +171,17 @@ def test_reload_older_files():
         got = np.load(out)
         worst = 0.0
         for name, d in zip(rec["names"], rec["diag"]):
-            key = "pos:" + str(name)
-            if key not in got.files:
-                R.check("%s: %s present in the reloaded file" % (other, name), False)
-                continue
-            worst = max(worst, float(np.abs(got[key] - rec[key]).max() / d))
+            for prefix in FRAMES:
+                key = "%s:%s" % (prefix, name)
+                if key not in got.files or key not in rec.files:
+                    R.check("%s: %s present in the reloaded file" % (other, key), False)
+                    continue
+                worst = max(worst, float(np.abs(got[key] - rec[key]).max() / d))
         report[other] = worst
-        R.check("%s's file in %s without the add-on: same evaluated meshes (max %.1e of the "
-                "diagonal)" % (other, LABEL, worst), worst <= REL_TOL, worst)
+        R.check("%s's file in %s without the add-on: same evaluated meshes on frames %s, the "
+                "keyed Factor animating (max %.1e of the diagonal)"
+                % (other, LABEL, sorted(f for f, _ in FRAMES.values()), worst),
+                worst <= REL_TOL, worst)
     with open(os.path.join(CROSS, LABEL + ".reloads.json"), "w") as f:
         json.dump({"blender": list(mine), "reloaded": report}, f, indent=1)
     if not report:

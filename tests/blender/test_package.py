@@ -12,7 +12,7 @@ Run by tests/blender/run_all.sh after scripts/package.sh, as (legacy zip, Blende
 or (extension zip, a bpy wheel's Python)
     env -u PYTHONPATH BLENDER_USER_RESOURCES=<fresh dir> \\
         DEFORMKIT_FROM_ZIP=dist/deformkit_addon-<version>-linux_x64.zip \\
-        build/venvs/bpy-5.0/bin/python tests/blender/test_package.py
+        build/venvs/bpy-5.3/bin/python tests/blender/test_package.py
 (_setup.py does the install and enable when DEFORMKIT_FROM_ZIP is set)."""
 import os
 import re
