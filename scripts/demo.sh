@@ -23,16 +23,18 @@ for arg in "$@"; do
 done
 start=$SECONDS
 scripts/setup.sh
-scripts/venvs.sh $(scripts/venvs.sh --blenders)
+# a Blender whose CPython this machine lacks is skipped (venvs.sh says what to install)
+scripts/venvs.sh $(scripts/venvs.sh --blenders) || echo "demo: some Blenders could not be set up" >&2
 mkdir -p demo_output
 export PYTHONPATH="$here/build/python"
 export PYTHONDONTWRITEBYTECODE=1
 
-# the newest Blender here: each bpy environment's pinned version, and Debian's program
+# the most recent Blender here: each bpy environment's pinned version, and Debian's program
 newest=debian
 newest_version="$(blender --version 2>/dev/null | sed -n 's/^Blender \([0-9.]*\).*/\1/p' | head -1)"
 for b in $(scripts/venvs.sh --blenders); do
   v="$(sed -n "/^\[$b\]/,/^\[/s/^bpy==\([0-9.]*\).*/\1/p" scripts/pins.txt)"
+  [ -x "build/venvs/$b/bin/python" ] || continue
   if [ -n "$v" ] && [ "$(printf '%s\n%s\n' "${newest_version:-0}" "$v" | sort -V | tail -1)" = "$v" ]; then
     newest="$b"; newest_version="$v"
   fi
