@@ -4,8 +4,6 @@ Each frame is solved cold (its result depends only on that frame's inputs), so f
 baked on different machines and joined give the same cache as one bake.
 """
 
-import os
-
 import bpy
 import numpy as np
 
@@ -292,22 +290,60 @@ def prepare(obj, d, kind):
         free(obj, d)
 
 
+def protected_files(obj, d):
+    """(path, why) of the files a bake of `d` must never replace: the open .blend, its linked
+    libraries, and the caches that other Mesh Cache modifiers play (the one of `d`'s own
+    point-cache bake excepted: baking again replaces it). A cache path outside these is
+    still only replaced when it is a PC2 file (pc2.check_target)."""
+    out = []
+    if bpy.data.filepath:
+        out.append((bpy.data.filepath, "the open .blend file"))
+    for lib in bpy.data.libraries:
+        out.append((bpy.path.abspath(lib.filepath), "the linked library '%s'" % lib.name))
+    st = state(obj, d)
+    own = obj.modifiers.get(d.bake_target or "%s Cache" % d.name) \
+        if st is not None and st["kind"] == "PC2" and not st["broken"] else None
+    for o in bpy.data.objects:
+        for m in getattr(o, "modifiers", ()):
+            if m.type == "MESH_CACHE" and m.filepath and not (own is not None and m == own):
+                out.append((bpy.path.abspath(m.filepath, library=o.library),
+                            "the cache that '%s' plays (its modifier '%s')" % (o.name, m.name)))
+    return out
+
+
+def check_cache_path(obj, d, path):
+    """The real path a point-cache bake of `d` writes to, or DeformKitError saying why `path`
+    cannot take it (pc2.check_target with protected_files). Changes nothing."""
+    try:
+        return pc2.check_target(path, protected_files(obj, d))
+    except pc2.PC2Error as e:
+        raise solver.DeformKitError(str(e)) from None
+
+
 class PC2Bake:
     """A bake to a PC2 file, frame by frame (the synchronous bake and the modal operator
-    share it): step() solves and writes the next frame into `path`.part; finish(True) puts
-    the file in place (and with `add_cache` adds the Mesh Cache that plays it), finish(False)
-    drops it. finish runs once."""
+    share it): step() solves and writes the next frame (into a hidden file beside `path`,
+    pc2.Writer); finish(True) puts the file in place (and with `add_cache` adds the Mesh
+    Cache that plays it), finish(False) drops it. finish runs once. The path is checked
+    before anything changes: a path that is not a point cache (the .blend, a folder, a
+    device, another object's cache) is refused with a DeformKitError, leaving the scene,
+    any earlier bake and the file as they were."""
     kind = "PC2"
 
     def __init__(self, context, obj, d, frame_start, frame_end, path, add_cache=True):
+        protect = protected_files(obj, d)
+        check_cache_path(obj, d, path)
         prepare(obj, d, "PC2")
         self.add_cache = add_cache
-        self.path, self.tmp = path, path + ".part"
+        self.path, self.protect = path, protect
         self.start, self.end = frame_start, frame_end
         self.fb = FrameBaker(context, obj, d, frame_start, frame_end)
         try:
-            os.makedirs(os.path.dirname(os.path.abspath(path)) or ".", exist_ok=True)
-            self.w = pc2.Writer(self.tmp, len(obj.data.vertices), start=frame_start)
+            self.w = pc2.Writer(path, len(obj.data.vertices), start=frame_start,
+                                protect=protect)
+        except pc2.PC2Error as e:
+            self.fb.finish()
+            raise solver.DeformKitError(str(e)) from None
         except BaseException:
             self.fb.finish()
             raise
@@ -316,9 +352,15 @@ class PC2Bake:
     def done(self):
         return self.fb.done
 
+    def _add(self, pos):
+        try:
+            self.w.add(np.asarray(pos, dtype=np.float32))
+        except pc2.PC2Error as e:
+            raise solver.DeformKitError(str(e)) from None
+
     def step(self):
         f, pos = self.fb.step()
-        self.w.add(np.asarray(pos, dtype=np.float32))
+        self._add(pos)
         return f
 
     def step_async(self):
@@ -326,17 +368,18 @@ class PC2Bake:
         r = self.fb.step_async()
         if r is None:
             return None
-        self.w.add(np.asarray(r[1], dtype=np.float32))
+        self._add(r[1])
         return r[0]
 
     def finish(self, ok):
         self.fb.finish()
-        self.w.close()
         if not ok:
-            if os.path.exists(self.tmp):
-                os.remove(self.tmp)
+            self.w.abort()
             return None
-        os.replace(self.tmp, self.path)
+        try:
+            self.w.close()
+        except pc2.PC2Error as e:
+            raise solver.DeformKitError(str(e)) from None
         if self.add_cache:
             obj, d = self.fb._objects()
             add_mesh_cache(obj, d, self.path, self.start, self.end)

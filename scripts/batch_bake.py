@@ -51,16 +51,26 @@ def fail(msg):
     leave(1)
 
 
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        """A usage error is a failure like any other: said as one, exit status 1."""
+        self.print_usage(sys.stderr)
+        fail(message)
+
+
 def parse(argv):
     argv = argv[argv.index("--") + 1:] if "--" in argv else argv[1:]
-    p = argparse.ArgumentParser(prog="batch_bake.py", description=__doc__.split("\n")[0])
+    p = _Parser(prog="batch_bake.py", description=__doc__.split("\n")[0])
     p.add_argument("--blend", help="open this .blend first (for Blender as a Python module; "
                                    "the blender program takes the file before --python)")
     p.add_argument("--scene", help="with --blend: the scene to bake in (default: the file's)")
     p.add_argument("--object", help="name of the deformed mesh object")
     p.add_argument("--deformer", help="deformer name (default: the object's active deformer)")
     p.add_argument("--frames", help="frame range A-B (inclusive); default: the scene's range")
-    p.add_argument("--out", required=True, help="output .pc2 file")
+    p.add_argument("--out", required=True,
+                   help="output .pc2 file (a path starting with // is relative to the .blend, "
+                        "as in Blender); its folder must exist, and an existing file there is "
+                        "only replaced if it is a point cache")
     p.add_argument("--join", nargs="+", metavar="PC2", help="join these caches into --out")
     p.add_argument("--save", action="store_true",
                    help="add a Mesh Cache modifier reading --out and save the .blend")
@@ -77,6 +87,9 @@ def load_pc2_module():
 
 def do_join(args):
     pc2 = load_pc2_module()
+    if args.out.startswith("//"):
+        fail("--out %s: a // path is relative to a .blend, and joining opens none: give a "
+             "plain path" % args.out)
     for p in args.join:
         if not os.path.isfile(p):
             fail("no such cache: %s" % p)
@@ -90,6 +103,10 @@ def do_join(args):
 
 
 def ensure_addon():
+    """The DeformKit add-on package, registered: the one already enabled, else the one
+    installed in this Blender (legacy add-on or extension), else the repository's addon/.
+    addon_utils.enable is only asked for a package it lists: for any other name it prints
+    an "Add-on not loaded" traceback even when the run then succeeds."""
     import bpy
     if hasattr(bpy.types.Object, "deformkit") and hasattr(bpy.ops, "deformkit"):
         for name in ("addon", "deformkit_addon", "bl_ext.user_default.deformkit_addon"):
@@ -97,13 +114,17 @@ def ensure_addon():
             if m is not None and hasattr(m, "solver"):
                 return m
     import addon_utils
-    for name in ("deformkit_addon",):
+    installed = [m.__name__ for m in addon_utils.modules()
+                 if m.__name__.split(".")[-1] == "deformkit_addon"]
+    for name in installed:
         try:
             mod = addon_utils.enable(name, default_set=False)
-            if mod is not None and hasattr(mod, "solver"):
-                return mod
-        except Exception:
-            pass
+        except Exception as e:  # a broken install: say so, then use the repository's
+            log("the installed add-on %s could not be enabled (%s): using %s"
+                % (name, e, os.path.join(ROOT, "addon")))
+            continue
+        if mod is not None and hasattr(mod, "solver"):
+            return mod
     if ROOT not in sys.path:
         sys.path.insert(0, ROOT)
     import addon
@@ -162,7 +183,13 @@ def do_bake(args):
     else:
         d = dks.deformers[min(dks.active_index, len(dks.deformers) - 1)]
     a, b = parse_frames(args.frames, scene)
+    if args.save and not bpy.data.filepath:
+        fail("--save needs a .blend file (open one with --blend, or give it to blender)")
+    if not args.out:
+        fail("--out is empty: give the .pc2 file to write")
     try:
+        out = bake.resolve_path(args.out, obj, d)   # "//" as in Blender: next to the .blend
+        bake.check_cache_path(obj, d, out)         # before binding or solving anything
         if not d.bound:
             log("'%s' is not bound: binding at the scene start frame %d" % (d.name, scene.frame_start))
             scene.frame_set(scene.frame_start)
@@ -177,13 +204,10 @@ def do_bake(args):
                                                     (now - last[0]) * 1000))
             last[0] = now
 
-        out = os.path.abspath(args.out)
         bake.bake_pc2(bpy.context, obj, d, a, b, out, progress)
         log("wrote %s: %d frames x %d vertices in %.2f s"
             % (out, n, len(obj.data.vertices), time.perf_counter() - t_start))
         if args.save:
-            if not bpy.data.filepath:
-                fail("--save needs a .blend file")
             bake.add_mesh_cache(obj, d, out, a, b)
             bpy.ops.wm.save_mainfile()
             log("added a Mesh Cache modifier and saved %s" % bpy.data.filepath)

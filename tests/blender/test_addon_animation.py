@@ -4,6 +4,7 @@ plays the cache back; bake to shape keys; batch failures exit non-zero; Embedded
 on a mesh animated by an Armature modifier above it (section 5 of Sumner et al.)."""
 import concurrent.futures
 import os
+import shutil
 import subprocess
 import sys
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -126,6 +127,10 @@ def test_chunked_bake_equals_single():
     R.check("single batch bake exits 0", r.returncode == 0, r.stderr[-1500:])
     R.check("progress lines on stderr", "frame 20 (20/20, 100%)" in r.stderr, r.stderr[-500:])
     R.check("chunk bakes exit 0", r1.returncode == 0 and r2.returncode == 0, r1.stderr[-800:] + r2.stderr[-800:])
+    R.check("a successful batch bake prints no traceback and no add-on load failure",
+            not any(w in x.stdout + x.stderr for x in (r, r1, r2)
+                    for w in ("Traceback", "Add-on not loaded")),
+            (r.stdout + r.stderr)[-1200:])
     r3 = run_batch("--join", out["b"], out["a"], "--out", out["joined"], blend=None)
     R.check("join exits 0", r3.returncode == 0, r3.stderr[-800:])
     h1, f1 = pc2.read(out["all"])
@@ -162,6 +167,37 @@ def test_batch_failures():
     R.check("non-mesh object: non-zero exit", r.returncode != 0 and "not a mesh" in r.stderr, r.stderr[-300:])
     r = bad[2]
     R.check("empty range: non-zero exit", r.returncode != 0, r.stderr[-300:])
+    # the output path: "//" as in Blender, and nothing destroyed or made up
+    folder = os.path.dirname(BLEND)
+    rel = os.path.join(folder, "anim_rel.pc2")
+    missing = os.path.join(folder, "anim_no_such_folder")
+    for p in (rel,):
+        if os.path.exists(p):
+            os.remove(p)
+    shutil.rmtree(missing, ignore_errors=True)
+    body = open(BLEND, "rb").read()
+    r_rel, r_blend, r_missing = run_batches(
+        (("--object", "Grid", "--frames", "1-2", "--out", "//anim_rel.pc2"), BLEND),
+        (("--object", "Grid", "--frames", "1-2", "--out", BLEND), BLEND),
+        (("--object", "Grid", "--frames", "1-2", "--out", os.path.join(missing, "x.pc2")),
+         BLEND))
+    R.check("--out //name.pc2 writes next to the .blend, as the panel does",
+            r_rel.returncode == 0 and os.path.isfile(rel), r_rel.stderr[-600:])
+    R.check("--out naming the open .blend: exit 1, refused by name, the .blend untouched",
+            r_blend.returncode == 1 and "the open .blend file" in r_blend.stderr
+            and open(BLEND, "rb").read() == body, r_blend.stderr[-600:])
+    R.check("--out in a missing folder: exit 1, said, no folder made",
+            r_missing.returncode == 1 and "does not exist" in r_missing.stderr
+            and not os.path.exists(missing), r_missing.stderr[-600:])
+    r_usage = run_batch("--object", "Grid", "--frames", "1-2")
+    R.check("a missing argument: exit 1 (as every failure) with batch_bake: error",
+            r_usage.returncode == 1 and "batch_bake: error:" in r_usage.stderr
+            and "--out" in r_usage.stderr, (r_usage.returncode, r_usage.stderr[-600:]))
+    if os.path.exists(rel):
+        r_join = run_batch("--join", rel, "--out", rel, blend=None)
+        R.check("join into one of its inputs: exit 1, the input kept",
+                r_join.returncode == 1 and "one of the caches being joined" in r_join.stderr
+                and pc2.read_header(rel)["samples"] == 2, r_join.stderr[-600:])
 
 
 def test_mesh_cache_modifier():

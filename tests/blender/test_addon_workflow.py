@@ -15,6 +15,8 @@ that stays with the handle, errors with a way out, plumbing out of view.
   empties; the point cache's file is a field of the panel.
 """
 import os
+import shutil
+import stat
 import sys
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _setup as S  # noqa: E402
@@ -126,6 +128,83 @@ def test_point_cache_bake_shows_and_frees():
     R.check("Re-bake keeps the kind and range",
             bake.state(obj, d)["kind"] == "PC2" and (d.bake_start, d.bake_end) == (2, 6)
             and len([m for m in obj.modifiers if m.type == "MESH_CACHE"]) == 1)
+
+
+def test_a_bake_never_overwrites_what_it_was_not_asked_to():
+    """Bake to Point Cache refuses any path that is not a point cache (the open .blend, a
+    folder, a pipe or device, another object's cache, a missing folder) with an error naming it, before
+    anything changes: the file, an earlier bake and the modifiers stay as they were, and no
+    partial file is left. Baking again to its own cache replaces it."""
+    obj, d, e, handle = scene()
+    lift(e, 4, 3)
+    blend = bpy.data.filepath
+    folder = os.path.dirname(blend)
+    body = open(blend, "rb").read()
+
+    def leftovers():
+        return [n for n in os.listdir(folder) if n.endswith(".part")]
+
+    for n in leftovers():   # from an earlier run of a broken build: start clean
+        os.remove(os.path.join(folder, n))
+    shutil.rmtree(os.path.join(folder, "no_such_folder"), ignore_errors=True)
+
+    def refused(path, words):
+        d.bake_file = path
+        try:
+            bpy.ops.deformkit.bake(mode="PC2", frame_start=1, frame_end=4)
+            msg = None
+        except RuntimeError as ex:
+            msg = str(ex)
+        R.check("a bake to %s is refused, saying %r" % (path, words),
+                msg is not None and words in msg, msg)
+
+    modifiers = [m.name for m in obj.modifiers]
+    refused(blend, "the open .blend file")
+    refused("//" + os.path.basename(blend), "the open .blend file")
+    R.check("the .blend is untouched", open(blend, "rb").read() == body)
+    refused("//", "is a folder")
+    # a pipe stands for devices and sockets (never a real device: a wrong build would
+    # replace it for the whole machine)
+    fifo = os.path.join(folder, "workflow_fifo.pc2")
+    if os.path.lexists(fifo):
+        os.remove(fifo)
+    os.mkfifo(fifo)
+    refused(fifo, "not a regular file")
+    R.check("the pipe is still a pipe", stat.S_ISFIFO(os.lstat(fifo).st_mode))
+    os.remove(fifo)
+    refused("//no_such_folder/x.pc2", "does not exist")
+    R.check("no folder was made", not os.path.exists(os.path.join(folder, "no_such_folder")))
+    notes = os.path.join(folder, "workflow_notes.txt")
+    with open(notes, "w") as f:
+        f.write("keep me")
+    refused("//workflow_notes.txt", "not a point cache")
+    R.check("a file that is not a cache is untouched", open(notes).read() == "keep me")
+    # another object's Mesh Cache plays a cache: not this deformer's to replace
+    other = S.make_grid(name="Other", nx=3, ny=3)
+    theirs = os.path.join(folder, "workflow_theirs.pc2")
+    S.addon.pc2.write(theirs, [[0.0] * 27], 9)
+    their_bytes = open(theirs, "rb").read()
+    mc = other.modifiers.new("Their Cache", "MESH_CACHE")
+    mc.cache_format, mc.filepath = "PC2", "//workflow_theirs.pc2"
+    bpy.context.view_layer.objects.active = obj
+    refused("//workflow_theirs.pc2", "the cache that 'Other' plays")
+    R.check("another object's cache is untouched", open(theirs, "rb").read() == their_bytes)
+    R.check("nothing changed: no modifier added, no bake recorded, no partial file",
+            [m.name for m in obj.modifiers] == modifiers and bake.state(obj, d) is None
+            and leftovers() == [], ([m.name for m in obj.modifiers], leftovers()))
+    # an earlier bake survives a refused one
+    bpy.ops.deformkit.bake(mode="SHAPE_KEYS", frame_start=1, frame_end=4)
+    refused(blend, "the open .blend file")
+    R.check("a refused bake keeps the earlier shape-key bake",
+            bake.state(obj, d) is not None and bake.state(obj, d)["kind"] == "SHAPE_KEYS")
+    bpy.ops.deformkit.free_bake()
+    # its own cache: baked, then baked again over it
+    d.bake_file = "//workflow_own.pc2"
+    bpy.ops.deformkit.bake(mode="PC2", frame_start=1, frame_end=4)
+    bpy.ops.deformkit.bake(mode="PC2", frame_start=2, frame_end=4)
+    own = bpy.path.abspath("//workflow_own.pc2")
+    R.check("baking again replaces its own cache",
+            S.addon.pc2.read_header(own)["samples"] == 3 and leftovers() == [])
 
 
 def test_shape_key_bake_shows_at_once_and_frees():
@@ -466,7 +545,7 @@ def test_modal_bake_frames_solve_in_a_worker_thread():
             np.abs(got.ravel() - a[-1]).max())
 
 
-for t in (test_factor_writes_and_edits_re_evaluate, test_option_change_rebinds_in_a_thread, test_modal_bake_frames_solve_in_a_worker_thread, test_group_change_rebinds_in_place_in_a_thread, test_falloff_reach_scales_with_the_model, test_point_cache_bake_shows_and_frees, test_shape_key_bake_shows_at_once_and_frees,
+for t in (test_a_bake_never_overwrites_what_it_was_not_asked_to, test_factor_writes_and_edits_re_evaluate, test_option_change_rebinds_in_a_thread, test_modal_bake_frames_solve_in_a_worker_thread, test_group_change_rebinds_in_place_in_a_thread, test_falloff_reach_scales_with_the_model, test_point_cache_bake_shows_and_frees, test_shape_key_bake_shows_at_once_and_frees,
           test_sidebar_and_handle_target, test_errors_with_a_way_out, test_keyed_factor_warns):
     R.run(t)
 R.finish()
