@@ -103,6 +103,7 @@ typedef struct dk_py_state {
     PyObject *mesh_type;
     PyObject *solve_result_type;
     PyThread_type_lock arpack_lock;
+    _Atomic unsigned long arpack_owner; /* PyThread_get_thread_ident() of its holder, or 0 */
     PyObject *numpy_frombuffer; /* None if numpy is missing */
     /* the fork gate (dk_py_native_begin): */
     pthread_mutex_t gate_mu;
@@ -131,6 +132,8 @@ typedef struct dk_py_progress {
     PyObject *callable;  /* owned; NULL: no callback                                      */
     PyObject *type;      /* owned: deformkit.BindProgress                                 */
     PyObject *exc_type, *exc_value, *exc_tb; /* what the callable raised (owned), or NULL */
+    dk_py_state *state;  /* the module's (the fork gate the call pauses in), or NULL      */
+    int *paused;         /* set to 1 while the callable runs (a rebind's object), or NULL */
 } dk_py_progress;
 
 /** Takes the key "progress" out of the keyword dict `kw` (may be NULL) into `p` (zeroed
@@ -140,12 +143,20 @@ int dk_py_progress_take(PyObject *kw, PyObject *module, const char *context,
                         dk_py_progress *p);
 
 /** The native callback (dk_phase_progress_fn; user = a dk_py_progress with a callable).
- *  After the callable raised, every further call returns 1 without calling it. */
+ *  After the callable raised, every further call returns 1 without calling it. The native
+ *  call it reports from is at a phase boundary: while the callable runs, the call leaves the
+ *  fork gate (dk_py_native_pause), so that the callable may fork or make DeformKit calls of
+ *  its own while another thread forks, without either waiting for the other. */
 int dk_py_progress_phase(void *user, const char *phase, double fraction);
 
 /** After a failed native call that reported to `p`: raises what the callable raised when it
  *  did (and returns NULL), else dk_py_raise(err, context). */
 PyObject *dk_py_progress_raise(dk_py_progress *p, const dk_error *err, const char *context);
+
+/** After a successful native call that reported to `p`: 1 with the exception set when the
+ *  callable raised at the final report ("done", whose stop request the work ignores: it is
+ *  complete), else 0. The caller then fails as for any error of the callable. */
+int dk_py_progress_raised(dk_py_progress *p);
 
 /** Drops the references of `p` (and any exception it still holds). */
 void dk_py_progress_release(dk_py_progress *p);
@@ -171,6 +182,25 @@ dk_py_state *dk_py_state_of(PyObject *obj);
  * (no gate). */
 void dk_py_native_begin(dk_py_state *st);
 void dk_py_native_end(dk_py_state *st);
+
+/** A call inside the gate that runs Python in between (a progress callback at a phase
+ *  boundary) leaves the gate for that time: pause = dk_py_native_end, resume =
+ *  dk_py_native_begin (it waits while a fork is under way). Without the GIL. */
+void dk_py_native_pause(dk_py_state *st);
+void dk_py_native_resume(dk_py_state *st);
+
+/* ------------------------------------------------------------------ the ARPACK lock ---- */
+/* ARPACK keeps its iteration state in Fortran SAVE variables: one eigensolve at a time in
+ * the process. A second one started on the thread that holds the lock (from the progress
+ * callback of an EigenDeformation bind) would wait for itself forever: refused instead. */
+
+/** With the GIL: 0, or -1 with RuntimeError (naming `context`) when this thread already
+ *  holds the ARPACK lock. */
+int dk_py_arpack_check(dk_py_state *st, const char *context);
+/** Without the GIL: takes the lock (waiting for another thread's eigensolve) / gives it
+ *  back, recording the holder. */
+void dk_py_arpack_acquire(dk_py_state *st);
+void dk_py_arpack_release(dk_py_state *st);
 
 /** Py_BEGIN_ALLOW_THREADS plus the fork gate (`st` evaluated once, with the GIL held). */
 #define DK_PY_BEGIN_NATIVE(st)                                                             \

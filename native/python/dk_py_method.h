@@ -47,6 +47,8 @@ typedef struct dk_py_method {
     PyObject *handles, *fixed, *roi, *handle_weights, *stiffness; /* as last bound         */
     int busy;                /* a call is running on the object ...                      */
     long busy_pid;           /* ... in this process (getpid() when it was entered)       */
+    unsigned long busy_tid;  /* ... on this thread (PyThread_get_thread_ident())          */
+    int busy_paused;         /* ... and stands at a progress callback (dk_py_progress)    */
 } dk_py_method;
 
 /** What is a method's own. */
@@ -156,7 +158,10 @@ int dk_py_method_register(PyObject *module, const dk_py_method_spec *spec, newfu
  *  exist here -- is taken over (issue 18, class 3): the fork gate (dk_py.h) guarantees that
  *  its native call was not running at the fork, so its native state is whole. Every native
  *  call on a method object that releases the GIL must therefore pass the gate
- *  (DK_PY_BEGIN_NATIVE). */
+ *  (DK_PY_BEGIN_NATIVE). Two exceptions: the forking thread itself, inside the object's
+ *  rebind from its progress callback, still owns it in the child (busy); and an object whose
+ *  rebind stood at a progress callback in another thread at the fork is half-way through
+ *  it, so the child refuses every call on it (RuntimeError saying so). */
 int dk_py_method_enter(dk_py_method *self);
 
 /** For getters that read the native object (with the GIL held, without entering it):

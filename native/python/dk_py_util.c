@@ -802,6 +802,41 @@ void dk_py_native_end(dk_py_state *st)
     pthread_mutex_unlock(&st->gate_mu);
 }
 
+void dk_py_native_pause(dk_py_state *st)
+{
+    dk_py_native_end(st);
+}
+
+void dk_py_native_resume(dk_py_state *st)
+{
+    dk_py_native_begin(st);
+}
+
+int dk_py_arpack_check(dk_py_state *st, const char *context)
+{
+    if (st && st->arpack_owner != 0 && st->arpack_owner == PyThread_get_thread_ident()) {
+        PyErr_Format(PyExc_RuntimeError,
+                     "%s: an eigen computation is already running on this thread (this call "
+                     "comes from its progress callback); ARPACK runs one at a time, so start "
+                     "this one after that bind has returned",
+                     context);
+        return -1;
+    }
+    return 0;
+}
+
+void dk_py_arpack_acquire(dk_py_state *st)
+{
+    PyThread_acquire_lock(st->arpack_lock, WAIT_LOCK);
+    st->arpack_owner = PyThread_get_thread_ident();
+}
+
+void dk_py_arpack_release(dk_py_state *st)
+{
+    st->arpack_owner = 0;
+    PyThread_release_lock(st->arpack_lock);
+}
+
 int dk_py_fork_before(dk_py_state *st)
 {
     if (!st || !st->gate_ready)

@@ -214,7 +214,10 @@ static PyObject *py_after_fork_child(PyObject *module, PyObject *unused)
     dk_openmp_after_fork_child();
     dk_py_fork_after_child(st);
     if (st && st->arpack_lock) {
-        if (PyThread_acquire_lock(st->arpack_lock, NOWAIT_LOCK)) {
+        if (st->arpack_owner == PyThread_get_thread_ident()) {
+            /* held by this very thread: it forked from the progress callback of its own
+             * eigen bind, which goes on here and gives the lock back: keep it */
+        } else if (PyThread_acquire_lock(st->arpack_lock, NOWAIT_LOCK)) {
             PyThread_release_lock(st->arpack_lock); /* free at the fork: keep it */
         } else {
             /* held by a thread that did not survive the fork: it would never be released.
@@ -223,6 +226,7 @@ static PyObject *py_after_fork_child(PyObject *module, PyObject *unused)
             if (!fresh)
                 return PyErr_NoMemory();
             st->arpack_lock = fresh;
+            st->arpack_owner = 0;
         }
     }
     Py_RETURN_NONE;

@@ -160,18 +160,48 @@ fail:
 
 /* ------------------------------------------------------------------ the object --------- */
 
-int dk_py_method_enter(dk_py_method *self)
+/* Whether the object is busy in this process; with an exception set when the reason is
+ * that a fork copied it half-way through a rebind (see dk_py_method_enter), which no call
+ * can use. */
+static int busy_here(dk_py_method *self, int *copied_half_way)
 {
     const long pid = (long)getpid();
-    /* Busy in another process: the parent's thread that entered the object does not exist
-     * here. The fork gate (dk_py.h) guarantees that no native call on it was running at the
-     * fork -- that thread was reading its inputs, waiting at the gate, or back from its
-     * native call and waiting for the GIL -- so the native state is whole: take it over. */
-    if (self->busy && self->busy_pid != pid)
-        self->busy = 0;
-    if (self->busy) {
-        PyErr_Format(PyExc_RuntimeError, "%s: the object is in use by another thread",
+    const unsigned long me = PyThread_get_thread_ident();
+    *copied_half_way = 0;
+    if (!self->busy || self->busy_pid == pid || self->busy_tid == me)
+        return self->busy;
+    /* Busy in another process, entered by a thread of the parent that does not exist here.
+     * The fork gate (dk_py.h) guarantees that no native call on it was running at the fork
+     * -- that thread was reading its inputs, waiting at the gate, or back from its native
+     * call and waiting for the GIL -- unless the call stood at a progress callback, which
+     * leaves the gate: then the native state is half-way through a rebind. */
+    if (self->busy_paused) {
+        *copied_half_way = 1;
+        PyErr_Format(PyExc_RuntimeError,
+                     "%s: this process was forked while a rebind of the object in another "
+                     "thread stood at its progress callback; the copy here is half-way "
+                     "through that rebind and cannot be used (make a new object)",
                      self->spec->name);
+        return 1;
+    }
+    return 0; /* whole: taken over */
+}
+
+int dk_py_method_enter(dk_py_method *self)
+{
+    int half;
+    if (busy_here(self, &half)) {
+        if (half)
+            return -1;
+        if (self->busy_tid == PyThread_get_thread_ident())
+            PyErr_Format(PyExc_RuntimeError,
+                         "%s: the object is in use by a call on this same thread (this one "
+                         "comes from that call's progress callback): call it after that one "
+                         "has returned",
+                         self->spec->name);
+        else
+            PyErr_Format(PyExc_RuntimeError, "%s: the object is in use by another thread",
+                         self->spec->name);
         return -1;
     }
     if (!self->native) {
@@ -179,7 +209,9 @@ int dk_py_method_enter(dk_py_method *self)
         return -1;
     }
     self->busy = 1;
-    self->busy_pid = pid;
+    self->busy_pid = (long)getpid();
+    self->busy_tid = PyThread_get_thread_ident();
+    self->busy_paused = 0;
     return 0;
 }
 
@@ -294,12 +326,21 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
         Py_DECREF(mine);
         return dk_py_raise(&err, NULL);
     }
+    if (dk_py_arpack_check(state, spec->name) < 0) {
+        if (spec->release_options)
+            spec->release_options(&opt);
+        dk_py_lap_constraints_release(&con);
+        dk_py_doubles_release(&stiff);
+        dk_py_progress_release(&prog);
+        Py_DECREF(mine);
+        return NULL;
+    }
     DK_PY_BEGIN_NATIVE(dk_py_get_state(module))
     if (state)
-        PyThread_acquire_lock(state->arpack_lock, WAIT_LOCK);
+        dk_py_arpack_acquire(state);
     st = spec->ops->bind(mesh, &con.desc, &opt, &native, &err);
     if (state)
-        PyThread_release_lock(state->arpack_lock);
+        dk_py_arpack_release(state);
     DK_PY_END_NATIVE
     if (spec->release_options)
         spec->release_options(&opt);
@@ -310,6 +351,12 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
         PyObject *r = dk_py_progress_raise(&prog, &err, spec->name);
         dk_py_progress_release(&prog);
         return r;
+    }
+    if (dk_py_progress_raised(&prog)) { /* at "done": the bind is whole, and dropped */
+        spec->ops->free(native);
+        dk_py_progress_release(&prog);
+        Py_DECREF(mine);
+        return NULL;
     }
     dk_py_progress_release(&prog);
     allocfunc alloc = (allocfunc)PyType_GetSlot(type, Py_tp_alloc);
@@ -635,8 +682,10 @@ PyObject *dk_py_method_rebind(PyObject *obj, PyObject *args, PyObject *kwargs)
         self->busy = 0;
         goto out;
     }
-    if (prog.callable)
+    if (prog.callable) {
+        prog.paused = &self->busy_paused;
         self->spec->rebind_progress(self->native, &prog);
+    }
     DK_PY_BEGIN_NATIVE(dk_py_state_of(obj))
     st = self->spec->ops->rebind(self->native, &con.desc, &err);
     DK_PY_END_NATIVE
@@ -650,7 +699,8 @@ PyObject *dk_py_method_rebind(PyObject *obj, PyObject *args, PyObject *kwargs)
         goto out;
     }
     remember(self, handles, fixed, roi, hw, stiffness);
-    result = Py_NewRef(Py_None);
+    /* raised at "done": the rebind is complete (its new constraints stay), the error goes up */
+    result = dk_py_progress_raised(&prog) ? NULL : Py_NewRef(Py_None);
 out:
     dk_py_progress_release(&prog);
     Py_XDECREF(kw);
@@ -720,10 +770,12 @@ int dk_py_method_readable(dk_py_method *self)
         return 0;
     }
     /* busy in another process: taken over as dk_py_method_enter does */
-    if (self->busy && self->busy_pid == (long)getpid()) {
-        PyErr_Format(PyExc_RuntimeError, "%s: the object is in use by another thread (a "
-                     "solve or rebind is running); read it when that call has returned",
-                     self->spec->name);
+    int half;
+    if (busy_here(self, &half)) {
+        if (!half)
+            PyErr_Format(PyExc_RuntimeError, "%s: the object is in use (a solve or rebind is "
+                         "running); read it when that call has returned",
+                         self->spec->name);
         return 0;
     }
     return 1;

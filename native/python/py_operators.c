@@ -541,6 +541,8 @@ static PyObject *py_laplacian_eigenpairs(PyObject *module, PyObject *args, PyObj
     if (tolerance < 0.0 || !isfinite(tolerance) || band_size < 0 || max_iterations < 0)
         return PyErr_Format(PyExc_ValueError,
                             "tolerance, band_size and max_iterations must be non-negative");
+    if (dk_py_arpack_check(state, "laplacian_eigenpairs") < 0)
+        return NULL;
     dk_eigs_options_default(&opt);
     if (tolerance > 0.0)
         opt.tolerance = tolerance;
@@ -565,9 +567,9 @@ static PyObject *py_laplacian_eigenpairs(PyObject *module, PyObject *args, PyObj
     if (st == DK_OK)
         st = dk_mass_matrix(mesh, kind, mass, &err);
     if (st == DK_OK) {
-        PyThread_acquire_lock(state->arpack_lock, WAIT_LOCK);
+        dk_py_arpack_acquire(state);
         st = dk_eigs_smallest(l, mass, k, &opt, vals, colmajor, &n_converged, &err);
-        PyThread_release_lock(state->arpack_lock);
+        dk_py_arpack_release(state);
     }
     if (st == DK_OK)
         for (Py_ssize_t i = 0; i < n; ++i)

@@ -68,6 +68,7 @@ int dk_py_progress_take(PyObject *kw, PyObject *module, const char *context, dk_
     }
     p->callable = cb;
     p->type = Py_NewRef(st->progress_type);
+    p->state = st;
     return 0;
 }
 
@@ -76,6 +77,11 @@ int dk_py_progress_phase(void *user, const char *phase, double fraction)
     dk_py_progress *p = user;
     if (!p || !p->callable)
         return 0;
+    /* at a phase boundary: out of the fork gate while Python runs (dk_py.h). `paused` is set
+     * before and cleared after, inside the gate, so a fork in between sees it set. */
+    if (p->paused)
+        *p->paused = 1;
+    dk_py_native_pause(p->state);
     PyGILState_STATE g = PyGILState_Ensure();
     int stop = 1;
     if (!p->exc_type) { /* after a raise: stop, without calling again */
@@ -96,6 +102,9 @@ int dk_py_progress_phase(void *user, const char *phase, double fraction)
             PyErr_Fetch(&p->exc_type, &p->exc_value, &p->exc_tb);
     }
     PyGILState_Release(g);
+    dk_py_native_resume(p->state);
+    if (p->paused)
+        *p->paused = 0;
     return stop;
 }
 
@@ -107,6 +116,15 @@ PyObject *dk_py_progress_raise(dk_py_progress *p, const dk_error *err, const cha
         return NULL;
     }
     return dk_py_raise(err, context);
+}
+
+int dk_py_progress_raised(dk_py_progress *p)
+{
+    if (!p || !p->exc_type)
+        return 0;
+    PyErr_Restore(p->exc_type, p->exc_value, p->exc_tb); /* steals the references */
+    p->exc_type = p->exc_value = p->exc_tb = NULL;
+    return 1;
 }
 
 void dk_py_progress_release(dk_py_progress *p)

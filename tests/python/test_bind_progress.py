@@ -209,3 +209,104 @@ def test_bad_progress_is_refused():
     # estimate_memory takes the bind's keywords, progress= included (not called)
     rec = Recorder()
     assert dk.ARAP.estimate_memory(MESH, progress=rec) > 0 and rec.seen == []
+
+
+# ---- the second hostile review: what a callback does at the end, and calls from inside it
+
+def _raise_at_done(fraction):
+    if fraction.phase == "done":
+        raise ZeroDivisionError("raised at done")
+    return False
+
+
+@pytest.mark.parametrize("name", METHODS + ["EigenDeformation"])
+def test_an_exception_at_done_propagates(name):
+    """The final report ("done") comes when the work is whole: a stop request there is
+    ignored, but an exception still propagates from the constructor (no object) and from
+    rebind (whose new constraints then stay bound, as the docs say)."""
+    if name == "EigenDeformation":
+        v, f = grid(24)
+        region = np.flatnonzero(np.arange(len(v)) % 25 >= 23)
+        with pytest.raises(ZeroDivisionError, match="raised at done"):
+            dk.EigenDeformation(dk.Mesh(v, f), handles=[region], n_eigenvectors=8, refine=0,
+                                progress=_raise_at_done)
+        return
+    with pytest.raises(ZeroDivisionError, match="raised at done"):
+        bind(name, progress=_raise_at_done)
+    obj = bind(name)
+    with pytest.raises(ZeroDivisionError, match="raised at done"):
+        obj.rebind(handles=[OTHER], progress=_raise_at_done)
+    lifted = V[OTHER] + [0.0, 0.0, 0.1]
+    got = np.asarray(obj.solve(lifted, warm_start=False).positions)[OTHER]
+    assert np.abs(got - lifted).max() < (1e-2 if name == "EmbeddedDeformation" else 1e-12)
+
+
+@pytest.mark.parametrize("name", METHODS)
+def test_a_call_on_the_same_object_from_its_rebind_callback_says_so(name):
+    obj = bind(name)
+    seen = []
+
+    def cb(fraction):
+        if not seen:
+            with pytest.raises(RuntimeError, match="in use by a call on this same thread"):
+                obj.solve(TARGETS)
+            seen.append(fraction.phase)
+        return False
+
+    obj.rebind(handles=[OTHER], progress=cb)
+    assert seen
+
+
+ISOLATED = """
+import numpy as np, deformkit as dk, json, sys
+x, y = np.meshgrid(np.linspace(0, 1, 25), np.linspace(0, 1, 25))
+v = np.column_stack([x.ravel(), y.ravel(), 0.05 * np.sin(5 * x.ravel()) * np.cos(3 * y.ravel())])
+f = []
+for j in range(24):
+    for i in range(24):
+        a = j * 25 + i
+        f += [(a, a + 1, a + 26), (a, a + 26, a + 25)]
+mesh = dk.Mesh(v, np.array(f))
+region = np.flatnonzero(np.arange(len(v)) % 25 >= 23)
+"""
+
+
+def run_isolated(code, timeout=120):
+    """Runs `code` (after ISOLATED's set-up) in a fresh interpreter; a hang fails the test
+    after `timeout` s instead of hanging the suite. Returns its stdout."""
+    import subprocess
+    import sys
+    try:
+        r = subprocess.run([sys.executable, "-c", ISOLATED + code], capture_output=True,
+                           text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        pytest.fail("hung: no answer within %d s" % timeout)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    return r.stdout
+
+
+@pytest.mark.parametrize("second", ["laplacian_eigenpairs", "EigenDeformation"])
+def test_an_eigen_computation_from_an_eigen_callback_is_refused_not_hung(second):
+    """ARPACK runs one eigensolve at a time: a second one started from the progress callback
+    of an EigenDeformation bind, on its thread, waited forever for the lock its own thread
+    held. It is refused with a RuntimeError, which propagates from the outer bind."""
+    out = run_isolated("""
+def cb(fraction):
+    if fraction.phase == "eigenvectors":
+        if %r == "laplacian_eigenpairs":
+            dk.laplacian_eigenpairs(mesh, 4)
+        else:
+            dk.EigenDeformation(mesh, handles=[region], n_eigenvectors=4, refine=0)
+    return False
+try:
+    dk.EigenDeformation(mesh, handles=[region], n_eigenvectors=8, refine=0, progress=cb)
+    print("no error")
+except RuntimeError as e:
+    print("refused:", e)
+# and afterwards both work again
+dk.laplacian_eigenpairs(mesh, 4)
+dk.EigenDeformation(mesh, handles=[region], n_eigenvectors=8, refine=0)
+print("then fine")
+""" % second)
+    assert "refused:" in out and "already running on this thread" in out, out
+    assert "then fine" in out, out

@@ -267,3 +267,160 @@ def test_child_of_an_idle_parent_keeps_its_objects(scene):
     for name in dk.METHODS:
         inherited, fresh = out[name]
         assert inherited < 1e-6 and fresh < 1e-6, (name, inherited, fresh)
+
+
+# ---- forks while a bind stands at its progress callback (the second hostile review) -------
+# A progress callback runs while its native call is at a phase boundary. Before, that call
+# still counted as "in flight" for the fork gate: os.fork() from the callback waited for the
+# very call that ran it, and a thread forking while another thread's callback made a
+# DeformKit call deadlocked both. Each scenario runs in a fresh interpreter with a timeout.
+
+ISOLATED = """
+import json, os, signal, sys, threading, time
+import numpy as np, deformkit as dk
+x, y = np.meshgrid(np.linspace(0, 1, 31), np.linspace(0, 1, 31))
+v = np.column_stack([x.ravel(), y.ravel(), 0.05 * np.sin(5 * x.ravel()) * np.cos(3 * y.ravel())])
+f = []
+for j in range(30):
+    for i in range(30):
+        a = j * 31 + i
+        f += [(a, a + 1, a + 32), (a, a + 32, a + 31)]
+mesh = dk.Mesh(v, np.array(f))
+cols = np.arange(len(v)) % 31
+fixed, handle, other = (np.flatnonzero(cols <= 1), np.flatnonzero(cols >= 29),
+                        np.flatnonzero((cols >= 15) & (cols <= 16)))
+targets = v[handle] + [0.05, 0.0, 0.2]
+
+def bind(name, **kw):
+    kw.setdefault("handles", [handle])
+    if name == "EigenDeformation":
+        return dk.EigenDeformation(mesh, n_eigenvectors=8, refine=0, **kw)
+    return getattr(dk, name)(mesh, fixed=fixed, **kw)
+
+def solve(m):
+    return np.asarray(m.solve(targets).positions)
+
+def wait_child(pid, timeout=60):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            return os.WEXITSTATUS(status) if os.WIFEXITED(status) else -1
+        time.sleep(0.02)
+    os.kill(pid, signal.SIGKILL)
+    os.waitpid(pid, 0)
+    return "hung"
+"""
+
+
+def run_isolated(code, timeout=150):
+    import subprocess
+    import sys
+    try:
+        r = subprocess.run([sys.executable, "-W", "ignore::DeprecationWarning", "-c",
+                            ISOLATED + code], capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        pytest.fail("hung: no answer within %d s" % timeout)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.parametrize("name", sorted(dk.METHODS))
+@pytest.mark.parametrize("call", ["bind", "rebind"])
+def test_fork_from_a_progress_callback(name, call):
+    """os.fork() inside a bind's (or rebind's) progress callback returns in both processes;
+    each finishes the bind and solves to the same answer as an undisturbed object."""
+    if call == "rebind" and name == "EigenDeformation":
+        pytest.skip("EigenDeformation's rebind takes no progress callback")
+    out = run_isolated("""
+name, call = %r, %r
+pids = []
+def cb(fraction):
+    if not pids and fraction > 0:
+        pids.append(os.fork())
+    return False
+want = solve(bind(name))
+if call == "bind":
+    m = bind(name, progress=cb)
+else:
+    m = bind(name, handles=[other]) if name != "EigenDeformation" else None
+    m.rebind(handles=[handle], progress=cb)
+err = float(np.abs(solve(m) - want).max())
+if pids and pids[0] == 0:          # the child: report through the exit status
+    os._exit(0 if err < 1e-9 else 3)
+child = wait_child(pids[0]) if pids else "no fork"
+print(json.dumps({"parent": err, "child": child}))
+""" % (name, call))
+    assert out["child"] == 0, out
+    assert out["parent"] < 1e-9, out
+
+
+def test_a_fork_while_another_threads_callback_calls_deformkit():
+    """Thread A's bind stands at its progress callback, which makes a DeformKit call (a solve
+    on another object) while thread B forks: neither waits for the other."""
+    out = run_isolated("""
+ready, forked = threading.Event(), threading.Event()
+other_obj = bind("LaplacianEdit")
+result = {}
+def cb(fraction):
+    if not ready.is_set():
+        ready.set()
+        forked.wait(30)     # B has forked (or is forking): now call in
+        result["solve"] = float(np.abs(solve(other_obj)).max())
+    return False
+def a():
+    result["bind"] = bind("ARAP", progress=cb) is not None
+def b():
+    ready.wait(30)
+    pid = os.fork()
+    if pid == 0:
+        os._exit(0 if float(np.abs(solve(other_obj)).max()) > 0 else 3)
+    forked.set()
+    result["child"] = wait_child(pid)
+ta, tb = threading.Thread(target=a), threading.Thread(target=b)
+ta.start(); tb.start(); ta.join(60); tb.join(60)
+print(json.dumps({"alive": ta.is_alive() or tb.is_alive(), **result}))
+""")
+    assert not out["alive"] and out.get("bind") and out.get("solve", 0) > 0, out
+    assert out.get("child") == 0, out
+
+
+def test_a_rebind_copied_half_way_by_a_fork_is_refused_in_the_child():
+    """Thread B forks while thread A's rebind of an object stands at its progress callback:
+    in the child that object is half-way through a rebind that will never finish there, so
+    every call on it is refused, saying why; other objects work, and in the parent the
+    rebind completes."""
+    out = run_isolated("""
+obj, spare = bind("ARAP"), bind("ARAP")
+at_callback, forked = threading.Event(), threading.Event()
+result = {}
+def cb(fraction):
+    if not at_callback.is_set():
+        at_callback.set()
+        forked.wait(30)
+    return False
+def a():
+    obj.rebind(handles=[other], progress=cb)
+    result["parent_rebind"] = "done"
+def b():
+    at_callback.wait(30)
+    pid = os.fork()
+    if pid == 0:
+        try:
+            obj.solve(v[other])
+            code = 3
+        except RuntimeError as e:
+            code = 0 if "half-way through that rebind" in str(e) else 4
+        if code == 0 and float(np.abs(solve(spare)).max()) <= 0:
+            code = 5
+        os._exit(code)
+    forked.set()
+    result["child"] = wait_child(pid)
+ta, tb = threading.Thread(target=a), threading.Thread(target=b)
+ta.start(); tb.start(); ta.join(60); tb.join(60)
+lifted = v[other] + [0.0, 0.0, 0.1]
+result["parent_err"] = float(np.abs(np.asarray(obj.solve(lifted, warm_start=False).positions)[other] - lifted).max())
+print(json.dumps(result))
+""")
+    assert out.get("child") == 0, out
+    assert out.get("parent_rebind") == "done" and out["parent_err"] < 1e-9, out
