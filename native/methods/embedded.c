@@ -66,6 +66,8 @@ struct dk_embedded {
     dk_index *edges;            /* n_edges x 2, i < j                                       */
     dk_index *adj_start, *adj;  /* directed adjacency (both directions), sorted              */
     double *x;                  /* m x 12: the current transformations                      */
+    double L;                   /* the unit of length of F: unit_length() of the bind mesh;
+                                   see evaluate()                                            */
     double energy;              /* F of x for the last solve's targets                      */
     ed_system sys;
     int analysis_count, factorization_count;
@@ -1153,12 +1155,43 @@ static void add_row(ed_system *s, const jrow *j, double r, double *F)
     }
 }
 
-/* F(x) (eq. 9); with `s`, also J^T f (s->grad) and J^T J (s->blocks, then s->a). */
+/* The unit of length of F: twice the root mean square distance of the points from their
+ * centroid (a sphere's diameter, 0.82 for the unit square), so that it does not depend on
+ * where the model is or how it is turned, as a bounding box would; 1 when the points
+ * coincide. Our choice: the paper gives no unit. */
+static double unit_length(const double *p, dk_index n)
+{
+    double c[3] = {0.0, 0.0, 0.0}, s = 0.0;
+    for (dk_index i = 0; i < n; i++)
+        for (int d = 0; d < 3; d++)
+            c[d] += p[3 * (size_t)i + d] / (double)n;
+    for (dk_index i = 0; i < n; i++)
+        for (int d = 0; d < 3; d++) {
+            const double e = p[3 * (size_t)i + d] - c[d];
+            s += e * e / (double)n;
+        }
+    const double L = 2.0 * sqrt(s);
+    return L > 0.0 && isfinite(L) ? L : 1.0;
+}
+
+/* F(x) (eq. 9); with `s`, also J^T f (s->grad) and J^T J (s->blocks, then s->a).
+ *
+ * Lengths are measured in units of ed->L (unit_length() of the bind mesh): E_reg and E_con are
+ * divided by L^2, and the unknowns are R and t / L. The paper gives fixed weights (w_rot 1,
+ * w_reg 10, w_con 100) and eq. 12's tests against 1, but E_rot is dimensionless while E_reg
+ * and E_con scale with length squared: in the model's own units the same scene scaled by
+ * 0.01 stopped 5% of its diagonal off, at 1e-6 after no iteration at all, and from about 20x
+ * up a 45 degree handle turn returned the rest pose (the second hostile review). In units of
+ * L, F, its gradient, the steps and the tests are the same at any scale. So the Jacobian's
+ * columns are those of t / L (a t entry's coefficient is L times its length one: wg, wc w),
+ * gn_step moves t by L times its step, and the step and iterate norms read t / L. ed->x
+ * itself stays in the model's units. */
 static double evaluate(const dk_embedded *ed, ed_system *s, const ed_system *sys,
                        const double *x)
 {
     const dk_index k = ed->k, m = ed->m;
     const double wr = sqrt(ed->opt.w_rot), wg = sqrt(ed->opt.w_reg), wc = sqrt(ed->opt.w_con);
+    const double wgL = wg / ed->L, wcL = wc / ed->L; /* per unit of length */
     double F = 0.0;
     jrow jr;
     if (s) {
@@ -1213,7 +1246,7 @@ static double evaluate(const dk_embedded *ed, ed_system *s, const ed_system *sys
                 jr.ns = 4;
                 for (int c = 0; c < 3; c++) {
                     jr.slot[0][c] = 3 * d + c;
-                    jr.coef[0][c] = wg * dg[c];
+                    jr.coef[0][c] = wgL * dg[c];
                     jr.slot[1][c] = 3 * d + c;
                     jr.coef[1][c] = 0.0; /* t_q only: its R does not enter */
                 }
@@ -1221,7 +1254,7 @@ static double evaluate(const dk_embedded *ed, ed_system *s, const ed_system *sys
                 jr.coef[0][3] = wg;
                 jr.slot[1][3] = 9 + d;
                 jr.coef[1][3] = -wg;
-                add_row(s, &jr, wg * r, &F);
+                add_row(s, &jr, wgL * r, &F);
             }
         }
     /* positional terms (eq. 8): handles to their targets, held fixed vertices to rest */
@@ -1248,7 +1281,7 @@ static double evaluate(const dk_embedded *ed, ed_system *s, const ed_system *sys
                 jr.u[c] = sys->node_unknown[j];
                 for (int e = 0; e < 3; e++) {
                     jr.slot[c][e] = 3 * d + e;
-                    jr.coef[c][e] = wc * wv[q] * dv[e];
+                    jr.coef[c][e] = wcL * wv[q] * dv[e];
                 }
                 jr.slot[c][3] = 9 + d;
                 jr.coef[c][3] = wc * wv[q];
@@ -1263,7 +1296,7 @@ static double evaluate(const dk_embedded *ed, ed_system *s, const ed_system *sys
                     for (int b2 = 0; b2 < jr.n; b2++)
                         jr.blk[a][b2] = sys->pos_blk[((size_t)l * k + idx[a]) * k + idx[b2]];
             }
-            add_row(s, &jr, wc * r, &F);
+            add_row(s, &jr, wcL * r, &F);
         }
     }
     if (s) /* the blocks into the CSC values: block (u, v) entry (a, c) = row 12v+c, col 12u+a;
@@ -1339,6 +1372,15 @@ static double inf_norm(const double *a, size_t n)
     return m;
 }
 
+/* |x|_inf of the transformations with t in units of ed->L (the unknowns of evaluate()) */
+static double x_norm(const dk_embedded *ed, const double *x)
+{
+    double m = 0.0;
+    for (size_t i = 0; i < 12 * (size_t)ed->m; i++)
+        m = fmax(m, fabs(x[i]) / (i % 12 >= 9 ? ed->L : 1.0));
+    return m;
+}
+
 /* One damped Gauss-Newton step (Levenberg-Marquardt with Nielsen's damping update, Madsen,
  * Nielsen & Tingleff 2004, the reference the paper gives): solves (J^T J + mu I) d = -J^T f
  * and compares the decrease of F with the one the linear model predicts,
@@ -1371,9 +1413,9 @@ static dk_status gn_step(dk_embedded *ed, double F, double *mu, double *nu, doub
             memcpy(s->x_try, ed->x, 12 * (size_t)ed->m * sizeof(double));
             double pred = 0.0;
             for (dk_index u = 0; u < s->n_free; u++)
-                for (int a = 0; a < 12; a++) {
+                for (int a = 0; a < 12; a++) { /* the step of t is in units of L */
                     const double d = s->step[12 * u + a];
-                    s->x_try[12 * (size_t)s->free_nodes[u] + a] += d;
+                    s->x_try[12 * (size_t)s->free_nodes[u] + a] += a >= 9 ? ed->L * d : d;
                     pred += d * (*mu * d - s->grad[12 * u + a]);
                 }
             const double Ft = evaluate(ed, NULL, s, s->x_try);
@@ -1430,13 +1472,14 @@ dk_status dk_embedded_solve(dk_embedded *ed, const dk_solve_request *rq, double 
     const double eps = ed->opt.tolerance;
     const size_t N = 12 * (size_t)s->n_free;
     double F = evaluate(ed, s, s, ed->x), mu = 0.0, nu = 2.0;
-    int it = 0, converged = 0;
-    while (it < maxit) {
-        /* the gradient test at the current iterate (grad F = 2 J^T f) */
-        if (2.0 * inf_norm(s->grad, N) < cbrt(eps) * (1.0 + F)) {
-            converged = 1;
-            break;
-        }
+    int it = 0;
+    /* Eq. 12 as Gill, Murray & Wright give it (the paper's reference): converged when the
+     * change of F, the gradient (grad F = 2 J^T f) and the step are all small, each against
+     * 1 + its scale; or, before any step, when the gradient is already negligible in absolute
+     * terms (their U4; eps^2 of the dimensionless F: a zero drag). The gradient test alone,
+     * as an alternative, let a large F stop after 0 or 1 steps. */
+    int converged = 2.0 * inf_norm(s->grad, N) <= eps * eps;
+    while (!converged && it < maxit) {
         double F_new, dnorm;
         int accepted;
         st = gn_step(ed, F, &mu, &nu, &F_new, &dnorm, &accepted, err);
@@ -1447,11 +1490,9 @@ dk_status dk_embedded_solve(dk_embedded *ed, const dk_solve_request *rq, double 
         it++;
         const double change = fabs(F - F_new);
         F = evaluate(ed, s, s, ed->x);
-        if (change < eps * (1.0 + F) &&
-            dnorm < sqrt(eps) * (1.0 + inf_norm(ed->x, 12 * (size_t)ed->m))) {
+        if (change < eps * (1.0 + F) && 2.0 * inf_norm(s->grad, N) < cbrt(eps) * (1.0 + F) &&
+            dnorm < sqrt(eps) * (1.0 + x_norm(ed, ed->x)))
             converged = 1;
-            break;
-        }
     }
     dk_team_park(ed->team); /* the helper sleeps until the next solve */
     apply(ed, ed->x, positions);
@@ -1530,6 +1571,8 @@ dk_status dk_embedded_bind(const dk_mesh *mesh, const dk_constraint_desc *constr
         else
             st = oom(err, "positions");
     }
+    if (st == DK_OK) /* the unit of length of F (evaluate()) */
+        ed->L = unit_length(mesh->positions, ed->n);
     if (st == DK_OK && (st = dk_progress_begin(&prog, 0, err)) == DK_OK) /* 1. the nodes */
         st = sample_nodes(ed, err);
     if (st == DK_OK && (st = dk_progress_begin(&prog, 1, err)) == DK_OK) /* 2. eq. 4 */
@@ -1765,7 +1808,7 @@ dk_status dk_embedded_energy(const dk_embedded *ed, const double *positions, dou
         const double *tg = s->pos_target_row[l] >= 0 ? s->targets + 3 * s->pos_target_row[l]
                                                      : ed->p + 3 * v;
         for (int d = 0; d < 3; d++) {
-            const double r = positions[3 * v + d] - tg[d];
+            const double r = (positions[3 * v + d] - tg[d]) / ed->L; /* as evaluate() */
             F += ed->opt.w_con * r * r;
         }
     }

@@ -772,9 +772,16 @@ int dk_py_method_readable(dk_py_method *self)
     /* busy in another process: taken over as dk_py_method_enter does */
     int half;
     if (busy_here(self, &half)) {
-        if (!half)
-            PyErr_Format(PyExc_RuntimeError, "%s: the object is in use (a solve or rebind is "
-                         "running); read it when that call has returned",
+        if (half)
+            return 0;
+        if (self->busy_tid == PyThread_get_thread_ident())
+            PyErr_Format(PyExc_RuntimeError, "%s: the object is in use by a call on this same "
+                         "thread (a solve or rebind whose progress callback this is); read it "
+                         "when that call has returned",
+                         self->spec->name);
+        else
+            PyErr_Format(PyExc_RuntimeError, "%s: the object is in use by another thread (a "
+                         "solve or rebind is running); read it when that call has returned",
                          self->spec->name);
         return 0;
     }

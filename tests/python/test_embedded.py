@@ -86,16 +86,23 @@ def test_rigid_motion_of_all_handles_is_exact():
 
 def test_bumpy_plane_figure_3():
     """Left edge fixed, right edge lifted: a purely translational edit. Gauss-Newton converges
-    in a few iterations (the paper: about six), the handles meet their targets within 1% of
-    the drag, and the bumps keep their shape: each bump's region is a rigid motion of its
-    rest shape to within a few % of the bump's height (no shearing)."""
+    by eq. 12 (all three tests, as in Gill et al.; the paper reports about six iterations, we
+    take 18: Gauss-Newton converges linearly on this problem, and the gradient test alone
+    stopped with the surface still 3% of its size from the minimum) to within 1e-4 of a
+    tightly converged solve; the handles meet their targets within 1% of the drag, and the
+    bumps keep their shape: each bump's region is a rigid motion of its rest shape to within
+    a few % of the bump's height (no shearing)."""
     v, f, centres = bumpy_plane(200)      # 40,401 vertices and ~300 nodes, as in the paper
     fixed = np.where(v[:, 0] <= 1e-9)[0]
     handle = np.where(v[:, 0] >= 1 - 1e-9)[0]
     ed = dk.EmbeddedDeformation(dk.Mesh(v, f), handles=[handle], fixed=fixed, n_nodes=300)
     lift = 0.4
     r = ed.solve(v[handle] + [0, 0, lift], warm_start=False)
-    assert r.converged and 2 <= r.iterations <= 10, r.iterations
+    assert r.converged and 2 <= r.iterations <= 30, r.iterations
+    tight = dk.EmbeddedDeformation(dk.Mesh(v, f), handles=[handle], fixed=fixed, n_nodes=300,
+                                   tolerance=1e-12, max_iterations=200)
+    rt = tight.solve(v[handle] + [0, 0, lift], warm_start=False)
+    assert np.abs(np.asarray(r.positions) - rt.positions).max() <= 1e-4
     err = np.abs(r.positions[handle] - (v[handle] + [0, 0, lift])).max()
     assert err <= 0.01 * lift, err
     assert np.abs(r.positions[fixed] - v[fixed]).max() == 0.0
