@@ -367,7 +367,9 @@ class DEFORMKIT_OT_apply(_Base, bpy.types.Operator):
         ("MESH", "Mesh", "Write the result into the mesh and remove the deformer"),
         ("SHAPE_KEY", "New Shape Key", "Store the result as a new shape key")))
     keep: BoolProperty(name="Keep Deformer", default=False,
-                       description="Keep the deformer after applying as a shape key")
+                       description="Keep the deformer after applying as a shape key; the key "
+                                   "is then stored at value 0, as Blender's Save as Shape Key "
+                                   "does (at 1 the deformer would add its offset to it again)")
 
     def run(self, context):
         obj = _get_object(self, context)
@@ -397,13 +399,19 @@ class DEFORMKIT_OT_apply(_Base, bpy.types.Operator):
                 obj.shape_key_add(name="Basis", from_mix=False)
             sk = obj.shape_key_add(name=name, from_mix=False)
             sk.data.foreach_set("co", flat)
-            sk.value = 1.0
+            # kept, the deformer still shows the result: the key waits at 0 (a key at 1 would
+            # be the deformer's input, and its offset would be added to it a second time)
+            sk.value = 0.0 if self.keep else 1.0
             me.update()
             if not self.keep:
                 remove_deformer(obj, d)
         if not first:
             self.report({"WARNING"}, "applied '%s', which was not first in the modifier stack"
                         % name)
+        elif self.mode == "SHAPE_KEY" and self.keep:
+            self.report({"INFO"}, "saved '%s' as the shape key '%s' (value 0: the deformer "
+                        "still shows the result; raise the key after removing it)"
+                        % (name, sk.name))
         else:
             self.report({"INFO"}, "applied '%s'" % name)
 

@@ -113,11 +113,22 @@ def test_apply_shape_key():
     R.check("shape key holds the result", np.abs(co.reshape(-1, 3) - want).max() < TOL)
     R.check("base mesh untouched by shape-key apply", np.abs(S.rest_positions(obj) - rest).max() == 0)
     R.check("keep=True keeps the deformer", len(obj.deformkit.deformers) == 1)
+    R.check("keep=True stores the key at value 0, as Blender's Save as Shape Key",
+            kb[1].value == 0.0, kb[1].value)
+    bpy.context.view_layer.update()
+    shown = S.evaluated_positions(obj)
+    R.check("keep=True: the result is shown once, not twice (the key and the deformer)",
+            np.abs(shown - want).max() < TOL, np.abs(shown - want).max())
     try:
         bpy.ops.deformkit.apply(mode="MESH")
         R.check("apply to a mesh with shape keys refused", False)
     except RuntimeError as ex:
         R.check("apply to a mesh with shape keys refused with a message", "shape keys" in str(ex), ex)
+    bpy.ops.deformkit.remove_deformer()
+    kb[1].value = 1.0
+    bpy.context.view_layer.update()
+    R.check("the deformer removed and the key raised: the same result, from the key",
+            np.abs(S.evaluated_positions(obj) - want).max() < TOL)
 
 
 for t in (test_save_reload, test_renders_without_addon, test_apply_mesh, test_apply_shape_key):
