@@ -59,7 +59,7 @@ class _Entry:
                  "groups", "last_inputs", "method_id", "verified", "pending", "pending_its",
                  "handles", "source", "preview_at", "material", "material_shown", "slice_cost",
                  "moved_at", "quick", "worker", "slice_ms", "graph_shown", "basis",
-                 "result_pos", "result_T", "preview_inputs", "warned")
+                 "result_pos", "result_T", "preview_inputs", "warned", "last_cold")
 
 
 def mark_settings_changed():
@@ -663,6 +663,7 @@ class BindJob:
         e.worker, e.slice_ms, e.graph_shown = None, None, None
         e.basis, e.result_pos, e.result_T, e.preview_inputs = None, None, None, None
         e.warned = None  # bind_warnings
+        e.last_cold = False  # whether the shown result is a cold solve's (solve())
         _cache[(obj.name, d.uid)] = e
         return e
 
@@ -1389,7 +1390,11 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
             shown = _finish_solve(obj, d, e, key, plan_w, w.result, w.ms)
     if shown is not None and inputs == w.plan["inputs"]:
         return shown  # the worker's result is for the targets as they are
-    if not force and e.last_inputs == inputs:
+    # unchanged inputs keep the shown result, except that a frame (cold) must show what a bake
+    # of it writes: a cold solve's result, not a drag's warm, budgeted or preview one (the
+    # second hostile review: ARAP 2.6e-5 of the diagonal off, EmbeddedDeformation 1e-3,
+    # EigenDeformation its Steps 1-2 preview)
+    if not force and e.last_inputs == inputs and (e.last_cold or not cold):
         return shown
     plan = _plan_solve(obj, d, e, key, T, source, inputs, cold, write, interactive,
                        resume and shown is None)
@@ -1438,6 +1443,8 @@ def _basis_preview(obj, d, e, T, inputs):
     np.subtract(pos, e.source, out=off, casting="unsafe")
     write_offset(obj, d, off, retime=False)
     e.preview_inputs = inputs
+    # what shows is no solve's result now: any later solve, a frame's included, writes again
+    e.last_inputs, e.last_cold = None, False
     return pos
 
 
@@ -1539,6 +1546,7 @@ def _finish_solve(obj, d, e, key, plan, res, ms):
         np.subtract(pos, e.source, out=off, casting="unsafe")
         write_offset(obj, d, off, retime=plan["cold"])
         e.last_inputs = plan["inputs"]
+        e.last_cold = plan["cold"]
         e.preview_inputs = None
         _written_at_undo[key] = _undo_serial[0]
     return pos
