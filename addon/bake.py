@@ -60,7 +60,9 @@ class FrameBaker:
         self.scene.frame_set(f)
         obj, d = self._objects()
         dg = self.context.evaluated_depsgraph_get()
-        pos = solver.deformed_positions(obj, d, dg, cold=True)
+        # the first frame reads the vertex groups again (a script may have edited them
+        # without an update that said so)
+        pos = solver.deformed_positions(obj, d, dg, cold=True, check_groups=self.i == 0)
         self.i += 1
         return f, pos
 
@@ -76,7 +78,8 @@ class FrameBaker:
         self.scene.frame_set(f)
         obj, d = self._objects()
         dg = self.context.evaluated_depsgraph_get()
-        job = solver.solve(obj, d, dg, cold=True, write=False, force=True, defer=True)
+        job = solver.solve(obj, d, dg, cold=True, write=False, force=True, defer=True,
+                           check_groups=self.i == 0)
         self.pending = (f, job, time.perf_counter())
 
     def step_poll(self):

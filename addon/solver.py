@@ -248,6 +248,26 @@ def _settings_key(d):
             tuple((h.vertex_group, h.use_weights) for h in d.handles))
 
 
+def group_names(obj, d):
+    """The names of the vertex groups `d` reads (handles, region, fixed, material, cut)."""
+    m = methods.get(d.method)
+    names = {h.vertex_group for h in d.handles if h.vertex_group}
+    names.update(g for g in (d.roi_group, d.fixed_group, d.material_group) if g)
+    if "cut" in m.maps:
+        names.update(g for g in (getattr(d.options, o) for o in m.cut_options) if g)
+    return names
+
+
+def groups_exist(obj, d):
+    """Whether every vertex group `d` reads is still there: a name lookup each, cheap enough
+    for every solve. A group removed by a script (obj.vertex_groups.remove) tags no update,
+    so the binding's copy of it went on being used, and Apply wrote its result (the second
+    hostile review); the next solve now re-reads the groups, and collect names the missing
+    one."""
+    vgs = obj.vertex_groups
+    return all(vgs.get(n) is not None for n in group_names(obj, d))
+
+
 def collect(obj, d):
     """Validated constraint arrays from the deformer's vertex groups (raises DeformKitError)."""
     check_object(obj, d)
@@ -1003,7 +1023,7 @@ def _entry_for(obj, d, check_groups, threaded=False, full_check=True):
     check_topology(obj, d, e, full=full_check or e is None or not e.verified or not rest_same)
     settings = _settings_key(d)
     same = e is not None and e.method_id == d.method and e.settings == settings
-    if same and e.verified and rest_same and not check_groups:
+    if same and e.verified and rest_same and not check_groups and groups_exist(obj, d):
         return e
     kw, key = collect(obj, d)
     if same and e.groups == key:
@@ -1632,8 +1652,10 @@ def zero_offset(obj, d):
 
 def finish(obj, d, depsgraph=None):
     """Brings the shown result up to date: solves when the inputs changed since the last
-    solve, and completes an interactive solve left pending (as the timer would)."""
-    solve(obj, d, depsgraph)
+    solve, and completes an interactive solve left pending (as the timer would). The vertex
+    groups are read again first: Apply must not write a result of groups a script has edited
+    without an update that said so."""
+    solve(obj, d, depsgraph, check_groups=True)
     key = (obj.name, d.uid)
     if key in _cache:
         _cache[key].moved_at = 0.0  # settled: whole iterations
@@ -1656,10 +1678,12 @@ def shown_positions(obj, d):
     return src + geonodes.factor(obj, d) * off.reshape(-1, 3).astype(np.float64)
 
 
-def deformed_positions(obj, d, depsgraph=None, cold=True):
+def deformed_positions(obj, d, depsgraph=None, cold=True, check_groups=False):
     """input + factor * (solved - input) for the current frame (what the modifier shows; the
-    input is the rest unless the method follows an animated input)."""
-    pos = solve(obj, d, depsgraph, cold=cold, write=False, force=True)
+    input is the rest unless the method follows an animated input). `check_groups`: re-read
+    the vertex groups first (a bake's first frame)."""
+    pos = solve(obj, d, depsgraph, cold=cold, write=False, force=True,
+                check_groups=check_groups)
     e = _cache[(obj.name, d.uid)]
     f = geonodes.factor(obj, d)
     return e.source + f * (pos - e.source)

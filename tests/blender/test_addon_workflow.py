@@ -207,6 +207,56 @@ def test_a_bake_never_overwrites_what_it_was_not_asked_to():
             S.addon.pc2.read_header(own)["samples"] == 3 and leftovers() == [])
 
 
+def test_groups_edited_by_a_script_are_seen_before_apply():
+    """A vertex group removed or edited from a script (no update tells the add-on) after the
+    bind: the deformer kept its stale groups and Apply wrote their result (the second
+    hostile review). A removed group is now refused by name at the next solve and at Apply;
+    edited contents are read again by Apply and by a bake's first frame. (Blender 3.4 tags no
+    update at all for obj.vertex_groups.remove, where the old code failed here; 5.3 tags a
+    geometry update, which re-read the groups already.)"""
+    obj, d, e, handle = scene()
+    e.location.z += 0.3
+    bpy.context.view_layer.update()
+    fixed = obj.vertex_groups[d.fixed_group]
+    members = [v.index for v in obj.data.vertices if any(g.group == fixed.index for g in v.groups)]
+    want = S.dk.ARAP(S.dk.Mesh(S.rest_positions(obj), S.solver.triangles(obj.data)),
+                     [handle], fixed=members[len(members) // 2:],
+                     tolerance=d.options.tolerance, max_iterations=d.options.max_iterations)
+    T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
+    want = np.asarray(want.solve(transforms=T, warm_start=False).positions)
+    base = S.rest_positions(obj)
+    # contents edited, then Apply at once (no depsgraph evaluation between, as in a script):
+    # the fixed group loses half its vertices
+    fixed.remove(members[: len(members) // 2])
+    bpy.ops.deformkit.apply(mode="SHAPE_KEY", keep=True)
+    kb = obj.data.shape_keys.key_blocks[-1]
+    co = np.empty(len(base) * 3, np.float32)
+    kb.data.foreach_get("co", co)
+    err = np.abs(co.reshape(-1, 3) - want).max()
+    R.check("Apply reads the groups a script edited: the result of the current ones (%.1e)"
+            % err, err < 1e-4, err)
+    # removed: refused by name at Apply, the mesh untouched (a fresh scene: the shape key
+    # edits above tag a geometry update, which re-reads the groups anyway)
+    obj, d, e, handle = scene()
+    e.location.z += 0.3
+    bpy.context.view_layer.update()
+    base = S.rest_positions(obj)
+    name = d.fixed_group
+    obj.vertex_groups.remove(obj.vertex_groups[name])
+    try:
+        bpy.ops.deformkit.apply(mode="MESH")
+        msg = None
+    except RuntimeError as ex:
+        msg = str(ex)
+    R.check("Apply after a script removed the Fixed group: refused by name",
+            msg is not None and "vertex group '%s' does not exist" % name in msg, msg)
+    R.check("... the mesh untouched", np.array_equal(S.rest_positions(obj), base))
+    e.location.z += 0.1
+    bpy.context.view_layer.update()
+    R.check("... and the next solve says so in the panel",
+            d.status_is_error and "'%s' does not exist" % name in d.status, d.status)
+
+
 def test_shape_key_bake_shows_at_once_and_frees():
     obj, d, e, handle = scene()
     lift(e, 6, 4)
@@ -545,7 +595,7 @@ def test_modal_bake_frames_solve_in_a_worker_thread():
             np.abs(got.ravel() - a[-1]).max())
 
 
-for t in (test_a_bake_never_overwrites_what_it_was_not_asked_to, test_factor_writes_and_edits_re_evaluate, test_option_change_rebinds_in_a_thread, test_modal_bake_frames_solve_in_a_worker_thread, test_group_change_rebinds_in_place_in_a_thread, test_falloff_reach_scales_with_the_model, test_point_cache_bake_shows_and_frees, test_shape_key_bake_shows_at_once_and_frees,
+for t in (test_groups_edited_by_a_script_are_seen_before_apply, test_a_bake_never_overwrites_what_it_was_not_asked_to, test_factor_writes_and_edits_re_evaluate, test_option_change_rebinds_in_a_thread, test_modal_bake_frames_solve_in_a_worker_thread, test_group_change_rebinds_in_place_in_a_thread, test_falloff_reach_scales_with_the_model, test_point_cache_bake_shows_and_frees, test_shape_key_bake_shows_at_once_and_frees,
           test_sidebar_and_handle_target, test_errors_with_a_way_out, test_keyed_factor_warns):
     R.run(t)
 R.finish()
