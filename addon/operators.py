@@ -22,6 +22,7 @@ def _get_object(op, context):
         raise solver.DeformKitError("no active object" if not name else
                                     "object '%s' not found" % name)
     solver.check_mesh_type(obj)
+    solver.check_editable(obj)
     return obj
 
 

@@ -248,6 +248,23 @@ def _settings_key(d):
             tuple((h.vertex_group, h.use_weights) for h in d.handles))
 
 
+def check_editable(obj):
+    """DeformKitError when `obj` or its mesh is linked from a library: nothing the add-on
+    writes (the deformer's settings, its result attribute, an applied mesh) can be stored
+    there, and Bind and Apply reported success having written nothing, Apply even removing
+    the deformer (the second hostile review)."""
+    lib = obj.library
+    if lib is not None:
+        raise DeformKitError("'%s' is linked from the library '%s': DeformKit cannot change it "
+                             "here (make it local: Object > Relations > Make Local)"
+                             % (obj.name, lib.name))
+    lib = getattr(obj.data, "library", None)
+    if lib is not None:
+        raise DeformKitError("the mesh '%s' of '%s' is linked from the library '%s': DeformKit "
+                             "cannot change it here (make it local: Object > Relations > Make "
+                             "Local > Object and Data)" % (obj.data.name, obj.name, lib.name))
+
+
 def group_names(obj, d):
     """The names of the vertex groups `d` reads (handles, region, fixed, material, cut)."""
     m = methods.get(d.method)

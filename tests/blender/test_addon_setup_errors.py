@@ -219,7 +219,32 @@ def test_add_handle_from_selection():
                  bpy.ops.deformkit.add_handle_from_selection, "Edit Mode")
 
 
-for t in (test_no_handles, test_missing_group, test_empty_group, test_no_target, test_overlap_fixed, test_handles_overlap,
+def test_linked_objects_are_refused():
+    """An object linked from another .blend (and an override whose mesh stays linked): Bind
+    and Apply reported success and wrote nothing, Apply removing the deformer (the second
+    hostile review). Every operator now refuses it by name, and nothing changes."""
+    obj, d, e, fixed, handle = fresh()
+    bpy.ops.deformkit.bind()
+    lib = os.path.join(S.OUTPUT, "setup_errors_library.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=lib)
+    name = obj.name
+    S.reset_scene()
+    with bpy.data.libraries.load(lib, link=True) as (src, dst):
+        dst.objects = [n for n in src.objects if n == name]
+    linked = dst.objects[0]
+    bpy.context.scene.collection.objects.link(linked)
+    bpy.context.view_layer.objects.active = linked
+    R.check("the object is linked", linked.library is not None)
+    n_def = len(linked.deformkit.deformers)
+    for label, op in (("Bind", bpy.ops.deformkit.bind), ("Apply", bpy.ops.deformkit.apply),
+                      ("Remove", bpy.ops.deformkit.remove_deformer),
+                      ("Add", lambda: bpy.ops.deformkit.add_deformer(method=MID))):
+        expect_error("%s on a linked object" % label, op, "is linked from the library")
+    R.check("nothing changed: the linked object keeps its deformer",
+            len(linked.deformkit.deformers) == n_def == 1)
+
+
+for t in (test_linked_objects_are_refused, test_no_handles, test_missing_group, test_empty_group, test_no_target, test_overlap_fixed, test_handles_overlap,
           test_deleted_target_after_bind, test_non_mesh, test_no_faces, test_topology_change,
           test_bind_reports_native_warnings,
           test_edit_mode_is_skipped, test_no_deformer, test_add_handle_from_selection):
