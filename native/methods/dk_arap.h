@@ -263,6 +263,12 @@ dk_status dk_arap_response_basis(const dk_arap *arap, double *out, dk_error *err
 /** Frees; NULL allowed. */
 void dk_arap_free(dk_arap *arap);
 
+/** The bytes a bind needs at its peak, its first solve included (dk_method.h,
+ *  dk_method_estimate_memory): the factor of the n-unknown system (fill ~ n log n). `options`
+ *  (may be NULL) changes nothing. DK_ERR_INVALID_ARGUMENT for a NULL mesh or bytes. */
+dk_status dk_arap_estimate_memory(const dk_mesh *mesh, const dk_arap_options *options,
+                                  uint64_t *bytes, dk_error *err);
+
 /** ARAP's table of the method contract (dk_method.h); options are a dk_arap_options. */
 extern const dk_method_ops dk_arap_ops;
 

@@ -136,6 +136,13 @@ void dk_eigen_stats(const dk_eigen *e, dk_method_stats *stats);
 /** Frees; NULL allowed. */
 void dk_eigen_free(dk_eigen *e);
 
+/** The bytes a bind needs at its peak, its first solve included (dk_method.h,
+ *  dk_method_estimate_memory): the K basis vectors (K the larger of n_eigenvectors, 300 when
+ *  automatic, and refine), the eigensolver's Krylov vectors and the Laplacian's factor.
+ *  `options` may be NULL (the defaults). DK_ERR_INVALID_ARGUMENT for a NULL mesh or bytes. */
+dk_status dk_eigen_estimate_memory(const dk_mesh *mesh, const dk_eigen_options *options,
+                                   uint64_t *bytes, dk_error *err);
+
 /** Eigen deformation's table of the method contract; options are a dk_eigen_options. */
 extern const dk_method_ops dk_eigen_ops;
 

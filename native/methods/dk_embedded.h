@@ -202,6 +202,15 @@ dk_status dk_embedded_embed(const dk_embedded *ed, const double *points, dk_inde
 /** Frees; NULL allowed. */
 void dk_embedded_free(dk_embedded *ed);
 
+/** The bytes a bind needs at its peak, its first solve included (dk_method.h,
+ *  dk_method_estimate_memory): per vertex its k weights and neighbours, and per node of the
+ *  graph J^T J's blocks and their Cholesky factor, which grow with k. The node count is
+ *  n_nodes, or, with a radius, the count a disk packing of that radius leaves on the
+ *  surface (capped by the vertices for nodes on vertices). `options` may be NULL (the
+ *  defaults). DK_ERR_INVALID_ARGUMENT for a NULL mesh or bytes. */
+dk_status dk_embedded_estimate_memory(const dk_mesh *mesh, const dk_embedded_options *options,
+                                      uint64_t *bytes, dk_error *err);
+
 /** Embedded deformation's table of the method contract; options are a
  *  dk_embedded_options. */
 extern const dk_method_ops dk_embedded_ops;

@@ -141,6 +141,12 @@ void dk_falloff_stats(const dk_falloff *f, dk_method_stats *stats);
 /** Frees; NULL allowed. */
 void dk_falloff_free(dk_falloff *f);
 
+/** The bytes a bind needs at its peak, its first solve included (dk_method.h,
+ *  dk_method_estimate_memory): a few arrays per vertex. `options` (may be NULL) changes
+ *  nothing. DK_ERR_INVALID_ARGUMENT for a NULL mesh or bytes. */
+dk_status dk_falloff_estimate_memory(const dk_mesh *mesh, const dk_falloff_options *options,
+                                     uint64_t *bytes, dk_error *err);
+
 /** Falloff's table of the method contract (dk_method.h); options are a dk_falloff_options. */
 extern const dk_method_ops dk_falloff_ops;
 

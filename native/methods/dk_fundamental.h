@@ -130,6 +130,14 @@ void dk_fundamental_stats(const dk_fundamental *f, dk_method_stats *stats);
 /** Frees; NULL allowed. */
 void dk_fundamental_free(dk_fundamental *f);
 
+/** The bytes a bind needs at its peak, its first solve included (dk_method.h,
+ *  dk_method_estimate_memory): the factor of the 7n-unknown system (fill ~ n log n).
+ *  `options` (may be NULL) changes nothing. DK_ERR_INVALID_ARGUMENT for a NULL mesh or
+ *  bytes. */
+dk_status dk_fundamental_estimate_memory(const dk_mesh *mesh,
+                                         const dk_fundamental_options *options,
+                                         uint64_t *bytes, dk_error *err);
+
 /** 1 when solves with transforms combine precomputed solutions (the transform basis: the
  *  result is affine in the transforms' entries, so bind solves once per entry and a solve
  *  is one n_unknowns x 4 n_handles x 3 product). Built at bind and rebind unless a

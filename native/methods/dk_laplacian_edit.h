@@ -190,6 +190,13 @@ void dk_laplacian_edit_get_counters(const dk_laplacian_edit *le, dk_laplacian_ed
 /** Frees; NULL allowed. */
 void dk_laplacian_edit_free(dk_laplacian_edit *le);
 
+/** The bytes a bind needs at its peak, its first solve included (dk_method.h,
+ *  dk_method_estimate_memory): as ARAP's, the factor of the n-unknown system. `options`
+ *  (may be NULL) changes nothing. DK_ERR_INVALID_ARGUMENT for a NULL mesh or bytes. */
+dk_status dk_laplacian_edit_estimate_memory(const dk_mesh *mesh,
+                                            const dk_laplacian_edit_options *options,
+                                            uint64_t *bytes, dk_error *err);
+
 /** Laplacian editing's table of the method contract (dk_method.h); options are a
  *  dk_laplacian_edit_options. */
 extern const dk_method_ops dk_laplacian_edit_ops;

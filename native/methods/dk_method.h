@@ -162,6 +162,10 @@ typedef struct dk_method_ops {
                         dk_error *err);
     void (*stats)(const void *self, dk_method_stats *stats);
     void (*free)(void *self);
+    /** The bytes a bind on `mesh` with `options` (NULL: the defaults) needs at its peak, its
+     *  first solve included (dk_method_estimate_memory). */
+    dk_status (*estimate_memory)(const dk_mesh *mesh, const void *options, uint64_t *bytes,
+                                 dk_error *err);
 } dk_method_ops;
 
 /** Every registered method, in a fixed order, terminated by NULL. Adding a method adds its
@@ -170,7 +174,8 @@ const dk_method_ops *const *dk_methods(void);
 
 /** Defines `const dk_method_ops VAR` for a method whose public functions follow the
  *  contract's names and argument order: PREFIX_bind(mesh, constraints, const OPTS *, TYPE **,
- *  err), PREFIX_rebind, PREFIX_solve, PREFIX_energy, PREFIX_stats and PREFIX_free, where TYPE
+ *  err), PREFIX_rebind, PREFIX_solve, PREFIX_energy, PREFIX_stats, PREFIX_free and
+ *  PREFIX_estimate_memory(mesh, const OPTS *, uint64_t *bytes, err), where TYPE
  *  is the method's object and OPTS its options struct. The generated adapters only convert
  *  `void *` to those types, so the table cannot drift from the typed functions. Use it once,
  *  at file scope, after the functions are declared; NAME and FLAGS as in dk_method_ops. */
@@ -202,6 +207,11 @@ const dk_method_ops *const *dk_methods(void);
     {                                                                                         \
         PREFIX##_free((TYPE *)self);                                                           \
     }                                                                                         \
+    static dk_status VAR##_estimate_memory(const dk_mesh *mesh, const void *options,          \
+                                           uint64_t *bytes, dk_error *err)                    \
+    {                                                                                         \
+        return PREFIX##_estimate_memory(mesh, (const OPTS *)options, bytes, err);              \
+    }                                                                                         \
     const dk_method_ops VAR = {.name = NAME,                                                  \
                                .flags = FLAGS,                                                \
                                .bind = VAR##_bind,                                            \
@@ -209,7 +219,8 @@ const dk_method_ops *const *dk_methods(void);
                                .solve = VAR##_solve,                                          \
                                .energy = VAR##_energy,                                        \
                                .stats = VAR##_stats,                                          \
-                               .free = VAR##_free}
+                               .free = VAR##_free,                                            \
+                               .estimate_memory = VAR##_estimate_memory}
 
 /** The registered method called `name`, or NULL. */
 const dk_method_ops *dk_method_find(const char *name);
@@ -241,14 +252,19 @@ dk_status dk_energy_result_check(double energy, const char *who, dk_error *err);
 }
 #endif
 /** The memory (bytes) a bind of method `ops` on `mesh` with `options` (the method's options
- *  struct, or NULL for its defaults) needs at its peak, including its first solve: a model
- *  fitted to measured peak RSS (memory_estimate.c; the ratios are in docs/benchmarks.md).
- *  It reads the vertex count and, where they change the size, the options: EigenDeformation
- *  n_eigenvectors and refine (K = the larger; the dense basis is K x n), EmbeddedDeformation
- *  k. The Cholesky factor is modelled here (fill ~ n log n) and checked exactly from the
- *  symbolic analysis (nnz(L)) before the numeric factorization. DK_ERR_INVALID_ARGUMENT for
- *  NULL arguments or a method without a model. */
+ *  struct, or NULL for its defaults) needs at its peak, including its first solve: each
+ *  method's own model (ops->estimate_memory, next to the method), fitted to measured peak
+ *  RSS (the ratios are in docs/benchmarks.md), read through dk_memory_model. Each reads the
+ *  vertex count and, where they change the size, the options (EigenDeformation's basis
+ *  size, EmbeddedDeformation's node count and k). A Cholesky factor is modelled (fill ~ n
+ *  log n) and checked exactly from the symbolic analysis (nnz(L)) before the numeric
+ *  factorization. DK_ERR_INVALID_ARGUMENT for NULL arguments. */
 dk_status dk_method_estimate_memory(const dk_method_ops *ops, const dk_mesh *mesh,
                                     const void *options, uint64_t *bytes, dk_error *err);
+
+/** The bytes of a bind whose measured peak is `per_vertex` bytes per vertex over
+ *  `n_vertices` plus `extra` bytes, with the margin every model carries (25%) and the small
+ *  per-object tables (8 MiB). For the methods' estimate_memory. */
+uint64_t dk_memory_model(double per_vertex, double n_vertices, double extra);
 
 #endif

@@ -1583,6 +1583,20 @@ void dk_laplacian_edit_free(dk_laplacian_edit *le)
 /* ---------------------------------------------------------------- the method contract --- */
 
 /* the contract's table (dk_method.h): the adapters cast to this method's types */
+dk_status dk_laplacian_edit_estimate_memory(const dk_mesh *mesh,
+                                            const dk_laplacian_edit_options *options,
+                                            uint64_t *bytes, dk_error *err)
+{
+    (void)options;
+    if (!mesh || !bytes)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "LaplacianEdit estimate_memory: mesh and bytes must not be NULL");
+    const double n = (double)mesh->n_vertices, lg = n > 2.0 ? log2(n) : 1.0;
+    /* measured 1950 B/vertex at 8k and 43k vertices, 2180-2450 at 692k (as ARAP) */
+    *bytes = dk_memory_model(1700.0 + 40.0 * lg, n, 0.0);
+    return DK_OK;
+}
+
 DK_METHOD_OPS(dk_laplacian_edit_ops, "LaplacianEdit",
               DK_METHOD_TRANSFORMS_AS_POSITIONS | DK_METHOD_TRANSLATION_INVARIANT,
               dk_laplacian_edit, dk_laplacian_edit, dk_laplacian_edit_options);
