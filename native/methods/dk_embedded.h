@@ -187,7 +187,8 @@ dk_status dk_embedded_deformed(const dk_embedded *ed, double *positions, dk_erro
  *  n' = sum_j w_j(v) R_j^-T n_v, renormalised. `normals` (n_vertices x 3) are the rest
  *  normals, or NULL for the mesh's area-weighted vertex normals. A node whose R is singular
  *  is left out of the sum (its inverse transpose does not exist). Writes `out`
- *  (n_vertices x 3; a zero vector where nothing is left). */
+ *  (n_vertices x 3; a zero vector where nothing is left). DK_ERR_NONFINITE, naming the
+ *  vertex, for a normal that is not finite. */
 dk_status dk_embedded_normals(const dk_embedded *ed, const double *normals, double *out,
                               dk_error *err);
 

@@ -1064,6 +1064,9 @@ dk_status dk_eigen_estimate_memory(const dk_mesh *mesh, const dk_eigen_options *
     if (!mesh || !bytes)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "EigenDeformation estimate_memory: mesh and bytes must not be NULL");
+    dk_status st = o ? check_options(o, mesh->n_vertices, err) : DK_OK; /* what bind refuses */
+    if (st != DK_OK)
+        return st;
     const double n = (double)mesh->n_vertices, lg = n > 2.0 ? log2(n) : 1.0;
     /* The K basis vectors (n doubles each; the eigensolver builds them in place), the band's
      * Krylov basis of 2 min(K, 50) + 1 vectors and its results of about min(K, 50) more

@@ -1689,6 +1689,13 @@ dk_status dk_embedded_normals(const dk_embedded *ed, const double *normals, doub
     const dk_index n = ed->n, k = ed->k;
     const dk_mesh *m = ed->mesh;
     double *rest = NULL;
+    if (normals) /* NaN normals came back as zero vectors (the second hostile review) */
+        for (size_t i = 0; i < 3 * (size_t)n; i++)
+            if (!isfinite(normals[i]))
+                return dk_error_set(err, DK_ERR_NONFINITE,
+                                    "EmbeddedDeformation normals: the normal of vertex %lld "
+                                    "is not finite",
+                                    (long long)(i / 3));
     if (!normals) { /* area-weighted vertex normals: the sum of the faces' cross products */
         rest = calloc(3 * (size_t)n + 1, sizeof *rest);
         if (!rest)
@@ -1883,6 +1890,9 @@ dk_status dk_embedded_estimate_memory(const dk_mesh *mesh, const dk_embedded_opt
         o = *options;
     else
         dk_embedded_default_options(&o);
+    dk_status st = check_options(&o, err); /* what bind refuses */
+    if (st != DK_OK)
+        return st;
     const double n = (double)mesh->n_vertices, k = o.k > 0 ? o.k : 4;
     /* the node count the bind will keep: n_nodes (at most the vertices), or for a radius r
      * the count a random disk packing leaves on the surface's area A, measured 0.51-0.65

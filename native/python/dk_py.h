@@ -57,6 +57,12 @@ typedef struct dk_py_doubles {
 int dk_py_read_doubles(PyObject *obj, Py_ssize_t rows, Py_ssize_t cols, const char *name,
                        dk_py_doubles *out);
 
+/** A flag argument: True or False, a numpy bool, or the ints 0 and 1. Anything else (a
+ *  string such as "no", None, 2) is a TypeError naming `name` and `context`: any truthy
+ *  object used to count as True (the second hostile review: preview="no" previewed).
+ *  Returns 0 with *value set, or -1. */
+int dk_py_strict_bool(PyObject *obj, const char *name, const char *context, int *value);
+
 /** A contiguous index array read from any int32/int64 (or other integer) buffer or sequence. */
 typedef struct dk_py_indices {
     dk_index *data;    /**< rows x cols, row-major; owned, free with _release              */

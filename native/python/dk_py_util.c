@@ -27,6 +27,46 @@ static int names_itself(const char *message, const char *context)
            (message[k] == ':' || message[k] == ' ');
 }
 
+int dk_py_strict_bool(PyObject *obj, const char *name, const char *context, int *value)
+{
+    if (PyBool_Check(obj)) {
+        *value = obj == Py_True;
+        return 0;
+    }
+    if (PyLong_Check(obj)) {
+        const long v = PyLong_AsLong(obj);
+        if (v == 0 || v == 1) {
+            *value = (int)v;
+            return 0;
+        }
+        PyErr_Clear();
+    } else {
+        /* numpy's bool scalar ("bool_" in numpy 1, "bool" in 2) is no Python bool */
+        PyObject *mod = PyObject_GetAttrString((PyObject *)Py_TYPE(obj), "__module__");
+        PyObject *qual = PyObject_GetAttrString((PyObject *)Py_TYPE(obj), "__name__");
+        int numpy_bool = 0;
+        if (mod && qual && PyUnicode_Check(mod) && PyUnicode_Check(qual))
+            numpy_bool = PyUnicode_CompareWithASCIIString(mod, "numpy") == 0 &&
+                         (PyUnicode_CompareWithASCIIString(qual, "bool_") == 0 ||
+                          PyUnicode_CompareWithASCIIString(qual, "bool") == 0);
+        Py_XDECREF(mod);
+        Py_XDECREF(qual);
+        PyErr_Clear();
+        if (numpy_bool) {
+            const int t = PyObject_IsTrue(obj);
+            if (t < 0)
+                return -1;
+            *value = t;
+            return 0;
+        }
+    }
+    PyObject *r = PyObject_Repr(obj);
+    PyErr_Format(PyExc_TypeError, "%s: %s must be True or False, got %s", context, name,
+                 r && PyUnicode_Check(r) ? PyUnicode_AsUTF8AndSize(r, NULL) : "?");
+    Py_XDECREF(r);
+    return -1;
+}
+
 PyObject *dk_py_raise(const dk_error *err, const char *context)
 {
     PyObject *type;

@@ -93,9 +93,10 @@ int dk_py_opt_bool(PyObject *kw, const char *key, int *value)
     PyObject *owned, *v = take(kw, key, &owned);
     if (!v)
         return PyErr_Occurred() ? -1 : 0;
-    int x = PyObject_IsTrue(v);
+    int x = 0;
+    const int r = dk_py_strict_bool(v, key, "option", &x);
     Py_DECREF(owned);
-    if (x < 0)
+    if (r < 0)
         return -1;
     *value = x;
     return 0;
@@ -434,6 +435,8 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
     const dk_py_method_spec *spec = self->spec;
     PyObject *targets = Py_None, *transforms = Py_None, *maxit_obj = Py_None;
     PyObject *start_obj = Py_None;
+    PyObject *warm_obj = Py_True, *resume_obj = Py_False, *energy_obj = Py_True,
+             *preview_obj = Py_False;
     PyObject *mine = NULL, *rest = NULL, *positions, *module;
     int warm = 1, resume = 0, want_energy = 1, maxit = 0, preview = 0, mode;
     dk_py_doubles in = {0}, start = {0};
@@ -450,13 +453,17 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
 
     memset(&pending, 0, sizeof pending);
     memset(&saved, 0, sizeof saved);
-    snprintf(fmt, sizeof fmt, "|OOpOpppO:solve");
+    snprintf(fmt, sizeof fmt, "|OOOOOOOO:solve");
     snprintf(ctx, sizeof ctx, "%s.solve", spec->name);
     if (split_keywords(kwargs, kwlist, &mine, &rest) < 0)
         return NULL;
     int ok = PyArg_ParseTupleAndKeywords(args, mine, fmt, kwlist, &targets, &transforms,
-                                         &warm, &maxit_obj, &resume, &want_energy, &preview,
-                                         &start_obj);
+                                         &warm_obj, &maxit_obj, &resume_obj, &energy_obj,
+                                         &preview_obj, &start_obj) &&
+             dk_py_strict_bool(warm_obj, "warm_start", ctx, &warm) == 0 &&
+             dk_py_strict_bool(resume_obj, "resume", ctx, &resume) == 0 &&
+             dk_py_strict_bool(energy_obj, "energy", ctx, &want_energy) == 0 &&
+             dk_py_strict_bool(preview_obj, "preview", ctx, &preview) == 0;
     Py_INCREF(targets);
     Py_INCREF(transforms);
     Py_DECREF(mine);

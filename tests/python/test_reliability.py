@@ -669,3 +669,65 @@ def test_getters_refuse_while_a_rebind_runs(name):
     assert seen
     after = {r: repr(getattr(obj, r)) for r in readers}  # readable again, and rebound
     assert after["n_handle_vertices"] == repr(len(other)) != before["n_handle_vertices"]
+
+
+# ---- the second hostile review: arguments that cannot work say so -------------------------
+
+@pytest.mark.parametrize("name", list(dk.METHODS))
+@pytest.mark.parametrize("flag", ["preview", "warm_start", "resume", "energy"])
+def test_a_flag_takes_a_bool_not_any_truthy_object(name, flag):
+    """solve's flags took any object by its truth: preview="no" previewed. True/False,
+    numpy bools and 0/1 are flags; a string, None or 2 is a TypeError naming the flag."""
+    v, f = make_grid(8)
+    cols = np.arange(len(v)) % 9
+    handle, fixed = np.flatnonzero(cols >= 7), np.flatnonzero(cols <= 1)
+    kw = {"n_eigenvectors": 8, "refine": 0} if name == "EigenDeformation" else {}
+    if name != "EigenDeformation":
+        kw["fixed"] = fixed
+    m = getattr(dk, name)(dk.Mesh(v, f), handles=[handle], **kw)
+    for bad in ("no", None, 2, "False"):
+        with pytest.raises(TypeError, match="%s must be True or False" % flag):
+            m.solve(v[handle], **{flag: bad})
+    for good in (False, np.bool_(False), 0):
+        m.solve(v[handle], **{flag: good})
+
+
+def test_nan_normals_are_refused():
+    """EmbeddedDeformation.normals(NaN) returned zero vectors; now a ValueError names the
+    vertex."""
+    v, f = make_grid(8)
+    cols = np.arange(len(v)) % 9
+    m = dk.EmbeddedDeformation(dk.Mesh(v, f), handles=[np.flatnonzero(cols >= 7)], n_nodes=10)
+    n = np.tile([0.0, 0.0, 1.0], (len(v), 1))
+    assert np.isfinite(np.asarray(m.normals(n))).all()
+    n[5, 1] = np.nan
+    with pytest.raises(ValueError, match="normal of vertex 5 is not finite"):
+        m.normals(n)
+
+
+BAD_OPTIONS = {
+    "ARAP": [{"tolerance": float("nan")}, {"tolerance": -1.0}, {"max_iterations": -5}],
+    "LaplacianEdit": [{"constraint_weight": -1.0}, {"tikhonov": float("nan")}],
+    "Falloff": [{"range": -1.0}, {"range": float("nan")}, {"k": float("inf")}],
+    "EmbeddedDeformation": [{"n_nodes": -1}, {"tolerance": float("nan")}, {"k": 0},
+                            {"w_reg": -1.0}, {"radius": float("nan")}],
+    "EigenDeformation": [{"n_eigenvectors": -1}, {"bsw_width": 0.0}, {"refine": -3}],
+    "LinearReconstruction": [{"w": -1.0}, {"w": float("nan")}],
+}
+
+
+@pytest.mark.parametrize("name", list(dk.METHODS))
+def test_estimate_memory_refuses_what_the_constructor_refuses(name):
+    """estimate_memory accepted options the constructor refused (n_nodes=-1, tolerance=nan,
+    ...) and estimated them (the second hostile review). For each bad option the estimate now
+    raises what the bind raises."""
+    v, f = make_grid(8)
+    mesh = dk.Mesh(v, f)
+    cols = np.arange(len(v)) % 9
+    handle = np.flatnonzero(cols >= 7)
+    cls = getattr(dk, name)
+    for bad in BAD_OPTIONS[name]:
+        with pytest.raises(ValueError):
+            cls(mesh, handles=[handle], **bad)
+        with pytest.raises(ValueError):
+            cls.estimate_memory(mesh, **bad)

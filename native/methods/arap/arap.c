@@ -440,10 +440,12 @@ dk_status dk_arap_response_basis(const dk_arap *ar, double *out, dk_error *err)
 dk_status dk_arap_estimate_memory(const dk_mesh *mesh, const dk_arap_options *options,
                                   uint64_t *bytes, dk_error *err)
 {
-    (void)options;
     if (!mesh || !bytes)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "ARAP estimate_memory: mesh and bytes must not be NULL");
+    dk_status st = options ? check_options(options, err) : DK_OK; /* what bind refuses */
+    if (st != DK_OK)
+        return st;
     const double n = (double)mesh->n_vertices, lg = n > 2.0 ? log2(n) : 1.0;
     /* measured 1950 B/vertex at 8k and 43k vertices, 2180-2450 at 692k */
     *bytes = dk_memory_model(1700.0 + 40.0 * lg, n, 0.0);
