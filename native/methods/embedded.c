@@ -638,9 +638,10 @@ static dk_status euclidean_weights(dk_embedded *ed, const unsigned char *todo,
         if (ns < k + 1) {
             st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                               "EmbeddedDeformation: the cut leaves %d nodes to the vertices of "
-                              "group %c, but k = %d needs at least %d (raise n_nodes or widen "
-                              "the groups)",
-                              (int)ns, side == 1 ? 'A' : 'B', (int)k, (int)k + 1);
+                              "group %c, but k = %d needs at least %d (raise n_nodes, widen "
+                              "the groups, or lower k to %d or less)",
+                              (int)ns, side == 1 ? 'A' : 'B', (int)k, (int)k + 1,
+                              (int)(ns > 1 ? ns - 1 : 1));
             goto done;
         }
     }
@@ -669,11 +670,25 @@ static dk_status weights(dk_embedded *ed, dk_error *err)
 {
     const dk_index n = ed->n, k = ed->k;
     const dk_embedded_options *o = &ed->opt;
-    if (ed->m < k + 1)
+    if (ed->m < k + 1) {
+        /* more nodes help only where the sampling can give them: n_nodes is capped by the
+         * vertices, so on a small mesh k is what to change (the second hostile review: the
+         * hint said "raise n_nodes", which could not help) */
+        const int more = o->radius > 0.0 ? 1 : o->n_nodes < n && ed->m < n;
+        if (ed->m < 2)
+            return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                                "EmbeddedDeformation: %d node, but k = %d needs at least %d "
+                                "(%s)",
+                                (int)ed->m, (int)k, (int)k + 1,
+                                more ? "raise n_nodes or lower the radius"
+                                     : "this mesh is too small for a graph");
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "EmbeddedDeformation: %d nodes, but k = %d needs at least %d "
-                            "(raise n_nodes or lower the radius)",
-                            (int)ed->m, (int)k, (int)k + 1);
+                            "(%slower k to %d or less)",
+                            (int)ed->m, (int)k, (int)k + 1,
+                            more ? "raise n_nodes or lower the radius, or " : "",
+                            (int)ed->m - 1);
+    }
     const int geodesic = o->distance == DK_ED_DISTANCE_GEODESIC, cut = o->n_cut_a > 0;
     if (geodesic && ed->mesh->n_faces == 0)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,

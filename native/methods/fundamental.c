@@ -999,9 +999,31 @@ static dk_status eliminate(const dk_fundamental *f, const dk_constraint_desc *de
             for (dk_index t = 0; col >= 0 && !at[0] && t < F; t++)
                 if (s->fu[t] >= 0 && col >= s->fu[t] && col < s->fu[t] + 3)
                     snprintf(at, sizeof at, " at the frame of face %d", (int)t);
-            dk_error_set(err, DK_ERR_NOT_POSITIVE_DEFINITE,
-                         "LinearReconstruction: the system is singular%s (constrained "
-                         "vertices on a line, or degenerate triangles around it)", at);
+            /* the likely cause first: the magnitudes of the material map or of w leave the
+             * system singular to rounding (the second hostile review: the message blamed the
+             * geometry when a material of 1e-14 was the cause) */
+            double lo = 1.0, hi = 1.0;
+            for (dk_index e = 0; f->material && e < f->mesh->n_edges; e++) {
+                lo = fmin(lo, f->material[e]);
+                hi = fmax(hi, f->material[e]);
+            }
+            const double w = f->opt.w;
+            if (hi / lo > 1e12)
+                dk_error_set(err, DK_ERR_NOT_POSITIVE_DEFINITE,
+                             "LinearReconstruction: the system is singular%s: the material map "
+                             "spans %g to %g, a ratio of %.3g, beyond what double precision "
+                             "resolves (keep it within 1e12, e.g. 1e-6 to 1e6)",
+                             at, lo, hi, hi / lo);
+            else if (w < 1e-12 || w > 1e12)
+                dk_error_set(err, DK_ERR_NOT_POSITIVE_DEFINITE,
+                             "LinearReconstruction: the system is singular%s: w = %g is too "
+                             "%s beside the edge terms for double precision (keep it within "
+                             "1e-12 to 1e12; 1, the default, weighs both alike)",
+                             at, w, w < 1e-12 ? "small" : "large");
+            else
+                dk_error_set(err, DK_ERR_NOT_POSITIVE_DEFINITE,
+                             "LinearReconstruction: the system is singular%s (constrained "
+                             "vertices on a line, or degenerate triangles around it)", at);
         } else if (st != DK_OK)
             dk_error_prefix(err, "LinearReconstruction");
     }

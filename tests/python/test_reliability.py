@@ -731,3 +731,35 @@ def test_estimate_memory_refuses_what_the_constructor_refuses(name):
             cls(mesh, handles=[handle], **bad)
         with pytest.raises(ValueError):
             cls.estimate_memory(mesh, **bad)
+
+
+def test_a_singular_linear_reconstruction_names_its_cause():
+    """LinearReconstruction blamed "constrained vertices on a line, or degenerate triangles"
+    when the material map's or w's magnitude made the system singular (the second hostile
+    review). The message now names the cause it can see."""
+    v, f = make_grid(12, 12, bump=0.1)
+    mesh = dk.Mesh(v, f)
+    cols = np.arange(len(v)) % 13
+    kw = dict(handles=[np.flatnonzero(cols >= 11)], fixed=np.flatnonzero(cols <= 1))
+    mat = np.ones(mesh.n_edges)
+    mat[: len(mat) // 2] = 1e-14
+    with pytest.raises(RuntimeError, match="material map spans 1e-14 to 1.*keep it within"):
+        dk.LinearReconstruction(mesh, material=mat, **kw)
+    with pytest.raises(RuntimeError, match="w = 1e-20 is too small"):
+        dk.LinearReconstruction(mesh, w=1e-20, **kw)
+    dk.LinearReconstruction(mesh, material=np.where(mat < 1, 1e-6, 1.0), **kw)  # within range
+
+
+def test_too_few_nodes_names_what_can_help():
+    """EmbeddedDeformation with fewer nodes than k + 1 said "raise n_nodes", which cannot
+    help where the nodes are already capped by the mesh's vertices (the second hostile
+    review): there it says to lower k."""
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    mesh = dk.Mesh(v, f)
+    with pytest.raises(ValueError, match=r"4 nodes, but k = 4 needs at least 5 \(lower k to 3"):
+        dk.EmbeddedDeformation(mesh, handles=[[0]], n_nodes=50)
+    dk.EmbeddedDeformation(mesh, handles=[[0]], n_nodes=50, k=3)
+    big, bf = make_grid(8)
+    with pytest.raises(ValueError, match="raise n_nodes or lower the radius, or lower k to 2"):
+        dk.EmbeddedDeformation(dk.Mesh(big, bf), handles=[[0]], n_nodes=3)
