@@ -59,7 +59,7 @@ class _Entry:
                  "groups", "last_inputs", "method_id", "verified", "pending", "pending_its",
                  "handles", "source", "preview_at", "material", "material_shown", "slice_cost",
                  "moved_at", "quick", "worker", "slice_ms", "graph_shown", "basis",
-                 "result_pos", "result_T", "preview_inputs", "warned", "last_cold")
+                 "result_pos", "result_T", "preview_inputs", "warned", "last_cold", "last_T")
 
 
 def mark_settings_changed():
@@ -701,6 +701,7 @@ class BindJob:
         e.basis, e.result_pos, e.result_T, e.preview_inputs = None, None, None, None
         e.warned = None  # bind_warnings
         e.last_cold = False  # whether the shown result is a cold solve's (solve())
+        e.last_T = None      # the handle transforms of the last written solve
         _cache[(obj.name, d.uid)] = e
         return e
 
@@ -1059,6 +1060,16 @@ def _entry_for(obj, d, check_groups, threaded=False, full_check=True):
 # matrix products (the bind pose re-computed, a target keyed back to where it was bound).
 _SNAP_LINEAR = 1e-6   # on the 3x3 part
 _SNAP_SHIFT = 1e-6    # on the translation, times the mesh's bounding-box diagonal
+
+
+def _within_rounding(T, U, extent):
+    """Whether handle transforms T and U differ by no more than float32 rounding: 1e-6 on the
+    3x3 parts, 1e-6 of the mesh's bounding-box diagonal on the translations (as
+    snap_identity)."""
+    dlt = np.abs(T - U)
+    return (dlt[:, :3, :3].max(initial=0.0) <= _SNAP_LINEAR
+            and dlt[:, :3, 3].max(initial=0.0) <= _SNAP_SHIFT * max(extent, 1e-30)
+            and not dlt[:, 3].any())
 
 
 def snap_identity(T, extent):
@@ -1489,6 +1500,12 @@ def _solve_inputs(obj, d, e, depsgraph):
     """The handle transforms, the animated input (methods that follow one, else None) and
     the bytes they make, which say whether anything changed since the last solve."""
     T = snap_identity(transforms(obj, d, depsgraph), e.extent)
+    last = e.last_T
+    if last is not None and last.shape == T.shape and _within_rounding(T, last, e.extent):
+        # the same placement seen through other float32 products (the object and its
+        # child target moved together): the last solve's, so that nothing is solved again
+        # (a warm iterative solve from its own result moves it by up to its tolerance)
+        T = last
     m = methods.get(d.method)
     if len(T) > len(e.handles):  # region_is_handle: the Region group moves with the first
         T = T[:len(e.handles)]
@@ -1535,7 +1552,7 @@ def _plan_solve(obj, d, e, key, T, source, inputs, cold, write, interactive, res
             kw[m.inner_iterations] = inner
         if resume:
             kw["resume"] = True
-    return dict(label=m.label, goal=goal, kw=kw, inputs=inputs, budgeted=budgeted,
+    return dict(label=m.label, goal=goal, kw=kw, inputs=inputs, T=T, budgeted=budgeted,
                 previewing=previewing, resume=resume, cap=cap, n_inner=n_inner, inner=inner,
                 write=write, cold=cold)
 
@@ -1584,6 +1601,7 @@ def _finish_solve(obj, d, e, key, plan, res, ms):
         write_offset(obj, d, off, retime=plan["cold"])
         e.last_inputs = plan["inputs"]
         e.last_cold = plan["cold"]
+        e.last_T = plan["T"]
         e.preview_inputs = None
         _written_at_undo[key] = _undo_serial[0]
     return pos
