@@ -354,11 +354,11 @@ METHODS.append(Method(
                "How strongly neighbouring nodes agree: raise it for smoother, more even "
                "bends; lower lets the nodes move more on their own", min=1e-6, max=1e6,
                advanced=True),
-        Option("w_con", "FLOAT", 100.0, "Handle Pull",
+        Option("w_con", "FLOAT", 2000.0, "Handle Pull",
                "How strongly the handles pull their vertices to the targets (handles are "
                "soft here): lower lets the shape lag behind the handles", min=1e-6, max=1e9,
                advanced=True),
-        Option("max_iterations", "INT", 30, "Max Iterations",
+        Option("max_iterations", "INT", 100, "Max Iterations",
                "Most Gauss-Newton steps one solve takes: raise it when the panel says 'not "
                "converged'", min=1, max=10000, advanced=True),
         Option("tolerance", "FLOAT", 1e-6, "Tolerance",
@@ -417,7 +417,9 @@ METHODS.append(Method(
     options=[
         Option("softness", "FLOAT", 1.0, "Softness",
                "How much more easily the Material group's painted areas fold (0: as built, "
-               "1: softest): paint where the surface should bend, an elbow",
+               "1: softest): paint where the surface should bend, an elbow. A gentle effect: "
+               "this method keeps lengths and bends as a whole, and the paint gathers about a "
+               "third more of a fold (for a sharp fold, ARAP with a Stiffness paint)",
                min=0.0, max=1.0, kw=None, shown_with="material_group"),
         Option("material_mode", "ENUM", "interpolate", "Material Paint",
                "How the Material group's weight paint becomes the material map",
@@ -506,29 +508,17 @@ def options_attr(method_id):
     return "options_" + method_id.lower()
 
 
-# The automatic Falloff range without a Fixed group (or for a handle that reaches none), as
-# a fraction of the bounding-box diagonal. The native default (10 edges) is ~7 cm on a 1 m
-# model of 43k vertices: the arm of the README's image became a stretched tube.
-FALLOFF_AUTO_DIAGONAL = 0.25
-
-
 def falloff_args(opts, rest, kw, mesh):
-    """Falloff's reach from the add-on's options. Range (a length) or Range (Edges), the one
-    the distance kind uses, when set; at 0 (the default) the automatic reach: with a Fixed
-    group each handle's distance to it in the same kind (reach='fixed': the pull fades out
-    exactly where the fixed part begins), else, and for a handle that reaches no fixed
-    vertex, FALLOFF_AUTO_DIAGONAL of the bounding-box diagonal (in edges: over the mean edge
-    length)."""
+    """Falloff's reach from the add-on's options: Range (a length) or Range (Edges), the one
+    the distance kind uses, when set (reach='range'); at 0 (the default) nothing, so the
+    native defaults apply, as from Python: each handle's distance to the Fixed group
+    (reach='fixed': the pull fades out exactly where the fixed part begins), else a quarter
+    of the bounding-box diagonal (dk_falloff.h, DK_FALLOFF_AUTO_RANGE)."""
     hops = opts.distance == "hops"
     given = opts.range_hops if hops else opts.range_length
     if given > 0:
         return {"range": float(given), "reach": "range"}
-    length = FALLOFF_AUTO_DIAGONAL * float(mesh.bbox_diagonal)
-    if hops:
-        length = max(1.0, round(length / max(float(mesh.mean_edge_length), 1e-30)))
-    fixed = kw.get("fixed")
-    return {"range": float(length),
-            "reach": "fixed" if fixed is not None and len(fixed) else "range"}
+    return {}
 
 
 def constructor_kwargs(method, opts):

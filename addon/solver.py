@@ -1438,6 +1438,11 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
             shown = _finish_solve(obj, d, e, key, plan_w, w.result, w.ms)
     if shown is not None and inputs == w.plan["inputs"]:
         return shown  # the worker's result is for the targets as they are
+    if write:
+        # Show Material follows its checkbox at once, not at the next solve (it showed
+        # nothing until the handle moved, and stayed after unticking: the second hostile
+        # review); show_material writes only on a change
+        show_material(obj, d, e)
     # unchanged inputs keep the shown result, except that a frame (cold) must show what a bake
     # of it writes: a cold solve's result, not a drag's warm, budgeted or preview one (the
     # second hostile review: ARAP 2.6e-5 of the diagonal off, EmbeddedDeformation 1e-3,

@@ -13,7 +13,9 @@
  *     with cotangent weights times the material map m_e: E_x's weight of edge e in
  *     triangle T is m_e cot(angle opposite e in T), E_f's weight of an interior edge is
  *     1 / (m_e (cot alpha + cot beta)); each cotangent clamped to [1e-2, 1e2] (see the docs).
- *     A softer material (m_e < 1) stretches more easily and bends less easily;
+ *     m_e > 1 stretches less easily and bends more easily: a fold gathers there (the
+ *     add-on's Softness). The paper calls m_e < 1 soft, but measured, that spreads a fold
+ *     away from the paint (docs/methods/fundamental.md, "Measured");
  *   - handle and fixed vertices are hard constraints and leave the unknowns; with
  *     orientation constraints, so are the frames of the faces whose three vertices belong to
  *     one handle (or are all fixed). The system is the same for the three coordinates: it is
@@ -66,7 +68,8 @@ typedef struct dk_fundamental_options {
                                     their faces (Wang, Liu & Tong's orientation
                                     constraints); default 0                               */
     const double *material;    /**< n_material = n_edges (the mesh's edge order), each > 0 and
-                                    finite: the material map m_e (1 = as built; < 1 softer);
+                                    finite: the material map m_e (1 = as built; > 1 folds
+                                    more easily there, < 1 resists folding);
                                     NULL = all 1. Copied at bind                           */
     dk_index n_material;       /**< entries of `material` (must be the mesh's edge count)   */
     dk_phase_progress_fn progress; /**< bind progress (dk_progress.h), NULL by default: the

@@ -95,7 +95,8 @@ typedef enum dk_le_basis {
 /** Options of one bind. Fill with dk_laplacian_edit_default_options, then change fields. */
 typedef struct dk_laplacian_edit_options {
     dk_le_weights weights;            /**< default COTANGENT                                */
-    dk_le_detail detail;              /**< default FIXED                                    */
+    dk_le_detail detail;              /**< default LOCAL_FRAME (the add-on's too: details
+                                           turn with the surface)                           */
     dk_le_constraint_mode constraints;/**< default HARD                                     */
     double constraint_weight;         /**< lambda > 0, finite; default 1                    */
     double tikhonov;                  /**< mu >= 0, finite; default 0                       */

@@ -55,9 +55,9 @@ void dk_falloff_default_options(dk_falloff_options *o)
 {
     if (!o)
         return;
-    o->distance = DK_FALLOFF_HOPS;
+    o->distance = DK_FALLOFF_EUCLIDEAN;
     o->range = 0.0;
-    o->reach = DK_FALLOFF_REACH_RANGE;
+    o->reach = DK_FALLOFF_REACH_FIXED;
     o->k = 0.0;
     o->heat_time_factor = 0.0;
     o->progress = NULL;
@@ -408,8 +408,12 @@ dk_status dk_falloff_bind(const dk_mesh *mesh, const dk_constraint_desc *desc,
         }
         f->unit = mesh->mean_edge_length;
     }
-    if (f->opt.range == 0.0)
-        f->opt.range = 10.0 * f->unit;
+    if (f->opt.range == 0.0) { /* a quarter of the model's size (hops: in mean edge lengths) */
+        const double len = DK_FALLOFF_AUTO_RANGE * mesh->bbox_diagonal;
+        f->opt.range = f->opt.distance == DK_FALLOFF_HOPS
+                           ? fmax(1.0, round(len / fmax(mesh->mean_edge_length, 1e-300)))
+                           : (len > 0.0 ? len : 10.0 * f->unit);
+    }
     {
         const int geo = f->opt.distance == DK_FALLOFF_GEODESIC;
         dk_progress_init(&prog, f->opt.progress, f->opt.progress_user,

@@ -114,6 +114,10 @@ enum { LE_PARALLEL_MIN = 8192 };
 
 /* Cosines of frame-neighbour candidates this close count as a tie (build_rest_frames). */
 #define LE_FRAME_TIE 1e-9
+/* Edge lengths within this fraction of each other tie too (then the vertex order decides):
+ * on a regular mesh equal lengths otherwise went to whichever rounding made longer, which
+ * differs when the whole scene is turned, and the frames with it (7e-4 of the ogre's size) */
+#define LE_LENGTH_TIE 1e-9
 
 /* ------------------------------------------------------------------ small helpers ------- */
 
@@ -165,7 +169,7 @@ void dk_laplacian_edit_default_options(dk_laplacian_edit_options *o)
     if (!o)
         return;
     o->weights = DK_LE_WEIGHTS_COTANGENT;
-    o->detail = DK_LE_DETAIL_FIXED;
+    o->detail = DK_LE_DETAIL_LOCAL_FRAME;
     o->constraints = DK_LE_CONSTRAINTS_HARD;
     o->constraint_weight = 1.0;
     o->tikhonov = 0.0;
@@ -410,8 +414,8 @@ static dk_status build_rest_frames(dk_laplacian_edit *le, dk_error *err)
          * c = |e.n| / (|e| |n|). Cosines within LE_FRAME_TIE of the smallest count as a
          * tie (a vertex in one triangle has two edges at c = 0, decided by rounding
          * otherwise, so by the order of the sums, i.e. by the vertex numbering); ties go to
-         * the longest edge (the better conditioned tangent), then to the caller's smaller
-         * vertex number. */
+         * the longest edge (the better conditioned tangent; lengths within LE_LENGTH_TIE
+         * tie), then to the caller's smaller vertex number. */
         for (int pass = 0; pass < 2; pass++) {
             double longest = -1.0;
             for (dk_index k = m->ring_start[i]; k < m->ring_start[i + 1]; k++) {
@@ -429,8 +433,9 @@ static dk_status build_rest_frames(dk_laplacian_edit *le, dk_error *err)
                 if (pass == 0) {
                     best = c < best ? c : best;
                 } else if (c <= best + LE_FRAME_TIE &&
-                           (el > longest ||
-                            (el == longest && le->ro->perm[j] < le->ro->perm[bestj]))) {
+                           (el > longest * (1.0 + LE_LENGTH_TIE) ||
+                            (el >= longest * (1.0 - LE_LENGTH_TIE) &&
+                             le->ro->perm[j] < le->ro->perm[bestj]))) {
                     longest = el;
                     bestj = j;
                 }

@@ -303,8 +303,8 @@ PyDoc_STRVAR(solve_doc,
 PyDoc_STRVAR(ed_doc,
              "EmbeddedDeformation(mesh, handles, fixed=None, roi=None, handle_weights=None,\n"
              "    stiffness=None, nodes='surface', n_nodes=200, radius=0.0, k=4,\n"
-             "    distance='euclidean', cut=None, w_rot=1.0, w_reg=10.0, w_con=100.0,\n"
-             "    tolerance=1e-6, max_iterations=30, seed=1, progress=None)\n\n"
+             "    distance='euclidean', cut=None, w_rot=1.0, w_reg=10.0, w_con=2000.0,\n"
+             "    tolerance=1e-6, max_iterations=100, seed=1, progress=None)\n\n"
              "Embedded deformation (Sumner, Schmid & Pauly 2007): a deformation graph of\n"
              "nodes sampled uniformly on the surface (or among the vertices), one affine\n"
              "transformation per node, each vertex moved by its k nearest nodes (in space, or\n"

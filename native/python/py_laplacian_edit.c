@@ -64,7 +64,7 @@ PyDoc_STRVAR(solve_doc,
 
 PyDoc_STRVAR(lap_doc,
              "LaplacianEdit(mesh, handles, fixed=None, roi=None, handle_weights=None,\n"
-             "              stiffness=None, weights='cotangent', detail='fixed',\n"
+             "              stiffness=None, weights='cotangent', detail='local_frame',\n"
              "              constraints='hard', constraint_weight=1.0, tikhonov=0.0,\n"
              "              local_frame_iterations=1, local_frame_tolerance=1e-6, basis='auto',\n"
              "              progress=None)\n\n"

@@ -117,6 +117,7 @@ static void test_distance_kinds(void)
             d.handle_sizes = &one;
             d.handle_vertices = &centre;
             dk_falloff_default_options(&o);
+            o.reach = DK_FALLOFF_REACH_RANGE;
             o.distance = (dk_falloff_distance)kind;
             o.k = ks[a];
             o.range = kind == DK_FALLOFF_HOPS ? 6.0 : 0.3;
@@ -195,6 +196,8 @@ static void test_groups_and_constraints(void)
     d.fixed_vertices = &fixed;
     dk_falloff_options o;
     dk_falloff_default_options(&o);
+    o.distance = DK_FALLOFF_HOPS;
+    o.reach = DK_FALLOFF_REACH_RANGE;
     o.range = 12; /* hops: columns 1..12 from each side, overlap in the middle */
     dk_falloff *f = NULL;
     dk_error e;

@@ -21,6 +21,7 @@ one handle cap:
 import importlib.util
 import math
 import os
+import re
 
 import numpy as np
 import pytest
@@ -129,7 +130,10 @@ def test_preview_is_fast_path_or_the_solve(name, scene):
     # solve does (to the method's tolerance)
     _, v, f, handles, fixed = scene
     T = [transform(rotation(0.3))] * len(handles)
-    a, b = bind(name, scene), bind(name, scene)
+    # a penalty method's Gauss-Newton stops anywhere within its tolerance's reach of the
+    # minimum (sqrt(1e-6) of the steps); tight, the two paths must meet
+    kw = {"tolerance": 1e-10} if info(name)["penalty_handles"] else {}
+    a, b = bind(name, scene, **kw), bind(name, scene, **kw)
     p = a.solve(transforms=T, preview=True)
     q = b.solve(transforms=T)
     assert np.isfinite(np.asarray(p.positions)).all()
@@ -411,3 +415,50 @@ def test_given_start(name, scene):
     else:
         b = m.solve(transforms=T, start_positions=noisy)
         assert np.array_equal(b.positions, a.positions)
+
+
+# The add-on's option defaults are the Python API's (the brief: "Python defaults and the
+# add-on's defaults agree"), as each class's docstring signature states them. Where they may
+# differ, the reason is listed here (the second hostile review found LaplacianEdit's detail
+# 'fixed' in Python and 'local_frame' in the add-on, Falloff's 10 hops against the add-on's
+# automatic reach, and LinearReconstruction's material read the other way round).
+DEFAULTS_MAY_DIFFER = {
+    # the add-on's Range options are two (a length, and edges for hops); 0 = automatic in
+    # both, which is the native range=0
+    ("FALLOFF", "range_length"), ("FALLOFF", "range_hops"),
+}
+
+
+def _docstring_defaults(cls):
+    sig = cls.__doc__.split("\n\n")[0]
+    out = {}
+    for m in re.finditer(r"(\w+)=('[^']*'|\"[^\"]*\"|[-+\w.]+)", sig):
+        out[m.group(1)] = m.group(2).strip("'\"")
+    return out
+
+
+def test_addon_defaults_are_the_python_defaults():
+    spec = importlib.util.spec_from_file_location("_addon_methods2",
+                                                  os.path.join(ROOT, "addon", "methods.py"))
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    checked = 0
+    for m in mod.METHODS:
+        doc = _docstring_defaults(getattr(dk, m.native_class))
+        for o in m.options:
+            kw = o.keyword
+            if kw is None or (m.id, o.name) in DEFAULTS_MAY_DIFFER or kw not in doc:
+                continue
+            want = doc[kw]
+            got = o.default
+            if isinstance(got, bool):
+                same = want == str(got)
+            elif isinstance(got, (int, float)):
+                same = (got == 0 and want in ("auto", "None")) or (
+                    want not in ("auto", "None") and float(want) == float(got))
+            else:
+                same = want == str(got)
+            assert same, "%s.%s: the add-on's default %r, Python's %r" % (
+                m.native_class, kw, got, want)
+            checked += 1
+    assert checked > 20

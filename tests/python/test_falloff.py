@@ -235,10 +235,17 @@ def test_reach_fixed_fades_out_where_the_fixed_part_begins():
             mid = free[np.argmin(np.abs(x[free] - 1.5))]
             assert 0.3 < S[mid] < 0.7, (distance, S[mid])     # half way: half the pull
         assert abs(ranges[0] - ranges[1]) < 1e-6 * ranges[0], (distance, ranges)
-    # default reach: the given range for every group; no fixed vertex reached: `range`
+    # reach="range": the given range for every group; no fixed vertex reached: `range`
     mesh = deformkit.Mesh(v, f)
-    assert np.asarray(deformkit.Falloff(mesh, handles=[hand], fixed=fixed, range=7.0).ranges)[0] == 7.0
+    assert np.asarray(deformkit.Falloff(mesh, handles=[hand], fixed=fixed, range=7.0,
+                                        reach="range").ranges)[0] == 7.0
     fo = deformkit.Falloff(mesh, handles=[hand], reach="fixed", range=5.0)
     assert np.asarray(fo.ranges)[0] == 5.0
+    # the defaults (the add-on's too): euclidean, reach="fixed", and without a fixed group a
+    # quarter of the bounding-box diagonal
+    d = np.asarray(deformkit.Falloff(mesh, handles=[hand], fixed=fixed).ranges)[0]
+    assert abs(d - np.asarray(deformkit.Falloff(mesh, handles=[hand], fixed=fixed, distance="euclidean", reach="fixed").ranges)[0]) == 0
+    assert abs(np.asarray(deformkit.Falloff(mesh, handles=[hand]).ranges)[0]
+               - 0.25 * mesh.bbox_diagonal) < 1e-12
     with pytest.raises(ValueError):
         deformkit.Falloff(mesh, handles=[hand], reach="nowhere")

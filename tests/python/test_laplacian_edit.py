@@ -131,7 +131,7 @@ def test_zero_drag_returns_rest(weights, detail, constraints):
 def test_hard_fixed_matches_reference_and_energy(weights):
     v, f, fixed, handle = grid_setup()
     mesh = deformkit.Mesh(v, f)
-    le = deformkit.LaplacianEdit(mesh, [handle], fixed=fixed, weights=weights)
+    le = deformkit.LaplacianEdit(mesh, [handle], fixed=fixed, weights=weights, detail="fixed")
     t = v[handle] + [-0.1, 0.05, 0.4]
     r = le.solve(t)
     x = r.positions
@@ -163,7 +163,7 @@ def test_membrane_soft_tikhonov_energies():
     # soft: handles with lambda, fixed with lambda (targets: rest)
     lam = 3.0
     r = deformkit.LaplacianEdit(mesh, [handle], fixed=fixed, constraints="soft",
-                                constraint_weight=lam).solve(t)
+                                constraint_weight=lam, detail="fixed").solve(t)
     x = r.positions
     e = float(np.sum((A @ x - A @ v) ** 2)) + lam ** 2 * (
         float(np.sum((x[handle] - t) ** 2)) + float(np.sum((x[fixed] - v[fixed]) ** 2)))
@@ -179,7 +179,8 @@ def test_membrane_soft_tikhonov_energies():
     assert np.abs(x[handle] - t).max() > 1e-6  # soft: not met exactly
     # tikhonov: + mu^2 ||x - x0||^2 over the unknowns
     mu = 0.5
-    r = deformkit.LaplacianEdit(mesh, [handle], fixed=fixed, tikhonov=mu).solve(t)
+    r = deformkit.LaplacianEdit(mesh, [handle], fixed=fixed, tikhonov=mu,
+                                detail="fixed").solve(t)
     x = r.positions
     free = np.setdiff1d(np.arange(n), np.r_[handle, fixed])
     e = float(np.sum((A @ x - A @ v) ** 2)) + mu ** 2 * float(np.sum((x[free] - v[free]) ** 2))
@@ -278,7 +279,8 @@ def test_local_frame_iterations_converge():
     # zero frame iterations is exactly the fixed-delta solution
     a = deformkit.LaplacianEdit(mesh, [handle], fixed=fixed, detail="local_frame",
                                 local_frame_iterations=0).solve(transforms=[T])
-    b = deformkit.LaplacianEdit(mesh, [handle], fixed=fixed).solve(transforms=[T])
+    b = deformkit.LaplacianEdit(mesh, [handle], fixed=fixed, detail="fixed").solve(
+        transforms=[T])
     assert np.abs(a.positions - b.positions).max() < 1e-12
 
 
@@ -375,7 +377,8 @@ def test_local_frame_matches_reference(iterations, tikhonov, bump):
             np.sum((r.positions[free] - v[free]) ** 2))
         assert r.energy == pytest.approx(e, rel=1e-9)
     # the reference really rotated the details (the test would not see a skipped update)
-    fixed_only = deformkit.LaplacianEdit(mesh, [handle], fixed=fixed, tikhonov=tikhonov)
+    fixed_only = deformkit.LaplacianEdit(mesh, [handle], fixed=fixed, tikhonov=tikhonov,
+                                         detail="fixed")
     assert np.abs(fixed_only.solve(tg).positions - ref).max() > 1e-3 * bbox
 
 
