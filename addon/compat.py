@@ -155,6 +155,21 @@ def line_shader():
     return _builtin_shader("POLYLINE_UNIFORM_COLOR", "3D_POLYLINE_UNIFORM_COLOR")
 
 
+def painting():
+    """Whether a paint stroke is running now (a modal PAINT_OT_* operator in a window): from
+    4.2, Window.modal_operators lists them; before, None (unknown)."""
+    wm = getattr(bpy.context, "window_manager", None)
+    if wm is None:
+        return False
+    if not len(wm.windows) or not hasattr(wm.windows[0], "modal_operators"):
+        return None
+    for win in wm.windows:
+        for op in win.modal_operators:
+            if getattr(op, "bl_idname", "").startswith(("PAINT_OT", "paint.")):
+                return True
+    return False
+
+
 def action_animates(action, path):
     """Whether `action` has an F-curve for the RNA `path` (any array index)."""
     fcs = getattr(action, "fcurves", None)

@@ -23,13 +23,21 @@
   Properties editor is redrawn whenever the set of pending solves changes.
 """
 
+import time
+
 import bpy
 from bpy.app.handlers import persistent
 
-from . import geonodes, solver
+from . import compat, geonodes, solver
 
 _busy = [False]
 enabled = [True]   # tests and the benchmark may switch automatic solving off
+# Weight Paint: every sample of a stroke changes a group, and re-binding on each (8 re-binds
+# and 41 ARAP solves for one 12-move stroke, the surface moving under the brush: the second
+# hostile review) is replaced by one re-bind once the stroke has settled: the objects whose
+# groups changed while painting, with the time of the last change (settle_paint)
+PAINT_SETTLE_S = 0.3
+_painted = {}
 # UI-style (time-budgeted) solves also under blender -b, where no timer runs: for the latency
 # benchmark, which then calls refine() itself
 force_interactive = [False]
@@ -81,6 +89,13 @@ def _run(scene, depsgraph, cold=False):
                 if obj.mode == "EDIT":
                     continue
             changed = (obj.name in geometry or ("mesh", obj.data.name) in geometry)
+            if changed and obj.mode == "WEIGHT_PAINT" and ui:
+                # a stroke's weights: keep the binding (and the surface) as it is until the
+                # stroke has settled, then re-bind once (settle_paint)
+                _painted[obj.name] = time.monotonic()
+                if not bpy.app.timers.is_registered(settle_paint):
+                    bpy.app.timers.register(settle_paint, first_interval=PAINT_SETTLE_S)
+                continue
             # re-read groups on every geometry update of the object, ours included: skipping
             # our own writes could hide a group edit made in the same update
             check = changed
@@ -129,6 +144,43 @@ def _claim_duplicates(objs):
         if len(holders) > 1:
             for obj, d in holders:
                 solver.ensure_own_uid(obj, d)
+
+
+def settle_paint():
+    """Timer: once no group of a painted object has changed for PAINT_SETTLE_S and no paint
+    stroke is running (4.2+ can tell), its deformers read their groups again: one re-bind
+    per stroke, in a worker thread as any group change. Returns the next interval, or None
+    when nothing is left."""
+    if not _painted:
+        return None
+    if compat.painting():
+        return PAINT_SETTLE_S / 3.0
+    now = time.monotonic()
+    due = [n for n, t in _painted.items() if now - t >= PAINT_SETTLE_S]
+    if not due:
+        return PAINT_SETTLE_S / 3.0
+    # as refine(): what is pending first with the handler live, then our writes guarded
+    _flush_updates()
+    _busy[0] = True
+    try:
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        for name in due:
+            _painted.pop(name, None)
+            obj = bpy.data.objects.get(name)
+            if obj is None or obj.type != "MESH":
+                continue
+            solver.evaluate_object(obj, depsgraph, check_groups=True, interactive=True,
+                                   check_topology=False)
+        _flush_updates()  # our writes only: the handler is guarded (_busy)
+    except Exception as ex:  # a timer must never raise
+        print("DeformKit paint error: %s: %s" % (type(ex).__name__, ex))
+    finally:
+        _busy[0] = False
+    if solver.rebinding() and not bpy.app.timers.is_registered(poll_rebinds):
+        bpy.app.timers.register(poll_rebinds, first_interval=0.05)
+    if solver.pending() and not bpy.app.timers.is_registered(refine):
+        bpy.app.timers.register(refine, first_interval=0.001)
+    return PAINT_SETTLE_S / 3.0 if _painted else None
 
 
 def refine():
@@ -256,7 +308,8 @@ def unregister():
                     and getattr(f, "__module__", "") == fn.__module__]:
             lst.remove(old)
     bpy.msgbus.clear_by_owner(geonodes._WATCH_OWNER)
-    for timer in (refine, poll_rebinds, _watch_after_register):
+    _painted.clear()
+    for timer in (refine, poll_rebinds, _watch_after_register, settle_paint):
         if bpy.app.timers.is_registered(timer):
             bpy.app.timers.unregister(timer)
     solver.clear_cache()

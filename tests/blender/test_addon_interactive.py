@@ -5,6 +5,7 @@ and undo/redo converging before they show. The UI path (timer, window) is in
 test_addon_modal.py and test_addon_undo.py; no timing is asserted here: the budget is set so
 small that no machine fits a full Newton step in it."""
 import os
+import time
 import sys
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _setup as S  # noqa: E402
@@ -70,6 +71,61 @@ def test_a_frame_after_a_drag_shows_what_a_bake_writes():
         err = np.abs(shown - bake).max() / size
         R.check("%s: the frame after a drag shows the bake's cold solve (%.1e of the size)"
                 % (m.id, err), err < 1e-6, err)
+
+
+def test_a_weight_paint_stroke_rebinds_once_and_keeps_the_surface():
+    """Painting a group a bound deformer reads: every sample of a stroke is a group change,
+    and each re-bound and re-solved (8 re-binds and 41 ARAP solves for one 12-move stroke,
+    the surface moving under the brush: the second hostile review). Now the stroke's changes
+    leave the binding and the surface as they are; once the stroke has settled
+    (handlers.settle_paint, a timer) the groups are read again: one re-bind."""
+    obj, d, e, fixed, handle, key = arap_grid(24, 12)
+    e.location = (1.0, 0.1, 0.3)
+    bpy.context.view_layer.update()
+    S.solver.finish(obj, d)
+    calls = {"rebind": 0}
+    real_build = S.solver._build
+
+    def counting_build(*a, **kw):
+        calls["rebind"] += 1
+        return real_build(*a, **kw)
+    S.solver._build = counting_build
+    try:
+        with budget(S.solver.INTERACTIVE_BUDGET_MS):
+            bpy.ops.object.mode_set(mode="WEIGHT_PAINT")
+            before = S.evaluated_positions(obj)
+            vg = obj.vertex_groups[d.fixed_group]
+            extra = [j * 24 + 2 for j in range(12)]   # the column next to the fixed ones
+            moved = 0.0
+            for i in range(12):                       # a stroke of 12 samples
+                vg.add([extra[i]], 1.0, "REPLACE")
+                bpy.context.view_layer.update()
+                moved = max(moved, float(np.abs(S.evaluated_positions(obj) - before).max()))
+            R.check("a stroke of 12 samples: no re-bind while it runs", calls["rebind"] == 0,
+                    calls)
+            R.check("... and the surface does not move under the brush (%.1e)" % moved,
+                    moved == 0.0)
+            time.sleep(S.handlers.PAINT_SETTLE_S + 0.05)
+            while S.handlers.settle_paint() is not None:
+                time.sleep(S.handlers.PAINT_SETTLE_S / 3)
+            for _ in range(200):                      # the re-bind's worker thread
+                if not S.solver.rebinding():
+                    break
+                time.sleep(0.02)
+            S.solver.finish_rebinds()
+            bpy.ops.object.mode_set(mode="OBJECT")
+            S.solver.finish(obj, d)
+        R.check("the stroke settled: one re-bind", calls["rebind"] == 1, calls)
+        T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
+        rest = S.rest_positions(obj)
+        want = S.dk.ARAP(S.dk.Mesh(rest, S.solver.triangles(obj.data)), [handle],
+                         fixed=np.r_[fixed, extra], tolerance=d.options.tolerance,
+                         max_iterations=d.options.max_iterations)
+        want = np.asarray(want.solve(transforms=T, warm_start=False).positions)
+        err = np.abs(S.evaluated_positions(obj) - want).max()
+        R.check("... and the result is the new groups' (%.1e)" % err, err < 1e-3)
+    finally:
+        S.solver._build = real_build
 
 def test_budget_arithmetic():
     """_budget: units that fit = budget / (a slice's time / its units), per kind of slice;
@@ -346,6 +402,7 @@ for t in (test_budget_arithmetic,) + (() if MOCK else (
         test_cheap_drag_step_converges_to_the_minimum, test_undo_converges_before_showing,
         test_refine_ticks_do_not_reread_groups_but_see_edits,
         test_slow_solves_run_in_a_worker_thread,
-        test_a_frame_after_a_drag_shows_what_a_bake_writes)):
+        test_a_frame_after_a_drag_shows_what_a_bake_writes,
+        test_a_weight_paint_stroke_rebinds_once_and_keeps_the_surface)):
     R.run(t)
 R.finish()
