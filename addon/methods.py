@@ -103,6 +103,13 @@ class Method:
     # True: the Region group, when set, is the region the handle moves (eigen deformation's
     # R) and goes to the native handles, with the first handle's transform
     region_is_handle: bool = False
+    # What the panel checks of a settled result, to say when this method cannot do the edit
+    # well (solver.fit_warning): "handles" (handles met approximately: how far the handle
+    # vertices are from their targets, against the move), "stretch" (a linear method: how
+    # many edges the result stretches by more than half), or None (nothing to say)
+    fit_check: Optional[str] = None
+    # ... and what the warning suggests instead (a method's label)
+    better_method: str = "ARAP"
     # True: the native constructor takes progress=callable(fraction) -> stop (fraction a
     # deformkit.BindProgress: a float with the phase's name in .phase); the UI bind shows
     # the phase and fraction, and Esc stops the native work at its next report
@@ -198,6 +205,7 @@ METHODS = [
     ),
     Method(
         id="LAPLACIAN",
+        fit_check="stretch",
         label="Laplacian Edit",
         native_class="LaplacianEdit",
         description="Laplacian surface editing: one linear solve per update",
@@ -250,6 +258,7 @@ METHODS = [
     ),
     Method(
         id="FALLOFF",
+        fit_check="stretch",
         label="Falloff",
         native_class="Falloff",
         description="Attenuated handle displacement by distance from the handle",
@@ -300,6 +309,7 @@ METHODS = [
 
 METHODS.append(Method(
     id="EMBEDDED",
+    fit_check="handles",
     label="Embedded Deformation",
     native_class="EmbeddedDeformation",
     description="Deformation graph (Sumner et al. 2007): a few hundred nodes carry the "
@@ -372,6 +382,7 @@ METHODS.append(Method(
 
 METHODS.append(Method(
     id="EIGEN",
+    fit_check="handles",
     label="Eigen Deformation",
     native_class="EigenDeformation",
     description="Eigen deformation (Dey, Ranjan & Wang): a smooth fit with the mesh's "
@@ -404,6 +415,7 @@ METHODS.append(Method(
 
 METHODS.append(Method(
     id="LINEAR_RECONSTRUCTION",
+    fit_check="stretch",
     label="Linear Reconstruction",
     native_class="LinearReconstruction",
     description="Linear reconstruction from discrete fundamental forms (Wang, Liu & Tong; "

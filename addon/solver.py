@@ -59,7 +59,8 @@ class _Entry:
                  "groups", "last_inputs", "method_id", "verified", "pending", "pending_its",
                  "handles", "source", "preview_at", "material", "material_shown", "slice_cost",
                  "moved_at", "quick", "worker", "slice_ms", "graph_shown", "basis",
-                 "result_pos", "result_T", "preview_inputs", "warned", "last_cold", "last_T")
+                 "result_pos", "result_T", "preview_inputs", "warned", "last_cold", "last_T",
+                 "fit_for", "fit_text")
 
 
 def mark_settings_changed():
@@ -702,6 +703,7 @@ class BindJob:
         e.warned = None  # bind_warnings
         e.last_cold = False  # whether the shown result is a cold solve's (solve())
         e.last_T = None      # the handle transforms of the last written solve
+        e.fit_for, e.fit_text = None, None   # fit_warning's cache
         _cache[(obj.name, d.uid)] = e
         return e
 
@@ -1610,6 +1612,52 @@ def _finish_solve(obj, d, e, key, plan, res, ms):
         e.preview_inputs = None
         _written_at_undo[key] = _undo_serial[0]
     return pos
+
+
+# fit_warning's thresholds: handles off by more than this part of their move, or more than
+# this part of the edges stretched (or shrunk) by more than half
+FIT_HANDLE_PART = 0.02
+FIT_STRETCH_PART = 0.01
+
+
+def fit_warning(obj, d):
+    """What the panel says when the method cannot do this edit well, with the method that
+    can (Method.fit_check, better_method), or None. Read from the last settled result (none
+    while refining or previewing), computed once per result: "handles" how far the handle
+    vertices are from their targets against the move, "stretch" how many edges changed
+    length by more than half. The second hostile review: Eigen Deformation's spike, the
+    linear methods' swelling, shown as if they were fine."""
+    m = methods.get(d.method)
+    e = _cache.get((obj.name, d.uid))
+    if (not m.fit_check or e is None or e.result_pos is None or e.result_T is None
+            or e.pending or not d.bound):
+        return None
+    if e.fit_for is e.result_pos:
+        return e.fit_text
+    pos, T, src = e.result_pos, e.result_T, e.rest
+    text = None
+    if m.fit_check == "handles":
+        worst = move = 0.0
+        for idx, Ti in zip(e.handles, T):
+            want = src[idx] @ Ti[:3, :3].T + Ti[:3, 3]
+            worst = max(worst, float(np.linalg.norm(pos[idx] - want, axis=1).max()))
+            move = max(move, float(np.linalg.norm(want - src[idx], axis=1).max()))
+        if move > 1e-3 * max(e.extent, 1e-30) and worst > FIT_HANDLE_PART * move:
+            text = ("%s meets its handles approximately: here %.0f%% of the move off the "
+                    "target. %s meets them exactly" % (m.label, 100.0 * worst / move,
+                                                        m.better_method))
+    else:
+        ed = np.asarray(e.dkmesh.edges)
+        a = np.linalg.norm(src[ed[:, 0]] - src[ed[:, 1]], axis=1)
+        b = np.linalg.norm(pos[ed[:, 0]] - pos[ed[:, 1]], axis=1)
+        ok = a > 0
+        bad = int((np.abs(b[ok] / a[ok] - 1.0) > 0.5).sum())
+        if bad > FIT_STRETCH_PART * max(int(ok.sum()), 1):
+            text = ("%s changes %s by more than half for this move: it moves the surface "
+                    "without turning it, and stretches what should turn. %s keeps the "
+                    "shape" % (m.label, plural(bad, "edge length"), m.better_method))
+    e.fit_for, e.fit_text = pos, text
+    return text
 
 
 def solve_summary(obj, d):

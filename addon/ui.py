@@ -175,6 +175,9 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
         summary = solver.solve_summary(obj, d)
         if summary:
             layout.label(text=summary, icon="TIME")
+        fit = solver.fit_warning(obj, d) if d.bound else None
+        if fit:
+            draw_wrapped(layout, fit, "INFO", width)
         if d.bound and solver.refining(obj, d):
             layout.label(text="refining\u2026", icon="SORTTIME")
         row = layout.row(align=True)

@@ -257,6 +257,30 @@ def test_groups_edited_by_a_script_are_seen_before_apply():
             d.status_is_error and "'%s' does not exist" % name in d.status, d.status)
 
 
+def test_the_panel_says_when_a_method_cannot_do_the_edit():
+    """Where a method cannot do an edit well, the panel says so and names the method that can
+    (the second hostile review: Eigen Deformation's spike and the linear methods' swelling
+    were shown as if fine): a Falloff drag that stretches edges by more than half, an Eigen
+    Deformation fit whose handle is off its target; ARAP's result has nothing to say."""
+    said = {}
+    for mid in ("ARAP", "FALLOFF", "EIGEN"):
+        S.reset_scene()
+        obj, d, e, fixed, handle = S.grid_setup(mid, nx=24, ny=8)
+        bpy.ops.deformkit.bind()
+        e.location.z += 1.0
+        bpy.context.view_layer.update()
+        S.solver.finish(obj, d)
+        said[mid] = text(draw(ui.DEFORMKIT_PT_modifiers, obj))
+    R.check("ARAP: no warning about the fit", "ARAP keeps" not in said["ARAP"]
+            and "meets its handles approximately" not in said["ARAP"], said["ARAP"])
+    R.check("Falloff stretching edges: the panel says so and suggests ARAP",
+            "by more than half" in said["FALLOFF"] and "ARAP keeps the shape" in said["FALLOFF"],
+            said["FALLOFF"])
+    R.check("Eigen Deformation off its handle: the panel says how far and suggests ARAP",
+            "meets its handles approximately" in said["EIGEN"]
+            and "ARAP meets them exactly" in said["EIGEN"], said["EIGEN"])
+
+
 def test_shape_key_bake_shows_at_once_and_frees():
     obj, d, e, handle = scene()
     lift(e, 6, 4)
@@ -595,7 +619,7 @@ def test_modal_bake_frames_solve_in_a_worker_thread():
             np.abs(got.ravel() - a[-1]).max())
 
 
-for t in (test_groups_edited_by_a_script_are_seen_before_apply, test_a_bake_never_overwrites_what_it_was_not_asked_to, test_factor_writes_and_edits_re_evaluate, test_option_change_rebinds_in_a_thread, test_modal_bake_frames_solve_in_a_worker_thread, test_group_change_rebinds_in_place_in_a_thread, test_falloff_reach_scales_with_the_model, test_point_cache_bake_shows_and_frees, test_shape_key_bake_shows_at_once_and_frees,
+for t in (test_the_panel_says_when_a_method_cannot_do_the_edit, test_groups_edited_by_a_script_are_seen_before_apply, test_a_bake_never_overwrites_what_it_was_not_asked_to, test_factor_writes_and_edits_re_evaluate, test_option_change_rebinds_in_a_thread, test_modal_bake_frames_solve_in_a_worker_thread, test_group_change_rebinds_in_place_in_a_thread, test_falloff_reach_scales_with_the_model, test_point_cache_bake_shows_and_frees, test_shape_key_bake_shows_at_once_and_frees,
           test_sidebar_and_handle_target, test_errors_with_a_way_out, test_keyed_factor_warns):
     R.run(t)
 R.finish()
