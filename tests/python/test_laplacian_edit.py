@@ -315,14 +315,15 @@ def reference_local_frame(v, f, A, constrained, values, iterations, mu=0.0):
     nrm0 = normals(v)
 
     def frame_neighbour(i):
-        # the most orthogonal edge; cosines within 1e-9 tie, ties to the longest edge, then
-        # to the smallest vertex number
+        # the most orthogonal edge; cosines within 1e-9 tie, ties to the longest edge
+        # (lengths within a relative 1e-9 tie), then to the smallest vertex number
         js = np.array(ring[i])
         e = v[js] - v[i]
         el = np.linalg.norm(e, axis=1)
         c = np.abs(e @ nrm0[i]) / (el * np.linalg.norm(nrm0[i]))
         cand = np.flatnonzero(c <= c.min() + 1e-9)
-        return int(js[cand[np.lexsort((js[cand], -el[cand]))[0]]])
+        cand = cand[el[cand] >= el[cand].max() * (1.0 - 1e-9)]
+        return int(js[cand].min())
 
     nb = np.array([frame_neighbour(i) for i in range(n)])
     delta0 = A @ v
