@@ -66,6 +66,14 @@ dk_status dk_harmonic_interpolation(const dk_mesh *mesh, const dk_index *painted
                                     const double *values, dk_index n_painted, double fallback,
                                     double *u_vertex, double *u_edge, dk_error *err);
 
+/** dk_harmonic_interpolation for `n_columns` (>= 1) sets of painted values at once, with one
+ *  factorization: `values` is n_painted x n_columns and `u` n_vertices x n_columns, both
+ *  column-major. */
+dk_status dk_harmonic_interpolation_columns(const dk_mesh *mesh, const dk_index *painted,
+                                            const double *values, dk_index n_painted,
+                                            int n_columns, double fallback, double *u,
+                                            dk_error *err);
+
 /* ---------------------------------------------------------------- mass matrices -------- */
 
 /** Lumped mass matrix kinds (diagonal, one entry per vertex). */
