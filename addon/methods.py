@@ -101,8 +101,10 @@ class Method:
     # the handles have stopped for PREVIEW_SETTLE_S
     preview: dict = field(default_factory=dict)
     # True: the Region group, when set, is the region the handle moves (eigen deformation's
-    # R) and goes to the native handles, with the first handle's transform
+    # R) and goes to the native handles, with the first handle's transform; region_kw: the
+    # bind keywords that say so to the native class
     region_is_handle: bool = False
+    region_kw: dict = field(default_factory=dict)
     # What the panel checks of a settled result, to say when this method cannot do the edit
     # well (solver.fit_warning): "handles" (handles met approximately: how far the handle
     # vertices are from their targets, against the move), "stretch" (a linear method: how
@@ -386,11 +388,12 @@ METHODS.append(Method(
     label="Eigen Deformation",
     native_class="EigenDeformation",
     description="Eigen deformation (Dey, Ranjan & Wang): a smooth fit with the mesh's "
-                "Laplace-Beltrami eigenvectors moves the handle's region, and the details "
-                "are added back in local frames",
+                "Laplace-Beltrami eigenvectors moves the part each handle drags (or the "
+                "Region group), and the details are added back in local frames",
     icon="MOD_WAVE",
     preview={"preview": True},
     region_is_handle=True,
+    region_kw={"region": "handles"},
     bind_progress=True,
     options=[
         Option("n_eigenvectors", "INT", 0, "Bend Shapes",

@@ -373,7 +373,10 @@ def collect(obj, d):
                                % (d.roi_group, d.fixed_group, len(both)),
                                d.roi_group, d.fixed_group)
         handles, roi = [roi], None
-    kw = dict(handles=handles, fixed=fixed, roi=roi)
+        kw = dict(m.region_kw)
+    else:
+        kw = {}
+    kw.update(handles=handles, fixed=fixed, roi=roi)
     if "stiffness" in m.maps and d.material_group:
         idx, w = groups[d.material_group]
         s = np.ones(len(obj.data.vertices))
@@ -394,6 +397,7 @@ def collect(obj, d):
         for x in (fixed, roi, kw.get("stiffness")) + kw.get("cut", ())
         + kw.get("material_paint", ()))
     key += b"|" + b"".join(w.tobytes() for w in kw.get("handle_weights", []))
+    key += b"|" + repr(sorted((k, x) for k, x in kw.items() if isinstance(x, str))).encode()
     return kw, key
 
 
@@ -1164,6 +1168,12 @@ def refining(obj, d):
     its time budget (or a preview shown) and the refine timer has not converged it yet."""
     e = _cache.get((obj.name, d.uid))
     return e is not None and e.pending and bool(d.bound)
+
+
+def previewing(obj, d):
+    """True while d shows a preview (Method.preview) that its full result will replace."""
+    e = _cache.get((obj.name, d.uid))
+    return e is not None and e.pending and e.preview_at > 0.0 and bool(d.bound)
 
 
 def drop_pending(key):

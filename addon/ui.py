@@ -178,7 +178,10 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
         fit = solver.fit_warning(obj, d) if d.bound else None
         if fit:
             draw_wrapped(layout, fit, "INFO", width)
-        if d.bound and solver.refining(obj, d):
+        if solver.previewing(obj, d):
+            layout.label(text="preview: the full result follows when the handles stop",
+                         icon="SORTTIME")
+        elif d.bound and solver.refining(obj, d):
             layout.label(text="refining\u2026", icon="SORTTIME")
         row = layout.row(align=True)
         row.operator("deformkit.apply", text="Apply").mode = "MESH"

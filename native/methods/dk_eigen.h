@@ -21,11 +21,14 @@
  *          m < n' the two-iteration scheme of section 4.3 (interpolation-based recovery to
  *          K~_n', a re-fit with n' eigenvectors, local-frame recovery).
  *
- * Constraints (the method contract): each handle group is a region R_g that the user moves;
- * together they are R. Every other vertex keeps its skeleton position in eq. 1 (the paper
- * has no fixed set: the fixed vertices are simply outside R). Handle weights and a region of
- * interest are refused (a region moves as a whole). Targets given as transforms are the
- * paper's rotation-type motion (T applied to R's skeleton points and, in the
+ * Constraints (the method contract): R, the region that moves, is made of groups, each with
+ * its own motion: per handle, the part of the mesh it drags (turned about the part's border
+ * so that the handle reaches its target) and the handle group itself (region
+ * DK_EIGEN_REGION_PART, the default; eigen_part.h), or the handle groups alone
+ * (DK_EIGEN_REGION_HANDLES). Every other vertex keeps its skeleton position in eq. 1 (the
+ * paper has no fixed set: the fixed vertices are simply outside R). Handle weights and a
+ * region of interest are refused (a region moves as a whole). Targets given as transforms
+ * are the paper's rotation-type motion (T applied to the group's skeleton points and, in the
  * transformation-based details, T's linear part to the detail vectors); targets given as
  * positions move each skeleton point by its vertex's displacement (translation-type, per
  * vertex). The least-squares fit meets neither exactly: the flag DK_METHOD_SOFT_REGIONS.
@@ -59,13 +62,27 @@ typedef enum dk_eigen_laplacian {
                                        nearest vertices in space                            */
 } dk_eigen_laplacian;
 
+/** What each handle moves (the region R of the paper). */
+typedef enum dk_eigen_region {
+    DK_EIGEN_REGION_PART = 0,    /**< the part the handle drags: the free vertices whose
+                                      harmonic field (1 on the handle, 0 on the other handles
+                                      and the fixed vertices) is the handle's and above one
+                                      half, turned about the border of the part so that the
+                                      handle's centroid reaches its target, the handle
+                                      following its own targets (eigen_part.h). Default      */
+    DK_EIGEN_REGION_HANDLES = 1  /**< the handle groups alone, moved to their targets: the
+                                      paper's R when the user selects it as a handle group  */
+} dk_eigen_region;
+
 /** Options; fill with dk_eigen_default_options. */
 typedef struct dk_eigen_options {
     int n_eigenvectors;      /**< m; 0 = automatic (section 4.2: 8, 50 or 300 from
-                                  delta_3 = diam R / diam(V \ R)). Default 0             */
+                                  delta_3 = diam R / diam(V \ R), plus one per connected
+                                  surface beyond the first). Default 0                    */
     int refine;              /**< n' of the two-iteration scheme (section 4.3), used when
                                   m < n'; 0 = one iteration always. Default 300           */
     dk_eigen_laplacian laplacian; /**< default DK_EIGEN_COTANGENT                         */
+    dk_eigen_region region;  /**< what each handle moves; default DK_EIGEN_REGION_PART       */
     double bsw_width;        /**< Belkin-Sun-Wang: sqrt(4h), the kernel's width, in mean edge
                                   lengths (> 0; default 1)                                */
     dk_phase_progress_fn progress; /**< bind progress in named phases (dk_progress.h):

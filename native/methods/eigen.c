@@ -11,6 +11,7 @@
 #include "dk_eigs.h"
 #include "dk_operators.h"
 #include "dk_sparse.h"
+#include "eigen_part.h"
 
 /* Below this many vertices (or when K is a large share of n) the eigenpairs come from a dense
  * solve: ARPACK wants K well below n, and the tests need all n of them. */
@@ -27,6 +28,24 @@ typedef struct level {
     dk_index *frame_nb; /* n: the neighbour whose edge gives the frame, -1: no valid frame */
 } level;
 
+/* What the constraints give: replaced as a whole by rebind. */
+typedef struct eigen_regions {
+    dk_constraints *user;    /* the caller's constraints, for region PART (NULL: HANDLES,
+                                where they are con)                                         */
+    eigen_parts parts;       /* PART: the groups each handle drags (eigen_part.h)           */
+    dk_constraints *con;     /* the groups R is made of                                     */
+    dk_index *region;        /* n: the group, or -1 outside R                               */
+    double *g, *w;           /* n: distance to the boundary of R; interpolation weight     */
+    double delta3;
+    /* the last request: per group the linear part of its motion (identity for targets given
+     * as positions: the paper's translation-type motion, per vertex), and the Step-1 targets
+     * of R's vertices */
+    double *lin;             /* con->n_handles x 9                                          */
+    double *target;          /* con->n_handle_vertices x 3                                  */
+    double *utarget;         /* PART: user->n_handle_vertices x 3, the caller's targets     */
+    double *uT, *gT;         /* PART: the handles' and the groups' transforms (x 16)        */
+} eigen_regions;
+
 struct dk_eigen {
     const dk_mesh *mesh;
     dk_eigen_options opt;
@@ -36,16 +55,7 @@ struct dk_eigen {
     double *evals, *U;       /* K; n x K column-major                                      */
     double *chol;            /* K x K column-major, upper: Phi_K = R^T R                   */
     level lv[2];
-    /* the regions */
-    dk_constraints *con;
-    dk_index *region;        /* n: handle group, or -1 outside R                           */
-    double *g, *w;           /* n: distance to the boundary of R; interpolation weight     */
-    double delta3;
-    /* the last request: per handle, the linear part and translation (transforms), and the
-     * Step-1 targets of R's vertices (for the energy) */
-    double *lin;             /* n_handles x 9                                               */
-    int per_vertex;          /* 1: targets were positions (translation-type per vertex)    */
-    double *target;          /* n_handle_vertices x 3                                       */
+    eigen_regions r;         /* the regions and the last request's targets                  */
     int preview;             /* dk_eigen_set_preview                                        */
     /* scratch, allocated at bind */
     double *ptil, *pstar, *normals, *b, *next;
@@ -64,6 +74,7 @@ void dk_eigen_default_options(dk_eigen_options *o)
     o->n_eigenvectors = 0;
     o->refine = 300;
     o->laplacian = DK_EIGEN_COTANGENT;
+    o->region = DK_EIGEN_REGION_PART;
     o->bsw_width = 1.0;
 }
 
@@ -474,32 +485,32 @@ static void record_frames(const dk_eigen *e, level *L, double *nrm)
 /* ------------------------------------------------------------------ regions ------------ */
 
 /* 2. R, its boundary, g (Dijkstra from the boundary), w (section 4.1) and delta_3 (4.2). */
-static dk_status regions(dk_eigen *e, const dk_constraint_desc *desc, dk_constraints **con,
-                         dk_index *region, double *g, double *w, double *delta3, dk_error *err)
+/* What the method does not use, refused rather than ignored. */
+static dk_status refuse_unused(const dk_constraint_desc *desc, dk_error *err)
 {
-    const dk_mesh *mesh = e->mesh;
-    const dk_index n = e->n;
-    if (desc && desc->n_roi > 0)
+    if (desc->n_roi > 0)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "EigenDeformation: no region of interest (roi) is used: the region "
-                            "R is the handle groups, the part that moves");
-    if (desc && desc->handle_weights)
+                            "R is what the handles move");
+    if (desc->handle_weights)
         for (int64_t i = 0, tot = 0; i < desc->n_handles; tot += desc->handle_sizes[i], i++)
             for (dk_index k = 0; k < desc->handle_sizes[i]; k++)
                 if (desc->handle_weights[tot + k] != 1.0)
                     return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                                         "EigenDeformation: handle weights are not used (a "
                                         "region moves as a whole): leave them at 1");
-    dk_status st = dk_constraints_create(mesh, desc, con, err);
-    if (st != DK_OK)
-        return dk_error_prefix(err, "EigenDeformation");
-    const dk_constraints *c = *con;
+    return DK_OK;
+}
+
+/* g, w and delta3 of R (the vertices with region >= 0). */
+static dk_status distances(const dk_mesh *mesh, eigen_regions *R, dk_error *err)
+{
+    const dk_index n = mesh->n_vertices;
+    const dk_index *region = R->region;
+    double *g = R->g, *w = R->w;
     dk_index *src = malloc(((size_t)n + 1) * sizeof *src), ns = 0;
     if (!src)
         return oom(err, "regions");
-    for (dk_index v = 0; v < n; v++) {
-        region[v] = c->role[v] >= 0 ? c->role[v] : -1;
-    }
     for (dk_index v = 0; v < n; v++) { /* in R, with a neighbour outside: the boundary */
         if (region[v] < 0)
             continue;
@@ -509,6 +520,7 @@ static dk_status regions(dk_eigen *e, const dk_constraint_desc *desc, dk_constra
                 break;
             }
     }
+    dk_status st = DK_OK;
     if (ns > 0) {
         st = dk_geodesic_dijkstra(mesh, src, ns, g, err);
     } else {
@@ -538,7 +550,86 @@ static dk_status regions(dk_eigen *e, const dk_constraint_desc *desc, dk_constra
         else
             w[v] = (d2 - g[v]) / (d2 - d1);
     }
-    *delta3 = diam_out > 0.0 ? diam_r / diam_out : INFINITY;
+    R->delta3 = diam_out > 0.0 ? diam_r / diam_out : INFINITY;
+    return DK_OK;
+}
+
+/* What the constraints give; frees what `R` holds */
+static void regions_free(eigen_regions *R)
+{
+    dk_constraints_free(R->user);
+    eigen_parts_free(&R->parts);
+    dk_constraints_free(R->con);
+    free(R->region);
+    free(R->g);
+    free(R->w);
+    free(R->lin);
+    free(R->target);
+    free(R->utarget);
+    free(R->uT);
+    free(R->gT);
+    memset(R, 0, sizeof *R);
+}
+
+/* The caller's constraints as the groups of R (region PART: each handle's part and the
+ * handle; HANDLES: the handle groups), their distances and weights, and the request
+ * buffers, with every target at rest. On failure `R` is empty. */
+static dk_status regions(dk_eigen *e, const dk_constraint_desc *desc, eigen_regions *R,
+                         dk_error *err)
+{
+    const dk_mesh *mesh = e->mesh;
+    const dk_index n = e->n;
+    memset(R, 0, sizeof *R);
+    dk_status st = refuse_unused(desc, err);
+    if (st != DK_OK)
+        return st;
+    const dk_constraint_desc *groups = desc;
+    if (e->opt.region == DK_EIGEN_REGION_PART) {
+        st = dk_constraints_create(mesh, desc, &R->user, err);
+        if (st != DK_OK)
+            return dk_error_prefix(err, "EigenDeformation");
+        st = eigen_parts_build(mesh, R->user, desc->fixed_vertices, desc->n_fixed, &R->parts,
+                               err);
+        if (st != DK_OK) {
+            regions_free(R);
+            return st;
+        }
+        groups = &R->parts.desc;
+    }
+    st = dk_constraints_create(mesh, groups, &R->con, err);
+    if (st != DK_OK) {
+        regions_free(R);
+        return dk_error_prefix(err, "EigenDeformation");
+    }
+    const dk_constraints *c = R->con, *u = R->user;
+    R->region = malloc(((size_t)n + 1) * sizeof *R->region);
+    R->g = malloc(((size_t)n + 1) * sizeof *R->g);
+    R->w = malloc(((size_t)n + 1) * sizeof *R->w);
+    R->lin = malloc(9 * ((size_t)c->n_handles + 1) * sizeof *R->lin);
+    R->target = malloc(3 * ((size_t)c->n_handle_vertices + 1) * sizeof *R->target);
+    if (u) {
+        R->utarget = malloc(3 * ((size_t)u->n_handle_vertices + 1) * sizeof *R->utarget);
+        R->uT = malloc(16 * ((size_t)u->n_handles + 1) * sizeof *R->uT);
+        R->gT = malloc(16 * ((size_t)c->n_handles + 1) * sizeof *R->gT);
+    }
+    if (!R->region || !R->g || !R->w || !R->lin || !R->target ||
+        (u && (!R->utarget || !R->uT || !R->gT))) {
+        regions_free(R);
+        return oom(err, "regions");
+    }
+    for (dk_index v = 0; v < n; v++)
+        R->region[v] = c->role[v] >= 0 ? c->role[v] : -1;
+    st = distances(mesh, R, err);
+    if (st != DK_OK) {
+        regions_free(R);
+        return st;
+    }
+    for (dk_index i = 0; i < c->n_handle_vertices; i++) /* before any solve: the rest */
+        memcpy(R->target + 3 * (size_t)i, mesh->positions + 3 * (size_t)c->handle_vertices[i],
+               3 * sizeof(double));
+    for (dk_index h = 0; h < c->n_handles; h++)
+        for (int k = 0; k < 9; k++)
+            R->lin[9 * (size_t)h + k] = k % 4 == 0 ? 1.0 : 0.0;
     return DK_OK;
 }
 
@@ -560,17 +651,6 @@ static void level_free(level *L)
     memset(L, 0, sizeof *L);
 }
 
-/* What the regions own (replaced as a whole by rebind). */
-static void regions_free(dk_eigen *e)
-{
-    dk_constraints_free(e->con);
-    free(e->region);
-    free(e->g);
-    free(e->w);
-    free(e->lin);
-    free(e->target);
-}
-
 void dk_eigen_free(dk_eigen *e)
 {
     if (!e)
@@ -580,7 +660,7 @@ void dk_eigen_free(dk_eigen *e)
     free(e->chol);
     level_free(&e->lv[0]);
     level_free(&e->lv[1]);
-    regions_free(e);
+    regions_free(&e->r);
     free(e->ptil);
     free(e->pstar);
     free(e->normals);
@@ -636,6 +716,9 @@ static dk_status check_options(const dk_eigen_options *o, dk_index n, dk_error *
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "EigenDeformation: laplacian must be cotangent (0) or "
                             "belkin_sun_wang (1)");
+    if (o->region != DK_EIGEN_REGION_PART && o->region != DK_EIGEN_REGION_HANDLES)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EigenDeformation: region must be part (0) or handles (1)");
     if (!(o->bsw_width > 0.0) || !isfinite(o->bsw_width))
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "EigenDeformation: bsw_width must be finite and > 0");
@@ -650,16 +733,27 @@ static dk_status check_options(const dk_eigen_options *o, dk_index n, dk_error *
     return DK_OK;
 }
 
+/* The constant eigenvectors beyond the first: one per further connected component. Each
+ * component's constant has eigenvalue 0, so they come first and a small component takes one
+ * whatever its size; the automatic count adds them to section 4.2's (the paper's models have
+ * one component; a scan with loose pieces would otherwise give the body none of its 8). */
+static int extra_constants(const dk_eigen *e)
+{
+    const dk_index c = e->mesh->report.n_components - e->mesh->report.n_isolated_vertices;
+    return c > 1 ? (int)(c - 1) : 0; /* an isolated vertex has no eigenvector of its own */
+}
+
 /* The eigenvector count for the regions: the option (at most n), or section 4.2's rule
- * capped at n / 4 (at least 4): on a small mesh the rule's 50 or 300 would be most of the
- * spectrum, and a fit with that many no longer smooths the cut of Step 1 (with n of them it
- * reproduces the cut exactly). */
+ * capped at n / 4 (at least 4), plus the components' constants: on a small mesh the rule's
+ * 50 or 300 would be most of the spectrum, and a fit with that many no longer smooths the
+ * cut of Step 1 (with n of them it reproduces the cut exactly). */
 static int choose_m(const dk_eigen *e, double delta3)
 {
     if (e->opt.n_eigenvectors > 0)
         return e->opt.n_eigenvectors < e->n ? e->opt.n_eigenvectors : (int)e->n;
-    const int m = automatic_m(delta3), cap = (int)(e->n / 4) > 4 ? (int)(e->n / 4) : 4;
-    return m < cap ? m : cap;
+    const int rule = automatic_m(delta3), cap = (int)(e->n / 4) > 4 ? (int)(e->n / 4) : 4;
+    const int64_t m = (int64_t)(rule < cap ? rule : cap) + extra_constants(e);
+    return m < e->n ? (int)m : (int)e->n;
 }
 
 dk_status dk_eigen_bind(const dk_mesh *mesh, const dk_constraint_desc *desc,
@@ -691,53 +785,40 @@ dk_status dk_eigen_bind(const dk_mesh *mesh, const dk_constraint_desc *desc,
         free(e);
         return st;
     }
-    e->region = malloc((size_t)n * sizeof *e->region);
-    e->g = malloc((size_t)n * sizeof *e->g);
-    e->w = malloc((size_t)n * sizeof *e->w);
     e->ptil = malloc(3 * (size_t)n * sizeof *e->ptil);
     e->pstar = malloc(3 * (size_t)n * sizeof *e->pstar);
     e->normals = malloc(3 * (size_t)n * sizeof *e->normals);
     e->next = malloc(3 * (size_t)n * sizeof *e->next);
     e->cm = malloc(3 * (size_t)n * sizeof *e->cm);
-    if (!e->region || !e->g || !e->w || !e->ptil || !e->pstar || !e->normals || !e->next ||
-        !e->cm) {
+    if (!e->ptil || !e->pstar || !e->normals || !e->next || !e->cm) {
         dk_eigen_free(e);
         return oom(err, "buffers");
     }
     e->tiny = frame_threshold(mesh);
     /* 1. the regions; 2. the eigenvectors (K = max(m, n') so that a later rebind, whose
-     * automatic m may differ, needs none); 3. the skeletons; 4. the request buffers */
+     * automatic m may differ, needs none); 3. the skeletons */
     dk_progress_init(&e->prog, e->opt.progress, e->opt.progress_user, eigen_phases,
                      (int)(sizeof eigen_phases / sizeof eigen_phases[0]), "EigenDeformation");
     st = dk_progress_begin(&e->prog, EIGEN_PHASE_REGIONS, err);
     if (st == DK_OK)
-        st = regions(e, desc, &e->con, e->region, e->g, e->w, &e->delta3, err);
+        st = regions(e, desc, &e->r, err);
     if (st == DK_OK) {
-        const int m = choose_m(e, e->delta3);
+        const int m = choose_m(e, e->r.delta3);
         int K = m;
         if (e->opt.refine > K)
             K = e->opt.refine;
-        if (e->opt.n_eigenvectors == 0 && K < 300) /* the automatic rule may ask for 300 */
-            K = 300;
+        if (e->opt.n_eigenvectors == 0 && K < 300 + extra_constants(e))
+            K = 300 + extra_constants(e); /* the automatic rule may ask for 300 */
         e->K = K < n ? K : (int)n;
         e->b = malloc(3 * (size_t)e->K * sizeof *e->b);
         st = e->b ? eigenvectors(e, err) : oom(err, "buffers");
         if (st == DK_OK)
             st = skeletons(e, m, err);
     }
-    if (st == DK_OK) {
-        e->lin = malloc(9 * ((size_t)e->con->n_handles + 1) * sizeof *e->lin);
-        e->target = malloc(3 * ((size_t)e->con->n_handle_vertices + 1) * sizeof *e->target);
-        if (!e->lin || !e->target)
-            st = oom(err, "buffers");
-    }
     if (st != DK_OK) {
         dk_eigen_free(e);
         return st;
     }
-    for (dk_index i = 0; i < e->con->n_handle_vertices; i++) /* before any solve: the rest */
-        memcpy(e->target + 3 * (size_t)i,
-               mesh->positions + 3 * (size_t)e->con->handle_vertices[i], 3 * sizeof(double));
     dk_progress_done(&e->prog);
     e->opt.progress = NULL; /* the caller's callback is for this bind only */
     e->opt.progress_user = NULL;
@@ -751,25 +832,13 @@ dk_status dk_eigen_rebind(dk_eigen *e, const dk_constraint_desc *desc, dk_error 
     if (!e || !desc)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "EigenDeformation rebind: object and constraints must not be NULL");
-    const dk_index n = e->n;
-    dk_constraints *con = NULL;
-    dk_index *region = malloc((size_t)n * sizeof *region);
-    double *g = malloc((size_t)n * sizeof *g), *w = malloc((size_t)n * sizeof *w), delta3;
-    double *lin = NULL, *target = NULL;
-    dk_status st = (!region || !g || !w) ? oom(err, "rebind") : DK_OK;
-    if (st == DK_OK)
-        st = regions(e, desc, &con, region, g, w, &delta3, err);
-    const int m = st == DK_OK ? choose_m(e, delta3) : 0;
+    eigen_regions R;
+    dk_status st = regions(e, desc, &R, err);
+    const int m = st == DK_OK ? choose_m(e, R.delta3) : 0;
     if (st == DK_OK && m > e->K)
         st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                           "EigenDeformation rebind: these regions need %d eigenvectors and %d "
                           "were computed at bind: bind again", m, e->K);
-    if (st == DK_OK) {
-        lin = malloc(9 * ((size_t)con->n_handles + 1) * sizeof *lin);
-        target = malloc(3 * ((size_t)con->n_handle_vertices + 1) * sizeof *target);
-        if (!lin || !target)
-            st = oom(err, "rebind");
-    }
     if (st == DK_OK && m != e->m) { /* a new m: new skeletons (the eigenvectors stay) */
         level keep[2] = {e->lv[0], e->lv[1]};
         const int keep_m = e->m, keep_levels = e->n_levels;
@@ -788,51 +857,117 @@ dk_status dk_eigen_rebind(dk_eigen *e, const dk_constraint_desc *desc, dk_error 
         }
     }
     if (st != DK_OK) {
-        dk_constraints_free(con);
-        free(region);
-        free(g);
-        free(w);
-        free(lin);
-        free(target);
+        regions_free(&R);
         return st;
     }
-    regions_free(e);
-    e->con = con, e->region = region, e->g = g, e->w = w, e->delta3 = delta3;
-    e->lin = lin, e->target = target;
-    for (dk_index i = 0; i < con->n_handle_vertices; i++)
-        memcpy(target + 3 * (size_t)i, e->mesh->positions + 3 * (size_t)con->handle_vertices[i],
-               3 * sizeof(double));
+    regions_free(&e->r);
+    e->r = R;
     return DK_OK;
 }
 
 /* ------------------------------------------------------------------ solve -------------- */
 
-/* Reads the request: the Step-1 targets of R's vertices (for the energy), and per handle the
- * linear part (identity for positions) into e->lin. */
+/* PART: the handles' transforms from the caller's targets (R->utarget), for the parts they
+ * turn: the given transforms, or for positions the affine map that gives them when there is
+ * one, else the translation of the handle's centroid. */
+static void handle_transforms(const dk_eigen *e, const dk_solve_request *rq)
+{
+    const eigen_regions *R = &e->r;
+    const dk_constraints *u = R->user;
+    for (dk_index h = 0; h < u->n_handles; h++) {
+        double *T = R->uT + 16 * (size_t)h;
+        if (rq->target_kind == DK_TARGETS_TRANSFORMS) {
+            memcpy(T, rq->targets + 16 * (size_t)h, 16 * sizeof(double));
+            continue;
+        }
+        const dk_index s = u->handle_start[h], cnt = u->handle_start[h + 1] - s;
+        if (dk_affine_fit(e->mesh->positions, u->handle_vertices + s, cnt,
+                          R->utarget + 3 * (size_t)s, 1e-9, T))
+            continue;
+        double d[3] = {0.0, 0.0, 0.0};
+        for (dk_index q = s; q < s + cnt; q++)
+            for (int r = 0; r < 3; r++)
+                d[r] += (R->utarget[3 * (size_t)q + r] -
+                         e->mesh->positions[3 * (size_t)u->handle_vertices[q] + r]) /
+                        (double)cnt;
+        for (int k = 0; k < 16; k++)
+            T[k] = k % 5 == 0 ? 1.0 : 0.0;
+        for (int r = 0; r < 3; r++)
+            T[4 * r + 3] = d[r];
+    }
+}
+
+/* PART: the groups' targets and linear parts. A handle group takes the caller's targets
+ * (and linear part: the transform's, or the identity for positions); a turning part the
+ * turn eigen_parts_transforms gives it. */
+static void part_targets(eigen_regions *R, const dk_mesh *mesh, int per_vertex)
+{
+    const eigen_parts *P = &R->parts;
+    const dk_constraints *c = R->con, *u = R->user;
+    eigen_parts_transforms(P, R->uT, R->gT);
+    for (dk_index h = 0; h < u->n_handles; h++) {
+        const dk_index f = P->follow[h], t = P->turn[h];
+        memcpy(R->target + 3 * (size_t)c->handle_start[f],
+               R->utarget + 3 * (size_t)u->handle_start[h],
+               3 * (size_t)(u->handle_start[h + 1] - u->handle_start[h]) * sizeof(double));
+        for (int r = 0; r < 3; r++)
+            for (int q = 0; q < 3; q++)
+                R->lin[9 * (size_t)f + 3 * r + q] =
+                    per_vertex ? (r == q) : R->uT[16 * (size_t)h + 4 * r + q];
+        if (t < 0)
+            continue;
+        const double *M = R->gT + 16 * (size_t)t;
+        for (int r = 0; r < 3; r++)
+            for (int q = 0; q < 3; q++)
+                R->lin[9 * (size_t)t + 3 * r + q] = M[4 * r + q];
+        for (dk_index q = c->handle_start[t]; q < c->handle_start[t + 1]; q++) {
+            const double *v = mesh->positions + 3 * (size_t)c->handle_vertices[q];
+            for (int r = 0; r < 3; r++)
+                R->target[3 * (size_t)q + r] =
+                    M[4 * r] * v[0] + M[4 * r + 1] * v[1] + M[4 * r + 2] * v[2] + M[4 * r + 3];
+        }
+    }
+}
+
+/* Reads the request: the Step-1 targets of R's vertices (for the energy), and per group the
+ * linear part of its motion (identity for positions) into R->lin. Checked before anything
+ * is written: a refused request leaves the last one's targets. */
 static dk_status read_request(dk_eigen *e, const dk_solve_request *rq, dk_error *err)
 {
     dk_status st = dk_solve_request_check(rq, "EigenDeformation solve", err);
     if (st != DK_OK)
         return st;
-    const dk_constraints *c = e->con;
+    eigen_regions *R = &e->r;
+    const int per_vertex = rq->target_kind == DK_TARGETS_POSITIONS;
+    if (R->user) {
+        st = dk_constraints_targets(R->user, e->mesh->positions, rq->targets,
+                                    (int)rq->target_kind, R->utarget, err);
+        if (st != DK_OK)
+            return dk_error_prefix(err, "EigenDeformation solve");
+        handle_transforms(e, rq);
+        part_targets(R, e->mesh, per_vertex);
+        return DK_OK;
+    }
+    const dk_constraints *c = R->con;
     st = dk_constraints_targets(c, e->mesh->positions, rq->targets, (int)rq->target_kind,
-                                e->target, err);
+                                R->target, err);
     if (st != DK_OK)
         return dk_error_prefix(err, "EigenDeformation solve");
-    e->per_vertex = rq->target_kind == DK_TARGETS_POSITIONS;
     for (dk_index h = 0; h < c->n_handles; h++)
         for (int r = 0; r < 3; r++)
             for (int q = 0; q < 3; q++)
-                e->lin[9 * (size_t)h + 3 * r + q] =
-                    e->per_vertex ? (r == q) : rq->targets[16 * (size_t)h + 4 * r + q];
+                R->lin[9 * (size_t)h + 3 * r + q] =
+                    per_vertex ? (r == q) : rq->targets[16 * (size_t)h + 4 * r + q];
     return DK_OK;
 }
 
 /* Step 1 on level L's skeleton into e->ptil, and Step 2's right-hand side from R's rows
- * alone: b = b0 + U_m^T (p~ - p), the change being zero outside R. */
+ * alone: b = b0 + U_m^T (p~ - p), the change being zero outside R. A vertex v of group h
+ * with target t and linear part A moves its skeleton point p to t - A (v - p): for a
+ * transform T, T p; for a position (A = I), p + (t - v). */
 static void step1_step2_rhs(dk_eigen *e, const level *L)
 {
-    const dk_constraints *c = e->con;
+    const dk_constraints *c = e->r.con;
     const dk_index n = e->n;
     memcpy(e->ptil, L->p, 3 * (size_t)n * sizeof(double));
     memcpy(e->b, L->b0, 3 * (size_t)L->m * sizeof(double));
@@ -840,13 +975,11 @@ static void step1_step2_rhs(dk_eigen *e, const level *L)
         for (dk_index q = c->handle_start[h]; q < c->handle_start[h + 1]; q++) {
             const dk_index i = c->handle_vertices[q];
             const double *p = L->p + 3 * (size_t)i, *v = e->mesh->positions + 3 * (size_t)i;
-            const double *tg = e->target + 3 * (size_t)q, *A = e->lin + 9 * (size_t)h;
+            const double *tg = e->r.target + 3 * (size_t)q, *A = e->r.lin + 9 * (size_t)h;
             double *pt = e->ptil + 3 * (size_t)i;
-            for (int r = 0; r < 3; r++) /* transforms: T p = T v - A (v - p); positions: */
-                pt[r] = e->per_vertex    /* p + (target - v)                              */
-                            ? p[r] + tg[r] - v[r]
-                            : tg[r] - (A[3 * r] * (v[0] - p[0]) + A[3 * r + 1] * (v[1] - p[1]) +
-                                       A[3 * r + 2] * (v[2] - p[2]));
+            for (int r = 0; r < 3; r++)
+                pt[r] = tg[r] - (A[3 * r] * (v[0] - p[0]) + A[3 * r + 1] * (v[1] - p[1]) +
+                                 A[3 * r + 2] * (v[2] - p[2]));
             for (int r = 0; r < 3; r++) {
                 const double dp = pt[r] - p[r];
                 if (dp != 0.0)
@@ -865,10 +998,10 @@ static void step3(dk_eigen *e, const level *L, const double *pstar, int blend, d
     vertex_normals(mesh, pstar, e->normals);
     for (dk_index i = 0; i < e->n; i++) {
         const double *d = L->detail + 3 * (size_t)i, *c = L->coord + 3 * (size_t)i;
-        const dk_index h = e->region[i];
+        const dk_index h = e->r.region[i];
         double d2[3];
         if (h >= 0) { /* the Step-1 transformation's linear part applied to d */
-            const double *A = e->lin + 9 * (size_t)h;
+            const double *A = e->r.lin + 9 * (size_t)h;
             for (int r = 0; r < 3; r++)
                 d2[r] = A[3 * r] * d[0] + A[3 * r + 1] * d[1] + A[3 * r + 2] * d[2];
         } else {
@@ -887,7 +1020,7 @@ static void step3(dk_eigen *e, const level *L, const double *pstar, int blend, d
                 o[r] = ps[r] + d2[r];
             continue;
         }
-        const double wi = blend ? e->w[i] : 1.0;
+        const double wi = blend ? e->r.w[i] : 1.0;
         if (wi >= 1.0) {
             for (int r = 0; r < 3; r++)
                 o[r] = ps[r] + d1[r];
@@ -924,7 +1057,7 @@ dk_status dk_eigen_energy(const dk_eigen *e, const double *positions, double *en
     if (!e || !positions || !energy)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "EigenDeformation energy: arguments must not be NULL");
-    const dk_constraints *c = e->con;
+    const dk_constraints *c = e->r.con;
     double E = 0.0;
     /* R's vertices against their targets, the others against the rest */
     for (dk_index i = 0; i < e->n; i++)
@@ -936,7 +1069,7 @@ dk_status dk_eigen_energy(const dk_eigen *e, const double *positions, double *en
     for (dk_index q = 0; q < c->n_handle_vertices; q++) {
         const dk_index i = c->handle_vertices[q];
         for (int r = 0; r < 3; r++) {
-            const double d = positions[3 * (size_t)i + r] - e->target[3 * (size_t)q + r];
+            const double d = positions[3 * (size_t)i + r] - e->r.target[3 * (size_t)q + r];
             E += d * d;
         }
     }
@@ -978,7 +1111,7 @@ dk_status dk_eigen_solve(dk_eigen *e, const dk_solve_request *rq, double *positi
     }
     /* loose vertices (on no face) follow their constraint exactly, held ones stay at rest */
     {
-        const dk_constraints *c = e->con;
+        const dk_constraints *c = e->r.con;
         const dk_mesh *mesh = e->mesh;
         for (dk_index i = 0; i < e->n; i++)
             if (mesh->ring_start[i + 1] == mesh->ring_start[i] && c->role[i] < 0)
@@ -987,7 +1120,7 @@ dk_status dk_eigen_solve(dk_eigen *e, const dk_solve_request *rq, double *positi
         for (dk_index q = 0; q < c->n_handle_vertices; q++) {
             const dk_index i = c->handle_vertices[q];
             if (mesh->ring_start[i + 1] == mesh->ring_start[i])
-                memcpy(positions + 3 * (size_t)i, e->target + 3 * (size_t)q,
+                memcpy(positions + 3 * (size_t)i, e->r.target + 3 * (size_t)q,
                        3 * sizeof(double));
         }
         dk_constraints_hold(c, mesh->positions, positions);
@@ -1037,12 +1170,12 @@ const double *dk_eigen_eigenvectors(const dk_eigen *e)
 
 double dk_eigen_delta3(const dk_eigen *e)
 {
-    return e ? e->delta3 : NAN;
+    return e ? e->r.delta3 : NAN;
 }
 
 const double *dk_eigen_weights(const dk_eigen *e)
 {
-    return e ? e->w : NULL;
+    return e ? e->r.w : NULL;
 }
 
 void dk_eigen_stats(const dk_eigen *e, dk_method_stats *st)
@@ -1051,9 +1184,10 @@ void dk_eigen_stats(const dk_eigen *e, dk_method_stats *st)
     if (!e)
         return;
     st->n_vertices = e->n;
-    st->n_handles = e->con->n_handles;
-    st->n_handle_vertices = e->con->n_handle_vertices;
-    dk_constraints_held_stats(e->con, NULL, st);
+    const dk_constraints *c = e->r.user ? e->r.user : e->r.con; /* the caller's */
+    st->n_handles = c->n_handles;
+    st->n_handle_vertices = c->n_handle_vertices;
+    dk_constraints_held_stats(c, NULL, st);
     st->n_unknowns = 3 * e->m;
     st->factorization_count = 1;
 }
@@ -1071,11 +1205,15 @@ dk_status dk_eigen_estimate_memory(const dk_mesh *mesh, const dk_eigen_options *
     /* The K basis vectors (n doubles each; the eigensolver builds them in place), the band's
      * Krylov basis of 2 min(K, 50) + 1 vectors and its results of about min(K, 50) more
      * (eigs.c), and the Laplacian's LDL' factor (the log term). K is the larger of the
-     * requested m (automatic: up to 300) and the refinement n'. Measured (2026-12-02): 4600 /
+     * requested m (automatic: up to 300 plus a constant per further component) and the
+     * refinement n'. Measured (2026-12-02): 4600 /
      * 4700 B/vertex for K = 300 at 62k / 248k vertices, 2660 for K = 50 at 62k. */
-    double k = o && o->n_eigenvectors > 0 ? o->n_eigenvectors : 300.0;
-    if (!o || o->refine > k)
-        k = o ? o->refine : 300.0;
+    const dk_index surfaces = mesh->report.n_components - mesh->report.n_isolated_vertices;
+    const double constants = surfaces > 1 ? (double)(surfaces - 1) : 0.0;
+    double k = o && o->n_eigenvectors > 0 ? o->n_eigenvectors : 300.0 + constants;
+    const double refine = o ? o->refine : 300.0;
+    if (refine > k)
+        k = refine;
     if (k > n)
         k = n;
     double per_vertex = 350.0 + 40.0 * lg + 8.0 * k + 26.0 * (k < 50.0 ? k : 50.0);

@@ -10,6 +10,7 @@
 #include <string.h>
 
 static const char *const laplacian_names[] = {"cotangent", "belkin_sun_wang", NULL};
+static const char *const region_names[] = {"part", "handles", NULL};
 
 static void default_options(void *o)
 {
@@ -27,7 +28,7 @@ static void bind_progress(void *o, dk_py_progress *p)
 static int parse_options(PyObject *kw, void *o, const char *context)
 {
     dk_eigen_options *opt = (dk_eigen_options *)o;
-    int lap = (int)opt->laplacian;
+    int lap = (int)opt->laplacian, region = (int)opt->region;
     PyObject *m = dk_py_opt_object(kw, "n_eigenvectors");
     if (!m && PyErr_Occurred())
         return -1;
@@ -54,9 +55,11 @@ static int parse_options(PyObject *kw, void *o, const char *context)
     }
     if (dk_py_opt_int(kw, "refine", &opt->refine) < 0 ||
         dk_py_opt_double(kw, "bsw_width", &opt->bsw_width) < 0 ||
-        dk_py_opt_choice(kw, "laplacian", laplacian_names, &lap, context) < 0)
+        dk_py_opt_choice(kw, "laplacian", laplacian_names, &lap, context) < 0 ||
+        dk_py_opt_choice(kw, "region", region_names, &region, context) < 0)
         return -1;
     opt->laplacian = (dk_eigen_laplacian)lap;
+    opt->region = (dk_eigen_region)region;
     return 0;
 }
 
@@ -206,15 +209,19 @@ PyDoc_STRVAR(solve_doc,
              "motion carried to the mesh. energy: |x - x~|^2 to the Step-1 target.");
 
 PyDoc_STRVAR(eig_doc,
-             "EigenDeformation(mesh, handles, fixed=None, n_eigenvectors='auto', refine=300,\n"
-             "    laplacian='cotangent' | 'belkin_sun_wang', bsw_width=1.0, progress=None)\n\n"
+             "EigenDeformation(mesh, handles, fixed=None, region='part' | 'handles',\n"
+             "    n_eigenvectors='auto', refine=300, laplacian='cotangent' | 'belkin_sun_wang',\n"
+             "    bsw_width=1.0, progress=None)\n\n"
              "Eigen deformation (Dey, Ranjan & Wang): the mesh's eigen-skeleton (its\n"
              "coordinates fitted with the first m Laplace-Beltrami eigenvectors) is deformed\n"
-             "by a least-squares fit to the handle regions' motion, and the details are\n"
-             "added back in local frames. Each handle group is a region R that moves; every\n"
-             "other vertex is held by the fit (fixed vertices are no different). m 'auto':\n"
-             "8, 50 or 300 from the regions' size (section 4.2). progress(fraction): as ARAP's\n"
-             "(phases regions, operator, eigenvectors, skeletons); True cancels the bind.\n"
+             "by a least-squares fit to the motion of a region R, and the details are added\n"
+             "back in local frames. region 'part': each handle drags the part of the mesh\n"
+             "nearer to it than to the fixed vertices and the other handles, turned about the\n"
+             "part's border so that the handle reaches its target; 'handles': R is the handle\n"
+             "groups alone (the paper's figures). Every other vertex is held by the fit.\n"
+             "m 'auto': 8, 50 or 300 from R's size (section 4.2), plus one per loose piece.\n"
+             "progress(fraction): as ARAP's (phases regions, operator, eigenvectors,\n"
+             "skeletons); True cancels the bind.\n"
              "It must not start another eigen computation. See docs/methods/eigen.md.");
 
 static PyGetSetDef eig_getset[] = {

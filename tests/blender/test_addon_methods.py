@@ -482,7 +482,7 @@ def test_eigen_region_and_preview():
     R.check("EIGEN with a Region group binds", d.bound and not d.status_is_error, d.status)
     m = S.methods.get("EIGEN")
     mesh = S.dk.Mesh(rest, S.solver.triangles(obj.data))
-    native = S.dk.EigenDeformation(mesh, handles=[half], fixed=fixed,
+    native = S.dk.EigenDeformation(mesh, handles=[half], fixed=fixed, **m.region_kw,
                                    **S.methods.bind_kwargs(m, d.options, rest,
                                                            dict(handles=[half], fixed=fixed),
                                                            mesh))
@@ -497,7 +497,8 @@ def test_eigen_region_and_preview():
         R.check("EIGEN drag shows the preview (Steps 1-2)", np.abs(got - want).max() < TOL,
                 np.abs(got - want).max())
         key = (obj.name, d.uid)
-        R.check("EIGEN preview is pending", key in S.solver.pending())
+        R.check("EIGEN preview is pending, and the panel says it is a preview",
+                key in S.solver.pending() and S.solver.previewing(obj, d))
         S.handlers.refine()
         R.check("EIGEN full result waits while the handle may still move",
                 key in S.solver.pending())
@@ -508,8 +509,23 @@ def test_eigen_region_and_preview():
         want = np.asarray(native.solve(transforms=T).positions)
         R.check("EIGEN full result once the handle stops", np.abs(got - want).max() < TOL
                 and np.abs(want - rest).max() > 0.1, np.abs(got - want).max())
+        R.check("EIGEN full result: the panel no longer says preview",
+                not S.solver.previewing(obj, d))
     finally:
         S.handlers.force_interactive[0] = False
+    d.roi_group = ""  # no Region group: the handle drags its part (region="part")
+    bpy.context.view_layer.update()
+    S.solver.evaluate_object(obj, check_groups=True)
+    part = S.dk.EigenDeformation(mesh, handles=[handle], fixed=fixed,
+                                 **S.methods.bind_kwargs(m, d.options, rest,
+                                                         dict(handles=[handle], fixed=fixed),
+                                                         mesh))
+    got = S.evaluated_positions(obj)
+    want = np.asarray(part.solve(transforms=T).positions)
+    R.check("EIGEN without a Region group: the handle drags its part",
+            np.abs(got - want).max() < TOL and not d.status_is_error,
+            (np.abs(got - want).max(), d.status))
+    d.roi_group = "half"
     S.group(obj, "tip2", handle[:3])
     e2 = S.empty("Tip2", (1.0, 0.0, 0.0))
     bpy.ops.deformkit.add_handle(vertex_group="tip2", target=e2.name)

@@ -1,7 +1,9 @@
 """Eigen deformation (Dey, Ranjan & Wang; docs/methods/eigen.md): zero drag, whole-mesh rigid
 motions, the skeleton with every eigenvector, the bent bumpy plane (Figures 10-11) and the
 twisted bar (Figure 13) against the paper's Table 2 edge-length errors, the n_ev rule of
-section 4.2, the eigenpairs against ARPACK, the preview, and bad input."""
+section 4.2 (the paper's figures with region='handles': R is the group the test names), the
+eigenpairs against ARPACK, the preview, bad input, and the part each handle drags
+(region='part', the default)."""
 import numpy as np
 import pytest
 
@@ -61,7 +63,7 @@ def rms_edge_error(v, w, e):
 def test_zero_drag_returns_the_mesh(m):
     v, f = bar()
     end = np.where(v[:, 0] > 4.5)[0]
-    e = dk.EigenDeformation(dk.Mesh(v, f), handles=[end], n_eigenvectors=m)
+    e = dk.EigenDeformation(dk.Mesh(v, f), region="handles", handles=[end], n_eigenvectors=m)
     assert e.n_eigenvectors == m
     for r in (e.solve(v[end]), e.solve(transforms=[np.eye(4)]),
               e.solve(translation=[0, 0, 0]), e.solve(rotation=np.eye(3), pivot=[1, 2, 3])):
@@ -86,7 +88,7 @@ def test_parts_without_their_own_eigenvector_keep_their_detail():
         off += len(s)
     V, F = np.vstack(V), np.vstack(F)
     h = np.where((V[:, 0] > 4.5) & (V[:, 0] < 6.5))[0]
-    e = dk.EigenDeformation(dk.Mesh(V, F), handles=[h], n_eigenvectors=8)
+    e = dk.EigenDeformation(dk.Mesh(V, F), region="handles", handles=[h], n_eigenvectors=8)
     assert np.abs(np.asarray(e.solve(V[h]).positions) - V).max() < 1e-10
     out = np.asarray(e.solve(translation=[0.0, 0.5, 0.0]).positions)
     assert np.all(np.isfinite(out))
@@ -98,7 +100,7 @@ def test_parts_without_their_own_eigenvector_keep_their_detail():
 
 def test_whole_mesh_moves_rigidly():
     v, f = bar(30, 4)
-    e = dk.EigenDeformation(dk.Mesh(v, f), handles=[np.arange(len(v))])
+    e = dk.EigenDeformation(dk.Mesh(v, f), region="handles", handles=[np.arange(len(v))])
     R = rot([1, 2, 3], 0.8)
     r = e.solve(rotation=R, pivot=[3, 0, 0], translation=[0.5, -1, 2])
     want = (v - [3, 0, 0]) @ R.T + [3, 0, 0] + [0.5, -1, 2]
@@ -110,12 +112,12 @@ def test_whole_mesh_moves_rigidly():
 
 def test_every_eigenvector_gives_the_mesh_as_skeleton():
     v, f = make_icosphere(2)
-    e = dk.EigenDeformation(dk.Mesh(v, f), handles=[np.where(v[:, 2] > 0.5)[0]],
+    e = dk.EigenDeformation(dk.Mesh(v, f), region="handles", handles=[np.where(v[:, 2] > 0.5)[0]],
                             n_eigenvectors=len(v))
     assert np.abs(np.asarray(e.skeleton) - v).max() < 1e-10
     # (a sphere is spanned by its first 4 eigenvectors; a bar is not)
     b, bf = bar(20, 4)
-    few = dk.EigenDeformation(dk.Mesh(b, bf), handles=[np.where(b[:, 0] > 5)[0]],
+    few = dk.EigenDeformation(dk.Mesh(b, bf), region="handles", handles=[np.where(b[:, 0] > 5)[0]],
                               n_eigenvectors=8, refine=0)
     assert np.abs(np.asarray(few.skeleton) - b).max() > 0.05   # a coarser skeleton
 
@@ -124,7 +126,7 @@ def test_eigenpairs_match_arpack():
     """The dense path (small meshes) and ARPACK agree; the vectors are M-orthonormal."""
     v, f = make_icosphere(3)      # 642 vertices: K = 300 > n / 4, the dense path
     mesh = dk.Mesh(v, f)
-    e = dk.EigenDeformation(mesh, handles=[np.where(v[:, 2] > 0.5)[0]])
+    e = dk.EigenDeformation(mesh, region="handles", handles=[np.where(v[:, 2] > 0.5)[0]])
     lam, _ = dk.laplacian_eigenpairs(mesh, 40, mass="voronoi")
     np.testing.assert_allclose(np.asarray(e.eigenvalues)[:40], lam, rtol=1e-8, atol=1e-9)
     U = np.asarray(e.eigenvectors())
@@ -151,7 +153,7 @@ def test_identical_components_give_whole_eigenspaces():
         off += len(s)
     V, F = np.vstack(V), np.vstack(F)
     mesh = dk.Mesh(V, F)
-    e = dk.EigenDeformation(mesh, handles=[np.where(V[:, 0] > 5.5)[0][:40]],
+    e = dk.EigenDeformation(mesh, region="handles", handles=[np.where(V[:, 0] > 5.5)[0][:40]],
                             n_eigenvectors=300, refine=0)
     lam_s, _ = dk.laplacian_eigenpairs(dk.Mesh(s, sf), len(s) - 1, mass="voronoi")
     lam_b, _ = dk.laplacian_eigenpairs(dk.Mesh(b, bf), 300, mass="voronoi")
@@ -181,7 +183,7 @@ def test_bent_bumpy_plane_keeps_its_edges_and_bumps():
     v, f = bumpy_plane(50)
     E = edges(f)
     half = np.where(v[:, 0] > 0.5 + 1e-9)[0]
-    e = dk.EigenDeformation(dk.Mesh(v, f), handles=[half], n_eigenvectors=50)
+    e = dk.EigenDeformation(dk.Mesh(v, f), region="handles", handles=[half], n_eigenvectors=50)
     small = np.asarray(e.solve(rotation=rot([0, 1, 0], -np.radians(10)),
                                pivot=[0.5, 0, 0]).positions)
     assert rms_edge_error(v, small, E) < 0.005, rms_edge_error(v, small, E)
@@ -205,7 +207,7 @@ def test_twisted_bar_keeps_its_edges():
     v, f = bar()
     E = edges(f)
     end = np.where(v[:, 0] > 5.0)[0]
-    e = dk.EigenDeformation(dk.Mesh(v, f), handles=[end])
+    e = dk.EigenDeformation(dk.Mesh(v, f), region="handles", handles=[end])
     assert e.n_eigenvectors == 50
     small = np.asarray(e.solve(rotation=rot([1, 0, 0], np.radians(10))).positions)
     assert rms_edge_error(v, small, E) < 0.02, rms_edge_error(v, small, E)
@@ -222,19 +224,99 @@ def test_eigenvector_count_rule():
     v, f = bar(80, 4)          # 1,282 vertices: the automatic count is capped at n / 4
     mesh = dk.Mesh(v, f)
     for cut, want in ((2.6, 8), (4.8, 50), (5.92, 300)):
-        e = dk.EigenDeformation(mesh, handles=[np.where(v[:, 0] > cut)[0]])
+        e = dk.EigenDeformation(mesh, region="handles", handles=[np.where(v[:, 0] > cut)[0]])
         band = 8 if e.delta3 >= 0.75 else 50 if e.delta3 >= 0.1 else 300
         assert band == want and e.n_eigenvectors == want, (cut, e.delta3)
     e.rebind(handles=[np.where(v[:, 0] > 2.6)[0]])   # rebind re-chooses m, same eigenvectors
     assert e.n_eigenvectors == 8
-    small = dk.EigenDeformation(dk.Mesh(*bar(20, 4)), handles=[np.arange(5)])
+    small = dk.EigenDeformation(dk.Mesh(*bar(20, 4)), region="handles", handles=[np.arange(5)])
     assert small.n_eigenvectors == 322 // 4      # 300 asked, a quarter of the spectrum kept
+
+
+def bar_lift():
+    v, f = bar()
+    fixed, hand = np.where(v[:, 0] < 0.3)[0], np.where(v[:, 0] > 5.7)[0]
+    T = np.eye(4)
+    T[:3, 3] = [-2.0, 0.0, 3.0]
+    return v, f, fixed, hand, T
+
+
+def test_a_handle_drags_its_part():
+    """region 'part' (the default): the bar's far end lifted by a handle, its near end fixed.
+    The handle's part (the half nearer to it) turns about its border, so the end comes
+    close to its target and the bar keeps its edges; R the handle alone (the paper's literal
+    region) leaves the bar behind and pulls a spike."""
+    v, f, fixed, hand, T = bar_lift()
+    E = edges(f)
+    move = np.linalg.norm(T[:3, 3])
+    got = {}
+    for region in ("part", "handles"):
+        e = dk.EigenDeformation(dk.Mesh(v, f), handles=[hand], fixed=fixed, region=region)
+        x = e.solve(transforms=[T]).positions
+        got[region] = (np.linalg.norm(x[hand] - (v[hand] + T[:3, 3]), axis=1).max() / move,
+                       np.linalg.norm(x[fixed] - v[fixed], axis=1).max() / move,
+                       rms_edge_error(v, x, E))
+        # a translation given as positions is the same request
+        assert np.abs(e.solve(v[hand] + T[:3, 3]).positions - x).max() < 1e-12
+    handle, drift, rms = got["part"]
+    assert handle < 0.2 and drift < 0.05 and rms < 0.2
+    assert got["handles"][0] > 3 * handle and got["handles"][2] > 5 * rms
+
+
+def test_each_handle_drags_its_own_part():
+    """Two handles, the middle fixed: lifting one end moves its half, the other half
+    stays where its (unmoved) handle holds it."""
+    v, f, _, hand, T = bar_lift()
+    other, mid = np.where(v[:, 0] < 0.3)[0], np.where(np.abs(v[:, 0] - 3.0) < 0.2)[0]
+    e = dk.EigenDeformation(dk.Mesh(v, f), handles=[other, hand], fixed=mid)
+    x = e.solve(transforms=[np.eye(4), T]).positions
+    move = np.linalg.norm(T[:3, 3])
+    left = v[:, 0] < 2.5
+    assert np.linalg.norm(x[left] - v[left], axis=1).max() < 0.1 * move
+    assert np.linalg.norm(x[hand] - v[hand] - T[:3, 3], axis=1).max() < 0.2 * move
+    assert e.solve(transforms=[np.eye(4), np.eye(4)]).positions == pytest.approx(v, abs=1e-9)
+
+
+def test_a_part_with_nothing_fixed_moves_rigidly():
+    """No fixed vertex: the handle's part is the whole bar, with no border to turn about,
+    so the bar follows the handle's transform exactly."""
+    v, f = bar()
+    hand = np.where(v[:, 0] > 5.7)[0]
+    T = np.eye(4)
+    T[:3, :3] = rot([1, 2, 3], 0.7)
+    T[:3, 3] = [1.0, 2.0, 3.0]
+    x = dk.EigenDeformation(dk.Mesh(v, f), handles=[hand]).solve(transforms=[T]).positions
+    assert np.abs(x - (v @ T[:3, :3].T + T[:3, 3])).max() < 1e-9
+
+
+def test_loose_pieces_leave_the_body_its_eigenvectors():
+    """Each connected surface has a constant eigenvector of eigenvalue 0: the automatic count
+    adds one per further piece, so a bar with loose pieces beside it is edited as the bar
+    alone is (the pieces, held, take their own constants)."""
+    v, f = bar()
+    pieces_v, pieces_f = [v], [f]
+    for k in range(12):  # twelve small closed pieces far from the bar
+        pv, pf = make_icosphere(0)
+        pieces_f.append(pf + sum(len(p) for p in pieces_v))
+        pieces_v.append(0.05 * pv + [k, 5.0, 0.0])
+    V, F = np.concatenate(pieces_v), np.concatenate(pieces_f)
+    fixed = np.where(v[:, 0] < 0.3)[0]
+    hand = np.where(v[:, 0] > 5.7)[0]
+    T = np.eye(4)
+    T[:3, 3] = [-2.0, 0.0, 3.0]
+    alone = dk.EigenDeformation(dk.Mesh(v, f), handles=[hand], fixed=fixed)
+    both = dk.EigenDeformation(dk.Mesh(V, F), handles=[hand], fixed=fixed)
+    assert both.n_eigenvectors == alone.n_eigenvectors + 12
+    a = alone.solve(transforms=[T]).positions
+    b = both.solve(transforms=[T]).positions
+    assert np.abs(b[: len(v)] - a).max() < 1e-6 * np.linalg.norm(T[:3, 3])
+    assert np.abs(b[len(v):] - V[len(v):]).max() < 1e-12
 
 
 def test_preview_is_the_skeleton_motion():
     v, f = bar(30, 4)
     end = np.where(v[:, 0] > 4.5)[0]
-    e = dk.EigenDeformation(dk.Mesh(v, f), handles=[end], n_eigenvectors=8)
+    e = dk.EigenDeformation(dk.Mesh(v, f), region="handles", handles=[end], n_eigenvectors=8)
     p = np.asarray(e.solve(translation=[0, 0, 1], preview=True).positions)
     full = np.asarray(e.solve(translation=[0, 0, 1]).positions)
     assert np.abs(p - v).max() > 0.5 and np.abs(p - full).max() < 0.5
@@ -275,18 +357,18 @@ def test_belkin_sun_wang_laplacian():
     top = np.where(v[:, 2] > 0.5)[0]
     want = np.repeat([0.0, 2.0, 6.0, 12.0], [1, 3, 5, 7])
     for lap in ("cotangent", "belkin_sun_wang"):
-        e = dk.EigenDeformation(mesh, handles=[top], laplacian=lap, n_eigenvectors=16,
+        e = dk.EigenDeformation(mesh, region="handles", handles=[top], laplacian=lap, n_eigenvectors=16,
                                 refine=0)
         lam = np.asarray(e.eigenvalues)[:16]
         np.testing.assert_allclose(lam, want, rtol=0.04, atol=1e-8, err_msg=lap)   # 642 vertices
         assert np.abs(np.asarray(e.solve(v[top]).positions) - v).max() < 1e-10
-    e = dk.EigenDeformation(mesh, handles=[np.arange(len(v))], laplacian="belkin_sun_wang",
+    e = dk.EigenDeformation(mesh, region="handles", handles=[np.arange(len(v))], laplacian="belkin_sun_wang",
                             n_eigenvectors=8)
     R = rot([1, 1, 0], 0.7)
     r = np.asarray(e.solve(rotation=R, translation=[1, 0, 0]).positions)
     assert np.abs(r - (v @ R.T + [1, 0, 0])).max() < 1e-9
     with pytest.raises(ValueError, match="bsw_width"):
-        dk.EigenDeformation(mesh, handles=[top], laplacian="belkin_sun_wang", bsw_width=0.0)
+        dk.EigenDeformation(mesh, region="handles", handles=[top], laplacian="belkin_sun_wang", bsw_width=0.0)
 
 
 def test_a_belkin_sun_wang_kernel_too_narrow_for_the_mesh_is_refused():
@@ -300,9 +382,9 @@ def test_a_belkin_sun_wang_kernel_too_narrow_for_the_mesh_is_refused():
     for width in (0.1, 0.3):
         with pytest.raises(ValueError, match="bsw_width %g is too narrow for this mesh.*does "
                                              "not connect the ends of" % width):
-            dk.EigenDeformation(mesh, handles=[region], laplacian="belkin_sun_wang",
+            dk.EigenDeformation(mesh, region="handles", handles=[region], laplacian="belkin_sun_wang",
                                 bsw_width=width, n_eigenvectors=8, refine=0)
-    e = dk.EigenDeformation(mesh, handles=[region], laplacian="belkin_sun_wang",
+    e = dk.EigenDeformation(mesh, region="handles", handles=[region], laplacian="belkin_sun_wang",
                             n_eigenvectors=8, refine=0)
     T = np.eye(4)
     T[:3, 3] = (0.1, 0.0, 0.2)
@@ -323,7 +405,7 @@ def test_eigenpairs_match_scipy_on_the_armadillo():
     mesh = dk.Mesh.from_polygons(v, sizes, idx)
     v = np.asarray(v)
     top = np.where(v[:, 1] > np.percentile(v[:, 1], 97))[0]
-    e = dk.EigenDeformation(mesh, handles=[top], n_eigenvectors=20, refine=0)
+    e = dk.EigenDeformation(mesh, region="handles", handles=[top], n_eigenvectors=20, refine=0)
     rows, cols, vals = dk.cotangent_laplacian(mesh)
     n = len(v)
     L = sp.csc_matrix((np.asarray(vals), (np.asarray(rows), np.asarray(cols))), shape=(n, n))
