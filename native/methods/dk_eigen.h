@@ -24,7 +24,7 @@
  * Constraints (the method contract): R, the region that moves, is made of groups, each with
  * its own motion: per handle, the part of the mesh it drags (turned about the part's border
  * so that the handle reaches its target) and the handle group itself (region
- * DK_EIGEN_REGION_PART, the default; eigen_part.h), or the handle groups alone
+ * DK_EIGEN_REGION_PART, the default; eigen/part.h), or the handle groups alone
  * (DK_EIGEN_REGION_HANDLES). Every other vertex keeps its skeleton position in eq. 1 (the
  * paper has no fixed set: the fixed vertices are simply outside R). Handle weights and a
  * region of interest are refused (a region moves as a whole). Targets given as transforms
@@ -69,7 +69,7 @@ typedef enum dk_eigen_region {
                                       and the fixed vertices) is the handle's and above one
                                       half, turned about the border of the part so that the
                                       handle's centroid reaches its target, the handle
-                                      following its own targets (eigen_part.h). Default      */
+                                      following its own targets (eigen/part.h). Default      */
     DK_EIGEN_REGION_HANDLES = 1  /**< the handle groups alone, moved to their targets: the
                                       paper's R when the user selects it as a handle group  */
 } dk_eigen_region;

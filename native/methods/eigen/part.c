@@ -1,5 +1,5 @@
-/* DeformKit: the part each handle of an EigenDeformation drags (eigen_part.h). */
-#include "eigen_part.h"
+/* DeformKit EigenDeformation: the part each handle drags (part.h). */
+#include "part.h"
 
 #include <math.h>
 #include <stdlib.h>
