@@ -29,8 +29,34 @@ static dk_status oom(dk_error *err)
 /* Harmonic fields solved together, with one factorization (n x BATCH doubles at a time). */
 #define BATCH 8
 
-/* owner[v] := the handle whose harmonic field is largest at free vertex v, when above one
- * half; -1 otherwise (handle and fixed vertices keep -1: they are no part's turning piece) */
+/* The level of a handle's field where its part ends: one half, raised past a plateau. The
+ * field is harmonic, so it falls steeply along a thin limb and hardly at all across a thick
+ * body: the torso between a hand and the feet is one level, near one half, and a cut there
+ * takes the torso into the hand's part (the whole body then leans). The free surface's area
+ * in bins of 1/CUT_BINS of the field finds it: a bin with over twice the mean area is
+ * thick; while a bin next to the cut is thick, the cut rises a bin (at most to 0.9). On a
+ * limb fixed at one end no bin near one half is thick, and the cut stays there. */
+#define CUT_BINS 20
+static double cut_level(const double *u, const double *mass, const dk_constraints *c)
+{
+    double area[CUT_BINS] = {0.0}, total = 0.0;
+    for (dk_index v = 0; v < c->n_vertices; v++)
+        if (c->role[v] == DK_VERTEX_FREE) {
+            int b = (int)(u[v] * CUT_BINS);
+            b = b < 0 ? 0 : b >= CUT_BINS ? CUT_BINS - 1 : b;
+            area[b] += mass[v];
+            total += mass[v];
+        }
+    const double thick = 2.0 * total / CUT_BINS;
+    int b = CUT_BINS / 2;
+    while (b < CUT_BINS - 2 && (area[b - 1] > thick || area[b] > thick))
+        b++;
+    return (double)b / CUT_BINS;
+}
+
+/* owner[v] := the handle whose harmonic field is largest at free vertex v, among those
+ * whose field there is above their cut level; -1 otherwise (handle and fixed vertices keep
+ * -1: they are no part's turning piece) */
 static dk_status owners(const dk_mesh *mesh, const dk_constraints *c, dk_index *owner,
                         dk_error *err)
 {
@@ -40,11 +66,14 @@ static dk_status owners(const dk_mesh *mesh, const dk_constraints *c, dk_index *
     double *val = malloc(((size_t)n + 1) * cols * sizeof *val);
     double *u = malloc(((size_t)n + 1) * cols * sizeof *u);
     double *best = malloc(((size_t)n + 1) * sizeof *best);
-    dk_status st = (!painted || !val || !u || !best) ? oom(err) : DK_OK;
+    double *mass = malloc(((size_t)n + 1) * sizeof *mass);
+    dk_status st = (!painted || !val || !u || !best || !mass) ? oom(err) : DK_OK;
+    if (st == DK_OK)
+        st = dk_mass_matrix(mesh, DK_MASS_BARYCENTRIC, mass, err);
     dk_index np = 0;
     for (dk_index v = 0; st == DK_OK && v < n; v++) {
         owner[v] = -1;
-        best[v] = 0.5;
+        best[v] = 0.0;
         if (c->role[v] != DK_VERTEX_FREE)
             painted[np++] = v;
     }
@@ -54,23 +83,24 @@ static dk_status owners(const dk_mesh *mesh, const dk_constraints *c, dk_index *
             for (dk_index q = 0; q < np; q++)
                 val[(size_t)np * j + q] = c->role[painted[q]] == h0 + j ? 1.0 : 0.0;
         st = dk_harmonic_interpolation_columns(mesh, painted, val, np, (int)k, 0.0, u, err);
-        if (st != DK_OK) {
-            dk_error_prefix(err, "EigenDeformation: the handles' parts");
+        if (st != DK_OK)
             break;
-        }
-        for (dk_index j = 0; j < k; j++)
-            for (dk_index v = 0; v < n; v++) {
-                const double x = u[(size_t)n * j + v];
-                if (c->role[v] == DK_VERTEX_FREE && x > best[v]) {
-                    best[v] = x;
+        for (dk_index j = 0; j < k; j++) {
+            const double *uj = u + (size_t)n * j, cut = cut_level(uj, mass, c);
+            for (dk_index v = 0; v < n; v++)
+                if (c->role[v] == DK_VERTEX_FREE && uj[v] > cut && uj[v] > best[v]) {
+                    best[v] = uj[v];
                     owner[v] = h0 + j;
                 }
-            }
+        }
     }
+    if (st != DK_OK && st != DK_ERR_OUT_OF_MEMORY)
+        dk_error_prefix(err, "EigenDeformation: the handles' parts");
     free(painted);
     free(val);
     free(u);
     free(best);
+    free(mass);
     return st;
 }
 
