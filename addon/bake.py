@@ -397,7 +397,7 @@ class ShapeKeyBake:
     def __init__(self, context, obj, d, frame_start, frame_end):
         solver.check_single_user(obj, "bake %s to shape keys" % d.name)
         prepare(obj, d, "SHAPE_KEYS")
-        solver.check_input_is_rest(obj, d, "bake to shape keys")
+        solver.check_input_is_rest(obj, d, "bake to shape keys", every_method=True)
         self.context, self.start, self.end = context, frame_start, frame_end
         self.fb = FrameBaker(context, obj, d, frame_start, frame_end)
         self.results = []

@@ -1236,11 +1236,20 @@ def moved_input(obj, d, depsgraph=None):
     return co.reshape(-1, 3).astype(np.float64)
 
 
-def check_input_is_rest(obj, d, what, depsgraph=None):
+def check_input_is_rest(obj, d, what, depsgraph=None, every_method=False):
     """Refuses writing a follower's result into the mesh or its shape keys (`what`: "apply",
     "bake to shape keys") while something above moves its input: the modifiers and keys
-    that moved it would move the written shape again."""
+    that moved it would move the written shape again. `every_method`: also for a method
+    that solves from the rest, while modifiers above move its input (shape keys hold
+    positions before modifiers: a rig would move each frame's baked shape again; shape keys
+    alone add up, the baked key's offset on top of the others')."""
     if not methods.get(d.method).follows_input:
+        above = modifiers_above(obj, d, depsgraph) if every_method else []
+        if above:
+            raise DeformKitError("cannot %s %s: its input is moved by %s above it, which "
+                                 "would move the baked shapes again; bake to Point Cache "
+                                 "instead" % (what, d.name,
+                                              ", ".join("'%s'" % m.name for m in above)))
         return
     by = input_movers(obj, d, depsgraph)
     if by is not None:
@@ -1369,8 +1378,7 @@ class FrameSolve:
         if _cache.get(self.key) is not e:
             raise DeformKitError("'%s' was re-bound during the bake: bake again" % d.name)
         pos = _finish_solve(obj, d, e, self.key, self.plan, self.result_, self.ms)
-        f = geonodes.factor(obj, d)
-        return e.source + f * (pos - e.source)
+        return as_shown(obj, d, e, pos)
 
 
 def _async_wanted(e, interactive, cold, write):
@@ -1776,15 +1784,25 @@ def shown_positions(obj, d):
     return src + geonodes.factor(obj, d) * off.reshape(-1, 3).astype(np.float64)
 
 
+def as_shown(obj, d, e, pos, depsgraph=None):
+    """What the modifier shows for the solved positions `pos` of this frame: the input it
+    gets + factor * (pos - the positions the method solved from). The input is what reaches
+    the modifier (an Armature's pose, shape keys), not the rest: a method that does not
+    follow its input solved from the rest, and its offset lands on the input as the
+    modifier adds it. A bake writes this, so that its cache, played after the Armature in
+    place of the modifier, shows what playback showed (issue 39: it held rest + offset, and
+    the rig was thrown away)."""
+    inp = moved_input(obj, d, depsgraph)
+    base = e.source if inp is None else inp
+    return base + geonodes.factor(obj, d) * (pos - e.source)
+
+
 def deformed_positions(obj, d, depsgraph=None, cold=True, check_groups=False):
-    """input + factor * (solved - input) for the current frame (what the modifier shows; the
-    input is the rest unless the method follows an animated input). `check_groups`: re-read
-    the vertex groups first (a bake's first frame)."""
+    """What the modifier shows on the current frame (as_shown), solved cold as a bake
+    solves. `check_groups`: re-read the vertex groups first (a bake's first frame)."""
     pos = solve(obj, d, depsgraph, cold=cold, write=False, force=True,
                 check_groups=check_groups)
-    e = _cache[(obj.name, d.uid)]
-    f = geonodes.factor(obj, d)
-    return e.source + f * (pos - e.source)
+    return as_shown(obj, d, _cache[(obj.name, d.uid)], pos, depsgraph)
 
 
 def evaluate_object(obj, depsgraph=None, check_groups=False, cold=False, interactive=False,

@@ -290,10 +290,11 @@ def test_every_method_plays_and_bakes_in_chunks():
                     len(f1) == len(f2) == 20 and diff == 0.0, diff)
 
 
-def rigged_arm(nodes):
+def rigged_arm(nodes, method="EMBEDDED"):
     """A 24 x 6 grid bent by a two-bone Armature modifier (first in the stack), the bones
-    keyed over frames 1-20; an Embedded Deformation deformer after it, fixed on the left
-    end, with a handle on the right tip moved by a static edit after the bind at frame 1."""
+    keyed over frames 1-20; a deformer of `method` after it (Embedded Deformation with
+    `nodes`), fixed on the left end, with a handle on the right tip moved by a static edit
+    after the bind at frame 1."""
     S.reset_scene()
     nx, ny = 24, 6
     obj = S.make_grid(nx=nx, ny=ny)
@@ -327,11 +328,12 @@ def rigged_arm(nodes):
     mod.object = ao
     bpy.context.view_layer.objects.active = obj
     e = S.empty("Tip", (1.0, 0.0, 0.0))
-    bpy.ops.deformkit.add_deformer(method="EMBEDDED")
+    bpy.ops.deformkit.add_deformer(method=method)
     d = obj.deformkit.deformers[0]
     d.fixed_group = "fixed"
-    d.options.nodes = nodes
-    d.options.n_nodes = 40
+    if method == "EMBEDDED":
+        d.options.nodes = nodes
+        d.options.n_nodes = 40
     bpy.ops.deformkit.add_handle(vertex_group="tip", target=e.name)
     sc = bpy.context.scene
     sc.frame_start, sc.frame_end = 1, 20
@@ -421,8 +423,50 @@ def test_embedded_follows_an_armature():
         S.handlers.enabled[0] = True
 
 
+def test_bakes_keep_the_rig():
+    """Issue 39: a deformer after an Armature, every method. The point cache holds what
+    playback shows on every frame: the armature's pose with the deformer's edit on it. It
+    held the rest shape plus the edit, and the Mesh Cache (Overwrite) after the Armature
+    threw the pose away (a straight arm at the bent frames). Shape keys, which the Armature
+    would move again, are refused with a message naming the Point Cache."""
+    for m in S.methods.METHODS:
+        if not S.native.has_class(m.native_class):
+            continue
+        obj, d, e, fixed, handle, bind_world = rigged_arm("surface", m.id)
+        sc = bpy.context.scene
+        want = {}
+        for f in (1, 8, 16, 20):
+            sc.frame_set(f)
+            want[f] = S.evaluated_positions(obj)
+        inp = armature_input(obj, d)
+        R.check("%s: the armature bends the arm at frame 20 (the test means something)"
+                % m.id, np.abs(inp - S.rest_positions(obj)).max() > 0.3)
+        sc.frame_set(20)
+        R.check("%s: the edit shows on the pose at frame 20" % m.id,
+                np.abs(want[20][handle] - inp[handle]).max() > 0.05)
+        try:
+            bpy.ops.deformkit.bake(mode="SHAPE_KEYS", frame_start=1, frame_end=2)
+            msg = ""
+        except RuntimeError as ex:
+            msg = str(ex)
+        R.check("%s: bake to shape keys under the Armature refused, naming what to use"
+                % m.id, "'Armature' above it" in msg and "Point Cache" in msg, msg)
+        R.check("%s: nothing written into the mesh" % m.id, obj.data.shape_keys is None)
+        path = os.path.join(S.OUTPUT, "anim_rig_%s.pc2" % m.id.lower())
+        bpy.ops.deformkit.bake(mode="PC2", frame_start=1, frame_end=20, filepath=path)
+        S.handlers.enabled[0] = False
+        try:
+            for f in want:
+                sc.frame_set(f)
+                got = S.evaluated_positions(obj)
+                R.check("%s: the point cache plays frame %d as playback showed it" % (m.id, f),
+                        np.abs(got - want[f]).max() < TOL, np.abs(got - want[f]).max())
+        finally:
+            S.handlers.enabled[0] = True
+
+
 for t in (test_playback, test_render_sees_each_frame, test_chunked_bake_equals_single, test_batch_failures, test_mesh_cache_modifier,
           test_shape_key_bake, test_every_method_plays_and_bakes_in_chunks,
-          test_embedded_follows_an_armature):
+          test_embedded_follows_an_armature, test_bakes_keep_the_rig):
     R.run(t)
 R.finish()
