@@ -154,7 +154,7 @@ class DEFORMKIT_OT_add_handle(_Base, bpy.types.Operator):
         h.subtarget = self.subtarget
         d.active_handle = len(d.handles) - 1
         if d.bound and h.target is not None:
-            solver.set_bind_matrix(obj, h)
+            solver.set_bind_matrix(obj, h, d=d)
         _handles_changed(d)
 
 
@@ -176,9 +176,14 @@ class DEFORMKIT_OT_add_handle_from_selection(_Base, bpy.types.Operator):
         if not sel:
             raise solver.DeformKitError("no vertices selected")
         co = np.array([tuple(v.co) for v in bm.verts if v.select])
-        centre_local = co.mean(axis=0)
         bpy.ops.object.mode_set(mode="OBJECT")
         try:
+            # the empty goes where the selection is shown: on a posed mesh, where the
+            # Armature (and the other modifiers) put it, not at its rest place
+            shown = solver.evaluated_positions(obj)
+            if len(shown) == len(obj.data.vertices):
+                co = shown[sel]
+            centre_local = co.mean(axis=0)
             dks = obj.deformkit
             if len(dks.deformers) == 0:
                 d = properties.new_deformer(obj, self.method)
@@ -210,7 +215,7 @@ class DEFORMKIT_OT_add_handle_from_selection(_Base, bpy.types.Operator):
             d.active_handle = len(d.handles) - 1
             if d.bound:
                 context.view_layer.update()
-                solver.set_bind_matrix(obj, h)
+                solver.set_bind_matrix(obj, h, d=d)
             _handles_changed(d)
         finally:
             bpy.ops.object.mode_set(mode="EDIT")

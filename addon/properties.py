@@ -76,6 +76,10 @@ class DeformKitHandle(bpy.types.PropertyGroup):
     bind_matrix: FloatVectorProperty(name="Bind Matrix", size=16, default=IDENTITY16,
                                      description="inverse(target world) @ object world at bind")
     is_bound: BoolProperty(name="Bound", default=False)
+    rig_matrix: FloatVectorProperty(name="Rig Matrix", size=16, default=(0.0,) * 16,
+                                    description="How the rig moved the target's bone at bind "
+                                                "(object space), all 0 when the target rides "
+                                                "no bone of a rig that deforms the input")
 
 
 def _make_options_group(method):

@@ -222,13 +222,68 @@ def bind_matrix(obj, h, depsgraph=None):
     return _flat(inv @ ow)
 
 
-def set_bind_matrix(obj, h, depsgraph=None):
+def rig_bone(obj, d, h, depsgraph=None):
+    """(armature object, bone name) when the handle's target rides a bone of an armature
+    that deforms d's input (an Armature modifier above d's, enabled): the target is that
+    bone, or an object parented to it (through other objects too). Else None."""
+    t, bone = h.target, h.subtarget
+    if t is None:
+        return None
+    if not (t.type == "ARMATURE" and bone):
+        bone = None
+        while t is not None and bone is None:
+            if t.parent is not None and t.parent_type == "BONE" and t.parent_bone:
+                bone = t.parent_bone
+            t = t.parent
+        if bone is None:
+            return None
+    for m in modifiers_above(obj, d, depsgraph):
+        if m.type == "ARMATURE" and m.object is not None and m.object.name == t.name:
+            return t, bone
+    return None
+
+
+def rig_motion(obj, d, h, depsgraph=None):
+    """How the rig moves the vertices the handle's bone carries, in obj's space: obj^-1 @
+    armature @ pose bone @ inverse(bone rest) @ armature^-1 @ obj, as the Armature modifier
+    deforms them (a Matrix); None when the target rides no such bone (rig_bone)."""
+    rb = rig_bone(obj, d, h, depsgraph)
+    if rb is None:
+        return None
+    arm, bone = rb
+    ae = arm.evaluated_get(depsgraph) if depsgraph is not None else arm
+    pb = ae.pose.bones.get(bone)
+    if pb is None:
+        return None
+    ow = obj.evaluated_get(depsgraph).matrix_world if depsgraph is not None else obj.matrix_world
+    try:
+        return (ow.inverted() @ ae.matrix_world @ pb.matrix @ pb.bone.matrix_local.inverted()
+                @ ae.matrix_world.inverted() @ ow)
+    except ValueError:
+        raise DeformKitError("handle '%s': the rig '%s' or '%s' has a singular transform"
+                             % (h.name, arm.name, obj.name))
+
+
+def rig_bind(obj, d, h, depsgraph=None):
+    """rig_motion at bind, flat (16 floats), or all 0 when there is none."""
+    m = rig_motion(obj, d, h, depsgraph) if d is not None else None
+    return (0.0,) * 16 if m is None else _flat(m)
+
+
+def set_bind_matrix(obj, h, depsgraph=None, d=None):
     h.bind_matrix = bind_matrix(obj, h, depsgraph)
+    h.rig_matrix = rig_bind(obj, d, h, depsgraph)
     h.is_bound = True
 
 
 def transforms(obj, d, depsgraph=None):
-    """n_handles x 4 x 4 transforms (object space) of the rest pose."""
+    """n_handles x 4 x 4 transforms (object space) of the rest pose. A handle whose target
+    rides a bone of the rig that deforms the input (rig_bone) gives only the artist's
+    deviation from the rig: the target's motion since bind T, less the rig's motion of that
+    bone since bind R, as T @ R^-1. The rig already moved those vertices in the input, and
+    the deformer adds its offset there: T alone moved them twice (issue 39: a forearm keyed
+    90 degrees swung 180). A target that follows its bone exactly gives the identity, and
+    the vertices stay where the rig shows them."""
     ow = obj.evaluated_get(depsgraph).matrix_world if depsgraph is not None else obj.matrix_world
     try:
         owi = ow.inverted()
@@ -238,8 +293,14 @@ def transforms(obj, d, depsgraph=None):
     for i, h in enumerate(d.handles):
         tw = target_world(h, depsgraph)
         if not h.is_bound:
-            set_bind_matrix(obj, h, depsgraph)
-        out[i] = np.array(owi @ tw @ _mat(h.bind_matrix))
+            set_bind_matrix(obj, h, depsgraph, d)
+        T = owi @ tw @ _mat(h.bind_matrix)
+        M = rig_motion(obj, d, h, depsgraph)
+        if M is not None:
+            if not any(h.rig_matrix):  # the rig came after the bind: its pose now is the rest
+                h.rig_matrix = _flat(M)
+            T = T @ _mat(h.rig_matrix) @ M.inverted()
+        out[i] = np.array(T)
     return out
 
 
@@ -933,7 +994,7 @@ def bind_begin(obj, d, depsgraph=None):
     ensure_own_uid(obj, d)
     _cancel_rebinds((obj.name, d.uid))  # this bind replaces an automatic re-bind
     kw, key = collect(obj, d)
-    mats = [bind_matrix(obj, h, depsgraph) for h in d.handles]
+    mats = [(bind_matrix(obj, h, depsgraph), rig_bind(obj, d, h, depsgraph)) for h in d.handles]
     return BindJob(obj, d, kw, key), mats
 
 
@@ -945,8 +1006,9 @@ def bind_end(obj, d, job, mats, depsgraph=None):
         raise DeformKitError("handles were added or removed during the bind: bind again")
     e = job.entry(obj, d, explicit=True)
     d.bind_topology = job.topology
-    for h, mat in zip(d.handles, mats):
+    for h, (mat, rig) in zip(d.handles, mats):
         h.bind_matrix = mat
+        h.rig_matrix = rig
         h.is_bound = True
     d.bind_n_vertices = e.n_vertices
     d.bind_n_faces = e.n_faces

@@ -11,7 +11,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _setup as S  # noqa: E402
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
-from mathutils import Euler  # noqa: E402
+from mathutils import Euler, Vector  # noqa: E402
 from addon import pc2  # noqa: E402
 
 R = S.Results("test_addon_animation")
@@ -465,8 +465,91 @@ def test_bakes_keep_the_rig():
             S.handlers.enabled[0] = True
 
 
+def test_a_handle_on_the_rig_moves_its_vertices_once():
+    """Issue 39: a handle whose target is the bone that bends the arm, or an empty parented
+    to that bone, every method. The rig already moved its vertices in the deformer's input:
+    the handle adds only the artist's deviation from the bone. It added the bone's motion
+    again (the forearm swung twice as far). With the target on the bone the result is the
+    armature's pose; with the empty moved along the bone, the tip moves by that much more."""
+    for m in S.methods.METHODS:
+        if not S.native.has_class(m.native_class):
+            continue
+        obj, d, e, fixed, handle, bind_world = rigged_arm("surface", m.id)
+        rig = bpy.data.objects["Rig"]
+        sc = bpy.context.scene
+        sc.frame_set(1)
+        h = d.handles[0]
+        h.target, h.subtarget = rig, "lower"
+        bpy.ops.deformkit.bind()
+        for f in (10, 20):
+            sc.frame_set(f)
+            got, inp = S.evaluated_positions(obj), armature_input(obj, d)
+            R.check("%s frame %d: the handle on the bone shows the rig's pose" % (m.id, f),
+                    np.abs(got - inp).max() < TOL, np.abs(got - inp).max())
+        if m.fit_check == "handles":
+            continue  # the deviation below is met exactly by the hard-handle methods only
+        sc.frame_set(1)
+        h.target, h.subtarget = e, ""
+        e.parent, e.parent_type, e.parent_bone = rig, "BONE", "lower"
+        e.matrix_world = bind_world  # the bind-time placement, now under the bone
+        bpy.context.view_layer.update()
+        bpy.ops.deformkit.bind()
+        for f in (10, 20):
+            sc.frame_set(f)
+            before = np.array(e.matrix_world.translation)
+            e.location = e.location + Vector((0, 0.1, 0))
+            bpy.context.view_layer.update()
+            dev = np.array(e.matrix_world.translation) - before
+            got, inp = S.evaluated_positions(obj), armature_input(obj, d)
+            off = np.abs(got[handle] - inp[handle] - dev).max()
+            R.check("%s frame %d: an empty on the bone adds its own move once" % (m.id, f),
+                    off < TOL and np.linalg.norm(dev) > 0.05, (off, dev))
+            e.location = e.location - Vector((0, 0.1, 0))
+            bpy.context.view_layer.update()
+
+
+def test_a_handle_from_selection_sits_where_the_selection_is_shown():
+    """Issue 39: Add Handle from Selection on a posed mesh put the empty at the selection's
+    rest place, far from the bent arm the artist was looking at."""
+    obj, d, e, fixed, handle, bind_world = rigged_arm("surface", MID)
+    bpy.context.scene.frame_set(20)
+    shown = S.evaluated_positions(obj)
+    bpy.context.view_layer.objects.active = obj
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.ops.mesh.select_all(action="DESELECT")
+    bpy.ops.object.mode_set(mode="OBJECT")
+    for i in fixed[:4]:
+        obj.data.vertices[int(i)].select = True
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.ops.deformkit.add_handle_from_selection()
+    bpy.ops.object.mode_set(mode="OBJECT")
+    new = d.handles[-1].target
+    want = np.array(obj.matrix_world) @ np.append(shown[fixed[:4]].mean(0), 1.0)
+    R.check("the empty is at the selection's shown centre",
+            np.abs(np.array(new.matrix_world.translation) - want[:3]).max() < 1e-5,
+            (tuple(new.matrix_world.translation), want))
+    sel = [j * 24 + 23 for j in range(6)]
+    shown = S.evaluated_positions(obj)  # the new handle changed the deformer's result
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.ops.mesh.select_all(action="DESELECT")
+    bpy.ops.object.mode_set(mode="OBJECT")
+    for i in sel:
+        obj.data.vertices[i].select = True
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.ops.deformkit.add_handle_from_selection()
+    bpy.ops.object.mode_set(mode="OBJECT")
+    new = d.handles[-1].target
+    rest = S.rest_positions(obj)
+    R.check("on the bent tip, not at its rest place",
+            np.abs(np.array(new.matrix_world.translation) - shown[sel].mean(0)).max() < 1e-5
+            and np.linalg.norm(rest[sel].mean(0) - shown[sel].mean(0)) > 0.3,
+            (tuple(new.matrix_world.translation), shown[sel].mean(0), rest[sel].mean(0)))
+
+
 for t in (test_playback, test_render_sees_each_frame, test_chunked_bake_equals_single, test_batch_failures, test_mesh_cache_modifier,
           test_shape_key_bake, test_every_method_plays_and_bakes_in_chunks,
-          test_embedded_follows_an_armature, test_bakes_keep_the_rig):
+          test_embedded_follows_an_armature, test_bakes_keep_the_rig,
+          test_a_handle_on_the_rig_moves_its_vertices_once,
+          test_a_handle_from_selection_sits_where_the_selection_is_shown):
     R.run(t)
 R.finish()
