@@ -80,6 +80,22 @@ class DeformKitHandle(bpy.types.PropertyGroup):
                                     description="How the rig moved the target's bone at bind "
                                                 "(object space), all 0 when the target rides "
                                                 "no bone of a rig that deforms the input")
+    follow: EnumProperty(
+        name="Edit", default="POSE", update=_touch,
+        items=(("POSE", "Follows the Pose",
+                "The handle's edit turns with its vertices as the animation (an Armature, "
+                "shape keys) turns them: a correction keyed once stays on its side of a "
+                "bending limb"),
+               ("WORLD", "Stays in Place",
+                "The handle's vertices go where the target puts them, wherever the animation "
+                "carries them: for a handle that must reach an absolute place (a hand on a "
+                "table)")),
+        description="What the handle's edit does where modifiers or shape keys above the "
+                    "deformer move its vertices")
+    pose_matrix: FloatVectorProperty(name="Pose Matrix", size=16, default=(0.0,) * 16,
+                                     description="The rigid fit of the handle's vertices from "
+                                                 "the rest to the deformer's input at bind, "
+                                                 "all 0 before it is known")
 
 
 def _make_options_group(method):

@@ -17,23 +17,14 @@ import time
 
 import bpy
 import numpy as np
-from mathutils import Matrix
 
 from . import compat, geonodes, methods, native
+from .animated_input import (check_input_is_rest, edit_targets, input_movers,  # noqa: F401
+                             modifiers_above, moved_input)
+from .errors import DeformKitError, OverlapError  # noqa: F401
+from .handles import (bind_matrix, pose_bind, rig_bind, set_bind_matrix,  # noqa: F401
+                      target_world, transforms, turn_with_the_pose)
 from .text import article, plural
-
-
-class DeformKitError(Exception):
-    """A setup problem or a native failure, with a message for the user."""
-
-
-class OverlapError(DeformKitError):
-    """Two of a deformer's vertex groups share vertices that may belong to one only. The
-    panel offers Select Shared and Remove from <group> (operators.DEFORMKIT_OT_overlap)."""
-
-    def __init__(self, msg, group_a, group_b):
-        super().__init__(msg)
-        self.groups = (group_a, group_b)
 
 
 NATIVE_ERRORS = (ValueError, IndexError, TypeError, RuntimeError, MemoryError, OverflowError)
@@ -180,128 +171,6 @@ def read_groups(obj, names):
                     wts[n].append(g.weight)
     return {n: (np.array(idx[n], dtype=np.int32), np.array(wts[n], dtype=np.float64))
             for n in idx}
-
-
-def target_world(h, depsgraph=None):
-    """World matrix of a handle's target (object, or bone of an armature); raises if missing."""
-    t = h.target
-    if t is None:
-        raise DeformKitError("handle '%s' has no target: pick an object or bone" % h.name)
-    if not t.users_scene:
-        raise DeformKitError("handle '%s': target '%s' was deleted" % (h.name, t.name))
-    te = t.evaluated_get(depsgraph) if depsgraph is not None else t
-    if h.subtarget:
-        if t.type != "ARMATURE":
-            raise DeformKitError("handle '%s': bone '%s' set but target '%s' is not an armature"
-                                 % (h.name, h.subtarget, t.name))
-        pb = te.pose.bones.get(h.subtarget)
-        if pb is None:
-            raise DeformKitError("handle '%s': bone '%s' not found in '%s'"
-                                 % (h.name, h.subtarget, t.name))
-        return te.matrix_world @ pb.matrix
-    return te.matrix_world.copy()
-
-
-def _flat(m):
-    return [m[r][c] for r in range(4) for c in range(4)]
-
-
-def _mat(v):
-    return Matrix((v[0:4], v[4:8], v[8:12], v[12:16]))
-
-
-def bind_matrix(obj, h, depsgraph=None):
-    """inverse(target world) @ object world, flat (16 floats): the handle's rest placement."""
-    tw = target_world(h, depsgraph)
-    try:
-        inv = tw.inverted()
-    except ValueError:
-        raise DeformKitError("handle '%s': target '%s' has a singular transform (zero scale?)"
-                             % (h.name, h.target.name))
-    ow = obj.evaluated_get(depsgraph).matrix_world if depsgraph is not None else obj.matrix_world
-    return _flat(inv @ ow)
-
-
-def rig_bone(obj, d, h, depsgraph=None):
-    """(armature object, bone name) when the handle's target rides a bone of an armature
-    that deforms d's input (an Armature modifier above d's, enabled): the target is that
-    bone, or an object parented to it (through other objects too). Else None."""
-    t, bone = h.target, h.subtarget
-    if t is None:
-        return None
-    if not (t.type == "ARMATURE" and bone):
-        bone = None
-        while t is not None and bone is None:
-            if t.parent is not None and t.parent_type == "BONE" and t.parent_bone:
-                bone = t.parent_bone
-            t = t.parent
-        if bone is None:
-            return None
-    for m in modifiers_above(obj, d, depsgraph):
-        if m.type == "ARMATURE" and m.object is not None and m.object.name == t.name:
-            return t, bone
-    return None
-
-
-def rig_motion(obj, d, h, depsgraph=None):
-    """How the rig moves the vertices the handle's bone carries, in obj's space: obj^-1 @
-    armature @ pose bone @ inverse(bone rest) @ armature^-1 @ obj, as the Armature modifier
-    deforms them (a Matrix); None when the target rides no such bone (rig_bone)."""
-    rb = rig_bone(obj, d, h, depsgraph)
-    if rb is None:
-        return None
-    arm, bone = rb
-    ae = arm.evaluated_get(depsgraph) if depsgraph is not None else arm
-    pb = ae.pose.bones.get(bone)
-    if pb is None:
-        return None
-    ow = obj.evaluated_get(depsgraph).matrix_world if depsgraph is not None else obj.matrix_world
-    try:
-        return (ow.inverted() @ ae.matrix_world @ pb.matrix @ pb.bone.matrix_local.inverted()
-                @ ae.matrix_world.inverted() @ ow)
-    except ValueError:
-        raise DeformKitError("handle '%s': the rig '%s' or '%s' has a singular transform"
-                             % (h.name, arm.name, obj.name))
-
-
-def rig_bind(obj, d, h, depsgraph=None):
-    """rig_motion at bind, flat (16 floats), or all 0 when there is none."""
-    m = rig_motion(obj, d, h, depsgraph) if d is not None else None
-    return (0.0,) * 16 if m is None else _flat(m)
-
-
-def set_bind_matrix(obj, h, depsgraph=None, d=None):
-    h.bind_matrix = bind_matrix(obj, h, depsgraph)
-    h.rig_matrix = rig_bind(obj, d, h, depsgraph)
-    h.is_bound = True
-
-
-def transforms(obj, d, depsgraph=None):
-    """n_handles x 4 x 4 transforms (object space) of the rest pose. A handle whose target
-    rides a bone of the rig that deforms the input (rig_bone) gives only the artist's
-    deviation from the rig: the target's motion since bind T, less the rig's motion of that
-    bone since bind R, as T @ R^-1. The rig already moved those vertices in the input, and
-    the deformer adds its offset there: T alone moved them twice (issue 39: a forearm keyed
-    90 degrees swung 180). A target that follows its bone exactly gives the identity, and
-    the vertices stay where the rig shows them."""
-    ow = obj.evaluated_get(depsgraph).matrix_world if depsgraph is not None else obj.matrix_world
-    try:
-        owi = ow.inverted()
-    except ValueError:
-        raise DeformKitError("'%s' has a singular transform (zero scale?)" % obj.name)
-    out = np.empty((len(d.handles), 4, 4), dtype=np.float64)
-    for i, h in enumerate(d.handles):
-        tw = target_world(h, depsgraph)
-        if not h.is_bound:
-            set_bind_matrix(obj, h, depsgraph, d)
-        T = owi @ tw @ _mat(h.bind_matrix)
-        M = rig_motion(obj, d, h, depsgraph)
-        if M is not None:
-            if not any(h.rig_matrix):  # the rig came after the bind: its pose now is the rest
-                h.rig_matrix = _flat(M)
-            T = T @ _mat(h.rig_matrix) @ M.inverted()
-        out[i] = np.array(T)
-    return out
 
 
 def _settings_key(d):
@@ -1010,6 +879,7 @@ def bind_end(obj, d, job, mats, depsgraph=None):
         h.bind_matrix = mat
         h.rig_matrix = rig
         h.is_bound = True
+    pose_bind(obj, d, e.rest, e.handles, _input_or_none(obj, d, depsgraph))
     d.bind_n_vertices = e.n_vertices
     d.bind_n_faces = e.n_faces
     d.bound = True
@@ -1244,94 +1114,6 @@ def drop_pending(key):
         e.pending = False
 
 
-def modifiers_above(obj, d, depsgraph=None):
-    """The modifiers above d's own in the stack that are enabled for the depsgraph's mode
-    (viewport or render)."""
-    mod = geonodes.find_modifier(obj, d)
-    render = depsgraph is not None and depsgraph.mode == "RENDER"
-    out = []
-    for mm in obj.modifiers:
-        if mm == mod:
-            break
-        if mm.show_render if render else mm.show_viewport:
-            out.append(mm)
-    return out
-
-
-def input_movers(obj, d, depsgraph=None):
-    """What may move the mesh before d's modifier sees it, for messages ("'Armature'",
-    "shape keys"), or None when its input is the base mesh."""
-    above = modifiers_above(obj, d, depsgraph)
-    keys = obj.data.shape_keys
-    if not above and (keys is None or len(keys.key_blocks) < 2):
-        return None
-    return ", ".join("'%s'" % mm.name for mm in above) or "shape keys"
-
-
-def moved_input(obj, d, depsgraph=None):
-    """What reaches d's modifier (n x 3, object space) when shape keys or modifiers above it
-    can move the base mesh, or None when the input is the base mesh itself. Read from the
-    evaluated object, where the modifier stores its input (geonodes, version 2)."""
-    what = input_movers(obj, d, depsgraph)
-    if what is None:
-        return None
-    mod = geonodes.find_modifier(obj, d)
-    if mod is None or not geonodes.ensure_input_name(mod, d):
-        raise DeformKitError("%s: its Geometry Nodes modifier is missing or not DeformKit's: "
-                             "bind again" % d.name)
-    dg = depsgraph if depsgraph is not None else bpy.context.evaluated_depsgraph_get()
-    a = obj.evaluated_get(dg).data.attributes.get(d.input_attribute_name)
-    if a is None:  # the Input name was just set (bind): evaluate the stack with it
-        dg.update()
-        a = obj.evaluated_get(dg).data.attributes.get(d.input_attribute_name)
-    if a is None:
-        raise DeformKitError("%s cannot read what %s gives it: its modifier is disabled or a "
-                             "modifier below it drops attributes" % (d.name, what))
-    n = len(obj.data.vertices)
-    if len(a.data) != n:
-        raise DeformKitError("%s follows %s, but the final mesh has %s, not %d: a "
-                             "modifier below it (Subdivision?) changes the vertex count; "
-                             "disable it while editing, or move it above %s"
-                             % (d.name, what, plural(len(a.data), "vertex"), n, d.name))
-    co = np.empty(n * 3, dtype=np.float32)
-    a.data.foreach_get("vector", co)
-    return co.reshape(-1, 3).astype(np.float64)
-
-
-def check_input_is_rest(obj, d, what, depsgraph=None, every_method=False):
-    """Refuses writing a follower's result into the mesh or its shape keys (`what`: "apply",
-    "bake to shape keys") while something above moves its input: the modifiers and keys
-    that moved it would move the written shape again. `every_method`: also for a method
-    that solves from the rest, while modifiers above move its input (shape keys hold
-    positions before modifiers: a rig would move each frame's baked shape again; shape keys
-    alone add up, the baked key's offset on top of the others')."""
-    if not methods.get(d.method).follows_input:
-        above = modifiers_above(obj, d, depsgraph) if every_method else []
-        if above:
-            raise DeformKitError("cannot %s %s: its input is moved by %s above it, which "
-                                 "would move the baked shapes again; bake to Point Cache "
-                                 "instead" % (what, d.name,
-                                              ", ".join("'%s'" % m.name for m in above)))
-        return
-    by = input_movers(obj, d, depsgraph)
-    if by is not None:
-        raise DeformKitError("cannot %s %s: its input is moved by %s above it, which would "
-                             "move the written shape again; bake to Point Cache instead"
-                             % (what, d.name, by))
-
-
-def edit_targets(e, T, source):
-    """Section 5 of Sumner et al.: each handle vertex's edit (its displacement by the handle's
-    transform T at its bind-time rest position) added to where `source` (the animated input)
-    puts it. Equal to T applied to the rest when the input is the rest."""
-    out = []
-    for h, t in zip(e.handles, T):
-        r = e.rest[h]
-        out.append(source[h] + (r @ t[:3, :3].T + t[:3, 3] - r))
-    return np.concatenate(out)
-
-
-# An interactive solve that takes longer than this (its last run, or a mesh of at least
 # ASYNC_MIN_VERTICES before any) runs in a worker thread: the update returns at once, the
 # shown result stays until the worker's is ready (the refine timer installs it), so that
 # dragging a million-vertex mesh never freezes Blender (issue 19). The native solve releases
@@ -1583,20 +1365,32 @@ def _basis_preview(obj, d, e, T, inputs):
     return pos
 
 
+def _input_or_none(obj, d, depsgraph):
+    """The deformer's input for a method that solves from the rest (where its handles' edits
+    turn with the pose), or None when it is the rest, or cannot be read (a modifier below
+    changes the vertex count): the edits then keep their direction, as they did."""
+    try:
+        return moved_input(obj, d, depsgraph)
+    except DeformKitError:
+        return None
+
+
 def _solve_inputs(obj, d, e, depsgraph):
     """The handle transforms, the animated input (methods that follow one, else None) and
     the bytes they make, which say whether anything changed since the last solve."""
-    T = snap_identity(transforms(obj, d, depsgraph), e.extent)
+    m = methods.get(d.method)
+    source = moved_input(obj, d, depsgraph) if m.follows_input else None
+    inp = source if m.follows_input else _input_or_none(obj, d, depsgraph)
+    T = snap_identity(turn_with_the_pose(d, e.rest, e.handles, transforms(obj, d, depsgraph),
+                                         inp), e.extent)
     last = e.last_T
     if last is not None and last.shape == T.shape and _within_rounding(T, last, e.extent):
         # the same placement seen through other float32 products (the object and its
         # child target moved together): the last solve's, so that nothing is solved again
         # (a warm iterative solve from its own result moves it by up to its tolerance)
         T = last
-    m = methods.get(d.method)
     if len(T) > len(e.handles):  # region_is_handle: the Region group moves with the first
         T = T[:len(e.handles)]
-    source = moved_input(obj, d, depsgraph) if m.follows_input else None
     return T, source, T.tobytes() + (b"" if source is None else source.tobytes())
 
 

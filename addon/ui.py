@@ -143,6 +143,8 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
                 hc.prop_search(h, "subtarget", h.target.data, "bones")
             if "handle_weights" in m.maps:
                 hc.prop(h, "use_weights")
+            if solver.input_movers(obj, d) is not None:  # an animated input: what the edit does
+                hc.prop(h, "follow")
         if obj.mode == "EDIT":
             layout.operator("deformkit.add_handle_from_selection", icon="HOOK")
 

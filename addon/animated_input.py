@@ -1,0 +1,100 @@
+"""What reaches a deformer on this frame: the modifiers and shape keys above it in the stack
+(an Armature's pose), read from the evaluated object where its Geometry Nodes modifier stores
+its input, and what may and may not be written back into the mesh under them."""
+
+import bpy
+import numpy as np
+
+from . import geonodes, methods
+from .errors import DeformKitError
+from .text import plural
+
+
+def modifiers_above(obj, d, depsgraph=None):
+    """The modifiers above d's own in the stack that are enabled for the depsgraph's mode
+    (viewport or render)."""
+    mod = geonodes.find_modifier(obj, d)
+    render = depsgraph is not None and depsgraph.mode == "RENDER"
+    out = []
+    for mm in obj.modifiers:
+        if mm == mod:
+            break
+        if mm.show_render if render else mm.show_viewport:
+            out.append(mm)
+    return out
+
+
+def input_movers(obj, d, depsgraph=None):
+    """What may move the mesh before d's modifier sees it, for messages ("'Armature'",
+    "shape keys"), or None when its input is the base mesh."""
+    above = modifiers_above(obj, d, depsgraph)
+    keys = obj.data.shape_keys
+    if not above and (keys is None or len(keys.key_blocks) < 2):
+        return None
+    return ", ".join("'%s'" % mm.name for mm in above) or "shape keys"
+
+
+def moved_input(obj, d, depsgraph=None):
+    """What reaches d's modifier (n x 3, object space) when shape keys or modifiers above it
+    can move the base mesh, or None when the input is the base mesh itself. Read from the
+    evaluated object, where the modifier stores its input (geonodes, version 2)."""
+    what = input_movers(obj, d, depsgraph)
+    if what is None:
+        return None
+    mod = geonodes.find_modifier(obj, d)
+    if mod is None or not geonodes.ensure_input_name(mod, d):
+        raise DeformKitError("%s: its Geometry Nodes modifier is missing or not DeformKit's: "
+                             "bind again" % d.name)
+    dg = depsgraph if depsgraph is not None else bpy.context.evaluated_depsgraph_get()
+    a = obj.evaluated_get(dg).data.attributes.get(d.input_attribute_name)
+    if a is None:  # the Input name was just set (bind): evaluate the stack with it
+        dg.update()
+        a = obj.evaluated_get(dg).data.attributes.get(d.input_attribute_name)
+    if a is None:
+        raise DeformKitError("%s cannot read what %s gives it: its modifier is disabled or a "
+                             "modifier below it drops attributes" % (d.name, what))
+    n = len(obj.data.vertices)
+    if len(a.data) != n:
+        raise DeformKitError("%s follows %s, but the final mesh has %s, not %d: a "
+                             "modifier below it (Subdivision?) changes the vertex count; "
+                             "disable it while editing, or move it above %s"
+                             % (d.name, what, plural(len(a.data), "vertex"), n, d.name))
+    co = np.empty(n * 3, dtype=np.float32)
+    a.data.foreach_get("vector", co)
+    return co.reshape(-1, 3).astype(np.float64)
+
+
+def check_input_is_rest(obj, d, what, depsgraph=None, every_method=False):
+    """Refuses writing a follower's result into the mesh or its shape keys (`what`: "apply",
+    "bake to shape keys") while something above moves its input: the modifiers and keys
+    that moved it would move the written shape again. `every_method`: also for a method
+    that solves from the rest, while modifiers above move its input (shape keys hold
+    positions before modifiers: a rig would move each frame's baked shape again; shape keys
+    alone add up, the baked key's offset on top of the others')."""
+    if not methods.get(d.method).follows_input:
+        above = modifiers_above(obj, d, depsgraph) if every_method else []
+        if above:
+            raise DeformKitError("cannot %s %s: its input is moved by %s above it, which "
+                                 "would move the baked shapes again; bake to Point Cache "
+                                 "instead" % (what, d.name,
+                                              ", ".join("'%s'" % m.name for m in above)))
+        return
+    by = input_movers(obj, d, depsgraph)
+    if by is not None:
+        raise DeformKitError("cannot %s %s: its input is moved by %s above it, which would "
+                             "move the written shape again; bake to Point Cache instead"
+                             % (what, d.name, by))
+
+
+def edit_targets(e, T, source):
+    """Section 5 of Sumner et al.: each handle vertex's edit (its displacement by the handle's
+    transform T at its bind-time rest position) added to where `source` (the animated input)
+    puts it. Equal to T applied to the rest when the input is the rest."""
+    out = []
+    for h, t in zip(e.handles, T):
+        r = e.rest[h]
+        out.append(source[h] + (r @ t[:3, :3].T + t[:3, 3] - r))
+    return np.concatenate(out)
+
+
+# An interactive solve that takes longer than this (its last run, or a mesh of at least
