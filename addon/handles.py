@@ -150,12 +150,11 @@ def rigid_fit(rest, moved):
     return G
 
 
-def pose_bind(obj, d, rest, handles, inp):
+def pose_bind(rest, handles, inp):
     """At bind: each handle's rigid fit from the rest to the input (`inp`, None: the rest),
-    stored in its pose_matrix, the pose the edit is made on."""
-    for h, idx in zip(d.handles, handles):
-        G = np.eye(4) if inp is None else rigid_fit(rest[idx], inp[idx])
-        h.pose_matrix = tuple(G.ravel())
+    flat (16 floats each), for its pose_matrix: the pose the edit is made on."""
+    return [tuple((np.eye(4) if inp is None else rigid_fit(rest[idx], inp[idx])).ravel())
+            for idx in handles]
 
 
 def turn_with_the_pose(d, rest, handles, T, inp):

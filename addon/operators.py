@@ -1,6 +1,7 @@
 """Operators (bpy.ops.deformkit.*). Each has a synchronous execute() that works under
 blender -b and from scripts; errors are reported with the native message, never raised."""
 
+import contextlib
 import time
 
 import bmesh
@@ -8,7 +9,7 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 
-from . import bake, compat, geonodes, methods, native, properties, solver
+from . import bake, compat, geonodes, handlers, methods, native, properties, solver
 from .text import plural
 
 
@@ -241,10 +242,14 @@ class DEFORMKIT_OT_remove_handle(_Base, bpy.types.Operator):
 
 
 
-def _report_bound(op, obj, d, ms):
+def _report_bound(op, obj, d, ms, rest_frame=None):
     """The bind's report: a warning when nothing can show the result, or when the native
-    object warns (loose geometry held at rest, a floppy deformation graph)."""
+    object warns (loose geometry held at rest, a floppy deformation graph). It names the rest
+    frame when that is not the frame shown."""
     msg = "%s %s (%.0f ms)" % (d.name, solver.idle_status(d), ms)
+    if rest_frame is not None and rest_frame != bpy.context.scene.frame_current:
+        msg += ", the rest taken on frame %d (%s)" % (
+            rest_frame, "the scene's start" if d.rest_frame_from == "START" else "Rest Frame")
     hidden = bake.hidden_reason(obj, d)
     baked = bake.state(obj, d)
     buts = ([hidden or baked["text"]] if hidden or baked else []) + list(
@@ -255,8 +260,37 @@ def _report_bound(op, obj, d, ms):
         op.report({"INFO"}, msg)
 
 
+@contextlib.contextmanager
+def _at_rest_frame(context, d):
+    """Shows the deformer's rest frame (solver.rest_frame) while the body runs, then the
+    frame that was shown, without solving any deformer on the way (the handlers are off:
+    what shows is unchanged). Yields the rest frame."""
+    scene = context.scene
+    f, now = solver.rest_frame(scene, d), scene.frame_current
+    if f == now:
+        yield f
+        return
+    was = handlers.enabled[0]
+    handlers.enabled[0] = False
+    try:
+        scene.frame_set(f)
+        yield f
+    finally:
+        scene.frame_set(now)
+        handlers.enabled[0] = was
+
+
+def _bind_begin(context, obj, d):
+    """solver.bind_begin on the deformer's rest frame: (job, bind matrices, rest frame)."""
+    with _at_rest_frame(context, d) as f:
+        job, mats = solver.bind_begin(obj, d, context.evaluated_depsgraph_get())
+    return job, mats, f
+
+
 class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
-    """Bind: precompute the solver for the current mesh, groups and target placement"""
+    """Bind: precompute the solver for the current mesh and groups, with the handles' placement
+    and the pose of the rest frame (the scene's start unless the deformer's Rest Frame says
+    otherwise)"""
     bl_idname = "deformkit.bind"
     bl_label = "Bind"
     bl_options = {"REGISTER", "UNDO"}
@@ -268,14 +302,16 @@ class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
         wm = context.window_manager
         wm.progress_begin(0, 1)  # a busy cursor while the factorizations run
         try:
-            solver.bind(obj, d, context.evaluated_depsgraph_get())
+            job, mats, f = _bind_begin(context, obj, d)
+            job.run()
+            solver.bind_end(obj, d, job, mats, context.evaluated_depsgraph_get())
         except solver.DeformKitError as ex:
             solver.set_status(d, ex, True)
             raise
         finally:
             wm.progress_end()
         ms = (time.perf_counter() - t0) * 1000
-        _report_bound(self, obj, d, ms)
+        _report_bound(self, obj, d, ms, f)
 
     # ---- UI version: the native precomputation runs in a worker thread (it releases the
     # GIL), the window stays live with the elapsed time in the status bar, Esc cancels and
@@ -291,7 +327,7 @@ class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
             # thread lives: a small mesh's bind is done before the next event)
             if (obj.name, d.uid) in solver.running_binds:
                 raise solver.DeformKitError("a bind of %s is already running" % d.name)
-            self._job, self._mats = solver.bind_begin(obj, d, context.evaluated_depsgraph_get())
+            self._job, self._mats, self._rest_frame = _bind_begin(context, obj, d)
         except solver.DeformKitError as ex:
             if "d" in locals():
                 solver.set_status(d, ex, True)
@@ -348,7 +384,7 @@ class DEFORMKIT_OT_bind(_Base, bpy.types.Operator):
             solver.set_status(d, ex, True)
             self.report({"ERROR"}, str(ex))
             return {"CANCELLED"}
-        _report_bound(self, obj, d, (time.perf_counter() - self._t0) * 1000)
+        _report_bound(self, obj, d, (time.perf_counter() - self._t0) * 1000, self._rest_frame)
         return {"FINISHED"}
 
 

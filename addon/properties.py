@@ -152,6 +152,18 @@ _deformer_ann = {
     "handles": CollectionProperty(type=DeformKitHandle),
     "active_handle": IntProperty(name="Active Handle", default=0),
     "bound": BoolProperty(name="Bound", default=False),
+    # the frame whose handle placements and pose Bind takes as the rest (solver.rest_frame)
+    "rest_frame_from": EnumProperty(
+        name="Rest Frame", default="START",
+        items=(("START", "Scene Start",
+                "Bind takes the handles' placement and the pose on the scene's first frame as "
+                "the rest, whichever frame is shown: a keyed correction is never inverted"),
+               ("FRAME", "Frame", "Bind takes them on the frame given below"),
+               ("CURRENT", "Current Frame", "Bind takes them on the frame shown")),
+        description="The frame Bind takes the rest from: where the handles are placed and how "
+                    "the animation poses the mesh there, the state the edits are made from"),
+    "rest_frame": IntProperty(name="Frame", default=1,
+                              description="Bind's rest frame (Rest Frame: Frame)"),
     "bind_n_vertices": IntProperty(name="Vertices at Bind", default=0),
     "bind_n_faces": IntProperty(name="Faces at Bind", default=0),
     # solver.topology_fingerprint of the mesh at bind (connectivity and vertex order): a

@@ -863,8 +863,20 @@ def bind_begin(obj, d, depsgraph=None):
     ensure_own_uid(obj, d)
     _cancel_rebinds((obj.name, d.uid))  # this bind replaces an automatic re-bind
     kw, key = collect(obj, d)
-    mats = [(bind_matrix(obj, h, depsgraph), rig_bind(obj, d, h, depsgraph)) for h in d.handles]
+    poses = pose_bind(rest_positions(obj.data), kw["handles"],
+                      _input_or_none(obj, d, depsgraph))
+    mats = [(bind_matrix(obj, h, depsgraph), rig_bind(obj, d, h, depsgraph), pose)
+            for h, pose in zip(d.handles, poses + [None] * (len(d.handles) - len(poses)))]
     return BindJob(obj, d, kw, key), mats
+
+
+def rest_frame(scene, d):
+    """The frame Bind takes the handles' placement and the pose from (d.rest_frame_from)."""
+    if d.rest_frame_from == "START":
+        return scene.frame_start
+    if d.rest_frame_from == "FRAME":
+        return d.rest_frame
+    return scene.frame_current
 
 
 def bind_end(obj, d, job, mats, depsgraph=None):
@@ -875,11 +887,11 @@ def bind_end(obj, d, job, mats, depsgraph=None):
         raise DeformKitError("handles were added or removed during the bind: bind again")
     e = job.entry(obj, d, explicit=True)
     d.bind_topology = job.topology
-    for h, (mat, rig) in zip(d.handles, mats):
+    for h, (mat, rig, pose) in zip(d.handles, mats):
         h.bind_matrix = mat
         h.rig_matrix = rig
+        h.pose_matrix = pose if pose is not None else (0.0,) * 16
         h.is_bound = True
-    pose_bind(obj, d, e.rest, e.handles, _input_or_none(obj, d, depsgraph))
     d.bind_n_vertices = e.n_vertices
     d.bind_n_faces = e.n_faces
     d.bound = True

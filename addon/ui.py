@@ -159,6 +159,7 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
             row.operator("deformkit.unbind", text="Unbind", icon="UNLINKED")
         else:
             row.operator("deformkit.bind", text="Bind", icon="LINKED")
+        draw_rest_frame(layout, d)
         draw_wrapped(layout, solver.status_text(d), "ERROR" if d.status_is_error else "INFO",
                      width, alert=d.status_is_error)
         draw_rebinding(layout, obj, d)
@@ -303,6 +304,18 @@ def draw_deformer_summary(layout, obj, i, d, handle=None, width=40):
     if st is not None:
         op = row.operator("deformkit.free_bake", icon="TRASH")
         op.object_name, op.deformer_index = obj.name, i
+    elif d.bound:  # an animator's next step: play what was keyed without DeformKit
+        op = row.operator("deformkit.bake", text="Bake", icon="FILE_CACHE")
+        op.object_name, op.deformer_index, op.mode = obj.name, i, "PC2"
+    draw_rest_frame(box, d)
+
+
+def draw_rest_frame(layout, d):
+    """Where Bind takes the rest from, next to the Bind button (solver.rest_frame)."""
+    r = layout.row(align=True)
+    r.prop(d, "rest_frame_from", text="Rest")
+    if d.rest_frame_from == "FRAME":
+        r.prop(d, "rest_frame", text="")
 
 
 class DEFORMKIT_PT_sidebar(bpy.types.Panel):

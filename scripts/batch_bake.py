@@ -191,8 +191,9 @@ def do_bake(args):
         out = bake.resolve_path(args.out, obj, d)   # "//" as in Blender: next to the .blend
         bake.check_cache_path(obj, d, out)         # before binding or solving anything
         if not d.bound:
-            log("'%s' is not bound: binding at the scene start frame %d" % (d.name, scene.frame_start))
-            scene.frame_set(scene.frame_start)
+            rest = solver.rest_frame(scene, d)
+            log("'%s' is not bound: binding with the rest of frame %d" % (d.name, rest))
+            scene.frame_set(rest)
             solver.bind(obj, d, bpy.context.evaluated_depsgraph_get())
         t_start = time.perf_counter()
         last = [t_start]

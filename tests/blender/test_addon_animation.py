@@ -511,6 +511,40 @@ def test_a_handle_on_the_rig_moves_its_vertices_once():
             bpy.context.view_layer.update()
 
 
+def test_rebind_takes_the_rest_frame():
+    """Issue 39: Rebind on frame 20 of a shot whose handle is keyed (rest on frame 1, lifted
+    on 20) took frame 20's placement as the rest: the lift vanished there and showed
+    inverted on frame 1. It takes the scene's start by default and says so; Current Frame
+    keeps the old behaviour for those who want it, and Frame a chosen one."""
+    obj, d, e, fixed, handle = build("LAPLACIAN")
+    sc = bpy.context.scene
+    rest = S.rest_positions(obj)
+    sc.frame_set(20)
+    lifted = S.evaluated_positions(obj)
+    R.check("the keyed lift shows on frame 20", np.abs(lifted - rest).max() > 0.1)
+    bpy.ops.deformkit.bind()
+    R.check("after Rebind on frame 20 the frame is still 20", sc.frame_current == 20)
+    R.check("Rebind keeps the keyed lift on frame 20",
+            np.abs(S.evaluated_positions(obj) - lifted).max() < TOL,
+            np.abs(S.evaluated_positions(obj) - lifted).max())
+    sc.frame_set(1)
+    R.check("... and the rest on frame 1", np.abs(S.evaluated_positions(obj) - rest).max() < TOL,
+            np.abs(S.evaluated_positions(obj) - rest).max())
+    d.rest_frame_from = "FRAME"
+    d.rest_frame = 20
+    bpy.ops.deformkit.bind()
+    R.check("Rest Frame 20: frame 20 is the rest", np.abs(S.evaluated_positions(obj) -
+                                                           rest).max() > 0.1)
+    sc.frame_set(20)
+    R.check("... there", np.abs(S.evaluated_positions(obj) - rest).max() < TOL,
+            np.abs(S.evaluated_positions(obj) - rest).max())
+    d.rest_frame_from = "CURRENT"
+    sc.frame_set(10)
+    bpy.ops.deformkit.bind()
+    R.check("Current Frame: the shown frame is the rest",
+            np.abs(S.evaluated_positions(obj) - rest).max() < TOL)
+
+
 def bone_turn(obj, name):
     """The rotation (3 x 3, the mesh's space) by which the rig's bone `name` turns what it
     carries on the current frame."""
@@ -603,6 +637,7 @@ for t in (test_playback, test_render_sees_each_frame, test_chunked_bake_equals_s
           test_shape_key_bake, test_every_method_plays_and_bakes_in_chunks,
           test_embedded_follows_an_armature, test_bakes_keep_the_rig,
           test_a_handle_on_the_rig_moves_its_vertices_once, test_an_edit_turns_with_the_pose,
+          test_rebind_takes_the_rest_frame,
           test_a_handle_from_selection_sits_where_the_selection_is_shown):
     R.run(t)
 R.finish()
