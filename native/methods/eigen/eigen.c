@@ -176,7 +176,8 @@ dk_status dk_eigen_rebind(dk_eigen *e, const dk_constraint_desc *desc, dk_error 
         st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                           "EigenDeformation rebind: these regions need %d eigenvectors and %d "
                           "were computed at bind: bind again", m, e->K);
-    if (st == DK_OK && m != e->m) { /* a new m: new skeletons (the eigenvectors stay) */
+    if (st == DK_OK && eigen_whole_count(e, m) != e->m) { /* a new m: new skeletons (the
+                                                             eigenvectors stay) */
         level keep[2] = {e->lv[0], e->lv[1]};
         const int keep_m = e->m, keep_levels = e->n_levels;
         memset(e->lv, 0, sizeof e->lv);

@@ -93,8 +93,15 @@ void eigen_project(const dk_eigen *e, int m, const double *x, double *b);
 void eigen_fit(const dk_eigen *e, int m, double *b, double *out);
 /** Frees a level's arrays (zeroes it). */
 void eigen_level_free(level *L);
+/** The eigenvector count to fit with for a requested m (1 <= m <= K): m, unless the
+ *  eigenvalues m and m + 1 (1-based) are one repeated eigenvalue, which a symmetric mesh
+ *  has: then the end of that eigenspace when it ends within the K computed, else its start.
+ *  Eq. 1 with part of an eigenspace depends on which basis of it the eigensolver returned
+ *  (LAPACK's threads or ARPACK's start pick one), the whole eigenspace does not. */
+int eigen_whole_count(const dk_eigen *e, int m);
 /** The levels for m (and n' = K when the two-iteration scheme applies): skeletons, their
- *  right-hand sides, details and frames. */
+ *  right-hand sides, details and frames; m is taken to a whole eigenspace first
+ *  (eigen_whole_count). */
 dk_status eigen_skeletons(dk_eigen *e, int m, dk_error *err);
 /** Step 1 on level L's skeleton into e->ptil, and Step 2's right-hand side into e->b. */
 void eigen_step1_step2_rhs(dk_eigen *e, const level *L);

@@ -1,6 +1,8 @@
 /* DeformKit EigenDeformation: eq. 1, the skeletons and Steps 1-2 (eigen_internal.h). */
 #include "eigen_internal.h"
 
+#include <math.h>
+
 #include <cblas.h>
 #include <lapacke.h>
 #include <stdlib.h>
@@ -54,10 +56,37 @@ static dk_status level_alloc(level *L, int m, dk_index n)
                                                                    : DK_ERR_OUT_OF_MEMORY;
 }
 
-/* 3. the skeletons of the levels for m (and n'), their details and frames */
+/* eigen_internal.h. Two eigenvalues are one when they differ by under 1e-8 of the larger
+ * (a symmetric mesh's repeated eigenvalues agree to ~1e-13; a scan's nearest distinct ones
+ * differ by far more), or both are zeros (below 1e-12 of the largest computed). */
+static int same_eigenvalue(const dk_eigen *e, double a, double b)
+{
+    const double zero = 1e-12 * fabs(e->evals[e->K - 1]);
+    return fabs(a - b) <= 1e-8 * fmax(fabs(a), fabs(b)) || (fabs(a) <= zero && fabs(b) <= zero);
+}
+
+int eigen_whole_count(const dk_eigen *e, int m)
+{
+    if (m <= 0 || m >= e->K || !same_eigenvalue(e, e->evals[m - 1], e->evals[m]))
+        return m;
+    int up = m;
+    while (up < e->K && same_eigenvalue(e, e->evals[up - 1], e->evals[up]))
+        up++;
+    if (up < e->K)
+        return up; /* the eigenspace ends within the computed ones */
+    int down = m;
+    while (down > 1 && same_eigenvalue(e, e->evals[down - 1], e->evals[down]))
+        down--;
+    return down;
+}
+
+/* 3. the skeletons of the levels for m (and n'), their details and frames. m is taken to
+ * the end of the eigenspace it cuts (eigen_whole_count), so that the fit is the mesh's,
+ * not the eigensolver's choice of basis inside that eigenspace. */
 dk_status eigen_skeletons(dk_eigen *e, int m, dk_error *err)
 {
     const dk_index n = e->n;
+    m = eigen_whole_count(e, m);
     const int two = e->opt.refine > m && e->K > m;
     eigen_level_free(&e->lv[0]);
     eigen_level_free(&e->lv[1]);
