@@ -122,8 +122,10 @@ dk_status dk_falloff_rebind(dk_falloff *f, const dk_constraint_desc *desc, dk_er
 void dk_falloff_set_progress(dk_falloff *f, dk_phase_progress_fn progress, void *user);
 
 /** Deformed positions (n x 3) for the handle targets of `request` (dk_method.h; a direct
- *  method: start and max_iterations change nothing). `info` (may be NULL): energy = the sum
- *  of squared displacements, iterations = converged = 1. Allocation-free. */
+ *  method: start and max_iterations change nothing). With request->input_positions the
+ *  displacements are taken from that pose and added to it: the falloff weights stay the
+ *  bind's (distances on the rest). `info` (may be NULL): energy = the sum of squared
+ *  displacements, iterations = converged = 1. Allocation-free. */
 dk_status dk_falloff_solve(dk_falloff *f, const dk_solve_request *request, double *positions,
                            dk_solve_info *info, dk_error *err);
 

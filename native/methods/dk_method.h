@@ -75,6 +75,18 @@ typedef struct dk_solve_request {
     const double *start_positions; /**< start DK_START_GIVEN: n_vertices x 3, row-major, in
                                      the mesh's vertex order, finite; must be NULL for the
                                      other starts                                          */
+    const double *input_positions; /**< NULL (the default): the method edits the bind's
+                                     rest. Else n_vertices x 3, row-major, in the mesh's
+                                     vertex order, finite: this frame's input (an
+                                     Armature's pose), which the method edits as if it
+                                     were the rest: fixed and held vertices stay there,
+                                     transforms act on the handle vertices' input
+                                     positions, and targets equal to the input give the
+                                     input. Only methods with DK_METHOD_EDITS_INPUT take
+                                     it (dk_solve_request_check refuses it otherwise). What
+                                     the bind precomputed from the rest (weights,
+                                     factorizations) is kept: the method's header says what
+                                     follows the input                                     */
 } dk_solve_request;
 
 /** What one solve did. Fields a method does not have are 0. */
@@ -137,10 +149,13 @@ typedef enum dk_method_flags {
                                                 is held approximately, fixed or not; a
                                                 handle covering the whole mesh moves it
                                                 exactly                                   */
-    DK_METHOD_GIVEN_START = 64             /**< iterative, and its iterate is the positions:
+    DK_METHOD_GIVEN_START = 64,            /**< iterative, and its iterate is the positions:
                                                 DK_START_GIVEN starts there (ARAP). Direct
                                                 methods ignore that start; iterative ones
                                                 without this flag refuse it               */
+    DK_METHOD_EDITS_INPUT = 128            /**< takes request.input_positions: edits the
+                                                pose it is given for this frame, without
+                                                binding again                             */
 } dk_method_flags;
 
 /** The functions of one method; every entry is set. `self` is the method's object. */
@@ -230,6 +245,14 @@ const dk_method_ops *dk_method_find(const char *name);
  *  max_iterations >= 0. `who` prefixes the message ("ARAP solve"). */
 dk_status dk_solve_request_check(const dk_solve_request *request, const char *who,
                                  dk_error *err);
+
+/** dk_solve_request_check for a method with DK_METHOD_EDITS_INPUT: the same checks, and
+ *  input_positions (when given, n_vertices x 3) every coordinate finite and within
+ *  DK_COORD_MAX (dk_check_positions: DK_ERR_NONFINITE naming the first bad vertex).
+ *  dk_solve_request_check itself refuses input_positions, so that a method that does not
+ *  edit an input never ignores one silently. */
+dk_status dk_solve_request_check_input(const dk_solve_request *request, dk_index n_vertices,
+                                       const char *who, dk_error *err);
 
 /** Checks a DK_START_GIVEN request's start_positions (n_vertices x 3): every coordinate
  *  finite (DK_ERR_NONFINITE naming the first bad vertex otherwise). A method that starts

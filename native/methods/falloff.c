@@ -498,7 +498,7 @@ dk_status dk_falloff_solve(dk_falloff *f, const dk_solve_request *rq, double *po
     if (!f || !positions)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "Falloff solve: NULL object or positions");
-    st = dk_solve_request_check(rq, "Falloff solve", err);
+    st = dk_solve_request_check_input(rq, f->mesh->n_vertices, "Falloff solve", err);
     if (st != DK_OK)
         return st;
     const double *targets = rq->targets;
@@ -506,12 +506,14 @@ dk_status dk_falloff_solve(dk_falloff *f, const dk_solve_request *rq, double *po
     m = f->mesh;
     s = &f->st;
     n = m->n_vertices;
+    /* the pose this solve edits: the request's input, or the rest */
+    const double *base = rq->input_positions ? rq->input_positions : m->positions;
     /* validates (finiteness, affine bottom row) and expands to per-vertex targets */
-    st = dk_constraints_targets(s->con, m->positions, targets, mode, s->targets, err);
+    st = dk_constraints_targets(s->con, base, targets, mode, s->targets, err);
     if (st != DK_OK)
         return dk_error_prefix(err, "Falloff solve");
     for (dk_index v = 0; v < n; v++) {
-        const double *p = m->positions + 3 * v;
+        const double *p = base + 3 * v;
         const dk_index role = s->con->role[v];
         double dsp[3] = {0.0, 0.0, 0.0};
         if (role >= 0) {
@@ -530,7 +532,7 @@ dk_status dk_falloff_solve(dk_falloff *f, const dk_solve_request *rq, double *po
                     const double *pl;
                     if (l < 0)
                         continue;
-                    pl = m->positions + 3 * s->con->handle_vertices[l];
+                    pl = base + 3 * s->con->handle_vertices[l];
                     for (int d = 0; d < 3; d++)
                         dsp[d] += w * s->con->handle_weights[l] * (s->targets[3 * l + d] - pl[d]);
                 } else {
@@ -642,5 +644,5 @@ dk_status dk_falloff_estimate_memory(const dk_mesh *mesh, const dk_falloff_optio
 }
 
 DK_METHOD_OPS(dk_falloff_ops, "Falloff",
-              0,
+              DK_METHOD_EDITS_INPUT,
               dk_falloff, dk_falloff, dk_falloff_options);

@@ -32,7 +32,29 @@ const dk_method_ops *dk_method_find(const char *name)
     return NULL;
 }
 
+static dk_status request_check(const dk_solve_request *rq, const char *who, dk_error *err);
+
 dk_status dk_solve_request_check(const dk_solve_request *rq, const char *who, dk_error *err)
+{
+    const dk_status st = request_check(rq, who, err);
+    if (st == DK_OK && rq->input_positions)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "%s: this method does not edit an input (input_positions): it "
+                            "deforms its bind's rest", who);
+    return st;
+}
+
+dk_status dk_solve_request_check_input(const dk_solve_request *rq, dk_index n_vertices,
+                                       const char *who, dk_error *err)
+{
+    dk_status st = request_check(rq, who, err);
+    if (st != DK_OK || !rq->input_positions)
+        return st;
+    st = dk_check_positions(rq->input_positions, n_vertices, err);
+    return st == DK_OK ? st : dk_error_prefix(err, "%s: input_positions", who);
+}
+
+static dk_status request_check(const dk_solve_request *rq, const char *who, dk_error *err)
 {
     if (!rq)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s: the request is NULL", who);

@@ -430,16 +430,17 @@ static void method_dealloc(PyObject *obj)
 PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
 {
     static char *kwlist[] = {"targets", "transforms", "warm_start", "max_iterations",
-                             "resume", "energy", "preview", "start_positions", NULL};
+                             "resume", "energy", "preview", "start_positions",
+                             "input_positions", NULL};
     dk_py_method *self = (dk_py_method *)obj;
     const dk_py_method_spec *spec = self->spec;
     PyObject *targets = Py_None, *transforms = Py_None, *maxit_obj = Py_None;
-    PyObject *start_obj = Py_None;
+    PyObject *start_obj = Py_None, *input_obj = Py_None;
     PyObject *warm_obj = Py_True, *resume_obj = Py_False, *energy_obj = Py_True,
              *preview_obj = Py_False;
     PyObject *mine = NULL, *rest = NULL, *positions, *module;
     int warm = 1, resume = 0, want_energy = 1, maxit = 0, preview = 0, mode;
-    dk_py_doubles in = {0}, start = {0};
+    dk_py_doubles in = {0}, start = {0}, input = {0};
     dk_solve_info info;
     dk_method_stats ms;
     dk_error err = {0};
@@ -453,13 +454,13 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
 
     memset(&pending, 0, sizeof pending);
     memset(&saved, 0, sizeof saved);
-    snprintf(fmt, sizeof fmt, "|OOOOOOOO:solve");
+    snprintf(fmt, sizeof fmt, "|OOOOOOOOO:solve");
     snprintf(ctx, sizeof ctx, "%s.solve", spec->name);
     if (split_keywords(kwargs, kwlist, &mine, &rest) < 0)
         return NULL;
     int ok = PyArg_ParseTupleAndKeywords(args, mine, fmt, kwlist, &targets, &transforms,
                                          &warm_obj, &maxit_obj, &resume_obj, &energy_obj,
-                                         &preview_obj, &start_obj) &&
+                                         &preview_obj, &start_obj, &input_obj) &&
              dk_py_strict_bool(warm_obj, "warm_start", ctx, &warm) == 0 &&
              dk_py_strict_bool(resume_obj, "resume", ctx, &resume) == 0 &&
              dk_py_strict_bool(energy_obj, "energy", ctx, &want_energy) == 0 &&
@@ -529,10 +530,18 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
                 goto fail_busy;
             }
     }
+    if (input_obj != Py_None && /* the native solve checks the values */
+        dk_py_read_doubles(input_obj, self->mesh->n_vertices, 3, "input_positions",
+                           &input) < 0) {
+        dk_py_doubles_release(&in);
+        dk_py_doubles_release(&start);
+        goto fail_busy;
+    }
     positions = dk_py_new_doubles(2, self->mesh->n_vertices, 3, &out);
     if (!positions) {
         dk_py_doubles_release(&in);
         dk_py_doubles_release(&start);
+        dk_py_doubles_release(&input);
         goto fail_busy;
     }
     const dk_solve_request rq = {
@@ -543,6 +552,7 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
                  : warm     ? DK_START_WARM
                             : DK_START_COLD,
         .start_positions = start.data,
+        .input_positions = input.data,
         .max_iterations = maxit,
         .skip_energy = !want_energy,
         .preview = preview,
@@ -556,6 +566,7 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
         spec->apply_extra(self, saved.bytes, NULL); /* the call raised: put it back */
     dk_py_doubles_release(&in);
     dk_py_doubles_release(&start);
+    dk_py_doubles_release(&input);
     self->busy = 0;
     Py_DECREF(rest);
     Py_DECREF(targets);

@@ -708,3 +708,38 @@ def test_preview_is_the_warm_start_from_the_response_basis():
     bent[3] += 0.01
     objs["auto"].solve(bent, preview=True)
     assert objs["auto"].stats["basis_starts"] == n + 1
+
+
+def test_editing_a_posed_input_is_editing_that_pose():
+    """input_positions (issue 39, an Armature's pose edited by the deformer after it): the
+    tube bent 40 and 90 degrees by a blend of two rigid parts, as skinning does, then its
+    tip dragged. The bind's weights and factor are kept, the rest edges are the pose's:
+    the result's ARAP energy, measured by an ARAP bound on the pose itself, is within 6%
+    of that bind's minimum (measured 0.1-5.5% over three drags, two blend widths and
+    20-90 degrees: the blend's sheared triangles have other cotangent weights; the issue's
+    1% is missed, docs/methods/arap.md), and over 8 times closer than pasting the rest's
+    edit on the pose (7-350% above). A solve on the rest afterwards is the rest's again."""
+    v, f = tube(around=16, rings=24, capped=False)     # along z, 0 to 4
+    fixed = np.where(v[:, 2] < 0.3)[0]
+    tip = np.where(v[:, 2] > 3.7)[0]
+    arap = deformkit.ARAP(deformkit.Mesh(v, f), handles=[tip], fixed=fixed)
+    t = np.array([0.2, 0.5, 0.3])
+    rest_edit = arap.solve(v[tip] + t, warm_start=False)
+    w = np.clip((v[:, 2] - 1.7) / 0.6, 0.0, 1.0)[:, None]   # the elbow's blend at z = 2
+    for angle in (40, 90):
+        c, s = math.cos(math.radians(angle)), math.sin(math.radians(angle))
+        turned = (v - [0, 0, 2]) @ np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]).T + [0, 0, 2]
+        posed = (1 - w) * v + w * turned
+        on_pose = deformkit.ARAP(deformkit.Mesh(posed, f), handles=[tip], fixed=fixed)
+        best = on_pose.solve(posed[tip] + t, warm_start=False, max_iterations=2000)
+        got = arap.solve(posed[tip] + t, input_positions=posed, warm_start=False,
+                         max_iterations=2000)
+        assert got.converged
+        np.testing.assert_allclose(got.positions[fixed], posed[fixed], atol=1e-12)
+        np.testing.assert_allclose(got.positions[tip], posed[tip] + t, atol=1e-12)
+        ratio = on_pose.energy(got.positions) / best.energy
+        pasted = on_pose.energy(posed + rest_edit.positions - v) / best.energy
+        assert 1.0 - 1e-9 <= ratio < 1.06, (angle, ratio)
+        assert pasted - 1.0 > 8 * (ratio - 1.0), (angle, ratio, pasted)
+    again = arap.solve(v[tip] + t, warm_start=False)
+    assert np.array_equal(again.positions, rest_edit.positions)

@@ -85,7 +85,8 @@ def test_registries_agree():
         assert isinstance(getattr(dk, name), type)
         assert set(info(name)) == {"iterative", "transforms_as_positions",
                                    "translation_invariant", "rigid_invariant",
-                                   "penalty_handles", "soft_regions", "given_start"}
+                                   "penalty_handles", "soft_regions", "given_start",
+                                   "edits_input"}
     with pytest.raises(KeyError):
         info("NoSuchMethod")
 
@@ -415,6 +416,45 @@ def test_given_start(name, scene):
     else:
         b = m.solve(transforms=T, start_positions=noisy)
         assert np.array_equal(b.positions, a.positions)
+
+
+@pytest.mark.parametrize("name,scene", CASES, ids=IDS)
+def test_input_positions(name, scene):
+    """input_positions: a method that edits an input (edits_input) treats it as this solve's
+    rest. Targets where the input puts the handles give the input exactly; a rigid motion
+    of the rest as the input gives the rest's result moved rigidly (rigid-invariant methods;
+    the others, a translation); then a solve without it is the rest's again, bit for bit.
+    Bad inputs raise ValueError and change nothing. A method that does not edit an input
+    refuses one, never ignores it."""
+    _, v, f, handles, fixed = scene
+    m = bind(name, scene)
+    T = [transform(rotation(0.5), (0.1, 0.2, 0))] * len(handles)
+    a = m.solve(transforms=T, **cold(name))
+    hv = np.concatenate(handles)
+    if not info(name)["edits_input"]:
+        with pytest.raises(ValueError, match="input_positions"):
+            m.solve(transforms=T, input_positions=v, **cold(name))
+        assert np.array_equal(m.solve(transforms=T, **cold(name)).positions, a.positions)
+        return
+    for bad in (v[:-1], np.where(np.arange(v.size).reshape(v.shape) == 4, np.nan, v),
+                np.full(v.shape, 1e300)):
+        with pytest.raises(ValueError):
+            m.solve(transforms=T, input_positions=bad, **cold(name))
+    assert np.array_equal(m.solve(transforms=T, **cold(name)).positions, a.positions)
+    flags = info(name)
+    R = rotation(0.7) if flags["rigid_invariant"] else np.eye(3)
+    t = np.array([0.3, -1.2, 2.0])
+    moved = v @ R.T + t
+    z = m.solve(moved[hv], input_positions=moved, **cold(name))
+    np.testing.assert_allclose(z.positions, moved, atol=1e-9)
+    kw = dict(cold(name), **({"max_iterations": 2000} if flags["iterative"] else {}))
+    a = m.solve(transforms=T, **kw)
+    M = np.eye(4)
+    M[:3, :3], M[:3, 3] = R, t
+    b = m.solve(transforms=[M @ np.asarray(x) @ np.linalg.inv(M) for x in T],
+                input_positions=moved, **kw)
+    np.testing.assert_allclose(b.positions, a.positions @ R.T + t, atol=1e-6)
+    assert np.array_equal(m.solve(transforms=T, **kw).positions, a.positions)
 
 
 # The add-on's option defaults are the Python API's (the brief: "Python defaults and the

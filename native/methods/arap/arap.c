@@ -101,6 +101,8 @@ void dk_arap_free(dk_arap *ar)
     free(ar->tb);
     free(ar->tw);
     free(ar->te);
+    free(ar->input);
+    free(ar->input_next);
     free(ar->x);
     free(ar->rot);
     free(ar->prev);
@@ -150,6 +152,7 @@ dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraint
         return st == DK_ERR_CANCELLED ? st : dk_error_prefix(err, "ARAP bind");
     }
     ar->mesh = ar->ro->mesh;
+    ar->base = ar->mesh->positions;
     ar->opt.progress = NULL; /* the caller's callback is for this bind only */
     ar->opt.progress_user = NULL;
     ar->x = malloc(((size_t)ar->n * 3 + 1) * sizeof *ar->x);
@@ -221,7 +224,7 @@ static dk_status solve_impl(dk_arap *ar, const dk_solve_request *rq, double *pos
     if (!ar || !positions)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "ARAP solve: object and positions must not be NULL");
-    dk_status st = dk_solve_request_check(rq, "ARAP solve", err);
+    dk_status st = dk_solve_request_check_input(rq, ar->n, "ARAP solve", err);
     if (st != DK_OK)
         return st;
     arap_system *s = &ar->sys;
@@ -236,15 +239,38 @@ static dk_status solve_impl(dk_arap *ar, const dk_solve_request *rq, double *pos
                       : rq->max_iterations > 0 ? rq->max_iterations
                                                : ar->opt.max_iterations;
 
-    /* 1. the targets, expanded per handle vertex */
-    st = dk_constraints_targets(s->con, ar->mesh->positions, rq->targets, (int)rq->target_kind,
-                                s->targets, err);
+    /* 1. the pose this solve edits (read aside: nothing changes before the targets pass),
+     * and the targets, expanded per handle vertex */
+    const double *base = ar->mesh->positions;
+    if (rq->input_positions) {
+        const size_t bytes = 3 * (size_t)ar->n * sizeof(double);
+        if (!ar->input_next && !(ar->input_next = malloc(bytes + sizeof(double))))
+            return oom(err, "input positions");
+        dk_reorder_rows_in(ar->ro, rq->input_positions, ar->input_next);
+        base = ar->base == ar->input && memcmp(ar->input, ar->input_next, bytes) == 0
+                   ? ar->input
+                   : ar->input_next;
+    }
+    st = dk_constraints_targets(s->con, base, rq->targets, (int)rq->target_kind, s->targets,
+                                err);
     if (st != DK_OK) /* refused: the targets of the last solve are still in place */
         return dk_error_prefix(err, "ARAP solve");
     s->have_targets = 1;
+    if (base != ar->base) { /* a new pose: its edges, and what the system made of them */
+        if (base == ar->input_next) { /* it becomes the input; the old one the scratch */
+            double *old = ar->input;
+            ar->input = ar->input_next;
+            ar->input_next = old;
+        }
+        ar->base = base;
+        arap_cells_set_edges(ar, base);
+        arap_system_edges_changed(ar, s);
+        ar->n_hist = 0;     /* the drag predictor's ends were solved on another pose */
+        s->resumable = 0;
+    }
 
     if (s->nu == 0) { /* every vertex constrained: the constrained motion, exactly */
-        dk_constraints_constrained_motion(s->con, ar->mesh->positions, s->targets, ar->x);
+        dk_constraints_constrained_motion(s->con, ar->base, s->targets, ar->x);
         const double e = arap_local_energy(ar, s, ar->x, NULL);
         dk_reorder_rows_out(ar->ro, ar->x, positions);
         st = dk_solve_result_check(positions, ar->n, e, !rq->skip_energy, "ARAP solve", err);
@@ -458,6 +484,6 @@ dk_status dk_arap_estimate_memory(const dk_mesh *mesh, const dk_arap_options *op
 DK_METHOD_OPS(dk_arap_ops, "ARAP",
               DK_METHOD_ITERATIVE | DK_METHOD_TRANSFORMS_AS_POSITIONS |
               DK_METHOD_TRANSLATION_INVARIANT | DK_METHOD_RIGID_INVARIANT |
-              DK_METHOD_GIVEN_START,
+              DK_METHOD_GIVEN_START | DK_METHOD_EDITS_INPUT,
               dk_arap, dk_arap, dk_arap_options);
 

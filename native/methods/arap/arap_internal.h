@@ -167,6 +167,13 @@ struct dk_arap {
     int64_t n_terms;
     dk_index *cell_start, *ta, *tb;
     double *tw, *te;
+    /* The pose the solves edit (dk_solve_request.input_positions), internal numbering:
+     * mesh->positions (the rest) or `input`; te and the system's vectors made from it
+     * follow it (arap_cells_set_edges, arap_system_edges_changed), the weights tw and the
+     * factor stay the bind's. input_next: the next request's pose, read before anything
+     * changes. Both NULL until a request gives one. */
+    const double *base;
+    double *input, *input_next;
     arap_system sys;
     double *x;            /* n x 3 row-major current positions                           */
     double *rot;          /* n x 9 rotations                                             */
@@ -254,14 +261,18 @@ static inline double dist2(const double *p, const double *q)
     return d0 * d0 + d1 * d1 + d2 * d2;
 }
 
-/* cells.c */
+/* cells.c; arap_cells_set_edges: te from the positions p (n x 3, internal numbering) */
 dk_status arap_build_cells(dk_arap *ar, dk_error *err);
+void arap_cells_set_edges(dk_arap *ar, const double *p);
 
 /* system.c: builds a complete system for `desc`; `old` (may be NULL) lends its symbolic
  * analysis when the unknown set is the same (it is then moved into the new system). */
 dk_status arap_system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_system *old,
                             arap_system *s, dk_error *err);
 void arap_system_free(arap_system *s);
+/* system.c: after ar->te changed (a new base): the parts of s made from it, the energy's
+ * scale, the right-hand-side map's vectors and Newton's packed terms */
+void arap_system_edges_changed(const dk_arap *ar, arap_system *s);
 
 /* local_step.c: the rotations optimal for x (refined from `rot`), into rot, and the energy
  * at x (arap_local_energy; rot may be NULL: energy only); the right-hand side of the next

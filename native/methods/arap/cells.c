@@ -128,3 +128,9 @@ done:
     return st;
 }
 
+void arap_cells_set_edges(dk_arap *ar, const double *p)
+{
+    for (int64_t t = 0; t < ar->n_terms; t++)
+        for (int d = 0; d < 3; d++)
+            ar->te[3 * t + d] = p[3 * ar->ta[t] + d] - p[3 * ar->tb[t] + d];
+}

@@ -488,3 +488,21 @@ dk_status arap_system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_sy
         arap_response_basis_build(ar, s);
     return st;
 }
+
+void arap_system_edges_changed(const dk_arap *ar, arap_system *s)
+{
+    double escale = 0.0; /* classify's sum, in its order */
+    for (int64_t t = 0; t < ar->n_terms; t++) {
+        const double *e = ar->te + 3 * t;
+        escale += s->tws[t] * (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
+    }
+    s->escale = escale;
+    if (s->rg)
+        for (dk_index u = 0; u < s->nu; u++)
+            for (int64_t k = s->rg_start[u]; k < s->rg_start[u + 1]; k++)
+                cell_gather_vector(ar, s, s->rg[k].cell, s->unknowns[u], s->rg[k].g);
+    if (s->ntt)
+        for (int64_t t = 0; t < ar->n_terms; t++)
+            for (int d = 0; d < 3; d++)
+                s->ntt[t].e[d] = (float)ar->te[3 * t + d];
+}

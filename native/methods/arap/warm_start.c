@@ -2,11 +2,12 @@
  * arap_internal.h). */
 #include "arap_internal.h"
 
-/* Eliminated vertices at their targets (hard handles) or rest; the unknowns at `from`. */
+/* Eliminated vertices at their targets (hard handles) or the base (the rest, or the
+ * request's input); the unknowns at `from`. */
 static void place_known(dk_arap *ar, arap_system *s, const double *from)
 {
     const dk_index n = ar->n;
-    const double *rest = ar->mesh->positions;
+    const double *rest = ar->base;
     if (from != ar->x)
         memcpy(ar->x, from, 3 * (size_t)n * sizeof(double));
     for (dk_index v = 0; v < n; v++)
@@ -194,7 +195,7 @@ dk_status arap_start(dk_arap *ar, arap_system *s, const double *given, int warm,
         dk_reorder_rows_in(ar->ro, given, ar->x);
         identity_rotations(ar);
     }
-    place_known(ar, s, given ? ar->x : warm ? ar->prev : ar->mesh->positions);
+    place_known(ar, s, given ? ar->x : warm ? ar->prev : ar->base);
     if (!(lazy && warm)) /* a lazy warm start needs it only in arap_start_complete */
         arap_build_rhs_const(ar, s, ar->x);
     if (warm)
