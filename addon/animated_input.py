@@ -5,9 +5,24 @@ its input, and what may and may not be written back into the mesh under them."""
 import bpy
 import numpy as np
 
-from . import geonodes, methods
+from . import geonodes, methods, native
 from .errors import DeformKitError
 from .text import plural
+
+
+_edits_input = {}
+
+
+def follows(m):
+    """Whether method `m` edits the animated input it receives (its result depends on it):
+    through update_source (m.follows_input) or the native contract's input_positions
+    (edits_input). The others solve on the rest, and their offset lands on the input."""
+    if m.follows_input:
+        return True
+    if m.native_class not in _edits_input:
+        _edits_input[m.native_class] = bool(native.method_info(m.native_class).get(
+            "edits_input", False))
+    return _edits_input[m.native_class]
 
 
 def modifiers_above(obj, d, depsgraph=None):
@@ -71,7 +86,7 @@ def check_input_is_rest(obj, d, what, depsgraph=None, every_method=False):
     that solves from the rest, while modifiers above move its input (shape keys hold
     positions before modifiers: a rig would move each frame's baked shape again; shape keys
     alone add up, the baked key's offset on top of the others')."""
-    if not methods.get(d.method).follows_input:
+    if not follows(methods.get(d.method)):
         above = modifiers_above(obj, d, depsgraph) if every_method else []
         if above:
             raise DeformKitError("cannot %s %s: its input is moved by %s above it, which "
@@ -84,6 +99,19 @@ def check_input_is_rest(obj, d, what, depsgraph=None, every_method=False):
         raise DeformKitError("cannot %s %s: its input is moved by %s above it, which would "
                              "move the written shape again; bake to Point Cache instead"
                              % (what, d.name, by))
+
+
+def input_transforms(e, T, source):
+    """Transforms that act on the input `source` as T (n_handles x 4 x 4) acts on the rest:
+    each handle's vertices move by the offset T gives them at rest, turned into the input by
+    the rigid fit G of the handle's vertices from the rest to the input: I + (T - I) G^-1
+    (exact where the input moves them rigidly). For a method that edits its input and whose
+    transforms are not positions (Falloff blends them per vertex)."""
+    from .handles import rigid_fit
+    out = np.empty_like(T)
+    for i, (h, t) in enumerate(zip(e.handles, T)):
+        out[i] = np.eye(4) + (t - np.eye(4)) @ np.linalg.inv(rigid_fit(e.rest[h], source[h]))
+    return out
 
 
 def edit_targets(e, T, source):

@@ -49,3 +49,13 @@ def get():
 def has_class(name):
     m = load()
     return m is not None and hasattr(m, name)
+
+
+def method_info(name):
+    """The native contract's flags of method class `name` (deformkit._native._method_info:
+    iterative, edits_input, ...), {} when the module or the method is missing."""
+    m = load()
+    try:
+        return dict(m._native._method_info(name)) if m is not None else {}
+    except (AttributeError, KeyError):
+        return {}

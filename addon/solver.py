@@ -19,8 +19,8 @@ import bpy
 import numpy as np
 
 from . import compat, geonodes, methods, native
-from .animated_input import (check_input_is_rest, edit_targets, input_movers,  # noqa: F401
-                             modifiers_above, moved_input)
+from .animated_input import (check_input_is_rest, edit_targets, follows,  # noqa: F401
+                             input_movers, input_transforms, modifiers_above, moved_input)
 from .errors import DeformKitError, OverlapError  # noqa: F401
 from .handles import (bind_matrix, pose_bind, rig_bind, set_bind_matrix,  # noqa: F401
                       target_world, transforms, turn_with_the_pose)
@@ -647,7 +647,7 @@ def _install_groups(entry, d, kw, groups_key):
     entry.groups = groups_key
     entry.handles = list(kw["handles"])
     # a follower's native source after a rebind: pushed again by the next solve
-    entry.source = None if methods.get(d.method).follows_input else entry.rest
+    entry.source = None if follows(methods.get(d.method)) else entry.rest
     entry.verified = True
     entry.last_inputs = None
     # other handles: another basis, and no result to move by it
@@ -1391,8 +1391,8 @@ def _solve_inputs(obj, d, e, depsgraph):
     """The handle transforms, the animated input (methods that follow one, else None) and
     the bytes they make, which say whether anything changed since the last solve."""
     m = methods.get(d.method)
-    source = moved_input(obj, d, depsgraph) if m.follows_input else None
-    inp = source if m.follows_input else _input_or_none(obj, d, depsgraph)
+    source = moved_input(obj, d, depsgraph) if follows(m) else None
+    inp = source if follows(m) else _input_or_none(obj, d, depsgraph)
     T = snap_identity(turn_with_the_pose(d, e.rest, e.handles, transforms(obj, d, depsgraph),
                                          inp), e.extent)
     last = e.last_T
@@ -1411,14 +1411,21 @@ def _plan_solve(obj, d, e, key, T, source, inputs, cold, write, interactive, res
     keywords (the budget's slice when interactive) and the inputs they come from."""
     m = methods.get(d.method)
     goal = dict(transforms=T)
-    if m.follows_input:
-        want = e.rest if source is None else source
-        if e.source is None or not np.array_equal(e.source, want):
-            _native_call(m.label + " input", e.native.update_source, want)
-            e.source = want
-        if source is not None:
-            goal = dict(targets=edit_targets(e, T, source))
     kw = methods.solve_kwargs(m, d.options, cold)
+    if follows(m):
+        want = e.rest if source is None else source
+        if m.follows_input and (e.source is None or not np.array_equal(e.source, want)):
+            _native_call(m.label + " input", e.native.update_source, want)
+        e.source = want
+        if source is not None:
+            # the edit where the input puts the handle vertices: positions where they are
+            # the transforms' equal, else transforms turned into the input
+            positions = m.follows_input or native.method_info(m.native_class).get(
+                "transforms_as_positions", False)
+            goal = (dict(targets=edit_targets(e, T, source)) if positions
+                    else dict(transforms=input_transforms(e, T, source)))
+            if not m.follows_input:
+                kw["input_positions"] = source
     # after an undo or redo: a full solve before showing (mark_all_dirty)
     full = write and converges_next(key)
     budgeted = interactive and m.iterative and not cold and not full

@@ -595,6 +595,47 @@ def test_an_edit_turns_with_the_pose():
                     np.abs(got[handle] - placed).max())
 
 
+def test_a_method_that_edits_its_input_solves_on_the_pose():
+    """Issue 39: a method that edits its input (the native edits_input: ARAP, Falloff)
+    solves on the pose the Armature gives it, each frame: playback equals the direct API
+    given that pose as input_positions and the handle where the edit, turned with the
+    forearm, puts it. Its offset was solved on the rest and pasted on the pose, so the
+    surface sheared instead of turning with the bone; the forearm's vertices near the tip
+    now keep their offset from the pose, seen from the bone, within 10% of the edit (they
+    were pasted in the rest's directions)."""
+    done = 0
+    for m in S.methods.METHODS:
+        if not (S.native.has_class(m.native_class) and
+                S.native.method_info(m.native_class).get("edits_input")):
+            continue
+        done += 1
+        obj, d, e, fixed, handle, bind_world = rigged_arm("surface", m.id)
+        rest = S.rest_positions(obj)
+        mesh = S.dk.Mesh(rest, S.solver.triangles(obj.data))
+        kw = dict(handles=[handle], fixed=fixed)
+        native = getattr(S.dk, m.native_class)(mesh, **kw, **S.methods.bind_kwargs(
+            m, d.options, rest, kw, mesh))
+        T = np.array(e.matrix_world @ bind_world.inverted())
+        edit = rest[handle] @ T[:3, :3].T + T[:3, 3] - rest[handle]
+        sc = bpy.context.scene
+        sc.frame_set(1)
+        near = np.where(rest[:, 0] > 0.6)[0]   # the forearm by the tip, its weight all 'lower'
+        at_bind = S.evaluated_positions(obj)[near] - armature_input(obj, d)[near]
+        for f in (10, 20):
+            sc.frame_set(f)
+            got, inp = S.evaluated_positions(obj), armature_input(obj, d)
+            B = bone_turn(obj, "lower")
+            want = np.asarray(native.solve(inp[handle] + edit @ B.T, input_positions=inp,
+                                           **S.methods.solve_kwargs(m, d.options, True)).positions)
+            R.check("%s frame %d: playback = the direct API on the pose" % (m.id, f),
+                    np.abs(got - want).max() < TOL, np.abs(got - want).max())
+            seen = (got[near] - inp[near]) @ B
+            off = np.abs(seen - at_bind).max() / np.abs(edit).max()
+            R.check("%s frame %d: the forearm's offset turns with it (%.2g of the edit)"
+                    % (m.id, f, off), off < 0.1, off)
+    R.check("some method edits its input", done > 0, done)
+
+
 def test_a_handle_from_selection_sits_where_the_selection_is_shown():
     """Issue 39: Add Handle from Selection on a posed mesh put the empty at the selection's
     rest place, far from the bent arm the artist was looking at."""
@@ -637,7 +678,7 @@ for t in (test_playback, test_render_sees_each_frame, test_chunked_bake_equals_s
           test_shape_key_bake, test_every_method_plays_and_bakes_in_chunks,
           test_embedded_follows_an_armature, test_bakes_keep_the_rig,
           test_a_handle_on_the_rig_moves_its_vertices_once, test_an_edit_turns_with_the_pose,
-          test_rebind_takes_the_rest_frame,
+          test_rebind_takes_the_rest_frame, test_a_method_that_edits_its_input_solves_on_the_pose,
           test_a_handle_from_selection_sits_where_the_selection_is_shown):
     R.run(t)
 R.finish()
