@@ -173,6 +173,9 @@ void dk_laplacian_edit_set_progress(dk_laplacian_edit *le, dk_phase_progress_fn 
  *  returned positions (see the file comment), iterations (linear solves done: 1 unless
  *  local_frame), converged (1 for fixed/membrane; local_frame: the last change <= tolerance),
  *  last_change (local_frame: the max vertex move of the last iteration / bbox diagonal).
+ *  request->input_positions (DK_METHOD_EDITS_INPUT): the pose to edit in place of the rest
+ *  (its deltas through the bind's operator, its frames; fixed vertices stay at it; the
+ *  bind's factor, the affine basis left aside while a pose is edited).
  *  Not thread-safe on the same object (uses buffers held in it). */
 dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const dk_solve_request *request,
                                   double *positions, dk_solve_info *info, dk_error *err);

@@ -33,6 +33,8 @@ typedef struct le_system {
      * x_d = g0_d + sum_{h,a} T_h[d][a] G_{h,a}, columns g0_x, g0_y, g0_z, then G_{h,a} for
      * a = 0..3 (x, y, z, 1 of the rest positions of handle h). n_unknowns x (3 + 4 H). */
     double *basis;
+    int basis_base;          /* le->base_serial when the basis was built: it holds for that
+                                pose only (its deltas and rest coordinates)              */
     double *fit;             /* n_handles x 16: the transforms fitted to positions given as
                                 targets (fit_transforms), when the basis exists          */
     unsigned char *row_active; /* n: the row of A has an unknown column                  */
@@ -54,7 +56,13 @@ struct dk_laplacian_edit {
     dk_index *a_start, *a_col;
     double *a_val, *at_val;
     double *delta_rest;  /* n x 3 column-major: A x0                                      */
-    double *rest;        /* n x 3 column-major copy of the rest positions                 */
+    double *rest;        /* n x 3 column-major copy of the pose the solves edit: the rest
+                            positions, or a request's input_positions (set_base); delta_rest
+                            and the frames are that pose's                              */
+    double *input, *input_next; /* n x 3 row-major: the input le->rest holds (when
+                            base_serial != 0), and the next request's, read before anything
+                            changes; NULL until a request gives one                     */
+    int base_serial;     /* 0: le->rest is the mesh's rest; else a number per input pose  */
     dk_index *frame_nb;  /* n: neighbour defining the tangent, -1 = no rest frame          */
     double *frame_coef;  /* n x 3 row-major: rest delta in the rest frame (n, u, n x u)     */
     dk_index n_fallback, n_degenerate_frames;
@@ -392,13 +400,17 @@ static dk_status build_rest_frames(dk_laplacian_edit *le, dk_error *err)
 {
     const dk_mesh *m = le->mesh;
     const dk_index n = le->n;
-    le->frame_nb = malloc(sizeof(dk_index) * (size_t)n);
-    le->frame_coef = malloc(sizeof(double) * 3 * (size_t)n);
+    if (!le->frame_nb) /* a new pose (set_base) reuses them */
+        le->frame_nb = malloc(sizeof(dk_index) * (size_t)n);
+    if (!le->frame_coef)
+        le->frame_coef = malloc(sizeof(double) * 3 * (size_t)n);
     if (!le->frame_nb || !le->frame_coef)
         return oom(err, "local frames");
-    le->face_cross = malloc(sizeof(double) * 3 * (size_t)m->n_faces);
+    if (!le->face_cross)
+        le->face_cross = malloc(sizeof(double) * 3 * (size_t)m->n_faces);
     if (!le->face_cross)
         return oom(err, "local frames");
+    le->n_degenerate_frames = 0;
     face_normals(le, le->rest);
     for (dk_index i = 0; i < n; i++) {
         double nraw[3];
@@ -455,6 +467,24 @@ static dk_status build_rest_frames(dk_laplacian_edit *le, dk_error *err)
         if (le->frame_nb[i] < 0 && le->mesh->ring_start[i + 1] > le->mesh->ring_start[i])
             le->n_degenerate_frames++;
     return DK_OK;
+}
+
+/* The pose the solves edit: `p` (n x 3 row-major, internal numbering; NULL: the mesh's
+ * rest) into le->rest, with its deltas and (local frames) its frames; serial 0 for the
+ * rest, else the input's number. No allocation after the bind's. */
+static void set_base(dk_laplacian_edit *le, const double *p, int serial)
+{
+    const dk_index n = le->n;
+    if (!p)
+        p = le->mesh->positions;
+    for (dk_index i = 0; i < n; i++)
+        for (int d = 0; d < 3; d++)
+            le->rest[d * n + i] = p[3 * i + d];
+    for (int d = 0; d < 3; d++)
+        apply_a(le, le->rest + (size_t)d * n, le->delta_rest + (size_t)d * n);
+    if (le->opt.detail == DK_LE_DETAIL_LOCAL_FRAME)
+        (void)build_rest_frames(le, NULL); /* its arrays exist since the bind: cannot fail */
+    le->base_serial = serial;
 }
 
 /* The rest-frame coordinates c of vertex i's delta, expressed in the frame of the raw
@@ -1278,6 +1308,7 @@ static dk_status build_basis(dk_laplacian_edit *le, le_system *s, dk_error *err)
         s->basis = s->fit = NULL;
         return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "LaplacianEdit: out of memory (basis)");
     }
+    s->basis_base = le->base_serial; /* built on the pose le->rest holds now */
     /* g0: handle values zero, fixed at rest, soft handle targets zero */
     for (dk_index i = 0; i < n; i++)
         for (int d = 0; d < 3; d++)
@@ -1451,7 +1482,7 @@ dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const dk_solve_request 
     if (!le || !positions)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "LaplacianEdit solve: NULL object or positions");
-    st = dk_solve_request_check(rq, "LaplacianEdit solve", err);
+    st = dk_solve_request_check_input(rq, le ? le->n : 0, "LaplacianEdit solve", err);
     if (st != DK_OK)
         return st;
     const double *targets = rq->targets;
@@ -1463,9 +1494,29 @@ dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const dk_solve_request 
                             "LaplacianEdit solve: no factorization (a failed rebind could not "
                             "restore it); rebind first");
     n = le->n;
-    st = dk_constraints_targets(s->con, le->mesh->positions, targets, mode, s->targets, err);
+    /* the pose to edit, read aside (nothing changes before the targets pass): the mesh's
+     * rest, the input already in place, or a new one */
+    const size_t bytes = 3 * (size_t)n * sizeof(double);
+    const double *base = le->mesh->positions;
+    if (rq->input_positions) {
+        if (!le->input_next && !(le->input_next = malloc(bytes + sizeof(double))))
+            return oom(err, "input positions");
+        dk_reorder_rows_in(le->ro, rq->input_positions, le->input_next);
+        base = le->base_serial != 0 && memcmp(le->input, le->input_next, bytes) == 0
+                   ? le->input
+                   : le->input_next;
+    }
+    st = dk_constraints_targets(s->con, base, targets, mode, s->targets, err);
     if (st != DK_OK)
         return dk_error_prefix(err, "LaplacianEdit solve");
+    if (base == le->input_next) { /* a new input: it becomes the pose */
+        double *old = le->input;
+        le->input = le->input_next;
+        le->input_next = old;
+        set_base(le, le->input, le->base_serial % 1000000 + 1); /* never 0, the rest's */
+    } else if (!rq->input_positions && le->base_serial != 0) {
+        set_base(le, NULL, 0); /* back to the rest */
+    }
     {
         /* x := targets (eliminated handle vertices) or rest, delta := the rest deltas (or 0):
          * sequential passes on two threads, which also bring the arrays back into the cache
@@ -1475,7 +1526,8 @@ dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const dk_solve_request 
     }
     if (s->n_unknowns == 0) {
         /* every vertex constrained: x (targets and rest) is the result */
-    } else if (s->basis && (mode == 1 || fit_transforms(le, s))) {
+    } else if (s->basis && s->basis_base == le->base_serial &&
+               (mode == 1 || fit_transforms(le, s))) {
         /* affine in the transforms: combine the precomputed basis (no back-substitution);
          * positions that an affine map per handle reproduces use the fitted maps */
         solve_init_job job = {le, mode == 1 ? targets : s->fit};
@@ -1574,6 +1626,8 @@ void dk_laplacian_edit_free(dk_laplacian_edit *le)
     free(le->at_val);
     free(le->delta_rest);
     free(le->rest);
+    free(le->input);
+    free(le->input_next);
     free(le->frame_nb);
     free(le->frame_coef);
     free(le->x);
@@ -1605,5 +1659,6 @@ dk_status dk_laplacian_edit_estimate_memory(const dk_mesh *mesh,
 }
 
 DK_METHOD_OPS(dk_laplacian_edit_ops, "LaplacianEdit",
-              DK_METHOD_TRANSFORMS_AS_POSITIONS | DK_METHOD_TRANSLATION_INVARIANT,
+              DK_METHOD_TRANSFORMS_AS_POSITIONS | DK_METHOD_TRANSLATION_INVARIANT |
+                  DK_METHOD_EDITS_INPUT,
               dk_laplacian_edit, dk_laplacian_edit, dk_laplacian_edit_options);
