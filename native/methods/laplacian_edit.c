@@ -1468,25 +1468,25 @@ static int fit_transforms(const dk_laplacian_edit *le, le_system *s)
     return 1;
 }
 
+static dk_status solve_on_pose(dk_laplacian_edit *le, const dk_solve_request *rq,
+                               double *positions, dk_solve_info *info, dk_error *err);
+
 dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const dk_solve_request *rq,
                                   double *positions, dk_solve_info *info, dk_error *err)
 {
     le_system *s;
     dk_index n;
     dk_status st;
-    int iterations = 0, converged = 1;
-    double last_change = 0.0;
 
     if (info)
         memset(info, 0, sizeof *info);
     if (!le || !positions)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "LaplacianEdit solve: NULL object or positions");
-    st = dk_solve_request_check_input(rq, le ? le->n : 0, "LaplacianEdit solve", err);
+    st = dk_solve_request_check_input(rq, le->n, "LaplacianEdit solve", err);
     if (st != DK_OK)
         return st;
     const double *targets = rq->targets;
-    const int want_energy = !rq->skip_energy;
     const int mode = (int)rq->target_kind;
     s = &le->sys;
     if (!s->chol && s->n_unknowns > 0)
@@ -1509,14 +1509,41 @@ dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const dk_solve_request 
     st = dk_constraints_targets(s->con, base, targets, mode, s->targets, err);
     if (st != DK_OK)
         return dk_error_prefix(err, "LaplacianEdit solve");
+    const int was = le->base_serial;
+    int swapped = 0;
     if (base == le->input_next) { /* a new input: it becomes the pose */
         double *old = le->input;
         le->input = le->input_next;
         le->input_next = old;
+        swapped = 1;
         set_base(le, le->input, le->base_serial % 1000000 + 1); /* never 0, the rest's */
     } else if (!rq->input_positions && le->base_serial != 0) {
         set_base(le, NULL, 0); /* back to the rest */
     }
+    st = solve_on_pose(le, rq, positions, info, err);
+    if (st != DK_OK && le->base_serial != was) { /* a failed call leaves the pose it found */
+        if (swapped) {
+            double *cur = le->input;
+            le->input = le->input_next;
+            le->input_next = cur;
+        }
+        set_base(le, was ? le->input : NULL, was);
+    }
+    return st;
+}
+
+/* The solve proper, on the pose and targets dk_laplacian_edit_solve set. */
+static dk_status solve_on_pose(dk_laplacian_edit *le, const dk_solve_request *rq,
+                               double *positions, dk_solve_info *info, dk_error *err)
+{
+    le_system *s = &le->sys;
+    const dk_index n = le->n;
+    const double *targets = rq->targets;
+    const int want_energy = !rq->skip_energy;
+    const int mode = (int)rq->target_kind;
+    int iterations = 0, converged = 1;
+    double last_change = 0.0;
+    dk_status st;
     {
         /* x := targets (eliminated handle vertices) or rest, delta := the rest deltas (or 0):
          * sequential passes on two threads, which also bring the arrays back into the cache

@@ -296,6 +296,7 @@ static const void *decode_options(dk_fuzz_input *in, const char *name, const dk_
 typedef struct request {
     dk_solve_request rq;
     double targets[16 * MAX_HV > 3 * MAX_HV ? 16 * MAX_HV : 3 * MAX_HV];
+    double input[3 * MAX_V]; /* input_positions, when the request has them */
 } request;
 
 /* A request for the handles of `g` (the groups bound): targets near their rest. */
@@ -343,6 +344,19 @@ static void decode_request(dk_fuzz_input *in, const dk_mesh *m, const groups *g,
             }
         }
         off += k;
+    }
+    /* a quarter of the requests edit a pose (refused by methods without edits_input): the
+     * rest scaled, shifted and jittered per vertex, sometimes with a NaN (refused) */
+    const uint8_t ib = dk_fuzz_u8(in);
+    if (ib % 4 == 0 && m->n_vertices <= MAX_V) {
+        const double scale = 1.0 + ((double)(dk_fuzz_u8(in) % 17) - 8) / 16.0;
+        for (dk_index v = 0; v < m->n_vertices; v++)
+            for (int d = 0; d < 3; d++)
+                r->input[3 * v + d] = scale * m->positions[3 * v + d] +
+                                      diag * ((double)(dk_fuzz_u8(in) % 9) - 4) / 64.0;
+        if (ib % 64 == 4)
+            r->input[3 * dk_fuzz_below(in, m->n_vertices)] = NAN;
+        r->rq.input_positions = r->input;
     }
 }
 

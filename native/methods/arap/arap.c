@@ -216,6 +216,65 @@ dk_status dk_arap_rebind(dk_arap *ar, const dk_constraint_desc *constraints, dk_
 }
 
 /* One solve: the targets, where to start, the iterations, the end kept for the next one. */
+/* 1. The pose this solve edits (read aside: nothing changes before the targets pass), and
+ * the targets, expanded per handle vertex; then the pose taken: its edges, and what the
+ * system made of them. *swapped: the request's input became ar->input, the old one is in
+ * ar->input_next (restore_base puts it back). */
+static dk_status take_pose(dk_arap *ar, const dk_solve_request *rq, int *swapped,
+                           dk_error *err)
+{
+    arap_system *s = &ar->sys;
+    const double *base = ar->mesh->positions;
+    *swapped = 0;
+    if (rq->input_positions) {
+        const size_t bytes = 3 * (size_t)ar->n * sizeof(double);
+        if (!ar->input_next && !(ar->input_next = malloc(bytes + sizeof(double))))
+            return oom(err, "input positions");
+        dk_reorder_rows_in(ar->ro, rq->input_positions, ar->input_next);
+        base = ar->base == ar->input && memcmp(ar->input, ar->input_next, bytes) == 0
+                   ? ar->input
+                   : ar->input_next;
+    }
+    const dk_status st = dk_constraints_targets(s->con, base, rq->targets,
+                                                (int)rq->target_kind, s->targets, err);
+    if (st != DK_OK) /* refused: the targets of the last solve are still in place */
+        return dk_error_prefix(err, "ARAP solve");
+    s->have_targets = 1;
+    if (base != ar->base) {
+        if (base == ar->input_next) { /* it becomes the input; the old one the scratch */
+            double *old = ar->input;
+            ar->input = ar->input_next;
+            ar->input_next = old;
+            *swapped = 1;
+        }
+        ar->base = base;
+        arap_cells_set_edges(ar, base);
+        arap_system_edges_changed(ar, s);
+        ar->n_hist = 0;     /* the drag predictor's ends were solved on another pose */
+        s->resumable = 0;
+    }
+    return DK_OK;
+}
+
+/* After a solve that failed having taken another pose: the pose before it again (`was`),
+ * so that a failed call leaves energy() as it was. */
+static void restore_base(dk_arap *ar, const double *was, int swapped)
+{
+    if (ar->base == was)
+        return;
+    if (swapped) {
+        double *cur = ar->input;
+        ar->input = ar->input_next;
+        ar->input_next = cur;
+    }
+    ar->base = was;
+    arap_cells_set_edges(ar, was);
+    arap_system_edges_changed(ar, &ar->sys);
+}
+
+static dk_status solve_rest(dk_arap *ar, const dk_solve_request *rq, double *positions,
+                            dk_solve_info *info, dk_error *err);
+
 static dk_status solve_impl(dk_arap *ar, const dk_solve_request *rq, double *positions,
                             dk_solve_info *info, dk_error *err)
 {
@@ -227,47 +286,34 @@ static dk_status solve_impl(dk_arap *ar, const dk_solve_request *rq, double *pos
     dk_status st = dk_solve_request_check_input(rq, ar->n, "ARAP solve", err);
     if (st != DK_OK)
         return st;
-    arap_system *s = &ar->sys;
     const double *given = rq->start == DK_START_GIVEN ? rq->start_positions : NULL;
     if (given && (st = dk_start_positions_check(given, ar->n, "ARAP solve", err)) != DK_OK)
         return st; /* before anything changes */
-    /* warm: from the previous solution; a given start, like a cold one, depends on the
-     * request alone and starts the drag history again */
-    const int warm_start = rq->start == DK_START_WARM || rq->start == DK_START_RESUME;
+    const double *was = ar->base;
+    int swapped = 0;
+    st = take_pose(ar, rq, &swapped, err);
+    if (st != DK_OK)
+        return st;
+    st = solve_rest(ar, rq, positions, info, err);
+    if (st != DK_OK)
+        restore_base(ar, was, swapped);
+    return st;
+}
+
+/* 2-4: the start, the iterations and the result, on the pose and targets take_pose set. */
+static dk_status solve_rest(dk_arap *ar, const dk_solve_request *rq, double *positions,
+                            dk_solve_info *info, dk_error *err)
+{
+    arap_system *s = &ar->sys;
+    dk_status st;
     /* a preview is the start alone: no iterations */
     const int maxit = rq->preview ? 0
                       : rq->max_iterations > 0 ? rq->max_iterations
                                                : ar->opt.max_iterations;
-
-    /* 1. the pose this solve edits (read aside: nothing changes before the targets pass),
-     * and the targets, expanded per handle vertex */
-    const double *base = ar->mesh->positions;
-    if (rq->input_positions) {
-        const size_t bytes = 3 * (size_t)ar->n * sizeof(double);
-        if (!ar->input_next && !(ar->input_next = malloc(bytes + sizeof(double))))
-            return oom(err, "input positions");
-        dk_reorder_rows_in(ar->ro, rq->input_positions, ar->input_next);
-        base = ar->base == ar->input && memcmp(ar->input, ar->input_next, bytes) == 0
-                   ? ar->input
-                   : ar->input_next;
-    }
-    st = dk_constraints_targets(s->con, base, rq->targets, (int)rq->target_kind, s->targets,
-                                err);
-    if (st != DK_OK) /* refused: the targets of the last solve are still in place */
-        return dk_error_prefix(err, "ARAP solve");
-    s->have_targets = 1;
-    if (base != ar->base) { /* a new pose: its edges, and what the system made of them */
-        if (base == ar->input_next) { /* it becomes the input; the old one the scratch */
-            double *old = ar->input;
-            ar->input = ar->input_next;
-            ar->input_next = old;
-        }
-        ar->base = base;
-        arap_cells_set_edges(ar, base);
-        arap_system_edges_changed(ar, s);
-        ar->n_hist = 0;     /* the drag predictor's ends were solved on another pose */
-        s->resumable = 0;
-    }
+    /* warm: from the previous solution; a given start, like a cold one, depends on the
+     * request alone and starts the drag history again */
+    const int warm_start = rq->start == DK_START_WARM || rq->start == DK_START_RESUME;
+    const double *given = rq->start == DK_START_GIVEN ? rq->start_positions : NULL;
 
     if (s->nu == 0) { /* every vertex constrained: the constrained motion, exactly */
         dk_constraints_constrained_motion(s->con, ar->base, s->targets, ar->x);
