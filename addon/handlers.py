@@ -97,8 +97,13 @@ def _run(scene, depsgraph, cold=False):
                     bpy.app.timers.register(settle_paint, first_interval=PAINT_SETTLE_S)
                 continue
             # re-read groups on every geometry update of the object, ours included: skipping
-            # our own writes could hide a group edit made in the same update
-            check = changed
+            # our own writes could hide a group edit made in the same update. Not on a frame
+            # change: an Armature (any animation above the deformer) updates the object's
+            # and the mesh's geometry on every frame, and the read, O(group memberships) in
+            # Python, took 111 ms of a 125 ms frame on the rigged armadillo
+            # (scripts/bench_animated.py); a group edit has its own update, the names are
+            # checked on every solve, and a bake's first frame re-reads them
+            check = changed and not cold
             # the topology: headless always, in the UI (drags, playback) on every geometry
             # update of the object (solver.check_topology: Blender 3.6+ compare three
             # attributes on every solve anyway, 3.4-3.5 read every corner)
