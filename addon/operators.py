@@ -400,6 +400,39 @@ class DEFORMKIT_OT_unbind(_Base, bpy.types.Operator):
         solver.unbind(obj, d)
 
 
+class DEFORMKIT_OT_bake_corrective(_Base, bpy.types.Operator):
+    """Store the deformer's edit at this pose as a corrective shape key under the Armature,
+    driven by the bone that carries the handles: it plays without DeformKit, at full
+    strength on this pose and blended in between"""
+    bl_idname = "deformkit.bake_corrective"
+    bl_label = "Bake Corrective Shape Key"
+    bl_options = {"REGISTER", "UNDO"}
+    bone: StringProperty(name="Bone", description="The bone whose rotation drives the key "
+                                                  "(empty: the one carrying the handles)")
+
+    def run(self, context):
+        from . import corrective
+        obj = _get_object(self, context)
+        d = _get_deformer(self, context, obj)
+        solver.check_editable(obj)
+        if obj.mode != "OBJECT":
+            raise solver.DeformKitError("leave %s Mode to bake a corrective" % obj.mode.title())
+        if not d.bound:
+            raise solver.DeformKitError("'%s' is not bound: press Bind first" % d.name)
+        rig = None
+        if self.bone:
+            arms = [m.object for m in solver.modifiers_above(obj, d)
+                    if m.type == "ARMATURE" and m.object is not None
+                    and self.bone in m.object.data.bones]
+            if not arms:
+                raise solver.DeformKitError("no Armature above %s has a bone '%s'"
+                                            % (d.name, self.bone))
+            rig = (arms[0], self.bone)
+        key, bone = corrective.bake_corrective(obj, d, bone=rig)
+        self.report({"INFO"}, "corrective shape key '%s', driven by bone '%s'; hide %s's "
+                    "modifier to play it alone" % (key.name, bone, d.name))
+
+
 class DEFORMKIT_OT_apply(_Base, bpy.types.Operator):
     """Bake the deformer's current result into the mesh or into a new shape key"""
     bl_idname = "deformkit.apply"
@@ -690,7 +723,8 @@ class DEFORMKIT_OT_overlap(_Base, bpy.types.Operator):
 CLASSES = [
     DEFORMKIT_OT_add_deformer, DEFORMKIT_OT_remove_deformer, DEFORMKIT_OT_move_deformer,
     DEFORMKIT_OT_add_handle, DEFORMKIT_OT_add_handle_from_selection, DEFORMKIT_OT_remove_handle,
-    DEFORMKIT_OT_bind, DEFORMKIT_OT_unbind, DEFORMKIT_OT_apply, DEFORMKIT_OT_bake,
+    DEFORMKIT_OT_bind, DEFORMKIT_OT_unbind, DEFORMKIT_OT_apply, DEFORMKIT_OT_bake_corrective,
+    DEFORMKIT_OT_bake,
     DEFORMKIT_OT_free_bake, DEFORMKIT_OT_rebake, DEFORMKIT_OT_restore_modifier,
     DEFORMKIT_OT_overlap,
 ]

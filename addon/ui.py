@@ -189,6 +189,8 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
         row = layout.row(align=True)
         row.operator("deformkit.apply", text="Apply").mode = "MESH"
         row.operator("deformkit.apply", text="Apply as Shape Key").mode = "SHAPE_KEY"
+        if d.bound and any(m.type == "ARMATURE" for m in solver.modifiers_above(obj, d)):
+            layout.operator("deformkit.bake_corrective", icon="SHAPEKEY_DATA")
         draw_bake(layout, obj, d, width)
 
 

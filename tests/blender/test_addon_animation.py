@@ -636,6 +636,45 @@ def test_a_method_that_edits_its_input_solves_on_the_pose():
     R.check("some method edits its input", done > 0, done)
 
 
+def test_a_corrective_shape_key_plays_without_deformkit():
+    """Issue 39, item 7: the deformer's edit on the bent pose of frame 20, baked as a shape
+    key under the Armature, driven by the forearm's rotation. With DeformKit's modifier off
+    (and the add-on's handlers), frame 20 shows what playback showed with it; frame 1, at
+    the rig's rest, the rig alone (the key at 0); frame 16 something in between."""
+    obj, d, e, fixed, handle, bind_world = rigged_arm("surface", MID)
+    sc = bpy.context.scene
+    sc.frame_set(20)
+    want = S.evaluated_positions(obj)
+    bpy.ops.deformkit.bake_corrective()
+    keys = obj.data.shape_keys
+    R.check("one corrective key besides the basis", keys is not None and
+            len(keys.key_blocks) == 2, keys and [k.name for k in keys.key_blocks])
+    key = keys.key_blocks[-1]
+    fc = keys.animation_data.drivers.find('key_blocks["%s"].value' % key.name)
+    R.check("driven by the forearm's rotation", fc is not None and
+            fc.driver.variables[0].targets[0].bone_target == "lower",
+            fc and fc.driver.variables[0].targets[0].bone_target)
+    mod = S.geonodes.find_modifier(obj, d)
+    mod.show_viewport = False
+    S.handlers.enabled[0] = False
+    try:
+        sc.frame_set(1)
+        sc.frame_set(20)
+        got = S.evaluated_positions(obj)
+        R.check("frame 20 without DeformKit shows the edit (%.1e)" % np.abs(got - want).max(),
+                np.abs(got - want).max() < 1e-4 and abs(key.value - 1.0) < 1e-6,
+                (np.abs(got - want).max(), key.value))
+        sc.frame_set(1)   # the rig at its rest: the mesh's rest
+        R.check("frame 1: the key at 0, the rig alone", abs(key.value) < 1e-6 and
+                np.abs(S.evaluated_positions(obj) - S.rest_positions(obj)).max() < 1e-5,
+                key.value)
+        sc.frame_set(16)
+        R.check("frame 16: the key in between", 0.05 < key.value < 0.95, key.value)
+    finally:
+        mod.show_viewport = True
+        S.handlers.enabled[0] = True
+
+
 def test_a_handle_from_selection_sits_where_the_selection_is_shown():
     """Issue 39: Add Handle from Selection on a posed mesh put the empty at the selection's
     rest place, far from the bent arm the artist was looking at."""
@@ -679,6 +718,7 @@ for t in (test_playback, test_render_sees_each_frame, test_chunked_bake_equals_s
           test_embedded_follows_an_armature, test_bakes_keep_the_rig,
           test_a_handle_on_the_rig_moves_its_vertices_once, test_an_edit_turns_with_the_pose,
           test_rebind_takes_the_rest_frame, test_a_method_that_edits_its_input_solves_on_the_pose,
+          test_a_corrective_shape_key_plays_without_deformkit,
           test_a_handle_from_selection_sits_where_the_selection_is_shown):
     R.run(t)
 R.finish()
