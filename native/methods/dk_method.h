@@ -23,6 +23,7 @@
 #include "dk_constraints.h"
 #include "dk_mesh.h"
 #include "dk_status.h"
+#include <stddef.h>
 #include <stdint.h>
 
 #ifdef __cplusplus
@@ -153,15 +154,61 @@ typedef enum dk_method_flags {
                                                 DK_START_GIVEN starts there (ARAP). Direct
                                                 methods ignore that start; iterative ones
                                                 without this flag refuse it               */
-    DK_METHOD_EDITS_INPUT = 128            /**< takes request.input_positions: edits the
+    DK_METHOD_EDITS_INPUT = 128,           /**< takes request.input_positions: edits the
                                                 pose it is given for this frame, without
                                                 binding again                             */
+    DK_METHOD_GRAPH = 256                  /**< deforms through a graph of its own, whose
+                                                nodes stats.n_graph_nodes counts           */
 } dk_method_flags;
+
+/** What one field of a method's options struct holds (dk_option_desc). */
+typedef enum dk_option_type {
+    DK_OPTION_INT = 0,        /**< int                                                     */
+    DK_OPTION_DOUBLE = 1,     /**< double                                                  */
+    DK_OPTION_ENUM = 2,       /**< an enum (int-sized): the values min .. max              */
+    DK_OPTION_SEED = 3,       /**< uint64_t, every value valid                             */
+    DK_OPTION_VERTICES = 4,   /**< const dk_index * at offset, its length (dk_index) at
+                                   count_offset: vertex indices of the bound mesh          */
+    DK_OPTION_EDGE_VALUES = 5 /**< const double * at offset, its length (dk_index) at
+                                   count_offset, which must be the mesh's edge count: one
+                                   value per edge in [min, max]                            */
+} dk_option_type;
+
+/** dk_option_desc.flags */
+enum {
+    DK_OPTION_LENGTH = 1,   /**< a length in the mesh's units: `usual` is a fraction of the
+                                 bounding-box diagonal                                    */
+    DK_OPTION_ZERO_AUTO = 2 /**< 0 is also valid (and means "automatic" or "none"), below
+                                 or outside [min, max]                                    */
+};
+
+/** One field of a method's options struct, for code written against the contract (the
+ *  fuzzer, the generic tests) that fills or checks options without knowing the method. */
+typedef struct dk_option_desc {
+    const char *name;     /**< the field's name, as the Python keyword                      */
+    dk_option_type type;
+    size_t offset;        /**< offsetof(options struct, field)                              */
+    size_t count_offset;  /**< VERTICES, EDGE_VALUES: offsetof the length field; else 0     */
+    double min, max;      /**< the valid values, inclusive (a bind refuses the others)      */
+    double usual;         /**< a typical valid value (LENGTH: a fraction of the diagonal)   */
+    double quick_max;     /**< INT: the largest value that keeps a bind and a solve quick
+                               (iteration counts, node counts; tests and fuzzers); else max */
+    unsigned flags;       /**< DK_OPTION_LENGTH, DK_OPTION_ZERO_AUTO                        */
+} dk_option_desc;
 
 /** The functions of one method; every entry is set. `self` is the method's object. */
 typedef struct dk_method_ops {
     const char *name;  /**< the class name, as in the Python module ("ARAP", ...)          */
     unsigned flags;    /**< dk_method_flags                                                 */
+    size_t options_size; /**< sizeof the method's options struct                            */
+    /** Fills an options struct (options_size bytes) with the method's defaults. */
+    void (*default_options)(void *options);
+    const dk_option_desc *option_fields; /**< every field a caller sets, in the struct's
+                                              order (the progress hook below excepted)     */
+    int n_option_fields;
+    /** Where the bind's progress hook lives in the options struct: a dk_phase_progress_fn
+     *  at progress_offset and its user pointer (void *) at progress_user_offset. */
+    size_t progress_offset, progress_user_offset;
     /** Binds: `options` is the method's own options struct, or NULL for the defaults. The
      *  mesh is borrowed and must outlive the object. */
     dk_status (*bind)(const dk_mesh *mesh, const dk_constraint_desc *constraints,
@@ -189,12 +236,18 @@ const dk_method_ops *const *dk_methods(void);
 
 /** Defines `const dk_method_ops VAR` for a method whose public functions follow the
  *  contract's names and argument order: PREFIX_bind(mesh, constraints, const OPTS *, TYPE **,
- *  err), PREFIX_rebind, PREFIX_solve, PREFIX_energy, PREFIX_stats, PREFIX_free and
- *  PREFIX_estimate_memory(mesh, const OPTS *, uint64_t *bytes, err), where TYPE
- *  is the method's object and OPTS its options struct. The generated adapters only convert
- *  `void *` to those types, so the table cannot drift from the typed functions. Use it once,
+ *  err), PREFIX_rebind, PREFIX_solve, PREFIX_energy, PREFIX_stats, PREFIX_free,
+ *  PREFIX_estimate_memory(mesh, const OPTS *, uint64_t *bytes, err) and
+ *  PREFIX_default_options(OPTS *), where TYPE is the method's object and OPTS its options
+ *  struct, whose bind progress hook is the fields `progress` and `progress_user`. The
+ *  generated adapters only convert `void *` to those types, so the table cannot drift from
+ *  the typed functions. FIELDS: a static array of the options' dk_option_desc. Use it once,
  *  at file scope, after the functions are declared; NAME and FLAGS as in dk_method_ops. */
-#define DK_METHOD_OPS(VAR, NAME, FLAGS, PREFIX, TYPE, OPTS)                                   \
+#define DK_METHOD_OPS(VAR, NAME, FLAGS, PREFIX, TYPE, OPTS, FIELDS)                           \
+    static void VAR##_default_options(void *options)                                          \
+    {                                                                                         \
+        PREFIX##_default_options((OPTS *)options);                                             \
+    }                                                                                         \
     static dk_status VAR##_bind(const dk_mesh *mesh, const dk_constraint_desc *c,              \
                                 const void *options, void **out, dk_error *err)                \
     {                                                                                         \
@@ -229,6 +282,12 @@ const dk_method_ops *const *dk_methods(void);
     }                                                                                         \
     const dk_method_ops VAR = {.name = NAME,                                                  \
                                .flags = FLAGS,                                                \
+                               .options_size = sizeof(OPTS),                                  \
+                               .default_options = VAR##_default_options,                      \
+                               .option_fields = FIELDS,                                       \
+                               .n_option_fields = (int)(sizeof FIELDS / sizeof FIELDS[0]),    \
+                               .progress_offset = offsetof(OPTS, progress),                   \
+                               .progress_user_offset = offsetof(OPTS, progress_user),         \
                                .bind = VAR##_bind,                                            \
                                .rebind = VAR##_rebind,                                        \
                                .solve = VAR##_solve,                                          \

@@ -10,6 +10,8 @@
  */
 #include "dk_embedded.h"
 
+#include <float.h>
+#include <limits.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -1959,8 +1961,34 @@ dk_status dk_embedded_estimate_memory(const dk_mesh *mesh, const dk_embedded_opt
     return DK_OK;
 }
 
+/* the options' fields (dk_option_desc): where each is, what values bind takes */
+static const dk_option_desc embedded_fields[] = {
+    {"nodes", DK_OPTION_ENUM, offsetof(dk_embedded_options, nodes), 0, 0, 1, 0, 1, 0},
+    {"n_nodes", DK_OPTION_INT, offsetof(dk_embedded_options, n_nodes), 0, 1, ED_MAX_NODES, 200,
+     40, 0},
+    {"radius", DK_OPTION_DOUBLE, offsetof(dk_embedded_options, radius), 0, DBL_TRUE_MIN,
+     DBL_MAX, 0.25, DBL_MAX, DK_OPTION_LENGTH | DK_OPTION_ZERO_AUTO},
+    {"k", DK_OPTION_INT, offsetof(dk_embedded_options, k), 0, 1, K_MAX, 4, 8, 0},
+    {"distance", DK_OPTION_ENUM, offsetof(dk_embedded_options, distance), 0, 0, 1, 0, 1, 0},
+    {"cut_a", DK_OPTION_VERTICES, offsetof(dk_embedded_options, cut_a),
+     offsetof(dk_embedded_options, n_cut_a), 0, 0, 0, 0, 0},
+    {"cut_b", DK_OPTION_VERTICES, offsetof(dk_embedded_options, cut_b),
+     offsetof(dk_embedded_options, n_cut_b), 0, 0, 0, 0, 0},
+    {"w_rot", DK_OPTION_DOUBLE, offsetof(dk_embedded_options, w_rot), 0, DBL_TRUE_MIN, DBL_MAX,
+     1.0, DBL_MAX, 0},
+    {"w_reg", DK_OPTION_DOUBLE, offsetof(dk_embedded_options, w_reg), 0, DBL_TRUE_MIN, DBL_MAX,
+     10.0, DBL_MAX, 0},
+    {"w_con", DK_OPTION_DOUBLE, offsetof(dk_embedded_options, w_con), 0, DBL_TRUE_MIN, DBL_MAX,
+     100.0, DBL_MAX, 0},
+    {"tolerance", DK_OPTION_DOUBLE, offsetof(dk_embedded_options, tolerance), 0, DBL_TRUE_MIN,
+     DBL_MAX, 1e-6, DBL_MAX, 0},
+    {"max_iterations", DK_OPTION_INT, offsetof(dk_embedded_options, max_iterations), 0, 1,
+     INT_MAX, 100, 20, 0},
+    {"seed", DK_OPTION_SEED, offsetof(dk_embedded_options, seed), 0, 0, 0, 1, 0, 0},
+};
+
 DK_METHOD_OPS(dk_embedded_ops, "EmbeddedDeformation",
               DK_METHOD_ITERATIVE | DK_METHOD_TRANSFORMS_AS_POSITIONS |
               DK_METHOD_TRANSLATION_INVARIANT | DK_METHOD_RIGID_INVARIANT |
-              DK_METHOD_PENALTY_HANDLES,
-              dk_embedded, dk_embedded, dk_embedded_options);
+              DK_METHOD_PENALTY_HANDLES | DK_METHOD_GRAPH,
+              dk_embedded, dk_embedded, dk_embedded_options, embedded_fields);

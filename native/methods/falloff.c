@@ -3,6 +3,8 @@
  * of g (position in the concatenated handle list) and its weight S; a solve is one pass. */
 #include "dk_falloff.h"
 
+#include <float.h>
+#include <limits.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -372,6 +374,10 @@ static dk_status check_options(const dk_falloff_options *o, dk_error *err)
     if (!isfinite(o->k))
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "Falloff bind: k must be finite, got %g", o->k);
+    if (!isfinite(o->heat_time_factor)) /* whatever the distance: a value that cannot work */
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "Falloff bind: heat_time_factor must be finite (<= 0: the "
+                            "default), got %g", o->heat_time_factor);
     return DK_OK;
 }
 
@@ -643,6 +649,18 @@ dk_status dk_falloff_estimate_memory(const dk_mesh *mesh, const dk_falloff_optio
     return DK_OK;
 }
 
+/* the options' fields (dk_option_desc): where each is, what values bind takes */
+static const dk_option_desc falloff_fields[] = {
+    {"distance", DK_OPTION_ENUM, offsetof(dk_falloff_options, distance), 0, 0, 3, 1, 3, 0},
+    {"range", DK_OPTION_DOUBLE, offsetof(dk_falloff_options, range), 0, DBL_TRUE_MIN, DBL_MAX,
+     0.3, DBL_MAX, DK_OPTION_LENGTH | DK_OPTION_ZERO_AUTO},
+    {"reach", DK_OPTION_ENUM, offsetof(dk_falloff_options, reach), 0, 0, 1, 1, 1, 0},
+    {"k", DK_OPTION_DOUBLE, offsetof(dk_falloff_options, k), 0, -DBL_MAX, DBL_MAX, 1.0, DBL_MAX,
+     0},
+    {"heat_time_factor", DK_OPTION_DOUBLE, offsetof(dk_falloff_options, heat_time_factor), 0,
+     -DBL_MAX, DBL_MAX, 1.0, DBL_MAX, 0},
+};
+
 DK_METHOD_OPS(dk_falloff_ops, "Falloff",
               DK_METHOD_EDITS_INPUT,
-              dk_falloff, dk_falloff, dk_falloff_options);
+              dk_falloff, dk_falloff, dk_falloff_options, falloff_fields);

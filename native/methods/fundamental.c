@@ -2,6 +2,8 @@
  * See dk_fundamental.h for the method and docs/methods/fundamental.md for the choices. */
 #include "dk_fundamental.h"
 
+#include <float.h>
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -1128,10 +1130,17 @@ dk_status dk_fundamental_bind(const dk_mesh *mesh, const dk_constraint_desc *des
     f->prog = &prog;
     f->prog_base = FR_BIND_PHASE_BASE;
     f->w_scaled = opt.w * mesh->mean_edge_length * mesh->mean_edge_length;
-    if (!(f->w_scaled > 0.0)) {
+    if (!(f->w_scaled > 0.0 && isfinite(f->w_scaled))) { /* name the cause it can see */
+        const double ws = f->w_scaled;
         free(f);
-        return dk_error_set(err, DK_ERR_DEGENERATE, "LinearReconstruction: the mesh has no "
-                            "edge length");
+        if (!(mesh->mean_edge_length > 0.0))
+            return dk_error_set(err, DK_ERR_DEGENERATE, "LinearReconstruction: the mesh has "
+                                "no edge length");
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "LinearReconstruction: w = %g times the mean edge length squared "
+                            "(%g) is %s in double precision: give a w nearer 1", opt.w,
+                            mesh->mean_edge_length * mesh->mean_edge_length,
+                            ws > 0.0 ? "infinite" : "zero");
     }
     const size_t F = (size_t)mesh->n_faces, E = (size_t)mesh->n_edges;
     f->material = malloc((E + 1) * sizeof *f->material);
@@ -1446,7 +1455,17 @@ dk_status dk_fundamental_estimate_memory(const dk_mesh *mesh,
     return DK_OK;
 }
 
+/* the options' fields (dk_option_desc): where each is, what values bind takes */
+static const dk_option_desc fundamental_fields[] = {
+    {"w", DK_OPTION_DOUBLE, offsetof(dk_fundamental_options, w), 0, DBL_TRUE_MIN, DBL_MAX, 1.0,
+     DBL_MAX, 0},
+    {"orientation", DK_OPTION_INT, offsetof(dk_fundamental_options, orientation), 0, 0, 1, 0, 1,
+     0},
+    {"material", DK_OPTION_EDGE_VALUES, offsetof(dk_fundamental_options, material),
+     offsetof(dk_fundamental_options, n_material), DBL_TRUE_MIN, DBL_MAX, 1.0, DBL_MAX, 0},
+};
+
 DK_METHOD_OPS(dk_fundamental_ops, "LinearReconstruction",
               DK_METHOD_TRANSFORMS_AS_POSITIONS | DK_METHOD_TRANSLATION_INVARIANT |
                   DK_METHOD_RIGID_INVARIANT,
-              dk_fundamental, dk_fundamental, dk_fundamental_options);
+              dk_fundamental, dk_fundamental, dk_fundamental_options, fundamental_fields);

@@ -4,6 +4,8 @@
  * replaces atomically. */
 #include "dk_laplacian_edit.h"
 
+#include <float.h>
+#include <limits.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -1685,7 +1687,25 @@ dk_status dk_laplacian_edit_estimate_memory(const dk_mesh *mesh,
     return DK_OK;
 }
 
+/* the options' fields (dk_option_desc): where each is, what values bind takes */
+static const dk_option_desc le_fields[] = {
+    {"weights", DK_OPTION_ENUM, offsetof(dk_laplacian_edit_options, weights), 0, 0, 1, 1, 1, 0},
+    {"detail", DK_OPTION_ENUM, offsetof(dk_laplacian_edit_options, detail), 0, 0, 2, 2, 2, 0},
+    {"constraints", DK_OPTION_ENUM, offsetof(dk_laplacian_edit_options, constraints), 0, 0, 1, 0,
+     1, 0},
+    {"constraint_weight", DK_OPTION_DOUBLE,
+     offsetof(dk_laplacian_edit_options, constraint_weight), 0, DBL_TRUE_MIN, DBL_MAX, 1.0,
+     DBL_MAX, 0},
+    {"tikhonov", DK_OPTION_DOUBLE, offsetof(dk_laplacian_edit_options, tikhonov), 0, 0, DBL_MAX,
+     1e-3, DBL_MAX, 0},
+    {"local_frame_iterations", DK_OPTION_INT,
+     offsetof(dk_laplacian_edit_options, local_frame_iterations), 0, 0, 1000, 1, 30, 0},
+    {"local_frame_tolerance", DK_OPTION_DOUBLE,
+     offsetof(dk_laplacian_edit_options, local_frame_tolerance), 0, 0, DBL_MAX, 1e-6, DBL_MAX, 0},
+    {"basis", DK_OPTION_ENUM, offsetof(dk_laplacian_edit_options, basis), 0, 0, 1, 0, 1, 0},
+};
+
 DK_METHOD_OPS(dk_laplacian_edit_ops, "LaplacianEdit",
               DK_METHOD_TRANSFORMS_AS_POSITIONS | DK_METHOD_TRANSLATION_INVARIANT |
                   DK_METHOD_EDITS_INPUT,
-              dk_laplacian_edit, dk_laplacian_edit, dk_laplacian_edit_options);
+              dk_laplacian_edit, dk_laplacian_edit, dk_laplacian_edit_options, le_fields);

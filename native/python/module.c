@@ -121,7 +121,7 @@ PyDoc_STRVAR(method_info_doc,
              "_method_info(name) -> dict\n\n"
              "What the native method contract says of method `name` (dk_method.h flags):\n"
              "iterative, transforms_as_positions, translation_invariant, rigid_invariant,\n"
-             "penalty_handles, soft_regions, given_start, edits_input.\n"
+             "penalty_handles, soft_regions, given_start, edits_input, graph.\n"
              "For code and tests written against the contract.");
 
 static PyObject *py_method_info(PyObject *module, PyObject *arg)
@@ -136,7 +136,7 @@ static PyObject *py_method_info(PyObject *module, PyObject *arg)
         return NULL;
     }
     const unsigned f = ops->flags;
-    return Py_BuildValue("{s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O}", "iterative",
+    return Py_BuildValue("{s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O}", "iterative",
                          (f & DK_METHOD_ITERATIVE) ? Py_True : Py_False,
                          "transforms_as_positions",
                          (f & DK_METHOD_TRANSFORMS_AS_POSITIONS) ? Py_True : Py_False,
@@ -147,7 +147,8 @@ static PyObject *py_method_info(PyObject *module, PyObject *arg)
                          (f & DK_METHOD_PENALTY_HANDLES) ? Py_True : Py_False, "soft_regions",
                          (f & DK_METHOD_SOFT_REGIONS) ? Py_True : Py_False, "given_start",
                          (f & DK_METHOD_GIVEN_START) ? Py_True : Py_False, "edits_input",
-                         (f & DK_METHOD_EDITS_INPUT) ? Py_True : Py_False);
+                         (f & DK_METHOD_EDITS_INPUT) ? Py_True : Py_False, "graph",
+                         (f & DK_METHOD_GRAPH) ? Py_True : Py_False);
 }
 
 /* ------------------------------------------------------------------ memory ------------- */

@@ -9,11 +9,13 @@
  *   3. constraint groups: 0..3 handles of 0..4 vertices with optional weights, fixed
  *      vertices, an optional region of interest and optional stiffness (indices sometimes
  *      out of range, groups sometimes overlapping);
- *   4. the method's own options, each field valid most of the time and otherwise on a
- *      boundary (0, negative, NaN, Inf, 1e300, an enum one past its names);
+ *   4. the method's own options, filled through its table's option fields (dk_option_desc:
+ *      no method is known here by name), each field valid most of the time and otherwise
+ *      on a boundary (0, negative, NaN, Inf, 1e300, an enum one past its names);
  *   5. up to four solve requests (positions or transforms near the handles' rest, moved by
  *      up to a few bounding-box diagonals, sometimes raw doubles; any start, the given one
- *      from the rest positions; iteration cap, skip_energy and preview), then a rebind
+ *      from the rest positions; iteration cap, skip_energy and preview; a quarter of them
+ *      with a pose to edit, input_positions), then a rebind
  *      with new groups and a solve after it.
  * Short inputs decode to small valid cases, so most inputs get through bind into solve.
  *
@@ -27,12 +29,6 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "dk_arap.h"
-#include "dk_eigen.h"
-#include "dk_embedded.h"
-#include "dk_falloff.h"
-#include "dk_fundamental.h"
-#include "dk_laplacian_edit.h"
 #include "dk_method.h"
 #include "fuzz_input.h"
 
@@ -180,115 +176,101 @@ static void decode_groups(dk_fuzz_input *in, dk_index n, groups *g)
 
 /* ------------------------------------------------------------------ options ------------ */
 
+/* The options, filled through the method's table (dk_option_desc): no code here knows a
+ * method by name, so a new method's options are fuzzed as soon as it is registered. */
 typedef union options {
-    dk_arap_options arap;
-    dk_laplacian_edit_options le;
-    dk_falloff_options falloff;
-    dk_embedded_options embedded;
-    dk_eigen_options eigen;
-    dk_fundamental_options fundamental;
+    max_align_t align;
+    unsigned char bytes[1024];
 } options;
 
+enum { MAX_LISTS = 4, MAX_LIST = 4 };
 typedef struct extras {
-    dk_index cut_a[4], cut_b[4];
-    double material[3 * MAX_P + 2];
+    dk_index lists[MAX_LISTS][MAX_LIST];
+    double edge_values[3 * MAX_P + 2];
 } extras;
 
-/* Fills the options of the method called `name`; returns NULL (the defaults) one time in
- * eight. */
-static const void *decode_options(dk_fuzz_input *in, const char *name, const dk_mesh *m,
-                                  options *o, extras *x)
+static void put_int(options *o, const dk_option_desc *f, int v)
+{
+    memcpy(o->bytes + f->offset, &v, sizeof v);
+}
+
+static void put_double(options *o, const dk_option_desc *f, double v)
+{
+    memcpy(o->bytes + f->offset, &v, sizeof v);
+}
+
+/* Fills the options of `ops` from its defaults, each field valid most of the time and
+ * otherwise on a boundary (0, -1, NaN, Inf, 1e300, one past an enum or a range); returns
+ * NULL (the defaults) one time in eight. Vertex lists come all or none (a method may want
+ * them in pairs, as EmbeddedDeformation's cut); an edge map has the edge count, or one off
+ * it (refused). */
+static const void *decode_options(dk_fuzz_input *in, const dk_method_ops *ops,
+                                  const dk_mesh *m, options *o, extras *x)
 {
     if (dk_fuzz_u8(in) % 8 == 0) return NULL;
+    dk_fuzz_check(ops->options_size <= sizeof o->bytes, "%s options over %zu bytes", ops->name,
+                  sizeof o->bytes);
     const double diag = m->bbox_diagonal > 0 ? m->bbox_diagonal : 1;
-    if (strcmp(name, "ARAP") == 0) {
-        dk_arap_options *a = &o->arap;
-        dk_arap_default_options(a);
-        a->energy = (dk_arap_energy_kind)dk_fuzz_enum(in, 2);
-        a->weights = (dk_arap_weight_kind)dk_fuzz_enum(in, 3);
-        a->max_iterations = dk_fuzz_int(in, 1, 40, 0);
-        a->tolerance = dk_fuzz_real(in, 1e-6);
-        a->acceleration = (dk_arap_acceleration)dk_fuzz_enum(in, 3);
-        a->anderson_depth = dk_fuzz_int(in, 1, 20, 1);
-        a->cg_iterations = dk_fuzz_int(in, 1, 100, 1);
-        a->predict = dk_fuzz_int(in, 0, 1, 1);
-        return a;
-    }
-    if (strcmp(name, "LaplacianEdit") == 0) {
-        dk_laplacian_edit_options *l = &o->le;
-        dk_laplacian_edit_default_options(l);
-        l->weights = (dk_le_weights)dk_fuzz_enum(in, 2);
-        l->detail = (dk_le_detail)dk_fuzz_enum(in, 3);
-        l->constraints = (dk_le_constraint_mode)dk_fuzz_enum(in, 2);
-        l->constraint_weight = dk_fuzz_real(in, 1.0);
-        l->tikhonov = dk_fuzz_u8(in) % 2 ? dk_fuzz_real(in, 1e-3) : 0;
-        l->local_frame_iterations = dk_fuzz_int(in, 0, 30, 0);
-        l->local_frame_tolerance = dk_fuzz_real(in, 1e-6);
-        return l;
-    }
-    if (strcmp(name, "Falloff") == 0) {
-        dk_falloff_options *f = &o->falloff;
-        dk_falloff_default_options(f);
-        f->distance = (dk_falloff_distance)dk_fuzz_enum(in, 4);
-        f->range = dk_fuzz_u8(in) % 2 ? dk_fuzz_real(in, f->distance == DK_FALLOFF_HOPS
-                                                              ? 3.0 : 0.3 * diag)
-                                      : 0;
-        f->reach = (dk_falloff_reach)dk_fuzz_enum(in, 2);
-        f->k = dk_fuzz_u8(in) % 2 ? dk_fuzz_real(in, 1.0) : 0;
-        f->heat_time_factor = dk_fuzz_u8(in) % 4 ? 0 : dk_fuzz_real(in, 1.0);
-        return f;
-    }
-    if (strcmp(name, "EmbeddedDeformation") == 0) {
-        dk_embedded_options *e = &o->embedded;
-        dk_embedded_default_options(e);
-        e->nodes = (dk_ed_node_source)dk_fuzz_enum(in, 2);
-        e->n_nodes = dk_fuzz_int(in, 1, 40, 1);
-        e->radius = dk_fuzz_u8(in) % 4 ? 0 : dk_fuzz_real(in, 0.25 * diag);
-        e->k = dk_fuzz_int(in, 1, 8, 1);
-        e->distance = (dk_ed_distance)dk_fuzz_enum(in, 2);
-        const uint8_t cut = dk_fuzz_u8(in);
-        if (cut % 8 == 0) {
-            e->n_cut_a = 1 + cut / 64, e->n_cut_b = 1 + (cut / 8) % 4;
-            for (int i = 0; i < e->n_cut_a; i++) x->cut_a[i] = decode_vertex(in, m->n_vertices);
-            for (int i = 0; i < e->n_cut_b; i++) x->cut_b[i] = decode_vertex(in, m->n_vertices);
-            e->cut_a = x->cut_a, e->cut_b = x->cut_b;
+    ops->default_options(o->bytes);
+    const int lists = dk_fuzz_u8(in) % 8 == 0;
+    int n_lists = 0;
+    for (int i = 0; i < ops->n_option_fields; i++) {
+        const dk_option_desc *f = &ops->option_fields[i];
+        switch (f->type) {
+        case DK_OPTION_INT: {
+            const int lo = f->min < -1e6 ? -1000 : (int)f->min;
+            put_int(o, f, dk_fuzz_int(in, lo, (int)(f->quick_max < lo + 200 ? f->quick_max
+                                                                                : lo + 200),
+                                      f->quick_max >= f->max));
+            break;
         }
-        e->w_rot = dk_fuzz_real(in, 1.0);
-        e->w_reg = dk_fuzz_real(in, 10.0);
-        e->w_con = dk_fuzz_real(in, 100.0);
-        e->tolerance = dk_fuzz_real(in, 1e-6);
-        e->max_iterations = dk_fuzz_int(in, 1, 20, 0);
-        e->seed = dk_fuzz_u32(in);
-        return e;
-    }
-    if (strcmp(name, "EigenDeformation") == 0) {
-        dk_eigen_options *e = &o->eigen;
-        dk_eigen_default_options(e);
-        e->n_eigenvectors = dk_fuzz_int(in, 0, 40, 1);
-        e->refine = dk_fuzz_int(in, 0, 60, 1);
-        e->laplacian = (dk_eigen_laplacian)dk_fuzz_enum(in, 2);
-        e->bsw_width = dk_fuzz_real(in, 1.0);
-        return e;
-    }
-    if (strcmp(name, "LinearReconstruction") == 0) {
-        dk_fundamental_options *f = &o->fundamental;
-        dk_fundamental_default_options(f);
-        f->w = dk_fuzz_real(in, 1.0);
-        f->orientation = dk_fuzz_int(in, 0, 1, 1);
-        const uint8_t mat = dk_fuzz_u8(in);
-        if (mat % 4 == 0) {
-            /* the edge count, or one off it (refused); the array has room for one more */
-            f->n_material = m->n_edges + (mat / 4) % 3 - 1;
-            if (f->n_material < 0) f->n_material = 0;
-            for (dk_index e = 0; e < m->n_edges + 1 && e < 3 * MAX_P + 2; e++)
-                x->material[e] = dk_fuzz_u8(in) % 8 == 0 ? dk_fuzz_real(in, 1.0)
-                                                          : 0.25 * (1 + dk_fuzz_u8(in) % 8);
-            f->material = x->material;
+        case DK_OPTION_ENUM:
+            put_int(o, f, (int)f->min + dk_fuzz_enum(in, (int)(f->max - f->min) + 1));
+            break;
+        case DK_OPTION_DOUBLE: {
+            const double usual = f->flags & DK_OPTION_LENGTH ? f->usual * diag : f->usual;
+            put_double(o, f, (f->flags & DK_OPTION_ZERO_AUTO) && dk_fuzz_u8(in) % 2
+                                 ? 0.0
+                                 : dk_fuzz_real(in, usual));
+            break;
         }
-        return f;
+        case DK_OPTION_SEED: {
+            const uint64_t seed = dk_fuzz_u32(in);
+            memcpy(o->bytes + f->offset, &seed, sizeof seed);
+            break;
+        }
+        case DK_OPTION_VERTICES: {
+            dk_index count = 0;
+            const dk_index *list = NULL;
+            if (lists && n_lists < MAX_LISTS) {
+                count = 1 + dk_fuzz_u8(in) % MAX_LIST;
+                for (dk_index k = 0; k < count; k++)
+                    x->lists[n_lists][k] = decode_vertex(in, m->n_vertices);
+                list = x->lists[n_lists++];
+            }
+            memcpy(o->bytes + f->offset, &list, sizeof list);
+            memcpy(o->bytes + f->count_offset, &count, sizeof count);
+            break;
+        }
+        case DK_OPTION_EDGE_VALUES: {
+            const uint8_t mat = dk_fuzz_u8(in);
+            if (mat % 4 == 0) {
+                /* the edge count, or one off it (refused); the array has room for one more */
+                dk_index count = m->n_edges + (mat / 4) % 3 - 1;
+                if (count < 0) count = 0;
+                for (dk_index e = 0; e < m->n_edges + 1 && e < 3 * MAX_P + 2; e++)
+                    x->edge_values[e] = dk_fuzz_u8(in) % 8 == 0
+                                            ? dk_fuzz_real(in, f->usual)
+                                            : f->usual * 0.25 * (1 + dk_fuzz_u8(in) % 8);
+                const double *values = x->edge_values;
+                memcpy(o->bytes + f->offset, &values, sizeof values);
+                memcpy(o->bytes + f->count_offset, &count, sizeof count);
+            }
+            break;
+        }
+        }
     }
-    dk_fuzz_check(0, "a method the harness does not know: %s", name);
-    return NULL;
+    return o->bytes;
 }
 
 /* ------------------------------------------------------------------ requests ----------- */
@@ -439,7 +421,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     memset(&o, 0, sizeof o);
     memset(&x, 0, sizeof x);
     decode_groups(&in, m->n_vertices, &g);
-    const void *opts = decode_options(&in, ops->name, m, &o, &x);
+    const void *opts = decode_options(&in, ops, m, &o, &x);
 
     void *obj = NULL;
     dk_error err = {0};

@@ -17,6 +17,7 @@
  *     unconstrained floating triangle binds with every method, every held vertex stays
  *     exactly at rest, the counters say how many were held, and a mesh whose every vertex
  *     is constrained gives the constrained motion instead of a refusal. */
+#include <limits.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -127,8 +128,8 @@ static void check_method(const dk_method_ops *ops, scene *s)
                   st.n_handle_vertices == s->n_hv,
               "%s on %s: stats %d %d %d", ops->name, s->name, (int)st.n_vertices,
               (int)st.n_handles, (int)st.n_handle_vertices);
-    /* a deformation graph's node count: embedded deformation only (py warnings read it) */
-    CHECK_MSG((strcmp(ops->name, "EmbeddedDeformation") == 0) == (st.n_graph_nodes > 0),
+    /* a deformation graph's node count: the methods with a graph only (py warnings read it) */
+    CHECK_MSG(((ops->flags & DK_METHOD_GRAPH) != 0) == (st.n_graph_nodes > 0),
               "%s on %s: n_graph_nodes %d", ops->name, s->name, (int)st.n_graph_nodes);
 
     /* zero drag, cold and warm */
@@ -460,4 +461,112 @@ static void test_loose_geometry(void)
     dk_test_mesh_free(&plane);
 }
 
-DK_TEST_MAIN(test_registry, test_every_method, test_loose_geometry)
+/* Sets field f of options o to v (INT, ENUM, DOUBLE). */
+static void set_field(void *o, const dk_option_desc *f, double v)
+{
+    unsigned char *p = (unsigned char *)o + f->offset;
+    if (f->type == DK_OPTION_DOUBLE) {
+        memcpy(p, &v, sizeof v);
+    } else {
+        const int i = (int)v;
+        memcpy(p, &i, sizeof i);
+    }
+}
+
+/* Binds with the defaults but field f set to v; returns the status (the object freed). */
+static dk_status bind_with(const dk_method_ops *o, const scene *s, const dk_option_desc *f,
+                           double v, dk_error *e)
+{
+    union {
+        max_align_t align;
+        unsigned char bytes[1024];
+    } opt;
+    void *obj = NULL;
+    if (o->options_size > sizeof opt.bytes)
+        return dk_error_set(e, DK_ERR_INTERNAL, "options struct over 1 KiB");
+    o->default_options(opt.bytes);
+    set_field(opt.bytes, f, v);
+    const dk_status st = o->bind(s->mesh, &s->desc, opt.bytes, &obj, e);
+    if (st == DK_OK)
+        o->free(obj);
+    return st;
+}
+
+/* The ops table's option fields (dk_option_desc) tell the truth, for every method: each
+ * default lies in its field's range; a bind takes the field's usual value, its least and
+ * its quick largest; and it refuses what lies outside: one below the least and one above
+ * the largest integer, NaN, and a real below its least (0 or -1). So code written against
+ * the contract (the fuzzer) fills options it does not know, and every field is checked
+ * ("a call that cannot work says so"). */
+static void test_option_fields(void)
+{
+    dk_test_mesh plane = {0};
+    scene s;
+    int ok = dk_test_bumpy_plane(8, 0.1, &plane) == 0 &&
+             scene_make(&s, "bumpy plane", &plane, 0, -0.99, 0.99, 1, 1, -1.0, 1e-9) == 0;
+    CHECK(ok);
+    if (!ok)
+        return;
+    for (const dk_method_ops *const *m = dk_methods(); *m; m++) {
+        const dk_method_ops *o = *m;
+        CHECK_MSG(o->options_size > 0 && o->default_options && o->n_option_fields > 0 &&
+                      o->progress_offset != o->progress_user_offset,
+                  "%s: the table lacks its options", o->name);
+        union {
+            max_align_t align;
+            unsigned char bytes[1024];
+        } def;
+        o->default_options(def.bytes);
+        for (int i = 0; i < o->n_option_fields; i++) {
+            const dk_option_desc *f = &o->option_fields[i];
+            dk_error e = {0};
+            CHECK_MSG(f->offset < o->options_size && f->count_offset < o->options_size,
+                      "%s.%s: offset past the struct", o->name, f->name);
+            if (f->type == DK_OPTION_VERTICES || f->type == DK_OPTION_EDGE_VALUES ||
+                f->type == DK_OPTION_SEED)
+                continue;
+            double d;
+            if (f->type == DK_OPTION_DOUBLE)
+                memcpy(&d, def.bytes + f->offset, sizeof d);
+            else {
+                int iv;
+                memcpy(&iv, def.bytes + f->offset, sizeof iv);
+                d = iv;
+            }
+            CHECK_MSG((d >= f->min && d <= f->max) || (d == 0 && (f->flags & DK_OPTION_ZERO_AUTO)),
+                      "%s.%s: the default %g is outside [%g, %g]", o->name, f->name, d, f->min,
+                      f->max);
+            const double usual = f->flags & DK_OPTION_LENGTH ? f->usual * s.diag : f->usual;
+            /* the least valid value alone: n_nodes = 1 needs k = 0, a radius or w of
+             * 1e-323 scale the mesh away; the integers' least is taken where the defaults
+             * allow it (below), the reals' usual value */
+            const double good[2] = {usual, f->type == DK_OPTION_DOUBLE ? usual : f->quick_max};
+            for (int k = 0; k < 2; k++)
+                CHECK_MSG(bind_with(o, &s, f, good[k], &e) == DK_OK, "%s.%s = %g refused: %s",
+                          o->name, f->name, good[k], e.message);
+            if (f->type == DK_OPTION_DOUBLE) {
+                CHECK_MSG(bind_with(o, &s, f, NAN, &e) != DK_OK && e.message[0],
+                          "%s.%s = NaN taken", o->name, f->name);
+                if (f->min >= 0.0) {
+                    const double below = f->min > 0.0 && !(f->flags & DK_OPTION_ZERO_AUTO)
+                                             ? 0.0
+                                             : -1.0;
+                    CHECK_MSG(bind_with(o, &s, f, below, &e) != DK_OK && e.message[0],
+                              "%s.%s = %g taken", o->name, f->name, below);
+                }
+            } else {
+                const int below = (int)f->min - 1;
+                if (f->min > INT_MIN && !(below == 0 && (f->flags & DK_OPTION_ZERO_AUTO)))
+                    CHECK_MSG(bind_with(o, &s, f, below, &e) != DK_OK && e.message[0],
+                              "%s.%s = %d taken", o->name, f->name, below);
+                if (f->max < INT_MAX)
+                    CHECK_MSG(bind_with(o, &s, f, f->max + 1, &e) != DK_OK && e.message[0],
+                              "%s.%s = %g taken", o->name, f->name, f->max + 1);
+            }
+        }
+    }
+    scene_free(&s);
+    dk_test_mesh_free(&plane);
+}
+
+DK_TEST_MAIN(test_registry, test_every_method, test_loose_geometry, test_option_fields)

@@ -81,12 +81,14 @@ def test_registries_agree():
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     assert [m.native_class for m in mod.METHODS] == list(dk.METHODS)
+    # what the add-on's registry repeats of the native table agrees with it
+    assert all(m.graph == info(m.native_class)["graph"] for m in mod.METHODS)
     for name in dk.METHODS:
         assert isinstance(getattr(dk, name), type)
         assert set(info(name)) == {"iterative", "transforms_as_positions",
                                    "translation_invariant", "rigid_invariant",
                                    "penalty_handles", "soft_regions", "given_start",
-                                   "edits_input"}
+                                   "edits_input", "graph"}
     with pytest.raises(KeyError):
         info("NoSuchMethod")
 

@@ -3,6 +3,9 @@
  * choices and measurements. */
 #include "arap_internal.h"
 
+#include <float.h>
+#include <limits.h>
+
 void dk_arap_default_options(dk_arap_options *o)
 {
     if (!o)
@@ -527,9 +530,27 @@ dk_status dk_arap_estimate_memory(const dk_mesh *mesh, const dk_arap_options *op
 /* ---------------------------------------------------------------- the method contract --- */
 
 /* the contract's table (dk_method.h): the adapters cast to this method's types */
+/* the options' fields (dk_option_desc): where each is, what values bind takes */
+static const dk_option_desc arap_fields[] = {
+    {"energy", DK_OPTION_ENUM, offsetof(dk_arap_options, energy), 0, 0, 1, 0, 1, 0},
+    {"weights", DK_OPTION_ENUM, offsetof(dk_arap_options, weights), 0, 0, 2, 1, 2, 0},
+    {"max_iterations", DK_OPTION_INT, offsetof(dk_arap_options, max_iterations), 0, 1, INT_MAX,
+     100, 40, 0},
+    {"tolerance", DK_OPTION_DOUBLE, offsetof(dk_arap_options, tolerance), 0, 0, DBL_MAX, 1e-6,
+     DBL_MAX, 0},
+    {"acceleration", DK_OPTION_ENUM, offsetof(dk_arap_options, acceleration), 0, 0, 2, 2, 2, 0},
+    {"anderson_depth", DK_OPTION_INT, offsetof(dk_arap_options, anderson_depth), 0, 1,
+     MAX_ANDERSON_DEPTH, 5, MAX_ANDERSON_DEPTH, 0},
+    {"cg_iterations", DK_OPTION_INT, offsetof(dk_arap_options, cg_iterations), 0, 1, 100, 12,
+     100, 0},
+    {"cg_schedule", DK_OPTION_ENUM, offsetof(dk_arap_options, cg_schedule), 0, 0, 1, 0, 1, 0},
+    {"predict", DK_OPTION_INT, offsetof(dk_arap_options, predict), 0, 0, 1, 1, 1, 0},
+    {"basis", DK_OPTION_ENUM, offsetof(dk_arap_options, basis), 0, 0, 1, 0, 1, 0},
+};
+
 DK_METHOD_OPS(dk_arap_ops, "ARAP",
               DK_METHOD_ITERATIVE | DK_METHOD_TRANSFORMS_AS_POSITIONS |
               DK_METHOD_TRANSLATION_INVARIANT | DK_METHOD_RIGID_INVARIANT |
               DK_METHOD_GIVEN_START | DK_METHOD_EDITS_INPUT,
-              dk_arap, dk_arap, dk_arap_options);
+              dk_arap, dk_arap, dk_arap_options, arap_fields);
 

@@ -3,6 +3,8 @@
  * leaves open. */
 #include "eigen_internal.h"
 
+#include <float.h>
+#include <limits.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -385,5 +387,17 @@ dk_status dk_eigen_estimate_memory(const dk_mesh *mesh, const dk_eigen_options *
     return DK_OK;
 }
 
+/* the options' fields (dk_option_desc): where each is, what values bind takes (an
+ * eigenvector count is also at most the vertex count) */
+static const dk_option_desc eigen_fields[] = {
+    {"n_eigenvectors", DK_OPTION_INT, offsetof(dk_eigen_options, n_eigenvectors), 0, 1, INT_MAX,
+     50, 40, DK_OPTION_ZERO_AUTO},
+    {"refine", DK_OPTION_INT, offsetof(dk_eigen_options, refine), 0, 0, INT_MAX, 300, 60, 0},
+    {"laplacian", DK_OPTION_ENUM, offsetof(dk_eigen_options, laplacian), 0, 0, 1, 0, 1, 0},
+    {"region", DK_OPTION_ENUM, offsetof(dk_eigen_options, region), 0, 0, 1, 0, 1, 0},
+    {"bsw_width", DK_OPTION_DOUBLE, offsetof(dk_eigen_options, bsw_width), 0, DBL_TRUE_MIN,
+     DBL_MAX, 1.0, DBL_MAX, 0},
+};
+
 DK_METHOD_OPS(dk_eigen_ops, "EigenDeformation", DK_METHOD_SOFT_REGIONS, dk_eigen, dk_eigen,
-              dk_eigen_options);
+              dk_eigen_options, eigen_fields);
