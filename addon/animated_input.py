@@ -25,6 +25,12 @@ def follows(m):
     return _edits_input[m.native_class]
 
 
+def depends_on_input(m, d):
+    """Whether d's result depends on its input: its method follows the input, or d solves
+    from the rest with its handles where the input puts them (Solve From: Rest Shape)."""
+    return follows(m) or d.solve_from == "REST"
+
+
 def modifiers_above(obj, d, depsgraph=None):
     """The modifiers above d's own in the stack that are enabled for the depsgraph's mode
     (viewport or render)."""
@@ -86,7 +92,7 @@ def check_input_is_rest(obj, d, what, depsgraph=None, every_method=False):
     that solves from the rest, while modifiers above move its input (shape keys hold
     positions before modifiers: a rig would move each frame's baked shape again; shape keys
     alone add up, the baked key's offset on top of the others')."""
-    if not follows(methods.get(d.method)):
+    if not depends_on_input(methods.get(d.method), d):
         above = modifiers_above(obj, d, depsgraph) if every_method else []
         if above:
             raise DeformKitError("cannot %s %s: its input is moved by %s above it, which "

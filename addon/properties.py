@@ -152,6 +152,20 @@ _deformer_ann = {
     "handles": CollectionProperty(type=DeformKitHandle),
     "active_handle": IntProperty(name="Active Handle", default=0),
     "bound": BoolProperty(name="Bound", default=False),
+    # what the method deforms when something above moves its input (solver._plan_solve)
+    "solve_from": EnumProperty(
+        name="Solve From", default="POSE", update=_touch,
+        items=(("POSE", "Input Pose",
+                "Edit the pose the modifiers above give: with the handles where they put "
+                "them the result is that pose (methods that cannot edit a pose add their "
+                "offset, solved on the rest, to it)"),
+               ("REST", "Rest Shape",
+                "Solve from the rest shape with the handles where the modifiers above put "
+                "them, plus their edits: the method replaces the rig's deformation between "
+                "the handles (put the parts the rig moves in handles on their bones; Fixed "
+                "vertices stay at rest)")),
+        description="What the deformer solves from when modifiers or shape keys above it move "
+                    "its input"),
     # the frame whose handle placements and pose Bind takes as the rest (solver.rest_frame)
     "rest_frame_from": EnumProperty(
         name="Rest Frame", default="START",

@@ -19,8 +19,9 @@ import bpy
 import numpy as np
 
 from . import compat, geonodes, methods, native
-from .animated_input import (check_input_is_rest, edit_targets, follows,  # noqa: F401
-                             input_movers, input_transforms, modifiers_above, moved_input)
+from .animated_input import (check_input_is_rest, depends_on_input, edit_targets,  # noqa: F401
+                             follows, input_movers, input_transforms, modifiers_above,
+                             moved_input)
 from .errors import DeformKitError, OverlapError  # noqa: F401
 from .handles import (bind_matrix, pose_bind, rig_bind, set_bind_matrix,  # noqa: F401
                       target_world, transforms, turn_with_the_pose)
@@ -51,7 +52,7 @@ class _Entry:
                  "handles", "source", "preview_at", "material", "material_shown", "slice_cost",
                  "moved_at", "quick", "worker", "slice_ms", "graph_shown", "basis",
                  "result_pos", "result_T", "preview_inputs", "warned", "last_cold", "last_T",
-                 "fit_for", "fit_text")
+                 "fit_for", "fit_text", "native_source")
 
 
 def mark_settings_changed():
@@ -629,6 +630,7 @@ class BindJob:
         e.settings, e.groups, e.method_id = self.settings, self.groups, self.method_id
         e.last_inputs, e.verified, e.pending, e.pending_its = None, True, False, 0
         e.handles, e.source, e.preview_at = self.handles, self.rest, 0.0
+        e.native_source = self.rest   # what a follower's native object solves from
         e.material, e.material_shown = self.material, None
         e.slice_cost, e.moved_at = {}, 0.0
         e.quick = quick_topology(me)
@@ -647,7 +649,8 @@ def _install_groups(entry, d, kw, groups_key):
     entry.groups = groups_key
     entry.handles = list(kw["handles"])
     # a follower's native source after a rebind: pushed again by the next solve
-    entry.source = None if follows(methods.get(d.method)) else entry.rest
+    entry.source = None if depends_on_input(methods.get(d.method), d) else entry.rest
+    entry.native_source = None
     entry.verified = True
     entry.last_inputs = None
     # other handles: another basis, and no result to move by it
@@ -1391,8 +1394,8 @@ def _solve_inputs(obj, d, e, depsgraph):
     """The handle transforms, the animated input (methods that follow one, else None) and
     the bytes they make, which say whether anything changed since the last solve."""
     m = methods.get(d.method)
-    source = moved_input(obj, d, depsgraph) if follows(m) else None
-    inp = source if follows(m) else _input_or_none(obj, d, depsgraph)
+    source = moved_input(obj, d, depsgraph) if depends_on_input(m, d) else None
+    inp = source if depends_on_input(m, d) else _input_or_none(obj, d, depsgraph)
     T = snap_identity(turn_with_the_pose(d, e.rest, e.handles, transforms(obj, d, depsgraph),
                                          inp), e.extent)
     last = e.last_T
@@ -1412,12 +1415,20 @@ def _plan_solve(obj, d, e, key, T, source, inputs, cold, write, interactive, res
     m = methods.get(d.method)
     goal = dict(transforms=T)
     kw = methods.solve_kwargs(m, d.options, cold)
-    if follows(m):
+    if depends_on_input(m, d):
         want = e.rest if source is None else source
-        if m.follows_input and (e.source is None or not np.array_equal(e.source, want)):
-            _native_call(m.label + " input", e.native.update_source, want)
-        e.source = want
-        if source is not None:
+        from_rest = d.solve_from == "REST"
+        solve_on = e.rest if from_rest else want   # what the native object deforms
+        ns = getattr(e, "native_source", None)
+        if m.follows_input and (ns is None or not np.array_equal(ns, solve_on)):
+            _native_call(m.label + " input", e.native.update_source, solve_on)
+            e.native_source = solve_on
+        e.source = want   # the offset written is the result less the input
+        if source is not None and from_rest:
+            # Solve From: Rest Shape: the handles where the input puts them (plus the
+            # edit), the rest between them solved from the rest shape
+            goal = dict(targets=edit_targets(e, T, source))
+        elif source is not None:
             # the edit where the input puts the handle vertices: positions where they are
             # the transforms' equal, else transforms turned into the input
             positions = m.follows_input or native.method_info(m.native_class).get(

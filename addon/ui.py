@@ -145,6 +145,8 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
                 hc.prop(h, "use_weights")
             if solver.input_movers(obj, d) is not None:  # an animated input: what the edit does
                 hc.prop(h, "follow")
+        if solver.input_movers(obj, d) is not None:
+            layout.prop(d, "solve_from")
         if obj.mode == "EDIT":
             layout.operator("deformkit.add_handle_from_selection", icon="HOOK")
 

@@ -675,6 +675,34 @@ def test_a_corrective_shape_key_plays_without_deformkit():
         S.handlers.enabled[0] = True
 
 
+def test_solve_from_the_rest_shape_between_the_bones():
+    """Solve From: Rest Shape: the arm's two ends are handles riding the rig's two bones; the
+    method places them where the rig does and solves what lies between from the rest shape,
+    in place of the rig's blend: the ends sit exactly on the rig's pose (no edit was made),
+    the elbow is ARAP's, whose edges keep their lengths better than the blend's."""
+    obj, d, e, fixed, handle, bind_world = rigged_arm("surface", "ARAP")
+    rig = bpy.data.objects["Rig"]
+    sc = bpy.context.scene
+    sc.frame_set(1)
+    d.fixed_group = ""
+    d.handles[0].target, d.handles[0].subtarget = rig, "lower"
+    bpy.ops.deformkit.add_handle(vertex_group="fixed", target=rig.name, subtarget="upper")
+    d.solve_from = "REST"
+    bpy.ops.deformkit.bind()
+    sc.frame_set(20)
+    got, inp = S.evaluated_positions(obj), armature_input(obj, d)
+    ends = np.concatenate([handle, fixed])
+    R.check("the ends where the rig puts them", np.abs(got[ends] - inp[ends]).max() < TOL,
+            np.abs(got[ends] - inp[ends]).max())
+    rest = S.rest_positions(obj)
+    E = np.array([(j * 24 + i, j * 24 + i + 1) for j in range(6) for i in range(23)])
+    change = lambda x: np.abs(np.linalg.norm(x[E[:, 0]] - x[E[:, 1]], axis=1) /  # noqa: E731
+                              np.linalg.norm(rest[E[:, 0]] - rest[E[:, 1]], axis=1) - 1).max()
+    R.check("the elbow is solved, not the blend (edge change %.3f against %.3f)"
+            % (change(got), change(inp)), change(got) < 0.8 * change(inp)
+            and np.abs(got - inp).max() > 1e-3)
+
+
 def test_a_handle_from_selection_sits_where_the_selection_is_shown():
     """Issue 39: Add Handle from Selection on a posed mesh put the empty at the selection's
     rest place, far from the bent arm the artist was looking at."""
@@ -719,6 +747,7 @@ for t in (test_playback, test_render_sees_each_frame, test_chunked_bake_equals_s
           test_a_handle_on_the_rig_moves_its_vertices_once, test_an_edit_turns_with_the_pose,
           test_rebind_takes_the_rest_frame, test_a_method_that_edits_its_input_solves_on_the_pose,
           test_a_corrective_shape_key_plays_without_deformkit,
+          test_solve_from_the_rest_shape_between_the_bones,
           test_a_handle_from_selection_sits_where_the_selection_is_shown):
     R.run(t)
 R.finish()
