@@ -45,18 +45,7 @@ def armadillo():
     sc = json.load(open(os.path.join(SHARED, "scenarios", "armadillo-wave.json")))
     mesh = S.dk.read_mesh(os.path.join(SHARED, "scenarios", sc["mesh"]))
     V, F = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
-    me = bpy.data.meshes.new("armadillo")
-    me.vertices.add(len(V))
-    me.vertices.foreach_set("co", V.astype(np.float32).ravel())
-    me.loops.add(F.size)
-    me.loops.foreach_set("vertex_index", F.astype(np.int32).ravel())
-    me.polygons.add(len(F))
-    me.polygons.foreach_set("loop_start", np.arange(0, F.size, 3, dtype=np.int32))
-    if bpy.app.version < (4, 0):
-        me.polygons.foreach_set("loop_total", np.full(len(F), 3, np.int32))
-    me.update()
-    obj = bpy.data.objects.new("armadillo", me)
-    bpy.context.scene.collection.objects.link(obj)
+    obj = S.triangle_mesh_object(V, F, "armadillo")
     return obj, V, np.array(sc["handles"][0]["vertices"]), np.array(sc["fixed"])
 
 

@@ -44,24 +44,6 @@ def args():
     return ap.parse_args(argv)
 
 
-def mesh_object(V, F):
-    me = bpy.data.meshes.new("scan")
-    me.vertices.add(len(V))
-    me.vertices.foreach_set("co", V.astype(np.float32).ravel())
-    me.loops.add(F.size)
-    me.loops.foreach_set("vertex_index", F.astype(np.int32).ravel())
-    me.polygons.add(len(F))
-    me.polygons.foreach_set("loop_start", np.arange(0, F.size, 3, dtype=np.int32))
-    if bpy.app.version < (4, 0):
-        me.polygons.foreach_set("loop_total", np.full(len(F), 3, np.int32))
-    me.update()
-    obj = bpy.data.objects.new("scan", me)
-    bpy.context.scene.collection.objects.link(obj)
-    bpy.context.view_layer.objects.active = obj
-    obj.select_set(True)
-    return obj
-
-
 def settle(obj, d, limit_s=600.0):
     """Calls the refine timer until it stops; returns the time to the first shown result
     for the handle's final placement and to the end (s)."""
@@ -125,7 +107,7 @@ def main():
     print("Blender %s" % bpy.app.version_string)
     for method in a.methods.split(","):
         S.reset_scene()
-        obj = mesh_object(V, F)
+        obj = S.triangle_mesh_object(V, F)
         S.group(obj, "fixed", fixed)
         S.group(obj, "hand", hand)
         rest = tuple(V[hand].mean(0))

@@ -263,6 +263,26 @@ def tiny_workbench_render(sc, size, filepath):
     sc.render.filepath = filepath
 
 
+def triangle_mesh_object(V, F, name="scan"):
+    """A new object of the triangles F (m x 3) over the vertices V (n x 3), linked to the
+    scene, active and selected (the benchmarks' scanned meshes)."""
+    me = bpy.data.meshes.new(name)
+    me.vertices.add(len(V))
+    me.vertices.foreach_set("co", V.astype(np.float32).ravel())
+    me.loops.add(F.size)
+    me.loops.foreach_set("vertex_index", F.astype(np.int32).ravel())
+    me.polygons.add(len(F))
+    me.polygons.foreach_set("loop_start", np.arange(0, F.size, 3, dtype=np.int32))
+    if bpy.app.version < (4, 0):
+        me.polygons.foreach_set("loop_total", np.full(len(F), 3, np.int32))
+    me.update()
+    obj = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(obj)
+    bpy.context.view_layer.objects.active = obj
+    obj.select_set(True)
+    return obj
+
+
 def make_grid(name="Grid", nx=12, ny=6, size=(2.0, 1.0), bumpy=True):
     """A bumpy nx x ny grid of quads in the XY plane, centred at the origin."""
     verts, faces = [], []
