@@ -14,7 +14,7 @@ to float32 rounding.
 import bpy
 import numpy as np
 
-from . import geonodes, solver
+from . import geonodes, handlers, solver
 from .errors import DeformKitError
 
 
@@ -36,6 +36,8 @@ def armature_jacobians(obj, d, eps):
     rest = solver.rest_positions(obj.data)
     n = len(rest)
     J = np.empty((n, 3, 3))
+    handlers_were = handlers.enabled[0]
+    handlers.enabled[0] = False  # no deformer re-solves on the probe's evaluations
     try:
         for m in below:
             m.show_viewport = False
@@ -62,6 +64,7 @@ def armature_jacobians(obj, d, eps):
         for m, v in shown:
             m.show_viewport = v
         obj.data.update()
+        handlers.enabled[0] = handlers_were
     return J, base
 
 
@@ -93,7 +96,9 @@ def driving_bone(obj, d):
 
 def bone_turn(arm, bone):
     """The bone's rotation from its rest, in its own space: (axis letter, angle in radians)
-    of the largest of its X, Y and Z Euler angles (the driver's variable)."""
+    of the largest of its X, Y and Z Euler angles (the driver's variable). These are the
+    bone's own channels (the driver's Local Space), without constraints: a limb posed by IK
+    drives no key through its deform bones; bake on the bone the animator keys."""
     pb = arm.pose.bones[bone]
     e = pb.matrix_basis.to_euler("XYZ")
     k = int(np.argmax(np.abs(e)))

@@ -54,7 +54,8 @@ def bind_matrix(obj, h, depsgraph=None):
 def rig_bone(obj, d, h, depsgraph=None):
     """(armature object, bone name) when the handle's target rides a bone of an armature
     that deforms d's input (an Armature modifier above d's, enabled): the target is that
-    bone, or an object parented to it (through other objects too). Else None."""
+    bone, or an object parented to it (through other objects too), and the bone deforms
+    (use_deform, and the mesh has its vertex group). Else None."""
     t, bone = h.target, h.subtarget
     if t is None:
         return None
@@ -66,6 +67,9 @@ def rig_bone(obj, d, h, depsgraph=None):
             t = t.parent
         if bone is None:
             return None
+    b = t.data.bones.get(bone) if t.type == "ARMATURE" else None
+    if b is None or not b.use_deform or obj.vertex_groups.get(bone) is None:
+        return None  # a control bone, or one that deforms nothing here: the rig moved nothing
     for m in modifiers_above(obj, d, depsgraph):
         if m.type == "ARMATURE" and m.object is not None and m.object.name == t.name:
             return t, bone
@@ -111,8 +115,11 @@ def transforms(obj, d, depsgraph=None):
     deviation from the rig: the target's motion since bind T, less the rig's motion of that
     bone since bind R, as T @ R^-1. The rig already moved those vertices in the input, and
     the deformer adds its offset there: T alone moved them twice (issue 39: a forearm keyed
-    90 degrees swung 180). A target that follows its bone exactly gives the identity, and
-    the vertices stay where the rig shows them."""
+    90 degrees swung 180). With M the rig's deformation now and M_b at bind, the target's
+    motion is T M_b = M K (K: the artist's own move, in the bone's rest frame), the vertices
+    belong at M K r, and the offset added to the rig's M r is (T M_b - M) r:
+    T' = I + T M_b - M. A target that follows its bone exactly gives the identity, and the
+    vertices stay where the rig shows them."""
     ow = obj.evaluated_get(depsgraph).matrix_world if depsgraph is not None else obj.matrix_world
     try:
         owi = ow.inverted()
@@ -128,7 +135,7 @@ def transforms(obj, d, depsgraph=None):
         if M is not None:
             if not any(h.rig_matrix):  # the rig came after the bind: its pose now is the rest
                 h.rig_matrix = _flat(M)
-            T = T @ _mat(h.rig_matrix) @ M.inverted()
+            T = Matrix.Identity(4) + T @ _mat(h.rig_matrix) - M
         out[i] = np.array(T)
     return out
 

@@ -458,7 +458,9 @@ class DEFORMKIT_OT_apply(_Base, bpy.types.Operator):
                                         "instead" % me.name)
         # what the artist sees: the shown result, brought up to date first
         dg = context.evaluated_depsgraph_get()
-        solver.check_input_is_rest(obj, d, "apply", dg)
+        # under an Armature the written shape would be moved again: for every method (the
+        # edits turn with the pose; Bake Corrective Shape Key carries them back instead)
+        solver.check_input_is_rest(obj, d, "apply", dg, every_method=True)
         solver.finish(obj, d, dg)
         pos = solver.shown_positions(obj, d)
         flat = np.ascontiguousarray(pos, dtype=np.float32).ravel()

@@ -1437,6 +1437,8 @@ def _plan_solve(obj, d, e, key, T, source, inputs, cold, write, interactive, res
                     else dict(transforms=input_transforms(e, T, source)))
             if not m.follows_input:
                 kw["input_positions"] = source
+    else:
+        e.source = e.rest   # solved on the rest, its offset lands on the input as it is
     # after an undo or redo: a full solve before showing (mark_all_dirty)
     full = write and converges_next(key)
     budgeted = interactive and m.iterative and not cold and not full

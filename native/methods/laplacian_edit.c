@@ -64,7 +64,12 @@ struct dk_laplacian_edit {
     double *input, *input_next; /* n x 3 row-major: the input le->rest holds (when
                             base_serial != 0), and the next request's, read before anything
                             changes; NULL until a request gives one                     */
-    int base_serial;     /* 0: le->rest is the mesh's rest; else a number per input pose  */
+    int base_serial;     /* 0: le->rest is the mesh's rest; else the input pose's number,
+                            from next_serial, which never repeats (a basis built on a pose
+                            is used for that pose only: basis_base)                     */
+    int next_serial;
+    double *delta_saved; /* n x 3: le->delta before a solve took a new pose, put back if
+                            that solve fails (energy() reads it); NULL until then       */
     dk_index *frame_nb;  /* n: neighbour defining the tangent, -1 = no rest frame          */
     double *frame_coef;  /* n x 3 row-major: rest delta in the rest frame (n, u, n x u)     */
     dk_index n_fallback, n_degenerate_frames;
@@ -1463,7 +1468,10 @@ static int fit_transforms(const dk_laplacian_edit *le, le_system *s)
     const dk_constraints *c = s->con;
     for (dk_index h = 0; h < c->n_handles; h++) {
         const dk_index k0 = c->handle_start[h], k1 = c->handle_start[h + 1];
-        if (!dk_affine_fit(le->mesh->positions, c->handle_vertices + k0, k1 - k0,
+        /* the maps of the pose the basis was built on (the solve uses the basis only for
+         * that pose: s->basis_base == le->base_serial) */
+        if (!dk_affine_fit(le->base_serial ? le->input : le->mesh->positions,
+                           c->handle_vertices + k0, k1 - k0,
                            s->targets + 3 * (size_t)k0, LE_FIT_TOLERANCE, s->fit + 16 * (size_t)h))
             return 0;
     }
@@ -1512,24 +1520,33 @@ dk_status dk_laplacian_edit_solve(dk_laplacian_edit *le, const dk_solve_request 
     if (st != DK_OK)
         return dk_error_prefix(err, "LaplacianEdit solve");
     const int was = le->base_serial;
+    const int new_pose = base == le->input_next || (!rq->input_positions && was != 0);
+    if (new_pose) { /* what energy() reads, kept in case this solve fails */
+        if (!le->delta_saved && !(le->delta_saved = malloc(bytes + sizeof(double))))
+            return oom(err, "input positions");
+        memcpy(le->delta_saved, le->delta, bytes);
+    }
     int swapped = 0;
     if (base == le->input_next) { /* a new input: it becomes the pose */
         double *old = le->input;
         le->input = le->input_next;
         le->input_next = old;
         swapped = 1;
-        set_base(le, le->input, le->base_serial % 1000000 + 1); /* never 0, the rest's */
-    } else if (!rq->input_positions && le->base_serial != 0) {
+        if (le->next_serial <= 0 || le->next_serial == INT_MAX) /* never 0, the rest's */
+            le->next_serial = 1;
+        set_base(le, le->input, le->next_serial++);
+    } else if (!rq->input_positions && was != 0) {
         set_base(le, NULL, 0); /* back to the rest */
     }
     st = solve_on_pose(le, rq, positions, info, err);
-    if (st != DK_OK && le->base_serial != was) { /* a failed call leaves the pose it found */
+    if (st != DK_OK && new_pose) { /* a failed call leaves the pose it found */
         if (swapped) {
             double *cur = le->input;
             le->input = le->input_next;
             le->input_next = cur;
         }
         set_base(le, was ? le->input : NULL, was);
+        memcpy(le->delta, le->delta_saved, bytes);
     }
     return st;
 }
@@ -1657,6 +1674,7 @@ void dk_laplacian_edit_free(dk_laplacian_edit *le)
     free(le->rest);
     free(le->input);
     free(le->input_next);
+    free(le->delta_saved);
     free(le->frame_nb);
     free(le->frame_coef);
     free(le->x);

@@ -509,6 +509,20 @@ def test_a_handle_on_the_rig_moves_its_vertices_once():
                     off < TOL and np.linalg.norm(dev) > 0.05, (off, dev))
             e.location = e.location - Vector((0, 0.1, 0))
             bpy.context.view_layer.update()
+            # turned about itself: the vertices turn about the empty, from where the rig
+            # puts them (the deviation applied in the bone's frame, not about the origin)
+            Ew = np.array(e.matrix_world)
+            was = e.rotation_euler.copy()
+            e.rotation_euler.z += 0.3
+            bpy.context.view_layer.update()
+            P = np.array(e.matrix_world) @ np.linalg.inv(Ew)
+            got, inp = S.evaluated_positions(obj), armature_input(obj, d)
+            want = inp[handle] @ P[:3, :3].T + P[:3, 3]
+            off = np.abs(got[handle] - want).max()
+            R.check("%s frame %d: an empty on the bone turned about itself turns its vertices"
+                    " there" % (m.id, f), off < TOL, off)
+            e.rotation_euler = was
+            bpy.context.view_layer.update()
 
 
 def test_rebind_takes_the_rest_frame():

@@ -697,3 +697,29 @@ def test_editing_a_posed_input():
         pasted = posed + rest_edit.positions - v
         assert np.abs(got - best).max() < 0.7 * np.abs(pasted - best).max(), angle
     assert np.array_equal(le.solve(v[tip] + t).positions, rest_edit.positions)
+
+
+def test_a_basis_built_on_a_pose_serves_that_pose_only():
+    """A rebind while a pose is edited builds the affine basis on that pose; after a solve
+    on the rest and one on another pose, that basis must not serve (the second review: the
+    pose numbers repeated, and pose B was solved with pose A's basis). Each solve equals a
+    fresh object's."""
+    from test_arap import tube
+    v, f = tube(around=12, rings=16, capped=False)
+    fixed, tip = np.where(v[:, 2] < 0.3)[0], np.where(v[:, 2] > 3.7)[0]
+    mesh = deformkit.Mesh(v, f)
+    T = np.eye(4)
+    T[:3, 3] = [0.2, 0.1, 0.3]
+    A = v + [0.0, 0.0, 0.5]
+    B = v * [1.0, 1.2, 1.0]
+    le = deformkit.LaplacianEdit(mesh, handles=[tip], fixed=fixed)
+    le.solve(transforms=[T], input_positions=A)
+    le.rebind(handles=[tip], fixed=fixed)
+    le.solve(transforms=[T], input_positions=A)
+    le.solve(transforms=[T])
+    got = le.solve(transforms=[T], input_positions=B).positions
+    fresh = deformkit.LaplacianEdit(mesh, handles=[tip], fixed=fixed)
+    want = fresh.solve(transforms=[T], input_positions=B).positions
+    np.testing.assert_allclose(got, want, atol=1e-9)
+    np.testing.assert_allclose(le.solve(transforms=[T]).positions,
+                               fresh.solve(transforms=[T]).positions, atol=1e-9)
