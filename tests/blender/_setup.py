@@ -252,6 +252,76 @@ def evaluated_frames_probe(seen, name="Grid"):
     return probe
 
 
+def rigged_arm(nodes, method="EMBEDDED", reset=True):
+    """A 24 x 6 grid bent by a two-bone Armature modifier (first in the stack), the bones
+    keyed over frames 1-20; a deformer of `method` after it (Embedded Deformation with
+    `nodes`), fixed on the left end, with a handle on the right tip moved by a static edit
+    after the bind at frame 1. `reset`: start from an empty scene (a window test resets it
+    first, then builds the rig under a context made after the reset)."""
+    if reset:
+        reset_scene()
+    nx, ny = 24, 6
+    obj = make_grid(nx=nx, ny=ny)
+    rest = rest_positions(obj)
+    fixed = np.array([j * nx + i for j in range(ny) for i in range(2)])
+    handle = np.array([j * nx + i for j in range(ny) for i in range(nx - 2, nx)])
+    group(obj, "fixed", fixed)
+    group(obj, "tip", handle)
+    w = np.clip((rest[:, 0] + 0.2) / 0.4, 0.0, 1.0)   # blend across the elbow at x = 0
+    group(obj, "lower", range(len(rest)), w)
+    group(obj, "upper", range(len(rest)), 1.0 - w)
+    arm = bpy.data.armatures.new("Rig")
+    ao = bpy.data.objects.new("Rig", arm)
+    bpy.context.scene.collection.objects.link(ao)
+    bpy.context.view_layer.objects.active = ao
+    bpy.ops.object.mode_set(mode="EDIT")
+    up = arm.edit_bones.new("upper")
+    up.head, up.tail = (-1.0, 0, 0), (0.0, 0, 0)
+    lo = arm.edit_bones.new("lower")
+    lo.head, lo.tail = (0.0, 0, 0), (1.0, 0, 0)
+    lo.parent, lo.use_connect = up, True
+    bpy.ops.object.mode_set(mode="OBJECT")
+    for name, keys in (("upper", ((1, (0, 0, 0)), (10, (0, 0, 0.25)), (20, (0.2, 0, 0.1)))),
+                       ("lower", ((1, (0, 0, 0)), (10, (0.5, 0, 0)), (20, (0.3, 0.2, -0.6))))):
+        pb = ao.pose.bones[name]
+        pb.rotation_mode = "XYZ"
+        for f, rot in keys:
+            pb.rotation_euler = rot
+            pb.keyframe_insert("rotation_euler", frame=f)
+    mod = obj.modifiers.new("Armature", "ARMATURE")
+    mod.object = ao
+    bpy.context.view_layer.objects.active = obj
+    e = empty("Tip", (1.0, 0.0, 0.0))
+    bpy.ops.deformkit.add_deformer(method=method)
+    d = obj.deformkit.deformers[0]
+    d.fixed_group = "fixed"
+    if method == "EMBEDDED":
+        d.options.nodes = nodes
+        d.options.n_nodes = 40
+    bpy.ops.deformkit.add_handle(vertex_group="tip", target=e.name)
+    sc = bpy.context.scene
+    sc.frame_start, sc.frame_end = 1, 20
+    sc.frame_set(1)
+    bpy.ops.deformkit.bind()
+    bind_world = e.matrix_world.copy()
+    e.location = (1.0, 0.1, 0.25)    # the edit, made on the pose of frame 1
+    bpy.context.view_layer.update()
+    return obj, d, e, fixed, handle, bind_world
+
+
+def armature_input(obj, d):
+    """What the Armature modifier gives the deformer: the stack with DeformKit's modifier off."""
+    mod = geonodes.find_modifier(obj, d)
+    mod.show_viewport = False
+    handlers.enabled[0] = False
+    try:
+        return evaluated_positions(obj)
+    finally:
+        mod.show_viewport = True
+        handlers.enabled[0] = True
+        bpy.context.view_layer.update()
+
+
 def tiny_workbench_render(sc, size, filepath):
     """A camera over the origin and a `size` x `size` Workbench render into `filepath`."""
     cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))

@@ -290,74 +290,6 @@ def test_every_method_plays_and_bakes_in_chunks():
                     len(f1) == len(f2) == 20 and diff == 0.0, diff)
 
 
-def rigged_arm(nodes, method="EMBEDDED"):
-    """A 24 x 6 grid bent by a two-bone Armature modifier (first in the stack), the bones
-    keyed over frames 1-20; a deformer of `method` after it (Embedded Deformation with
-    `nodes`), fixed on the left end, with a handle on the right tip moved by a static edit
-    after the bind at frame 1."""
-    S.reset_scene()
-    nx, ny = 24, 6
-    obj = S.make_grid(nx=nx, ny=ny)
-    rest = S.rest_positions(obj)
-    fixed = np.array([j * nx + i for j in range(ny) for i in range(2)])
-    handle = np.array([j * nx + i for j in range(ny) for i in range(nx - 2, nx)])
-    S.group(obj, "fixed", fixed)
-    S.group(obj, "tip", handle)
-    w = np.clip((rest[:, 0] + 0.2) / 0.4, 0.0, 1.0)   # blend across the elbow at x = 0
-    S.group(obj, "lower", range(len(rest)), w)
-    S.group(obj, "upper", range(len(rest)), 1.0 - w)
-    arm = bpy.data.armatures.new("Rig")
-    ao = bpy.data.objects.new("Rig", arm)
-    bpy.context.scene.collection.objects.link(ao)
-    bpy.context.view_layer.objects.active = ao
-    bpy.ops.object.mode_set(mode="EDIT")
-    up = arm.edit_bones.new("upper")
-    up.head, up.tail = (-1.0, 0, 0), (0.0, 0, 0)
-    lo = arm.edit_bones.new("lower")
-    lo.head, lo.tail = (0.0, 0, 0), (1.0, 0, 0)
-    lo.parent, lo.use_connect = up, True
-    bpy.ops.object.mode_set(mode="OBJECT")
-    for name, keys in (("upper", ((1, (0, 0, 0)), (10, (0, 0, 0.25)), (20, (0.2, 0, 0.1)))),
-                       ("lower", ((1, (0, 0, 0)), (10, (0.5, 0, 0)), (20, (0.3, 0.2, -0.6))))):
-        pb = ao.pose.bones[name]
-        pb.rotation_mode = "XYZ"
-        for f, rot in keys:
-            pb.rotation_euler = rot
-            pb.keyframe_insert("rotation_euler", frame=f)
-    mod = obj.modifiers.new("Armature", "ARMATURE")
-    mod.object = ao
-    bpy.context.view_layer.objects.active = obj
-    e = S.empty("Tip", (1.0, 0.0, 0.0))
-    bpy.ops.deformkit.add_deformer(method=method)
-    d = obj.deformkit.deformers[0]
-    d.fixed_group = "fixed"
-    if method == "EMBEDDED":
-        d.options.nodes = nodes
-        d.options.n_nodes = 40
-    bpy.ops.deformkit.add_handle(vertex_group="tip", target=e.name)
-    sc = bpy.context.scene
-    sc.frame_start, sc.frame_end = 1, 20
-    sc.frame_set(1)
-    bpy.ops.deformkit.bind()
-    bind_world = e.matrix_world.copy()
-    e.location = (1.0, 0.1, 0.25)    # the edit, made on the pose of frame 1
-    bpy.context.view_layer.update()
-    return obj, d, e, fixed, handle, bind_world
-
-
-def armature_input(obj, d):
-    """What the Armature modifier gives the deformer: the stack with DeformKit's modifier off."""
-    mod = S.geonodes.find_modifier(obj, d)
-    mod.show_viewport = False
-    S.handlers.enabled[0] = False
-    try:
-        return S.evaluated_positions(obj)
-    finally:
-        mod.show_viewport = True
-        S.handlers.enabled[0] = True
-        bpy.context.view_layer.update()
-
-
 def test_embedded_follows_an_armature():
     """Section 5: the graph rides along the armature's output, and the artist's edit (the
     handle's displacement at the bind pose) is kept on every frame. Each frame's playback
@@ -365,7 +297,7 @@ def test_embedded_follows_an_armature():
     solve with targets input[handle] + edit. For both node sources (surface samples keep
     their places in their triangles; vertex nodes ride with their vertices)."""
     for nodes in ("surface", "vertices"):
-        obj, d, e, fixed, handle, bind_world = rigged_arm(nodes)
+        obj, d, e, fixed, handle, bind_world = S.rigged_arm(nodes)
         m = S.methods.get("EMBEDDED")
         rest = S.rest_positions(obj)
         mesh = S.dk.Mesh(rest, S.solver.triangles(obj.data))
@@ -378,7 +310,7 @@ def test_embedded_follows_an_armature():
         for f in (1, 7, 10, 16, 20):
             sc.frame_set(f)
             got = S.evaluated_positions(obj)
-            inp = armature_input(obj, d)
+            inp = S.armature_input(obj, d)
             native.update_source(inp)
             # the edit follows the pose (the tip rides the lower bone alone: its fit is the
             # bone's turn)
@@ -435,13 +367,13 @@ def test_bakes_keep_the_rig():
     for m in S.methods.METHODS:
         if not S.native.has_class(m.native_class):
             continue
-        obj, d, e, fixed, handle, bind_world = rigged_arm("surface", m.id)
+        obj, d, e, fixed, handle, bind_world = S.rigged_arm("surface", m.id)
         sc = bpy.context.scene
         want = {}
         for f in (1, 8, 16, 20):
             sc.frame_set(f)
             want[f] = S.evaluated_positions(obj)
-        inp = armature_input(obj, d)
+        inp = S.armature_input(obj, d)
         R.check("%s: the armature bends the arm at frame 20 (the test means something)"
                 % m.id, np.abs(inp - S.rest_positions(obj)).max() > 0.3)
         sc.frame_set(20)
@@ -477,7 +409,7 @@ def test_a_handle_on_the_rig_moves_its_vertices_once():
     for m in S.methods.METHODS:
         if not S.native.has_class(m.native_class):
             continue
-        obj, d, e, fixed, handle, bind_world = rigged_arm("surface", m.id)
+        obj, d, e, fixed, handle, bind_world = S.rigged_arm("surface", m.id)
         rig = bpy.data.objects["Rig"]
         sc = bpy.context.scene
         sc.frame_set(1)
@@ -486,7 +418,7 @@ def test_a_handle_on_the_rig_moves_its_vertices_once():
         bpy.ops.deformkit.bind()
         for f in (10, 20):
             sc.frame_set(f)
-            got, inp = S.evaluated_positions(obj), armature_input(obj, d)
+            got, inp = S.evaluated_positions(obj), S.armature_input(obj, d)
             R.check("%s frame %d: the handle on the bone shows the rig's pose" % (m.id, f),
                     np.abs(got - inp).max() < TOL, np.abs(got - inp).max())
         if m.fit_check == "handles":
@@ -503,7 +435,7 @@ def test_a_handle_on_the_rig_moves_its_vertices_once():
             e.location = e.location + Vector((0, 0.1, 0))
             bpy.context.view_layer.update()
             dev = np.array(e.matrix_world.translation) - before
-            got, inp = S.evaluated_positions(obj), armature_input(obj, d)
+            got, inp = S.evaluated_positions(obj), S.armature_input(obj, d)
             off = np.abs(got[handle] - inp[handle] - dev).max()
             R.check("%s frame %d: an empty on the bone adds its own move once" % (m.id, f),
                     off < TOL and np.linalg.norm(dev) > 0.05, (off, dev))
@@ -516,7 +448,7 @@ def test_a_handle_on_the_rig_moves_its_vertices_once():
             e.rotation_euler.z += 0.3
             bpy.context.view_layer.update()
             P = np.array(e.matrix_world) @ np.linalg.inv(Ew)
-            got, inp = S.evaluated_positions(obj), armature_input(obj, d)
+            got, inp = S.evaluated_positions(obj), S.armature_input(obj, d)
             want = inp[handle] @ P[:3, :3].T + P[:3, 3]
             off = np.abs(got[handle] - want).max()
             R.check("%s frame %d: an empty on the bone turned about itself turns its vertices"
@@ -580,17 +512,17 @@ def test_an_edit_turns_with_the_pose():
     for m in S.methods.METHODS:
         if not S.native.has_class(m.native_class):
             continue
-        obj, d, e, fixed, handle, bind_world = rigged_arm("surface", m.id)
+        obj, d, e, fixed, handle, bind_world = S.rigged_arm("surface", m.id)
         sc = bpy.context.scene
         exact = m.fit_check != "handles"
         tol = lambda edit: TOL if exact else 0.03 * np.linalg.norm(edit.mean(0))  # noqa: E731
         sc.frame_set(1)
-        edit = S.evaluated_positions(obj)[handle] - armature_input(obj, d)[handle]
+        edit = S.evaluated_positions(obj)[handle] - S.armature_input(obj, d)[handle]
         R.check("%s: the edit shows at the bind frame" % m.id,
                 np.linalg.norm(edit.mean(0)) > 0.2, edit.mean(0))
         for f in (10, 20):
             sc.frame_set(f)
-            got, inp = S.evaluated_positions(obj), armature_input(obj, d)
+            got, inp = S.evaluated_positions(obj), S.armature_input(obj, d)
             seen = (got[handle] - inp[handle]) @ bone_turn(obj, "lower")
             off = np.abs(seen - edit).max() if exact else np.linalg.norm((seen - edit).mean(0))
             R.check("%s frame %d: the edit, seen from the forearm, is the bind frame's"
@@ -602,7 +534,7 @@ def test_an_edit_turns_with_the_pose():
         placed = S.evaluated_positions(obj)[handle]
         for f in (10, 20):
             sc.frame_set(f)
-            got, inp = S.evaluated_positions(obj), armature_input(obj, d)
+            got, inp = S.evaluated_positions(obj), S.armature_input(obj, d)
             R.check("%s frame %d: Stays in Place keeps the tip where the edit put it"
                     % (m.id, f), np.abs(got[handle] - placed).max() < TOL
                     and np.abs(inp[handle] - placed).max() > 0.3,
@@ -623,7 +555,7 @@ def test_a_method_that_edits_its_input_solves_on_the_pose():
                 S.native.method_info(m.native_class).get("edits_input")):
             continue
         done += 1
-        obj, d, e, fixed, handle, bind_world = rigged_arm("surface", m.id)
+        obj, d, e, fixed, handle, bind_world = S.rigged_arm("surface", m.id)
         rest = S.rest_positions(obj)
         mesh = S.dk.Mesh(rest, S.solver.triangles(obj.data))
         kw = dict(handles=[handle], fixed=fixed)
@@ -634,10 +566,10 @@ def test_a_method_that_edits_its_input_solves_on_the_pose():
         sc = bpy.context.scene
         sc.frame_set(1)
         near = np.where(rest[:, 0] > 0.6)[0]   # the forearm by the tip, its weight all 'lower'
-        at_bind = S.evaluated_positions(obj)[near] - armature_input(obj, d)[near]
+        at_bind = S.evaluated_positions(obj)[near] - S.armature_input(obj, d)[near]
         for f in (10, 20):
             sc.frame_set(f)
-            got, inp = S.evaluated_positions(obj), armature_input(obj, d)
+            got, inp = S.evaluated_positions(obj), S.armature_input(obj, d)
             B = bone_turn(obj, "lower")
             want = np.asarray(native.solve(inp[handle] + edit @ B.T, input_positions=inp,
                                            **S.methods.solve_kwargs(m, d.options, True)).positions)
@@ -655,7 +587,7 @@ def test_a_corrective_shape_key_plays_without_deformkit():
     key under the Armature, driven by the forearm's rotation. With DeformKit's modifier off
     (and the add-on's handlers), frame 20 shows what playback showed with it; frame 1, at
     the rig's rest, the rig alone (the key at 0); frame 16 something in between."""
-    obj, d, e, fixed, handle, bind_world = rigged_arm("surface", MID)
+    obj, d, e, fixed, handle, bind_world = S.rigged_arm("surface", MID)
     sc = bpy.context.scene
     sc.frame_set(20)
     want = S.evaluated_positions(obj)
@@ -694,7 +626,7 @@ def test_solve_from_the_rest_shape_between_the_bones():
     method places them where the rig does and solves what lies between from the rest shape,
     in place of the rig's blend: the ends sit exactly on the rig's pose (no edit was made),
     the elbow is ARAP's, whose edges keep their lengths better than the blend's."""
-    obj, d, e, fixed, handle, bind_world = rigged_arm("surface", "ARAP")
+    obj, d, e, fixed, handle, bind_world = S.rigged_arm("surface", "ARAP")
     rig = bpy.data.objects["Rig"]
     sc = bpy.context.scene
     sc.frame_set(1)
@@ -704,7 +636,7 @@ def test_solve_from_the_rest_shape_between_the_bones():
     d.solve_from = "REST"
     bpy.ops.deformkit.bind()
     sc.frame_set(20)
-    got, inp = S.evaluated_positions(obj), armature_input(obj, d)
+    got, inp = S.evaluated_positions(obj), S.armature_input(obj, d)
     ends = np.concatenate([handle, fixed])
     R.check("the ends where the rig puts them", np.abs(got[ends] - inp[ends]).max() < TOL,
             np.abs(got[ends] - inp[ends]).max())
@@ -720,7 +652,7 @@ def test_solve_from_the_rest_shape_between_the_bones():
 def test_a_handle_from_selection_sits_where_the_selection_is_shown():
     """Issue 39: Add Handle from Selection on a posed mesh put the empty at the selection's
     rest place, far from the bent arm the artist was looking at."""
-    obj, d, e, fixed, handle, bind_world = rigged_arm("surface", MID)
+    obj, d, e, fixed, handle, bind_world = S.rigged_arm("surface", MID)
     bpy.context.scene.frame_set(20)
     shown = S.evaluated_positions(obj)
     bpy.context.view_layer.objects.active = obj

@@ -9,7 +9,8 @@
 - dragging (ARAP): a UI update solves within the interactive time budget (Newton steps cut to
   fewer CG iterations when a whole one does not fit), the panel's flag says "refining" while
   it is pending, and the refine timer finishes the solve once the handle stops, reaching the
-  minimum a full solve reaches (to the tolerance: cut steps take another path)."""
+  minimum a full solve reaches (to the tolerance: cut steps take another path);
+- playback on a rig: the shot played in the window equals its bake, frame by frame."""
 import os
 import sys
 import time
@@ -301,8 +302,43 @@ def refine_tests():
             np.abs(got - r.positions).max())
 
 
+def playback_rig_tests():
+    """Issue 39: the shot played in the window (screen.animation_play) on a rig: a deformer
+    after the Armature, its handle edited at the bind pose. Every frame the window showed
+    equals the point cache a bake then writes of it (float32), so what plays is what
+    renders."""
+    with bpy.context.temp_override(**S.ui_context()):
+        S.reset_scene()
+    yield 0.2
+    with bpy.context.temp_override(**S.ui_context()):
+        obj, d, e, fixed, handle, bind_world = S.rigged_arm("surface", MID, reset=False)
+        sc = bpy.context.scene
+        sc.frame_set(1)
+    seen = {}
+    probe = S.evaluated_frames_probe(seen)
+    bpy.app.handlers.frame_change_post.append(probe)
+    try:
+        with bpy.context.temp_override(**S.ui_context()):
+            bpy.ops.screen.animation_play()
+        t0 = time.time()
+        while len(seen) < 10 and time.time() - t0 < 60:
+            yield 0.1
+        with bpy.context.temp_override(**S.ui_context()):
+            bpy.ops.screen.animation_cancel(restore_frame=True)
+    finally:
+        bpy.app.handlers.frame_change_post.remove(probe)
+    R.check("the shot played (%d frames shown)" % len(seen), len(seen) >= 5, sorted(seen))
+    path = os.path.join(S.OUTPUT, "modal_rig.pc2")
+    with bpy.context.temp_override(**S.ui_context()):
+        bpy.ops.deformkit.bake(mode="PC2", frame_start=1, frame_end=20, filepath=path)
+    _, frames = pc2.read(path)
+    worst = max((float(np.abs(np.asarray(frames[f - 1]).reshape(-1, 3) - co).max())
+                 for f, co in seen.items() if 1 <= f <= 20), default=float("inf"))
+    R.check("every frame played equals its bake (%.1e)" % worst, worst < 2e-5, worst)
+
+
 def all_tests():
-    for part in (main, bind_tests, progress_bind_cancel_tests, refine_tests):
+    for part in (main, bind_tests, progress_bind_cancel_tests, refine_tests, playback_rig_tests):
         start = time.perf_counter()
         yield from part()
         print("time %s: %.1f s" % (part.__name__, time.perf_counter() - start))
