@@ -58,11 +58,7 @@ def rig(obj, V, hand, frames):
     w = np.clip((0.5 - d) / (1.0 / 6.0), 0.0, 1.0)
     S.group(obj, "arm", range(len(V)), w)
     S.group(obj, "body", range(len(V)), 1.0 - w)
-    arm = bpy.data.armatures.new("Rig")
-    ao = bpy.data.objects.new("Rig", arm)
-    bpy.context.scene.collection.objects.link(ao)
-    bpy.context.view_layer.objects.active = ao
-    bpy.ops.object.mode_set(mode="EDIT")
+    arm, ao = S.armature_in_edit_mode("Rig")
     body = arm.edit_bones.new("body")
     body.head, body.tail = tuple(c), tuple(c + [0, 0, 0.1 * np.ptp(V[:, 2])])
     shoulder = h + 0.5 * (c - h)

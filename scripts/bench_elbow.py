@@ -63,19 +63,13 @@ def tube(name, x0, rings=48, around=24):
     me = bpy.data.meshes.new(name)
     me.from_pydata([tuple(v) for v in V], [], F)
     me.update()
-    obj = bpy.data.objects.new(name, me)
+    obj = S.linked_object(name, me)
     obj.location = (x0, 0.0, 0.0)
-    bpy.context.scene.collection.objects.link(obj)
-    bpy.context.view_layer.objects.active = obj
     return obj
 
 
 def rig(obj, x0, angle):
-    arm = bpy.data.armatures.new(obj.name + " rig")
-    ao = bpy.data.objects.new(obj.name + " rig", arm)
-    bpy.context.scene.collection.objects.link(ao)
-    bpy.context.view_layer.objects.active = ao
-    bpy.ops.object.mode_set(mode="EDIT")
+    arm, ao = S.armature_in_edit_mode(obj.name + " rig")
     up = arm.edit_bones.new("upper")
     up.head, up.tail = (x0 - 1.0, 0, 0), (x0, 0, 0)
     lo = arm.edit_bones.new("lower")

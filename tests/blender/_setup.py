@@ -270,11 +270,7 @@ def rigged_arm(nodes, method="EMBEDDED", reset=True):
     w = np.clip((rest[:, 0] + 0.2) / 0.4, 0.0, 1.0)   # blend across the elbow at x = 0
     group(obj, "lower", range(len(rest)), w)
     group(obj, "upper", range(len(rest)), 1.0 - w)
-    arm = bpy.data.armatures.new("Rig")
-    ao = bpy.data.objects.new("Rig", arm)
-    bpy.context.scene.collection.objects.link(ao)
-    bpy.context.view_layer.objects.active = ao
-    bpy.ops.object.mode_set(mode="EDIT")
+    arm, ao = armature_in_edit_mode("Rig")
     up = arm.edit_bones.new("upper")
     up.head, up.tail = (-1.0, 0, 0), (0.0, 0, 0)
     lo = arm.edit_bones.new("lower")
@@ -333,6 +329,24 @@ def tiny_workbench_render(sc, size, filepath):
     sc.render.filepath = filepath
 
 
+def linked_object(name, data):
+    """A new object of `data` linked to the scene, active and selected."""
+    obj = bpy.data.objects.new(name, data)
+    bpy.context.scene.collection.objects.link(obj)
+    bpy.context.view_layer.objects.active = obj
+    obj.select_set(True)
+    return obj
+
+
+def armature_in_edit_mode(name="Rig"):
+    """A new armature object linked to the scene, active and in Edit Mode, ready for its
+    bones: (armature data, object). Leave Edit Mode with object.mode_set(mode="OBJECT")."""
+    arm = bpy.data.armatures.new(name)
+    ao = linked_object(name, arm)
+    bpy.ops.object.mode_set(mode="EDIT")
+    return arm, ao
+
+
 def triangle_mesh_object(V, F, name="scan"):
     """A new object of the triangles F (m x 3) over the vertices V (n x 3), linked to the
     scene, active and selected (the benchmarks' scanned meshes)."""
@@ -346,11 +360,7 @@ def triangle_mesh_object(V, F, name="scan"):
     if bpy.app.version < (4, 0):
         me.polygons.foreach_set("loop_total", np.full(len(F), 3, np.int32))
     me.update()
-    obj = bpy.data.objects.new(name, me)
-    bpy.context.scene.collection.objects.link(obj)
-    bpy.context.view_layer.objects.active = obj
-    obj.select_set(True)
-    return obj
+    return linked_object(name, me)
 
 
 def make_grid(name="Grid", nx=12, ny=6, size=(2.0, 1.0), bumpy=True):
@@ -369,11 +379,7 @@ def make_grid(name="Grid", nx=12, ny=6, size=(2.0, 1.0), bumpy=True):
     me = bpy.data.meshes.new(name)
     me.from_pydata(verts, [], faces)
     me.update()
-    obj = bpy.data.objects.new(name, me)
-    bpy.context.scene.collection.objects.link(obj)
-    bpy.context.view_layer.objects.active = obj
-    obj.select_set(True)
-    return obj
+    return linked_object(name, me)
 
 
 def group(obj, name, indices, weights=None):

@@ -198,11 +198,7 @@ def test_bone_target():
         return
     S.reset_scene()
     obj, d, e, fixed, handle = S.grid_setup("ARAP")
-    arm = bpy.data.armatures.new("Rig")
-    ao = bpy.data.objects.new("Rig", arm)
-    bpy.context.scene.collection.objects.link(ao)
-    bpy.context.view_layer.objects.active = ao
-    bpy.ops.object.mode_set(mode="EDIT")
+    arm, ao = S.armature_in_edit_mode("Rig")
     b = arm.edit_bones.new("tipbone")
     b.head, b.tail = (1.0, 0, 0), (1.0, 0, 0.3)
     bpy.ops.object.mode_set(mode="OBJECT")
