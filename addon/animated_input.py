@@ -129,6 +129,3 @@ def edit_targets(e, T, source):
         r = e.rest[h]
         out.append(source[h] + (r @ t[:3, :3].T + t[:3, 3] - r))
     return np.concatenate(out)
-
-
-# An interactive solve that takes longer than this (its last run, or a mesh of at least

@@ -7,7 +7,7 @@ baked on different machines and joined give the same cache as one bake.
 import bpy
 import numpy as np
 
-from . import compat, geonodes, handlers, pc2, solver
+from . import animated_input, compat, geonodes, handlers, pc2, solver
 from .text import plural
 
 
@@ -397,7 +397,7 @@ class ShapeKeyBake:
     def __init__(self, context, obj, d, frame_start, frame_end):
         solver.check_single_user(obj, "bake %s to shape keys" % d.name)
         prepare(obj, d, "SHAPE_KEYS")
-        solver.check_input_is_rest(obj, d, "bake to shape keys", every_method=True)
+        animated_input.check_input_is_rest(obj, d, "bake to shape keys", every_method=True)
         self.context, self.start, self.end = context, frame_start, frame_end
         self.fb = FrameBaker(context, obj, d, frame_start, frame_end)
         self.results = []

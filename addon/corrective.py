@@ -14,7 +14,7 @@ to float32 rounding.
 import bpy
 import numpy as np
 
-from . import geonodes, handlers, solver
+from . import animated_input, geonodes, handlers, solver
 from .errors import DeformKitError
 
 
@@ -72,18 +72,18 @@ def driving_bone(obj, d):
     """(armature object, bone name) whose rotation drives the key by default: the bone that
     carries the most weight of the handles' vertices, among the deforming bones of the
     Armature modifiers above d."""
-    arms = [m.object for m in solver.modifiers_above(obj, d)
+    arms = [m.object for m in animated_input.modifiers_above(obj, d)
             if m.type == "ARMATURE" and m.object is not None]
     if not arms:
         raise DeformKitError("%s has no Armature above it: a corrective shape key is driven "
                              "by a bone of the rig that deforms the mesh" % d.name)
-    groups = solver.read_groups(obj, {h.vertex_group for h in d.handles if h.vertex_group})
+    groups = solver.blender_data.read_groups(obj, {h.vertex_group for h in d.handles if h.vertex_group})
     handle = np.unique(np.concatenate([g[0] for g in groups.values()] or [np.zeros(0, int)]))
     best, best_w = None, -1.0
     bones = {b.name: a for a in arms for b in a.data.bones if b.use_deform}
     if not bones:
         raise DeformKitError("the rig above %s has no deforming bone" % d.name)
-    weights = solver.read_groups(obj, set(bones))
+    weights = solver.blender_data.read_groups(obj, set(bones))
     for name, (idx, w) in weights.items():
         total = float(w[np.isin(idx, handle)].sum())
         if total > best_w:

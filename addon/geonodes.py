@@ -11,7 +11,7 @@ the add-on finds the modifier again (modifiers may be renamed and reordered free
 The stored input ("dk_<uid>_input" on the evaluated mesh) is what reaches the modifier: the
 base mesh moved by the modifiers and shape keys above it. A method that follows an animated
 input (Embedded Deformation, section 5 of Sumner et al.) reads it back from the evaluated
-object each update (solver.moved_input). Version 1 groups (files saved before) are upgraded
+object each update (animated_input.moved_input). Version 1 groups (files saved before) are upgraded
 in place: the three first sockets keep their identifiers, so values and keyframes survive.
 """
 

@@ -83,7 +83,7 @@ class Method:
     # iterative methods whose iterations are iterative themselves (ARAP's Newton steps: CG
     # iterations): the option, also a solve keyword for one call, holding their inner count,
     # and the (option, value) under which it applies. A budgeted slice that cannot fit one
-    # full iteration takes one with fewer inner iterations (solver._budget)
+    # full iteration takes one with fewer inner iterations (solver.budget._budget)
     inner_iterations: Optional[str] = None
     inner_when: Optional[tuple] = None
     # False: the method also deforms meshes without faces (vertex clouds)
@@ -92,7 +92,7 @@ class Method:
     # and a BOOL option `show_graph` lets the viewport draw it (overlay.py)
     graph: bool = False
     # True: the native object has `update_source(positions)`; the method follows an input
-    # that the modifiers and shape keys above it animate (solver.moved_input): each update
+    # that the modifiers and shape keys above it animate (animated_input.moved_input): each update
     # re-solves on that input, with the handles' edit (their displacement since the bind)
     # added to where the input puts the handle vertices (section 5 of Sumner et al.)
     follows_input: bool = False
@@ -122,7 +122,7 @@ class Method:
     rebind_progress: bool = False
     # True: the native object has response_basis() (ARAP's warm-start response to each
     # handle's affine motion): while a solve runs in a worker thread, each update shows the
-    # last result moved by it to the handles' current transforms (solver._basis_preview)
+    # last result moved by it to the handles' current transforms (solver.previews._basis_preview)
     response_basis: bool = False
 
 

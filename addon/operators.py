@@ -9,7 +9,8 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 
-from . import bake, compat, geonodes, handlers, methods, native, properties, solver
+from . import (animated_input, bake, compat, geonodes, handlers, handles, methods, native,
+               properties, solver)
 from .text import plural
 
 
@@ -155,7 +156,7 @@ class DEFORMKIT_OT_add_handle(_Base, bpy.types.Operator):
         h.subtarget = self.subtarget
         d.active_handle = len(d.handles) - 1
         if d.bound and h.target is not None:
-            solver.set_bind_matrix(obj, h, d=d)
+            handles.set_bind_matrix(obj, h, d=d)
         _handles_changed(d)
 
 
@@ -216,7 +217,7 @@ class DEFORMKIT_OT_add_handle_from_selection(_Base, bpy.types.Operator):
             d.active_handle = len(d.handles) - 1
             if d.bound:
                 context.view_layer.update()
-                solver.set_bind_matrix(obj, h, d=d)
+                handles.set_bind_matrix(obj, h, d=d)
             _handles_changed(d)
         finally:
             bpy.ops.object.mode_set(mode="EDIT")
@@ -421,7 +422,7 @@ class DEFORMKIT_OT_bake_corrective(_Base, bpy.types.Operator):
             raise solver.DeformKitError("'%s' is not bound: press Bind first" % d.name)
         rig = None
         if self.bone:
-            arms = [m.object for m in solver.modifiers_above(obj, d)
+            arms = [m.object for m in animated_input.modifiers_above(obj, d)
                     if m.type == "ARMATURE" and m.object is not None
                     and self.bone in m.object.data.bones]
             if not arms:
@@ -460,7 +461,7 @@ class DEFORMKIT_OT_apply(_Base, bpy.types.Operator):
         dg = context.evaluated_depsgraph_get()
         # under an Armature the written shape would be moved again: for every method (the
         # edits turn with the pose; Bake Corrective Shape Key carries them back instead)
-        solver.check_input_is_rest(obj, d, "apply", dg, every_method=True)
+        animated_input.check_input_is_rest(obj, d, "apply", dg, every_method=True)
         solver.finish(obj, d, dg)
         pos = solver.shown_positions(obj, d)
         flat = np.ascontiguousarray(pos, dtype=np.float32).ravel()
@@ -692,7 +693,7 @@ class DEFORMKIT_OT_overlap(_Base, bpy.types.Operator):
         for n, vg in zip(names, vgs):
             if vg is None:
                 raise solver.DeformKitError("vertex group '%s' does not exist" % n)
-        groups = solver.read_groups(obj, names)
+        groups = solver.blender_data.read_groups(obj, names)
         shared = np.intersect1d(groups[names[0]][0], groups[names[1]][0])
         if len(shared) == 0:
             raise solver.DeformKitError("'%s' and '%s' share no vertices" % names)

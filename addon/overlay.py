@@ -23,12 +23,12 @@ def graph_lines(obj, d):
     m = methods.get(d.method)
     if not m.graph or not getattr(d.options, "show_graph", False) or not d.bound:
         return None
-    e = solver._cache.get((obj.name, d.uid))
+    e = solver.cache._cache.get((obj.name, d.uid))
     if e is None or e.native is None:
         return None
-    if (e.worker is not None and e.worker.thread.is_alive()) or solver._in_place_rebind(
+    if (e.worker is not None and e.worker.thread.is_alive()) or solver.rebind._in_place_rebind(
             (obj.name, d.uid)) is not None:
-        # the object is solving (solver._Worker) or re-binding for new groups
+        # the object is solving (solver.workers._Worker) or re-binding for new groups
         # (solver.GroupsRebindJob) in a worker thread: the last graph drawn
         return e.graph_shown
     g = np.asarray(e.native.nodes, dtype=np.float64)

@@ -1,25 +1,24 @@
 """Settings stored in the .blend: Object.deformkit -> deformers -> handles (+ method options).
 
 Only names and values are stored (vertex-group names, a target object pointer, matrices);
-solver state lives in solver.py and is rebuilt on demand.
+solver state lives in the solver package and is rebuilt on demand.
 """
 
 import re
-import uuid
 
 import bpy
 from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty,
                        FloatVectorProperty, IntProperty, PointerProperty, StringProperty)
 
-from . import compat, methods
+from . import compat, geonodes, methods
+from .solver import cache, identity
 
 IDENTITY16 = (1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0)
 
 
 def _touch(self, context):
     """Any settings change: mark solver inputs dirty (the handler re-checks and re-solves)."""
-    from . import solver
-    solver.mark_settings_changed()
+    cache.mark_settings_changed()
 
 
 # A deformer's name as the add-on gives it: "DeformKit <method label>", with ".NNN" when taken
@@ -54,7 +53,6 @@ def _method_changed(self, context):
     label = methods.get(self.method).label
     if _auto_label(self.name) in (None, label):
         return
-    from . import geonodes
     old = self.name
     self.name = unique_name(self.id_data.deformkit, label, skip=self)
     mod = geonodes.find_modifier(self.id_data, self)
@@ -133,10 +131,6 @@ def _make_options_group(method):
 OPTION_CLASSES = [_make_options_group(m) for m in methods.METHODS]
 
 
-def _new_uid():
-    return uuid.uuid4().hex[:10]
-
-
 _deformer_ann = {
     "uid": StringProperty(name="UID", description="Stable id: attribute and cache key"),
     "method": EnumProperty(name="Method", items=methods.enum_items(), update=_method_changed),
@@ -152,7 +146,7 @@ _deformer_ann = {
     "handles": CollectionProperty(type=DeformKitHandle),
     "active_handle": IntProperty(name="Active Handle", default=0),
     "bound": BoolProperty(name="Bound", default=False),
-    # what the method deforms when something above moves its input (solver._plan_solve)
+    # what the method deforms when something above moves its input (solver.solving._plan_solve)
     "solve_from": EnumProperty(
         name="Solve From", default="POSE", update=_touch,
         items=(("POSE", "Input Pose",
@@ -254,7 +248,7 @@ CLASSES = OPTION_CLASSES + [DeformKitHandle, DeformKitDeformer, DeformKitObject]
 def new_deformer(obj, method_id):
     dks = obj.deformkit
     d = dks.deformers.add()
-    d.uid = _new_uid()
+    d.uid = identity.new_uid()
     d.owner = obj.name
     d.method = method_id
     d.name = unique_name(dks, methods.get(method_id).label, skip=d)

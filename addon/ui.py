@@ -3,7 +3,7 @@ view. Drawing only reads settings and the solver's runtime figures; it never sol
 
 import bpy
 
-from . import bake, geonodes, methods, native, solver
+from . import animated_input, bake, geonodes, methods, native, solver
 
 
 class DEFORMKIT_UL_deformers(bpy.types.UIList):
@@ -143,9 +143,9 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
                 hc.prop_search(h, "subtarget", h.target.data, "bones")
             if "handle_weights" in m.maps:
                 hc.prop(h, "use_weights")
-            if solver.input_movers(obj, d) is not None:  # an animated input: what the edit does
+            if animated_input.input_movers(obj, d) is not None:  # an animated input: what the edit does
                 hc.prop(h, "follow")
-        if solver.input_movers(obj, d) is not None:
+        if animated_input.input_movers(obj, d) is not None:
             layout.prop(d, "solve_from")
         if obj.mode == "EDIT":
             layout.operator("deformkit.add_handle_from_selection", icon="HOOK")
@@ -191,7 +191,7 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
         row = layout.row(align=True)
         row.operator("deformkit.apply", text="Apply").mode = "MESH"
         row.operator("deformkit.apply", text="Apply as Shape Key").mode = "SHAPE_KEY"
-        if d.bound and any(m.type == "ARMATURE" for m in solver.modifiers_above(obj, d)):
+        if d.bound and any(m.type == "ARMATURE" for m in animated_input.modifiers_above(obj, d)):
             layout.operator("deformkit.bake_corrective", icon="SHAPEKEY_DATA")
         draw_bake(layout, obj, d, width)
 

@@ -10,7 +10,7 @@ each a depsgraph update as the UI makes it (interactive solves), measured two wa
   sync     the solve in the handler (solver.threaded_solves off): the update's time is
            the time Blender is frozen
   threaded the add-on's UI behaviour (solver.threaded_solves "auto"): a solve slower than
-           solver.ASYNC_MS, or any on a mesh of ASYNC_MIN_VERTICES, runs in a worker
+           solver.workers.ASYNC_MS, or any on a mesh of ASYNC_MIN_VERTICES, runs in a worker
            thread and the update returns at once; the refine timer (called here as
            Blender's timer would, every 5 ms) installs the worker's result
 Each drag starts from the handle at rest, settled.
@@ -48,13 +48,13 @@ def settle(obj, d, limit_s=600.0):
     """Calls the refine timer until it stops; returns the time to the first shown result
     for the handle's final placement and to the end (s)."""
     key = (obj.name, d.uid)
-    ent = S.solver._cache[key]
-    final = S.solver._solve_inputs(obj, d, ent, bpy.context.evaluated_depsgraph_get())[2]
+    ent = S.solver.cache._cache[key]
+    final = S.solver.solving._solve_inputs(obj, d, ent, bpy.context.evaluated_depsgraph_get())[2]
     t0 = time.perf_counter()
     first = 0.0 if ent.last_inputs == final else None
     while time.perf_counter() - t0 < limit_s:
         nxt = S.handlers.refine()
-        ent = S.solver._cache.get(key)
+        ent = S.solver.cache._cache.get(key)
         if first is None and ent is not None and ent.last_inputs == final:
             first = time.perf_counter() - t0
         if nxt is None:
@@ -85,7 +85,7 @@ def drag(obj, d, e, rest, t, steps, threaded):
     S.solver.threaded_solves[0] = None
     S.handlers.force_interactive[0] = False
     ratio = None
-    ent = S.solver._cache.get((obj.name, d.uid))
+    ent = S.solver.cache._cache.get((obj.name, d.uid))
     if d.method == "ARAP" and ent is not None:  # its energy over the settled result's
         ratio = float(ent.native.energy(shown)) / float(ent.native.energy(
             shown_positions(obj, d)))

@@ -29,7 +29,7 @@ import numpy as np
 import deformkit as dk
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-MATERIAL_SOFTEST = 20.0  # addon/solver.py
+MATERIAL_SOFTEST = 20.0  # addon/solver/material.py
 ELBOW_X, RING, SHARE_RADIUS = -0.2, 0.06, 0.12
 
 

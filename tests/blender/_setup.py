@@ -193,7 +193,7 @@ if FROM_ZIP:
 else:
     import addon  # noqa: E402
     addon.register()
-from addon import solver, geonodes, native, handlers, methods, overlay, compat  # noqa: E402,F401
+from addon import solver, geonodes, native, handlers, handles, methods, overlay, compat  # noqa: E402,F401
 
 dk = native.load()
 

@@ -30,12 +30,12 @@ class budget:
         self.ms = ms
 
     def __enter__(self):
-        self.old = S.solver.INTERACTIVE_BUDGET_MS
-        S.solver.INTERACTIVE_BUDGET_MS = self.ms
+        self.old = S.solver.budget.INTERACTIVE_BUDGET_MS
+        S.solver.budget.INTERACTIVE_BUDGET_MS = self.ms
         S.handlers.force_interactive[0] = True
 
     def __exit__(self, *exc):
-        S.solver.INTERACTIVE_BUDGET_MS = self.old
+        S.solver.budget.INTERACTIVE_BUDGET_MS = self.old
         S.handlers.force_interactive[0] = False
 
 
@@ -84,14 +84,14 @@ def test_a_weight_paint_stroke_rebinds_once_and_keeps_the_surface():
     bpy.context.view_layer.update()
     S.solver.finish(obj, d)
     calls = {"rebind": 0}
-    real_build = S.solver._build
+    real_build = S.solver.binding._build
 
     def counting_build(*a, **kw):
         calls["rebind"] += 1
         return real_build(*a, **kw)
-    S.solver._build = counting_build
+    S.solver.binding._build = counting_build
     try:
-        with budget(S.solver.INTERACTIVE_BUDGET_MS):
+        with budget(S.solver.budget.INTERACTIVE_BUDGET_MS):
             bpy.ops.object.mode_set(mode="WEIGHT_PAINT")
             before = S.evaluated_positions(obj)
             vg = obj.vertex_groups[d.fixed_group]
@@ -116,7 +116,7 @@ def test_a_weight_paint_stroke_rebinds_once_and_keeps_the_surface():
             bpy.ops.object.mode_set(mode="OBJECT")
             S.solver.finish(obj, d)
         R.check("the stroke settled: one re-bind", calls["rebind"] == 1, calls)
-        T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
+        T = S.handles.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
         rest = S.rest_positions(obj)
         want = S.dk.ARAP(S.dk.Mesh(rest, S.solver.triangles(obj.data)), [handle],
                          fixed=np.r_[fixed, extra], tolerance=d.options.tolerance,
@@ -125,30 +125,30 @@ def test_a_weight_paint_stroke_rebinds_once_and_keeps_the_surface():
         err = np.abs(S.evaluated_positions(obj) - want).max()
         R.check("... and the result is the new groups' (%.1e)" % err, err < 1e-3)
     finally:
-        S.solver._build = real_build
+        S.solver.binding._build = real_build
 
 def test_budget_arithmetic():
     """_budget: units that fit = budget / (a slice's time / its units), per kind of slice;
     an iteration with an inner count that does not fit whole is cut to fewer inner
     iterations; with room for several whole ones, several."""
     obj, d, e, fixed, handle, key = arap_grid(12, 6)
-    ent = S.solver._cache[key]
-    B = S.solver.INTERACTIVE_BUDGET_MS
+    ent = S.solver.cache._cache[key]
+    B = S.solver.budget.INTERACTIVE_BUDGET_MS
     ent.slice_cost = {False: (B * 2.0, 1, 12)}  # a unit costs B/6
     R.check("a step that does not fit is cut to the inner iterations that do",
-            S.solver._budget(key, 100, 12, False) == (1, 6), S.solver._budget(key, 100, 12, False))
+            S.solver.budget._budget(key, 100, 12, False) == (1, 6), S.solver.budget._budget(key, 100, 12, False))
     ent.slice_cost = {False: (B * 2.0, 1, 12), True: (B / 3.0, 1, 12)}  # a unit: B/36
     R.check("resumed slices use their own cost (3 whole steps fit)",
-            S.solver._budget(key, 100, 12, True) == (3, None), S.solver._budget(key, 100, 12, True))
-    R.check("... and the cap holds", S.solver._budget(key, 2, 12, True) == (2, None))
+            S.solver.budget._budget(key, 100, 12, True) == (3, None), S.solver.budget._budget(key, 100, 12, True))
+    R.check("... and the cap holds", S.solver.budget._budget(key, 2, 12, True) == (2, None))
     ent.slice_cost = {False: (B * 2.0, 1, 12)}
     R.check("settled refine steps (cut=False) take whole iterations",
-            S.solver._budget(key, 100, 12, True, cut=False) == (1, None))
+            S.solver.budget._budget(key, 100, 12, True, cut=False) == (1, None))
     ent.slice_cost = {False: (B * 100.0, 1, 12)}
-    R.check("at least one inner iteration", S.solver._budget(key, 100, 12, False) == (1, 1))
+    R.check("at least one inner iteration", S.solver.budget._budget(key, 100, 12, False) == (1, 1))
     ent.slice_cost = {False: (B / 2.0, 3, 1)}
     R.check("methods without an inner count: whole iterations (6 fit)",
-            S.solver._budget(key, 100, 0, False) == (6, None), S.solver._budget(key, 100, 0, False))
+            S.solver.budget._budget(key, 100, 0, False) == (6, None), S.solver.budget._budget(key, 100, 0, False))
     m = S.methods.get("ARAP")
     R.check("ARAP Newton's inner count is its CG iterations",
             S.solver.inner_cap(m, d.options) == d.options.cg_iterations == 12)
@@ -162,7 +162,7 @@ def test_cheap_drag_step_converges_to_the_minimum():
     converged at the minimum one uninterrupted solve reaches, to the solver's tolerance."""
     obj, d, e, fixed, handle, key = arap_grid()
     dg = bpy.context.evaluated_depsgraph_get()
-    bind_T = S.solver.transforms(obj, d, dg)
+    bind_T = S.handles.transforms(obj, d, dg)
     with budget(1e-6):
         e.location = (1.0, 0.1, 0.4)
         e.rotation_euler = Euler((0.0, -0.3, 0.0))
@@ -173,7 +173,7 @@ def test_cheap_drag_step_converges_to_the_minimum():
                 and first.get("inner") == 1 and not first.get("converged"), first)
         R.check("it is pending and the panel's flag says refining",
                 key in S.solver.pending() and S.solver.refining(obj, d))
-    with budget(S.solver.INTERACTIVE_BUDGET_MS):
+    with budget(S.solver.budget.INTERACTIVE_BUDGET_MS):
         ticks = refine_all()
     last = S.solver.runtime.get(key, {})
     R.check("refine steps converge it (%d ticks)" % ticks,
@@ -181,7 +181,7 @@ def test_cheap_drag_step_converges_to_the_minimum():
     R.check("the flag is cleared once converged", not S.solver.refining(obj, d))
     got = S.evaluated_positions(obj)
     rest = S.rest_positions(obj)
-    T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
+    T = S.handles.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
     ref = S.dk.ARAP(S.dk.Mesh(rest, S.solver.triangles(obj.data)), [handle], fixed=fixed,
                     tolerance=d.options.tolerance, max_iterations=d.options.max_iterations)
     ref.solve(transforms=bind_T, warm_start=False)
@@ -228,19 +228,19 @@ def test_undo_converges_before_showing():
 
 
 class counting_group_reads:
-    """Counts solver.read_groups calls (the O(n) vertex-group pass) within a block."""
+    """Counts solver.blender_data.read_groups calls (the O(n) vertex-group pass) within a block."""
 
     def __enter__(self):
-        self.n, self.orig = 0, S.solver.read_groups
+        self.n, self.orig = 0, S.solver.blender_data.read_groups
 
         def counted(*a, **kw):
             self.n += 1
             return self.orig(*a, **kw)
-        S.solver.read_groups = counted
+        S.solver.blender_data.read_groups = counted
         return self
 
     def __exit__(self, *exc):
-        S.solver.read_groups = self.orig
+        S.solver.blender_data.read_groups = self.orig
 
 
 def test_refine_ticks_do_not_reread_groups_but_see_edits():
@@ -252,7 +252,7 @@ def test_refine_ticks_do_not_reread_groups_but_see_edits():
         e.location = (1.0, 0.1, 0.4)
         bpy.context.view_layer.update()
         R.check("a drag leaves the solve pending", key in S.solver.pending())
-    with budget(S.solver.INTERACTIVE_BUDGET_MS), counting_group_reads() as c:
+    with budget(S.solver.budget.INTERACTIVE_BUDGET_MS), counting_group_reads() as c:
         S.handlers.refine()
         bpy.context.view_layer.update()  # what the main loop evaluates after the tick
         R.check("a refine tick and the update after it read no vertex group (%d reads)" % c.n,
@@ -264,7 +264,7 @@ def test_refine_ticks_do_not_reread_groups_but_see_edits():
     with budget(1e-6):
         e.location = (1.0, 0.1, 0.45)
         bpy.context.view_layer.update()
-    with budget(S.solver.INTERACTIVE_BUDGET_MS), counting_group_reads() as c:
+    with budget(S.solver.budget.INTERACTIVE_BUDGET_MS), counting_group_reads() as c:
         obj.vertex_groups["fixed"].add([free], 1.0, "REPLACE")
         obj.data.update_tag()
         S.handlers.refine()
@@ -278,7 +278,7 @@ def test_refine_ticks_do_not_reread_groups_but_see_edits():
 
 
 class threaded_solves:
-    """Interactive solves in worker threads (solver._Worker) for a block, under blender -b."""
+    """Interactive solves in worker threads (solver.workers._Worker) for a block, under blender -b."""
 
     def __enter__(self):
         S.solver.threaded_solves[0] = True
@@ -319,17 +319,17 @@ def test_slow_solves_run_in_a_worker_thread():
         obj, d, e, fixed, handle = S.grid_setup(method, nx=60, ny=30)
         bpy.ops.deformkit.bind()
         key = (obj.name, d.uid)
-        bind_T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
+        bind_T = S.handles.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
         before = shown_offset(obj, d).copy()
         with threaded_solves():
             e.location = (1.0, 0.1, 0.4)
             e.rotation_euler = Euler((0.0, -0.3, 0.0))
             bpy.context.view_layer.update()
-            ent = S.solver._cache[key]
+            ent = S.solver.cache._cache[key]
             if method == "ARAP":
                 # the update shows the bind result moved by the response basis: the plain
                 # warm start, which an independent object's preview gives
-                T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
+                T = S.handles.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
                 ref = S.dk.ARAP(S.dk.Mesh(S.rest_positions(obj), S.solver.triangles(obj.data)),
                                 [handle], fixed=fixed, predict=False)
                 ref.solve(transforms=bind_T, warm_start=False)
@@ -343,7 +343,7 @@ def test_slow_solves_run_in_a_worker_thread():
                 # a second move while the worker runs: the preview follows the handle
                 e.location = (1.1, 0.1, 0.45)
                 bpy.context.view_layer.update()
-                T2 = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
+                T2 = S.handles.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
                 busy = ent.worker is not None and ent.worker.thread.is_alive()
                 ref.solve(transforms=bind_T, warm_start=False)
                 want2 = np.asarray(ref.solve(transforms=T2, preview=True, energy=False).positions)
@@ -363,7 +363,7 @@ def test_slow_solves_run_in_a_worker_thread():
                     S.solver.runtime.get(key))
         got = S.evaluated_positions(obj)
         rest = S.rest_positions(obj)
-        T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
+        T = S.handles.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
         bbox = np.linalg.norm(rest.max(0) - rest.min(0))
         if method == "ARAP":
             ref, r = S.arap_reference(obj, d, handle, fixed, bind_T, T)
@@ -379,7 +379,7 @@ def test_slow_solves_run_in_a_worker_thread():
         with threaded_solves():
             e.location = (1.0, 0.2, 0.5)
             bpy.context.view_layer.update()
-            started = S.solver._cache[key].worker is not None
+            started = S.solver.cache._cache[key].worker is not None
             try:
                 cold = S.solver.deformed_positions(obj, d)
                 err = None

@@ -259,14 +259,14 @@ def test_skip_when_unchanged():
     e.location = (1.0, 0.0, 0.3)
     bpy.context.view_layer.update()
     calls = []
-    orig = S.solver._cache[(obj.name, d.uid)].native
+    orig = S.solver.cache._cache[(obj.name, d.uid)].native
     class Spy:
         def __getattr__(self, k):
             return getattr(orig, k)
         def solve(self, *a, **k):
             calls.append(1)
             return orig.solve(*a, **k)
-    S.solver._cache[(obj.name, d.uid)].native = Spy()
+    S.solver.cache._cache[(obj.name, d.uid)].native = Spy()
     for _ in range(5):
         bpy.context.view_layer.update()
         S.evaluated_positions(obj)
@@ -399,7 +399,7 @@ def test_show_graph():
     e.location.z += 0.3
     bpy.context.view_layer.update()
     before = S.evaluated_positions(obj)
-    native = S.solver._cache[(obj.name, d.uid)].native
+    native = S.solver.cache._cache[(obj.name, d.uid)].native
     R.check("toggle off: nothing to draw", S.overlay.graph_lines(obj, d) is None)
     d.options_embedded.show_graph = True
     bpy.context.view_layer.update()
@@ -417,7 +417,7 @@ def test_show_graph():
         R.check("the graph's edges", np.array_equal(edges, np.asarray(native.edges)) and
                 len(edges) > 0)
         R.check("the nodes moved with the drag", np.abs(t).max() > 1e-3)
-    R.check("toggling does not rebind", S.solver._cache[(obj.name, d.uid)].native is native)
+    R.check("toggling does not rebind", S.solver.cache._cache[(obj.name, d.uid)].native is native)
     R.check("toggling does not change the mesh",
             np.abs(S.evaluated_positions(obj) - before).max() < 1e-7)
     d.options_embedded.show_graph = False
@@ -498,7 +498,7 @@ def test_eigen_region_and_preview():
         S.handlers.refine()
         R.check("EIGEN full result waits while the handle may still move",
                 key in S.solver.pending())
-        time.sleep(S.solver.PREVIEW_SETTLE_S + 0.05)
+        time.sleep(S.solver.budget.PREVIEW_SETTLE_S + 0.05)
         while S.handlers.refine() is not None:
             pass
         got = S.evaluated_positions(obj)

@@ -264,9 +264,9 @@ def refine_tests():
         obj, d, e, fixed, handle = S.grid_setup("ARAP", nx=160, ny=80)
         bpy.ops.deformkit.bind()
         key = (obj.name, d.uid)
-        bind_T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
+        bind_T = S.handles.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
         # from the bind solve's timing
-        want = S.solver._budget(key, d.options.max_iterations,
+        want = S.solver.budget._budget(key, d.options.max_iterations,
                                 S.solver.inner_cap(S.methods.get("ARAP"), d.options), False)
         e.location = (1.0, 0.1, 0.4)   # a move that takes several budgets
         e.rotation_euler = (0.0, -0.3, 0.0)
@@ -286,7 +286,7 @@ def refine_tests():
     R.check("... and the refining flag is cleared", not S.solver.refining(obj, d))
     with bpy.context.temp_override(**S.ui_context()):
         got = S.evaluated_positions(obj)
-        T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
+        T = S.handles.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
     rest = S.rest_positions(obj)
     # the minimum of one uninterrupted solve: bind (cold) then one warm solve of Max
     # Iterations (bit for bit when every slice took whole Newton steps, as the Python and C

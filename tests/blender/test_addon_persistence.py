@@ -36,7 +36,7 @@ def test_save_reload():
     R.check("settings survive reload", d.bound and d.fixed_group == "fixed"
             and d.options_arap.max_iterations == 77 and d.handles[0].target.name == "Tip"
             and d.method == mid)
-    R.check("solver cache empty after load", len(S.solver._cache) == 0)
+    R.check("solver cache empty after load", len(S.solver.cache._cache) == 0)
     p2 = S.evaluated_positions(obj)
     R.check("reloaded file evaluates to the same result", np.abs(p2 - p1).max() < 1e-6,
             np.abs(p2 - p1).max())

@@ -50,7 +50,7 @@ def direct(obj, d, handle_groups=("tip",), T=None, cold=False):
     me = obj.data
     rest = S.solver.rest_positions(me)
     mesh = S.dk.Mesh(rest, S.solver.triangles(me))
-    groups = S.solver.read_groups(obj, set(handle_groups) | {d.fixed_group})
+    groups = S.solver.blender_data.read_groups(obj, set(handle_groups) | {d.fixed_group})
     kw = dict(handles=[groups[g][0] for g in handle_groups], fixed=groups[d.fixed_group][0])
     kw.update(S.methods.bind_kwargs(m, d.options, rest, kw, mesh))
     meth = getattr(S.dk, m.native_class)(mesh, **kw)
@@ -236,7 +236,7 @@ def test_drags_do_not_fingerprint():
         return real(me)
     try:
         obj, d, e = bound_grid("LAPLACIAN")
-        S.solver.topology_fingerprint = counting
+        S.solver.identity.topology_fingerprint = counting
         for _ in range(5):
             e.location.z += 0.02
             update()
@@ -246,7 +246,7 @@ def test_drags_do_not_fingerprint():
         update()
         R.check("an edit after it does", calls[0] >= 1 and d.status_is_error, calls[0])
     finally:
-        S.solver.topology_fingerprint = real
+        S.solver.identity.topology_fingerprint = real
         S.handlers.force_interactive[0] = False
 
 
@@ -448,7 +448,7 @@ def test_file_load_during_threaded_binds():
         d.options_arap.weights = "uniform" if d.options_arap.weights != "uniform" else "cotangent"
         e.location.z += 0.05
         update()  # the option change: a re-bind in a worker thread
-        rebinds = dict(S.solver._rebinds)
+        rebinds = dict(S.solver.cache._rebinds)
         R.check("a threaded re-bind is running", len(rebinds) == 1, list(rebinds))
         # an explicit bind's worker, as the Bind button (invoke) starts it
         job, mats = S.solver.bind_begin(obj, d)
@@ -456,7 +456,7 @@ def test_file_load_during_threaded_binds():
         th.start()
         S.solver.running_binds[(obj.name, d.uid)] = th
         bpy.ops.wm.open_mainfile(filepath=BLEND2)
-        R.check("the load forgets both", not S.solver._rebinds and not S.solver.running_binds)
+        R.check("the load forgets both", not S.solver.cache._rebinds and not S.solver.running_binds)
         for r in rebinds.values():
             r["thread"].join(60)
         th.join(60)

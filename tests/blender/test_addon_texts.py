@@ -148,10 +148,10 @@ def test_sliced_solve_totals():
     obj, d, e, fixed, handle = S.grid_setup("ARAP", nx=30, ny=15)
     bpy.ops.deformkit.bind()
     key = (obj.name, d.uid)
-    bind_T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
-    budget = S.solver.INTERACTIVE_BUDGET_MS
+    bind_T = S.handles.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
+    budget = S.solver.budget.INTERACTIVE_BUDGET_MS
     S.handlers.force_interactive[0] = True
-    S.solver.INTERACTIVE_BUDGET_MS = 1e-9   # one iteration a slice
+    S.solver.budget.INTERACTIVE_BUDGET_MS = 1e-9   # one iteration a slice
     try:
         e.location = (1.0, 0.1, 0.4)
         e.rotation_euler = (0.0, -0.3, 0.0)
@@ -161,10 +161,10 @@ def test_sliced_solve_totals():
             S.handlers.refine()
             seen.append(dict(S.solver.runtime[key]))
     finally:
-        S.solver.INTERACTIVE_BUDGET_MS = budget
+        S.solver.budget.INTERACTIVE_BUDGET_MS = budget
         S.handlers.force_interactive[0] = False
     rt = seen[-1]
-    T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
+    T = S.handles.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
     ref, r = S.arap_reference(obj, d, handle, fixed, bind_T, T)
     steps = [b["iterations"] - a["iterations"] for a, b in zip(seen, seen[1:])]
     R.check("the solve took several slices (%d)" % len(seen),

@@ -161,10 +161,10 @@ def test_states():
     calls = draw_all(obj, "ARAP bound, material group")
     R.check("the panel shows the material stiffness", "prop stiffness_scale" in calls)
     R.check("a converged result: no refining line", "label refining\u2026" not in calls)
-    S.solver._cache[(obj.name, d.uid)].pending = True  # as a budgeted drag update leaves it
+    S.solver.cache._cache[(obj.name, d.uid)].pending = True  # as a budgeted drag update leaves it
     calls = draw_all(obj, "ARAP refining")
     R.check("a pending result: the panel says refining", "label refining\u2026" in calls)
-    S.solver._cache[(obj.name, d.uid)].pending = False
+    S.solver.cache._cache[(obj.name, d.uid)].pending = False
     for m in S.methods.METHODS:
         d.method = m.id
         for open_ in (False, True):   # the options box's Advanced section, both ways

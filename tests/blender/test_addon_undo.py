@@ -180,7 +180,7 @@ def shift_d_in_the_ui():
     with bpy.context.temp_override(**S.ui_context()):
         for o in (obj, copy):
             dd = o.deformkit.deformers[0]
-            T = S.solver.transforms(o, dd)
+            T = S.handles.transforms(o, dd)
             ref, want = S.arap_reference(o, dd, handle, fixed, np.eye(4)[None], T)
             got = S.evaluated_positions(o)
             err = np.abs(got - np.asarray(want.positions)).max()

@@ -222,7 +222,7 @@ def test_groups_edited_by_a_script_are_seen_before_apply():
     want = S.dk.ARAP(S.dk.Mesh(S.rest_positions(obj), S.solver.triangles(obj.data)),
                      [handle], fixed=members[len(members) // 2:],
                      tolerance=d.options.tolerance, max_iterations=d.options.max_iterations)
-    T = S.solver.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
+    T = S.handles.transforms(obj, d, bpy.context.evaluated_depsgraph_get())
     want = np.asarray(want.solve(transforms=T, warm_start=False).positions)
     base = S.rest_positions(obj)
     # contents edited, then Apply at once (no depsgraph evaluation between, as in a script):
@@ -424,7 +424,7 @@ def test_falloff_reach_scales_with_the_model():
         obj.data.transform(Matrix.Scale(scale, 4))
         e.location = (1.0 * scale, 0.0, 0.0)
         bpy.ops.deformkit.bind()
-        native = S.addon.solver._cache[(obj.name, d.uid)].native
+        native = S.addon.solver.cache._cache[(obj.name, d.uid)].native
         rest = S.rest_positions(obj)
         fixed = np.array([i for i, v in enumerate(obj.data.vertices)
                           if any(g.group == obj.vertex_groups["fixed"].index
@@ -440,13 +440,13 @@ def test_falloff_reach_scales_with_the_model():
             np.abs(shapes[0] - shapes[1]).max() < 1e-5, np.abs(shapes[0] - shapes[1]).max())
     d.fixed_group = ""
     bpy.ops.deformkit.bind()
-    native = S.addon.solver._cache[(obj.name, d.uid)].native
+    native = S.addon.solver.cache._cache[(obj.name, d.uid)].native
     diag = float(np.linalg.norm(rest.max(0) - rest.min(0)))
     R.check("without Fixed: a quarter of the diagonal",
             abs(float(np.asarray(native.ranges)[0]) - 0.25 * diag) < 1e-6 * diag)
     d.options.range_length = 0.123
     bpy.ops.deformkit.bind()
-    native = S.addon.solver._cache[(obj.name, d.uid)].native
+    native = S.addon.solver.cache._cache[(obj.name, d.uid)].native
     R.check("a Range typed in is used", abs(float(np.asarray(native.ranges)[0]) - 0.123) < 1e-6)
 
 
@@ -518,7 +518,7 @@ def test_group_change_rebinds_in_place_in_a_thread():
     before = S.evaluated_positions(obj)
     solver = S.addon.solver
     key = (obj.name, d.uid)
-    native = solver._cache[key].native
+    native = solver.cache._cache[key].native
     vg = obj.vertex_groups["fixed"]
     members = [v.index for v in obj.data.vertices if any(g.group == vg.index for g in v.groups)]
     threshold = solver.REBIND_ASYNC_MIN_VERTICES[0]
@@ -529,19 +529,19 @@ def test_group_change_rebinds_in_place_in_a_thread():
         obj.data.update()
         bpy.context.view_layer.update()
         R.check("a group change starts an in-place re-bind in a thread",
-                solver._in_place_rebind(key) is not None)
+                solver.rebind._in_place_rebind(key) is not None)
         threaded = shown_meanwhile_then_installed(obj, before)
-        R.check("the same native object, re-bound", solver._cache[key].native is native and
+        R.check("the same native object, re-bound", solver.cache._cache[key].native is native and
                 not d.status_is_error, d.status)
         # again, and a frame's (non-interactive) solve right away: it waits for the worker
         vg.remove(members[0:4:2])
         obj.data.update()
         bpy.context.view_layer.update()
         R.check("a second group change re-binds in a thread too",
-                solver._in_place_rebind(key) is not None)
+                solver.rebind._in_place_rebind(key) is not None)
         got = solver.solve(obj, d, force=True)
         R.check("a frame's solve waits for it and installs it",
-                solver._in_place_rebind(key) is None and got is not None)
+                solver.rebind._in_place_rebind(key) is None and got is not None)
     finally:
         solver.threaded_rebinds[0] = None
         solver.REBIND_ASYNC_MIN_VERTICES[0] = threshold
@@ -583,8 +583,8 @@ def test_modal_bake_frames_solve_in_a_worker_thread():
     async_path = os.path.join(S.OUTPUT, "async.pc2")
     bake.bake_pc2(bpy.context, obj, d, 1, 6, sync_path)
     solver = S.addon.solver
-    slice_ms, quick = solver.BAKE_SLICE_MS, bake.QUICK_FRAME_S
-    solver.BAKE_SLICE_MS = 1e-6  # one iteration a slice: the most resumed slices
+    slice_ms, quick = solver.workers.BAKE_SLICE_MS, bake.QUICK_FRAME_S
+    solver.workers.BAKE_SLICE_MS = 1e-6  # one iteration a slice: the most resumed slices
     bake.QUICK_FRAME_S = 0.0  # a tick does not wait for the frame it starts
     try:
         job = bake.PC2Bake(bpy.context, obj, d, 1, 6, async_path)
@@ -595,7 +595,7 @@ def test_modal_bake_frames_solve_in_a_worker_thread():
             ticks += 1
         job.finish(True)
     finally:
-        solver.BAKE_SLICE_MS, bake.QUICK_FRAME_S = slice_ms, quick
+        solver.workers.BAKE_SLICE_MS, bake.QUICK_FRAME_S = slice_ms, quick
     a = np.array([np.asarray(x) for x in pc2.read(sync_path)[1]])
     b = np.array([np.asarray(x) for x in pc2.read(async_path)[1]])
     R.check("the modal bake's frames were solved in a worker (ticks between)",
