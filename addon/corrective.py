@@ -77,7 +77,8 @@ def driving_bone(obj, d):
     if not arms:
         raise DeformKitError("%s has no Armature above it: a corrective shape key is driven "
                              "by a bone of the rig that deforms the mesh" % d.name)
-    groups = solver.blender_data.read_groups(obj, {h.vertex_group for h in d.handles if h.vertex_group})
+    groups = solver.blender_data.read_groups(
+        obj, {h.vertex_group for h in d.handles if h.vertex_group})
     handle = np.unique(np.concatenate([g[0] for g in groups.values()] or [np.zeros(0, int)]))
     best, best_w = None, -1.0
     bones = {b.name: a for a in arms for b in a.data.bones if b.use_deform}

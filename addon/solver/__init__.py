@@ -11,8 +11,9 @@ Solver state (native objects) is cached by (object name, deformer uid) and holds
 references; it is rebuilt on demand (after file load, undo, settings or group changes).
 
 One idea per module: cache (what is kept between updates), calls (the native module's
-errors), blender_data (reading the mesh, writing the result), vertex_groups (the collector
-for vertex-group controls), identity (topology and deformer uids), binding, rebind (re-binds
+errors), blender_data (reading the mesh, writing the result), controls (the collector for
+the control kinds a method declares), vertex_groups (the collector for vertex-group
+controls), identity (topology and deformer uids), binding, rebind (re-binds
 in worker threads), solving, budget (interactive time budgets), workers (solves off the main
 thread), previews, status (what the panel says), material (linear reconstruction's map).
 The names below are what the rest of the add-on uses; tests that tune or spy on a module
@@ -20,8 +21,8 @@ reach into it (solver.budget.INTERACTIVE_BUDGET_MS).
 """
 
 from ..errors import DeformKitError, OverlapError  # noqa: F401
-from . import (binding, blender_data, budget, cache, calls, identity, material, progress,  # noqa: F401
-               previews, rebind, solving, status, vertex_groups, workers)
+from . import (binding, blender_data, budget, cache, calls, controls, identity,  # noqa: F401
+               material, previews, progress, rebind, solving, status, vertex_groups, workers)
 from .binding import (BindJob, bind, bind_begin, bind_end,  # noqa: F401
                       bind_warnings, rest_frame, unbind)
 from .blender_data import (check_editable, check_mesh_type, evaluated_positions,  # noqa: F401

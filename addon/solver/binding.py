@@ -10,8 +10,8 @@ from ..animated_input import depends_on_input
 from ..errors import DeformKitError
 from ..handles import bind_matrix, pose_bind, rig_bind
 from ..text import plural
-from . import (blender_data, cache, calls, identity, material, progress, rebind, solving, status,
-               vertex_groups)
+from . import (blender_data, cache, calls, controls, identity, material, progress, rebind, solving,
+               status)
 
 
 class BindJob(progress.Reporting):
@@ -27,7 +27,8 @@ class BindJob(progress.Reporting):
         dk, self._cls = calls._native_class(m)
         me = obj.data
         self.label = m.label
-        self.method_id, self.settings, self.groups = d.method, vertex_groups._settings_key(d), groups_key
+        self.method_id, self.groups = d.method, groups_key
+        self.settings = controls.settings_key(d)
         self.rest = blender_data.rest_positions(me)
         self.n_vertices, self.n_faces = len(me.vertices), len(me.polygons)
         self.topology = identity.topology_fingerprint(me)
@@ -36,8 +37,8 @@ class BindJob(progress.Reporting):
         paint = args.pop("material_paint", None)
         self.material = None
         if paint is not None:
-            args["material"] = self.material = material.material_map(dk, self.dkmesh, paint, kw,
-                                                            d.options)
+            args["material"] = self.material = material.material_map(
+                dk, self.dkmesh, paint, kw, d.options)
         args.update(methods.bind_kwargs(m, d.options, self.rest, kw, self.dkmesh))
         self.fraction, self.phase, self.cancelled = None, None, False
         if m.bind_progress:  # called from the worker thread: plain attribute writes only
@@ -53,7 +54,7 @@ class BindJob(progress.Reporting):
         t0 = time.perf_counter()
         try:
             self.native = calls._native_call(self.label + " bind", self._cls, self.dkmesh,
-                                       **self._args)
+                                             **self._args)
         except DeformKitError as ex:
             self.error = ex
         except Exception as ex:  # e.g. a KeyboardInterrupt-free failure in a thread
@@ -117,7 +118,8 @@ def _install_groups(entry, d, kw, groups_key):
 def _build(obj, d, kw, groups_key, entry=None, threaded=False, groups_threaded=False):
     # Only the constraint groups changed: the native rebind is the fast path (in a worker
     # thread for big meshes in the UI: GroupsRebindJob).
-    if (entry is not None and entry.method_id == d.method and entry.settings == vertex_groups._settings_key(d)
+    if (entry is not None and entry.method_id == d.method
+            and entry.settings == controls.settings_key(d)
             and hasattr(entry.native, "rebind") and set(kw) <= {"handles", "fixed", "roi"}):
         if groups_threaded and entry.n_vertices >= rebind.REBIND_ASYNC_MIN_VERTICES[0]:
             rebind._groups_rebind_in_thread(obj, d, entry, kw, groups_key)  # raises RebindPending
@@ -140,7 +142,7 @@ def bind_begin(obj, d, depsgraph=None):
     blender_data.check_object(obj, d)
     identity.ensure_own_uid(obj, d)
     cache._cancel_rebinds((obj.name, d.uid))  # this bind replaces an automatic re-bind
-    kw, key = vertex_groups.collect(obj, d)
+    kw, key = controls.collect(obj, d)
     poses = pose_bind(blender_data.rest_positions(obj.data), kw["handles"],
                       solving._input_or_none(obj, d, depsgraph))
     mats = [(bind_matrix(obj, h, depsgraph), rig_bind(obj, d, h, depsgraph), pose)
@@ -231,12 +233,13 @@ def _entry_for(obj, d, check_groups, threaded=False, full_check=True):
                              % (d.bind_n_faces, plural(f, "face")))
     e = cache._cache.get((obj.name, d.uid))
     rest_same = e is not None and np.array_equal(blender_data.rest_positions(me), e.rest)
-    identity.check_topology(obj, d, e, full=full_check or e is None or not e.verified or not rest_same)
-    settings = vertex_groups._settings_key(d)
+    identity.check_topology(obj, d, e,
+                            full=full_check or e is None or not e.verified or not rest_same)
+    settings = controls.settings_key(d)
     same = e is not None and e.method_id == d.method and e.settings == settings
-    if same and e.verified and rest_same and not check_groups and vertex_groups.groups_exist(obj, d):
+    if same and e.verified and rest_same and not check_groups and controls.exist(obj, d):
         return e
-    kw, key = vertex_groups.collect(obj, d)
+    kw, key = controls.collect(obj, d)
     if same and e.groups == key:
         if rest_same:
             e.verified = True

@@ -31,7 +31,8 @@ def material_map(dk, dkmesh, paint, kw, opts):
         held = np.setdiff1d(np.concatenate(held) if held else np.zeros(0, np.int64), idx)
         painted = np.concatenate([np.asarray(idx, dtype=np.int64), held.astype(np.int64)])
         values = np.concatenate([val, np.ones(len(held))])
-        return np.asarray(calls._native_call("material", dk.harmonic_material, dkmesh, painted, values))
+        return np.asarray(calls._native_call("material", dk.harmonic_material, dkmesh, painted,
+                                             values))
     u = np.ones(n)
     u[idx] = val
     for _ in range(int(opts.smooth_iterations)):  # Jacobi averaging over the neighbours

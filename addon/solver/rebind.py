@@ -7,7 +7,7 @@ import bpy
 
 from .. import methods
 from ..errors import DeformKitError
-from . import binding, blender_data, cache, calls, progress, status, vertex_groups
+from . import binding, blender_data, cache, calls, controls, progress, status
 
 
 threaded_rebinds = [None]  # None: in the UI only; True / False force it (tests)
@@ -25,7 +25,7 @@ def _use_threads(interactive):
 def _rebind_in_thread(obj, d, kw, groups_key):
     import threading
     key = (obj.name, d.uid)
-    sig = (d.method, vertex_groups._settings_key(d), groups_key)
+    sig = (d.method, controls.settings_key(d), groups_key)
     r = cache._rebinds.get(key)
     if r is not None and r["sig"] == sig:
         raise RebindPending()
@@ -84,7 +84,7 @@ class GroupsRebindJob(progress.Reporting):
 def _groups_rebind_in_thread(obj, d, entry, kw, groups_key):
     import threading
     key = (obj.name, d.uid)
-    sig = (d.method, vertex_groups._settings_key(d), groups_key)
+    sig = (d.method, controls.settings_key(d), groups_key)
     r = cache._rebinds.get(key)
     if r is not None:
         if r["sig"] != sig:

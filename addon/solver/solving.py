@@ -10,7 +10,8 @@ from .. import geonodes, methods, native
 from ..animated_input import depends_on_input, edit_targets, input_transforms, moved_input
 from ..errors import DeformKitError
 from ..handles import transforms, turn_with_the_pose
-from . import binding, blender_data, budget, cache, calls, identity, material, previews, rebind, status, workers
+from . import (binding, blender_data, budget, cache, calls, identity, material, previews, rebind,
+               status, workers)
 
 
 def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_groups=False,
@@ -45,8 +46,9 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
     # all but interactive solves); the UI's handler asks for it after a geometry update the
     # add-on did not make, an Edit or Sculpt Mode session or an undo (handlers._run)
     full = (not interactive) if check_topology is None else check_topology
-    e = binding._entry_for(obj, d, check_groups, threaded=not cold and rebind._use_threads(interactive),
-                   full_check=full)
+    e = binding._entry_for(obj, d, check_groups,
+                           threaded=not cold and rebind._use_threads(interactive),
+                           full_check=full)
     w, e.worker = e.worker, None
     if isinstance(w, workers.FrameSolve):
         w = None  # a bake's frame (finished): its owner takes the result (FrameSolve.result)
@@ -109,8 +111,8 @@ def _solve_inputs(obj, d, e, depsgraph):
     m = methods.get(d.method)
     source = moved_input(obj, d, depsgraph) if depends_on_input(m, d) else None
     inp = source if depends_on_input(m, d) else _input_or_none(obj, d, depsgraph)
-    T = budget.snap_identity(turn_with_the_pose(d, e.rest, e.handles, transforms(obj, d, depsgraph),
-                                         inp), e.extent)
+    T = budget.snap_identity(turn_with_the_pose(d, e.rest, e.handles,
+                                                transforms(obj, d, depsgraph), inp), e.extent)
     last = e.last_T
     if last is not None and last.shape == T.shape and budget._within_rounding(T, last, e.extent):
         # the same placement seen through other float32 products (the object and its
@@ -171,7 +173,7 @@ def _plan_solve(obj, d, e, key, T, source, inputs, cold, write, interactive, res
         if not resume:
             e.pending_its, e.moved_at = 0, now
         its, inner = budget._budget(key, cap or 100, n_inner, resume,
-                             cut=not resume or now - e.moved_at < budget.PREVIEW_SETTLE_S)
+                                    cut=not resume or now - e.moved_at < budget.PREVIEW_SETTLE_S)
         left = cap - e.pending_its if cap else 1 << 30
         kw["max_iterations"] = max(1, min(its, int(math.ceil(left))))
         if inner is not None:

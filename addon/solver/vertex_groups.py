@@ -10,7 +10,7 @@ from ..text import plural
 from . import blender_data
 
 
-def _settings_key(d):
+def settings_key(d):
     m = methods.get(d.method)
     return (methods.signature(m, d.options), d.roi_group, d.fixed_group, d.material_group,
             tuple((h.vertex_group, h.use_weights) for h in d.handles))
@@ -26,7 +26,7 @@ def group_names(obj, d):
     return names
 
 
-def groups_exist(obj, d):
+def exist(obj, d):
     """Whether every vertex group `d` reads is still there: a name lookup each, cheap enough
     for every solve. A group removed by a script (obj.vertex_groups.remove) tags no update,
     so the binding's copy of it went on being used, and Apply wrote its result (the second

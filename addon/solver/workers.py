@@ -95,7 +95,7 @@ class FrameSolve:
                     k = max(1, min(its, cap - done))
                     t1 = time.perf_counter()
                     res = calls._native_call(label + " solve", native_solve, **goal,
-                                       **dict(kw, max_iterations=k, resume=not first))
+                                             **dict(kw, max_iterations=k, resume=not first))
                     ms = (time.perf_counter() - t1) * 1000.0
                     first, done = False, done + int(res.iterations)
                     if res.converged or done >= cap or self.cancelled:

@@ -264,7 +264,10 @@ dk_status dk_constraints_create(const dk_mesh *mesh, const dk_constraint_desc *d
                             "constraints: mesh, description and output must not be NULL");
     const dk_index n = mesh->n_vertices;
     int64_t total = 0;
-    dk_status st = check_shape(desc, &total, err);
+    dk_status st = dk_control_taken(desc->control, DK_CONTROL_VERTEX_GROUPS, "this method", err);
+    if (st != DK_OK)
+        return st;
+    st = check_shape(desc, &total, err);
     if (st == DK_OK)
         st = check_values(mesh, desc, err);
     if (st != DK_OK)

@@ -26,6 +26,7 @@
 #ifndef DK_CONSTRAINTS_H
 #define DK_CONSTRAINTS_H
 
+#include "dk_controls.h"
 #include "dk_mesh.h"
 #include "dk_status.h"
 
@@ -46,6 +47,10 @@ typedef struct dk_constraint_desc {
     dk_index n_roi;                   /**< 0 = the whole mesh is the region of interest     */
     const dk_index *roi_vertices;     /**< n_roi                                            */
     const double *stiffness;          /**< n_vertices, > 0; NULL = all 1                    */
+    const dk_control_desc *control;   /**< NULL: the handles above drive the method. Else
+                                           the control it binds to (dk_controls.h), for a
+                                           method whose table takes its kind; the vertex-
+                                           group constraints refuse it                  */
 } dk_constraint_desc;
 
 /** Validated, owned constraints of one bind. */
@@ -69,7 +74,8 @@ typedef struct dk_constraints {
 } dk_constraints;
 
 /** Validates `desc` against the mesh (indices in range, no overlaps, weights in (0,1],
- *  stiffness finite and > 0, no empty handle, at least one handle vertex) and builds the
+ *  stiffness finite and > 0, no empty handle, at least one handle vertex, no `control`:
+ *  "this method binds to vertex groups, not a lattice") and builds the
  *  owned form. Vertices outside a non-empty ROI become FIXED, and so do the vertices of
  *  every connected component without a handle or fixed vertex (held, see above). */
 dk_status dk_constraints_create(const dk_mesh *mesh, const dk_constraint_desc *desc,

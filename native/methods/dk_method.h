@@ -21,6 +21,7 @@
 #define DK_METHOD_H
 
 #include "dk_constraints.h"
+#include "dk_controls.h"
 #include "dk_mesh.h"
 #include "dk_status.h"
 #include <stddef.h>
@@ -200,6 +201,9 @@ typedef struct dk_option_desc {
 typedef struct dk_method_ops {
     const char *name;  /**< the class name, as in the Python module ("ARAP", ...)          */
     unsigned flags;    /**< dk_method_flags                                                 */
+    unsigned controls; /**< the dk_control_kind bits its bind takes: DK_CONTROL_VERTEX_GROUPS
+                            (handles of dk_constraint_desc) and/or a control's kind
+                            (dk_constraint_desc.control); a bind refuses the others by name */
     size_t options_size; /**< sizeof the method's options struct                            */
     /** Fills an options struct (options_size bytes) with the method's defaults. */
     void (*default_options)(void *options);
@@ -242,8 +246,9 @@ const dk_method_ops *const *dk_methods(void);
  *  struct, whose bind progress hook is the fields `progress` and `progress_user`. The
  *  generated adapters only convert `void *` to those types, so the table cannot drift from
  *  the typed functions. FIELDS: a static array of the options' dk_option_desc. Use it once,
- *  at file scope, after the functions are declared; NAME and FLAGS as in dk_method_ops. */
-#define DK_METHOD_OPS(VAR, NAME, FLAGS, PREFIX, TYPE, OPTS, FIELDS)                           \
+ *  at file scope, after the functions are declared; NAME, FLAGS and CONTROLS as in
+ *  dk_method_ops. */
+#define DK_METHOD_OPS(VAR, NAME, FLAGS, CONTROLS, PREFIX, TYPE, OPTS, FIELDS)                           \
     static void VAR##_default_options(void *options)                                          \
     {                                                                                         \
         PREFIX##_default_options((OPTS *)options);                                             \
@@ -282,6 +287,7 @@ const dk_method_ops *const *dk_methods(void);
     }                                                                                         \
     const dk_method_ops VAR = {.name = NAME,                                                  \
                                .flags = FLAGS,                                                \
+                               .controls = CONTROLS,                                          \
                                .options_size = sizeof(OPTS),                                  \
                                .default_options = VAR##_default_options,                      \
                                .option_fields = FIELDS,                                       \

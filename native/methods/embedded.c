@@ -1990,5 +1990,5 @@ static const dk_option_desc embedded_fields[] = {
 DK_METHOD_OPS(dk_embedded_ops, "EmbeddedDeformation",
               DK_METHOD_ITERATIVE | DK_METHOD_TRANSFORMS_AS_POSITIONS |
               DK_METHOD_TRANSLATION_INVARIANT | DK_METHOD_RIGID_INVARIANT |
-              DK_METHOD_PENALTY_HANDLES | DK_METHOD_GRAPH,
+              DK_METHOD_PENALTY_HANDLES | DK_METHOD_GRAPH, DK_CONTROL_VERTEX_GROUPS,
               dk_embedded, dk_embedded, dk_embedded_options, embedded_fields);

@@ -663,4 +663,5 @@ static const dk_option_desc falloff_fields[] = {
 
 DK_METHOD_OPS(dk_falloff_ops, "Falloff",
               DK_METHOD_EDITS_INPUT,
-              dk_falloff, dk_falloff, dk_falloff_options, falloff_fields);
+              DK_CONTROL_VERTEX_GROUPS, dk_falloff, dk_falloff, dk_falloff_options,
+              falloff_fields);

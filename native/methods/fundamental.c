@@ -1468,4 +1468,5 @@ static const dk_option_desc fundamental_fields[] = {
 DK_METHOD_OPS(dk_fundamental_ops, "LinearReconstruction",
               DK_METHOD_TRANSFORMS_AS_POSITIONS | DK_METHOD_TRANSLATION_INVARIANT |
                   DK_METHOD_RIGID_INVARIANT,
-              dk_fundamental, dk_fundamental, dk_fundamental_options, fundamental_fields);
+              DK_CONTROL_VERTEX_GROUPS, dk_fundamental, dk_fundamental, dk_fundamental_options,
+              fundamental_fields);

@@ -1726,4 +1726,5 @@ static const dk_option_desc le_fields[] = {
 DK_METHOD_OPS(dk_laplacian_edit_ops, "LaplacianEdit",
               DK_METHOD_TRANSFORMS_AS_POSITIONS | DK_METHOD_TRANSLATION_INVARIANT |
                   DK_METHOD_EDITS_INPUT,
-              dk_laplacian_edit, dk_laplacian_edit, dk_laplacian_edit_options, le_fields);
+              DK_CONTROL_VERTEX_GROUPS, dk_laplacian_edit, dk_laplacian_edit,
+              dk_laplacian_edit_options, le_fields);

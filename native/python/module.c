@@ -121,7 +121,9 @@ PyDoc_STRVAR(method_info_doc,
              "_method_info(name) -> dict\n\n"
              "What the native method contract says of method `name` (dk_method.h flags):\n"
              "iterative, transforms_as_positions, translation_invariant, rigid_invariant,\n"
-             "penalty_handles, soft_regions, given_start, edits_input, graph.\n"
+             "penalty_handles, soft_regions, given_start, edits_input, graph; and\n"
+             "'controls', the control kinds its bind takes (dk_controls.h), a tuple of\n"
+             "'vertex_groups', 'points', 'bones', 'cage', 'lattice', 'poses'.\n"
              "For code and tests written against the contract.");
 
 static PyObject *py_method_info(PyObject *module, PyObject *arg)
@@ -136,7 +138,19 @@ static PyObject *py_method_info(PyObject *module, PyObject *arg)
         return NULL;
     }
     const unsigned f = ops->flags;
-    return Py_BuildValue("{s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O}", "iterative",
+    PyObject *list = PyList_New(0);
+    for (unsigned bit = 1; list && bit <= DK_CONTROL_ALL; bit <<= 1) {
+        const char *id = (ops->controls & bit) ? dk_control_kind_id((dk_control_kind)bit) : NULL;
+        PyObject *s = id ? PyUnicode_FromString(id) : NULL;
+        if (id && (!s || PyList_Append(list, s) != 0))
+            Py_CLEAR(list);
+        Py_XDECREF(s);
+    }
+    PyObject *controls = list ? PyList_AsTuple(list) : NULL;
+    Py_XDECREF(list);
+    if (!controls)
+        return NULL;
+    PyObject *info = Py_BuildValue("{s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O}", "iterative",
                          (f & DK_METHOD_ITERATIVE) ? Py_True : Py_False,
                          "transforms_as_positions",
                          (f & DK_METHOD_TRANSFORMS_AS_POSITIONS) ? Py_True : Py_False,
@@ -148,7 +162,9 @@ static PyObject *py_method_info(PyObject *module, PyObject *arg)
                          (f & DK_METHOD_SOFT_REGIONS) ? Py_True : Py_False, "given_start",
                          (f & DK_METHOD_GIVEN_START) ? Py_True : Py_False, "edits_input",
                          (f & DK_METHOD_EDITS_INPUT) ? Py_True : Py_False, "graph",
-                         (f & DK_METHOD_GRAPH) ? Py_True : Py_False);
+                         (f & DK_METHOD_GRAPH) ? Py_True : Py_False, "controls", controls);
+    Py_DECREF(controls);
+    return info;
 }
 
 /* ------------------------------------------------------------------ memory ------------- */

@@ -244,7 +244,30 @@ def test_linked_objects_are_refused():
             len(linked.deformkit.deformers) == n_def == 1)
 
 
-for t in (test_linked_objects_are_refused, test_no_handles, test_missing_group, test_empty_group, test_no_target, test_overlap_fixed, test_handles_overlap,
+def test_a_control_kind_the_addon_cannot_read():
+    """A method whose native table declares only control kinds the add-on has no collector
+    for (as a lattice method would, in a module newer than the add-on) is refused at Bind by
+    name, and nothing is bound; the add-on picks the collector from the table, not from the
+    method's name."""
+    obj, d, e, fixed, handle = fresh()
+    real = S.native.method_info
+    cls = S.methods.get(d.method).native_class
+
+    def lattice_only(name):
+        info = real(name)
+        return dict(info, controls=("lattice",)) if name == cls else info
+    S.native.method_info = lattice_only
+    try:
+        expect_error("a lattice method", bpy.ops.deformkit.bind,
+                     "binds to lattice, which this version of the add-on cannot read")
+        R.check("nothing bound", not d.bound and d.status_is_error, d.status)
+    finally:
+        S.native.method_info = real
+    bpy.ops.deformkit.bind()
+    R.check("the vertex groups bind again", d.bound and not d.status_is_error, d.status)
+
+
+for t in (test_linked_objects_are_refused, test_a_control_kind_the_addon_cannot_read, test_no_handles, test_missing_group, test_empty_group, test_no_target, test_overlap_fixed, test_handles_overlap,
           test_deleted_target_after_bind, test_non_mesh, test_no_faces, test_topology_change,
           test_bind_reports_native_warnings,
           test_edit_mode_is_skipped, test_no_deformer, test_add_handle_from_selection):

@@ -35,6 +35,7 @@
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 
 enum { MAX_V = 48, MAX_P = 96, MAX_HANDLES = 3, MAX_HV = 12, MAX_FIXED = 8, MAX_REQUESTS = 4 };
+enum { MAX_CONTROLS = 8, MAX_CAGE_TRIS = 12 };
 
 /* ------------------------------------------------------------------ the mesh ----------- */
 
@@ -119,6 +120,12 @@ typedef struct groups {
     dk_index sizes[MAX_HANDLES], hv[MAX_HV], fixed[MAX_FIXED], roi[MAX_V];
     double weights[MAX_HV], stiffness[MAX_V];
     dk_constraint_desc desc;
+    /* a control bound beside the groups (dk_controls.h), sometimes malformed */
+    dk_control_desc control;
+    double control_rest[16 * MAX_CONTROLS > 3 * MAX_CONTROLS * MAX_V ? 16 * MAX_CONTROLS
+                                                                      : 3 * MAX_CONTROLS * MAX_V];
+    dk_index control_tris[3 * MAX_CAGE_TRIS];
+    double control_weights[MAX_CONTROLS * MAX_V];
 } groups;
 
 static dk_index decode_vertex(dk_fuzz_input *in, dk_index n)
@@ -172,6 +179,55 @@ static void decode_groups(dk_fuzz_input *in, dk_index n, groups *g)
                                                        : 0.25 * (1 + dk_fuzz_u8(in) % 8);
         g->desc.stiffness = g->stiffness;
     }
+}
+
+/* One bind in eight carries a control of any kind, every field decoded within its buffer
+ * (n_controls, resolution and triangle corners may still be wrong, values non-finite):
+ * dk_control_check must refuse the malformed ones with a message, and a method whose table
+ * does not take the kind must refuse the bind. */
+static void decode_control(dk_fuzz_input *in, dk_index n, groups *g)
+{
+    if (dk_fuzz_u8(in) % 8 != 0 || n > MAX_V)
+        return;
+    dk_control_desc *c = &g->control;
+    c->kind = (dk_control_kind)(1u << dk_fuzz_below(in, 7)); /* 64: not a kind */
+    c->n_controls = dk_fuzz_below(in, MAX_CONTROLS + 1);
+    for (int k = 0; k < 3; k++)
+        c->resolution[k] = c->kind == DK_CONTROL_LATTICE ? dk_fuzz_below(in, 3) + 1 : 0;
+    const size_t per = c->kind == DK_CONTROL_POSES ? 3 * (size_t)n
+                       : c->kind == DK_CONTROL_BONES || c->kind == DK_CONTROL_LATTICE ? 16
+                                                                                      : 3;
+    const size_t count = c->kind == DK_CONTROL_LATTICE ? 16 : per * (size_t)c->n_controls;
+    for (size_t i = 0; i < count; i++)
+        g->control_rest[i] = dk_fuzz_real(in, 1.0);
+    if (c->kind == DK_CONTROL_BONES || c->kind == DK_CONTROL_LATTICE)
+        for (size_t f = 0; f < count / 16; f++) { /* mostly affine frames */
+            double *m = g->control_rest + 16 * f;
+            if (dk_fuzz_u8(in) % 4 != 0) {
+                m[12] = m[13] = m[14] = 0.0;
+                m[15] = 1.0;
+            }
+        }
+    c->rest = dk_fuzz_u8(in) % 16 == 0 ? NULL : g->control_rest;
+    if (c->kind == DK_CONTROL_CAGE) {
+        c->n_triangles = dk_fuzz_below(in, MAX_CAGE_TRIS + 1);
+        for (dk_index i = 0; i < 3 * c->n_triangles; i++)
+            g->control_tris[i] = dk_fuzz_below(in, MAX_CONTROLS + 1) - 1;
+        c->triangles = g->control_tris;
+    }
+    if (c->kind == DK_CONTROL_BONES && c->n_controls > 0) {
+        for (dk_index v = 0; v < n; v++)
+            for (dk_index b = 0; b < c->n_controls; b++)
+                g->control_weights[v * c->n_controls + b] =
+                    dk_fuzz_u8(in) % 8 == 0 ? dk_fuzz_real(in, 1.0)
+                                            : (b == v % c->n_controls ? 1.0 : 0.0);
+        c->weights = g->control_weights;
+    }
+    dk_error err = {0};
+    if (dk_control_check(c, n, &err) != DK_OK)
+        dk_fuzz_check(err.message[0], "a refused %s control without a message",
+                      dk_control_kind_name(c->kind));
+    g->desc.control = c;
 }
 
 /* ------------------------------------------------------------------ options ------------ */
@@ -421,11 +477,15 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     memset(&o, 0, sizeof o);
     memset(&x, 0, sizeof x);
     decode_groups(&in, m->n_vertices, &g);
+    decode_control(&in, m->n_vertices, &g);
     const void *opts = decode_options(&in, ops, m, &o, &x);
 
     void *obj = NULL;
     dk_error err = {0};
     dk_status st = ops->bind(m, &g.desc, opts, &obj, &err);
+    dk_fuzz_check(st != DK_OK || !g.desc.control || (ops->controls & (unsigned)g.control.kind),
+                  "%s took %s, a control kind its table does not declare", ops->name,
+                  dk_control_kind_name(g.control.kind));
     if (st != DK_OK) {
         dk_fuzz_check(obj == NULL, "%s bind failed (%d) but returned an object", ops->name,
                       (int)st);

@@ -193,7 +193,7 @@ static void test_zero_drag(void)
         return;
     }
     dk_index sizes[1] = {s.n_handle};
-    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL, NULL};
     for (int accel = 0; accel < 3; accel++) {
         dk_arap_options o;
         dk_arap_default_options(&o);
@@ -257,7 +257,7 @@ static void test_rigid_motion(void)
         tf[16 * h + 12] = tf[16 * h + 13] = tf[16 * h + 14] = 0;
         tf[16 * h + 15] = 1;
     }
-    dk_constraint_desc d = {2, sizes, hv, NULL, 0, NULL, 0, NULL, NULL};
+    dk_constraint_desc d = {2, sizes, hv, NULL, 0, NULL, 0, NULL, NULL, NULL};
     for (int energy_kind = 0; energy_kind < 2; energy_kind++)
         for (int accel = 0; accel < 3; accel++) {
             dk_arap_options o;
@@ -309,7 +309,7 @@ static void test_bend(void)
     }
     const dk_mesh *m = s.mesh;
     dk_index sizes[1] = {s.n_handle};
-    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL, NULL};
     double t[3 * 64];
     bend_targets(&s, 1.2, t);
     double *x[3];
@@ -404,7 +404,7 @@ static void test_newton_quadratic(void)
     }
     const dk_mesh *m = s.mesh;
     dk_index sizes[1] = {s.n_handle};
-    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL, NULL};
     double t[3 * 64];
     bend_targets(&s, 1.2, t);
     double *x = malloc(sizeof(double) * 3 * m->n_vertices);
@@ -512,7 +512,7 @@ static void test_newton_soft_stiffness(void)
     }
     for (dk_index v = 0; v < n; v++)
         stiff[v] = m->positions[3 * v] < 0 ? 20.0 : 1.0;
-    dk_constraint_desc d = {1, sizes, s.handle, w, s.n_fixed, s.fixed, 0, NULL, stiff};
+    dk_constraint_desc d = {1, sizes, s.handle, w, s.n_fixed, s.fixed, 0, NULL, stiff, NULL};
     dk_arap_options o;
     dk_arap_default_options(&o);
     o.acceleration = DK_ARAP_ACCEL_ANDERSON;
@@ -576,7 +576,7 @@ static void test_twist(void)
         t[3 * k + 1] = p[0];
         t[3 * k + 2] = p[2];
     }
-    dk_constraint_desc d = {1, sizes, hv, NULL, ring, fixed, 0, NULL, NULL};
+    dk_constraint_desc d = {1, sizes, hv, NULL, ring, fixed, 0, NULL, NULL, NULL};
     double anderson_energy[2] = {0, 0};
     for (int run = 0; run < 4; run++) {
         const int kind = run % 2, newton = run / 2;
@@ -642,7 +642,7 @@ static void test_clamping(void)
         return;
     }
     dk_index fixed[4] = {0, 1, 2, 3}, hv[1] = {4}, sizes[1] = {1};
-    dk_constraint_desc d = {1, sizes, hv, NULL, 4, fixed, 0, NULL, NULL};
+    dk_constraint_desc d = {1, sizes, hv, NULL, 4, fixed, 0, NULL, NULL, NULL};
     double x[24];
     memcpy(x, p, sizeof x);
     x[3 * 4] -= 0.3;
@@ -687,7 +687,7 @@ static void test_resume(void)
     bend_targets(&s, 1.2, t2);
     double *x = malloc(sizeof(double) * 3 * n), *y = malloc(sizeof(double) * 3 * n),
            *z = malloc(sizeof(double) * 3 * n);
-    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL, NULL};
     for (int accel = 1; accel < 3; accel++) {
         dk_arap_options o;
         dk_arap_default_options(&o);
@@ -766,7 +766,7 @@ static void test_cg_override(void)
     bend_targets(&s, 1.1, t);
     double *x = malloc(sizeof(double) * 3 * n), *y = malloc(sizeof(double) * 3 * n),
            *z = malloc(sizeof(double) * 3 * n);
-    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL, NULL};
     dk_arap_options o, o2;
     dk_arap_default_options(&o);
     o.max_iterations = 1000;
@@ -855,7 +855,7 @@ static void predictor_case(dk_arap_acceleration accel)
     const dk_mesh *m = s.mesh;
     const dk_index n = m->n_vertices;
     dk_index sizes[1] = {s.n_handle};
-    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL, NULL};
     static const double angles[] = {0.30, 0.40, 0.35, 0.45, 0.55, 0.65, 0.75};
     const int steps = (int)(sizeof angles / sizeof angles[0]);
     double t[3 * 64];
@@ -977,7 +977,7 @@ static void cg_schedule_run(const plane_setup *s, dk_arap_cg_schedule schedule, 
 {
     const dk_mesh *m = s->mesh;
     dk_index sizes[1] = {s->n_handle};
-    dk_constraint_desc d = {1, sizes, s->handle, NULL, s->n_fixed, s->fixed, 0, NULL, NULL};
+    dk_constraint_desc d = {1, sizes, s->handle, NULL, s->n_fixed, s->fixed, 0, NULL, NULL, NULL};
     dk_arap_options o;
     dk_arap_default_options(&o);
     o.tolerance = 1e-11;
@@ -1053,7 +1053,7 @@ static void test_cg_schedule(void)
     }
     /* the option is validated */
     dk_index sizes[1] = {s.n_handle};
-    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL, NULL};
     dk_arap_options o;
     dk_arap_default_options(&o);
     o.cg_schedule = (dk_arap_cg_schedule)2; /* neither FIXED nor GROWING */
@@ -1103,7 +1103,7 @@ static void test_stopping_gap(void)
     }
     const dk_index n = s.mesh->n_vertices;
     dk_index sizes[1] = {s.n_handle};
-    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL, NULL};
     dk_arap_options o;
     dk_arap_default_options(&o);
     o.cg_iterations = 3;
@@ -1146,7 +1146,7 @@ static void test_given_start(void)
     }
     const dk_index n = s.mesh->n_vertices;
     dk_index sizes[1] = {s.n_handle};
-    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL, NULL};
     dk_arap *a = NULL, *b = NULL;
     dk_error e = {0};
     double t[3 * 64], t2[3 * 64];
@@ -1231,7 +1231,7 @@ static void test_stopping_indefinite(void)
         return;
     }
     dk_index sizes[1] = {s.n_handle};
-    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL, NULL};
     dk_arap_options o;
     dk_arap_default_options(&o);
     dk_arap *a = NULL;
@@ -1287,7 +1287,7 @@ static void stiffness_soft_warm_rebind_case(dk_arap_acceleration accel)
            *y = malloc(sizeof(double) * 3 * n);
     for (dk_index v = 0; v < n; v++)
         stiff[v] = m->positions[3 * v] < 0 ? 100.0 : 1.0; /* stiff left half */
-    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL, NULL};
     dk_constraint_desc ds = d;
     ds.stiffness = stiff;
     dk_arap_options o;
@@ -1364,7 +1364,7 @@ static void stiffness_soft_warm_rebind_case(dk_arap_acceleration accel)
         CHECK_NEAR(arap_energy(ar, x), info.energy, 1e-12 * info.energy);
         /* a failing rebind keeps the previous constraints */
         dk_index bad[1] = {100000}, one[1] = {1};
-        dk_constraint_desc db = {1, one, bad, NULL, 0, NULL, 0, NULL, NULL};
+        dk_constraint_desc db = {1, one, bad, NULL, 0, NULL, 0, NULL, NULL, NULL};
         CHECK(dk_arap_rebind(ar, &db, &e) == DK_ERR_INDEX);
         CHECK(dk_arap_solve(ar, &(dk_solve_request){.targets = t, .start = DK_START_WARM}, y, &info,
                             &e) == DK_OK);
@@ -1401,7 +1401,7 @@ static void test_warm_rotations_and_cold_reproducibility(void)
     const dk_mesh *m = s.mesh;
     const size_t bytes = sizeof(double) * 3 * (size_t)m->n_vertices;
     dk_index sizes[1] = {s.n_handle};
-    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL, NULL};
     double t[3 * 64];
     double *x0 = malloc(bytes), *x = malloc(bytes);
     static history h;
@@ -1482,7 +1482,7 @@ static void test_response_basis(void)
     const dk_mesh *m = s.mesh;
     const size_t n3 = 3 * (size_t)m->n_vertices;
     dk_index sizes[1] = {s.n_handle};
-    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL, NULL};
     dk_arap_options o, off;
     dk_arap_default_options(&o);
     off = o;
@@ -1594,7 +1594,7 @@ static void test_errors(void)
     dk_arap *ar = NULL;
     dk_error e = {0};
     dk_index sizes[2] = {s.n_handle, 0};
-    dk_constraint_desc d = {2, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL};
+    dk_constraint_desc d = {2, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL, NULL};
     CHECK(dk_arap_bind(m, &d, NULL, &ar, &e) == DK_ERR_INVALID_ARGUMENT && !ar);
     CHECK_MSG(strstr(e.message, "handle 1 is empty"), "%s", e.message);
     d.n_handles = 1;
@@ -1613,7 +1613,7 @@ static void test_errors(void)
             if ((v % 7) != 6)
                 all[nf++] = v;
         /* every vertex constrained: the constrained motion, not a refusal (issue 18) */
-        dk_constraint_desc dn = {1, sizes, s.handle, NULL, nf, all, 0, NULL, NULL};
+        dk_constraint_desc dn = {1, sizes, s.handle, NULL, nf, all, 0, NULL, NULL, NULL};
         CHECK(dk_arap_bind(m, &dn, NULL, &ar, &e) == DK_OK);
         if (ar) {
             double *t = malloc(sizeof(double) * 3 * (size_t)s.n_handle);
@@ -1671,7 +1671,7 @@ static void test_errors(void)
         dk_mesh *nm = NULL;
         if (dk_mesh_create(p, 5, f, 3, &nm, &e) == DK_OK) {
             dk_index hv[1] = {2}, sz[1] = {1}, fx[1] = {3};
-            dk_constraint_desc dd = {1, sz, hv, NULL, 1, fx, 0, NULL, NULL};
+            dk_constraint_desc dd = {1, sz, hv, NULL, 1, fx, 0, NULL, NULL, NULL};
             CHECK_MSG(dk_arap_bind(nm, &dd, NULL, &ar, &e) == DK_OK, "%s", e.message);
             double xn[15], tn[3] = {0.5, 1, 0};
             if (ar) {
@@ -1699,7 +1699,7 @@ static void test_errors(void)
         dk_mesh *dm = NULL;
         if (dk_mesh_create(p, 4, f, 2, &dm, &e) == DK_OK) {
             dk_index hv[1] = {0}, sz[1] = {1}, fx[1] = {3};
-            dk_constraint_desc dd = {1, sz, hv, NULL, 1, fx, 0, NULL, NULL};
+            dk_constraint_desc dd = {1, sz, hv, NULL, 1, fx, 0, NULL, NULL, NULL};
             dk_status st = dk_arap_bind(dm, &dd, NULL, &ar, &e);
             CHECK_MSG(st == DK_ERR_DEGENERATE && strstr(e.message, "positive definite"), "%d %s",
                       (int)st, e.message);
@@ -1713,7 +1713,7 @@ static void test_errors(void)
         dk_mesh *cm = NULL;
         if (dk_mesh_create(p, 7, f, 3, &cm, &e) == DK_OK) {
             dk_index hv[1] = {0}, sz[1] = {1}, fx[1] = {3};
-            dk_constraint_desc dd = {1, sz, hv, NULL, 1, fx, 0, NULL, NULL};
+            dk_constraint_desc dd = {1, sz, hv, NULL, 1, fx, 0, NULL, NULL, NULL};
             /* held at rest and reported (issue 18, class 12), no longer refused */
             CHECK(dk_arap_bind(cm, &dd, NULL, &ar, &e) == DK_OK);
             if (ar) {
@@ -1759,7 +1759,7 @@ static void test_big_mesh_threaded_local_step(void)
         t[3 * j + 2] = p[2] + 0.8;
     }
     dk_index sizes[1] = {cells + 1};
-    dk_constraint_desc d = {1, sizes, hv, NULL, cells + 1, fixed, 0, NULL, NULL};
+    dk_constraint_desc d = {1, sizes, hv, NULL, cells + 1, fixed, 0, NULL, NULL, NULL};
     for (int accel = 1; accel < 3; accel++) {
         dk_arap_options o;
         dk_arap_default_options(&o);

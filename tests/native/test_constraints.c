@@ -22,7 +22,7 @@ static void test_roles_and_maps(void)
     dk_index sizes[2] = {2, 1};
     dk_index hv[3] = {7, 3, 5};
     dk_index fixed[2] = {0, 9};
-    dk_constraint_desc d = {2, sizes, hv, NULL, 2, fixed, 0, NULL, NULL};
+    dk_constraint_desc d = {2, sizes, hv, NULL, 2, fixed, 0, NULL, NULL, NULL};
     dk_constraints *c = NULL;
     dk_error e = {0};
     CHECK_MSG(dk_constraints_create(&m, &d, &c, &e) == DK_OK, "%s", e.message);
@@ -52,7 +52,7 @@ static void test_roi(void)
     dk_index roi[3] = {1, 2, 2};
     double stiff[8] = {1, 2, 3, 4, 5, 6, 7, 8};
     double w[1] = {0.5};
-    dk_constraint_desc d = {1, sizes, hv, w, 0, NULL, 3, roi, stiff};
+    dk_constraint_desc d = {1, sizes, hv, w, 0, NULL, 3, roi, stiff, NULL};
     dk_constraints *c = NULL;
     dk_error e = {0};
     CHECK_MSG(dk_constraints_create(&m, &d, &c, &e) == DK_OK, "%s", e.message);
@@ -83,7 +83,7 @@ static void test_errors(void)
 {
     dk_index sizes[2] = {2, 2};
     dk_index hv[4] = {1, 2, 3, 2};
-    dk_constraint_desc d = {2, sizes, hv, NULL, 0, NULL, 0, NULL, NULL};
+    dk_constraint_desc d = {2, sizes, hv, NULL, 0, NULL, 0, NULL, NULL, NULL};
     expect_error(&d, 10, DK_ERR_INVALID_ARGUMENT, "vertex 2", "handle 0 and in handle 1");
 
     dk_index hv_same[4] = {1, 1, 3, 4};
@@ -139,7 +139,7 @@ static void test_targets(void)
     double rest[12] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1};
     dk_index sizes[2] = {2, 1};
     dk_index hv[3] = {1, 3, 2};
-    dk_constraint_desc d = {2, sizes, hv, NULL, 0, NULL, 0, NULL, NULL};
+    dk_constraint_desc d = {2, sizes, hv, NULL, 0, NULL, 0, NULL, NULL, NULL};
     dk_constraints *c = NULL;
     dk_error e = {0};
     if (dk_constraints_create(&m, &d, &c, &e) != DK_OK) {

@@ -16,7 +16,9 @@
  *   - loose geometry (issue 18, class 12): the bumpy plane with loose vertices and an
  *     unconstrained floating triangle binds with every method, every held vertex stays
  *     exactly at rest, the counters say how many were held, and a mesh whose every vertex
- *     is constrained gives the constrained motion instead of a refusal. */
+ *     is constrained gives the constrained motion instead of a refusal;
+ *   - every method declares the controls it binds to (dk_controls.h), and a bind given a
+ *     control of another kind is refused by name, nothing returned. */
 #include <limits.h>
 #include <math.h>
 #include <stdlib.h>
@@ -569,4 +571,48 @@ static void test_option_fields(void)
     dk_test_mesh_free(&plane);
 }
 
-DK_TEST_MAIN(test_registry, test_every_method, test_loose_geometry, test_option_fields)
+/* Each method declares its control kinds; a control of a kind it does not take is refused
+ * with a message naming both, and no object comes back. */
+static void test_controls_declared(void)
+{
+    dk_test_mesh plane = {0};
+    scene s;
+    int ok = dk_test_bumpy_plane(8, 0.1, &plane) == 0 &&
+             scene_make(&s, "bumpy plane", &plane, 0, -0.99, 0.99, 1, 1, -1.0, 1e-9) == 0;
+    CHECK(ok);
+    if (!ok)
+        return;
+    const double box[16] = {2, 0, 0, -1, 0, 2, 0, -1, 0, 0, 1, -0.5, 0, 0, 0, 1};
+    const double points[6] = {0, 0, 0, 1, 1, 1};
+    const dk_control_desc controls[2] = {
+        {.kind = DK_CONTROL_LATTICE, .n_controls = 8, .rest = box, .resolution = {2, 2, 2}},
+        {.kind = DK_CONTROL_POINTS, .n_controls = 2, .rest = points}};
+    for (const dk_method_ops *const *m = dk_methods(); *m; m++) {
+        const dk_method_ops *o = *m;
+        CHECK_MSG(o->controls != 0 && (o->controls & ~DK_CONTROL_ALL) == 0,
+                  "%s declares controls %#x", o->name, o->controls);
+        for (int k = 0; k < 2; k++) {
+            const dk_control_desc *c = &controls[k];
+            dk_error e = {0};
+            CHECK(dk_control_check(c, s.mesh->n_vertices, &e) == DK_OK);
+            if (o->controls & (unsigned)c->kind)
+                continue; /* a method that takes it has tests of its own */
+            dk_constraint_desc d = s.desc;
+            d.control = c;
+            void *obj = (void *)1;
+            const dk_status st = o->bind(s.mesh, &d, NULL, &obj, &e);
+            CHECK_MSG(st == DK_ERR_INVALID_ARGUMENT && obj == NULL &&
+                          strstr(e.message, dk_control_kind_name(c->kind)) &&
+                          strstr(e.message, "binds to"),
+                      "%s given %s: status %d, '%s'", o->name, dk_control_kind_name(c->kind),
+                      (int)st, e.message);
+            if (st == DK_OK && obj)
+                o->free(obj);
+        }
+    }
+    scene_free(&s);
+    dk_test_mesh_free(&plane);
+}
+
+DK_TEST_MAIN(test_registry, test_every_method, test_loose_geometry, test_option_fields,
+             test_controls_declared)

@@ -159,7 +159,7 @@ static void test_constraint_descriptions(void)
     if (stiff) {
         for (dk_index i = 0; i < n; i++)
             stiff[i] = 1.0 + i;
-        dk_constraint_desc d = {2, sizes, hv, hw, 2, fixed, 4, roi, stiff};
+        dk_constraint_desc d = {2, sizes, hv, hw, 2, fixed, 4, roi, stiff, NULL};
         dk_reorder_desc rd;
         CHECK(dk_reorder_desc_create(r, m, &d, &rd, &err) == DK_OK);
         CHECK(rd.desc.n_handles == 2 && rd.desc.handle_sizes == sizes && rd.desc.handle_weights == hw);
@@ -174,11 +174,11 @@ static void test_constraint_descriptions(void)
         dk_reorder_desc_free(&rd);
         /* errors are about the caller's numbering, and leave nothing to free */
         const dk_index bad[3] = {5, 9, n};
-        dk_constraint_desc e = {2, sizes, bad, NULL, 0, NULL, 0, NULL, NULL};
+        dk_constraint_desc e = {2, sizes, bad, NULL, 0, NULL, 0, NULL, NULL, NULL};
         CHECK(dk_reorder_desc_create(r, m, &e, &rd, &err) == DK_ERR_INDEX);
         CHECK(rd.indices == NULL && rd.stiffness == NULL);
         const dk_index overlap[2] = {9, 1};
-        dk_constraint_desc o = {2, sizes, hv, NULL, 2, overlap, 0, NULL, NULL};
+        dk_constraint_desc o = {2, sizes, hv, NULL, 2, overlap, 0, NULL, NULL, NULL};
         CHECK(dk_reorder_desc_create(r, m, &o, &rd, &err) != DK_OK);
         CHECK_MSG(strstr(err.message, "9") != NULL, "%s", err.message);
         dk_reorder_desc_free(&rd); /* safe on what a failure left */

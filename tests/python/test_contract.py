@@ -88,7 +88,11 @@ def test_registries_agree():
         assert set(info(name)) == {"iterative", "transforms_as_positions",
                                    "translation_invariant", "rigid_invariant",
                                    "penalty_handles", "soft_regions", "given_start",
-                                   "edits_input", "graph"}
+                                   "edits_input", "graph", "controls"}
+        # the control kinds its bind takes (dk_controls.h): a non-empty tuple of known ids
+        kinds = info(name)["controls"]
+        assert isinstance(kinds, tuple) and kinds and set(kinds) <= {
+            "vertex_groups", "points", "bones", "cage", "lattice", "poses"}, (name, kinds)
     with pytest.raises(KeyError):
         info("NoSuchMethod")
 

@@ -551,6 +551,6 @@ static const dk_option_desc arap_fields[] = {
 DK_METHOD_OPS(dk_arap_ops, "ARAP",
               DK_METHOD_ITERATIVE | DK_METHOD_TRANSFORMS_AS_POSITIONS |
               DK_METHOD_TRANSLATION_INVARIANT | DK_METHOD_RIGID_INVARIANT |
-              DK_METHOD_GIVEN_START | DK_METHOD_EDITS_INPUT,
+              DK_METHOD_GIVEN_START | DK_METHOD_EDITS_INPUT, DK_CONTROL_VERTEX_GROUPS,
               dk_arap, dk_arap, dk_arap_options, arap_fields);
 

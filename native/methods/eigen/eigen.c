@@ -399,5 +399,5 @@ static const dk_option_desc eigen_fields[] = {
      DBL_MAX, 1.0, DBL_MAX, 0},
 };
 
-DK_METHOD_OPS(dk_eigen_ops, "EigenDeformation", DK_METHOD_SOFT_REGIONS, dk_eigen, dk_eigen,
-              dk_eigen_options, eigen_fields);
+DK_METHOD_OPS(dk_eigen_ops, "EigenDeformation", DK_METHOD_SOFT_REGIONS,
+              DK_CONTROL_VERTEX_GROUPS, dk_eigen, dk_eigen, dk_eigen_options, eigen_fields);
