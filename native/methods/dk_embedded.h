@@ -206,6 +206,20 @@ dk_status dk_embedded_embed(const dk_embedded *ed, const double *points, dk_inde
 /** Frees; NULL allowed. */
 void dk_embedded_free(dk_embedded *ed);
 
+/** State (dk_method_ops.state_size, dk_method.h): the bytes save_state writes -- the graph's
+ *  transformations a warm start continues from, their energy, the last targets and the
+ *  source (update_source) -- so that a restored object, this one or another bound the same
+ *  way, continues bit for bit as this one would. */
+size_t dk_embedded_state_size(const dk_embedded *ed);
+
+/** Writes the state into `state` (exactly dk_embedded_state_size bytes). */
+dk_status dk_embedded_save_state(const dk_embedded *ed, void *state, size_t size, dk_error *err);
+
+/** Puts back a state dk_embedded_save_state wrote; another method's, mesh size's,
+ *  constraints' or graph's is DK_ERR_INVALID_ARGUMENT and changes nothing. */
+dk_status dk_embedded_restore_state(dk_embedded *ed, const void *state, size_t size,
+                                    dk_error *err);
+
 /** The bytes a bind needs at its peak, its first solve included (dk_method.h,
  *  dk_method_estimate_memory): per vertex its k weights and neighbours, and per node of the
  *  graph J^T J's blocks and their Cholesky factor, which grow with k. The node count is

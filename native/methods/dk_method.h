@@ -232,6 +232,19 @@ typedef struct dk_method_ops {
      *  first solve included (dk_method_estimate_memory). */
     dk_status (*estimate_memory)(const dk_mesh *mesh, const void *options, uint64_t *bytes,
                                  dk_error *err);
+    /** State (optional: all three NULL for a method whose solves read nothing an earlier
+     *  call left behind). What a solve leaves for the next call -- a warm start's iterate
+     *  and history, a resumable solve's place, the pose and targets it solved -- as bytes,
+     *  so that a bake can checkpoint and a chunk can start mid-shot, in this object or in
+     *  another bound the same way. state_size: the bytes save_state writes (fixed while the
+     *  constraints are). restore_state takes a state saved by an object of the same method
+     *  on the same mesh size, constraints and options (a dk_state_header says which; any
+     *  other, or a wrong size, is DK_ERR_INVALID_ARGUMENT and nothing changes); every call
+     *  after it then returns, bit for bit, what it returned right after the save. The
+     *  contract test checks this for every method that has them. */
+    size_t (*state_size)(const void *self);
+    dk_status (*save_state)(const void *self, void *state, size_t size, dk_error *err);
+    dk_status (*restore_state)(void *self, const void *state, size_t size, dk_error *err);
 } dk_method_ops;
 
 /** Every registered method, in a fixed order, terminated by NULL. Adding a method adds its
@@ -248,7 +261,34 @@ const dk_method_ops *const *dk_methods(void);
  *  the typed functions. FIELDS: a static array of the options' dk_option_desc. Use it once,
  *  at file scope, after the functions are declared; NAME, FLAGS and CONTROLS as in
  *  dk_method_ops. */
-#define DK_METHOD_OPS(VAR, NAME, FLAGS, CONTROLS, PREFIX, TYPE, OPTS, FIELDS)                           \
+#define DK_METHOD_OPS(VAR, NAME, FLAGS, CONTROLS, PREFIX, TYPE, OPTS, FIELDS)                 \
+    DK_METHOD_OPS_WITH(VAR, NAME, FLAGS, CONTROLS, PREFIX, TYPE, OPTS, FIELDS, .free = VAR##_free)
+
+/** DK_METHOD_OPS for a method that carries state (dk_method_ops.state_size): its
+ *  PREFIX_state_size(const TYPE *), PREFIX_save_state(const TYPE *, void *, size_t, err)
+ *  and PREFIX_restore_state(TYPE *, const void *, size_t, err) fill the three entries. */
+#define DK_METHOD_OPS_STATEFUL(VAR, NAME, FLAGS, CONTROLS, PREFIX, TYPE, OPTS, FIELDS)        \
+    static size_t VAR##_state_size(const void *self)                                          \
+    {                                                                                         \
+        return PREFIX##_state_size((const TYPE *)self);                                        \
+    }                                                                                         \
+    static dk_status VAR##_save_state(const void *self, void *state, size_t size,             \
+                                      dk_error *err)                                          \
+    {                                                                                         \
+        return PREFIX##_save_state((const TYPE *)self, state, size, err);                      \
+    }                                                                                         \
+    static dk_status VAR##_restore_state(void *self, const void *state, size_t size,          \
+                                         dk_error *err)                                       \
+    {                                                                                         \
+        return PREFIX##_restore_state((TYPE *)self, state, size, err);                         \
+    }                                                                                         \
+    DK_METHOD_OPS_WITH(VAR, NAME, FLAGS, CONTROLS, PREFIX, TYPE, OPTS, FIELDS,                 \
+                       .free = VAR##_free, .state_size = VAR##_state_size,                    \
+                       .save_state = VAR##_save_state, .restore_state = VAR##_restore_state)
+
+/* The shared part of DK_METHOD_OPS and DK_METHOD_OPS_STATEFUL; the trailing designated
+ * initializers (at least .free) end the table. */
+#define DK_METHOD_OPS_WITH(VAR, NAME, FLAGS, CONTROLS, PREFIX, TYPE, OPTS, FIELDS, ...)        \
     static void VAR##_default_options(void *options)                                          \
     {                                                                                         \
         PREFIX##_default_options((OPTS *)options);                                             \
@@ -299,8 +339,8 @@ const dk_method_ops *const *dk_methods(void);
                                .solve = VAR##_solve,                                          \
                                .energy = VAR##_energy,                                        \
                                .stats = VAR##_stats,                                          \
-                               .free = VAR##_free,                                            \
-                               .estimate_memory = VAR##_estimate_memory}
+                               .estimate_memory = VAR##_estimate_memory,                      \
+                               __VA_ARGS__}
 
 /** The registered method called `name`, or NULL. */
 const dk_method_ops *dk_method_find(const char *name);
@@ -332,6 +372,44 @@ dk_status dk_start_positions_check(const double *start_positions, dk_index n_ver
  *  while the positions are finite, with the remedy). `who` prefixes the message. */
 dk_status dk_solve_result_check(const double *positions, dk_index n_vertices, double energy,
                                 int check_energy, const char *who, dk_error *err);
+
+/** What a saved state begins with (dk_method_ops.save_state): the method's name and the
+ *  shape of the object it was saved from (the method's own numbers: vertices, constrained
+ *  vertices, unknowns, options that size its buffers), so that a restore into anything
+ *  else is refused by name. Stored byte for byte at the start of the state; the state
+ *  itself may sit at any alignment (Python bytes). */
+typedef struct dk_state_header {
+    char magic[8];        /**< "DKSTATE1"                                                  */
+    char method[32];      /**< the method's name, NUL-padded                               */
+    uint64_t shape[4];    /**< the method's numbers, 0 where unused                        */
+    uint64_t payload;     /**< the bytes after the header                                  */
+} dk_state_header;
+
+/** One run of bytes of a method's state (its iterate, a counter): save and restore walk
+ *  the same list, so that they cannot disagree on what the state holds. */
+typedef struct dk_state_span {
+    void *data;
+    size_t bytes;
+} dk_state_span;
+
+/** sizeof(dk_state_header) plus the spans' bytes: a method's state_size. */
+size_t dk_state_size(const dk_state_span *spans, int n_spans);
+
+/** Writes the header for `method` and `shape`, then the spans, into `state` of `size`
+ *  bytes (DK_ERR_INVALID_ARGUMENT, nothing written, unless size is dk_state_size). */
+dk_status dk_state_save(const char *method, const uint64_t shape[4], const dk_state_span *spans,
+                        int n_spans, void *state, size_t size, dk_error *err);
+
+/** Checks that `state` (`size` bytes) was saved by `method` for `shape` with these spans'
+ *  sizes, naming what differs (another method, another mesh size or constraints, a
+ *  truncated buffer) as DK_ERR_INVALID_ARGUMENT. dk_state_restore_spans then copies it in;
+ *  a method restores what must be set first (a pose) between the two. */
+dk_status dk_state_check(const char *method, const uint64_t shape[4],
+                         const dk_state_span *spans, int n_spans, const void *state,
+                         size_t size, dk_error *err);
+
+/** Copies a checked state's spans back into place. */
+void dk_state_restore_spans(const dk_state_span *spans, int n_spans, const void *state);
 
 /** Checks an energy value before energy() returns it (DK_ERR_NONFINITE when not finite). */
 dk_status dk_energy_result_check(double energy, const char *who, dk_error *err);

@@ -1693,6 +1693,64 @@ dk_status dk_embedded_update_source(dk_embedded *ed, const double *positions, dk
     return DK_OK;
 }
 
+/* The state (dk_method_ops.state_size): the graph's transformations a warm start continues
+ * from, their energy, the targets energy() reads, and the source a solve deforms with its
+ * nodes (update_source). */
+static int ed_state_spans(const dk_embedded *ed_const, dk_state_span *sp)
+{
+    dk_embedded *ed = (dk_embedded *)ed_const; /* save reads through the list restore writes */
+    const size_t D = sizeof(double);
+    int k = 0;
+    sp[k++] = (dk_state_span){ed->x, 12 * (size_t)ed->m * D};
+    sp[k++] = (dk_state_span){&ed->energy, D};
+    sp[k++] = (dk_state_span){ed->sys.targets, 3 * (size_t)ed->sys.con->n_handle_vertices * D};
+    sp[k++] = (dk_state_span){ed->p, 3 * (size_t)ed->n * D};
+    sp[k++] = (dk_state_span){ed->g, 3 * (size_t)ed->m * D};
+    return k;
+}
+
+static void ed_state_shape(const dk_embedded *ed, uint64_t shape[4])
+{
+    shape[0] = (uint64_t)ed->n;
+    shape[1] = (uint64_t)ed->sys.con->n_handle_vertices;
+    shape[2] = (uint64_t)ed->m;
+    shape[3] = (uint64_t)ed->k;
+}
+
+size_t dk_embedded_state_size(const dk_embedded *ed)
+{
+    dk_state_span sp[5];
+    return ed ? dk_state_size(sp, ed_state_spans(ed, sp)) : 0;
+}
+
+dk_status dk_embedded_save_state(const dk_embedded *ed, void *state, size_t size, dk_error *err)
+{
+    if (!ed)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EmbeddedDeformation save_state: object is NULL");
+    dk_state_span sp[5];
+    uint64_t shape[4];
+    ed_state_shape(ed, shape);
+    return dk_state_save("EmbeddedDeformation", shape, sp, ed_state_spans(ed, sp), state, size,
+                         err);
+}
+
+dk_status dk_embedded_restore_state(dk_embedded *ed, const void *state, size_t size,
+                                    dk_error *err)
+{
+    if (!ed)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "EmbeddedDeformation restore_state: object is NULL");
+    dk_state_span sp[5];
+    uint64_t shape[4];
+    ed_state_shape(ed, shape);
+    const int k = ed_state_spans(ed, sp);
+    const dk_status st = dk_state_check("EmbeddedDeformation", shape, sp, k, state, size, err);
+    if (st == DK_OK)
+        dk_state_restore_spans(sp, k, state);
+    return st;
+}
+
 dk_status dk_embedded_deformed(const dk_embedded *ed, double *positions, dk_error *err)
 {
     if (!ed || !positions)
@@ -1987,7 +2045,7 @@ static const dk_option_desc embedded_fields[] = {
     {"seed", DK_OPTION_SEED, offsetof(dk_embedded_options, seed), 0, 0, 0, 1, 0, 0},
 };
 
-DK_METHOD_OPS(dk_embedded_ops, "EmbeddedDeformation",
+DK_METHOD_OPS_STATEFUL(dk_embedded_ops, "EmbeddedDeformation",
               DK_METHOD_ITERATIVE | DK_METHOD_TRANSFORMS_AS_POSITIONS |
               DK_METHOD_TRANSLATION_INVARIANT | DK_METHOD_RIGID_INVARIANT |
               DK_METHOD_PENALTY_HANDLES | DK_METHOD_GRAPH, DK_CONTROL_VERTEX_GROUPS,

@@ -108,6 +108,8 @@ struct dk_py_method_spec {
 PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs);
 PyObject *dk_py_method_rebind(PyObject *obj, PyObject *args, PyObject *kwargs);
 PyObject *dk_py_method_energy(PyObject *obj, PyObject *arg);
+PyObject *dk_py_method_save_state(PyObject *obj, PyObject *unused);
+PyObject *dk_py_method_restore_state(PyObject *obj, PyObject *arg);
 PyObject *dk_py_method_estimate_memory(PyObject *cls, PyObject *args, PyObject *kwargs);
 PyObject *dk_py_method_get_mesh(PyObject *obj, void *closure);
 PyObject *dk_py_method_get_n_vertices(PyObject *obj, void *closure);
@@ -117,6 +119,8 @@ PyObject *dk_py_method_get_stats(PyObject *obj, void *closure);
 PyObject *dk_py_method_get_warnings(PyObject *obj, void *closure);
 extern const char dk_py_method_rebind_doc[];
 extern const char dk_py_method_energy_doc[];
+extern const char dk_py_method_save_state_doc[];
+extern const char dk_py_method_restore_state_doc[];
 extern const char dk_py_method_estimate_memory_doc[];
 
 #define DK_PY_METHOD_METHODS(solve_doc)                                                    \
@@ -125,6 +129,9 @@ extern const char dk_py_method_estimate_memory_doc[];
         {"rebind", (PyCFunction)(void (*)(void))dk_py_method_rebind,                       \
          METH_VARARGS | METH_KEYWORDS, dk_py_method_rebind_doc},                           \
         {"energy", dk_py_method_energy, METH_O, dk_py_method_energy_doc},                  \
+        {"save_state", dk_py_method_save_state, METH_NOARGS, dk_py_method_save_state_doc}, \
+        {"restore_state", dk_py_method_restore_state, METH_O,                              \
+         dk_py_method_restore_state_doc},                                                  \
         {"estimate_memory", (PyCFunction)(void (*)(void))dk_py_method_estimate_memory,      \
          METH_VARARGS | METH_KEYWORDS | METH_CLASS, dk_py_method_estimate_memory_doc}
 

@@ -123,7 +123,8 @@ PyDoc_STRVAR(method_info_doc,
              "iterative, transforms_as_positions, translation_invariant, rigid_invariant,\n"
              "penalty_handles, soft_regions, given_start, edits_input, graph; and\n"
              "'controls', the control kinds its bind takes (dk_controls.h), a tuple of\n"
-             "'vertex_groups', 'points', 'bones', 'cage', 'lattice', 'poses'.\n"
+             "'vertex_groups', 'points', 'bones', 'cage', 'lattice', 'poses'; 'state',\n"
+             "whether it carries state from solve to solve (save_state, restore_state).\n"
              "For code and tests written against the contract.");
 
 static PyObject *py_method_info(PyObject *module, PyObject *arg)
@@ -150,7 +151,8 @@ static PyObject *py_method_info(PyObject *module, PyObject *arg)
     Py_XDECREF(list);
     if (!controls)
         return NULL;
-    PyObject *info = Py_BuildValue("{s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O}", "iterative",
+    PyObject *info = Py_BuildValue("{s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O}",
+                                   "state", ops->state_size ? Py_True : Py_False, "iterative",
                          (f & DK_METHOD_ITERATIVE) ? Py_True : Py_False,
                          "transforms_as_positions",
                          (f & DK_METHOD_TRANSFORMS_AS_POSITIONS) ? Py_True : Py_False,

@@ -775,6 +775,96 @@ const char dk_py_method_energy_doc[] =
              "targets of the last solve (before any solve: the rest targets); the value a\n"
              "solve reports for its own result.";
 
+/* ------------------------------------------------------------------ state -------------- */
+
+/* 1 when the method carries state; else 0 with TypeError set. */
+static int has_state(dk_py_method *self, const char *verb)
+{
+    if (self->spec->ops->state_size)
+        return 1;
+    PyErr_Format(PyExc_TypeError,
+                 "%s.%s: %s carries no state from solve to solve (each solve depends on its "
+                 "request alone): there is nothing to save or restore",
+                 self->spec->name, verb, self->spec->name);
+    return 0;
+}
+
+PyObject *dk_py_method_save_state(PyObject *obj, PyObject *unused)
+{
+    dk_py_method *self = (dk_py_method *)obj;
+    dk_error err = {0};
+    char ctx[80];
+    (void)unused;
+    snprintf(ctx, sizeof ctx, "%s.save_state", self->spec->name);
+    if (!has_state(self, "save_state") || dk_py_method_enter(self) < 0)
+        return NULL;
+    const size_t size = self->spec->ops->state_size(self->native);
+    PyObject *out = PyBytes_FromStringAndSize(NULL, (Py_ssize_t)size);
+    if (!out) {
+        self->busy = 0;
+        return NULL;
+    }
+    char *buf = PyBytes_AsString(out);
+    dk_status st = buf ? DK_OK : DK_ERR_INVALID_ARGUMENT;
+    if (buf) {
+        DK_PY_BEGIN_NATIVE(dk_py_state_of(obj))
+        st = self->spec->ops->save_state(self->native, buf, size, &err);
+        DK_PY_END_NATIVE
+    }
+    self->busy = 0;
+    if (!buf) {
+        Py_DECREF(out);
+        return NULL;
+    }
+    if (st != DK_OK) {
+        Py_DECREF(out);
+        return dk_py_raise(&err, ctx);
+    }
+    return out;
+}
+
+const char dk_py_method_save_state_doc[] =
+             "save_state() -> bytes\n\n"
+             "What the solves left for the next call -- a warm start's iterate and history,\n"
+             "a resumable solve's place, the pose and targets last solved -- for\n"
+             "restore_state: a bake's checkpoint, or the start of a chunk of a shot in\n"
+             "another process. Methods whose solves depend on their request alone\n"
+             "(_method_info(name)['state'] False) raise TypeError.";
+
+PyObject *dk_py_method_restore_state(PyObject *obj, PyObject *arg)
+{
+    dk_py_method *self = (dk_py_method *)obj;
+    dk_error err = {0};
+    char ctx[80];
+    Py_buffer view;
+    snprintf(ctx, sizeof ctx, "%s.restore_state", self->spec->name);
+    if (!has_state(self, "restore_state"))
+        return NULL;
+    if (PyObject_GetBuffer(arg, &view, PyBUF_SIMPLE) < 0)
+        return NULL;
+    if (dk_py_method_enter(self) < 0) {
+        PyBuffer_Release(&view);
+        return NULL;
+    }
+    dk_status st;
+    DK_PY_BEGIN_NATIVE(dk_py_state_of(obj))
+    st = self->spec->ops->restore_state(self->native, view.buf, (size_t)view.len, &err);
+    DK_PY_END_NATIVE
+    self->busy = 0;
+    PyBuffer_Release(&view);
+    if (st != DK_OK)
+        return dk_py_raise(&err, ctx);
+    Py_RETURN_NONE;
+}
+
+const char dk_py_method_restore_state_doc[] =
+             "restore_state(state)\n\n"
+             "Puts back what save_state() returned (any buffer of its bytes), into this\n"
+             "object or another bound on the same mesh with the same constraints and\n"
+             "options: every solve after it returns, bit for bit, what it would have\n"
+             "returned right after the save. A state saved by another method, mesh size,\n"
+             "constraints or options raises ValueError and changes nothing.";
+
 /* ------------------------------------------------------------------ getters ------------ */
 
 /* Whether the object still has its native part (the garbage collector's tp_clear frees it

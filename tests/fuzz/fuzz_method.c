@@ -524,6 +524,40 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                       ops->name);
     }
 
+    /* state (methods that carry it): saved, perhaps damaged (a byte flipped, the buffer cut
+     * short), restored. A refused restore changes nothing; one that is taken continues
+     * as the saved object: its next solve of a request equals the saved object's. */
+    if (ops->state_size && dk_fuzz_u8(&in) % 2 == 0) {
+        const size_t size = ops->state_size(obj);
+        unsigned char *st_buf = malloc(size + 1);
+        double *xs = malloc(N * sizeof(double));
+        if (st_buf && xs && ops->save_state(obj, st_buf, size, &err) == DK_OK) {
+            decode_request(&in, m, &g, &r);
+            const int ok_a = solve(ops, obj, m, &r.rq, xs) == DK_OK;
+            size_t use = size;
+            const uint8_t damage = dk_fuzz_u8(&in);
+            if (damage % 4 == 1)
+                st_buf[dk_fuzz_below(&in, (int)(size < 4096 ? size : 4096))] ^=
+                    (unsigned char)(1 + damage / 4);
+            else if (damage % 4 == 2)
+                use = (size_t)dk_fuzz_below(&in, (int)(size < 4096 ? size : 4096));
+            observe(ops, obj, m, &before);
+            if (ops->restore_state(obj, st_buf, use, &err) != DK_OK) {
+                dk_fuzz_check(err.message[0], "%s restore_state failed without a message",
+                              ops->name);
+                observe(ops, obj, m, &after);
+                same_state(ops, &before, &after, "restore_state");
+            } else if (damage % 4 == 0 && ok_a && r.rq.start != DK_START_GIVEN) {
+                dk_fuzz_check(solve(ops, obj, m, &r.rq, x1) == DK_OK && same_bits(xs, x1, N),
+                              "%s: after restore_state a solve differs from the saved "
+                              "object's",
+                              ops->name);
+            }
+        }
+        free(st_buf);
+        free(xs);
+    }
+
     /* a rebind with new groups; a failed one changes nothing */
     decode_groups(&in, m->n_vertices, &g2);
     observe(ops, obj, m, &before);

@@ -18,7 +18,11 @@
  *     exactly at rest, the counters say how many were held, and a mesh whose every vertex
  *     is constrained gives the constrained motion instead of a refusal;
  *   - every method declares the controls it binds to (dk_controls.h), and a bind given a
- *     control of another kind is refused by name, nothing returned. */
+ *     control of another kind is refused by name, nothing returned;
+ *   - every iterative method carries state (dk_method_ops.state_size): after a save, other
+ *     solves and a restore -- into the same object or a fresh one -- the next solves
+ *     (a resumed one, a warm one, one on a pose) equal bit for bit those of an object that
+ *     was never interrupted; states that do not fit are refused and change nothing. */
 #include <limits.h>
 #include <math.h>
 #include <stdlib.h>
@@ -614,5 +618,182 @@ static void test_controls_declared(void)
     dk_test_mesh_free(&plane);
 }
 
+/* One step of a shot: transforms of both handles (a shift along x and a turn), the start,
+ * an iteration cap (0: as bound) and, for methods that edit their input, whether the
+ * request carries a pose (the rest bent along y). */
+typedef struct shot_step {
+    double shift;
+    dk_start start;
+    int max_iterations, posed;
+} shot_step;
+
+static dk_status shot_solve(const dk_method_ops *ops, void *obj, const scene *s,
+                            const shot_step *k, const double *pose, double *x,
+                            dk_solve_info *info, dk_error *e)
+{
+    double T[32];
+    some_transform(T, k->shift);
+    memcpy(T + 16, T, 16 * sizeof(double));
+    T[16 + 3] -= 2.0 * k->shift;
+    dk_solve_request rq = {.targets = T,
+                           .target_kind = DK_TARGETS_TRANSFORMS,
+                           .start = k->start,
+                           .max_iterations = k->max_iterations};
+    if (k->posed && (ops->flags & DK_METHOD_EDITS_INPUT))
+        rq.input_positions = pose;
+    (void)s;
+    return ops->solve(obj, &rq, x, info, e);
+}
+
+/* Runs steps [from, to) of `shot` on obj; the last solve's positions in x, its info in
+ * *info. 0 on success. */
+static int shot_run(const dk_method_ops *ops, void *obj, const scene *s, const shot_step *shot,
+                    int from, int to, const double *pose, double *x, dk_solve_info *info)
+{
+    for (int k = from; k < to; k++) {
+        dk_error e = {0};
+        if (shot_solve(ops, obj, s, &shot[k], pose, x, info, &e) != DK_OK) {
+            CHECK_MSG(0, "%s: shot step %d: %s", ops->name, k, e.message);
+            return -1;
+        }
+    }
+    return 0;
+}
+
+static int same_solve(const double *x, const dk_solve_info *a, const double *y,
+                      const dk_solve_info *b, size_t n)
+{
+    return memcmp(x, y, n * sizeof(double)) == 0 && a->iterations == b->iterations &&
+           a->converged == b->converged &&
+           memcmp(&a->energy, &b->energy, sizeof a->energy) == 0;
+}
+
+static void check_state(const dk_method_ops *ops, scene *s)
+{
+    const size_t N = 3 * (size_t)s->mesh->n_vertices;
+    /* cold, a warm slice of three iterations (a resumable place), a turn on the pose, then
+     * what must continue exactly: a resume of that slice (three iterations in: Newton
+     * steps, whose resumed products read what the slice left), warm solves on a pose */
+    static const shot_step shot[] = {{0.0, DK_START_COLD, 0, 0}, {0.3, DK_START_WARM, 3, 0},
+                                     {0.3, DK_START_RESUME, 0, 0}, {0.5, DK_START_WARM, 0, 1},
+                                     {0.6, DK_START_WARM, 0, 1}, {0.6, DK_START_RESUME, 0, 1}};
+    const int saved_at = 2, n_steps = (int)(sizeof shot / sizeof shot[0]);
+    double *pose = malloc(N * sizeof(double)), *x = malloc(N * sizeof(double));
+    double *y = malloc(N * sizeof(double));
+    void *a = NULL, *b = NULL, *c = NULL;
+    unsigned char *state = NULL;
+    dk_error e = {0};
+    dk_solve_info ia, ib;
+    if (!pose || !x || !y)
+        goto out;
+    for (size_t i = 0; i < N; i += 3) { /* the rest, bent: y lifted by x^2 / 4 */
+        memcpy(pose + i, s->mesh->positions + i, 3 * sizeof(double));
+        pose[i + 1] += 0.25 * pose[i] * pose[i];
+    }
+    if (ops->bind(s->mesh, &s->desc, NULL, &a, &e) != DK_OK ||
+        ops->bind(s->mesh, &s->desc, NULL, &b, &e) != DK_OK ||
+        ops->bind(s->mesh, &s->desc, NULL, &c, &e) != DK_OK) {
+        CHECK_MSG(0, "%s: bind: %s", ops->name, e.message);
+        goto out;
+    }
+    /* a: never interrupted, the reference */
+    if (shot_run(ops, a, s, shot, 0, n_steps, pose, x, &ia) != 0)
+        goto out;
+    /* b: saved after the first two steps, driven elsewhere, restored, finished */
+    if (shot_run(ops, b, s, shot, 0, saved_at, pose, y, &ib) != 0)
+        goto out;
+    const size_t size = ops->state_size(b);
+    state = malloc(size + 1);
+    if (!state || ops->save_state(b, state, size, &e) != DK_OK) {
+        CHECK_MSG(0, "%s: save_state: %s", ops->name, e.message);
+        goto out;
+    }
+    CHECK(ops->save_state(b, state, size - 1, &e) == DK_ERR_INVALID_ARGUMENT);
+    if (shot_run(ops, b, s, shot, saved_at + 1, n_steps, pose, y, &ib) != 0)
+        goto out;
+    if (ops->restore_state(b, state, size, &e) != DK_OK) {
+        CHECK_MSG(0, "%s: restore_state: %s", ops->name, e.message);
+        goto out;
+    }
+    if (shot_run(ops, b, s, shot, saved_at, n_steps, pose, y, &ib) != 0)
+        goto out;
+    CHECK_MSG(same_solve(x, &ia, y, &ib, N),
+              "%s on %s: restored into itself, the shot ends %g away (%d vs %d iterations)",
+              ops->name, s->name, max_diff(x, y, N), ia.iterations, ib.iterations);
+    /* c: a fresh object given the state (a chunk starting mid-shot); first what must not
+     * fit, which changes nothing */
+    unsigned char *bad = malloc(size);
+    if (bad) {
+        memcpy(bad, state, size);
+        bad[0] ^= 1;
+        CHECK(ops->restore_state(c, bad, size, &e) == DK_ERR_INVALID_ARGUMENT &&
+              strstr(e.message, "not a saved state"));
+        memcpy(bad, state, size);
+        bad[8] = 'Z'; /* the method's name */
+        CHECK(ops->restore_state(c, bad, size, &e) == DK_ERR_INVALID_ARGUMENT &&
+              strstr(e.message, "saved by"));
+        CHECK(ops->restore_state(c, state, size - 1, &e) == DK_ERR_INVALID_ARGUMENT);
+        free(bad);
+    }
+    if (ops->restore_state(c, state, size, &e) != DK_OK) {
+        CHECK_MSG(0, "%s: restore_state into a fresh object: %s", ops->name, e.message);
+        goto out;
+    }
+    if (shot_run(ops, c, s, shot, saved_at, n_steps, pose, y, &ib) != 0)
+        goto out;
+    CHECK_MSG(same_solve(x, &ia, y, &ib, N),
+              "%s on %s: restored into a fresh object, the shot ends %g away (%d vs %d "
+              "iterations)",
+              ops->name, s->name, max_diff(x, y, N), ia.iterations, ib.iterations);
+    /* other constraints (one handle): refused, and the object goes on as before */
+    dk_constraint_desc one = s->desc;
+    one.n_handles = 1;
+    if (ops->rebind(c, &one, &e) == DK_OK) {
+        CHECK_MSG(ops->restore_state(c, state, ops->state_size(c), &e) ==
+                          DK_ERR_INVALID_ARGUMENT &&
+                      strstr(e.message, "bound otherwise"),
+                  "%s: a state of two handles restored into one: '%s'", ops->name, e.message);
+    }
+out:
+    if (a)
+        ops->free(a);
+    if (b)
+        ops->free(b);
+    if (c)
+        ops->free(c);
+    free(state);
+    free(pose);
+    free(x);
+    free(y);
+}
+
+static void test_state(void)
+{
+    dk_test_mesh plane = {0};
+    scene s;
+    int ok = dk_test_bumpy_plane(12, 0.1, &plane) == 0 &&
+             scene_make(&s, "bumpy plane", &plane, 0, -0.99, 0.99, 1, 1, -1.0, 1e-9) == 0;
+    CHECK(ok);
+    if (!ok)
+        return;
+    int stateful = 0;
+    for (const dk_method_ops *const *m = dk_methods(); *m; m++) {
+        const dk_method_ops *o = *m;
+        const int has = o->state_size != NULL;
+        CHECK_MSG(has == (o->save_state != NULL) && has == (o->restore_state != NULL),
+                  "%s: state entries partly set", o->name);
+        /* a warm start reads what the last solve left: every iterative method carries it */
+        CHECK_MSG(!(o->flags & DK_METHOD_ITERATIVE) || has, "%s: iterative without state",
+                  o->name);
+        if (has) {
+            stateful++;
+            check_state(o, &s);
+        }
+    }
+    CHECK(stateful >= 2);
+    scene_free(&s);
+    dk_test_mesh_free(&plane);
+}
+
 DK_TEST_MAIN(test_registry, test_every_method, test_loose_geometry, test_option_fields,
-             test_controls_declared)
+             test_controls_declared, test_state)

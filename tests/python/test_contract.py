@@ -88,7 +88,9 @@ def test_registries_agree():
         assert set(info(name)) == {"iterative", "transforms_as_positions",
                                    "translation_invariant", "rigid_invariant",
                                    "penalty_handles", "soft_regions", "given_start",
-                                   "edits_input", "graph", "controls"}
+                                   "edits_input", "graph", "controls", "state"}
+        # a warm start reads what the last solve left: every iterative method carries state
+        assert info(name)["state"] or not info(name)["iterative"], name
         # the control kinds its bind takes (dk_controls.h): a non-empty tuple of known ids
         kinds = info(name)["controls"]
         assert isinstance(kinds, tuple) and kinds and set(kinds) <= {
@@ -189,6 +191,63 @@ def test_rigid_motion_of_every_constraint(name, scene):
     np.testing.assert_allclose(r.positions[allh], want[allh], atol=tol)
     if flags["rigid_invariant"] or flags["translation_invariant"]:
         np.testing.assert_allclose(r.positions, want, atol=max(tol, 1e-6))
+
+
+@pytest.mark.parametrize("name", dk.METHODS)
+def test_a_restored_state_continues_the_shot(name):
+    """save_state() mid-shot, other solves, restore_state() into the same object and into a
+    fresh one (a chunk in another process): the rest of the shot is bit for bit what an
+    object never interrupted gives. A state that does not fit raises ValueError and changes
+    nothing; a method without state raises TypeError."""
+    scene = SCENES[0]
+    m = bind(name, scene)
+    if not info(name)["state"]:
+        with pytest.raises(TypeError, match="carries no state"):
+            m.save_state()
+        with pytest.raises(TypeError, match="carries no state"):
+            m.restore_state(b"")
+        return
+    n = len(scene[3])
+    pose = scene[1] + [0.0, 0.0, 0.05] * scene[1][:, :1] ** 2
+    edits = info(name)["edits_input"]
+
+    def shot(obj, steps):
+        out = []
+        for k in steps:
+            kw = dict(transforms=[transform(rotation(0.2 * k), (0.1 * k, 0, 0))] * n)
+            if k >= 2 and edits:
+                kw["input_positions"] = pose
+            if k == 1:
+                kw["max_iterations"] = 1   # a slice: the next one resumes it
+            if k == 2:
+                kw = dict(kw, transforms=[transform(rotation(0.2), (0.1, 0, 0))] * n,
+                          resume=True)
+                kw.pop("input_positions", None)
+            out.append(obj.solve(**kw))
+        return out
+
+    ref = shot(bind(name, scene), range(5))
+    shot(m, range(2))
+    state = m.save_state()
+    assert isinstance(state, bytes) and len(state) > 0
+    shot(m, [4, 3])
+    m.restore_state(bytearray(state))
+    fresh = bind(name, scene)
+    fresh.restore_state(memoryview(state))
+    for obj in (m, fresh):
+        got = shot(obj, range(2, 5))
+        for a, b in zip(ref[2:], got):
+            assert np.array_equal(a.positions, b.positions) and a.iterations == b.iterations
+    other = getattr(dk, name)(dk.Mesh(scene[1], scene[2]), handles=scene[3][:1],
+                              fixed=scene[4])
+    before = other.save_state()
+    with pytest.raises(ValueError, match="bound otherwise"):
+        other.restore_state(state)
+    with pytest.raises(ValueError, match="bytes"):
+        m.restore_state(state[:-1])
+    with pytest.raises(TypeError):
+        m.restore_state(42)
+    assert other.save_state() == before
 
 
 @pytest.mark.parametrize("name,scene", CASES, ids=IDS)

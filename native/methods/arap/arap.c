@@ -548,7 +548,7 @@ static const dk_option_desc arap_fields[] = {
     {"basis", DK_OPTION_ENUM, offsetof(dk_arap_options, basis), 0, 0, 1, 0, 1, 0},
 };
 
-DK_METHOD_OPS(dk_arap_ops, "ARAP",
+DK_METHOD_OPS_STATEFUL(dk_arap_ops, "ARAP",
               DK_METHOD_ITERATIVE | DK_METHOD_TRANSFORMS_AS_POSITIONS |
               DK_METHOD_TRANSLATION_INVARIANT | DK_METHOD_RIGID_INVARIANT |
               DK_METHOD_GIVEN_START | DK_METHOD_EDITS_INPUT, DK_CONTROL_VERTEX_GROUPS,

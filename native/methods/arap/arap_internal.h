@@ -30,6 +30,7 @@
  *                 history the predictor keeps
  *   anderson.c    local/global iterations, plain or Anderson-accelerated
  *   newton.c      inexact Newton steps with matrix-free Hessian products
+ *   state.c       the state a solve leaves for the next call, saved and restored
  */
 #ifndef DK_ARAP_INTERNAL_H
 #define DK_ARAP_INTERNAL_H
