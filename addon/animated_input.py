@@ -31,6 +31,26 @@ def depends_on_input(m, d):
     return follows(m) or d.solve_from == "REST"
 
 
+def pose_note(obj, d):
+    """What the panel says when d's method solves on the rest while an Armature above it
+    poses the mesh (and d does not solve from the rest shape between handles where the
+    input puts them): its edit is pasted on the pose in the rest's directions away from the
+    handles (2-6% of the model from a bind on the pose, docs/methods/fundamental.md), with
+    the methods that edit the pose. None otherwise."""
+    m = methods.get(d.method)
+    if depends_on_input(m, d) or not any(mm.type == "ARMATURE"
+                                         for mm in modifiers_above(obj, d)):
+        return None
+    editors = [x.label for x in methods.METHODS if x.id != m.id and follows(x)
+               and native.has_class(x.native_class)]
+    names = (", ".join(editors[:-1]) + " and " + editors[-1]) if len(editors) > 1 else \
+        "".join(editors)
+    return ("%s solves on the rest pose: on the posed mesh its edit keeps the rest's "
+            "directions away from the handles%s" % (
+                m.label, ". %s edit%s the pose" % (names, "" if len(editors) > 1 else "s")
+                if editors else ""))
+
+
 def modifiers_above(obj, d, depsgraph=None):
     """The modifiers above d's own in the stack that are enabled for the depsgraph's mode
     (viewport or render)."""

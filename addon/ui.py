@@ -143,7 +143,7 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
                 hc.prop_search(h, "subtarget", h.target.data, "bones")
             if "handle_weights" in m.maps:
                 hc.prop(h, "use_weights")
-            if animated_input.input_movers(obj, d) is not None:  # an animated input: what the edit does
+            if animated_input.input_movers(obj, d) is not None:  # what the edit does there
                 hc.prop(h, "follow")
         if animated_input.input_movers(obj, d) is not None:
             layout.prop(d, "solve_from")
@@ -183,6 +183,9 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
         fit = solver.fit_warning(obj, d) if d.bound else None
         if fit:
             draw_wrapped(layout, fit, "INFO", width)
+        note = animated_input.pose_note(obj, d) if d.bound else None
+        if note:
+            draw_wrapped(layout, note, "INFO", width)
         if solver.previewing(obj, d):
             layout.label(text="preview: the full result follows when the handles stop",
                          icon="SORTTIME")
