@@ -117,6 +117,9 @@ typedef struct dk_method_stats {
                                       geometry, dk_constraints.h)                          */
     dk_index n_held_components;  /**< the components they make up                          */
     dk_index first_held;         /**< the smallest held vertex, -1 when none                */
+    dk_index n_controls;         /**< points of the control a method binds to (lattice
+                                      points, cage vertices: dk_controls.h), 0 for the
+                                      vertex-group methods                                 */
     dk_index n_graph_nodes;      /**< nodes of the deformation graph (embedded deformation),
                                       0 for methods without one; more nodes than vertices
                                       make a floppy graph (docs/methods/embedded.md)       */
@@ -158,8 +161,13 @@ typedef enum dk_method_flags {
     DK_METHOD_EDITS_INPUT = 128,           /**< takes request.input_positions: edits the
                                                 pose it is given for this frame, without
                                                 binding again                             */
-    DK_METHOD_GRAPH = 256                  /**< deforms through a graph of its own, whose
+    DK_METHOD_GRAPH = 256,                 /**< deforms through a graph of its own, whose
                                                 nodes stats.n_graph_nodes counts           */
+    DK_METHOD_LINEAR_PRECISION = 512       /**< binds to a control (dk_controls.h) and an
+                                                affine map of the control's points moves
+                                                every vertex by that map (a lattice, a cage
+                                                with mean value coordinates; not Shepard's
+                                                interpolation)                             */
 } dk_method_flags;
 
 /** What one field of a method's options struct holds (dk_option_desc). */

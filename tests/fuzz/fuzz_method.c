@@ -181,19 +181,29 @@ static void decode_groups(dk_fuzz_input *in, dk_index n, groups *g)
     }
 }
 
-/* One bind in eight carries a control of any kind, every field decoded within its buffer
- * (n_controls, resolution and triangle corners may still be wrong, values non-finite):
- * dk_control_check must refuse the malformed ones with a message, and a method whose table
- * does not take the kind must refuse the bind. */
-static void decode_control(dk_fuzz_input *in, dk_index n, groups *g)
+/* One bind in eight carries a control of any kind -- every bind of a method that takes no
+ * vertex groups, mostly of its own kind (`own`: its table's controls) -- every field
+ * decoded within its buffer (n_controls, resolution and triangle corners may still be
+ * wrong, values non-finite): dk_control_check must refuse the malformed ones with a
+ * message, and a method whose table does not take the kind must refuse the bind. */
+static void decode_control(dk_fuzz_input *in, const dk_mesh *m, unsigned own, groups *g)
 {
-    if (dk_fuzz_u8(in) % 8 != 0 || n > MAX_V)
+    const dk_index n = m->n_vertices;
+    const int controlled = !(own & DK_CONTROL_VERTEX_GROUPS);
+    if ((!controlled && dk_fuzz_u8(in) % 8 != 0) || n > MAX_V)
         return;
     dk_control_desc *c = &g->control;
     c->kind = (dk_control_kind)(1u << dk_fuzz_below(in, 7)); /* 64: not a kind */
+    if (controlled && dk_fuzz_u8(in) % 8 != 0)
+        c->kind = (dk_control_kind)(own & (0u - own)); /* its first kind */
     c->n_controls = dk_fuzz_below(in, MAX_CONTROLS + 1);
     for (int k = 0; k < 3; k++)
         c->resolution[k] = c->kind == DK_CONTROL_LATTICE ? dk_fuzz_below(in, 3) + 1 : 0;
+    if (c->kind == DK_CONTROL_LATTICE && dk_fuzz_u8(in) % 8 != 0) { /* mostly consistent */
+        for (int k = 0; k < 3; k++)
+            c->resolution[k] = c->resolution[k] < 2 ? 2 : c->resolution[k];
+        c->n_controls = c->resolution[0] * c->resolution[1] * c->resolution[2];
+    }
     const size_t per = c->kind == DK_CONTROL_POSES ? 3 * (size_t)n
                        : c->kind == DK_CONTROL_BONES || c->kind == DK_CONTROL_LATTICE ? 16
                                                                                       : 3;
@@ -208,6 +218,26 @@ static void decode_control(dk_fuzz_input *in, dk_index n, groups *g)
                 m[15] = 1.0;
             }
         }
+    if (c->kind == DK_CONTROL_LATTICE && dk_fuzz_u8(in) % 4 != 0) {
+        /* mostly a box around the mesh, grown or shrunk a little (vertices in and out) */
+        double lo[3], hi[3];
+        for (int d = 0; d < 3; d++)
+            lo[d] = hi[d] = m->positions[d];
+        for (dk_index v = 0; v < n; v++)
+            for (int d = 0; d < 3; d++) {
+                lo[d] = fmin(lo[d], m->positions[3 * v + d]);
+                hi[d] = fmax(hi[d], m->positions[3 * v + d]);
+            }
+        double *f = g->control_rest;
+        memset(f, 0, 16 * sizeof(double));
+        for (int d = 0; d < 3; d++) {
+            const double w = hi[d] - lo[d] > 0 ? hi[d] - lo[d] : 1.0;
+            const double grow = ((double)(dk_fuzz_u8(in) % 9) - 2) / 16.0;
+            f[5 * d] = w * (1.0 + 2.0 * grow);
+            f[4 * d + 3] = lo[d] - grow * w;
+        }
+        f[15] = 1.0;
+    }
     c->rest = dk_fuzz_u8(in) % 16 == 0 ? NULL : g->control_rest;
     if (c->kind == DK_CONTROL_CAGE) {
         c->n_triangles = dk_fuzz_below(in, MAX_CAGE_TRIS + 1);
@@ -356,6 +386,32 @@ static void decode_request(dk_fuzz_input *in, const dk_mesh *m, const groups *g,
     r->rq.preview = (c >> 6) == 3 ? 1 : 0; /* a quarter of the requests are previews */
     r->rq.targets = r->targets;
     const int raw = dk_fuzz_u8(in) % 32 == 0;
+    const dk_control_desc *ctl = g->desc.control;
+    if (ctl && ctl->rest && ctl->n_controls > 0 && dk_control_target_count(ctl) <= 192 &&
+        dk_fuzz_u8(in) % 8 != 0) {
+        /* the control's points near their rest (a lattice's from its box), as positions */
+        r->rq.target_kind = DK_TARGETS_POSITIONS;
+        const size_t cnt = dk_control_target_count(ctl);
+        for (size_t k = 0; k < cnt; k++) {
+            double base = 0.0;
+            if (ctl->kind == DK_CONTROL_LATTICE) {
+                const dk_index q = (dk_index)(k / 3), res0 = ctl->resolution[0] > 1
+                                                              ? ctl->resolution[0] : 2;
+                const dk_index res1 = ctl->resolution[1] > 1 ? ctl->resolution[1] : 2;
+                const dk_index res2 = ctl->resolution[2] > 1 ? ctl->resolution[2] : 2;
+                const double u[3] = {(double)(q % res0) / (res0 - 1),
+                                     (double)((q / res0) % res1) / (res1 - 1),
+                                     (double)(q / (res0 * res1)) / (res2 - 1)};
+                const double *f = ctl->rest + 4 * (k % 3);
+                base = f[0] * u[0] + f[1] * u[1] + f[2] * u[2] + f[3];
+            } else if (ctl->kind == DK_CONTROL_POINTS || ctl->kind == DK_CONTROL_CAGE) {
+                base = ctl->rest[k];
+            }
+            const uint8_t b = dk_fuzz_u8(in);
+            r->targets[k] = raw ? dk_fuzz_raw_double(in)
+                                : base + 0.5 * diag * ((double)(b % 33) - 16) / 16.0;
+        }
+    }
     dk_index off = 0;
     for (dk_index h = 0; h < g->desc.n_handles; h++) {
         const dk_index k = g->sizes[h];
@@ -477,7 +533,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     memset(&o, 0, sizeof o);
     memset(&x, 0, sizeof x);
     decode_groups(&in, m->n_vertices, &g);
-    decode_control(&in, m->n_vertices, &g);
+    decode_control(&in, m, ops->controls, &g);
     const void *opts = decode_options(&in, ops, m, &o, &x);
 
     void *obj = NULL;
@@ -560,6 +616,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 
     /* a rebind with new groups; a failed one changes nothing */
     decode_groups(&in, m->n_vertices, &g2);
+    decode_control(&in, m, ops->controls, &g2);
     observe(ops, obj, m, &before);
     if (ops->rebind(obj, &g2.desc, &err) != DK_OK) {
         dk_fuzz_check(err.message[0], "%s rebind failed without a message", ops->name);

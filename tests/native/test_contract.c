@@ -17,6 +17,11 @@
  *     unconstrained floating triangle binds with every method, every held vertex stays
  *     exactly at rest, the counters say how many were held, and a mesh whose every vertex
  *     is constrained gives the constrained motion instead of a refusal;
+ *   - a method bound to a control (dk_controls.h: a lattice here) instead of vertex groups:
+ *     zero motion returns the rest bit for bit, a translation of the control translates
+ *     the mesh, an affine map moves it by that map (DK_METHOD_LINEAR_PRECISION), cold solves
+ *     repeat, the energy matches, a refused request changes nothing, an input pose is
+ *     returned when the control stays, a rebind equals a fresh bind;
  *   - every method declares the controls it binds to (dk_controls.h), and a bind given a
  *     control of another kind is refused by name, nothing returned;
  *   - every iterative method carries state (dk_method_ops.state_size): after a save, other
@@ -111,8 +116,173 @@ static void apply(const double T[16], const double *p, double *out)
         out[d] = T[4 * d] * p[0] + T[4 * d + 1] * p[1] + T[4 * d + 2] * p[2] + T[4 * d + 3];
 }
 
+/* What a method bound to a control (not to vertex groups) binds with on a scene: the
+ * control around the scene's mesh and its points at rest (the targets of no motion). */
+typedef struct control_scene {
+    dk_control_desc control;
+    dk_constraint_desc desc;
+    double frame[16];
+    double *rest; /* n_controls x 3 */
+} control_scene;
+
+static void control_scene_free(control_scene *c)
+{
+    free(c->rest);
+    memset(c, 0, sizeof *c);
+}
+
+/* A lattice of 3 x 4 x 3 points over the mesh's bounding box grown by a tenth of it (the
+ * kinds a method may take, first match). 0 on success; -1 for a kind this test has no
+ * scene for: a new kind needs its scene here. */
+static int control_scene_make(const dk_method_ops *o, const scene *s, control_scene *c)
+{
+    memset(c, 0, sizeof *c);
+    if (!(o->controls & DK_CONTROL_LATTICE))
+        return -1;
+    const dk_mesh *m = s->mesh;
+    double lo[3], hi[3];
+    for (int d = 0; d < 3; d++)
+        lo[d] = hi[d] = m->positions[d];
+    for (dk_index v = 0; v < m->n_vertices; v++)
+        for (int d = 0; d < 3; d++) {
+            lo[d] = fmin(lo[d], m->positions[3 * v + d]);
+            hi[d] = fmax(hi[d], m->positions[3 * v + d]);
+        }
+    for (int d = 0; d < 3; d++) {
+        const double pad = 0.1 * (hi[d] - lo[d]) + 1e-3 * s->diag;
+        c->frame[5 * d] = hi[d] - lo[d] + 2 * pad;
+        c->frame[4 * d + 3] = lo[d] - pad;
+    }
+    c->frame[15] = 1.0;
+    const dk_index res[3] = {3, 4, 3};
+    c->control = (dk_control_desc){.kind = DK_CONTROL_LATTICE, .n_controls = 36, .rest = c->frame,
+                                   .resolution = {res[0], res[1], res[2]}};
+    c->rest = malloc(3 * 36 * sizeof(double));
+    if (!c->rest)
+        return -1;
+    for (int k = 0, q = 0; k < res[2]; k++)
+        for (int j = 0; j < res[1]; j++)
+            for (int i = 0; i < res[0]; i++, q++) {
+                const double u[3] = {(double)i / (res[0] - 1), (double)j / (res[1] - 1),
+                                     (double)k / (res[2] - 1)};
+                for (int d = 0; d < 3; d++)
+                    c->rest[3 * q + d] = c->frame[5 * d] * u[d] + c->frame[4 * d + 3];
+            }
+    c->desc.control = &c->control;
+    return 0;
+}
+
+/* The contract for a method bound to a control (see the file's comment). */
+static void check_control_method(const dk_method_ops *ops, scene *s)
+{
+    const dk_index n = s->mesh->n_vertices;
+    const size_t N = 3 * (size_t)n;
+    control_scene c;
+    if (control_scene_make(ops, s, &c) != 0) {
+        CHECK_MSG(0, "%s: no contract scene for its controls %#x", ops->name, ops->controls);
+        return;
+    }
+    const size_t nt = 3 * (size_t)c.control.n_controls;
+    double *x = malloc(sizeof(double) * N), *y = malloc(sizeof(double) * N);
+    double *t = malloc(sizeof(double) * nt);
+    void *m = NULL, *fresh = NULL;
+    dk_error e = {0};
+    dk_solve_info info;
+    if (!x || !y || !t || ops->bind(s->mesh, &c.desc, NULL, &m, &e) != DK_OK) {
+        CHECK_MSG(0, "%s on %s: bind: %s", ops->name, s->name, e.message);
+        goto out;
+    }
+    dk_method_stats st;
+    ops->stats(m, &st);
+    CHECK_MSG(st.n_vertices == n && st.n_controls == c.control.n_controls,
+              "%s: stats %d vertices, %d controls", ops->name, (int)st.n_vertices,
+              (int)st.n_controls);
+    /* no motion: the rest, bit for bit */
+    dk_solve_request rq = {.targets = c.rest};
+    CHECK_MSG(ops->solve(m, &rq, x, &info, &e) == DK_OK && memcmp(x, s->mesh->positions,
+                                                                  N * sizeof(double)) == 0,
+              "%s on %s: the control at rest moves the mesh (%s)", ops->name, s->name,
+              e.message);
+    /* a translation translates; an affine map maps (linear precision) */
+    double T[16];
+    some_transform(T, 0.0);
+    for (int affine = 0; affine < 2; affine++) {
+        if (affine && !(ops->flags & DK_METHOD_LINEAR_PRECISION))
+            continue;
+        for (size_t k = 0; k < nt; k += 3) {
+            if (affine)
+                apply(T, c.rest + k, t + k);
+            else
+                for (int d = 0; d < 3; d++)
+                    t[k + d] = c.rest[k + d] + T[4 * d + 3];
+        }
+        rq.targets = t;
+        double worst = INFINITY;
+        if (ops->solve(m, &rq, x, &info, &e) == DK_OK) {
+            worst = 0.0;
+            for (dk_index v = 0; v < n; v++) {
+                double want[3];
+                if (affine)
+                    apply(T, s->mesh->positions + 3 * v, want);
+                else
+                    for (int d = 0; d < 3; d++)
+                        want[d] = s->mesh->positions[3 * v + d] + T[4 * d + 3];
+                for (int d = 0; d < 3; d++)
+                    worst = fmax(worst, fabs(x[3 * v + d] - want[d]));
+            }
+            double en = NAN;
+            CHECK(ops->energy(m, x, &en, &e) == DK_OK &&
+                  fabs(en - info.energy) <= 1e-9 * fmax(1.0, fabs(info.energy)));
+        }
+        CHECK_MSG(worst <= 1e-9 * s->diag, "%s on %s: the control %s moves the mesh %g off",
+                  ops->name, s->name, affine ? "mapped affinely" : "translated", worst);
+    }
+    /* cold solves repeat, whatever came between; a refused request changes nothing */
+    for (size_t k = 0; k < nt; k++)
+        t[k] = c.rest[k] + 0.05 * sin(3.0 * (double)k) * s->diag;
+    rq.targets = t;
+    CHECK(ops->solve(m, &rq, x, NULL, &e) == DK_OK);
+    double *bad = malloc(sizeof(double) * nt);
+    if (bad) {
+        memcpy(bad, t, sizeof(double) * nt);
+        bad[nt / 2] = NAN;
+        dk_solve_request brq = {.targets = bad};
+        CHECK(ops->solve(m, &brq, y, NULL, &e) != DK_OK && e.message[0]);
+        free(bad);
+    }
+    CHECK(ops->solve(m, &rq, y, NULL, &e) == DK_OK && memcmp(x, y, N * sizeof(double)) == 0);
+    /* an input pose with the control at rest: the input */
+    if (ops->flags & DK_METHOD_EDITS_INPUT) {
+        for (size_t k = 0; k < N; k++)
+            y[k] = s->mesh->positions[k] + 0.02 * cos((double)k) * s->diag;
+        dk_solve_request irq = {.targets = c.rest, .input_positions = y};
+        double *z = malloc(sizeof(double) * N);
+        CHECK(z && ops->solve(m, &irq, z, NULL, &e) == DK_OK && memcmp(z, y, N * sizeof(double)) == 0);
+        free(z);
+    }
+    /* a rebind with the same control equals a fresh bind */
+    CHECK(ops->rebind(m, &c.desc, &e) == DK_OK && ops->solve(m, &rq, x, NULL, &e) == DK_OK);
+    if (ops->bind(s->mesh, &c.desc, NULL, &fresh, &e) == DK_OK &&
+        ops->solve(fresh, &rq, y, NULL, &e) == DK_OK)
+        CHECK_MSG(memcmp(x, y, N * sizeof(double)) == 0, "%s: rebind differs from a bind",
+                  ops->name);
+out:
+    if (m)
+        ops->free(m);
+    if (fresh)
+        ops->free(fresh);
+    free(x);
+    free(y);
+    free(t);
+    control_scene_free(&c);
+}
+
 static void check_method(const dk_method_ops *ops, scene *s)
 {
+    if (!(ops->controls & DK_CONTROL_VERTEX_GROUPS)) {
+        check_control_method(ops, s);
+        return;
+    }
     const dk_index n = s->mesh->n_vertices;
     const size_t N = 3 * (size_t)n;
     const double tol = 1e-9 * s->diag;
@@ -395,6 +565,8 @@ static void test_loose_geometry(void)
             t[3 * k + c] = p[3 * s.hv[k] + c] + (c == 2 ? 0.2 : 0.0);
     for (const dk_method_ops *const *m = dk_methods(); *m; m++) {
         const dk_method_ops *o = *m;
+        if (!(o->controls & DK_CONTROL_VERTEX_GROUPS))
+            continue; /* a control moves every vertex: nothing is loose */
         void *obj = NULL;
         dk_error e = {0};
         dk_status st = o->bind(s.mesh, &s.desc, NULL, &obj, &e);
@@ -435,6 +607,8 @@ static void test_loose_geometry(void)
     all.fixed_vertices = rest;
     for (const dk_method_ops *const *m = dk_methods(); *m; m++) {
         const dk_method_ops *o = *m;
+        if (!(o->controls & DK_CONTROL_VERTEX_GROUPS))
+            continue; /* no vertex is constrained by a control */
         void *obj = NULL;
         dk_error e = {0};
         dk_status st = o->bind(s.mesh, &all, NULL, &obj, &e);
@@ -492,7 +666,13 @@ static dk_status bind_with(const dk_method_ops *o, const scene *s, const dk_opti
         return dk_error_set(e, DK_ERR_INTERNAL, "options struct over 1 KiB");
     o->default_options(opt.bytes);
     set_field(opt.bytes, f, v);
-    const dk_status st = o->bind(s->mesh, &s->desc, opt.bytes, &obj, e);
+    control_scene c;
+    const int controlled = !(o->controls & DK_CONTROL_VERTEX_GROUPS);
+    if (controlled && control_scene_make(o, s, &c) != 0)
+        return dk_error_set(e, DK_ERR_INTERNAL, "no contract scene for %s's controls", o->name);
+    const dk_status st = o->bind(s->mesh, controlled ? &c.desc : &s->desc, opt.bytes, &obj, e);
+    if (controlled)
+        control_scene_free(&c);
     if (st == DK_OK)
         o->free(obj);
     return st;
