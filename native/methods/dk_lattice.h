@@ -102,6 +102,12 @@ dk_status dk_lattice_energy(const dk_lattice *lattice, const double *positions, 
                             dk_error *err);
 
 void dk_lattice_stats(const dk_lattice *lattice, dk_method_stats *stats);
+
+/** The bound lattice: its points along x, y, z (`resolution`, 3), its box (`frame`, 16:
+ *  the unit cube onto the box, row-major) and its points at rest (`rest`, n_controls x 3,
+ *  x fastest), each NULL when not wanted. */
+void dk_lattice_get(const dk_lattice *lattice, dk_index *resolution, double *frame,
+                    double *rest);
 void dk_lattice_free(dk_lattice *lattice);
 
 /** Peak bytes of a bind (dk_method_ops.estimate_memory): the registration's weights, per

@@ -246,6 +246,7 @@ PyObject *dk_py_new_solve_result(PyObject *module, PyObject *positions, double e
     M(embedded, "EmbeddedDeformation")                                                     \
     M(eigen, "EigenDeformation")                                                           \
     M(fundamental, "LinearReconstruction")                                                 \
+    M(lattice, "Lattice")                                                                  \
     X(cholesky)
 
 #define DK_PY_DECLARE_PART(part) int dk_py_init_##part(PyObject *module);

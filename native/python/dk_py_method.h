@@ -37,6 +37,9 @@ typedef struct dk_py_method_spec dk_py_method_spec;
 /** The size of a method's pending solve keywords (see dk_py_method_spec.solve_extra). */
 #define DK_PY_EXTRA_MAX 64
 
+/** The size of a control read from keywords (see dk_py_method_spec.parse_control). */
+#define DK_PY_CONTROL_MAX 512
+
 /** The Python object of every method. */
 typedef struct dk_py_method {
     PyObject_HEAD
@@ -93,6 +96,17 @@ struct dk_py_method_spec {
     /** Optional: the native object's rebind reports progress: installs the callback for
      *  the following rebinds (p NULL: removes it); rebind(progress=...) then exists. */
     void (*rebind_progress)(void *native, dk_py_progress *p);
+    /** Optional: the method binds to a control (dk_controls.h: a lattice, a cage...)
+     *  instead of vertex groups. Reads it from the constructor's or rebind's keywords `kw`
+     *  (taking them out, like parse_options) for `mesh` into `store` (DK_PY_CONTROL_MAX
+     *  bytes, zeroed, max_align_t-aligned), whose first member is the dk_control_desc the
+     *  bind gets; `bound` is NULL for the constructor (absent keywords: the defaults), the
+     *  bound native object for rebind (absent keywords: its current values). Returns 0, or
+     *  -1 with an exception set. Such a method's constructor takes the mesh and keywords
+     *  only (no handles), its rebind the control's keywords, and its solve the control's
+     *  targets (stats.n_controls rows). */
+    int (*parse_control)(PyObject *kw, const dk_mesh *mesh, const void *bound, void *store,
+                         const char *context);
     /** 1: the bind runs under the module's ARPACK lock (ARPACK is not reentrant). */
     int serialise_bind;
     /** Optional: the `stats` dict; default: the contract's counters. */

@@ -263,6 +263,11 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
 {
     static char *kwlist[] = {"mesh", "handles", "fixed", "roi", "handle_weights", "stiffness",
                              NULL};
+    static char *kwlist_control[] = {"mesh", NULL};
+    union {
+        max_align_t align;
+        unsigned char bytes[DK_PY_CONTROL_MAX];
+    } control;
     PyObject *mesh_obj, *handles, *fixed = Py_None, *roi = Py_None, *hw = Py_None;
     PyObject *stiffness = Py_None, *mine = NULL, *rest = NULL;
     PyObject *module = PyType_GetModule(type);
@@ -279,6 +284,10 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
     char fmt[64], where[80];
 
     memset(&prog, 0, sizeof prog);
+    memset(&control, 0, sizeof control);
+    memset(&con, 0, sizeof con);
+    memset(&stiff, 0, sizeof stiff);
+    const int controlled = spec->parse_control != NULL;
 
     if (!module)
         return NULL;
@@ -286,23 +295,32 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
         PyErr_Format(PyExc_SystemError, "%s: options struct too large", spec->name);
         return NULL;
     }
-    snprintf(fmt, sizeof fmt, "OO|OOOO:%s", spec->name);
+    snprintf(fmt, sizeof fmt, controlled ? "O:%s" : "OO|OOOO:%s", spec->name);
     snprintf(where, sizeof where, "%s()", spec->name);
-    if (split_keywords(kwargs, kwlist, &mine, &rest) < 0)
+    if (split_keywords(kwargs, controlled ? kwlist_control : kwlist, &mine, &rest) < 0)
         return NULL;
     spec->default_options(&opt);
-    int ok = PyArg_ParseTupleAndKeywords(args, mine, fmt, kwlist, &mesh_obj, &handles, &fixed,
-                                         &roi, &hw, &stiffness) &&
+    int ok = (controlled ? PyArg_ParseTupleAndKeywords(args, mine, fmt, kwlist_control,
+                                                       &mesh_obj)
+                         : PyArg_ParseTupleAndKeywords(args, mine, fmt, kwlist, &mesh_obj,
+                                                       &handles, &fixed, &roi, &hw,
+                                                       &stiffness)) &&
              (!spec->bind_progress || dk_py_progress_take(rest, module, spec->name, &prog) == 0) &&
-             spec->parse_options(rest, &opt, spec->name) == 0 &&
-             refuse_leftovers(rest, where) == 0;
+             spec->parse_options(rest, &opt, spec->name) == 0;
+    /* mesh_obj ... borrow from `mine`, which stays alive until the end */
+    const dk_mesh *mesh = ok ? dk_py_mesh_get(module, mesh_obj, "mesh") : NULL;
+    ok = mesh &&
+         (!controlled || spec->parse_control(rest, mesh, NULL, control.bytes, spec->name) == 0) &&
+         refuse_leftovers(rest, where) == 0;
     Py_DECREF(rest);
     if (ok && prog.callable)
         spec->bind_progress(&opt, &prog);
-    /* mesh_obj ... borrow from `mine`, which stays alive until the end */
-    const dk_mesh *mesh = ok ? dk_py_mesh_get(module, mesh_obj, "mesh") : NULL;
-    if (!mesh || read_all(spec, handles, fixed, roi, hw, stiffness, mesh->n_vertices,
-                          spec->name, &con, &stiff) < 0) {
+    if (ok && controlled) {
+        con.desc.control = (const dk_control_desc *)control.bytes;
+        handles = fixed = roi = hw = stiffness = Py_None;
+    }
+    if (!ok || (!controlled && read_all(spec, handles, fixed, roi, hw, stiffness,
+                                        mesh->n_vertices, spec->name, &con, &stiff) < 0)) {
         if (spec->release_options)
             spec->release_options(&opt);
         dk_py_progress_release(&prog);
@@ -512,8 +530,15 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
         refuse_leftovers(rest, "solve()") < 0)
         goto fail_busy;
     spec->ops->stats(self->native, &ms);
-    if (dk_py_lap_read_solve_input(targets, transforms, ms.n_handles, ms.n_handle_vertices,
-                                   ctx, &in, &mode) < 0)
+    if (ms.n_controls > 0 && transforms != Py_None) {
+        PyErr_Format(PyExc_TypeError, "%s: takes the positions of its %d control points "
+                     "(targets), not transforms", ctx, (int)ms.n_controls);
+        goto fail_busy;
+    }
+    /* a method bound to a control: its points' positions are the targets */
+    if (dk_py_lap_read_solve_input(targets, transforms, ms.n_controls ? 0 : ms.n_handles,
+                                   ms.n_controls ? ms.n_controls : ms.n_handle_vertices, ctx,
+                                   &in, &mode) < 0)
         goto fail_busy;
     if (start_obj != Py_None) { /* read and checked for every method, used by some */
         if (dk_py_read_doubles(start_obj, self->mesh->n_vertices, 3, "start_positions",
@@ -649,8 +674,53 @@ const char dk_py_method_estimate_memory_doc[] =
 
 /* ------------------------------------------------------------------ rebind, energy ----- */
 
+/* rebind(**control keywords) of a method bound to a control: another control for the same
+ * mesh and options; on error the previous one stays. */
+static PyObject *control_rebind(dk_py_method *self, PyObject *args, PyObject *kwargs)
+{
+    char ctx[80];
+    union {
+        max_align_t align;
+        unsigned char bytes[DK_PY_CONTROL_MAX];
+    } control;
+    dk_error err = {0};
+    snprintf(ctx, sizeof ctx, "%s.rebind", self->spec->name);
+    memset(&control, 0, sizeof control);
+    if (args && PyTuple_Size(args) > 0) {
+        PyErr_Format(PyExc_TypeError, "%s: takes keywords only (the control's)", ctx);
+        return NULL;
+    }
+    PyObject *kw = kwargs ? PyDict_Copy(kwargs) : PyDict_New();
+    if (!kw)
+        return NULL;
+    if (dk_py_method_enter(self) < 0) {
+        Py_DECREF(kw);
+        return NULL;
+    }
+    if (self->spec->parse_control(kw, self->mesh, self->native, control.bytes, ctx) < 0 ||
+        refuse_leftovers(kw, ctx) < 0) {
+        self->busy = 0;
+        Py_DECREF(kw);
+        return NULL;
+    }
+    Py_DECREF(kw);
+    dk_constraint_desc desc;
+    memset(&desc, 0, sizeof desc);
+    desc.control = (const dk_control_desc *)control.bytes;
+    dk_status st;
+    DK_PY_BEGIN_NATIVE(dk_py_state_of((PyObject *)self))
+    st = self->spec->ops->rebind(self->native, &desc, &err);
+    DK_PY_END_NATIVE
+    self->busy = 0;
+    if (st != DK_OK)
+        return dk_py_raise(&err, ctx);
+    Py_RETURN_NONE;
+}
+
 PyObject *dk_py_method_rebind(PyObject *obj, PyObject *args, PyObject *kwargs)
 {
+    if (((dk_py_method *)obj)->spec->parse_control)
+        return control_rebind((dk_py_method *)obj, args, kwargs);
     static char *kwlist[] = {"handles", "fixed", "roi", "handle_weights", "stiffness", NULL};
     dk_py_method *self = (dk_py_method *)obj;
     PyObject *handles = NULL, *fixed = NULL, *roi = NULL, *hw = NULL, *stiffness = NULL;
@@ -965,6 +1035,15 @@ PyObject *dk_py_method_get_stats(PyObject *obj, void *c)
     }
     Py_DECREF(a);
     Py_DECREF(b);
+    if (ms.n_controls > 0) { /* a method bound to a control: its points */
+        PyObject *k = PyLong_FromSsize_t((Py_ssize_t)ms.n_controls);
+        if (!k || PyDict_SetItemString(d, "n_controls", k) < 0) {
+            Py_XDECREF(k);
+            Py_DECREF(d);
+            return NULL;
+        }
+        Py_DECREF(k);
+    }
     return d;
 }
 

@@ -55,6 +55,16 @@ def pytest_configure(config):
         "tests take the same code paths")
 
 
+def _controls(name):
+    return deformkit._native._method_info(name)["controls"]
+
+
+# The methods driven by vertex groups of the mesh (handles, fixed, region): the tests that
+# bind with handles run over these. The methods bound to a control instead (dk_controls.h:
+# a lattice) have their own contract tests (test_contract.py) and files.
+GROUP_METHODS = tuple(m for m in deformkit.METHODS if "vertex_groups" in _controls(m))
+CONTROL_METHODS = tuple(m for m in deformkit.METHODS if m not in GROUP_METHODS)
+
 SHARED_MESHES = pathlib.Path(
     os.environ.get("DK_SHARED_DIR", pathlib.Path(__file__).resolve().parents[2] / ".." / "shared")
 ) / "meshes"

@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 
 import deformkit as dk
-from conftest import SHARED_MESHES
+from conftest import GROUP_METHODS, SHARED_MESHES
 
 MESH = SHARED_MESHES / "arm.obj"
 CHILD_TIMEOUT = 180.0   # s; a child binds all six methods on these 8k vertices in ~5 s
@@ -55,7 +55,7 @@ class Scene:
         self.scale = float(np.ptp(v, axis=0).max())
         self.reference = {}
         self.objects = {}
-        for name in dk.METHODS:
+        for name in GROUP_METHODS:
             m = self.bind(name)
             self.reference[name] = np.asarray(m.solve(self.targets, **_solve_kw(name)).positions)
             self.objects[name] = m       # solved: its pools and helper thread are live
@@ -78,9 +78,9 @@ class BusySolvers:
 
     def __init__(self, scene):
         self.stop = threading.Event()
-        self.in_solve = {name: threading.Event() for name in dk.METHODS}
+        self.in_solve = {name: threading.Event() for name in GROUP_METHODS}
         self.threads = [threading.Thread(target=self._loop, args=(scene, name), daemon=True)
-                        for name in dk.METHODS]
+                        for name in GROUP_METHODS]
 
     def _loop(self, scene, name):
         m = scene.objects[name]
@@ -106,7 +106,7 @@ def child_work(scene, out_fd):
     """In the child: bind and solve every method, and solve every inherited object (some of
     them were mid-solve in a thread that does not exist here). Writes a JSON report."""
     report = {}
-    for name in dk.METHODS:
+    for name in GROUP_METHODS:
         entry = {}
         try:
             m = scene.bind(name)
@@ -140,7 +140,7 @@ def _read_all(fd):
 def _check(report_text, how):
     assert report_text, "%s: the child wrote no report" % how
     report = json.loads(report_text)
-    for name in dk.METHODS:
+    for name in GROUP_METHODS:
         for key in ("fresh", "fresh_again", "inherited"):
             got = report[name][key]
             assert not isinstance(got, str), "%s child, %s %s: %s" % (how, name, key, got)
@@ -235,7 +235,7 @@ def test_child_binds_and_solves_after_fork_during_solves(scene, how):
     text = wait()    # the parent's solver threads have stopped: the child runs alone
     _check(text, how)
     # and the parent's objects are unaffected by the fork
-    for name in dk.METHODS:
+    for name in GROUP_METHODS:
         r = scene.objects[name].solve(scene.targets, **_solve_kw(name))
         assert scene.error(name, r.positions) < 1e-6
 
@@ -252,7 +252,7 @@ def test_child_of_an_idle_parent_keeps_its_objects(scene):
             os.close(r)
             signal.alarm(int(CHILD_TIMEOUT))
             out = {}
-            for name in dk.METHODS:
+            for name in GROUP_METHODS:
                 m = scene.objects[name]
                 res = m.solve(scene.targets, **_solve_kw(name))
                 fresh = scene.bind(name).solve(scene.targets, **_solve_kw(name))
@@ -264,7 +264,7 @@ def test_child_of_an_idle_parent_keeps_its_objects(scene):
             os._exit(code)
     os.close(w)
     out = json.loads(_wait_os_child(pid, r))  # asserts the child exited with status 0
-    for name in dk.METHODS:
+    for name in GROUP_METHODS:
         inherited, fresh = out[name]
         assert inherited < 1e-6 and fresh < 1e-6, (name, inherited, fresh)
 
@@ -325,7 +325,7 @@ def run_isolated(code, timeout=150):
     return json.loads(r.stdout.strip().splitlines()[-1])
 
 
-@pytest.mark.parametrize("name", sorted(dk.METHODS))
+@pytest.mark.parametrize("name", sorted(GROUP_METHODS))
 @pytest.mark.parametrize("call", ["bind", "rebind"])
 def test_fork_from_a_progress_callback(name, call):
     """os.fork() inside a bind's (or rebind's) progress callback returns in both processes;

@@ -16,7 +16,7 @@ import textwrap
 import pytest
 
 import deformkit as dk
-from conftest import SHARED_MESHES, measures_rss
+from conftest import GROUP_METHODS, SHARED_MESHES, measures_rss
 
 MESH = SHARED_MESHES / "arm.obj"
 TIMEOUT = 120.0   # s for one subprocess binding all six methods (~10 s unlimited)
@@ -77,10 +77,10 @@ def run_limited(headroom, names):
 
 @pytest.mark.parametrize("headroom_mib", [64, 160, 320, 640])
 def test_binds_under_rlimit_as_succeed_or_raise_memory_error_quickly(headroom_mib):
-    available, results = run_limited(headroom_mib << 20, list(dk.METHODS))
+    available, results = run_limited(headroom_mib << 20, list(GROUP_METHODS))
     assert available["limit"] == "RLIMIT_AS headroom"
     assert available["address_space"] <= (headroom_mib << 20)
-    for name in dk.METHODS:
+    for name in GROUP_METHODS:
         r = results[name]
         assert r["result"] in ("ok", "MemoryError"), (headroom_mib, r)
         if r["result"] == "MemoryError":
@@ -95,7 +95,7 @@ def test_a_tight_limit_is_refused_and_a_roomy_one_binds():
     _, tight = run_limited(64 << 20, ["LaplacianEdit", "EigenDeformation"])
     assert all(r["result"] == "MemoryError" for r in tight.values()), tight
     assert "refused before allocating" in tight["LaplacianEdit"]["message"]
-    _, roomy = run_limited(2048 << 20, list(dk.METHODS))
+    _, roomy = run_limited(2048 << 20, list(GROUP_METHODS))
     assert all(r["result"] == "ok" for r in roomy.values()), roomy
 
 
@@ -122,7 +122,7 @@ PEAK = textwrap.dedent("""
 
 
 @measures_rss
-@pytest.mark.parametrize("name", dk.METHODS)
+@pytest.mark.parametrize("name", GROUP_METHODS)
 def test_estimate_bounds_the_measured_peak(name):
     """The estimate is at least the measured peak RSS of a bind and its first solve (a bind
     admitted by it does not run out half-way), and not absurdly above it."""

@@ -30,7 +30,7 @@ from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 import deformkit as dk  # noqa: E402
-from conftest import make_grid  # noqa: E402
+from conftest import GROUP_METHODS, make_grid  # noqa: E402
 
 _HEALTH = [HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.filter_too_much]
 settings.register_profile("ci", max_examples=30, deadline=None, derandomize=True,
@@ -240,7 +240,7 @@ BOTTOM = [int(i) for i in np.where((GRID_V[:, 1] <= 1e-9) & (GRID_V[:, 0] > 1e-9
                                    & (GRID_V[:, 0] < 1 - 1e-9))[0]]
 MESH = dk.Mesh(GRID_V, GRID_F)
 POSE = GRID_V + 0.01 * np.sin(np.arange(GRID_V.size)).reshape(GRID_V.shape)
-METHODS = list(dk.METHODS)
+METHODS = list(GROUP_METHODS)
 
 
 # a graph of the paper's density for this small grid: the default 200 nodes on 30 vertices

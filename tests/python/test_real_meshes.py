@@ -15,7 +15,7 @@ import pathlib
 import pytest
 
 import deformkit as dk
-from conftest import SHARED_MESHES
+from conftest import GROUP_METHODS, SHARED_MESHES
 
 _SCRIPT = pathlib.Path(__file__).resolve().parents[2] / "scripts" / "sweep_meshes.py"
 _spec = importlib.util.spec_from_file_location("sweep_meshes", _SCRIPT)
@@ -39,7 +39,7 @@ def scenario(name):
 
 @pytest.mark.heavy
 @pytest.mark.skipif(not MESH_FILES, reason="../shared/meshes not present")
-@pytest.mark.parametrize("method", dk.METHODS)
+@pytest.mark.parametrize("method", GROUP_METHODS)
 @pytest.mark.parametrize("mesh_file", MESH_FILES)
 def test_method_on_real_mesh(mesh_file, method):
     status, detail = sweep.check(method, *scenario(mesh_file))

@@ -45,6 +45,7 @@ void dk_lattice_free(dk_lattice *lt)
         return;
     lattice_grid_free(&lt->grid);
     free(lt->pose);
+    dk_team_free(lt->team);
     free(lt);
 }
 
@@ -79,6 +80,7 @@ dk_status dk_lattice_bind(const dk_mesh *mesh, const dk_constraint_desc *constra
     if (!lt)
         return oom(err, "object");
     lt->mesh = mesh;
+    lt->team = dk_team_create(); /* NULL (no thread available) is fine: passes start threads */
     lt->opt = opt;
     lt->n = mesh->n_vertices;
     lt->pose = malloc((3 * (size_t)lt->n + 1) * sizeof *lt->pose);
@@ -119,13 +121,22 @@ dk_status dk_lattice_rebind(dk_lattice *lt, const dk_constraint_desc *constraint
     return DK_OK;
 }
 
-/* x' = x + sum_ijk w_i w_j w_k (P_ijk - R_ijk) for every vertex, into `out`. */
-static void deform(const dk_lattice *lt, double *out)
+typedef struct deform_job {
+    const dk_lattice *lt;
+    double *out;
+} deform_job;
+
+/* x' = x + sum_ijk w_i w_j w_k (P_ijk - R_ijk) for vertices [v0, v1), into `out`. */
+static void deform_range(void *ctx, dk_index v0, dk_index v1, int part)
 {
+    const deform_job *job = ctx;
+    const dk_lattice *lt = job->lt;
+    double *out = job->out;
     const lattice_grid *g = &lt->grid;
     const int kx = g->k[0], ky = g->k[1], kz = g->k[2], kt = kx + ky + kz;
     const size_t rx = (size_t)g->res[0], rxy = rx * (size_t)g->res[1];
-    for (dk_index v = 0; v < lt->n; v++) {
+    (void)part;
+    for (dk_index v = v0; v < v1; v++) {
         const dk_index *first = g->first + 3 * (size_t)v;
         const double *wx = g->w + (size_t)kt * (size_t)v, *wy = wx + kx, *wz = wy + ky;
         double acc[3] = {0.0, 0.0, 0.0};
@@ -149,6 +160,14 @@ static void deform(const dk_lattice *lt, double *out)
         for (int d = 0; d < 3; d++)
             out[3 * (size_t)v + d] = x[d] + acc[d];
     }
+}
+
+/* Every vertex, on two threads for big meshes (each vertex is its own). */
+static void deform(dk_lattice *lt, double *out)
+{
+    deform_job job = {lt, out};
+    dk_team_run_halves(lt->team, deform_range, &job, lt->n, LATTICE_PARALLEL_MIN);
+    dk_team_park(lt->team);
 }
 
 static double displacement_energy(const dk_lattice *lt, const double *positions)
@@ -227,6 +246,18 @@ void dk_lattice_stats(const dk_lattice *lt, dk_method_stats *st)
         return;
     st->n_vertices = lt->n;
     st->n_controls = lt->grid.n_points;
+}
+
+void dk_lattice_get(const dk_lattice *lt, dk_index *resolution, double *frame, double *rest)
+{
+    if (!lt)
+        return;
+    if (resolution)
+        memcpy(resolution, lt->grid.res, sizeof lt->grid.res);
+    if (frame)
+        memcpy(frame, lt->grid.frame, sizeof lt->grid.frame);
+    if (rest)
+        memcpy(rest, lt->grid.rest, 3 * (size_t)lt->grid.n_points * sizeof *rest);
 }
 
 dk_status dk_lattice_estimate_memory(const dk_mesh *mesh, const dk_lattice_options *options,

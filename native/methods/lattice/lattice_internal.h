@@ -10,6 +10,7 @@
 #define DK_LATTICE_INTERNAL_H
 
 #include "dk_lattice.h"
+#include "dk_parallel.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -43,7 +44,12 @@ struct dk_lattice {
     lattice_grid grid;
     double *pose;         /* n x 3: the positions registered (the rest, or an input)       */
     int pose_is_input;    /* pose holds a request's input_positions, not the rest          */
+    dk_team *team;        /* the deformation pass's helper thread (NULL: per pass)         */
 };
+
+/* Below this many vertices a pass runs on the calling thread only (waking the helper cost
+ * more than it saved at 43k: scripts/bench_lattice.py). */
+#define LATTICE_PARALLEL_MIN 100000
 
 /* basis.c: checks the control for this method (resolution and basis limits) and fills the
  * grid's box, rest points and buffers (allocates; on failure the grid is freed) */
