@@ -5,8 +5,9 @@ Run:
         --python tests/blender/test_module_blender.py
 
 Builds a Mesh from a bpy primitive's foreach_get buffers (array.array memoryviews and numpy),
-computes a cotangent Laplacian, eigenpairs and a geodesic, checks them, prints
-'N passed, N failed' and exits non-zero on any failure.
+computes a cotangent Laplacian, eigenpairs and a geodesic, checks them; and deformkit.Lattice
+with the linear basis against this Blender's own Lattice modifier, vertex for vertex (issue
+40). Prints 'N passed, N failed' and exits non-zero on any failure.
 """
 
 import array
@@ -99,11 +100,74 @@ def main():
         else:
             raise AssertionError("out-of-range index accepted")
 
-    for name, fn in [("mesh from foreach_get memoryviews", build_from_memoryview),
+    def lattice_matches_blenders():
+        """A sphere, moved, turned and scaled, under a Lattice modifier whose lattice (3 x 4 x
+        2 points, linear interpolation, turned, moved and smaller than the sphere in places,
+        so that some vertices lie outside it) has every point moved: deformkit.Lattice on the
+        same box, linear with outside='clamp', gives Blender's result to float32 rounding,
+        inside the box and out (docs/methods/lattice.md)."""
+        import numpy as np
+        from mathutils import Vector
+        bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=3, radius=1.0,
+                                              location=(0.3, -0.2, 0.5))
+        obj = bpy.context.active_object
+        obj.rotation_euler = (0.3, 0.1, -0.4)
+        obj.scale = (1.2, 0.8, 1.0)
+        lt = bpy.data.lattices.new("DK test lattice")
+        lat = bpy.data.objects.new("DK test lattice", lt)
+        bpy.context.collection.objects.link(lat)
+        lt.points_u, lt.points_v, lt.points_w = 3, 4, 2
+        lt.interpolation_type_u = lt.interpolation_type_v = "KEY_LINEAR"
+        lt.interpolation_type_w = "KEY_LINEAR"
+        lat.location = (0.5, 0.0, 0.4)
+        lat.rotation_euler = (0.2, -0.3, 0.5)
+        lat.scale = (2.0, 1.6, 1.3)
+        rng = np.random.default_rng(3)
+        for p in lt.points:
+            p.co_deform = p.co + Vector(rng.normal(scale=0.15, size=3))
+        mod = obj.modifiers.new("Lattice", "LATTICE")
+        mod.object = lat
+        bpy.context.view_layer.update()
+        dg = bpy.context.evaluated_depsgraph_get()
+        ev = obj.evaluated_get(dg)
+        em = ev.to_mesh()
+        got = np.empty(3 * len(em.vertices), dtype=np.float32)
+        em.vertices.foreach_get("co", got)
+        ev.to_mesh_clear()
+        me = obj.data
+        rest = np.empty(3 * len(me.vertices), dtype=np.float32)
+        me.vertices.foreach_get("co", rest)
+        me.calc_loop_triangles()
+        tri = np.empty(3 * len(me.loop_triangles), dtype=np.int32)
+        me.loop_triangles.foreach_get("vertices", tri)
+        rest, got = rest.reshape(-1, 3).astype(float), got.reshape(-1, 3).astype(float)
+        # the lattice in the mesh's object space: its box from its first and last rest point
+        M = np.array(obj.matrix_world.inverted() @ lat.matrix_world)
+        lo, hi = np.array(lt.points[0].co), np.array(lt.points[len(lt.points) - 1].co)
+        box = np.eye(4)
+        box[:3, :3] = np.diag(hi - lo)
+        box[:3, 3] = lo
+        to_obj = lambda p: (M @ np.append(np.array(p), 1.0))[:3]  # noqa: E731
+        L = deformkit.Lattice(deformkit.Mesh(rest, tri.reshape(-1, 3)), resolution=(3, 4, 2),
+                              frame=M @ box, interpolation="linear", outside="clamp")
+        diag = float(np.linalg.norm(np.ptp(rest, axis=0)))
+        grid = np.array([to_obj(p.co) for p in lt.points])
+        assert np.abs(np.asarray(L.rest_points) - grid).max() < 1e-5 * diag
+        x = np.asarray(L.solve(np.array([to_obj(p.co_deform) for p in lt.points])).positions)
+        u = (rest - (M @ box)[:3, 3]) @ np.linalg.inv((M @ box)[:3, :3]).T
+        outside = ((u < 0) | (u > 1)).any(axis=1)
+        assert 0 < outside.sum() < len(rest), outside.sum()   # both kinds are compared
+        err = np.abs(x - got).max() / diag
+        assert err < 2e-6, err
+        assert np.abs(got - rest).max() > 0.05 * diag   # the lattice did deform
+
+    for name, fn in [("lattice matches Blender's Lattice modifier", lattice_matches_blenders),
+                     ("mesh from foreach_get memoryviews", build_from_memoryview),
                      ("mesh from numpy views", build_from_numpy),
                      ("cotangent laplacian", laplacian), ("eigenpairs", eigenpairs),
                      ("heat geodesic", geodesic), ("index error", errors)]:
-        if name != "mesh from foreach_get memoryviews" and "mesh" not in state:
+        if name not in ("mesh from foreach_get memoryviews",
+                        "lattice matches Blender's Lattice modifier") and "mesh" not in state:
             RESULTS["failed"] += 1
             print("SKIP(FAIL)", name, "- no mesh")
             continue
