@@ -16,18 +16,14 @@ with the difference between the two results against the bounding-box diagonal.
 A script, not a test: compare the two starts within one run.
 """
 import argparse
-import json
 import math
-import os
 import statistics
 import time
 
 import numpy as np
 
 import deformkit as dk
-
-HERE = os.path.dirname(os.path.abspath(__file__))
-SHARED = os.environ.get("DEFORMKIT_SHARED", os.path.join(HERE, "..", "..", "shared"))
+from posed_armadillo import PosedArmadillo
 
 
 def main():
@@ -35,20 +31,8 @@ def main():
     ap.add_argument("--frames", type=int, default=12)
     ap.add_argument("--tolerance", type=float, default=1e-6)
     a = ap.parse_args()
-    sc = json.load(open(os.path.join(SHARED, "scenarios", "armadillo-wave.json")))
-    mesh = dk.read_mesh(os.path.join(SHARED, "scenarios", sc["mesh"]))
-    V, F = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
-    hand, fixed = np.array(sc["handles"][0]["vertices"]), np.array(sc["fixed"])
-    c, h = V.mean(axis=0), V[hand].mean(axis=0)
-    w = np.clip((0.5 - np.linalg.norm(V - h, axis=1) / np.linalg.norm(h - c)) * 6.0,
-                0.0, 1.0)[:, None]
-    shoulder = h + 0.5 * (c - h)
-    diag = float(np.linalg.norm(np.ptp(V, axis=0)))
-
-    def pose(angle):
-        co, si = math.cos(angle), math.sin(angle)
-        R = np.array([[1.0, 0.0, 0.0], [0.0, co, -si], [0.0, si, co]])
-        return (1.0 - w) * V + w * ((V - shoulder) @ R.T + shoulder)
+    arm = PosedArmadillo()
+    V, F, hand, fixed, diag, pose = arm.V, arm.F, arm.hand, arm.fixed, arm.diag, arm.pose
 
     ar = dk.ARAP(dk.Mesh(V, F), [hand], fixed=fixed, tolerance=a.tolerance)
     T = np.eye(4)[None].copy()

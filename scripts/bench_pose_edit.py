@@ -10,17 +10,13 @@ two are at the farthest vertex.
 
 A script, not a test (METHOD: a deformkit class, default LinearReconstruction).
 """
-import json
 import math
-import os
 import sys
 
 import numpy as np
 
 import deformkit as dk
-
-HERE = os.path.dirname(os.path.abspath(__file__))
-SHARED = os.environ.get("DEFORMKIT_SHARED", os.path.join(HERE, "..", "..", "shared"))
+from posed_armadillo import PosedArmadillo
 
 
 def rigid_fit(A, B):
@@ -37,23 +33,13 @@ def rigid_fit(A, B):
 def main():
     name = sys.argv[1] if len(sys.argv) > 1 else "LinearReconstruction"
     cls = getattr(dk, name)
-    sc = json.load(open(os.path.join(SHARED, "scenarios", "armadillo-wave.json")))
-    mesh = dk.read_mesh(os.path.join(SHARED, "scenarios", sc["mesh"]))
-    V, F = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
-    hand, fixed = np.array(sc["handles"][0]["vertices"]), np.array(sc["fixed"])
-    c, h = V.mean(axis=0), V[hand].mean(axis=0)
-    w = np.clip((0.5 - np.linalg.norm(V - h, axis=1) / np.linalg.norm(h - c)) * 6.0,
-                0.0, 1.0)[:, None]
-    shoulder = h + 0.5 * (c - h)
-    diag = float(np.linalg.norm(np.ptp(V, axis=0)))
+    arm = PosedArmadillo()
+    V, F, hand, fixed, diag = arm.V, arm.F, arm.hand, arm.fixed, arm.diag
     on_rest = cls(dk.Mesh(V, F), [hand], fixed=fixed)
     T = np.eye(4)
     T[2, 3] = 0.05 * diag
     for deg in (20, 60, 90):
-        a = math.radians(deg)
-        R = np.array([[1.0, 0.0, 0.0], [0.0, math.cos(a), -math.sin(a)],
-                      [0.0, math.sin(a), math.cos(a)]])
-        P = (1.0 - w) * V + w * ((V - shoulder) @ R.T + shoulder)
+        P = arm.pose(math.radians(deg))
         G = rigid_fit(V[hand], P[hand])
         at_rest = np.linalg.inv(G) @ T @ G   # the edit as it reads at the rest
         pasted = P + (np.asarray(on_rest.solve(transforms=at_rest[None]).positions) - V)

@@ -89,6 +89,16 @@ static int scene_make(scene *s, const char *name, dk_test_mesh *tm, int axis, do
     return 0;
 }
 
+/* The bumpy plane of n x n cells with the two handle columns and the fixed row of
+ * test_every_method; 1 on success (else a failed check, nothing to free). */
+static int small_plane(scene *s, dk_test_mesh *plane, int n)
+{
+    const int ok = dk_test_bumpy_plane(n, 0.1, plane) == 0 &&
+                   scene_make(s, "bumpy plane", plane, 0, -0.99, 0.99, 1, 1, -1.0, 1e-9) == 0;
+    CHECK(ok);
+    return ok;
+}
+
 static double max_diff(const double *a, const double *b, size_t n)
 {
     double m = 0;
@@ -688,10 +698,7 @@ static void test_option_fields(void)
 {
     dk_test_mesh plane = {0};
     scene s;
-    int ok = dk_test_bumpy_plane(8, 0.1, &plane) == 0 &&
-             scene_make(&s, "bumpy plane", &plane, 0, -0.99, 0.99, 1, 1, -1.0, 1e-9) == 0;
-    CHECK(ok);
-    if (!ok)
+    if (!small_plane(&s, &plane, 8))
         return;
     for (const dk_method_ops *const *m = dk_methods(); *m; m++) {
         const dk_method_ops *o = *m;
@@ -761,10 +768,7 @@ static void test_controls_declared(void)
 {
     dk_test_mesh plane = {0};
     scene s;
-    int ok = dk_test_bumpy_plane(8, 0.1, &plane) == 0 &&
-             scene_make(&s, "bumpy plane", &plane, 0, -0.99, 0.99, 1, 1, -1.0, 1e-9) == 0;
-    CHECK(ok);
-    if (!ok)
+    if (!small_plane(&s, &plane, 8))
         return;
     const double box[16] = {2, 0, 0, -1, 0, 2, 0, -1, 0, 0, 1, -0.5, 0, 0, 0, 1};
     const double points[6] = {0, 0, 0, 1, 1, 1};
@@ -951,10 +955,7 @@ static void test_state(void)
 {
     dk_test_mesh plane = {0};
     scene s;
-    int ok = dk_test_bumpy_plane(12, 0.1, &plane) == 0 &&
-             scene_make(&s, "bumpy plane", &plane, 0, -0.99, 0.99, 1, 1, -1.0, 1e-9) == 0;
-    CHECK(ok);
-    if (!ok)
+    if (!small_plane(&s, &plane, 12))
         return;
     int stateful = 0;
     for (const dk_method_ops *const *m = dk_methods(); *m; m++) {
