@@ -240,6 +240,7 @@ PyObject *dk_py_new_solve_result(PyObject *module, PyObject *positions, double e
 #define DK_PY_PARTS(X, M)                                                                  \
     X(mesh)                                                                                \
     X(operators)                                                                           \
+    X(coordinates)                                                                         \
     M(arap, "ARAP")                                                                        \
     M(laplacian_edit, "LaplacianEdit")                                                     \
     M(falloff, "Falloff")                                                                  \
