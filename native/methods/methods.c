@@ -6,6 +6,7 @@
 #include <string.h>
 
 #include "dk_arap.h"
+#include "dk_cage.h"
 #include "dk_eigen.h"
 #include "dk_embedded.h"
 #include "dk_falloff.h"
@@ -16,7 +17,8 @@
 /* Adding a method: its table here, in the order the Python module lists its classes. */
 static const dk_method_ops *const registry[] = {&dk_arap_ops, &dk_laplacian_edit_ops,
                                                 &dk_falloff_ops, &dk_embedded_ops, &dk_eigen_ops,
-                                                &dk_fundamental_ops, &dk_lattice_ops, NULL};
+                                                &dk_fundamental_ops, &dk_lattice_ops, &dk_cage_ops,
+                                                NULL};
 
 const dk_method_ops *const *dk_methods(void)
 {

@@ -248,6 +248,7 @@ PyObject *dk_py_new_solve_result(PyObject *module, PyObject *positions, double e
     M(eigen, "EigenDeformation")                                                           \
     M(fundamental, "LinearReconstruction")                                                 \
     M(lattice, "Lattice")                                                                  \
+    M(cage, "Cage")                                                                        \
     X(cholesky)
 
 #define DK_PY_DECLARE_PART(part) int dk_py_init_##part(PyObject *module);

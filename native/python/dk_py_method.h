@@ -107,6 +107,10 @@ struct dk_py_method_spec {
      *  targets (stats.n_controls rows). */
     int (*parse_control)(PyObject *kw, const dk_mesh *mesh, const void *bound, void *store,
                          const char *context);
+    /** Optional: frees what parse_control allocated into `store`; called once after the
+     *  bind or rebind, and after a failed parse (so parse_control leaves `store`
+     *  releasable at every exit). */
+    void (*release_control)(void *store);
     /** 1: the bind runs under the module's ARPACK lock (ARPACK is not reentrant). */
     int serialise_bind;
     /** Optional: the `stats` dict; default: the contract's counters. */

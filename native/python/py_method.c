@@ -321,6 +321,8 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
     }
     if (!ok || (!controlled && read_all(spec, handles, fixed, roi, hw, stiffness,
                                         mesh->n_vertices, spec->name, &con, &stiff) < 0)) {
+        if (controlled && spec->release_control)
+            spec->release_control(control.bytes);
         if (spec->release_options)
             spec->release_options(&opt);
         dk_py_progress_release(&prog);
@@ -337,6 +339,8 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
         st = dk_memory_check(need, spec->name, what, &err);
     }
     if (st != DK_OK) {
+        if (controlled && spec->release_control)
+            spec->release_control(control.bytes);
         if (spec->release_options)
             spec->release_options(&opt);
         dk_py_lap_constraints_release(&con);
@@ -346,6 +350,8 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
         return dk_py_raise(&err, NULL);
     }
     if (dk_py_arpack_check(state, spec->name) < 0) {
+        if (controlled && spec->release_control)
+            spec->release_control(control.bytes);
         if (spec->release_options)
             spec->release_options(&opt);
         dk_py_lap_constraints_release(&con);
@@ -361,6 +367,8 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
     if (state)
         dk_py_arpack_release(state);
     DK_PY_END_NATIVE
+    if (controlled && spec->release_control)
+        spec->release_control(control.bytes);
     if (spec->release_options)
         spec->release_options(&opt);
     dk_py_lap_constraints_release(&con);
@@ -699,6 +707,8 @@ static PyObject *control_rebind(dk_py_method *self, PyObject *args, PyObject *kw
     }
     if (self->spec->parse_control(kw, self->mesh, self->native, control.bytes, ctx) < 0 ||
         refuse_leftovers(kw, ctx) < 0) {
+        if (self->spec->release_control)
+            self->spec->release_control(control.bytes);
         self->busy = 0;
         Py_DECREF(kw);
         return NULL;
@@ -711,6 +721,8 @@ static PyObject *control_rebind(dk_py_method *self, PyObject *args, PyObject *kw
     DK_PY_BEGIN_NATIVE(dk_py_state_of((PyObject *)self))
     st = self->spec->ops->rebind(self->native, &desc, &err);
     DK_PY_END_NATIVE
+    if (self->spec->release_control)
+        self->spec->release_control(control.bytes);
     self->busy = 0;
     if (st != DK_OK)
         return dk_py_raise(&err, ctx);

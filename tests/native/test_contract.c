@@ -133,6 +133,7 @@ typedef struct control_scene {
     dk_constraint_desc desc;
     double frame[16];
     double *rest; /* n_controls x 3 */
+    dk_index tris[36];
 } control_scene;
 
 static void control_scene_free(control_scene *c)
@@ -141,13 +142,14 @@ static void control_scene_free(control_scene *c)
     memset(c, 0, sizeof *c);
 }
 
-/* A lattice of 3 x 4 x 3 points over the mesh's bounding box grown by a tenth of it (the
- * kinds a method may take, first match). 0 on success; -1 for a kind this test has no
- * scene for: a new kind needs its scene here. */
+/* A lattice of 3 x 4 x 3 points, or a box cage (8 vertices, 12 triangles facing out), over
+ * the mesh's bounding box grown by a tenth of it (the kinds a method may take, first
+ * match). 0 on success; -1 for a kind this test has no scene for: a new kind needs its
+ * scene here. */
 static int control_scene_make(const dk_method_ops *o, const scene *s, control_scene *c)
 {
     memset(c, 0, sizeof *c);
-    if (!(o->controls & DK_CONTROL_LATTICE))
+    if (!(o->controls & (DK_CONTROL_LATTICE | DK_CONTROL_CAGE)))
         return -1;
     const dk_mesh *m = s->mesh;
     double lo[3], hi[3];
@@ -164,6 +166,21 @@ static int control_scene_make(const dk_method_ops *o, const scene *s, control_sc
         c->frame[4 * d + 3] = lo[d] - pad;
     }
     c->frame[15] = 1.0;
+    if (!(o->controls & DK_CONTROL_LATTICE)) { /* the box as a cage, corners x fastest */
+        static const dk_index box[36] = {0, 2, 1, 1, 2, 3, 4, 5, 6, 5, 7, 6, 0, 1, 4, 1, 5, 4,
+                                         2, 6, 3, 3, 6, 7, 0, 4, 2, 2, 4, 6, 1, 3, 5, 3, 7, 5};
+        memcpy(c->tris, box, sizeof box);
+        c->rest = malloc(3 * 8 * sizeof(double));
+        if (!c->rest)
+            return -1;
+        for (int q = 0; q < 8; q++)
+            for (int d = 0; d < 3; d++)
+                c->rest[3 * q + d] = c->frame[5 * d] * (double)((q >> d) & 1) + c->frame[4 * d + 3];
+        c->control = (dk_control_desc){.kind = DK_CONTROL_CAGE, .n_controls = 8, .rest = c->rest,
+                                       .n_triangles = 12, .triangles = c->tris};
+        c->desc.control = &c->control;
+        return 0;
+    }
     const dk_index res[3] = {3, 4, 3};
     c->control = (dk_control_desc){.kind = DK_CONTROL_LATTICE, .n_controls = 36, .rest = c->frame,
                                    .resolution = {res[0], res[1], res[2]}};

@@ -103,6 +103,25 @@ def test_registries_agree():
         info("NoSuchMethod")
 
 
+BOX_TRIANGLES = np.array([[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
+                          [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]])
+
+
+def bind_control(name, v, f):
+    """A method bound to a control, its control around the vertices v: a lattice with its
+    defaults, or a box cage over their bounding box grown by a tenth (a new control kind
+    needs its scene here, as in test_contract.c)."""
+    kinds = info(name)["controls"]
+    if "lattice" in kinds:
+        return getattr(dk, name)(dk.Mesh(v, f))
+    assert "cage" in kinds, "no contract scene for %s's controls %s" % (name, kinds)
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    pad = 0.1 * (hi - lo) + 1e-3 * np.linalg.norm(hi - lo)
+    corners = np.array([[(q >> d) & 1 for d in range(3)] for q in range(8)], dtype=float)
+    box = lo - pad + corners * (hi - lo + 2 * pad)
+    return getattr(dk, name)(dk.Mesh(v, f), cage_vertices=box, cage_triangles=BOX_TRIANGLES)
+
+
 @pytest.mark.parametrize("name", CONTROL_METHODS)
 @pytest.mark.parametrize("scene", SCENES, ids=[s[0] for s in SCENES])
 def test_a_method_bound_to_a_control(name, scene):
@@ -114,7 +133,7 @@ def test_a_method_bound_to_a_control(name, scene):
     _, v, f, handles, fixed = scene
     for scale, shift in ((1.0, 0.0), (1e-3, 5e3), (250.0, -40.0)):
         vs = v * scale + shift
-        m = getattr(dk, name)(dk.Mesh(vs, f))
+        m = bind_control(name, vs, f)
         rest = np.asarray(m.rest_points)
         assert np.array_equal(m.solve(rest).positions, vs)
         t = np.array([0.3, -0.2, 0.7]) * scale

@@ -1,0 +1,97 @@
+/* DeformKit cage FFD: 3D mean value coordinates of one point (dk_cage.h, Ju, Schaefer and
+ * Warren 2005, their pseudo-code's robust form). */
+#include "dk_cage.h"
+
+#include <math.h>
+#include <string.h>
+
+/* pi - h below this: the point is on the triangle; |s_i| below it: on the triangle's plane,
+ * outside it (the paper's epsilon) */
+#define MVC_EPS 1e-10
+#define MVC_PI 3.14159265358979323846
+
+static double det3(const double *a, const double *b, const double *c)
+{
+    return a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
+           a[2] * (b[0] * c[1] - b[1] * c[0]);
+}
+
+int dk_cage_mean_value(const double *x, const double *cage, dk_index nc,
+                       const dk_index *tris, dk_index nt, double *lambda, double *scratch)
+{
+    double *d = scratch, *u = scratch + nc; /* u: nc x 3 */
+    double size2 = 0.0;
+    for (dk_index j = 0; j < nc; j++) {
+        const double *p = cage + 3 * (size_t)j;
+        double v[3] = {p[0] - x[0], p[1] - x[1], p[2] - x[2]};
+        const double r2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+        size2 = r2 > size2 ? r2 : size2;
+        d[j] = sqrt(r2);
+        for (int k = 0; k < 3; k++)
+            u[3 * (size_t)j + k] = d[j] > 0.0 ? v[k] / d[j] : 0.0;
+    }
+    const double on_vertex = 1e-12 * sqrt(size2);
+    for (dk_index j = 0; j < nc; j++)
+        if (d[j] <= on_vertex) { /* on a cage vertex: that vertex */
+            memset(lambda, 0, (size_t)nc * sizeof *lambda);
+            lambda[j] = 1.0;
+            return 0;
+        }
+    memset(lambda, 0, (size_t)nc * sizeof *lambda);
+    for (dk_index t = 0; t < nt; t++) {
+        const dk_index *f = tris + 3 * (size_t)t;
+        const double *uf[3] = {u + 3 * (size_t)f[0], u + 3 * (size_t)f[1], u + 3 * (size_t)f[2]};
+        /* per corner i, the angle theta_i at x subtended by the opposite edge: its cosine
+         * (a dot product), sine (a cross product's length) and value (atan2) */
+        double theta[3], co[3], si[3];
+        for (int i = 0; i < 3; i++) {
+            const double *a = uf[(i + 1) % 3], *b = uf[(i + 2) % 3];
+            const double cx = a[1] * b[2] - a[2] * b[1], cy = a[2] * b[0] - a[0] * b[2],
+                         cz = a[0] * b[1] - a[1] * b[0];
+            co[i] = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+            si[i] = sqrt(cx * cx + cy * cy + cz * cz);
+            theta[i] = atan2(si[i], co[i]);
+        }
+        const double h = 0.5 * (theta[0] + theta[1] + theta[2]);
+        if (MVC_PI - h < MVC_EPS) { /* on this triangle: its barycentric coordinates */
+            memset(lambda, 0, (size_t)nc * sizeof *lambda);
+            double sum = 0.0;
+            for (int i = 0; i < 3; i++) {
+                const double w = si[i] * d[f[(i + 2) % 3]] * d[f[(i + 1) % 3]];
+                lambda[f[i]] += w;
+                sum += w;
+            }
+            for (int i = 0; i < 3; i++)
+                lambda[f[i]] /= sum;
+            return 0;
+        }
+        /* c_i = 2 sin(h) sin(h - theta_i) / (sin theta_i+1 sin theta_i-1) - 1, written with
+         * 2 sin h sin(h - theta_i) = cos theta_i - cos(theta_i+1 + theta_i-1): no trigonometry */
+        double c[3], s[3];
+        const double sign = det3(uf[0], uf[1], uf[2]) < 0.0 ? -1.0 : 1.0;
+        int skip = 0;
+        for (int i = 0; i < 3; i++) {
+            const int ip = (i + 1) % 3, im = (i + 2) % 3;
+            c[i] = (co[i] - co[ip] * co[im]) / (si[ip] * si[im]);
+            const double q = 1.0 - c[i] * c[i];
+            s[i] = sign * sqrt(q > 0.0 ? q : 0.0);
+            if (fabs(s[i]) <= MVC_EPS)
+                skip = 1; /* on the triangle's plane, outside it: no contribution */
+        }
+        if (skip)
+            continue;
+        for (int i = 0; i < 3; i++) {
+            const int ip = (i + 1) % 3, im = (i + 2) % 3;
+            lambda[f[i]] += (theta[i] - c[ip] * theta[im] - c[im] * theta[ip]) /
+                            (d[f[i]] * si[ip] * s[im]);
+        }
+    }
+    double sum = 0.0;
+    for (dk_index j = 0; j < nc; j++)
+        sum += lambda[j];
+    if (!(fabs(sum) > 0.0) || !isfinite(sum))
+        return -1;
+    for (dk_index j = 0; j < nc; j++)
+        lambda[j] /= sum;
+    return 0;
+}

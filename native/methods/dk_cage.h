@@ -1,0 +1,103 @@
+/* DeformKit: cage-based free-form deformation with 3D mean value coordinates (the slides'
+ * "arbitrary polyhedron cells"; Ju, Schaefer and Warren 2005, "Mean value coordinates for
+ * closed triangular meshes"; Floater, Kos and Reimers 2005).
+ *
+ * The control (dk_controls.h, DK_CONTROL_CAGE): a closed triangle mesh around the mesh (its
+ * rest vertices R, n_controls x 3, and triangles). Bind computes each vertex's coordinates
+ * lambda (one per cage vertex: sum lambda_j R_j = x, sum lambda_j = 1) -- the dense n x
+ * n_controls matrix W, the costly part, parallel over vertices. A solve moves the cage's
+ * vertices to P (targets: n_controls x 3 positions) and every vertex by
+ *     x' = x + sum_j lambda_j (P_j - R_j) = x + W (P - R),
+ * one matrix product (BLAS), so that a cage at rest gives the mesh back bit for bit and an
+ * affine map of the cage maps the mesh (linear precision).
+ *
+ * Mean value coordinates, as the paper evaluates them: per cage triangle, from the unit
+ * vectors u_i towards its corners, the angles theta_i = 2 asin(|u_i+1 - u_i-1| / 2), h =
+ * (theta_1 + theta_2 + theta_3) / 2, c_i = 2 sin(h) sin(h - theta_i) / (sin theta_i+1
+ * sin theta_i-1) - 1, s_i = sign(det[u_1 u_2 u_3]) sqrt(1 - c_i^2), and
+ *     w_i += (theta_i - c_i+1 theta_i-1 - c_i-1 theta_i+1) / (d_i sin theta_i+1 s_i-1),
+ * normalised. Its special cases: a vertex on a cage vertex takes it (lambda its unit
+ * vector); on a cage triangle (pi - h below 1e-10) the triangle's barycentric coordinates;
+ * a triangle whose plane holds the vertex outside it (|s_i| below 1e-10) adds nothing. The
+ * coordinates are defined inside and outside the cage, positive inside convex cages.
+ *
+ * Memory: W is n x n_controls doubles (43k x 100: 35 MB), or floats with weights='single'
+ * (a million vertices and a 500-vertex cage: 2 GB instead of 4), whose products keep the
+ * motion to about 1e-7 of itself. It edits a pose only at bind (no input_positions): the
+ * coordinates are the rest's. Direct: iterations 1; the energy reported is the squared
+ * displacement sum |x' - x|^2. Rebind takes another cage for the same mesh.
+ */
+#ifndef DK_CAGE_H
+#define DK_CAGE_H
+
+#include "dk_constraints.h"
+#include "dk_controls.h"
+#include "dk_mesh.h"
+#include "dk_method.h"
+#include "dk_progress.h"
+#include "dk_status.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/** How W is stored. */
+typedef enum dk_cage_weights {
+    DK_CAGE_DOUBLE = 0, /**< doubles: affine maps to rounding (1e-13)                     */
+    DK_CAGE_SINGLE = 1  /**< floats: half the memory, the motion to about 1e-7 of itself   */
+} dk_cage_weights;
+
+typedef struct dk_cage_options {
+    dk_cage_weights weights;       /**< default DK_CAGE_DOUBLE                            */
+    dk_phase_progress_fn progress; /**< bind progress (phase "coordinates"), NULL: none   */
+    void *progress_user;
+} dk_cage_options;
+
+typedef struct dk_cage dk_cage;
+
+void dk_cage_default_options(dk_cage_options *options);
+
+/** Binds `mesh` (borrowed) to the cage `constraints->control` (DK_CONTROL_CAGE, checked by
+ *  dk_control_check; no handles, fixed vertices or region). The progress hook may cancel
+ *  (DK_ERR_CANCELLED, nothing returned). */
+dk_status dk_cage_bind(const dk_mesh *mesh, const dk_constraint_desc *constraints,
+                       const dk_cage_options *options, dk_cage **out, dk_error *err);
+
+/** Another cage for the same mesh and options; on failure nothing changes. */
+dk_status dk_cage_rebind(dk_cage *cage, const dk_constraint_desc *constraints, dk_error *err);
+
+/** `request->targets`: the cage vertices' positions (n_controls x 3, positions only).
+ *  Writes n_vertices x 3 positions; allocation-free. */
+dk_status dk_cage_solve(dk_cage *cage, const dk_solve_request *request, double *positions,
+                        dk_solve_info *info, dk_error *err);
+
+/** The sum over the vertices of |positions - rest|^2. */
+dk_status dk_cage_energy(const dk_cage *cage, const double *positions, double *energy,
+                         dk_error *err);
+
+void dk_cage_stats(const dk_cage *cage, dk_method_stats *stats);
+
+/** The cage's vertices at rest (n_controls x 3), owned by the object. */
+const double *dk_cage_rest_points(const dk_cage *cage);
+void dk_cage_free(dk_cage *cage);
+
+/** One vertex's mean value coordinates for a cage: `point` (3), the cage's `n_cage`
+ *  vertices (n_cage x 3) and `n_triangles` triangles (n_triangles x 3), into `lambda`
+ *  (n_cage; `scratch` 4 n_cage doubles). Returns 0, or -1 when the weights sum to zero
+ *  (a point the formula cannot place: an open or degenerate cage). */
+int dk_cage_mean_value(const double *point, const double *cage, dk_index n_cage,
+                       const dk_index *triangles, dk_index n_triangles, double *lambda,
+                       double *scratch);
+
+/** Peak bytes of a bind: the mesh's rows of W for a cage the model cannot know here (the
+ *  Python binding and the bind check the control's own size: n x n_controls). */
+dk_status dk_cage_estimate_memory(const dk_mesh *mesh, const dk_cage_options *options,
+                                  uint64_t *bytes, dk_error *err);
+
+extern const dk_method_ops dk_cage_ops;
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif

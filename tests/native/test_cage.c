@@ -1,0 +1,213 @@
+/* Cage FFD with 3D mean value coordinates (dk_cage.h): the coordinates against their
+ * definition integrated numerically (an independent evaluation), partition of unity and
+ * linear precision inside and outside, positivity inside a convex cage, a cage vertex's
+ * unit vector, a cage face's barycentric coordinates (and their limit just off the face),
+ * a non-convex cage; the method: a vertex on a cage vertex follows it, an affine map of the
+ * cage maps the mesh (double and single weights), an open cage refused. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "dk_cage.h"
+#include "dk_test.h"
+
+#define PI 3.14159265358979323846
+
+/* The cube [-1, 1]^3: corners x fastest, 12 triangles facing out. */
+static const double cube[24] = {-1, -1, -1, 1, -1, -1, -1, 1, -1, 1, 1, -1,
+                                -1, -1, 1,  1, -1, 1,  -1, 1, 1,  1, 1, 1};
+static const dk_index cube_tris[36] = {0, 2, 1, 1, 2, 3, 4, 5, 6, 5, 7, 6, 0, 1, 4, 1, 5, 4,
+                                       2, 6, 3, 3, 6, 7, 0, 4, 2, 2, 4, 6, 1, 3, 5, 3, 7, 5};
+
+static double rnd(unsigned *s)
+{
+    *s = *s * 1664525u + 1013904223u;
+    return (double)(*s >> 8) / 16777216.0;
+}
+
+static double precision(const double *cage, int nc, const double *x, const double *l)
+{
+    double s = 0.0, p[3] = {0, 0, 0};
+    for (int j = 0; j < nc; j++) {
+        s += l[j];
+        for (int d = 0; d < 3; d++)
+            p[d] += l[j] * cage[3 * j + d];
+    }
+    return fmax(fabs(s - 1.0), fmax(fabs(p[0] - x[0]), fmax(fabs(p[1] - x[1]), fabs(p[2] - x[2]))));
+}
+
+/* The definition, integrated: w_j = integral over the directions xi of phi_j(hit) / |hit - x|,
+ * phi_j the barycentric coordinate of the ray's hit on its triangle (a convex cage: one
+ * hit), over a Fibonacci sphere of m directions. */
+static void integrated(const double *cage, const dk_index *tris, int nt, int nc,
+                       const double *x, int m, double *l)
+{
+    memset(l, 0, (size_t)nc * sizeof *l);
+    const double golden = PI * (3.0 - sqrt(5.0));
+    for (int k = 0; k < m; k++) {
+        const double z = 1.0 - 2.0 * (k + 0.5) / m, r = sqrt(1.0 - z * z), a = golden * k;
+        const double dir[3] = {r * cos(a), r * sin(a), z};
+        for (int t = 0; t < nt; t++) { /* Moller-Trumbore */
+            const double *p0 = cage + 3 * tris[3 * t], *p1 = cage + 3 * tris[3 * t + 1],
+                         *p2 = cage + 3 * tris[3 * t + 2];
+            double e1[3], e2[3], h[3], s[3], q[3];
+            for (int d = 0; d < 3; d++)
+                e1[d] = p1[d] - p0[d], e2[d] = p2[d] - p0[d], s[d] = x[d] - p0[d];
+            h[0] = dir[1] * e2[2] - dir[2] * e2[1];
+            h[1] = dir[2] * e2[0] - dir[0] * e2[2];
+            h[2] = dir[0] * e2[1] - dir[1] * e2[0];
+            const double det = e1[0] * h[0] + e1[1] * h[1] + e1[2] * h[2];
+            if (fabs(det) < 1e-15)
+                continue;
+            const double u = (s[0] * h[0] + s[1] * h[1] + s[2] * h[2]) / det;
+            q[0] = s[1] * e1[2] - s[2] * e1[1];
+            q[1] = s[2] * e1[0] - s[0] * e1[2];
+            q[2] = s[0] * e1[1] - s[1] * e1[0];
+            const double v = (dir[0] * q[0] + dir[1] * q[1] + dir[2] * q[2]) / det;
+            const double dist = (e2[0] * q[0] + e2[1] * q[1] + e2[2] * q[2]) / det;
+            if (u < 0 || v < 0 || u + v > 1 || dist <= 0)
+                continue;
+            l[tris[3 * t]] += (1 - u - v) / dist;
+            l[tris[3 * t + 1]] += u / dist;
+            l[tris[3 * t + 2]] += v / dist;
+            break;
+        }
+    }
+    double sum = 0.0;
+    for (int j = 0; j < nc; j++)
+        sum += l[j];
+    for (int j = 0; j < nc; j++)
+        l[j] /= sum;
+}
+
+static void test_against_the_definition(void)
+{
+    double l[8], ref[8], scratch[32];
+    unsigned st = 3;
+    double worst = 0.0;
+    for (int k = 0; k < 6; k++) {
+        const double x[3] = {-0.8 + 1.6 * rnd(&st), -0.8 + 1.6 * rnd(&st), -0.8 + 1.6 * rnd(&st)};
+        CHECK(dk_cage_mean_value(x, cube, 8, cube_tris, 12, l, scratch) == 0);
+        integrated(cube, cube_tris, 12, 8, x, 200000, ref);
+        for (int j = 0; j < 8; j++)
+            worst = fmax(worst, fabs(l[j] - ref[j]));
+    }
+    CHECK_MSG(worst < 1e-3, "mean value coordinates %g from their integrated definition", worst);
+}
+
+static void test_properties(void)
+{
+    double l[8], scratch[32];
+    unsigned st = 7;
+    double worst_in = 0.0, worst_out = 0.0, least = 1.0;
+    for (int k = 0; k < 300; k++) {
+        const int out = k % 3 == 0;
+        double x[3];
+        for (int d = 0; d < 3; d++)
+            x[d] = out ? -3.0 + 6.0 * rnd(&st) : -0.99 + 1.98 * rnd(&st);
+        if (out && fabs(x[0]) < 1 && fabs(x[1]) < 1 && fabs(x[2]) < 1)
+            x[0] = 2.5;
+        CHECK(dk_cage_mean_value(x, cube, 8, cube_tris, 12, l, scratch) == 0);
+        const double e = precision(cube, 8, x, l);
+        if (out)
+            worst_out = fmax(worst_out, e);
+        else {
+            worst_in = fmax(worst_in, e);
+            for (int j = 0; j < 8; j++)
+                least = fmin(least, l[j]);
+        }
+    }
+    CHECK_MSG(worst_in < 1e-12 && worst_out < 1e-10, "linear precision %g inside, %g outside",
+              worst_in, worst_out);
+    CHECK_MSG(least > 0.0, "a negative weight %g inside a convex cage", least);
+    /* a cage vertex: its unit vector; a face: barycentric; just off it: the same limit */
+    CHECK(dk_cage_mean_value(cube + 9, cube, 8, cube_tris, 12, l, scratch) == 0 && l[3] == 1.0);
+    const double on[3] = {-1.0 / 3, -1.0, -1.0 / 3}; /* triangle 0 1 4 (corners 0, 1, 4) */
+    CHECK(dk_cage_mean_value(on, cube, 8, cube_tris, 12, l, scratch) == 0 &&
+          precision(cube, 8, on, l) < 1e-12 && fabs(l[0] - 1.0 / 3) < 1e-12 &&
+          fabs(l[1] - 1.0 / 3) < 1e-12 && fabs(l[4] - 1.0 / 3) < 1e-12);
+    const double near[3] = {-1.0 / 3, -1.0 + 1e-9, -1.0 / 3};
+    CHECK(dk_cage_mean_value(near, cube, 8, cube_tris, 12, l, scratch) == 0 &&
+          precision(cube, 8, near, l) < 1e-9 && fabs(l[0] - 1.0 / 3) < 1e-6);
+    /* a non-convex cage: the cube with its top face pushed in to a pyramid */
+    double dent[27];
+    memcpy(dent, cube, sizeof cube);
+    dent[24] = 0, dent[25] = 0, dent[26] = 0.2; /* vertex 8: the dent's tip, below the top */
+    static const dk_index dent_tris[42] = {0, 2, 1, 1, 2, 3, 0, 1, 4, 1, 5, 4, 2, 6, 3, 3, 6, 7,
+                                           0, 4, 2, 2, 4, 6, 1, 3, 5, 3, 7, 5, 4, 5, 8, 5, 7, 8,
+                                           7, 6, 8, 6, 4, 8};
+    double ld[9], sd[36];
+    double worst = 0.0;
+    for (int k = 0; k < 200; k++) {
+        const double x[3] = {-0.9 + 1.8 * rnd(&st), -0.9 + 1.8 * rnd(&st), -0.9 + 1.05 * rnd(&st)};
+        CHECK(dk_cage_mean_value(x, dent, 9, dent_tris, 14, ld, sd) == 0);
+        worst = fmax(worst, precision(dent, 9, x, ld));
+    }
+    CHECK_MSG(worst < 1e-11, "a non-convex cage: linear precision %g", worst);
+}
+
+static void test_the_method(void)
+{
+    /* the mesh: points inside and outside, two on cage vertices */
+    enum { N = 60 };
+    double p[3 * N];
+    unsigned st = 11;
+    for (int v = 0; v < N; v++)
+        for (int d = 0; d < 3; d++)
+            p[3 * v + d] = v < 40 ? -0.9 + 1.8 * rnd(&st) : -2.0 + 4.0 * rnd(&st);
+    memcpy(p, cube + 9, 3 * sizeof(double));
+    memcpy(p + 3, cube + 18, 3 * sizeof(double));
+    dk_mesh *mesh = NULL;
+    dk_error e = {0};
+    CHECK(dk_mesh_create(p, N, NULL, 0, &mesh, &e) == DK_OK);
+    if (!mesh)
+        return;
+    dk_control_desc c = {.kind = DK_CONTROL_CAGE, .n_controls = 8, .rest = cube,
+                         .n_triangles = 12, .triangles = cube_tris};
+    dk_constraint_desc d = {.control = &c};
+    double P[24], x[3 * N];
+    const double A[12] = {1.1, 0.2, -0.3, 0.5, -0.1, 0.9, 0.25, -2.0, 0.3, 0.1, 1.2, 0.7};
+    for (int weights = 0; weights < 2; weights++) {
+        dk_cage_options o;
+        dk_cage_default_options(&o);
+        o.weights = (dk_cage_weights)weights;
+        dk_cage *cg = NULL;
+        CHECK(dk_cage_bind(mesh, &d, &o, &cg, &e) == DK_OK);
+        if (!cg)
+            continue;
+        for (int k = 0; k < 8; k++)
+            for (int dd = 0; dd < 3; dd++)
+                P[3 * k + dd] = A[4 * dd] * cube[3 * k] + A[4 * dd + 1] * cube[3 * k + 1] +
+                                A[4 * dd + 2] * cube[3 * k + 2] + A[4 * dd + 3];
+        dk_solve_request rq = {.targets = P};
+        double worst = INFINITY;
+        if (dk_cage_solve(cg, &rq, x, NULL, &e) == DK_OK) {
+            worst = 0.0;
+            for (int v = 0; v < N; v++)
+                for (int dd = 0; dd < 3; dd++)
+                    worst = fmax(worst, fabs(x[3 * v + dd] -
+                                             (A[4 * dd] * p[3 * v] + A[4 * dd + 1] * p[3 * v + 1] +
+                                              A[4 * dd + 2] * p[3 * v + 2] + A[4 * dd + 3])));
+        }
+        CHECK_MSG(worst < (weights ? 1e-5 : 1e-11), "weights %d: an affine map off by %g",
+                  weights, worst);
+        for (int k = 0; k < 24; k++) /* any motion: a vertex on a cage vertex follows it */
+            P[k] = cube[k] + 0.3 * (rnd(&st) - 0.5);
+        if (dk_cage_solve(cg, &rq, x, NULL, &e) == DK_OK)
+            CHECK(fabs(x[0] - P[9]) < 1e-6 && fabs(x[4] - P[19]) < 1e-6);
+        dk_method_stats ms;
+        dk_cage_stats(cg, &ms);
+        CHECK(ms.n_controls == 8 && ms.n_vertices == N);
+        dk_cage_free(cg);
+    }
+    /* an open cage: refused by name */
+    dk_control_desc open = c;
+    open.n_triangles = 11;
+    dk_constraint_desc od = {.control = &open};
+    dk_cage *none = NULL;
+    CHECK(dk_cage_bind(mesh, &od, NULL, &none, &e) == DK_ERR_INVALID_ARGUMENT && !none &&
+          strstr(e.message, "not closed"));
+    dk_mesh_free(mesh);
+}
+
+DK_TEST_MAIN(test_against_the_definition, test_properties, test_the_method)

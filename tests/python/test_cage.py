@@ -1,0 +1,101 @@
+"""deformkit.Cage (docs/methods/cage.md) from Python: every real mesh of ../shared/meshes in
+a coarse cage (a box subdivided, its vertices pushed onto a sphere around the mesh: 26
+vertices, convex), at its own scale and placement: the cage at rest returns the mesh bit for
+bit, an affine map of the cage maps it, a local pull of one cage vertex moves the mesh most
+near it; single-precision weights agree to their precision; refusals. The coordinates'
+definition, positivity and the special cases are in tests/native/test_cage.c."""
+import numpy as np
+import pytest
+
+import deformkit as dk
+from conftest import SHARED_MESHES
+
+MESH_FILES = sorted(p.name for p in SHARED_MESHES.glob("*")
+                    if p.suffix in (".obj", ".off", ".ply")) if SHARED_MESHES.is_dir() else []
+
+
+def sphere_cage(v):
+    """26 vertices (the cube's corners, edge and face centres pushed onto a sphere) and their
+    48 triangles facing out, around the points v (a margin of a tenth of their size)."""
+    c = 0.5 * (v.min(axis=0) + v.max(axis=0))
+    r = 1.1 * np.linalg.norm(v - c, axis=1).max()
+    grid = {}
+    pts = []
+    for i in range(3):
+        for j in range(3):
+            for k in range(3):
+                if (i, j, k) != (1, 1, 1):
+                    grid[(i, j, k)] = len(pts)
+                    q = np.array([i, j, k], dtype=float) - 1.0
+                    pts.append(c + r * q / np.linalg.norm(q))
+    tris = []
+    for axis in range(3):          # each face of the cube: 2 x 2 quads, 2 triangles each
+        for side in (0, 2):
+            a, b = [d for d in range(3) if d != axis]
+            for s in range(2):
+                for t in range(2):
+                    def idx(ds, dt):
+                        key = [0, 0, 0]
+                        key[axis], key[a], key[b] = side, s + ds, t + dt
+                        return grid[tuple(key)]
+                    q = [idx(0, 0), idx(1, 0), idx(1, 1), idx(0, 1)]
+                    tris += [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]
+    tris = np.array(tris)
+    P = np.array(pts)
+    # face out: flip the triangles whose normal points to the centre
+    n = np.cross(P[tris[:, 1]] - P[tris[:, 0]], P[tris[:, 2]] - P[tris[:, 0]])
+    inward = np.einsum("ij,ij->i", n, P[tris[:, 0]] - c) < 0
+    tris[inward] = tris[inward][:, ::-1]
+    return P, tris
+
+
+@pytest.mark.skipif(not MESH_FILES, reason="../shared/meshes not present")
+@pytest.mark.parametrize("mesh_file", MESH_FILES)
+def test_every_real_mesh(mesh_file):
+    verts, sizes, idx = dk.load_mesh_file(str(SHARED_MESHES / mesh_file))
+    v = np.asarray(verts, dtype=float)
+    mesh = dk.Mesh.from_polygons(verts, sizes, idx)
+    diag = float(np.linalg.norm(np.ptp(v, axis=0)))
+    P, T = sphere_cage(v)
+    cage = dk.Cage(mesh, cage_vertices=P, cage_triangles=T)
+    assert np.array_equal(cage.solve(cage.rest_points).positions, v)
+    A = np.array([[1.1, 0.2, 0.0], [-0.1, 0.9, 0.3], [0.05, 0.0, 1.2]])
+    t = np.array([0.3, -0.1, 0.2]) * diag
+    assert np.abs(cage.solve(P @ A.T + t).positions - (v @ A.T + t)).max() < 1e-9 * diag
+    pulled = P.copy()
+    top = int(np.argmax(P[:, 2]))
+    pulled[top] += [0.0, 0.0, 0.2 * diag]
+    x = np.asarray(cage.solve(pulled).positions)
+    move = np.linalg.norm(x - v, axis=1)
+    near = np.linalg.norm(v - P[top], axis=1)
+    assert move.max() > 1e-3 * diag
+    # the pull fades away from the pulled vertex: the nearest tenth moves more than the
+    # farthest tenth
+    order = np.argsort(near)
+    k = max(len(v) // 10, 1)
+    assert move[order[:k]].mean() > 2 * move[order[-k:]].mean()
+
+
+def test_single_weights_and_refusals():
+    rng = np.random.default_rng(2)
+    v = rng.uniform(-1, 1, size=(300, 3))
+    mesh = dk.Mesh(v, np.array([[0, 1, 2]]))
+    P, T = sphere_cage(v)
+    pulled = P + rng.normal(scale=0.1, size=P.shape)
+    a = dk.Cage(mesh, cage_vertices=P, cage_triangles=T).solve(pulled).positions
+    b = dk.Cage(mesh, cage_vertices=P, cage_triangles=T, weights="single").solve(pulled).positions
+    assert 0 < np.abs(a - b).max() < 1e-5
+    with pytest.raises(TypeError, match="cage_vertices"):
+        dk.Cage(mesh)
+    with pytest.raises(ValueError, match="not closed"):
+        dk.Cage(mesh, cage_vertices=P, cage_triangles=T[:-1])
+    with pytest.raises(IndexError):
+        dk.Cage(mesh, cage_vertices=P, cage_triangles=np.vstack([T, [[0, 1, 99]]]))
+    cage = dk.Cage(mesh, cage_vertices=P, cage_triangles=T)
+    with pytest.raises(TypeError, match="not transforms"):
+        cage.solve(transforms=[np.eye(4)])
+    with pytest.raises(ValueError):
+        cage.solve(P[:-1])
+    cage.rebind(cage_vertices=P * 1.5, cage_triangles=T)
+    np.testing.assert_allclose(cage.rest_points, P * 1.5)
+    assert cage.stats["n_controls"] == len(P)
