@@ -81,12 +81,20 @@ void dk_cage_stats(const dk_cage *cage, dk_method_stats *stats);
 const double *dk_cage_rest_points(const dk_cage *cage);
 void dk_cage_free(dk_cage *cage);
 
+/** The edges of a cage's triangles, for dk_cage_mean_value: `edges` (n_edges x 2, each
+ *  once) and, per triangle corner, the edge opposite it (`opposite`, n_triangles x 3).
+ *  Allocates both (the caller frees them); DK_ERR_OUT_OF_MEMORY. */
+dk_status dk_cage_edges(const dk_index *triangles, dk_index n_triangles, dk_index **edges,
+                        dk_index *n_edges, dk_index **opposite, dk_error *err);
+
 /** One vertex's mean value coordinates for a cage: `point` (3), the cage's `n_cage`
- *  vertices (n_cage x 3) and `n_triangles` triangles (n_triangles x 3), into `lambda`
- *  (n_cage; `scratch` 4 n_cage doubles). Returns 0, or -1 when the weights sum to zero
- *  (a point the formula cannot place: an open or degenerate cage). */
+ *  vertices (n_cage x 3), `n_triangles` triangles (n_triangles x 3) and their edges
+ *  (dk_cage_edges), into `lambda` (n_cage; `scratch`: 4 n_cage + 3 n_edges doubles). Each
+ *  edge's angle is computed once for the two triangles that share it. Returns 0, or -1 when
+ *  the weights sum to zero (a point the formula cannot place: a degenerate cage). */
 int dk_cage_mean_value(const double *point, const double *cage, dk_index n_cage,
-                       const dk_index *triangles, dk_index n_triangles, double *lambda,
+                       const dk_index *triangles, dk_index n_triangles, const dk_index *edges,
+                       dk_index n_edges, const dk_index *opposite, double *lambda,
                        double *scratch);
 
 /** Peak bytes of a bind: the mesh's rows of W for a cage the model cannot know here (the

@@ -238,6 +238,29 @@ static void decode_control(dk_fuzz_input *in, const dk_mesh *m, unsigned own, gr
         }
         f[15] = 1.0;
     }
+    if (c->kind == DK_CONTROL_CAGE && dk_fuzz_u8(in) % 4 != 0) {
+        /* mostly a closed box cage around the mesh, its corners jittered */
+        static const dk_index box[36] = {0, 2, 1, 1, 2, 3, 4, 5, 6, 5, 7, 6, 0, 1, 4, 1, 5, 4,
+                                         2, 6, 3, 3, 6, 7, 0, 4, 2, 2, 4, 6, 1, 3, 5, 3, 7, 5};
+        double lo[3], hi[3];
+        for (int d = 0; d < 3; d++)
+            lo[d] = hi[d] = m->positions[d];
+        for (dk_index v = 0; v < n; v++)
+            for (int d = 0; d < 3; d++) {
+                lo[d] = fmin(lo[d], m->positions[3 * v + d]);
+                hi[d] = fmax(hi[d], m->positions[3 * v + d]);
+            }
+        c->n_controls = 8;
+        c->n_triangles = 12;
+        memcpy(g->control_tris, box, sizeof box);
+        c->triangles = g->control_tris;
+        for (int q = 0; q < 8; q++)
+            for (int d = 0; d < 3; d++) {
+                const double w = hi[d] - lo[d] > 0 ? hi[d] - lo[d] : 1.0;
+                g->control_rest[3 * q + d] = ((q >> d) & 1 ? hi[d] + 0.1 * w : lo[d] - 0.1 * w) +
+                                             w * ((double)(dk_fuzz_u8(in) % 9) - 4) / 32.0;
+            }
+    }
     c->rest = dk_fuzz_u8(in) % 16 == 0 ? NULL : g->control_rest;
     if (c->kind == DK_CONTROL_CAGE) {
         c->n_triangles = dk_fuzz_below(in, MAX_CAGE_TRIS + 1);

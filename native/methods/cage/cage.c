@@ -91,9 +91,11 @@ static dk_status take_control(const dk_constraint_desc *c, dk_index n, dk_error 
 typedef struct rows_job {
     const dk_mesh *mesh;
     const dk_control_desc *c;
+    const dk_index *edges, *opposite;
+    dk_index n_edges;
     double *W;
     float *Wf;
-    double *scratch; /* 2 parts x 5 nc: lambda and the kernel's 4 nc */
+    double *scratch; /* 2 parts x (5 nc + 3 n_edges): lambda and the kernel's scratch */
     dk_index first_bad[2];
 } rows_job;
 
@@ -101,10 +103,12 @@ static void rows_range(void *ctx, dk_index v0, dk_index v1, int part)
 {
     rows_job *job = ctx;
     const dk_index nc = job->c->n_controls;
-    double *lambda = job->scratch + (size_t)part * 5 * (size_t)nc, *k = lambda + nc;
+    double *lambda = job->scratch + (size_t)part * (5 * (size_t)nc + 3 * (size_t)job->n_edges);
+    double *k = lambda + nc;
     for (dk_index v = v0; v < v1; v++) {
         if (dk_cage_mean_value(job->mesh->positions + 3 * (size_t)v, job->c->rest, nc,
-                               job->c->triangles, job->c->n_triangles, lambda, k) != 0 &&
+                               job->c->triangles, job->c->n_triangles, job->edges,
+                               job->n_edges, job->opposite, lambda, k) != 0 &&
             job->first_bad[part] < 0)
             job->first_bad[part] = v;
         if (job->W)
@@ -155,10 +159,17 @@ static dk_status build(dk_cage *cg, const dk_control_desc *c, dk_progress *prog,
     } else {
         cg->W = malloc(n * nc * sizeof *cg->W + 1);
     }
-    rows_job job = {cg->mesh, c, cg->W, cg->Wf, malloc(10 * nc * sizeof(double)), {-1, -1}};
+    dk_index *edges = NULL, *opposite = NULL, ne = 0;
+    st = dk_cage_edges(c->triangles, c->n_triangles, &edges, &ne, &opposite, err);
+    if (st != DK_OK)
+        return st;
+    rows_job job = {cg->mesh, c, edges, opposite, ne, cg->W, cg->Wf,
+                    malloc(2 * (5 * nc + 3 * (size_t)ne) * sizeof(double)), {-1, -1}};
     if (!cg->rest || !cg->disp || (single ? !cg->Wf || !cg->dispf || !cg->outf : !cg->W) ||
         !job.scratch) {
         free(job.scratch);
+        free(edges);
+        free(opposite);
         return oom(err, "coordinates");
     }
     memcpy(cg->rest, c->rest, 3 * nc * sizeof *cg->rest);
@@ -180,6 +191,8 @@ static dk_status build(dk_cage *cg, const dk_control_desc *c, dk_progress *prog,
                 job.first_bad[0] = (dk_index)v0 + part.first_bad[k];
     }
     free(job.scratch);
+    free(edges);
+    free(opposite);
     if (st == DK_OK && job.first_bad[0] >= 0)
         st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                           "Cage: vertex %d has no mean value coordinates (its weights sum to "

@@ -3,6 +3,8 @@
 #include "dk_cage.h"
 
 #include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
 #include <string.h>
 
 /* pi - h below this: the point is on the triangle; |s_i| below it: on the triangle's plane,
@@ -16,10 +18,60 @@ static double det3(const double *a, const double *b, const double *c)
            a[2] * (b[0] * c[1] - b[1] * c[0]);
 }
 
+typedef struct edge_key {
+    int64_t key; /* min * 2^31 + max */
+    int64_t slot; /* 3 t + the opposite corner */
+} edge_key;
+
+static int key_less(const void *a, const void *b)
+{
+    const int64_t x = ((const edge_key *)a)->key, y = ((const edge_key *)b)->key;
+    return (x > y) - (x < y);
+}
+
+dk_status dk_cage_edges(const dk_index *tris, dk_index nt, dk_index **edges_out,
+                        dk_index *n_edges, dk_index **opposite_out, dk_error *err)
+{
+    const size_t ns = 3 * (size_t)nt;
+    edge_key *k = malloc((ns + 1) * sizeof *k);
+    dk_index *edges = malloc((2 * ns + 1) * sizeof *edges);
+    dk_index *opposite = malloc((ns + 1) * sizeof *opposite);
+    if (!k || !edges || !opposite) {
+        free(k);
+        free(edges);
+        free(opposite);
+        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "Cage: out of memory (cage edges)");
+    }
+    for (dk_index t = 0; t < nt; t++)
+        for (int i = 0; i < 3; i++) {
+            const int64_t a = tris[3 * t + (i + 1) % 3], b = tris[3 * t + (i + 2) % 3];
+            k[3 * (size_t)t + i].key = a < b ? a * INT64_C(2147483648) + b
+                                             : b * INT64_C(2147483648) + a;
+            k[3 * (size_t)t + i].slot = 3 * (int64_t)t + i;
+        }
+    qsort(k, ns, sizeof *k, key_less);
+    dk_index ne = 0;
+    for (size_t i = 0; i < ns; i++) {
+        if (i == 0 || k[i].key != k[i - 1].key) {
+            edges[2 * (size_t)ne] = (dk_index)(k[i].key / INT64_C(2147483648));
+            edges[2 * (size_t)ne + 1] = (dk_index)(k[i].key % INT64_C(2147483648));
+            ne++;
+        }
+        opposite[k[i].slot] = ne - 1;
+    }
+    free(k);
+    *edges_out = edges;
+    *n_edges = ne;
+    *opposite_out = opposite;
+    return DK_OK;
+}
+
 int dk_cage_mean_value(const double *x, const double *cage, dk_index nc,
-                       const dk_index *tris, dk_index nt, double *lambda, double *scratch)
+                       const dk_index *tris, dk_index nt, const dk_index *edges, dk_index ne,
+                       const dk_index *opposite, double *lambda, double *scratch)
 {
     double *d = scratch, *u = scratch + nc; /* u: nc x 3 */
+    double *eth = scratch + 4 * (size_t)nc, *eco = eth + ne, *esi = eco + ne;
     double size2 = 0.0;
     for (dk_index j = 0; j < nc; j++) {
         const double *p = cage + 3 * (size_t)j;
@@ -38,19 +90,26 @@ int dk_cage_mean_value(const double *x, const double *cage, dk_index nc,
             return 0;
         }
     memset(lambda, 0, (size_t)nc * sizeof *lambda);
+    /* per edge, the angle at x it subtends: its cosine (a dot product), sine (a cross
+     * product's length) and value (atan2), once for its two triangles */
+    for (dk_index e = 0; e < ne; e++) {
+        const double *a = u + 3 * (size_t)edges[2 * e], *b = u + 3 * (size_t)edges[2 * e + 1];
+        const double cx = a[1] * b[2] - a[2] * b[1], cy = a[2] * b[0] - a[0] * b[2],
+                     cz = a[0] * b[1] - a[1] * b[0];
+        eco[e] = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        esi[e] = sqrt(cx * cx + cy * cy + cz * cz);
+        eth[e] = atan2(esi[e], eco[e]);
+    }
     for (dk_index t = 0; t < nt; t++) {
         const dk_index *f = tris + 3 * (size_t)t;
         const double *uf[3] = {u + 3 * (size_t)f[0], u + 3 * (size_t)f[1], u + 3 * (size_t)f[2]};
-        /* per corner i, the angle theta_i at x subtended by the opposite edge: its cosine
-         * (a dot product), sine (a cross product's length) and value (atan2) */
+        /* per corner i, the angle theta_i at x subtended by the opposite edge */
         double theta[3], co[3], si[3];
         for (int i = 0; i < 3; i++) {
-            const double *a = uf[(i + 1) % 3], *b = uf[(i + 2) % 3];
-            const double cx = a[1] * b[2] - a[2] * b[1], cy = a[2] * b[0] - a[0] * b[2],
-                         cz = a[0] * b[1] - a[1] * b[0];
-            co[i] = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-            si[i] = sqrt(cx * cx + cy * cy + cz * cz);
-            theta[i] = atan2(si[i], co[i]);
+            const dk_index e = opposite[3 * (size_t)t + i];
+            theta[i] = eth[e];
+            co[i] = eco[e];
+            si[i] = esi[e];
         }
         const double h = 0.5 * (theta[0] + theta[1] + theta[2]);
         if (MVC_PI - h < MVC_EPS) { /* on this triangle: its barycentric coordinates */
