@@ -419,6 +419,17 @@ dk_status dk_state_check(const char *method, const uint64_t shape[4],
 /** Copies a checked state's spans back into place. */
 void dk_state_restore_spans(const dk_state_span *spans, int n_spans, const void *state);
 
+/** The sum over `n` vertices of |positions - base|^2 (both n x 3): the squared
+ *  displacement, the energy of the direct space deformations (Lattice, Cage). */
+double dk_displacement_energy(const double *positions, const double *base, dk_index n);
+
+/** The end of a direct method's solve whose energy is the squared displacement from `base`:
+ *  that energy (NaN when the request skips it), dk_solve_result_check, and `info` (may be
+ *  NULL) filled with iterations 1 and converged 1. `who` prefixes the messages. */
+dk_status dk_direct_solve_finish(const double *positions, const double *base, dk_index n,
+                                 const dk_solve_request *request, const char *who,
+                                 dk_solve_info *info, dk_error *err);
+
 /** Checks an energy value before energy() returns it (DK_ERR_NONFINITE when not finite). */
 dk_status dk_energy_result_check(double energy, const char *who, dk_error *err);
 

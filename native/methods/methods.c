@@ -150,3 +150,27 @@ void dk_constraints_held_stats(const dk_constraints *c, const dk_index *to_calle
         stats->first_held = first;
     }
 }
+
+double dk_displacement_energy(const double *positions, const double *base, dk_index n)
+{
+    double e = 0.0;
+    for (size_t k = 0; k < 3 * (size_t)n; k++) {
+        const double d = positions[k] - base[k];
+        e += d * d;
+    }
+    return e;
+}
+
+dk_status dk_direct_solve_finish(const double *positions, const double *base, dk_index n,
+                                 const dk_solve_request *rq, const char *who,
+                                 dk_solve_info *info, dk_error *err)
+{
+    const double e = rq->skip_energy ? NAN : dk_displacement_energy(positions, base, n);
+    const dk_status st = dk_solve_result_check(positions, n, e, !rq->skip_energy, who, err);
+    if (st == DK_OK && info) {
+        info->energy = e;
+        info->iterations = 1;
+        info->converged = 1;
+    }
+    return st;
+}

@@ -264,16 +264,6 @@ dk_status dk_cage_rebind(dk_cage *cg, const dk_constraint_desc *constraints, dk_
     return DK_OK;
 }
 
-static double displacement_energy(const dk_cage *cg, const double *positions)
-{
-    double e = 0.0;
-    for (size_t k = 0; k < 3 * (size_t)cg->n; k++) {
-        const double d = positions[k] - cg->mesh->positions[k];
-        e += d * d;
-    }
-    return e;
-}
-
 dk_status dk_cage_solve(dk_cage *cg, const dk_solve_request *rq, double *positions,
                         dk_solve_info *info, dk_error *err)
 {
@@ -309,16 +299,7 @@ dk_status dk_cage_solve(dk_cage *cg, const dk_solve_request *rq, double *positio
         for (size_t k = 0; k < n3; k++)
             positions[k] = x[k] + (double)cg->outf[k];
     }
-    const double e = rq->skip_energy ? NAN : displacement_energy(cg, positions);
-    st = dk_solve_result_check(positions, cg->n, e, !rq->skip_energy, "Cage solve", err);
-    if (st != DK_OK)
-        return st;
-    if (info) {
-        info->energy = e;
-        info->iterations = 1;
-        info->converged = 1;
-    }
-    return DK_OK;
+    return dk_direct_solve_finish(positions, x, cg->n, rq, "Cage solve", info, err);
 }
 
 dk_status dk_cage_energy(const dk_cage *cg, const double *positions, double *energy,
@@ -326,7 +307,7 @@ dk_status dk_cage_energy(const dk_cage *cg, const double *positions, double *ene
 {
     if (!cg || !positions || !energy)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "Cage energy: arguments must not be NULL");
-    const double e = displacement_energy(cg, positions);
+    const double e = dk_displacement_energy(positions, cg->mesh->positions, cg->n);
     const dk_status st = dk_energy_result_check(e, "Cage energy", err);
     if (st == DK_OK)
         *energy = e;

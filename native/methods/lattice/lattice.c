@@ -170,16 +170,6 @@ static void deform(dk_lattice *lt, double *out)
     dk_team_park(lt->team);
 }
 
-static double displacement_energy(const dk_lattice *lt, const double *positions)
-{
-    double e = 0.0;
-    for (size_t k = 0; k < 3 * (size_t)lt->n; k++) {
-        const double d = positions[k] - lt->pose[k];
-        e += d * d;
-    }
-    return e;
-}
-
 dk_status dk_lattice_solve(dk_lattice *lt, const dk_solve_request *rq, double *positions,
                            dk_solve_info *info, dk_error *err)
 {
@@ -211,16 +201,7 @@ dk_status dk_lattice_solve(dk_lattice *lt, const dk_solve_request *rq, double *p
     for (size_t k = 0; k < 3 * (size_t)g->n_points; k++)
         g->disp[k] = rq->targets[k] - g->rest[k];
     deform(lt, positions);
-    const double e = rq->skip_energy ? NAN : displacement_energy(lt, positions);
-    st = dk_solve_result_check(positions, lt->n, e, !rq->skip_energy, "Lattice solve", err);
-    if (st != DK_OK)
-        return st;
-    if (info) {
-        info->energy = e;
-        info->iterations = 1;
-        info->converged = 1;
-    }
-    return DK_OK;
+    return dk_direct_solve_finish(positions, lt->pose, lt->n, rq, "Lattice solve", info, err);
 }
 
 dk_status dk_lattice_energy(const dk_lattice *lt, const double *positions, double *energy,
@@ -229,7 +210,7 @@ dk_status dk_lattice_energy(const dk_lattice *lt, const double *positions, doubl
     if (!lt || !positions || !energy)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "Lattice energy: arguments must not be NULL");
-    const double e = displacement_energy(lt, positions);
+    const double e = dk_displacement_energy(positions, lt->pose, lt->n);
     const dk_status st = dk_energy_result_check(e, "Lattice energy", err);
     if (st == DK_OK)
         *energy = e;
