@@ -42,19 +42,8 @@ typedef struct lattice_store {
 /* The mesh's bounding box grown by LATTICE_MARGIN, as a frame (row-major 4 x 4). */
 static void box_around(const dk_mesh *m, double *F)
 {
-    double lo[3], hi[3];
-    for (int d = 0; d < 3; d++)
-        lo[d] = hi[d] = m->positions[d];
-    for (dk_index v = 0; v < m->n_vertices; v++)
-        for (int d = 0; d < 3; d++) {
-            const double x = m->positions[3 * (size_t)v + d];
-            lo[d] = x < lo[d] ? x : lo[d];
-            hi[d] = x > hi[d] ? x : hi[d];
-        }
-    double diag = 0.0;
-    for (int d = 0; d < 3; d++)
-        diag += (hi[d] - lo[d]) * (hi[d] - lo[d]);
-    diag = sqrt(diag) > 0.0 ? sqrt(diag) : 1.0;
+    const double *lo = m->bbox_min, *hi = m->bbox_max;
+    const double diag = m->bbox_diagonal > 0.0 ? m->bbox_diagonal : 1.0;
     memset(F, 0, 16 * sizeof(double));
     for (int d = 0; d < 3; d++) {
         const double pad = LATTICE_MARGIN * (hi[d] - lo[d]) + 1e-3 * diag;

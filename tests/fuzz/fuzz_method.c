@@ -181,18 +181,6 @@ static void decode_groups(dk_fuzz_input *in, dk_index n, groups *g)
     }
 }
 
-/* The mesh's bounding box. */
-static void mesh_box(const dk_mesh *m, double *lo, double *hi)
-{
-    for (int d = 0; d < 3; d++)
-        lo[d] = hi[d] = m->positions[d];
-    for (dk_index v = 0; v < m->n_vertices; v++)
-        for (int d = 0; d < 3; d++) {
-            lo[d] = fmin(lo[d], m->positions[3 * v + d]);
-            hi[d] = fmax(hi[d], m->positions[3 * v + d]);
-        }
-}
-
 /* One bind in eight carries a control of any kind -- every bind of a method that takes no
  * vertex groups, mostly of its own kind (`own`: its table's controls) -- every field
  * decoded within its buffer (n_controls, resolution and triangle corners may still be
@@ -232,8 +220,7 @@ static void decode_control(dk_fuzz_input *in, const dk_mesh *m, unsigned own, gr
         }
     if (c->kind == DK_CONTROL_LATTICE && dk_fuzz_u8(in) % 4 != 0) {
         /* mostly a box around the mesh, grown or shrunk a little (vertices in and out) */
-        double lo[3], hi[3];
-        mesh_box(m, lo, hi);
+        const double *lo = m->bbox_min, *hi = m->bbox_max;
         double *f = g->control_rest;
         memset(f, 0, 16 * sizeof(double));
         for (int d = 0; d < 3; d++) {
@@ -248,8 +235,7 @@ static void decode_control(dk_fuzz_input *in, const dk_mesh *m, unsigned own, gr
         /* mostly a closed box cage around the mesh, its corners jittered */
         static const dk_index box[36] = {0, 2, 1, 1, 2, 3, 4, 5, 6, 5, 7, 6, 0, 1, 4, 1, 5, 4,
                                          2, 6, 3, 3, 6, 7, 0, 4, 2, 2, 4, 6, 1, 3, 5, 3, 7, 5};
-        double lo[3], hi[3];
-        mesh_box(m, lo, hi);
+        const double *lo = m->bbox_min, *hi = m->bbox_max;
         c->n_controls = 8;
         c->n_triangles = 12;
         memcpy(g->control_tris, box, sizeof box);

@@ -151,15 +151,7 @@ static int control_scene_make(const dk_method_ops *o, const scene *s, control_sc
     memset(c, 0, sizeof *c);
     if (!(o->controls & (DK_CONTROL_LATTICE | DK_CONTROL_CAGE)))
         return -1;
-    const dk_mesh *m = s->mesh;
-    double lo[3], hi[3];
-    for (int d = 0; d < 3; d++)
-        lo[d] = hi[d] = m->positions[d];
-    for (dk_index v = 0; v < m->n_vertices; v++)
-        for (int d = 0; d < 3; d++) {
-            lo[d] = fmin(lo[d], m->positions[3 * v + d]);
-            hi[d] = fmax(hi[d], m->positions[3 * v + d]);
-        }
+    const double *lo = s->mesh->bbox_min, *hi = s->mesh->bbox_max;
     for (int d = 0; d < 3; d++) {
         const double pad = 0.1 * (hi[d] - lo[d]) + 1e-3 * s->diag;
         c->frame[5 * d] = hi[d] - lo[d] + 2 * pad;
