@@ -27,8 +27,10 @@ def follows(m):
 
 def depends_on_input(m, d):
     """Whether d's result depends on its input: its method follows the input, or d solves
-    from the rest with its handles where the input puts them (Solve From: Rest Shape)."""
-    return follows(m) or d.solve_from == "REST"
+    from the rest with its handles where the input puts them (Solve From: Rest Shape; a
+    method driven by a control object has no handles, and no such choice)."""
+    return follows(m) or (d.solve_from == "REST"
+                          and "vertex_groups" in native.control_kinds(m.native_class))
 
 
 def pose_note(obj, d):
@@ -41,14 +43,18 @@ def pose_note(obj, d):
     if depends_on_input(m, d) or not any(mm.type == "ARMATURE"
                                          for mm in modifiers_above(obj, d)):
         return None
+    kinds = native.control_kinds(m.native_class)
     editors = [x.label for x in methods.METHODS if x.id != m.id and follows(x)
-               and native.has_class(x.native_class)]
+               and native.has_class(x.native_class)
+               and native.control_kinds(x.native_class) == kinds]
     names = (", ".join(editors[:-1]) + " and " + editors[-1]) if len(editors) > 1 else \
         "".join(editors)
+    where = ("away from the handles" if "vertex_groups" in kinds
+             else "wherever the pose turns the mesh")
     return ("%s solves on the rest pose: on the posed mesh its edit keeps the rest's "
-            "directions away from the handles%s" % (
-                m.label, ". %s edit%s the pose" % (names, "" if len(editors) > 1 else "s")
-                if editors else ""))
+            "directions %s%s" % (m.label, where,
+                                 ". %s edit%s the pose" % (names, "" if len(editors) > 1 else "s")
+                                 if editors else ""))
 
 
 def modifiers_above(obj, d, depsgraph=None):

@@ -249,6 +249,16 @@ def _animated(idd):
     return False
 
 
+def _moved_by_others(c):
+    """Whether a modifier of `c` (a lattice's or cage's Hook or Armature) takes an object that
+    is animated."""
+    for m in getattr(c, "modifiers", ()):
+        o = getattr(m, "object", None)
+        if o is not None and _animated(o):
+            return True
+    return False
+
+
 def animated_reason(obj, d):
     """Why the deformer's result changes over time without a bake, or None: a keyed (or
     driven) handle target, the object itself, or its Factor. A file opened without the
@@ -257,6 +267,10 @@ def animated_reason(obj, d):
     for h in d.handles:
         if h.target is not None and _animated(h.target):
             return "handle '%s' follows the animated '%s'" % (h.name, h.target.name)
+    c = d.control_object
+    if c is not None and (_animated(c) or _animated(c.data) or _animated(
+            getattr(c.data, "shape_keys", None)) or _moved_by_others(c)):
+        return "its control '%s' is animated" % c.name
     mod = geonodes.find_modifier(obj, d)
     ad = obj.animation_data
     if mod is not None and ad is not None:

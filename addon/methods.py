@@ -463,6 +463,63 @@ METHODS.append(Method(
 ))
 
 
+# Methods driven by a control object (their native kinds, solver.controls): no handles, no
+# Region or Fixed group; the panel shows the control and its Make operator instead
+METHODS.append(Method(
+    id="LATTICE",
+    label="Lattice",
+    native_class="Lattice",
+    description="Free-form deformation by a Lattice object: edit, key, hook or rig its "
+                "points and the mesh inside follows",
+    icon="MOD_LATTICE",
+    needs_faces=False,
+    options=[
+        # default = the native default (and Blender's lattices' B-spline)
+        Option("interpolation", "ENUM", "bspline", "Interpolation",
+               "How the points around a vertex weigh on it",
+               items=(("bspline", "B-Spline",
+                       "Smooth: four points per axis around the vertex, as Blender's lattice "
+                       "(the default); the border points are met exactly"),
+                      ("linear", "Linear",
+                       "The points of the vertex's cell, trilinear: follows the points "
+                       "exactly, with creases at the cells' faces"),
+                      ("bernstein", "Bernstein",
+                       "Every point weighs on every vertex (Sederberg-Parry): the smoothest, "
+                       "and the least local; at most 32 points per axis"))),
+        Option("outside", "ENUM", "extend", "Outside",
+               "What vertices outside the lattice's box do",
+               items=(("extend", "Extend",
+                       "They move as the nearest border cell continued (the default): an "
+                       "affine edit of the lattice moves every vertex by it"),
+                      ("clamp", "Clamp",
+                       "They move as the box's nearest point, as Blender's Lattice modifier "
+                       "with linear interpolation"),
+                      ("still", "Fade Out",
+                       "Their motion fades to none one cell beyond the box"))),
+    ],
+))
+
+METHODS.append(Method(
+    id="CAGE",
+    label="Cage",
+    native_class="Cage",
+    description="Cage deformation with mean value coordinates: a closed mesh around the "
+                "model moves it smoothly",
+    icon="MOD_MESHDEFORM",
+    needs_faces=False,
+    options=[
+        Option("weights", "ENUM", "double", "Precision",
+               "How the coordinates are stored",
+               items=(("double", "Double",
+                       "Full precision (the default): 8 bytes per vertex and cage vertex"),
+                      ("single", "Single",
+                       "Half the memory, for millions of vertices: the motion to about 1e-7 "
+                       "of itself")),
+               advanced=True),
+    ],
+))
+
+
 BY_ID = {m.id: m for m in METHODS}
 
 

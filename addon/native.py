@@ -59,3 +59,10 @@ def method_info(name):
         return dict(m._native._method_info(name)) if m is not None else {}
     except (AttributeError, KeyError):
         return {}
+
+
+def control_kinds(name):
+    """The control kinds method class `name` binds to (its table's dk_method_ops.controls:
+    "vertex_groups", "lattice", "cage", ...); vertex groups when the module does not say (a
+    build without the contract's controls, the tests' mock module)."""
+    return tuple(method_info(name).get("controls") or ("vertex_groups",))

@@ -60,6 +60,15 @@ def _method_changed(self, context):
         mod.name = self.name
 
 
+def _control_poll(self, ob):
+    """The objects the deformer's method can take as its control: a Lattice object for a
+    lattice, any other mesh for a cage (solver.controls: the collector of its kinds)."""
+    from .solver import controls
+    if controls.uses_handles(self):
+        return False
+    return ob.type == controls.of(self).OBJECT_TYPE and ob.name != self.id_data.name
+
+
 class DeformKitHandle(bpy.types.PropertyGroup):
     # name (from PropertyGroup) is the label shown in the list
     vertex_group: StringProperty(name="Vertex Group", description="Vertices moved by this handle",
@@ -144,6 +153,18 @@ _deformer_ann = {
                                                  "Reconstruction folds more easily (its "
                                                  "Material group)"),
     "handles": CollectionProperty(type=DeformKitHandle),
+    # a method driven by a control object (solver.controls: a lattice, a cage): the object,
+    # and what Bind kept of it (solver.control_objects)
+    "control_object": PointerProperty(
+        name="Control", type=bpy.types.Object, poll=_control_poll, update=_touch,
+        description="The lattice or cage whose points move the mesh: edit, key, hook or rig "
+                    "it, and the mesh follows"),
+    "control_bind": StringProperty(name="Control at Bind",
+                                   description="The control's rest, taken at Bind (float64, "
+                                               "base64)"),
+    "control_bound_object": PointerProperty(name="Bound Control", type=bpy.types.Object,
+                                            description="The control object Bind took the "
+                                                        "rest from"),
     "active_handle": IntProperty(name="Active Handle", default=0),
     "bound": BoolProperty(name="Bound", default=False),
     # what the method deforms when something above moves its input (solver.solving._plan_solve)

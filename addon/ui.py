@@ -120,35 +120,10 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
             r.alert = True
             r.label(text="its Geometry Nodes modifier was removed", icon="ERROR")
             col.operator("deformkit.restore_modifier", icon="MODIFIER")
-        col.prop_search(d, "roi_group", obj, "vertex_groups", text="Region")
-        col.prop_search(d, "fixed_group", obj, "vertex_groups", text="Fixed")
-        if "stiffness" in m.maps or "material" in m.maps:
-            col.prop_search(d, "material_group", obj, "vertex_groups", text=m.material_label)
-
-        layout.label(text="Handles")
-        row = layout.row()
-        row.template_list("DEFORMKIT_UL_handles", "", d, "handles", d, "active_handle", rows=2)
-        c = row.column(align=True)
-        c.operator("deformkit.add_handle_from_selection", icon="ADD", text="")
-        c.operator("deformkit.add_handle", icon="PLUS", text="")
-        c.operator("deformkit.remove_handle", icon="REMOVE", text="")
-        if 0 <= d.active_handle < len(d.handles):
-            h = d.handles[d.active_handle]
-            hc = layout.column()
-            hc.use_property_split = True
-            hc.use_property_decorate = False
-            hc.prop_search(h, "vertex_group", obj, "vertex_groups")
-            hc.prop(h, "target")
-            if h.target is not None and h.target.type == "ARMATURE":
-                hc.prop_search(h, "subtarget", h.target.data, "bones")
-            if "handle_weights" in m.maps:
-                hc.prop(h, "use_weights")
-            if animated_input.input_movers(obj, d) is not None:  # what the edit does there
-                hc.prop(h, "follow")
-        if animated_input.input_movers(obj, d) is not None:
-            layout.prop(d, "solve_from")
-        if obj.mode == "EDIT":
-            layout.operator("deformkit.add_handle_from_selection", icon="HOOK")
+        if not solver.controls.uses_handles(d):
+            draw_control(layout, col, obj, d)
+        else:
+            draw_handles(layout, col, obj, d, m)
 
         box = layout.box()
         box.label(text="%s Options" % m.label, icon=m.icon)
@@ -197,6 +172,48 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
         if d.bound and any(m.type == "ARMATURE" for m in animated_input.modifiers_above(obj, d)):
             layout.operator("deformkit.bake_corrective", icon="SHAPEKEY_DATA")
         draw_bake(layout, obj, d, width)
+
+
+def draw_handles(layout, col, obj, d, m):
+    """The groups and handles of a method driven by vertex groups moved by targets."""
+    col.prop_search(d, "roi_group", obj, "vertex_groups", text="Region")
+    col.prop_search(d, "fixed_group", obj, "vertex_groups", text="Fixed")
+    if "stiffness" in m.maps or "material" in m.maps:
+        col.prop_search(d, "material_group", obj, "vertex_groups", text=m.material_label)
+
+    layout.label(text="Handles")
+    row = layout.row()
+    row.template_list("DEFORMKIT_UL_handles", "", d, "handles", d, "active_handle", rows=2)
+    c = row.column(align=True)
+    c.operator("deformkit.add_handle_from_selection", icon="ADD", text="")
+    c.operator("deformkit.add_handle", icon="PLUS", text="")
+    c.operator("deformkit.remove_handle", icon="REMOVE", text="")
+    if 0 <= d.active_handle < len(d.handles):
+        h = d.handles[d.active_handle]
+        hc = layout.column()
+        hc.use_property_split = True
+        hc.use_property_decorate = False
+        hc.prop_search(h, "vertex_group", obj, "vertex_groups")
+        hc.prop(h, "target")
+        if h.target is not None and h.target.type == "ARMATURE":
+            hc.prop_search(h, "subtarget", h.target.data, "bones")
+        if "handle_weights" in m.maps:
+            hc.prop(h, "use_weights")
+        if animated_input.input_movers(obj, d) is not None:  # what the edit does there
+            hc.prop(h, "follow")
+    if animated_input.input_movers(obj, d) is not None:
+        layout.prop(d, "solve_from")
+    if obj.mode == "EDIT":
+        layout.operator("deformkit.add_handle_from_selection", icon="HOOK")
+
+
+def draw_control(layout, col, obj, d):
+    """The control object of a method driven by one (a lattice, a cage), and the operator
+    that makes one around the mesh."""
+    c = solver.controls.of(d)
+    row = col.row(align=True)
+    row.prop(d, "control_object", text=c.LABEL)
+    layout.operator(c.MAKE_OPERATOR, icon="ADD")
 
 
 def draw_rebinding(layout, obj, d):
@@ -275,12 +292,17 @@ def _wrap(text, width):
 
 
 def driven_by(target):
-    """(mesh object, deformer index, deformer, handle) of every handle that `target` moves."""
+    """(mesh object, deformer index, deformer, handle) of every handle that `target` moves,
+    and (mesh object, deformer index, deformer, None) of every deformer it is the control
+    object (lattice, cage) of."""
     out = []
     for obj in bpy.data.objects:
         if obj.type != "MESH":
             continue
         for i, d in enumerate(obj.deformkit.deformers):
+            if d.control_object == target and not solver.controls.uses_handles(d):
+                out.append((obj, i, d, None))
+                continue
             for h in d.handles:
                 if h.target == target:
                     out.append((obj, i, d, h))
@@ -370,8 +392,9 @@ class DEFORMKIT_PT_handle_target(bpy.types.Panel):
     def draw(self, context):
         width = wrap_width(context)
         for mesh, i, d, h in driven_by(context.object):
-            draw_wrapped(self.layout, "moves handle '%s' of %s (%s)" % (h.name, mesh.name,
-                                                                        d.name), "HOOK", width)
+            text = ("moves handle '%s' of %s (%s)" % (h.name, mesh.name, d.name)
+                    if h is not None else "moves %s (%s)" % (mesh.name, d.name))
+            draw_wrapped(self.layout, text, "HOOK", width)
 
 
 class DEFORMKIT_MT_add(bpy.types.Menu):

@@ -47,7 +47,8 @@ class BindJob(progress.Reporting):
             if args.get(k) is None:
                 args.pop(k, None)
         self._args = args
-        self.handles = list(kw["handles"])
+        self.handles = list(kw.get("handles", ()))   # a control object's method: none
+        self.captured = None   # what Bind keeps of a control object (bind_begin, bind_end)
         self.native, self.error, self.seconds = None, None, 0.0
 
     def run(self):
@@ -102,7 +103,7 @@ class BindJob(progress.Reporting):
 def _install_groups(entry, d, kw, groups_key):
     """The entry after its native object was re-bound for new constraint groups."""
     entry.groups = groups_key
-    entry.handles = list(kw["handles"])
+    entry.handles = list(kw.get("handles", ()))
     # a follower's native source after a rebind: pushed again by the next solve
     entry.source = None if depends_on_input(methods.get(d.method), d) else entry.rest
     entry.native_source = None
@@ -142,12 +143,17 @@ def bind_begin(obj, d, depsgraph=None):
     blender_data.check_object(obj, d)
     identity.ensure_own_uid(obj, d)
     cache._cancel_rebinds((obj.name, d.uid))  # this bind replaces an automatic re-bind
-    kw, key = controls.collect(obj, d)
-    poses = pose_bind(blender_data.rest_positions(obj.data), kw["handles"],
-                      solving._input_or_none(obj, d, depsgraph))
-    mats = [(bind_matrix(obj, h, depsgraph), rig_bind(obj, d, h, depsgraph), pose)
-            for h, pose in zip(d.handles, poses + [None] * (len(d.handles) - len(poses)))]
-    return BindJob(obj, d, kw, key), mats
+    captured = controls.capture(obj, d, depsgraph)   # a control object's rest, taken now
+    kw, key = controls.collect(obj, d, captured)
+    mats = []
+    if controls.uses_handles(d):
+        poses = pose_bind(blender_data.rest_positions(obj.data), kw["handles"],
+                          solving._input_or_none(obj, d, depsgraph))
+        mats = [(bind_matrix(obj, h, depsgraph), rig_bind(obj, d, h, depsgraph), pose)
+                for h, pose in zip(d.handles, poses + [None] * (len(d.handles) - len(poses)))]
+    job = BindJob(obj, d, kw, key)
+    job.captured = captured
+    return job, mats
 
 
 def rest_frame(scene, d):
@@ -163,11 +169,17 @@ def bind_end(obj, d, job, mats, depsgraph=None):
     """Explicit bind, second half (main thread, after job.run()): installs the result. On the
     native bind's error, or a mesh or handle list changed meanwhile, it raises before touching
     anything, so the previous binding stays."""
-    if len(d.handles) != len(mats):
+    handles = controls.uses_handles(d)
+    if handles and len(d.handles) != len(mats):
         raise DeformKitError("handles were added or removed during the bind: bind again")
     e = job.entry(obj, d, explicit=True)
     d.bind_topology = job.topology
-    for h, (mat, rig, pose) in zip(d.handles, mats):
+    if not handles:
+        controls.store(d, job.captured)
+        # the binding's settings include what was kept (settings_key): the entry is the
+        # one for it
+        e.settings = controls.settings_key(d)
+    for h, (mat, rig, pose) in zip(d.handles if handles else (), mats):
         h.bind_matrix = mat
         h.rig_matrix = rig
         h.pose_matrix = pose if pose is not None else (0.0,) * 16

@@ -1,24 +1,33 @@
 """Which collector reads a deformer's controls from Blender: chosen by the control kinds its
 native method declares (deformkit._native._method_info(name)["controls"], from the method's
 table, dk_method_ops.controls), never by the method's name. A collector is a module with
-    collect(obj, d)   -> (the bind's keywords, bytes that change when the controls do);
-                         raises DeformKitError naming what is missing or wrong
+    uses_handles      -> True: the deformer's handles (vertex groups moved by targets) are
+                         its controls; False: a control object (d.control_object) is
+    capture(obj, d, depsgraph) -> what Bind keeps of the controls now (None: nothing)
+    store(d, captured)         -> keeps it in the deformer (Bind's end, on success)
+    collect(obj, d, captured=None)
+                      -> (the bind's keywords, bytes that change when the controls do),
+                         from `captured` or what the deformer keeps; raises DeformKitError
+                         naming what is missing or wrong
     settings_key(d)   -> what of d's settings (besides the controls) its binding depends on
     exist(obj, d)     -> whether every control d names is still there (cheap: every solve)
-The add-on reads one kind so far, vertex groups of the deformed mesh (vertex_groups.py);
-a lattice or a cage adds its module to COLLECTORS."""
+and, for a control object (uses_handles False), KIND, LABEL, OBJECT_TYPE, MAKE_OPERATOR and
+    targets(obj, d, e, depsgraph) -> the control's points on this frame (n_controls x 3)
+    summary(d), missing(d)        -> the status line's words
+Vertex groups of the deformed mesh (vertex_groups.py), a Blender Lattice object
+(lattice_control.py) and a closed mesh as a cage (cage_control.py)."""
 
 from .. import methods, native
 from ..errors import DeformKitError
-from . import vertex_groups
+from . import cage_control, lattice_control, vertex_groups
 
-COLLECTORS = {"vertex_groups": vertex_groups}
+COLLECTORS = {"vertex_groups": vertex_groups, "lattice": lattice_control, "cage": cage_control}
 
 
 def kinds(m):
     """The control kinds method `m`'s native class binds to; vertex groups when the module
     does not say (a build without the contract's controls, the tests' mock module)."""
-    return tuple(native.method_info(m.native_class).get("controls") or ("vertex_groups",))
+    return native.control_kinds(m.native_class)
 
 
 def collector(m):
@@ -32,8 +41,30 @@ def collector(m):
                          "Blender" % (m.label, " or ".join(k.replace("_", " ") for k in ks)))
 
 
-def collect(obj, d):
-    return collector(methods.get(d.method)).collect(obj, d)
+def of(d):
+    """The collector of deformer d's method."""
+    return collector(methods.get(d.method))
+
+
+def uses_handles(d):
+    """Whether d's controls are its handles (else a control object); True for a method
+    whose kinds the add-on cannot read (its collect raises)."""
+    try:
+        return of(d).uses_handles
+    except DeformKitError:
+        return True
+
+
+def capture(obj, d, depsgraph=None):
+    return of(d).capture(obj, d, depsgraph)
+
+
+def store(d, captured):
+    of(d).store(d, captured)
+
+
+def collect(obj, d, captured=None):
+    return of(d).collect(obj, d, captured)
 
 
 def settings_key(d):

@@ -10,8 +10,8 @@ from .. import geonodes, methods, native
 from ..animated_input import depends_on_input, edit_targets, input_transforms, moved_input
 from ..errors import DeformKitError
 from ..handles import transforms, turn_with_the_pose
-from . import (binding, blender_data, budget, cache, calls, identity, material, previews, rebind,
-               status, workers)
+from . import (binding, blender_data, budget, cache, calls, controls, identity, material,
+               previews, rebind, status, workers)
 
 
 def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_groups=False,
@@ -110,6 +110,11 @@ def _solve_inputs(obj, d, e, depsgraph):
     the bytes they make, which say whether anything changed since the last solve."""
     m = methods.get(d.method)
     source = moved_input(obj, d, depsgraph) if depends_on_input(m, d) else None
+    c = controls.collector(m)
+    if not c.uses_handles:
+        # a control object: its points on this frame are the targets (T holds them)
+        P = c.targets(obj, d, e, depsgraph)
+        return P, source, P.tobytes() + (b"" if source is None else source.tobytes())
     inp = source if depends_on_input(m, d) else _input_or_none(obj, d, depsgraph)
     T = budget.snap_identity(turn_with_the_pose(d, e.rest, e.handles,
                                                 transforms(obj, d, depsgraph), inp), e.extent)
@@ -130,7 +135,15 @@ def _plan_solve(obj, d, e, key, T, source, inputs, cold, write, interactive, res
     m = methods.get(d.method)
     goal = dict(transforms=T)
     kw = methods.solve_kwargs(m, d.options, cold)
-    if depends_on_input(m, d):
+    if not controls.collector(m).uses_handles:
+        # a control object's points (_solve_inputs); a method that edits its input
+        # registers the input to the control where it lies, the others solve on the rest
+        # and their offset lands on the input
+        goal = dict(targets=T)
+        if source is not None:
+            kw["input_positions"] = source
+        e.source = e.rest if source is None else source
+    elif depends_on_input(m, d):
         want = e.rest if source is None else source
         from_rest = d.solve_from == "REST"
         solve_on = e.rest if from_rest else want   # what the native object deforms

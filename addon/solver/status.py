@@ -6,7 +6,7 @@ import numpy as np
 from .. import methods
 from ..errors import OverlapError
 from ..text import plural
-from . import cache
+from . import cache, controls
 
 
 def set_status(d, msg, is_error):
@@ -26,6 +26,12 @@ def idle_status(d):
     """A deformer's status when nothing is wrong, composed from its state now (bound or not,
     its handles): the one place that words it. The panel draws it at draw time, so it follows
     handles added or removed since it was stored."""
+    c = controls.of(d) if not controls.uses_handles(d) else None
+    if c is not None:
+        if d.bound:
+            return "bound: %s to %s" % (plural(d.bind_n_vertices, "vertex"), c.summary(d))
+        want = c.missing(d)
+        return "not bound: %s, then Bind" % want if want else "not bound: press Bind"
     if d.bound:
         return "bound: %s, %s" % (plural(d.bind_n_vertices, "vertex"),
                                   plural(len(d.handles), "handle"))

@@ -9,6 +9,17 @@ from ..handles import target_world
 from ..text import plural
 from . import blender_data
 
+uses_handles = True
+
+
+def capture(obj, d, depsgraph=None):
+    """Nothing: the handles' placement at Bind is kept by binding.bind_end (bind_matrix)."""
+    return None
+
+
+def store(d, captured):
+    """Nothing to keep (capture)."""
+
 
 def settings_key(d):
     m = methods.get(d.method)
@@ -36,8 +47,9 @@ def exist(obj, d):
     return all(vgs.get(n) is not None for n in group_names(obj, d))
 
 
-def collect(obj, d):
-    """Validated constraint arrays from the deformer's vertex groups (raises DeformKitError)."""
+def collect(obj, d, captured=None):
+    """Validated constraint arrays from the deformer's vertex groups (raises DeformKitError);
+    `captured` is capture()'s None."""
     blender_data.check_object(obj, d)
     m = methods.get(d.method)
     if len(d.handles) == 0:

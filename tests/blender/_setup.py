@@ -193,9 +193,17 @@ if FROM_ZIP:
 else:
     import addon  # noqa: E402
     addon.register()
-from addon import solver, geonodes, native, handlers, handles, methods, overlay, compat  # noqa: E402,F401
+from addon import (solver, geonodes, native, handlers, handles, methods, overlay, compat,  # noqa: E402,F401
+                   properties)
 
 dk = native.load()
+
+
+def handle_methods():
+    """The registry's methods driven by handles (vertex groups moved by targets), which the
+    handle set-ups test; the ones driven by a control object (a lattice, a cage) have
+    test_addon_controls.py."""
+    return [m for m in methods.METHODS if "vertex_groups" in native.control_kinds(m.native_class)]
 
 
 class Results:

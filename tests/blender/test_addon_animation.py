@@ -250,7 +250,7 @@ def test_every_method_plays_and_bakes_in_chunks():
     direct cold solve, and two chunked batch bakes joined equal one bake, bit for bit. The
     scenes are saved first, then every method's bakes run side by side (run_batches)."""
     outs = {}
-    for m in S.methods.METHODS:
+    for m in S.handle_methods():
         if m.id == MID or not S.native.has_class(m.native_class):
             continue
         obj, d, e, fixed, handle = build(m.id)
@@ -364,7 +364,7 @@ def test_bakes_keep_the_rig():
     held the rest shape plus the edit, and the Mesh Cache (Overwrite) after the Armature
     threw the pose away (a straight arm at the bent frames). Shape keys, which the Armature
     would move again, are refused with a message naming the Point Cache."""
-    for m in S.methods.METHODS:
+    for m in S.handle_methods():
         if not S.native.has_class(m.native_class):
             continue
         obj, d, e, fixed, handle, bind_world = S.rigged_arm("surface", m.id)
@@ -406,7 +406,7 @@ def test_a_handle_on_the_rig_moves_its_vertices_once():
     the handle adds only the artist's deviation from the bone. It added the bone's motion
     again (the forearm swung twice as far). With the target on the bone the result is the
     armature's pose; with the empty moved along the bone, the tip moves by that much more."""
-    for m in S.methods.METHODS:
+    for m in S.handle_methods():
         if not S.native.has_class(m.native_class):
             continue
         obj, d, e, fixed, handle, bind_world = S.rigged_arm("surface", m.id)
@@ -509,7 +509,7 @@ def test_an_edit_turns_with_the_pose():
     met approximately). It was pasted in the rest's directions, so a correction keyed
     outward on a straight arm pointed elsewhere on the bent one. With Stays in Place the
     tip keeps the place the edit gave it, wherever the rig takes the forearm."""
-    for m in S.methods.METHODS:
+    for m in S.handle_methods():
         if not S.native.has_class(m.native_class):
             continue
         obj, d, e, fixed, handle, bind_world = S.rigged_arm("surface", m.id)
@@ -550,7 +550,7 @@ def test_a_method_that_edits_its_input_solves_on_the_pose():
     now keep their offset from the pose, seen from the bone, within 10% of the edit (they
     were pasted in the rest's directions)."""
     done = 0
-    for m in S.methods.METHODS:
+    for m in S.handle_methods():
         if not (S.native.has_class(m.native_class) and
                 S.native.method_info(m.native_class).get("edits_input")):
             continue
@@ -693,9 +693,9 @@ def test_the_panel_says_which_methods_edit_the_pose():
     Reconstruction). Under an Armature the panel says so and names the methods that edit
     the pose (from the native table's edits_input, not from names); not for those methods,
     not with Solve From: Rest Shape, not without a rig."""
-    followers = [m for m in S.methods.METHODS if S.native.has_class(m.native_class)
+    followers = [m for m in S.handle_methods() if S.native.has_class(m.native_class)
                  and S.addon.animated_input.follows(m)]
-    for m in S.methods.METHODS:
+    for m in S.handle_methods():
         if not S.native.has_class(m.native_class):
             continue
         obj, d, e, fixed, handle, bind_world = S.rigged_arm("surface", m.id)

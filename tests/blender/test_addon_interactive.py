@@ -53,7 +53,7 @@ def test_a_frame_after_a_drag_shows_what_a_bake_writes():
     method. The frame handler's "inputs unchanged" shortcut kept the drag's result (the
     second hostile review: ARAP 2.6e-5 of the diagonal off, EmbeddedDeformation 1e-3,
     EigenDeformation its Steps 1-2 preview)."""
-    for m in S.methods.METHODS:
+    for m in S.handle_methods():
         S.reset_scene()
         obj, d, e, fixed, handle = S.grid_setup(m.id, nx=24, ny=10)
         bpy.ops.deformkit.bind()

@@ -92,7 +92,7 @@ def one_method(mid):
 
 
 def test_methods():
-    for m in S.methods.METHODS:
+    for m in S.handle_methods():
         if not S.native.has_class(m.native_class):
             print("SKIP %s: deformkit.%s not in this build" % (m.id, m.native_class))
             continue
@@ -296,7 +296,7 @@ def test_vertex_cloud():
             except RuntimeError as ex:
                 refused = "no faces" in str(ex) and m.label in str(ex)
             R.check("%s refuses a vertex cloud at Add" % m.id, refused)
-    cloud = [m for m in S.methods.METHODS if not m.needs_faces]
+    cloud = [m for m in S.handle_methods() if not m.needs_faces]
     R.check("some method deforms vertex clouds", len(cloud) > 0)
     for m in cloud:
         S.group(obj, "fixed", np.where(pts[:, 0] < -0.9)[0])

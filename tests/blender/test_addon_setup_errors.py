@@ -246,20 +246,20 @@ def test_linked_objects_are_refused():
 
 def test_a_control_kind_the_addon_cannot_read():
     """A method whose native table declares only control kinds the add-on has no collector
-    for (as a lattice method would, in a module newer than the add-on) is refused at Bind by
+    for (as a method bound to example poses would, in a module newer than the add-on) is refused at Bind by
     name, and nothing is bound; the add-on picks the collector from the table, not from the
     method's name."""
     obj, d, e, fixed, handle = fresh()
     real = S.native.method_info
     cls = S.methods.get(d.method).native_class
 
-    def lattice_only(name):
+    def poses_only(name):
         info = real(name)
-        return dict(info, controls=("lattice",)) if name == cls else info
-    S.native.method_info = lattice_only
+        return dict(info, controls=("poses",)) if name == cls else info
+    S.native.method_info = poses_only
     try:
-        expect_error("a lattice method", bpy.ops.deformkit.bind,
-                     "binds to lattice, which this version of the add-on cannot read")
+        expect_error("a method bound to poses", bpy.ops.deformkit.bind,
+                     "binds to poses, which this version of the add-on cannot read")
         R.check("nothing bound", not d.bound and d.status_is_error, d.status)
     finally:
         S.native.method_info = real

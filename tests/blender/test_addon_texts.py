@@ -192,7 +192,7 @@ def test_sliced_solve_totals():
 def test_convergence_wording():
     """'(not converged)' only for iterative methods that stopped at their cap; a direct
     method's line has no iterations and never says it."""
-    for m in S.methods.METHODS:
+    for m in S.handle_methods():
         if m.iterative or not S.native.has_class(m.native_class):
             continue
         S.reset_scene()
@@ -288,6 +288,9 @@ STORED_IDS = {
     ("EMBEDDED", "distance"): ("euclidean", "geodesic"),
     ("EIGEN", "laplacian"): ("cotangent", "belkin_sun_wang"),
     ("LINEAR_RECONSTRUCTION", "material_mode"): ("interpolate", "smooth"),
+    ("LATTICE", "interpolation"): ("bspline", "linear", "bernstein"),
+    ("LATTICE", "outside"): ("extend", "clamp", "still"),
+    ("CAGE", "weights"): ("double", "single"),
 }
 # the solver's words the issue found in the UI, which an artist cannot act on
 SOLVER_WORDS = ("Tikhonov", "Regularization", "Material Stiffness", "CG Iterations",
@@ -393,7 +396,9 @@ def test_no_unplural_counts_in_source():
     through text.plural, articles through text.article."""
     here = os.path.dirname(S.addon.__file__)
     bad = []
-    for f in sorted(os.listdir(here)):
+    files = sorted(os.path.relpath(os.path.join(r, f), here) for r, _, fs in os.walk(here)
+                   for f in fs)
+    for f in files:
         if not f.endswith(".py") or f == "pc2.py":  # pc2: the file format's own errors
             continue
         src = open(os.path.join(here, f), encoding="utf-8").read()

@@ -80,10 +80,13 @@ def test_registries_agree():
                                                   os.path.join(ROOT, "addon", "methods.py"))
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    # the add-on reads vertex groups only so far (addon/solver/controls.py): a method bound
-    # to a control joins its registry with its collector
-    assert [m.native_class for m in mod.METHODS] == list(GROUP_METHODS)
+    # every native method is in the add-on's registry, each read by the collector of its
+    # control kinds (addon/solver/controls.py: vertex groups, a lattice, a cage)
+    assert sorted(m.native_class for m in mod.METHODS) == sorted(dk.METHODS)
     assert CONTROL_METHODS and set(GROUP_METHODS) | set(CONTROL_METHODS) == set(dk.METHODS)
+    src = open(os.path.join(ROOT, "addon", "solver", "controls.py")).read()
+    collected = set(re.search(r"COLLECTORS = \{(.*?)\}", src, re.S).group(1).split('"')[1::2])
+    assert all(set(info(m.native_class)["controls"]) & collected for m in mod.METHODS)
     # what the add-on's registry repeats of the native table agrees with it
     assert all(m.graph == info(m.native_class)["graph"] for m in mod.METHODS)
     for name in dk.METHODS:
