@@ -50,12 +50,13 @@ def enclosing_cage(points, subdivisions=2, margin=0.05):
         raise ValueError("enclosing_cage: points must be a non-empty n x 3 finite array")
     lo, hi = P.min(axis=0), P.max(axis=0)
     c = 0.5 * (lo + hi)
-    size = float(np.linalg.norm(hi - lo))
-    floor = max(size, np.abs(c).max(), 1e-30) * 1e-3   # a flat or single-point set's radius
     A, F = icosphere(subdivisions)
     D = P - c
     r = np.linalg.norm(D, axis=1)
-    keep = r > floor * 1e-6
+    # the radius of a cage vertex whose triangles hold no point (a flat set's sides): a
+    # tenth of the farthest point's, so that the cage keeps a thickness
+    floor = 0.1 * float(r.max()) if r.max() > 0 else 1e-3 * max(float(np.abs(c).max()), 1.0)
+    keep = r > 1e-9 * floor
     U = D[keep] / r[keep, None]
     rk = r[keep] * (1.0 + margin)
     # each point's triangle (the cone holding its ray) and its weights mu in that cone

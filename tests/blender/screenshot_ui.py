@@ -21,7 +21,8 @@ PNG2 = os.path.join(OUT, "modifiers_tab_last_method.png")
 PNG3 = os.path.join(OUT, "viewport_show_graph.png")
 # the panel in each state an artist meets (DEFORMKIT_SHOT=states, a third run): one image
 # each, kept in docs/images after being looked at
-STATES = ("unbound", "bound", "bound_warning", "rebinding", "baked", "overlap_error", "handle_target", "sidebar")
+STATES = ("unbound", "bound", "bound_warning", "rebinding", "baked", "overlap_error", "handle_target",
+          "sidebar", "lattice", "cage", "cage_view")
 STATE_PNGS = [os.path.join(OUT, "panel_%s.png" % s) for s in STATES]
 
 try:
@@ -269,6 +270,62 @@ def in_blender():
         sidebar_drawn.clear()
         yield "sidebar"
         R.check("the sidebar's DeformKit tab drew the deformer", bool(sidebar_drawn))
+        # the deformers driven by a control object: a lattice made around a grid, one point
+        # raised; a cage made around a sphere, a few of its vertices pulled
+        S.reset_scene()
+        win = bpy.context.window_manager.windows[0]
+        area = max(win.screen.areas, key=lambda a: a.width * a.height)
+        area.type = "PROPERTIES"
+        yield None
+        with bpy.context.temp_override(**S.ui_context()):
+            obj = S.make_grid(nx=24, ny=12)
+            bpy.ops.deformkit.add_deformer(method="LATTICE")
+            bpy.ops.deformkit.make_lattice()
+            d = obj.deformkit.deformers[0]
+            bpy.ops.deformkit.bind()
+            lt = d.control_object.data
+            lt.points[13].co_deform.z += 0.4
+            lt.update_tag()
+            bpy.context.view_layer.update()
+        S.geonodes.find_modifier(obj, d).show_expanded = False
+        R.check("the lattice deformer bound", d.bound and not d.status_is_error, d.status)
+        yield "lattice"
+        import bmesh
+        S.reset_scene()
+        me = bpy.data.meshes.new("Blob")
+        bm = bmesh.new()
+        bmesh.ops.create_uvsphere(bm, u_segments=32, v_segments=16, radius=0.5)
+        bm.to_mesh(me)
+        bm.free()
+        obj = S.linked_object("Blob", me)
+        with bpy.context.temp_override(**S.ui_context()):
+            bpy.ops.deformkit.add_deformer(method="CAGE")
+            bpy.ops.deformkit.make_cage(detail=1)
+            d = obj.deformkit.deformers[0]
+            bpy.ops.deformkit.bind()
+            cage = d.control_object
+            for v in cage.data.vertices:
+                if v.co.z > 0.3:
+                    v.co.z += 0.35
+                    v.co.x += 0.2
+            cage.data.update()
+            bpy.context.view_layer.update()
+        S.geonodes.find_modifier(obj, d).show_expanded = False
+        R.check("the cage deformer bound", d.bound and not d.status_is_error, d.status)
+        yield "cage"
+        area.type = "VIEW_3D"
+        yield None
+        win = bpy.context.window_manager.windows[0]
+        area = max(win.screen.areas, key=lambda a: a.width * a.height)
+        sp = next(x for x in area.spaces if x.type == "VIEW_3D")
+        sp.shading.type = "SOLID"
+        r3d = sp.region_3d
+        r3d.view_perspective = "PERSP"
+        from mathutils import Euler, Vector
+        r3d.view_rotation = Euler((1.2, 0.0, 0.6)).to_quaternion()
+        r3d.view_location = Vector((0.0, 0.0, 0.15))
+        r3d.view_distance = 3.2
+        yield "cage_view"
 
     sidebar_drawn = []
     from addon import ui

@@ -333,9 +333,71 @@ def test_save_and_reload():
     R.check("and differs from the saved result", np.abs(before - want).max() > 1e-3)
 
 
+def test_an_animated_control_plays_and_bakes():
+    """A lattice point hooked to a keyed empty (the lattice's own modifier) and a cage keyed
+    as an object: each frame shows the API's solve for the control on that frame, the panel
+    asks for a bake, and a Point Cache bake plays what playback showed."""
+    obj, d = lattice_setup()
+    lat = d.control_object
+    bpy.ops.deformkit.bind()
+    e = S.empty("Hook", (0.0, 0.0, 0.0))
+    hook = lat.modifiers.new("Hook", "HOOK")
+    hook.object = e
+    hook.vertex_indices_set([13])
+    sc = bpy.context.scene
+    sc.frame_start, sc.frame_end = 1, 6
+    for f, z in ((1, 0.0), (6, 0.5)):
+        e.location = (0.0, 0.0, z)
+        e.keyframe_insert("location", frame=f)
+    R.check("the panel asks for a bake", "control" in (S.addon.bake.animated_reason(obj, d) or ""),
+            S.addon.bake.animated_reason(obj, d))
+    seen, worst = {}, 0.0
+    for f in range(1, 7):
+        sc.frame_set(f)
+        dg = bpy.context.evaluated_depsgraph_get()
+        le = lat.evaluated_get(dg)
+        M = np.array(obj.matrix_world.inverted() @ le.matrix_world)
+        want, _ = _api_lattice(obj, d, _lattice_points(le.data, "co_deform") @ M[:3, :3].T
+                               + M[:3, 3])
+        seen[f] = S.evaluated_positions(obj)
+        worst = max(worst, float(np.abs(seen[f] - want).max()))
+    R.check("every frame = the API on that frame's lattice (%.1e)" % worst, worst < TOL)
+    R.check("the hook moves the mesh", np.abs(seen[6] - seen[1]).max() > 0.05)
+    path = os.path.join(S.OUTPUT, "controls_lattice.pc2")
+    if os.path.exists(path):
+        os.remove(path)
+    bpy.ops.deformkit.bake(mode="PC2", frame_start=1, frame_end=6, filepath=path)
+    S.handlers.enabled[0] = False
+    try:
+        worst = 0.0
+        for f in range(1, 7):
+            sc.frame_set(f)
+            worst = max(worst, float(np.abs(S.evaluated_positions(obj) - seen[f]).max()))
+    finally:
+        S.handlers.enabled[0] = True
+    R.check("the bake plays what playback showed (%.1e)" % worst, worst < TOL)
+
+    obj, d, cage = cage_setup()
+    bpy.ops.deformkit.bind()
+    sc = bpy.context.scene
+    sc.frame_start, sc.frame_end = 1, 4
+    base = cage.matrix_basis.copy()
+    for f, ang in ((1, 0.0), (4, 0.6)):
+        cage.matrix_basis = Matrix.Rotation(ang, 4, "X") @ base
+        cage.keyframe_insert("rotation_euler", frame=f)
+        cage.keyframe_insert("location", frame=f)
+    sc.frame_set(4)
+    rest = S.rest_positions(obj)
+    want = _api_cage(obj, d, cage)
+    err = np.abs(S.evaluated_positions(obj) - want).max()
+    R.check("a keyed cage: frame 4 = the API (%.1e, moved %.2f)"
+            % (err, np.abs(want - rest).max()), err < TOL and np.abs(want - rest).max() > 0.05)
+
+
 if __name__ == "__main__":
     for fn in (test_make_lattice_encloses_and_binds, test_linear_lattice_equals_blenders,
                test_lattice_follows_points_and_object, test_cage, test_after_an_armature,
-               test_errors_are_said, test_save_and_reload):
+               test_errors_are_said, test_save_and_reload,
+               test_an_animated_control_plays_and_bakes):
         R.run(fn)
     R.finish()
