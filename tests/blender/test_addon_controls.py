@@ -5,6 +5,7 @@ carries the mesh, Make Lattice and Make Cage enclose it, an Armature's pose is e
 lattice) or has the rest's offset pasted on (the cage), a save and reload keeps the result,
 and what goes wrong is said in the deformer's status."""
 import os
+import subprocess
 import sys
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _setup as S  # noqa: E402
@@ -376,6 +377,27 @@ def test_an_animated_control_plays_and_bakes():
     finally:
         S.handlers.enabled[0] = True
     R.check("the bake plays what playback showed (%.1e)" % worst, worst < TOL)
+    # a pipeline's batch bake of the saved scene (scripts/batch_bake.py, another process)
+    # writes what playback showed
+    bpy.ops.deformkit.free_bake()
+    blend = os.path.join(S.OUTPUT, "controls_lattice.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=blend)
+    out = os.path.join(S.OUTPUT, "controls_lattice_batch.pc2")
+    if os.path.exists(out):
+        os.remove(out)
+    batch = os.path.join(S.ROOT, "scripts", "batch_bake.py")
+    args = ["--object", "Grid", "--frames", "1-6", "--out", out]
+    cmd = ([sys.executable, batch, "--blend", blend] + args if S.AS_MODULE
+           else S.blender_command(blend=blend, script=batch, args=args))
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    R.check("the batch bake exits 0", r.returncode == 0, r.stderr[-800:])
+    if r.returncode == 0:
+        from addon import pc2
+        _, frames = pc2.read(out)
+        worst = max(float(np.abs(np.asarray(fr, dtype=np.float64).reshape(-1, 3)
+                                 - seen[i + 1]).max()) for i, fr in enumerate(frames))
+        R.check("the batch bake = playback (%.1e, %d frames)" % (worst, len(frames)),
+                len(frames) == 6 and worst < TOL)
 
     obj, d, cage = cage_setup()
     bpy.ops.deformkit.bind()
