@@ -96,4 +96,5 @@ def main():
         del cage
 
 
-main()
+if __name__ == "__main__":
+    main()
