@@ -508,6 +508,17 @@ METHODS.append(Method(
     icon="MOD_MESHDEFORM",
     needs_faces=False,
     options=[
+        # default = the native default (mean value coordinates: linear precision)
+        Option("coordinates", "ENUM", "mean_value", "Coordinates",
+               "How each vertex is tied to the cage",
+               items=(("mean_value", "Mean Value",
+                       "To the cage's vertices (the default): the mesh follows the cage "
+                       "closely, and stretching the cage stretches the mesh with it"),
+                      ("green", "Green",
+                       "To the cage's vertices and faces (Green coordinates): the mesh keeps "
+                       "its shape, details scale instead of shearing when the cage is "
+                       "stretched; a little slower, and the cage's faces must all face the "
+                       "same way (Recalculate Normals)"))),
         Option("weights", "ENUM", "double", "Precision",
                "How the coordinates are stored",
                items=(("double", "Double",

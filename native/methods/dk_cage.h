@@ -21,6 +21,13 @@
  * a triangle whose plane holds the vertex outside it (|s_i| below 1e-10) adds nothing. The
  * coordinates are defined inside and outside the cage, positive inside convex cages.
  *
+ * Green coordinates instead (options.coordinates, green.c): x = sum phi_i R_i + sum psi_t
+ * n_t over the cage's vertices and its faces' outward unit normals; a solve moves every
+ * vertex by x' = x + Phi (P - R) + Psi (s n' - n), n' the moved faces' normals and s each
+ * face's stretch (Lipman et al.'s sqrt(|u'|^2 |v|^2 - 2 (u'.v')(u.v) + |v'|^2 |u|^2) /
+ * (sqrt(8) area), the scale of a face moved by a similarity): two products. Psi is n x
+ * n_triangles more (about twice W).
+ *
  * Memory: W is n x n_controls doubles (43k x 100: 35 MB), or floats with weights='single'
  * (a million vertices and a 500-vertex cage: 2 GB instead of 4), whose products keep the
  * motion to about 1e-7 of itself. It edits a pose only at bind (no input_positions): the
@@ -47,7 +54,20 @@ typedef enum dk_cage_weights {
     DK_CAGE_SINGLE = 1  /**< floats: half the memory, the motion to about 1e-7 of itself   */
 } dk_cage_weights;
 
+/** Which coordinates the vertices get. */
+typedef enum dk_cage_coordinates {
+    DK_CAGE_MEAN_VALUE = 0, /**< 3D mean value coordinates: affine maps of the cage map the
+                                 mesh (linear precision)                                   */
+    DK_CAGE_GREEN = 1       /**< Green coordinates (Lipman, Levin, Cohen-Or 2008): each
+                                 vertex from the cage's vertices and its faces' normals,
+                                 quasi-conformal, shape-preserving; similarities of the cage
+                                 map the mesh by them, other affine maps do not (they keep
+                                 the shape instead). Needs the cage's triangles oriented
+                                 consistently (either way round)                           */
+} dk_cage_coordinates;
+
 typedef struct dk_cage_options {
+    dk_cage_coordinates coordinates; /**< default DK_CAGE_MEAN_VALUE                      */
     dk_cage_weights weights;       /**< default DK_CAGE_DOUBLE                            */
     dk_phase_progress_fn progress; /**< bind progress (phase "coordinates"), NULL: none   */
     void *progress_user;
@@ -96,6 +116,17 @@ int dk_cage_mean_value(const double *point, const double *cage, dk_index n_cage,
                        const dk_index *triangles, dk_index n_triangles, const dk_index *edges,
                        dk_index n_edges, const dk_index *opposite, double *lambda,
                        double *scratch);
+
+/** One vertex's Green coordinates for a cage whose `n_triangles` triangles are oriented
+ *  outwards, with their unit outward `normals` (n_triangles x 3) and edges (dk_cage_edges):
+ *  `phi` (n_cage) and `psi` (n_triangles), so that point = sum phi_i cage_i + sum psi_t
+ *  normal_t; outside the cage continued through the face it lies beyond (green.c).
+ *  `scratch`: 4 n_cage + n_edges doubles. Returns 0, or -1 for a point the formula cannot
+ *  place (a degenerate cage, or values not finite). */
+int dk_cage_green(const double *point, const double *cage, dk_index n_cage,
+                  const dk_index *triangles, dk_index n_triangles, const double *normals,
+                  const dk_index *edges, dk_index n_edges, const dk_index *opposite,
+                  double *phi, double *psi, double *scratch);
 
 /** Peak bytes of a bind: the mesh's rows of W for a cage the model cannot know here (the
  *  Python binding and the bind check the control's own size: n x n_controls). */

@@ -165,9 +165,10 @@ typedef enum dk_method_flags {
                                                 nodes stats.n_graph_nodes counts           */
     DK_METHOD_LINEAR_PRECISION = 512       /**< binds to a control (dk_controls.h) and an
                                                 affine map of the control's points moves
-                                                every vertex by that map (a lattice, a cage
-                                                with mean value coordinates; not Shepard's
-                                                interpolation)                             */
+                                                every vertex by that map, with the method's
+                                                default options (a lattice, a cage with
+                                                mean value coordinates; not a cage with
+                                                Green ones, nor Shepard's interpolation)   */
 } dk_method_flags;
 
 /** What one field of a method's options struct holds (dk_option_desc). */

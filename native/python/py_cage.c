@@ -8,6 +8,7 @@
 #include <string.h>
 
 static const char *const weights_names[] = {"double", "single", NULL};
+static const char *const coordinates_names[] = {"mean_value", "green", NULL};
 
 static void default_options(void *o)
 {
@@ -21,6 +22,10 @@ static int parse_options(PyObject *kw, void *o, const char *context)
     if (dk_py_opt_choice(kw, "weights", weights_names, &w, context) < 0)
         return -1;
     opt->weights = (dk_cage_weights)w;
+    int c = (int)opt->coordinates;
+    if (dk_py_opt_choice(kw, "coordinates", coordinates_names, &c, context) < 0)
+        return -1;
+    opt->coordinates = (dk_cage_coordinates)c;
     return 0;
 }
 
@@ -93,9 +98,11 @@ PyDoc_STRVAR(solve_doc,
              "solve(targets, energy=True) -> SolveResult\n\n"
              "targets: the cage vertices' positions, k x 3 in the order given at bind\n"
              "(transforms are refused: a cage has no handles). Every vertex moves by the\n"
-             "mean-value-weighted motion of the cage's vertices (the cage at rest gives the\n"
-             "mesh back exactly, an affine map of the cage maps it). A direct method;\n"
-             "energy is the sum of squared displacements, iterations 1.");
+             "coordinate-weighted motion of the cage's vertices (and, with Green\n"
+             "coordinates, of its faces' scaled normals); the cage at rest gives the mesh\n"
+             "back exactly, an affine map of the cage maps it (mean value coordinates) or a\n"
+             "similarity does (Green). A direct method; energy is the sum of squared\n"
+             "displacements, iterations 1.");
 
 static PyMethodDef cage_methods[] = {
     DK_PY_METHOD_METHODS(solve_doc),
@@ -103,13 +110,18 @@ static PyMethodDef cage_methods[] = {
 };
 
 PyDoc_STRVAR(cage_doc,
-             "Cage(mesh, cage_vertices, cage_triangles, weights='double')\n\n"
-             "Cage-based free-form deformation with 3D mean value coordinates (Ju, Schaefer,\n"
-             "Warren 2005; the slides' arbitrary polyhedron cells): the closed triangle cage\n"
-             "(k x 3 vertices, m x 3 triangles, every edge in two of them) around the mesh;\n"
-             "bind computes each vertex's coordinates (an n x k matrix, two threads), a\n"
-             "solve is one product with the cage's motion. weights='single' stores them as\n"
-             "floats (half the memory; the motion to about 1e-7 of itself).\n"
+             "Cage(mesh, cage_vertices, cage_triangles, coordinates='mean_value',\n"
+             "     weights='double')\n\n"
+             "Cage-based free-form deformation: the closed triangle cage (k x 3 vertices,\n"
+             "m x 3 triangles, every edge in two of them) around the mesh. coordinates:\n"
+             "'mean_value' (Ju, Schaefer, Warren 2005; the slides' arbitrary polyhedron\n"
+             "cells: affine maps of the cage map the mesh) or 'green' (Lipman, Levin,\n"
+             "Cohen-Or 2008: from the cage's vertices and its faces' normals,\n"
+             "quasi-conformal, keeps the shape; the triangles oriented consistently).\n"
+             "Bind computes each vertex's coordinates (an n x k matrix, and n x m more for\n"
+             "Green; two threads), a solve is one or two products with the cage's motion.\n"
+             "weights='single' stores them as floats (half the memory; the motion to about\n"
+             "1e-7 of itself).\n"
              "rebind(cage_vertices=..., cage_triangles=...) takes another cage. See\n"
              "docs/methods/cage.md.");
 

@@ -276,6 +276,25 @@ def test_cage():
     R.check("the rest is untouched", np.array_equal(S.rest_positions(obj), rest))
 
 
+def test_green_cage():
+    """Green coordinates from the panel's option on Make Cage's cage: the add-on's result is
+    the API's (their properties are tested in tests/native/test_cage.c and
+    tests/python/test_cage.py)."""
+    obj, d, cage = cage_setup()
+    d.options.coordinates = "green"
+    bpy.ops.deformkit.bind()
+    R.check("green cage bound", d.bound and not d.status_is_error, d.status)
+    V = _cage_co(cage)
+    V[:6] += (0.05, 0.1, 0.15)
+    cage.data.vertices.foreach_set("co", V.astype(np.float32).ravel())
+    cage.data.update()
+    bpy.context.view_layer.update()
+    got, want = S.evaluated_positions(obj), _api_cage(obj, d, cage)
+    err = np.abs(got - want).max()
+    R.check("green: add-on = API (%.1e, moved %.2f)" % (err, np.abs(want - S.rest_positions(obj)).max()),
+            err < TOL and np.abs(want - S.rest_positions(obj)).max() > 0.02, d.status)
+
+
 def test_errors_are_said():
     obj, d = lattice_setup(make=False)
     try:
@@ -418,7 +437,8 @@ def test_an_animated_control_plays_and_bakes():
 
 if __name__ == "__main__":
     for fn in (test_make_lattice_encloses_and_binds, test_linear_lattice_equals_blenders,
-               test_lattice_follows_points_and_object, test_cage, test_after_an_armature,
+               test_lattice_follows_points_and_object, test_cage, test_green_cage,
+               test_after_an_armature,
                test_errors_are_said, test_save_and_reload,
                test_an_animated_control_plays_and_bakes):
         R.run(fn)

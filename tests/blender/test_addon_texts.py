@@ -290,6 +290,7 @@ STORED_IDS = {
     ("LINEAR_RECONSTRUCTION", "material_mode"): ("interpolate", "smooth"),
     ("LATTICE", "interpolation"): ("bspline", "linear", "bernstein"),
     ("LATTICE", "outside"): ("extend", "clamp", "still"),
+    ("CAGE", "coordinates"): ("mean_value", "green"),
     ("CAGE", "weights"): ("double", "single"),
 }
 # the solver's words the issue found in the UI, which an artist cannot act on

@@ -101,3 +101,77 @@ def test_single_weights_and_refusals():
     cage.rebind(cage_vertices=P * 1.5, cage_triangles=T)
     np.testing.assert_allclose(cage.rest_points, P * 1.5)
     assert cage.stats["n_controls"] == len(P)
+
+
+def _conformal_distortion(rest, pos, tris):
+    """Per mesh triangle, the ratio of the larger to the smaller singular value of the map
+    of its two edges (1: angles kept)."""
+    e1, e2 = rest[tris[:, 1]] - rest[tris[:, 0]], rest[tris[:, 2]] - rest[tris[:, 0]]
+    f1, f2 = pos[tris[:, 1]] - pos[tris[:, 0]], pos[tris[:, 2]] - pos[tris[:, 0]]
+    # an orthonormal frame of the rest triangle, the map's 3 x 2 matrix in it
+    u = e1 / np.linalg.norm(e1, axis=1)[:, None]
+    n = np.cross(e1, e2)
+    w = np.cross(n, u)
+    w /= np.linalg.norm(w, axis=1)[:, None]
+    a1, b1 = np.einsum("ij,ij->i", e1, u), np.zeros(len(u))
+    a2, b2 = np.einsum("ij,ij->i", e2, u), np.einsum("ij,ij->i", e2, w)
+    det = a1 * b2 - a2 * b1
+    ok = np.abs(det) > 1e-14 * (a1 * a1 + b2 * b2)
+    # M [a; b] = f  ->  M = F inv([[a1, a2], [b1, b2]])
+    inv = np.stack([np.stack([b2, -a2], 1), np.stack([-b1, a1], 1)], 1) / det[:, None, None]
+    F = np.stack([f1, f2], axis=2)                      # n x 3 x 2
+    M = F @ inv                                         # n x 3 x 2
+    s = np.linalg.svd(M[ok], compute_uv=False)
+    return s[:, 0] / np.maximum(s[:, 1], 1e-300)
+
+
+@pytest.mark.skipif(not MESH_FILES, reason="../shared/meshes not present")
+@pytest.mark.parametrize("mesh_file", ["armadillo.obj", "spot.obj", "beast.obj"])
+def test_green_coordinates_on_real_meshes(mesh_file):
+    """Green coordinates (Lipman, Levin, Cohen-Or 2008) at the mesh's own scale and far from
+    the origin: the cage at rest returns the mesh bit for bit; a similarity of the cage maps
+    it by that similarity (linear precision holds for similarities only); the cage stretched
+    along one axis keeps the mesh's angles better than mean value coordinates do (the
+    paper's shape preservation, its Figure 1), and the same deformation of the mesh and cage
+    scaled by 1000 and moved is the scaled result."""
+    if not (SHARED_MESHES / mesh_file).exists():
+        pytest.skip("%s not present" % mesh_file)
+    verts, sizes, idx = dk.load_mesh_file(str(SHARED_MESHES / mesh_file))
+    v = np.asarray(verts, dtype=float)
+    mesh = dk.Mesh.from_polygons(verts, sizes, idx)
+    tris = np.asarray(mesh.triangles)
+    diag = float(np.linalg.norm(np.ptp(v, axis=0)))
+    P, T = sphere_cage(v)
+    green = dk.Cage(mesh, cage_vertices=P, cage_triangles=T, coordinates="green")
+    assert np.array_equal(np.asarray(green.solve(P).positions), v)
+    th = 0.9
+    Q = np.array([[np.cos(th), 0, np.sin(th)], [0, 1, 0], [-np.sin(th), 0, np.cos(th)]])
+    move = np.array([0.3, -0.2, 0.5]) * diag
+    got = np.asarray(green.solve(1.3 * P @ Q.T + move).positions)
+    assert np.abs(got - (1.3 * v @ Q.T + move)).max() < 1e-10 * diag
+    # a stretch: x by 1.6 about the cage's centre
+    c = P.mean(axis=0)
+    S = P.copy()
+    S[:, 0] = c[0] + 1.6 * (P[:, 0] - c[0])
+    g = np.asarray(green.solve(S).positions)
+    mv = np.asarray(dk.Cage(mesh, cage_vertices=P, cage_triangles=T).solve(S).positions)
+    dg, dm = _conformal_distortion(v, g, tris), _conformal_distortion(v, mv, tris)
+    assert np.median(dg) < np.median(dm) - 0.05, (np.median(dg), np.median(dm))
+    # scale and placement: the same deformation at 1000x, 1e4 away
+    off = np.array([1e4, -2e4, 3e4])
+    mesh2 = dk.Mesh.from_polygons(v * 1000.0 + off, sizes, idx)
+    green2 = dk.Cage(mesh2, cage_vertices=P * 1000.0 + off, cage_triangles=T,
+                     coordinates="green")
+    g2 = np.asarray(green2.solve(S * 1000.0 + off).positions)
+    assert np.abs(g2 - (g * 1000.0 + off)).max() < 1e-8 * 1000.0 * diag
+
+
+def test_green_option_refusals():
+    mesh = dk.Mesh(np.random.default_rng(0).uniform(-0.5, 0.5, (20, 3)), np.zeros((0, 3), int))
+    P, T = sphere_cage(np.asarray(mesh.vertices))
+    with pytest.raises(ValueError, match="coordinates"):
+        dk.Cage(mesh, cage_vertices=P, cage_triangles=T, coordinates="harmonic")
+    bad = T.copy()
+    bad[0] = bad[0][::-1]
+    with pytest.raises(ValueError, match="oriented consistently"):
+        dk.Cage(mesh, cage_vertices=P, cage_triangles=bad, coordinates="green")

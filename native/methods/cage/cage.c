@@ -22,6 +22,14 @@ struct dk_cage {
     double *disp;     /* nc x 3: the cage's motion of a solve (scratch)                  */
     float *dispf;     /* nc x 3, and n x 3 products (SINGLE only)                        */
     float *outf;
+    /* Green coordinates only (else NULL, nt 0): */
+    dk_index nt;
+    dk_index *tris;   /* nt x 3: the cage's triangles, oriented outwards                 */
+    double *nrm;      /* nt x 3: their unit normals at rest                              */
+    double *Psi;      /* n x nt row-major (DOUBLE), else NULL                            */
+    float *Psif;      /* n x nt row-major (SINGLE), else NULL                            */
+    double *dn;       /* nt x 3: s n' - n of a solve (scratch)                           */
+    float *dnf;       /* nt x 3 (SINGLE)                                                 */
 };
 
 /* The vertices of a bind per progress report (and cancellation check). */
@@ -35,6 +43,7 @@ static dk_status oom(dk_error *err, const char *what)
 void dk_cage_default_options(dk_cage_options *o)
 {
     memset(o, 0, sizeof *o);
+    o->coordinates = DK_CAGE_MEAN_VALUE;
     o->weights = DK_CAGE_DOUBLE;
 }
 
@@ -75,6 +84,68 @@ static dk_status check_closed(const dk_control_desc *c, dk_error *err)
     return st;
 }
 
+/* Green coordinates: the cage's triangles oriented consistently (each edge used once each
+ * way), copied into `out` facing outwards (the enclosed volume positive), and their unit
+ * normals. */
+static dk_status orient_outwards(const dk_control_desc *c, dk_index *out, double *nrm,
+                                 dk_error *err)
+{
+    const size_t ne = 3 * (size_t)c->n_triangles;
+    int64_t *e = malloc((ne + 1) * sizeof *e);
+    if (!e)
+        return oom(err, "cage edges");
+    for (dk_index t = 0; t < c->n_triangles; t++)
+        for (int k = 0; k < 3; k++)
+            e[3 * (size_t)t + k] = (int64_t)c->triangles[3 * t + k] * INT64_C(2147483648) +
+                                   c->triangles[3 * t + (k + 1) % 3];
+    qsort(e, ne, sizeof *e, edge_less);
+    dk_status st = DK_OK;
+    for (size_t i = 1; i < ne && st == DK_OK; i++)
+        if (e[i] == e[i - 1])
+            st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                              "Cage: Green coordinates need the cage's triangles oriented "
+                              "consistently, but two triangles run along edge %lld-%lld the "
+                              "same way (recalculate the cage's normals)",
+                              (long long)(e[i] / INT64_C(2147483648)),
+                              (long long)(e[i] % INT64_C(2147483648)));
+    free(e);
+    if (st != DK_OK)
+        return st;
+    double vol = 0.0;
+    const double *R = c->rest;
+    for (dk_index t = 0; t < c->n_triangles; t++) {
+        const double *a = R + 3 * (size_t)c->triangles[3 * t],
+                     *b = R + 3 * (size_t)c->triangles[3 * t + 1],
+                     *d = R + 3 * (size_t)c->triangles[3 * t + 2];
+        vol += a[0] * (b[1] * d[2] - b[2] * d[1]) - a[1] * (b[0] * d[2] - b[2] * d[0]) +
+               a[2] * (b[0] * d[1] - b[1] * d[0]);
+    }
+    const int flip = vol < 0.0;
+    for (dk_index t = 0; t < c->n_triangles; t++) {
+        const dk_index *f = c->triangles + 3 * (size_t)t;
+        dk_index *g = out + 3 * (size_t)t;
+        g[0] = f[0];
+        g[1] = flip ? f[2] : f[1];
+        g[2] = flip ? f[1] : f[2];
+        const double *a = R + 3 * (size_t)g[0], *b = R + 3 * (size_t)g[1],
+                     *d = R + 3 * (size_t)g[2];
+        double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+        double v[3] = {d[0] - a[0], d[1] - a[1], d[2] - a[2]};
+        double *n = nrm + 3 * (size_t)t;
+        n[0] = u[1] * v[2] - u[2] * v[1];
+        n[1] = u[2] * v[0] - u[0] * v[2];
+        n[2] = u[0] * v[1] - u[1] * v[0];
+        const double len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        if (!(len > 0.0))
+            return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                                "Cage: Green coordinates need cage triangles with an area; "
+                                "triangle %d has none", (int)t);
+        for (int k = 0; k < 3; k++)
+            n[k] /= len;
+    }
+    return DK_OK;
+}
+
 static dk_status take_control(const dk_constraint_desc *c, dk_index n, dk_error *err)
 {
     dk_status st = dk_control_taken(c->control, DK_CONTROL_CAGE, "Cage", err);
@@ -93,29 +164,49 @@ typedef struct rows_job {
     const dk_control_desc *c;
     const dk_index *edges, *opposite;
     dk_index n_edges;
-    double *W;
-    float *Wf;
-    double *scratch; /* 2 parts x (5 nc + 3 n_edges): lambda and the kernel's scratch */
+    const dk_index *tris; /* Green: the oriented triangles and their normals, else NULL */
+    const double *nrm;
+    double *W, *Psi;
+    float *Wf, *Psif;
+    double *scratch; /* 2 parts x rows_scratch() doubles */
     dk_index first_bad[2];
 } rows_job;
+
+/* Doubles of one part's scratch: the coordinates and the kernel's scratch. */
+static size_t rows_scratch(size_t nc, size_t nt, size_t ne)
+{
+    const size_t mv = 5 * nc + 3 * ne, gc = 5 * nc + nt + ne;
+    return mv > gc ? mv : gc;
+}
+
+static void store_row(double *Wd, float *Wf, size_t v, size_t width, const double *row)
+{
+    if (Wd)
+        memcpy(Wd + v * width, row, width * sizeof *row);
+    else
+        for (size_t j = 0; j < width; j++)
+            Wf[v * width + j] = (float)row[j];
+}
 
 static void rows_range(void *ctx, dk_index v0, dk_index v1, int part)
 {
     rows_job *job = ctx;
-    const dk_index nc = job->c->n_controls;
-    double *lambda = job->scratch + (size_t)part * (5 * (size_t)nc + 3 * (size_t)job->n_edges);
-    double *k = lambda + nc;
+    const dk_index nc = job->c->n_controls, nt = job->c->n_triangles;
+    double *lambda = job->scratch + (size_t)part * rows_scratch((size_t)nc, (size_t)nt,
+                                                                (size_t)job->n_edges);
+    double *psi = lambda + nc, *k = job->tris ? psi + nt : lambda + nc;
     for (dk_index v = v0; v < v1; v++) {
-        if (dk_cage_mean_value(job->mesh->positions + 3 * (size_t)v, job->c->rest, nc,
-                               job->c->triangles, job->c->n_triangles, job->edges,
-                               job->n_edges, job->opposite, lambda, k) != 0 &&
-            job->first_bad[part] < 0)
+        const double *x = job->mesh->positions + 3 * (size_t)v;
+        const int bad = job->tris
+            ? dk_cage_green(x, job->c->rest, nc, job->tris, nt, job->nrm, job->edges,
+                            job->n_edges, job->opposite, lambda, psi, k)
+            : dk_cage_mean_value(x, job->c->rest, nc, job->c->triangles, nt, job->edges,
+                                 job->n_edges, job->opposite, lambda, k);
+        if (bad != 0 && job->first_bad[part] < 0)
             job->first_bad[part] = v;
-        if (job->W)
-            memcpy(job->W + (size_t)v * (size_t)nc, lambda, (size_t)nc * sizeof *lambda);
-        else
-            for (dk_index j = 0; j < nc; j++)
-                job->Wf[(size_t)v * (size_t)nc + j] = (float)lambda[j];
+        store_row(job->W, job->Wf, (size_t)v, (size_t)nc, lambda);
+        if (job->tris)
+            store_row(job->Psi, job->Psif, (size_t)v, (size_t)nt, psi);
     }
 }
 
@@ -127,8 +218,16 @@ static void cage_free_arrays(dk_cage *cg)
     free(cg->disp);
     free(cg->dispf);
     free(cg->outf);
-    cg->rest = cg->W = cg->disp = NULL;
-    cg->Wf = cg->dispf = cg->outf = NULL;
+    free(cg->tris);
+    free(cg->nrm);
+    free(cg->Psi);
+    free(cg->Psif);
+    free(cg->dn);
+    free(cg->dnf);
+    cg->rest = cg->W = cg->disp = cg->nrm = cg->Psi = cg->dn = NULL;
+    cg->Wf = cg->dispf = cg->outf = cg->Psif = cg->dnf = NULL;
+    cg->tris = NULL;
+    cg->nt = 0;
 }
 
 void dk_cage_free(dk_cage *cg)
@@ -144,12 +243,17 @@ static dk_status build(dk_cage *cg, const dk_control_desc *c, dk_progress *prog,
 {
     const size_t n = (size_t)cg->n, nc = (size_t)c->n_controls;
     const int single = cg->opt.weights == DK_CAGE_SINGLE;
-    char what[96];
-    snprintf(what, sizeof what, "coordinates of %zu vertices for %zu cage vertices", n, nc);
-    dk_status st = dk_memory_check((uint64_t)n * nc * (single ? 4u : 8u), "Cage", what, err);
+    const int green = cg->opt.coordinates == DK_CAGE_GREEN;
+    const size_t nt = green ? (size_t)c->n_triangles : 0;
+    char what[128];
+    snprintf(what, sizeof what, "%s coordinates of %zu vertices for %zu cage vertices%s",
+             green ? "Green" : "mean value", n, nc, green ? " and their faces" : "");
+    dk_status st = dk_memory_check((uint64_t)n * (nc + nt) * (single ? 4u : 8u), "Cage", what,
+                                   err);
     if (st != DK_OK)
         return st;
     cg->nc = c->n_controls;
+    cg->nt = (dk_index)nt;
     cg->rest = malloc(3 * nc * sizeof *cg->rest);
     cg->disp = malloc(3 * nc * sizeof *cg->disp);
     if (single) {
@@ -159,15 +263,35 @@ static dk_status build(dk_cage *cg, const dk_control_desc *c, dk_progress *prog,
     } else {
         cg->W = malloc(n * nc * sizeof *cg->W + 1);
     }
+    int green_ok = 1;
+    if (green) {
+        cg->tris = malloc(3 * nt * sizeof *cg->tris + 1);
+        cg->nrm = malloc(3 * nt * sizeof *cg->nrm + 1);
+        if (single) {
+            cg->Psif = malloc(n * nt * sizeof *cg->Psif + 1);
+            cg->dnf = malloc(3 * nt * sizeof *cg->dnf + 1);
+            green_ok = cg->Psif && cg->dnf;
+        } else {
+            cg->Psi = malloc(n * nt * sizeof *cg->Psi + 1);
+            cg->dn = malloc(3 * nt * sizeof *cg->dn + 1);
+            green_ok = cg->Psi && cg->dn;
+        }
+        green_ok = green_ok && cg->tris && cg->nrm;
+    }
+    if (!cg->rest || !cg->disp || (single ? !cg->Wf || !cg->dispf || !cg->outf : !cg->W) ||
+        !green_ok)
+        return oom(err, "coordinates");
+    if (green && (st = orient_outwards(c, cg->tris, cg->nrm, err)) != DK_OK)
+        return st;
     dk_index *edges = NULL, *opposite = NULL, ne = 0;
-    st = dk_cage_edges(c->triangles, c->n_triangles, &edges, &ne, &opposite, err);
+    st = dk_cage_edges(green ? cg->tris : c->triangles, c->n_triangles, &edges, &ne, &opposite,
+                       err);
     if (st != DK_OK)
         return st;
-    rows_job job = {cg->mesh, c, edges, opposite, ne, cg->W, cg->Wf,
-                    malloc(2 * (5 * nc + 3 * (size_t)ne) * sizeof(double)), {-1, -1}};
-    if (!cg->rest || !cg->disp || (single ? !cg->Wf || !cg->dispf || !cg->outf : !cg->W) ||
-        !job.scratch) {
-        free(job.scratch);
+    rows_job job = {cg->mesh, c, edges, opposite, ne, cg->tris, cg->nrm, cg->W, cg->Psi, cg->Wf,
+                    cg->Psif, malloc(2 * rows_scratch(nc, (size_t)c->n_triangles, (size_t)ne) *
+                                     sizeof(double)), {-1, -1}};
+    if (!job.scratch) {
         free(edges);
         free(opposite);
         return oom(err, "coordinates");
@@ -184,6 +308,8 @@ static dk_status build(dk_cage *cg, const dk_control_desc *c, dk_progress *prog,
         part.mesh = &view;
         part.W = cg->W ? cg->W + v0 * nc : NULL;
         part.Wf = cg->Wf ? cg->Wf + v0 * nc : NULL;
+        part.Psi = cg->Psi ? cg->Psi + v0 * nt : NULL;
+        part.Psif = cg->Psif ? cg->Psif + v0 * nt : NULL;
         part.first_bad[0] = part.first_bad[1] = -1;
         dk_run_halves(rows_range, &part, (dk_index)(v1 - v0), 512);
         for (int k = 0; k < 2; k++)
@@ -195,8 +321,11 @@ static dk_status build(dk_cage *cg, const dk_control_desc *c, dk_progress *prog,
     free(opposite);
     if (st == DK_OK && job.first_bad[0] >= 0)
         st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
-                          "Cage: vertex %d has no mean value coordinates (its weights sum to "
-                          "zero: a degenerate cage, or the vertex on it where it folds)",
+                          green ? "Cage: vertex %d has no Green coordinates (a degenerate "
+                                  "cage, or the vertex on it)"
+                                : "Cage: vertex %d has no mean value coordinates (its weights "
+                                  "sum to zero: a degenerate cage, or the vertex on it where "
+                                  "it folds)",
                           (int)job.first_bad[0]);
     return st;
 }
@@ -217,6 +346,10 @@ dk_status dk_cage_bind(const dk_mesh *mesh, const dk_constraint_desc *constraint
     if (opt.weights != DK_CAGE_DOUBLE && opt.weights != DK_CAGE_SINGLE)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "Cage: weights %d is not double (0) or single (1)", (int)opt.weights);
+    if (opt.coordinates != DK_CAGE_MEAN_VALUE && opt.coordinates != DK_CAGE_GREEN)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "Cage: coordinates %d is not mean value (0) or Green (1)",
+                            (int)opt.coordinates);
     dk_status st = take_control(constraints, mesh->n_vertices, err);
     if (st != DK_OK)
         return st;
@@ -252,8 +385,10 @@ dk_status dk_cage_rebind(dk_cage *cg, const dk_constraint_desc *constraints, dk_
     if (st != DK_OK)
         return st;
     dk_cage fresh = *cg;
-    fresh.rest = fresh.W = fresh.disp = NULL;
-    fresh.Wf = fresh.dispf = fresh.outf = NULL;
+    fresh.rest = fresh.W = fresh.disp = fresh.nrm = fresh.Psi = fresh.dn = NULL;
+    fresh.Wf = fresh.dispf = fresh.outf = fresh.Psif = fresh.dnf = NULL;
+    fresh.tris = NULL;
+    fresh.nt = 0;
     st = build(&fresh, constraints->control, NULL, err);
     if (st != DK_OK) {
         cage_free_arrays(&fresh);
@@ -262,6 +397,59 @@ dk_status dk_cage_rebind(dk_cage *cg, const dk_constraint_desc *constraints, dk_
     cage_free_arrays(cg);
     *cg = fresh;
     return DK_OK;
+}
+
+/* Green coordinates: each face's s n' - n for the cage at `P` (dn, or dnf), s its stretch
+ * (dk_cage.h); a face moved to no area gets s n' = 0. */
+static void normal_motion(dk_cage *cg, const double *P)
+{
+    for (dk_index t = 0; t < cg->nt; t++) {
+        const dk_index *f = cg->tris + 3 * (size_t)t;
+        const double *a = cg->rest + 3 * (size_t)f[0], *b = cg->rest + 3 * (size_t)f[1],
+                     *d = cg->rest + 3 * (size_t)f[2];
+        const double *a2 = P + 3 * (size_t)f[0], *b2 = P + 3 * (size_t)f[1],
+                     *d2 = P + 3 * (size_t)f[2];
+        if (memcmp(a, a2, 3 * sizeof *a) == 0 && memcmp(b, b2, 3 * sizeof *b) == 0 &&
+            memcmp(d, d2, 3 * sizeof *d) == 0) { /* at rest: no motion, bit for bit */
+            for (int k = 0; k < 3; k++) {
+                if (cg->dn)
+                    cg->dn[3 * (size_t)t + k] = 0.0;
+                else
+                    cg->dnf[3 * (size_t)t + k] = 0.0f;
+            }
+            continue;
+        }
+        double u[3], v[3], u2[3], v2[3], n2[3];
+        for (int k = 0; k < 3; k++) {
+            u[k] = b[k] - a[k];
+            v[k] = d[k] - a[k];
+            u2[k] = b2[k] - a2[k];
+            v2[k] = d2[k] - a2[k];
+        }
+        n2[0] = u2[1] * v2[2] - u2[2] * v2[1];
+        n2[1] = u2[2] * v2[0] - u2[0] * v2[2];
+        n2[2] = u2[0] * v2[1] - u2[1] * v2[0];
+        const double len2 = sqrt(n2[0] * n2[0] + n2[1] * n2[1] + n2[2] * n2[2]);
+        const double uu = u[0] * u[0] + u[1] * u[1] + u[2] * u[2];
+        const double vv = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+        const double uv = u[0] * v[0] + u[1] * v[1] + u[2] * v[2];
+        const double uu2 = u2[0] * u2[0] + u2[1] * u2[1] + u2[2] * u2[2];
+        const double vv2 = v2[0] * v2[0] + v2[1] * v2[1] + v2[2] * v2[2];
+        const double uv2 = u2[0] * v2[0] + u2[1] * v2[1] + u2[2] * v2[2];
+        /* twice the rest area: |u x v| = sqrt(|u|^2 |v|^2 - (u.v)^2) */
+        const double area2 = sqrt(fmax(uu * vv - uv * uv, 0.0));
+        const double q = uu2 * vv - 2.0 * uv2 * uv + vv2 * uu;
+        /* s = sqrt(q) / (sqrt(8) area) = sqrt(q) / (sqrt(2) * 2 area) */
+        const double sc = area2 > 0.0 ? sqrt(fmax(q, 0.0)) / (sqrt(2.0) * area2) : 0.0;
+        const double *n = cg->nrm + 3 * (size_t)t;
+        for (int k = 0; k < 3; k++) {
+            const double want = len2 > 0.0 ? sc * n2[k] / len2 : 0.0;
+            if (cg->dn)
+                cg->dn[3 * (size_t)t + k] = want - n[k];
+            else
+                cg->dnf[3 * (size_t)t + k] = (float)(want - n[k]);
+        }
+    }
 }
 
 dk_status dk_cage_solve(dk_cage *cg, const dk_solve_request *rq, double *positions,
@@ -285,17 +473,25 @@ dk_status dk_cage_solve(dk_cage *cg, const dk_solve_request *rq, double *positio
         return dk_error_prefix(err, "Cage solve: the cage vertices");
     const size_t nc3 = 3 * (size_t)cg->nc, n3 = 3 * (size_t)cg->n;
     const double *x = cg->mesh->positions;
+    if (cg->tris)
+        normal_motion(cg, rq->targets);
     if (cg->W) {
         for (size_t k = 0; k < nc3; k++)
             cg->disp[k] = rq->targets[k] - cg->rest[k];
         memcpy(positions, x, n3 * sizeof *positions);
         cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, (int)cg->n, 3, (int)cg->nc, 1.0,
                     cg->W, (int)cg->nc, cg->disp, 3, 1.0, positions, 3);
+        if (cg->Psi)
+            cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, (int)cg->n, 3, (int)cg->nt,
+                        1.0, cg->Psi, (int)cg->nt, cg->dn, 3, 1.0, positions, 3);
     } else {
         for (size_t k = 0; k < nc3; k++)
             cg->dispf[k] = (float)(rq->targets[k] - cg->rest[k]);
         cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, (int)cg->n, 3, (int)cg->nc, 1.0f,
                     cg->Wf, (int)cg->nc, cg->dispf, 3, 0.0f, cg->outf, 3);
+        if (cg->Psif)
+            cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, (int)cg->n, 3, (int)cg->nt,
+                        1.0f, cg->Psif, (int)cg->nt, cg->dnf, 3, 1.0f, cg->outf, 3);
         for (size_t k = 0; k < n3; k++)
             positions[k] = x[k] + (double)cg->outf[k];
     }
@@ -337,13 +533,18 @@ dk_status dk_cage_estimate_memory(const dk_mesh *mesh, const dk_cage_options *op
     if (!mesh || !bytes)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "Cage estimate_memory: mesh and bytes must not be NULL");
-    (void)options;
-    /* W's rows for a cage of 64 vertices (the bind checks its own cage's size) */
-    *bytes = dk_memory_model(64.0 * 8.0 + 48.0, (double)mesh->n_vertices, 0.0);
+    /* W's rows for a cage of 64 vertices, and Green's Psi for its 124 triangles (the bind
+     * checks its own cage's size) */
+    const int green = options && options->coordinates == DK_CAGE_GREEN;
+    const double per = (options && options->weights == DK_CAGE_SINGLE) ? 4.0 : 8.0;
+    *bytes = dk_memory_model((64.0 + (green ? 124.0 : 0.0)) * per + 48.0,
+                             (double)mesh->n_vertices, 0.0);
     return DK_OK;
 }
 
 static const dk_option_desc cage_fields[] = {
+    {"coordinates", DK_OPTION_ENUM, offsetof(dk_cage_options, coordinates), 0,
+     DK_CAGE_MEAN_VALUE, DK_CAGE_GREEN, DK_CAGE_MEAN_VALUE, DK_CAGE_GREEN, 0},
     {"weights", DK_OPTION_ENUM, offsetof(dk_cage_options, weights), 0, DK_CAGE_DOUBLE,
      DK_CAGE_SINGLE, DK_CAGE_DOUBLE, DK_CAGE_SINGLE, 0},
 };
