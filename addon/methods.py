@@ -519,6 +519,25 @@ METHODS.append(Method(
                        "its shape, details scale instead of shearing when the cage is "
                        "stretched; a little slower, and the cage's faces must all face the "
                        "same way (Recalculate Normals)"))),
+        Option("evaluation", "ENUM", "auto", "Evaluation",
+               "Where the coordinates are computed",
+               items=(("auto", "Auto",
+                       "At every vertex, unless that would take more than 64 million "
+                       "coefficients (a million vertices and a big cage): then on a grid "
+                       "(the default)"),
+                      ("exact", "Every Vertex",
+                       "At every vertex: exact, but memory and each frame grow with the "
+                       "vertices times the cage's size"),
+                      ("grid", "Grid",
+                       "At the corners of a grid's cells around the mesh, blended per "
+                       "vertex: fast binds and frames at millions of vertices; the result "
+                       "differs from the exact one by about a thousandth of the motion")),
+               advanced=True),
+        Option("grid_resolution", "INT", 64, "Grid Cells",
+               "Grid evaluation: cells along the mesh's longest side; more follow the "
+               "exact result closer (the difference falls with the square), and cost more "
+               "memory and time", min=4, max=256, advanced=True,
+               shown_if=("evaluation", ("auto", "grid"))),
         Option("weights", "ENUM", "double", "Precision",
                "How the coordinates are stored",
                items=(("double", "Double",

@@ -1,8 +1,10 @@
 """Issue 40: the Cage method's bind and per-frame solve on the armadillo of armadillo-wave
 (43,243 vertices) with a box cage of 98 vertices (5 points along each edge, the issue's
 measure against Blender's Mesh Deform), and on a million points (the armadillo's, repeated
-and jittered) with a 488-vertex box cage in single-precision weights; peak RSS against the
-weights' size. Plain Python:
+and jittered) with a 488-vertex box cage; mean value and Green coordinates, evaluated
+exactly or on a grid (evaluation='auto' picks the grid at a million), double and single
+weights; the whole process's peak RSS after each bind (the mesh's own arrays included;
+its growth says little after a bigger run before it). Plain Python:
 
     PYTHONPATH=build/python /usr/bin/python3 scripts/bench_cage.py [--meshes armadillo,million]
 
@@ -64,36 +66,43 @@ def box_cage(v, n):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--meshes", default="armadillo,million")
+    ap.add_argument("--coordinates", default="mean_value,green")
     a = ap.parse_args()
     for which in a.meshes.split(","):
         if which == "armadillo":
-            mesh, n_edge, weights = armadillo(), 5, "double"
+            mesh, n_edge = armadillo(), 5
+            runs = [("auto", "double"), ("grid", "double")]
         else:
             v = np.asarray(armadillo().vertices)
             rng = np.random.default_rng(1)
             pts = np.concatenate([v + rng.normal(scale=2e-3, size=v.shape)
                                   for _ in range(-(-1_000_000 // len(v)))])[:1_000_000]
-            mesh, n_edge, weights = dk.Mesh(pts, np.zeros((0, 3), np.int32)), 10, "single"
+            mesh, n_edge = dk.Mesh(pts, np.zeros((0, 3), np.int32)), 10
+            runs = [("auto", "single"), ("auto", "double")]
         v = np.asarray(mesh.vertices)
         P, T = box_cage(v, n_edge)
-        rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-        t0 = time.perf_counter()
-        cage = dk.Cage(mesh, cage_vertices=P, cage_triangles=T, weights=weights)
-        bind_s = time.perf_counter() - t0
-        rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
         pulled = P.copy()
         pulled[:, 2] += 0.1 * np.ptp(v[:, 2]) * np.sin(3 * P[:, 0] / np.ptp(v[:, 0]))
-        times = []
-        for _ in range(10):
-            t0 = time.perf_counter()
-            cage.solve(pulled, energy=False)
-            times.append((time.perf_counter() - t0) * 1e3)
-        print("%s: %d vertices, cage of %d vertices (%d triangles), %s weights: bind %.2f s, "
-              "solve median %.1f ms; weights %.0f MB, peak RSS grew %.0f MB" % (
-                  which, len(v), len(P), len(T), weights, bind_s, statistics.median(times),
-                  len(v) * len(P) * (4 if weights == "single" else 8) / 2**20,
-                  (rss - rss0) / 1024.0), flush=True)
-        del cage
+        for coordinates in a.coordinates.split(","):
+            for evaluation, weights in runs:
+                rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+                t0 = time.perf_counter()
+                cage = dk.Cage(mesh, cage_vertices=P, cage_triangles=T, weights=weights,
+                               coordinates=coordinates, evaluation=evaluation)
+                bind_s = time.perf_counter() - t0
+                rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+                times = []
+                for _ in range(10):
+                    t0 = time.perf_counter()
+                    cage.solve(pulled, energy=False)
+                    times.append((time.perf_counter() - t0) * 1e3)
+                print("%s: %d vertices, cage of %d vertices (%d triangles), %s, evaluation "
+                      "%s, %s weights: bind %.2f s, solve median %.1f ms; the process's "
+                      "peak RSS %.0f MB (grew %.0f MB)"
+                      % (which, len(v), len(P), len(T), coordinates, evaluation, weights,
+                         bind_s, statistics.median(times), rss / 1024.0, (rss - rss0) / 1024.0),
+                      flush=True)
+                del cage
 
 
 if __name__ == "__main__":

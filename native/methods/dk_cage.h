@@ -66,8 +66,28 @@ typedef enum dk_cage_coordinates {
                                  consistently (either way round)                           */
 } dk_cage_coordinates;
 
+/** Where the coordinates are computed. */
+typedef enum dk_cage_evaluation {
+    DK_CAGE_AUTO = 0,  /**< EXACT while the coordinates have at most DK_CAGE_AUTO_ENTRIES
+                            entries (n x n_controls, plus n x n_triangles for Green), else
+                            GRID                                                         */
+    DK_CAGE_EXACT = 1, /**< at every vertex                                              */
+    DK_CAGE_GRID = 2   /**< at the corners of a grid's cells that hold vertices, blended
+                            trilinearly per vertex (cage/grid.c): linear precision and the
+                            partition of unity kept exactly, the values between nodes to
+                            the grid's h^2, memory and solves by the nodes, not the vertices */
+} dk_cage_evaluation;
+
+/** AUTO's limit: 64 M entries (512 MB of doubles). */
+#define DK_CAGE_AUTO_ENTRIES 67108864.0
+
 typedef struct dk_cage_options {
     dk_cage_coordinates coordinates; /**< default DK_CAGE_MEAN_VALUE                      */
+    dk_cage_evaluation evaluation;   /**< default DK_CAGE_AUTO                            */
+    int grid_resolution;             /**< GRID: cells along the mesh's box's longest side,
+                                          4 .. 256; default 64 (the interpolation off the
+                                          exact coordinates by about 3e-4 of the motion on
+                                          the armadillo; 128: 8e-5)                       */
     dk_cage_weights weights;       /**< default DK_CAGE_DOUBLE                            */
     dk_phase_progress_fn progress; /**< bind progress (phase "coordinates"), NULL: none   */
     void *progress_user;

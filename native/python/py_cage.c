@@ -9,6 +9,7 @@
 
 static const char *const weights_names[] = {"double", "single", NULL};
 static const char *const coordinates_names[] = {"mean_value", "green", NULL};
+static const char *const evaluation_names[] = {"auto", "exact", "grid", NULL};
 
 static void default_options(void *o)
 {
@@ -26,6 +27,12 @@ static int parse_options(PyObject *kw, void *o, const char *context)
     if (dk_py_opt_choice(kw, "coordinates", coordinates_names, &c, context) < 0)
         return -1;
     opt->coordinates = (dk_cage_coordinates)c;
+    int ev = (int)opt->evaluation;
+    if (dk_py_opt_choice(kw, "evaluation", evaluation_names, &ev, context) < 0)
+        return -1;
+    opt->evaluation = (dk_cage_evaluation)ev;
+    if (dk_py_opt_int(kw, "grid_resolution", &opt->grid_resolution) < 0)
+        return -1;
     return 0;
 }
 
@@ -111,7 +118,7 @@ static PyMethodDef cage_methods[] = {
 
 PyDoc_STRVAR(cage_doc,
              "Cage(mesh, cage_vertices, cage_triangles, coordinates='mean_value',\n"
-             "     weights='double')\n\n"
+             "     evaluation='auto', grid_resolution=64, weights='double')\n\n"
              "Cage-based free-form deformation: the closed triangle cage (k x 3 vertices,\n"
              "m x 3 triangles, every edge in two of them) around the mesh. coordinates:\n"
              "'mean_value' (Ju, Schaefer, Warren 2005; the slides' arbitrary polyhedron\n"
@@ -121,7 +128,10 @@ PyDoc_STRVAR(cage_doc,
              "Bind computes each vertex's coordinates (an n x k matrix, and n x m more for\n"
              "Green; two threads), a solve is one or two products with the cage's motion.\n"
              "weights='single' stores them as floats (half the memory; the motion to about\n"
-             "1e-7 of itself).\n"
+             "1e-7 of itself). evaluation: 'exact' (at every vertex), 'grid' (at the corners\n"
+             "of the cells, grid_resolution along the mesh's longest side, that hold a\n"
+             "vertex, blended trilinearly: linear precision kept, memory and solves by the\n"
+             "nodes) or 'auto' (exact up to 64 M coefficients, else grid).\n"
              "rebind(cage_vertices=..., cage_triangles=...) takes another cage. See\n"
              "docs/methods/cage.md.");
 

@@ -291,6 +291,7 @@ STORED_IDS = {
     ("LATTICE", "interpolation"): ("bspline", "linear", "bernstein"),
     ("LATTICE", "outside"): ("extend", "clamp", "still"),
     ("CAGE", "coordinates"): ("mean_value", "green"),
+    ("CAGE", "evaluation"): ("auto", "exact", "grid"),
     ("CAGE", "weights"): ("double", "single"),
 }
 # the solver's words the issue found in the UI, which an artist cannot act on

@@ -469,5 +469,99 @@ static void test_green_method(void)
     dk_mesh_free(mesh);
 }
 
+static void test_grid_evaluation(void)
+{
+    /* coordinates on a grid, blended: affine maps (mean value) and similarities (Green) still
+     * exact, inside and outside the cage; close to the exact coordinates' result; AUTO is
+     * EXACT at this size, bit for bit */
+    enum { N = 400 };
+    double p[3 * N];
+    unsigned st = 17;
+    for (int v = 0; v < N; v++)
+        for (int d = 0; d < 3; d++)
+            p[3 * v + d] = v < 360 ? -0.95 + 1.9 * rnd(&st) : -1.6 + 3.2 * rnd(&st);
+    dk_mesh *mesh = NULL;
+    dk_error e = {0};
+    CHECK(dk_mesh_create(p, N, NULL, 0, &mesh, &e) == DK_OK);
+    if (!mesh)
+        return;
+    dk_control_desc c = {.kind = DK_CONTROL_CAGE, .n_controls = 8, .rest = cube,
+                         .n_triangles = 12, .triangles = cube_tris};
+    dk_constraint_desc d = {.control = &c};
+    const double A[12] = {1.1, 0.2, -0.3, 0.5, -0.1, 0.9, 0.25, -2.0, 0.3, 0.1, 1.2, 0.7};
+    double P[24], Pm[24], x[3 * N], xe[3 * N], xa[3 * N];
+    for (int k = 0; k < 8; k++)
+        for (int dd = 0; dd < 3; dd++) {
+            P[3 * k + dd] = A[4 * dd] * cube[3 * k] + A[4 * dd + 1] * cube[3 * k + 1] +
+                            A[4 * dd + 2] * cube[3 * k + 2] + A[4 * dd + 3];
+            Pm[3 * k + dd] = cube[3 * k + dd] + (k == 7 ? 0.4 : 0.0); /* one corner pulled */
+        }
+    for (int green = 0; green < 2; green++) {
+        dk_cage_options o;
+        dk_cage_default_options(&o);
+        o.coordinates = green ? DK_CAGE_GREEN : DK_CAGE_MEAN_VALUE;
+        dk_cage *grid = NULL, *exact = NULL, *aut = NULL;
+        o.evaluation = DK_CAGE_GRID;
+        o.grid_resolution = 16;
+        CHECK(dk_cage_bind(mesh, &d, &o, &grid, &e) == DK_OK);
+        o.evaluation = DK_CAGE_EXACT;
+        CHECK(dk_cage_bind(mesh, &d, &o, &exact, &e) == DK_OK);
+        o.evaluation = DK_CAGE_AUTO;
+        CHECK(dk_cage_bind(mesh, &d, &o, &aut, &e) == DK_OK);
+        if (!grid || !exact || !aut) {
+            dk_cage_free(grid);
+            dk_cage_free(exact);
+            dk_cage_free(aut);
+            continue;
+        }
+        dk_solve_request rq = {.targets = P};
+        if (!green && dk_cage_solve(grid, &rq, x, NULL, &e) == DK_OK) {
+            double worst = 0.0;
+            for (int v = 0; v < N; v++)
+                for (int dd = 0; dd < 3; dd++)
+                    worst = fmax(worst, fabs(x[3 * v + dd] -
+                                             (A[4 * dd] * p[3 * v] + A[4 * dd + 1] * p[3 * v + 1] +
+                                              A[4 * dd + 2] * p[3 * v + 2] + A[4 * dd + 3])));
+            CHECK_MSG(worst < 1e-12, "grid: an affine map off by %g", worst);
+        }
+        if (green) { /* a similarity: scale 2 and a move */
+            for (int k = 0; k < 24; k++)
+                P[k] = 2.0 * cube[k] + (k % 3 == 1 ? 0.7 : 0.0);
+            if (dk_cage_solve(grid, &rq, x, NULL, &e) == DK_OK) {
+                double worst = 0.0;
+                for (int k = 0; k < 3 * N; k++)
+                    worst = fmax(worst, fabs(x[k] - (2.0 * p[k] + (k % 3 == 1 ? 0.7 : 0.0))));
+                CHECK_MSG(worst < 1e-12, "grid, Green: a similarity off by %g", worst);
+            }
+        }
+        rq.targets = Pm;
+        double worst = INFINITY, moved = 0.0;
+        if (dk_cage_solve(grid, &rq, x, NULL, &e) == DK_OK &&
+            dk_cage_solve(exact, &rq, xe, NULL, &e) == DK_OK &&
+            dk_cage_solve(aut, &rq, xa, NULL, &e) == DK_OK) {
+            worst = 0.0;
+            for (int k = 0; k < 3 * N; k++) {
+                worst = fmax(worst, fabs(x[k] - xe[k]));
+                moved = fmax(moved, fabs(xe[k] - p[k]));
+                CHECK(xa[k] == xe[k]);
+            }
+        }
+        CHECK_MSG(worst < 0.02 * moved, "%s: the grid's result %g from the exact one (moved %g)",
+                  green ? "Green" : "mean value", worst, moved);
+        dk_cage_free(grid);
+        dk_cage_free(exact);
+        dk_cage_free(aut);
+    }
+    dk_cage_options o;
+    dk_cage_default_options(&o);
+    o.evaluation = DK_CAGE_GRID;
+    o.grid_resolution = 3;
+    dk_cage *none = NULL;
+    CHECK(dk_cage_bind(mesh, &d, &o, &none, &e) == DK_ERR_INVALID_ARGUMENT && !none &&
+          strstr(e.message, "grid_resolution"));
+    dk_mesh_free(mesh);
+}
+
 DK_TEST_MAIN(test_against_the_definition, test_properties, test_the_method,
-             test_green_against_the_definition, test_green_properties, test_green_method)
+             test_green_against_the_definition, test_green_properties, test_green_method,
+             test_grid_evaluation)

@@ -9,6 +9,7 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "cage_grid.h"
 #include "dk_memory.h"
 #include "dk_parallel.h"
 
@@ -30,6 +31,10 @@ struct dk_cage {
     float *Psif;      /* n x nt row-major (SINGLE), else NULL                            */
     double *dn;       /* nt x 3: s n' - n of a solve (scratch)                           */
     float *dnf;       /* nt x 3 (SINGLE)                                                 */
+    /* evaluation on a grid (else use_grid 0): W and Psi are the nodes' rows */
+    int use_grid;
+    dk_cage_grid grid;
+    double *node_disp; /* n_nodes x 3: the nodes' motion of a solve (DOUBLE)             */
 };
 
 /* The vertices of a bind per progress report (and cancellation check). */
@@ -44,6 +49,8 @@ void dk_cage_default_options(dk_cage_options *o)
 {
     memset(o, 0, sizeof *o);
     o->coordinates = DK_CAGE_MEAN_VALUE;
+    o->evaluation = DK_CAGE_AUTO;
+    o->grid_resolution = 64;
     o->weights = DK_CAGE_DOUBLE;
 }
 
@@ -160,7 +167,7 @@ static dk_status take_control(const dk_constraint_desc *c, dk_index n, dk_error 
 }
 
 typedef struct rows_job {
-    const dk_mesh *mesh;
+    const double *points; /* the rows' points (x 3): vertices, or grid nodes */
     const dk_control_desc *c;
     const dk_index *edges, *opposite;
     dk_index n_edges;
@@ -196,7 +203,7 @@ static void rows_range(void *ctx, dk_index v0, dk_index v1, int part)
                                                                 (size_t)job->n_edges);
     double *psi = lambda + nc, *k = job->tris ? psi + nt : lambda + nc;
     for (dk_index v = v0; v < v1; v++) {
-        const double *x = job->mesh->positions + 3 * (size_t)v;
+        const double *x = job->points + 3 * (size_t)v;
         const int bad = job->tris
             ? dk_cage_green(x, job->c->rest, nc, job->tris, nt, job->nrm, job->edges,
                             job->n_edges, job->opposite, lambda, psi, k)
@@ -224,6 +231,10 @@ static void cage_free_arrays(dk_cage *cg)
     free(cg->Psif);
     free(cg->dn);
     free(cg->dnf);
+    free(cg->node_disp);
+    dk_cage_grid_free(&cg->grid);
+    cg->node_disp = NULL;
+    cg->use_grid = 0;
     cg->rest = cg->W = cg->disp = cg->nrm = cg->Psi = cg->dn = NULL;
     cg->Wf = cg->dispf = cg->outf = cg->Psif = cg->dnf = NULL;
     cg->tris = NULL;
@@ -241,15 +252,27 @@ void dk_cage_free(dk_cage *cg)
 /* The coordinates of every vertex for the control into `cg` (whose arrays it allocates). */
 static dk_status build(dk_cage *cg, const dk_control_desc *c, dk_progress *prog, dk_error *err)
 {
-    const size_t n = (size_t)cg->n, nc = (size_t)c->n_controls;
+    const size_t nc = (size_t)c->n_controls;
     const int single = cg->opt.weights == DK_CAGE_SINGLE;
     const int green = cg->opt.coordinates == DK_CAGE_GREEN;
     const size_t nt = green ? (size_t)c->n_triangles : 0;
-    char what[128];
-    snprintf(what, sizeof what, "%s coordinates of %zu vertices for %zu cage vertices%s",
-             green ? "Green" : "mean value", n, nc, green ? " and their faces" : "");
-    dk_status st = dk_memory_check((uint64_t)n * (nc + nt) * (single ? 4u : 8u), "Cage", what,
-                                   err);
+    cg->use_grid = cg->opt.evaluation == DK_CAGE_GRID ||
+                   (cg->opt.evaluation == DK_CAGE_AUTO &&
+                    (double)cg->n * (double)(nc + nt) > DK_CAGE_AUTO_ENTRIES);
+    dk_status st;
+    if (cg->use_grid &&
+        (st = dk_cage_grid_plan(cg->mesh->positions, cg->n, cg->opt.grid_resolution, &cg->grid,
+                                err)) != DK_OK)
+        return st;
+    /* the points whose coordinates are computed: the vertices, or the grid's nodes */
+    const double *pts = cg->use_grid ? cg->grid.node_pos : cg->mesh->positions;
+    const size_t n = cg->use_grid ? (size_t)cg->grid.n_nodes : (size_t)cg->n;
+    char what[160];
+    snprintf(what, sizeof what, "%s coordinates of %zu %s for %zu cage vertices%s",
+             green ? "Green" : "mean value", n, cg->use_grid ? "grid nodes" : "vertices", nc,
+             green ? " and their faces" : "");
+    st = dk_memory_check((uint64_t)n * (nc + nt) * (single ? 4u : 8u) +
+                         (cg->use_grid ? 128u * (uint64_t)cg->n : 0u), "Cage", what, err);
     if (st != DK_OK)
         return st;
     cg->nc = c->n_controls;
@@ -263,6 +286,8 @@ static dk_status build(dk_cage *cg, const dk_control_desc *c, dk_progress *prog,
     } else {
         cg->W = malloc(n * nc * sizeof *cg->W + 1);
     }
+    if (cg->use_grid && !single && !(cg->node_disp = malloc(3 * n * sizeof *cg->node_disp + 1)))
+        return oom(err, "the grid");
     int green_ok = 1;
     if (green) {
         cg->tris = malloc(3 * nt * sizeof *cg->tris + 1);
@@ -288,7 +313,7 @@ static dk_status build(dk_cage *cg, const dk_control_desc *c, dk_progress *prog,
                        err);
     if (st != DK_OK)
         return st;
-    rows_job job = {cg->mesh, c, edges, opposite, ne, cg->tris, cg->nrm, cg->W, cg->Psi, cg->Wf,
+    rows_job job = {pts, c, edges, opposite, ne, cg->tris, cg->nrm, cg->W, cg->Psi, cg->Wf,
                     cg->Psif, malloc(2 * rows_scratch(nc, (size_t)c->n_triangles, (size_t)ne) *
                                      sizeof(double)), {-1, -1}};
     if (!job.scratch) {
@@ -301,11 +326,9 @@ static dk_status build(dk_cage *cg, const dk_control_desc *c, dk_progress *prog,
         const size_t v1 = v0 + CAGE_CHUNK < n ? v0 + CAGE_CHUNK : n;
         if (prog && (st = dk_progress_part(prog, (double)v0 / (double)n, err)) != DK_OK)
             break;
-        /* the chunk's two halves on two threads, on a view of the chunk's rows */
-        dk_mesh view = *cg->mesh;
-        view.positions = cg->mesh->positions + 3 * v0;
+        /* the chunk's two halves on two threads, on the chunk's rows */
         rows_job part = job;
-        part.mesh = &view;
+        part.points = pts + 3 * v0;
         part.W = cg->W ? cg->W + v0 * nc : NULL;
         part.Wf = cg->Wf ? cg->Wf + v0 * nc : NULL;
         part.Psi = cg->Psi ? cg->Psi + v0 * nt : NULL;
@@ -321,12 +344,16 @@ static dk_status build(dk_cage *cg, const dk_control_desc *c, dk_progress *prog,
     free(opposite);
     if (st == DK_OK && job.first_bad[0] >= 0)
         st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
-                          green ? "Cage: vertex %d has no Green coordinates (a degenerate "
-                                  "cage, or the vertex on it)"
-                                : "Cage: vertex %d has no mean value coordinates (its weights "
-                                  "sum to zero: a degenerate cage, or the vertex on it where "
+                          green ? "Cage: %s %d has no Green coordinates (a degenerate "
+                                  "cage, or the point on it)"
+                                : "Cage: %s %d has no mean value coordinates (its weights "
+                                  "sum to zero: a degenerate cage, or the point on it where "
                                   "it folds)",
-                          (int)job.first_bad[0]);
+                          cg->use_grid ? "grid node" : "vertex", (int)job.first_bad[0]);
+    if (cg->use_grid) { /* the nodes' positions served their purpose */
+        free(cg->grid.node_pos);
+        cg->grid.node_pos = NULL;
+    }
     return st;
 }
 
@@ -350,6 +377,15 @@ dk_status dk_cage_bind(const dk_mesh *mesh, const dk_constraint_desc *constraint
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "Cage: coordinates %d is not mean value (0) or Green (1)",
                             (int)opt.coordinates);
+    if (opt.evaluation != DK_CAGE_AUTO && opt.evaluation != DK_CAGE_EXACT &&
+        opt.evaluation != DK_CAGE_GRID)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "Cage: evaluation %d is not auto (0), exact (1) or grid (2)",
+                            (int)opt.evaluation);
+    if (opt.grid_resolution < 4 || opt.grid_resolution > 256)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "Cage: grid_resolution %d is outside 4 .. 256 (cells along the "
+                            "mesh's longest side)", opt.grid_resolution);
     dk_status st = take_control(constraints, mesh->n_vertices, err);
     if (st != DK_OK)
         return st;
@@ -389,6 +425,9 @@ dk_status dk_cage_rebind(dk_cage *cg, const dk_constraint_desc *constraints, dk_
     fresh.Wf = fresh.dispf = fresh.outf = fresh.Psif = fresh.dnf = NULL;
     fresh.tris = NULL;
     fresh.nt = 0;
+    fresh.node_disp = NULL;
+    fresh.use_grid = 0;
+    memset(&fresh.grid, 0, sizeof fresh.grid);
     st = build(&fresh, constraints->control, NULL, err);
     if (st != DK_OK) {
         cage_free_arrays(&fresh);
@@ -473,27 +512,36 @@ dk_status dk_cage_solve(dk_cage *cg, const dk_solve_request *rq, double *positio
         return dk_error_prefix(err, "Cage solve: the cage vertices");
     const size_t nc3 = 3 * (size_t)cg->nc, n3 = 3 * (size_t)cg->n;
     const double *x = cg->mesh->positions;
+    /* the rows of W (and Psi): the vertices', or the grid nodes' */
+    const int rows = cg->use_grid ? (int)cg->grid.n_nodes : (int)cg->n;
     if (cg->tris)
         normal_motion(cg, rq->targets);
     if (cg->W) {
         for (size_t k = 0; k < nc3; k++)
             cg->disp[k] = rq->targets[k] - cg->rest[k];
-        memcpy(positions, x, n3 * sizeof *positions);
-        cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, (int)cg->n, 3, (int)cg->nc, 1.0,
-                    cg->W, (int)cg->nc, cg->disp, 3, 1.0, positions, 3);
+        double *out = cg->use_grid ? cg->node_disp : positions;
+        if (!cg->use_grid)
+            memcpy(positions, x, n3 * sizeof *positions);
+        cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, rows, 3, (int)cg->nc, 1.0,
+                    cg->W, (int)cg->nc, cg->disp, 3, cg->use_grid ? 0.0 : 1.0, out, 3);
         if (cg->Psi)
-            cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, (int)cg->n, 3, (int)cg->nt,
-                        1.0, cg->Psi, (int)cg->nt, cg->dn, 3, 1.0, positions, 3);
+            cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, rows, 3, (int)cg->nt,
+                        1.0, cg->Psi, (int)cg->nt, cg->dn, 3, 1.0, out, 3);
+        if (cg->use_grid)
+            dk_cage_grid_blend(&cg->grid, x, cg->node_disp, NULL, positions);
     } else {
         for (size_t k = 0; k < nc3; k++)
             cg->dispf[k] = (float)(rq->targets[k] - cg->rest[k]);
-        cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, (int)cg->n, 3, (int)cg->nc, 1.0f,
+        cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, rows, 3, (int)cg->nc, 1.0f,
                     cg->Wf, (int)cg->nc, cg->dispf, 3, 0.0f, cg->outf, 3);
         if (cg->Psif)
-            cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, (int)cg->n, 3, (int)cg->nt,
+            cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, rows, 3, (int)cg->nt,
                         1.0f, cg->Psif, (int)cg->nt, cg->dnf, 3, 1.0f, cg->outf, 3);
-        for (size_t k = 0; k < n3; k++)
-            positions[k] = x[k] + (double)cg->outf[k];
+        if (cg->use_grid)
+            dk_cage_grid_blend(&cg->grid, x, NULL, cg->outf, positions);
+        else
+            for (size_t k = 0; k < n3; k++)
+                positions[k] = x[k] + (double)cg->outf[k];
     }
     return dk_direct_solve_finish(positions, x, cg->n, rq, "Cage solve", info, err);
 }
@@ -545,6 +593,10 @@ dk_status dk_cage_estimate_memory(const dk_mesh *mesh, const dk_cage_options *op
 static const dk_option_desc cage_fields[] = {
     {"coordinates", DK_OPTION_ENUM, offsetof(dk_cage_options, coordinates), 0,
      DK_CAGE_MEAN_VALUE, DK_CAGE_GREEN, DK_CAGE_MEAN_VALUE, DK_CAGE_GREEN, 0},
+    {"evaluation", DK_OPTION_ENUM, offsetof(dk_cage_options, evaluation), 0, DK_CAGE_AUTO,
+     DK_CAGE_GRID, DK_CAGE_AUTO, DK_CAGE_GRID, 0},
+    {"grid_resolution", DK_OPTION_INT, offsetof(dk_cage_options, grid_resolution), 0, 4, 256,
+     64, 32, 0},
     {"weights", DK_OPTION_ENUM, offsetof(dk_cage_options, weights), 0, DK_CAGE_DOUBLE,
      DK_CAGE_SINGLE, DK_CAGE_DOUBLE, DK_CAGE_SINGLE, 0},
 };
