@@ -8,7 +8,6 @@ the mesh follows. An edit that changes its vertex count asks for Bind."""
 
 import numpy as np
 
-from .. import methods
 from ..errors import DeformKitError
 from ..text import plural
 from . import blender_data, control_objects
@@ -66,19 +65,12 @@ def collect(obj, d, captured=None):
     return dict(cage_vertices=rest, cage_triangles=tris), blob.tobytes() + tris.tobytes()
 
 
-def store(d, captured):
-    d.control_bind = control_objects.encode(captured)
-    d.control_bound_object = d.control_object
-
-
-def settings_key(d):
-    m = methods.get(d.method)
-    return (methods.signature(m, d.options), d.control_bind)
+store = control_objects.store
+settings_key = control_objects.settings_key
 
 
 def exist(obj, d):
-    c = d.control_object
-    return c is not None and c.type == OBJECT_TYPE and bool(c.users_scene)
+    return control_objects.exists(d, OBJECT_TYPE)
 
 
 def targets(obj, d, e, depsgraph=None):

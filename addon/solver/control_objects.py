@@ -13,6 +13,7 @@ import base64
 
 import numpy as np
 
+from .. import methods
 from ..errors import DeformKitError
 from ..text import article
 
@@ -77,3 +78,24 @@ def to_mesh_space(obj, c, depsgraph=None):
 def transform(M, P):
     """Points P (n x 3) mapped by the 4 x 4 affine M."""
     return P @ M[:3, :3].T + M[:3, 3]
+
+
+def store(d, captured):
+    """Keeps what Bind took of the control (its collector's capture) in the deformer, with
+    the object it was taken from (Bind's end, on success)."""
+    d.control_bind = encode(captured)
+    d.control_bound_object = d.control_object
+
+
+def settings_key(d):
+    """What the binding depends on besides the control's motion: the method's bind options
+    and what Bind kept."""
+    m = methods.get(d.method)
+    return (methods.signature(m, d.options), d.control_bind)
+
+
+def exists(d, object_type):
+    """Whether d's control object is set, of `object_type` and in a scene (every solve)."""
+    c = d.control_object
+    return c is not None and c.type == object_type and bool(c.users_scene)
+

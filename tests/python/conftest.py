@@ -13,6 +13,7 @@ read the real meshes under ../shared/meshes skip when those are absent.
 """
 
 import os
+import importlib.util
 import pathlib
 
 import numpy as np
@@ -65,38 +66,21 @@ def _controls(name):
 GROUP_METHODS = tuple(m for m in deformkit.METHODS if "vertex_groups" in _controls(m))
 CONTROL_METHODS = tuple(m for m in deformkit.METHODS if m not in GROUP_METHODS)
 
+_spec = importlib.util.spec_from_file_location(
+    "dk_enclosing_cage", pathlib.Path(__file__).resolve().parents[2] / "addon" / "enclosing_cage.py")
+_enclosing_cage = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_enclosing_cage)
+
 SHARED_MESHES = pathlib.Path(
     os.environ.get("DK_SHARED_DIR", pathlib.Path(__file__).resolve().parents[2] / ".." / "shared")
 ) / "meshes"
 
 
 def make_icosphere(subdivisions=2, radius=1.0):
-    """Icosahedron subdivided `subdivisions` times (midpoints projected to the sphere)."""
-    t = (1.0 + 5.0 ** 0.5) / 2.0
-    v = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t),
-         (0, -1, -t), (0, 1, -t), (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)]
-    f = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4),
-         (11, 10, 2), (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8),
-         (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]
-    verts = [np.array(p, dtype=float) / np.linalg.norm(p) for p in v]
-    faces = list(f)
-    for _ in range(subdivisions):
-        cache = {}
-
-        def midpoint(a, b):
-            key = (min(a, b), max(a, b))
-            if key not in cache:
-                m = verts[a] + verts[b]
-                verts.append(m / np.linalg.norm(m))
-                cache[key] = len(verts) - 1
-            return cache[key]
-
-        new_faces = []
-        for a, b, c in faces:
-            ab, bc, ca = midpoint(a, b), midpoint(b, c), midpoint(c, a)
-            new_faces += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
-        faces = new_faces
-    return np.array(verts) * radius, np.array(faces, dtype=np.int64)
+    """Icosahedron subdivided `subdivisions` times (midpoints projected to the sphere): the
+    add-on's own (addon/enclosing_cage.py, Make Cage's sphere; pure numpy)."""
+    V, F = _enclosing_cage.icosphere(subdivisions)
+    return V * radius, F
 
 
 def make_grid(nx=8, ny=6, bump=0.0, jitter=0.0, seed=0):

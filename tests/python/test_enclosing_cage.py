@@ -1,21 +1,12 @@
 """Make Cage's cage (addon/enclosing_cage.py), without Blender: closed and manifold, every
-vertex of real meshes inside it (winding number 1, and deformkit.Cage's coordinates all
-positive... not required: inside is what Make Cage promises), the same cage for a moved and
-scaled mesh moved and scaled, and bad input refused."""
-import importlib.util
-import os
-
+vertex of real meshes inside it (winding number 1: inside is what Make Cage promises), the
+same cage for a moved and scaled mesh moved and scaled, and bad input refused."""
 import numpy as np
 import pytest
 
 import deformkit as dk
 from conftest import SHARED_MESHES
-
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-spec = importlib.util.spec_from_file_location(
-    "dk_enclosing_cage", os.path.join(ROOT, "addon", "enclosing_cage.py"))
-ec = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(ec)
+from conftest import _enclosing_cage as ec
 
 
 def winding(C, T, P):
