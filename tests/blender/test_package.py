@@ -150,7 +150,7 @@ def test_native_calls():
 
 
 def test_deform_end_to_end():
-    for mid in [m.id for m in S.methods.METHODS]:
+    for mid in [m.id for m in S.handle_methods()]:
         S.reset_scene()  # also re-enables the add-on (factory settings disable it)
         nx, ny = 10, 5
         obj = S.make_grid(nx=nx, ny=ny)
@@ -195,6 +195,29 @@ def test_deform_end_to_end():
         R.check("%s base mesh untouched" % mid, np.abs(S.rest_positions(obj) - rest).max() == 0)
 
 
+def test_control_deformers_end_to_end():
+    """The methods driven by a control object, from the packaged add-on: Make Lattice or
+    Make Cage, Bind, then the control translated moves the mesh by the translation."""
+    for m in S.methods.METHODS:
+        if m in S.handle_methods():
+            continue
+        S.reset_scene()
+        obj = S.make_grid(nx=10, ny=5)
+        bpy.ops.deformkit.add_deformer(method=m.id)
+        d = obj.deformkit.deformers[0]
+        make = S.solver.controls.of(d).MAKE_OPERATOR.split(".")[1]
+        getattr(bpy.ops.deformkit, make)()
+        bpy.ops.deformkit.bind()
+        R.check("%s bound" % m.id, d.bound and not d.status_is_error, d.status)
+        rest = S.rest_positions(obj)
+        d.control_object.location.z += 0.3
+        bpy.context.view_layer.update()
+        err = np.abs(S.evaluated_positions(obj) - (rest + [0.0, 0.0, 0.3])).max()
+        R.check("%s: the control's move moves the mesh (%.1e)" % (m.id, err), err < 1e-5)
+        R.check("%s base mesh untouched" % m.id,
+                np.abs(S.rest_positions(obj) - rest).max() == 0)
+
+
 def test_disable_enable():
     addon_utils.disable(S.ADDON_NAME, default_set=True)
     try:
@@ -214,6 +237,7 @@ def test_disable_enable():
 
 
 for t in (test_installed_copy_in_use, test_bundled_libraries_loaded, test_native_calls,
-          test_deform_end_to_end, test_disable_enable):
+          test_deform_end_to_end, test_control_deformers_end_to_end,
+          test_disable_enable):
     R.run(t)
 R.finish()
