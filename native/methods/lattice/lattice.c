@@ -126,10 +126,7 @@ typedef struct deform_job {
     double *out;
 } deform_job;
 
-/* x' = x + sum_ijk w_i w_j w_k (P_ijk - R_ijk) for vertices [v0, v1), into `out`. Summed
- * per axis (each row of the cell along x, then the rows along y, then the layers along z),
- * so that the additions form short chains the processor overlaps: one running sum over all
- * 64 points of a B-spline cell waited on each addition (four cycles apiece). */
+/* x' = x + sum_ijk w_i w_j w_k (P_ijk - R_ijk) for vertices [v0, v1), into `out`. */
 static void deform_range(void *ctx, dk_index v0, dk_index v1, int part)
 {
     const deform_job *job = ctx;
@@ -144,26 +141,20 @@ static void deform_range(void *ctx, dk_index v0, dk_index v1, int part)
         const double *wx = g->w + (size_t)kt * (size_t)v, *wy = wx + kx, *wz = wy + ky;
         double acc[3] = {0.0, 0.0, 0.0};
         for (int c = 0; c < kz; c++) {
-            if (wz[c] == 0.0)
-                continue;
             const size_t zoff = rxy * (size_t)(first[2] + c);
-            double layer[3] = {0.0, 0.0, 0.0};
             for (int b = 0; b < ky; b++) {
-                if (wy[b] == 0.0)
+                const double wyz = wy[b] * wz[c];
+                if (wyz == 0.0)
                     continue;
                 const double *d = g->disp + 3 * (zoff + rx * (size_t)(first[1] + b) +
                                                  (size_t)first[0]);
-                double row[3] = {0.0, 0.0, 0.0};
                 for (int a = 0; a < kx; a++) {
-                    row[0] += wx[a] * d[3 * a];
-                    row[1] += wx[a] * d[3 * a + 1];
-                    row[2] += wx[a] * d[3 * a + 2];
+                    const double f = wx[a] * wyz;
+                    acc[0] += f * d[3 * a];
+                    acc[1] += f * d[3 * a + 1];
+                    acc[2] += f * d[3 * a + 2];
                 }
-                for (int k = 0; k < 3; k++)
-                    layer[k] += wy[b] * row[k];
             }
-            for (int k = 0; k < 3; k++)
-                acc[k] += wz[c] * layer[k];
         }
         const double *x = lt->pose + 3 * (size_t)v;
         for (int d = 0; d < 3; d++)
