@@ -550,6 +550,55 @@ METHODS.append(Method(
 ))
 
 
+# appended last: the method's place in this list is what files store (enum_items)
+METHODS.append(Method(
+    id="SHEPARD",
+    label="Shepard",
+    native_class="Shepard",
+    description="Shepard interpolation: each vertex blends the handles' motion (and the "
+                "Fixed group's stillness), weighted by inverse distance",
+    icon="MOD_WARP",
+    bind_progress=True,
+    maps=("handle_weights",),
+    fit_check="stretch",
+    options=[
+        Option("interpolate", "ENUM", "transforms", "Blend",
+               "What each vertex blends from the handles near it",
+               items=(("transforms", "Handle Motions",
+                       "Each handle's whole motion, turns included, applied to the vertex "
+                       "(the default): smooth around the handles, a turned handle turns its "
+                       "surroundings"),
+                      ("displacements", "Displacements",
+                       "The displacement of each handle's nearest vertex (the lecture's "
+                       "formula): never beyond what the handles move, but flat plateaus "
+                       "around each handle and no turning"))),
+        Option("power", "FLOAT", 2.0, "Power",
+               "How strongly the nearest handle or the Fixed group wins: higher keeps each "
+               "vertex with its nearest group (sharper transitions), lower blends more evenly",
+               min=0.1, max=64.0),
+        Option("neighbourhood", "ENUM", "all", "Blend Over",
+               "Which handles (and the Fixed group) each vertex blends",
+               items=(("all", "All Groups",
+                       "Every handle and the Fixed group (the lecture's formula; the default)"),
+                      ("nearest", "Nearest Groups",
+                       "Its nearest ones (Groups), fading smoothly to none at the next one: "
+                       "far handles leave a vertex alone"),
+                      ("radius", "Within Radius",
+                       "Those within Radius (at most Groups), fading to none at Radius: "
+                       "vertices farther than that from every group stay still")),
+               advanced=True),
+        Option("k", "INT", 4, "Groups",
+               "How many of the nearest handles (and the Fixed group) each vertex blends",
+               min=1, max=1024, advanced=True, shown_if=("neighbourhood", ("nearest", "radius"))),
+        Option("radius", "FLOAT", 0.0, "Radius",
+               "Within Radius: how far a vertex looks for handles and the Fixed group, in the "
+               "mesh's units (0: a quarter of the model's size)",
+               min=0.0, max=1e9, subtype="DISTANCE", advanced=True,
+               shown_if=("neighbourhood", ("radius",))),
+    ],
+))
+
+
 BY_ID = {m.id: m for m in METHODS}
 
 

@@ -249,6 +249,7 @@ PyObject *dk_py_new_solve_result(PyObject *module, PyObject *positions, double e
     M(fundamental, "LinearReconstruction")                                                 \
     M(lattice, "Lattice")                                                                  \
     M(cage, "Cage")                                                                        \
+    M(shepard, "Shepard")                                                                  \
     X(cholesky)
 
 #define DK_PY_DECLARE_PART(part) int dk_py_init_##part(PyObject *module);

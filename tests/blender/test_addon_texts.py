@@ -293,6 +293,8 @@ STORED_IDS = {
     ("CAGE", "coordinates"): ("mean_value", "green"),
     ("CAGE", "evaluation"): ("auto", "exact", "grid"),
     ("CAGE", "weights"): ("double", "single"),
+    ("SHEPARD", "interpolate"): ("transforms", "displacements"),
+    ("SHEPARD", "neighbourhood"): ("all", "nearest", "radius"),
 }
 # the solver's words the issue found in the UI, which an artist cannot act on
 SOLVER_WORDS = ("Tikhonov", "Regularization", "Material Stiffness", "CG Iterations",

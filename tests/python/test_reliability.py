@@ -713,6 +713,7 @@ BAD_OPTIONS = {
                             {"w_reg": -1.0}, {"radius": float("nan")}],
     "EigenDeformation": [{"n_eigenvectors": -1}, {"bsw_width": 0.0}, {"refine": -3}],
     "LinearReconstruction": [{"w": -1.0}, {"w": float("nan")}],
+    "Shepard": [{"power": 0.0}, {"power": float("nan")}, {"k": 0}, {"radius": -1.0}],
 }
 
 
