@@ -169,8 +169,11 @@ static dk_status build(dk_shepard *s, const dk_constraint_desc *desc, dk_progres
     double *pts = malloc(3 * ((size_t)biggest + 1) * sizeof *pts);
     dk_index *ids = malloc(((size_t)biggest + 1) * sizeof *ids);
     dk_index *order = malloc(((size_t)g + 1) * sizeof *order);
+    double *q = malloc(3 * ((size_t)c->n_free + 1) * sizeof *q);  /* the free vertices */
+    double *qd = malloc(((size_t)c->n_free + 1) * sizeof *qd);
+    dk_index *qi = malloc(((size_t)c->n_free + 1) * sizeof *qi);
     if (!sw->w || !sw->dist || !sw->label || !sw->hpos || !sw->targets || !pts || !ids ||
-        !order) {
+        !order || !q || !qd || !qi) {
         st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "Shepard: out of memory (weights)");
         goto done;
     }
@@ -182,8 +185,13 @@ static dk_status build(dk_shepard *s, const dk_constraint_desc *desc, dk_progres
         sw->dist[i] = INFINITY;
         sw->label[i] = -1;
     }
-    /* each group's nearest vertex and distance, for every free vertex (a tree per group) */
+    /* each group's nearest vertex and distance, for every free vertex: a tree per group,
+     * queried once for all of them */
+    for (dk_index f = 0; f < c->n_free; f++)
+        memcpy(q + 3 * (size_t)f, X + 3 * (size_t)c->free_vertices[f], 3 * sizeof *q);
     for (dk_index grp = 0; grp < g && st == DK_OK; grp++) {
+        if ((st = dk_progress_part(prog, (double)grp / g, err)) != DK_OK)
+            break;
         dk_index cnt = 0;
         if (grp < c->n_handles) {
             for (dk_index k = c->handle_start[grp]; k < c->handle_start[grp + 1]; k++)
@@ -200,18 +208,14 @@ static dk_status build(dk_shepard *s, const dk_constraint_desc *desc, dk_progres
         dk_kdtree *tree = NULL;
         if ((st = dk_kdtree_create(pts, cnt, &tree, err)) != DK_OK)
             break;
-        for (dk_index v = 0; v < n && st == DK_OK; v++) {
-            if ((v & 8191) == 0)
-                st = dk_progress_part(prog, ((double)grp + (double)v / n) / g, err);
-            if (st != DK_OK || c->role[v] != DK_VERTEX_FREE)
-                continue;
-            dk_index j;
-            double d2;
-            st = dk_kdtree_knn(tree, X + 3 * (size_t)v, 1, 1, &j, &d2, err);
-            sw->dist[(size_t)v * g + grp] = sqrt(d2);
-            sw->label[(size_t)v * g + grp] = grp < c->n_handles ? ids[j] : -1;
-        }
+        if (c->n_free > 0)
+            st = dk_kdtree_knn(tree, q, c->n_free, 1, qi, qd, err);
         dk_kdtree_free(tree);
+        for (dk_index f = 0; f < c->n_free && st == DK_OK; f++) {
+            const size_t at = (size_t)c->free_vertices[f] * g + (size_t)grp;
+            sw->dist[at] = sqrt(qd[f]);
+            sw->label[at] = grp < c->n_handles ? ids[qi[f]] : -1;
+        }
     }
     for (dk_index v = 0; v < n && st == DK_OK; v++)
         if (c->role[v] == DK_VERTEX_FREE)
@@ -220,6 +224,9 @@ done:
     free(pts);
     free(ids);
     free(order);
+    free(q);
+    free(qd);
+    free(qi);
     if (st != DK_OK)
         weights_free(sw);
     return st;
