@@ -572,6 +572,14 @@ METHODS.append(Method(
                        "The displacement of each handle's nearest vertex (the lecture's "
                        "formula): never beyond what the handles move, but flat plateaus "
                        "around each handle and no turning"))),
+        Option("distance", "ENUM", "euclidean", "Distance",
+               "How the distance from a handle or the Fixed group is measured",
+               items=(("euclidean", "Straight Line",
+                       "Straight through space (the default): quick; a part that touches "
+                       "another in space is pulled with it (a hand resting on a leg)"),
+                      ("geodesic", "Along Surface",
+                       "Along the surface (heat method): parts near in space but far along "
+                       "the surface do not pull each other; slower to bind"))),
         Option("power", "FLOAT", 2.0, "Power",
                "How strongly the nearest handle or the Fixed group wins: higher keeps each "
                "vertex with its nearest group (sharper transitions), lower blends more evenly",

@@ -3,8 +3,10 @@
  *
  * The data are the constraint groups: each handle group (its value: its motion) and the
  * fixed vertices as one more (no motion). Each is a data point at the distance of its
- * nearest vertex, d_g(x) = min over its vertices |x - v| (Euclidean, on the rest), and a free
- * vertex x moves by
+ * nearest vertex, d_g(x) = min over its vertices |x - v| (Euclidean, on the rest; or along
+ * the surface with distance GEODESIC: the heat method's distance from the group, its
+ * nearest vertex the one nearest along the edges, dk_labelled_search), and a free vertex x
+ * moves by
  *     f(x) = sum_g phi_g(x) f_g(x),   phi_g(x) = w_g(x) / sum_j w_j(x),
  * over its neighbourhood of groups:
  *   ALL      every group, w_g = d_g^-p (the slides' formula; the default);
@@ -54,6 +56,13 @@ typedef enum dk_shepard_neighbourhood {
     DK_SHEPARD_RADIUS = 2   /**< the groups within `radius` (at most k)                     */
 } dk_shepard_neighbourhood;
 
+typedef enum dk_shepard_distance {
+    DK_SHEPARD_EUCLIDEAN = 0, /**< straight through space (default)                         */
+    DK_SHEPARD_GEODESIC = 1   /**< along the surface (the heat method; needs triangles): a
+                                   part that touches another in space but not along the
+                                   surface is not pulled by it                            */
+} dk_shepard_distance;
+
 typedef enum dk_shepard_interpolate {
     DK_SHEPARD_TRANSFORMS = 0,    /**< the handles' transforms: no flat spots (default)     */
     DK_SHEPARD_DISPLACEMENTS = 1  /**< the data points' displacements (the slides)          */
@@ -69,6 +78,7 @@ typedef struct dk_shepard_options {
     double radius;                         /**< RADIUS: a length > 0, 0 = auto
                                                 (DK_SHEPARD_AUTO_RADIUS of the diagonal)   */
     dk_shepard_interpolate interpolate;    /**< default TRANSFORMS                         */
+    dk_shepard_distance distance;          /**< default EUCLIDEAN                          */
     dk_phase_progress_fn progress;         /**< bind progress (phase "weights"), NULL: none */
     void *progress_user;
 } dk_shepard_options;

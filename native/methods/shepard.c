@@ -29,7 +29,8 @@ typedef struct shepard_weights {
 struct dk_shepard {
     const dk_mesh *mesh;
     dk_shepard_options opt;
-    double radius; /* RADIUS: the bind's radius (auto resolved) */
+    double radius;          /* RADIUS: the bind's radius (auto resolved)                   */
+    dk_heat_geodesic *heat; /* GEODESIC: the heat method's factors (kept for rebinds)      */
     shepard_weights sw;
 };
 
@@ -43,6 +44,7 @@ void dk_shepard_default_options(dk_shepard_options *o)
     o->k = 4;
     o->radius = 0.0;
     o->interpolate = DK_SHEPARD_TRANSFORMS;
+    o->distance = DK_SHEPARD_EUCLIDEAN;
 }
 
 static void weights_free(shepard_weights *sw)
@@ -73,6 +75,10 @@ static dk_status check_options(const dk_shepard_options *o, dk_error *err)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "Shepard: radius must be finite and > 0 (0 = auto), got %g",
                             o->radius);
+    if (o->distance != DK_SHEPARD_EUCLIDEAN && o->distance != DK_SHEPARD_GEODESIC)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "Shepard: distance %d is not euclidean (0) or geodesic (1)",
+                            (int)o->distance);
     if (o->interpolate != DK_SHEPARD_TRANSFORMS && o->interpolate != DK_SHEPARD_DISPLACEMENTS)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "Shepard: interpolate %d is not transforms (0) or displacements "
@@ -170,10 +176,15 @@ static dk_status build(dk_shepard *s, const dk_constraint_desc *desc, dk_progres
     dk_index *ids = malloc(((size_t)biggest + 1) * sizeof *ids);
     dk_index *order = malloc(((size_t)g + 1) * sizeof *order);
     double *q = malloc(3 * ((size_t)c->n_free + 1) * sizeof *q);  /* the free vertices */
+    /* GEODESIC: the sources, and per vertex a distance, a straight-line distance, a label */
+    dk_index *src = malloc(((size_t)biggest + 1) * sizeof *src);
+    double *gd = s->heat ? malloc(((size_t)n + 1) * sizeof *gd) : NULL;
+    double *ge = s->heat ? malloc(((size_t)n + 1) * sizeof *ge) : NULL;
+    dk_index *gl = s->heat ? malloc(((size_t)n + 1) * sizeof *gl) : NULL;
     double *qd = malloc(((size_t)c->n_free + 1) * sizeof *qd);
     dk_index *qi = malloc(((size_t)c->n_free + 1) * sizeof *qi);
     if (!sw->w || !sw->dist || !sw->label || !sw->hpos || !sw->targets || !pts || !ids ||
-        !order || !q || !qd || !qi) {
+        !order || !q || !qd || !qi || !src || (s->heat && (!gd || !ge || !gl))) {
         st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "Shepard: out of memory (weights)");
         goto done;
     }
@@ -204,6 +215,19 @@ static dk_status build(dk_shepard *s, const dk_constraint_desc *desc, dk_progres
         for (dk_index i = 0; i < cnt; i++) {
             const dk_index v = grp < c->n_handles ? c->handle_vertices[ids[i]] : ids[i];
             memcpy(pts + 3 * (size_t)i, X + 3 * (size_t)v, 3 * sizeof *pts);
+            src[i] = v;
+        }
+        if (s->heat) { /* along the surface: the heat distance, the nearest along edges */
+            st = dk_labelled_search(m, src, cnt, 0, 0, gd, ge, gl, prog, grp, g, err);
+            if (st == DK_OK)
+                st = dk_heat_distance(s->heat, src, cnt, gd, err);
+            for (dk_index f = 0; f < c->n_free && st == DK_OK; f++) {
+                const dk_index v = c->free_vertices[f];
+                const size_t at = (size_t)v * g + (size_t)grp;
+                sw->dist[at] = gl[v] >= 0 ? fmax(gd[v], 0.0) : INFINITY;
+                sw->label[at] = grp < c->n_handles && gl[v] >= 0 ? ids[gl[v]] : -1;
+            }
+            continue;
         }
         dk_kdtree *tree = NULL;
         if ((st = dk_kdtree_create(pts, cnt, &tree, err)) != DK_OK)
@@ -227,6 +251,10 @@ done:
     free(q);
     free(qd);
     free(qi);
+    free(src);
+    free(gd);
+    free(ge);
+    free(gl);
     if (st != DK_OK)
         weights_free(sw);
     return st;
@@ -262,8 +290,21 @@ dk_status dk_shepard_bind(const dk_mesh *mesh, const dk_constraint_desc *constra
     s->radius = opt.radius > 0.0 ? opt.radius : DK_SHEPARD_AUTO_RADIUS * mesh->bbox_diagonal;
     if (!(s->radius > 0.0))
         s->radius = 1.0; /* a mesh of one point: any radius */
+    if (opt.distance == DK_SHEPARD_GEODESIC) {
+        if (mesh->n_faces == 0) {
+            free(s);
+            return dk_error_set(err, DK_ERR_DEGENERATE,
+                                "Shepard: geodesic distance needs triangles (a vertex cloud "
+                                "has only straight-line distances)");
+        }
+        if ((st = dk_heat_create(mesh, 0.0, &s->heat, err)) != DK_OK) {
+            free(s);
+            return dk_error_prefix(err, "Shepard bind");
+        }
+    }
     st = build(s, constraints, &prog, &s->sw, err);
     if (st != DK_OK) {
+        dk_heat_free(s->heat);
         free(s);
         return st;
     }
@@ -407,6 +448,7 @@ void dk_shepard_free(dk_shepard *s)
     if (!s)
         return;
     weights_free(&s->sw);
+    dk_heat_free(s->heat);
     free(s);
 }
 
@@ -441,6 +483,8 @@ static const dk_option_desc shepard_fields[] = {
     {"interpolate", DK_OPTION_ENUM, offsetof(dk_shepard_options, interpolate), 0,
      DK_SHEPARD_TRANSFORMS, DK_SHEPARD_DISPLACEMENTS, DK_SHEPARD_TRANSFORMS,
      DK_SHEPARD_DISPLACEMENTS, 0},
+    {"distance", DK_OPTION_ENUM, offsetof(dk_shepard_options, distance), 0,
+     DK_SHEPARD_EUCLIDEAN, DK_SHEPARD_GEODESIC, DK_SHEPARD_EUCLIDEAN, DK_SHEPARD_GEODESIC, 0},
 };
 
 DK_METHOD_OPS(dk_shepard_ops, "Shepard", DK_METHOD_EDITS_INPUT, DK_CONTROL_VERTEX_GROUPS,

@@ -127,6 +127,22 @@ void dk_heat_free(dk_heat_geodesic *heat);
  *  calls, which only back-substitute. For tests and reports. */
 int dk_heat_factorization_count(const dk_heat_geodesic *heat);
 
+/* ---------------------------------------------------------------- nearest source -------- */
+
+struct dk_progress;
+
+/** For every vertex, the source (of `n_sources` vertex indices) nearest to it along the
+ *  edges: `label` (n) gets first_label + the source's position in `sources` (-1 where none
+ *  is reachable), `dist` (n) the distance along the edges (edge counts with `unit_weights`,
+ *  else lengths; INFINITY unreachable) and `eu` (n) the straight-line distance to that source.
+ *  Ties go to the straight-line nearer source, then to the lower position. Progress (may be
+ *  NULL): the search is group g of n_groups, reported as the first half of the group's
+ *  share of the current phase; DK_ERR_CANCELLED when asked to stop. */
+dk_status dk_labelled_search(const dk_mesh *mesh, const dk_index *sources, dk_index n_sources,
+                             dk_index first_label, int unit_weights, double *dist, double *eu,
+                             dk_index *label, struct dk_progress *prog, dk_index g,
+                             dk_index n_groups, dk_error *err);
+
 /* ---------------------------------------------------------------- nearest neighbours --- */
 
 /** A static k-d tree over a copy of n points in R^3. */

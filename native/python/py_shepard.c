@@ -6,6 +6,7 @@
 
 static const char *const neighbourhood_names[] = {"all", "nearest", "radius", NULL};
 static const char *const interpolate_names[] = {"transforms", "displacements", NULL};
+static const char *const distance_names[] = {"euclidean", "geodesic", NULL};
 
 static void default_options(void *o)
 {
@@ -15,13 +16,15 @@ static void default_options(void *o)
 static int parse_options(PyObject *kw, void *o, const char *context)
 {
     dk_shepard_options *opt = (dk_shepard_options *)o;
-    int nb = (int)opt->neighbourhood, in = (int)opt->interpolate;
+    int nb = (int)opt->neighbourhood, in = (int)opt->interpolate, di = (int)opt->distance;
     if (dk_py_opt_double(kw, "power", &opt->power) < 0 ||
         dk_py_opt_choice(kw, "neighbourhood", neighbourhood_names, &nb, context) < 0 ||
         dk_py_opt_int(kw, "k", &opt->k) < 0 ||
         dk_py_opt_double(kw, "radius", &opt->radius) < 0 ||
-        dk_py_opt_choice(kw, "interpolate", interpolate_names, &in, context) < 0)
+        dk_py_opt_choice(kw, "interpolate", interpolate_names, &in, context) < 0 ||
+        dk_py_opt_choice(kw, "distance", distance_names, &di, context) < 0)
         return -1;
+    opt->distance = (dk_shepard_distance)di;
     opt->neighbourhood = (dk_shepard_neighbourhood)nb;
     opt->interpolate = (dk_shepard_interpolate)in;
     return 0;
@@ -73,7 +76,7 @@ PyDoc_STRVAR(solve_doc,
 PyDoc_STRVAR(shepard_doc,
              "Shepard(mesh, handles, fixed=None, roi=None, handle_weights=None, power=2.0,\n"
              "        neighbourhood='all', k=4, radius=0.0, interpolate='transforms',\n"
-             "        progress=None)\n\n"
+             "        distance='euclidean', progress=None)\n\n"
              "Shepard interpolation (inverse distance weighting, the slides' scattered data\n"
              "interpolation) of the handles' motion: each handle group and the fixed vertices\n"
              "are data points at the distance d_g of their nearest vertex; a free vertex\n"
@@ -85,6 +88,8 @@ PyDoc_STRVAR(shepard_doc,
              "applied to the vertex: linear nodal functions, no flat spots at the data; the\n"
              "default) or 'displacements' (the displacement of the group's nearest vertex:\n"
              "the slides' formula, within the data's range, flat at the data for p > 1).\n"
+             "distance: 'euclidean' (straight through space) or 'geodesic' (along the surface,\n"
+             "the heat method: a part touching another in space is not pulled by it).\n"
              "See docs/methods/shepard.md.");
 
 static PyMethodDef shepard_methods[] = {

@@ -294,6 +294,7 @@ STORED_IDS = {
     ("CAGE", "evaluation"): ("auto", "exact", "grid"),
     ("CAGE", "weights"): ("double", "single"),
     ("SHEPARD", "interpolate"): ("transforms", "displacements"),
+    ("SHEPARD", "distance"): ("euclidean", "geodesic"),
     ("SHEPARD", "neighbourhood"): ("all", "nearest", "radius"),
 }
 # the solver's words the issue found in the UI, which an artist cannot act on

@@ -155,3 +155,53 @@ def test_shared_meshes(mesh_file):
         assert dz.min() > -1e-9 * diag and dz.max() < 0.2 * diag * (1 + 1e-12)
         mid = np.flatnonzero(np.abs(v[:, 2] - np.median(v[:, 2])) < 0.05 * np.ptp(v[:, 2]))
         assert 0.01 * diag < np.median(dz[mid]) < 0.19 * diag
+
+
+def u_strip(n=40, w=4, L=1.0, gap=0.1):
+    """A strip folded back on itself: the bottom sheet from x = 0 to L (z = 0), a half turn of
+    radius gap/2, the top sheet back to x = 0 (z = gap). Returns V, F and the path parameter
+    of each vertex's column."""
+    half = np.pi * gap / 2
+    total = 2 * L + half
+    s = np.linspace(0.0, total, n)
+    cols = []
+    for t in s:
+        if t <= L:
+            cols.append((t, 0.0))
+        elif t <= L + half:
+            a = (t - L) / (gap / 2)
+            cols.append((L + gap / 2 * np.sin(a), gap / 2 - gap / 2 * np.cos(a)))
+        else:
+            cols.append((L - (t - L - half), gap))
+    V = np.array([(x, y, z) for (x, z) in cols for y in np.linspace(0, 0.2, w)])
+    F = []
+    for i in range(n - 1):
+        for j in range(w - 1):
+            a = i * w + j
+            F += [[a, a + w, a + w + 1], [a, a + w + 1, a + 1]]
+    return V, np.array(F), np.repeat(s, w)
+
+
+def test_geodesic_distance_follows_the_surface():
+    """On a strip folded back on itself, the bottom sheet's tip lies a fold's gap below the
+    handle on the top sheet's tip, but two sheets away along the surface: straight-line
+    distances pull it nearly as far as the handle, distances along the surface hardly."""
+    V, F, s = u_strip()
+    mesh = dk.Mesh(V, F)
+    total = s.max()
+    handle = np.flatnonzero(s > total - 0.06)          # the top sheet's tip
+    fixed = np.flatnonzero(np.abs(s - 0.5 * total) < 0.06)   # the fold
+    probe = np.flatnonzero(s < 0.03)                   # the bottom sheet's tip, below the handle
+    T = np.eye(4)
+    T[1, 3] = 0.5
+    moved = {}
+    for distance in ("euclidean", "geodesic"):
+        sh = dk.Shepard(mesh, handles=[handle], fixed=fixed, distance=distance)
+        x = np.asarray(sh.solve(transforms=T[None]).positions)
+        assert np.allclose(x[handle], V[handle] + (0, 0.5, 0)) and np.array_equal(x[fixed],
+                                                                                  V[fixed])
+        moved[distance] = float((x[probe, 1] - V[probe, 1]).mean())
+    assert moved["euclidean"] > 0.3 and moved["geodesic"] < 0.5 * moved["euclidean"], moved
+    with pytest.raises(ValueError, match="geodesic distance needs triangles"):
+        dk.Shepard(dk.Mesh(V, np.zeros((0, 3), int)), handles=[handle], fixed=fixed,
+                   distance="geodesic")
