@@ -607,6 +607,28 @@ METHODS.append(Method(
 ))
 
 
+METHODS.append(Method(
+    id="SKINNING",
+    label="Skinning",
+    native_class="Skinning",
+    description="Skinning by an Armature's bones with the vertex groups named after them: "
+                "linear blend or dual quaternions",
+    icon="MOD_ARMATURE",
+    needs_faces=False,
+    options=[
+        Option("blend", "ENUM", "linear", "Blend",
+               "How each vertex blends its bones' motions",
+               items=(("linear", "Linear",
+                       "Linear blend skinning (the default, as Blender's Armature modifier): "
+                       "quick, but a limb twisted half a turn collapses at the joint"),
+                      ("dual_quaternion", "Dual Quaternion",
+                       "The bones' turns blended as dual quaternions (as the Armature "
+                       "modifier's Preserve Volume): twisted and bent joints keep their "
+                       "girth"))),
+    ],
+))
+
+
 BY_ID = {m.id: m for m in METHODS}
 
 

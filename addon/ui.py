@@ -213,7 +213,8 @@ def draw_control(layout, col, obj, d):
     c = solver.controls.of(d)
     row = col.row(align=True)
     row.prop(d, "control_object", text=c.LABEL)
-    layout.operator(c.MAKE_OPERATOR, icon="ADD")
+    if c.MAKE_OPERATOR:
+        layout.operator(c.MAKE_OPERATOR, icon="ADD")
 
 
 def draw_rebinding(layout, obj, d):

@@ -16,6 +16,7 @@ KIND = "cage"
 LABEL = "Cage"
 OBJECT_TYPE = "MESH"
 MAKE_OPERATOR = "deformkit.make_cage"
+SOLVE_KEYWORD = "targets"   # the solve takes the control's points as positions
 uses_handles = False
 
 

@@ -36,12 +36,14 @@ def decode(text):
     return np.frombuffer(raw, dtype="<f8").astype(np.float64)
 
 
-def control_object(obj, d, kind, object_type):
-    """d's control object, checked: set, in a scene, of `object_type` ("LATTICE", "MESH"),
-    not the deformed object itself. `kind` names it in messages ("lattice", "cage")."""
+def control_object(obj, d, kind, object_type, make=True):
+    """d's control object, checked: set, in a scene, of `object_type` ("LATTICE", "MESH",
+    "ARMATURE"), not the deformed object itself. `kind` names it in messages ("lattice",
+    "cage"); `make`: the panel has Make <Kind> for it."""
     c = d.control_object
     if c is None:
-        raise DeformKitError("no %s: pick one in the panel (or Make %s)" % (kind, kind.title()))
+        raise DeformKitError("no %s: pick one in the panel%s" % (
+            kind, " (or Make %s)" % kind.title() if make else ""))
     if not c.users_scene:
         raise DeformKitError("%s '%s' was deleted" % (kind, c.name))
     if c.type != object_type:

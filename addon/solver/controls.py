@@ -11,17 +11,21 @@ table, dk_method_ops.controls), never by the method's name. A collector is a mod
                          naming what is missing or wrong
     settings_key(d)   -> what of d's settings (besides the controls) its binding depends on
     exist(obj, d)     -> whether every control d names is still there (cheap: every solve)
-and, for a control object (uses_handles False), KIND, LABEL, OBJECT_TYPE, MAKE_OPERATOR and
-    targets(obj, d, e, depsgraph) -> the control's points on this frame (n_controls x 3)
+and, for a control object (uses_handles False), KIND, LABEL, OBJECT_TYPE, MAKE_OPERATOR (the
+operator that makes one around the mesh, or None), SOLVE_KEYWORD and
+    targets(obj, d, e, depsgraph) -> the control's points on this frame (n_controls x 3),
+                                     or its bones' frames (n_controls x 4 x 4)
     summary(d), missing(d)        -> the status line's words
 Vertex groups of the deformed mesh (vertex_groups.py), a Blender Lattice object
-(lattice_control.py) and a closed mesh as a cage (cage_control.py)."""
+(lattice_control.py), a closed mesh as a cage (cage_control.py) and an Armature's bones
+(bones_control.py)."""
 
 from .. import methods, native
 from ..errors import DeformKitError
-from . import cage_control, lattice_control, vertex_groups
+from . import bones_control, cage_control, lattice_control, vertex_groups
 
-COLLECTORS = {"vertex_groups": vertex_groups, "lattice": lattice_control, "cage": cage_control}
+COLLECTORS = {"vertex_groups": vertex_groups, "lattice": lattice_control, "cage": cage_control,
+              "bones": bones_control}
 
 
 def kinds(m):

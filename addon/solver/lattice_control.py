@@ -19,6 +19,7 @@ KIND = "lattice"
 LABEL = "Lattice"
 OBJECT_TYPE = "LATTICE"
 MAKE_OPERATOR = "deformkit.make_lattice"
+SOLVE_KEYWORD = "targets"   # the solve takes the control's points as positions
 uses_handles = False
 
 # a one-point axis: its two layers span the mesh along it, this much beyond it

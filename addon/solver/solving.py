@@ -139,7 +139,7 @@ def _plan_solve(obj, d, e, key, T, source, inputs, cold, write, interactive, res
         # a control object's points (_solve_inputs); a method that edits its input
         # registers the input to the control where it lies, the others solve on the rest
         # and their offset lands on the input
-        goal = dict(targets=T)
+        goal = {controls.collector(m).SOLVE_KEYWORD: T}
         if source is not None:
             kw["input_positions"] = source
         e.source = e.rest if source is None else source

@@ -7,9 +7,10 @@
  * moves:
  *   POINTS   free points in space (Shepard interpolation): their rest positions; a solve gives
  *            each point's position (targets: n_controls x 3).
- *   BONES    bone frames (skinning): each bone's rest frame (a 4x4 affine, row-major) and a
- *            weight per vertex and bone; a solve gives each bone's transform since its rest
- *            (targets: n_controls 4x4 row-major).
+ *   BONES    bone frames (skinning): each bone's rest frame B_j (a 4x4 affine, row-major)
+ *            and a weight per vertex and bone; a solve gives each bone's current frame T_j
+ *            (targets: n_controls 4x4 row-major, as transforms), and the bone moves the
+ *            mesh by T_j B_j^-1 (the slides' skinning), so the rest frames give it back.
  *   CAGE     a closed triangle control mesh around the mesh (mean value and Wachspress
  *            coordinates): its rest vertices and triangles; a solve gives each cage vertex's
  *            position (targets: n_controls x 3).

@@ -14,12 +14,13 @@
 #include "dk_laplacian_edit.h"
 #include "dk_lattice.h"
 #include "dk_shepard.h"
+#include "dk_skinning.h"
 
 /* Adding a method: its table here, in the order the Python module lists its classes. */
 static const dk_method_ops *const registry[] = {&dk_arap_ops, &dk_laplacian_edit_ops,
                                                 &dk_falloff_ops, &dk_embedded_ops, &dk_eigen_ops,
                                                 &dk_fundamental_ops, &dk_lattice_ops, &dk_cage_ops,
-                                                &dk_shepard_ops, NULL};
+                                                &dk_shepard_ops, &dk_skinning_ops, NULL};
 
 const dk_method_ops *const *dk_methods(void)
 {

@@ -250,6 +250,7 @@ PyObject *dk_py_new_solve_result(PyObject *module, PyObject *positions, double e
     M(lattice, "Lattice")                                                                  \
     M(cage, "Cage")                                                                        \
     M(shepard, "Shepard")                                                                  \
+    M(skinning, "Skinning")                                                                \
     X(cholesky)
 
 #define DK_PY_DECLARE_PART(part) int dk_py_init_##part(PyObject *module);

@@ -111,6 +111,9 @@ struct dk_py_method_spec {
      *  bind or rebind, and after a failed parse (so parse_control leaves `store`
      *  releasable at every exit). */
     void (*release_control)(void *store);
+    /** 1: the control's targets are one 4 x 4 transform per control (bones' frames, from
+     *  solve(transforms=...)); 0: one position per control point (solve(targets=...)). */
+    int control_transforms;
     /** 1: the bind runs under the module's ARPACK lock (ARPACK is not reentrant). */
     int serialise_bind;
     /** Optional: the `stats` dict; default: the contract's counters. */

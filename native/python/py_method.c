@@ -538,13 +538,21 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
         refuse_leftovers(rest, "solve()") < 0)
         goto fail_busy;
     spec->ops->stats(self->native, &ms);
-    if (ms.n_controls > 0 && transforms != Py_None) {
+    if (ms.n_controls > 0 && !spec->control_transforms && transforms != Py_None) {
         PyErr_Format(PyExc_TypeError, "%s: takes the positions of its %d control points "
                      "(targets), not transforms", ctx, (int)ms.n_controls);
         goto fail_busy;
     }
-    /* a method bound to a control: its points' positions are the targets */
-    if (dk_py_lap_read_solve_input(targets, transforms, ms.n_controls ? 0 : ms.n_handles,
+    if (ms.n_controls > 0 && spec->control_transforms && targets != Py_None) {
+        PyErr_Format(PyExc_TypeError, "%s: takes the frames of its %d bones (transforms, "
+                     "n x 4 x 4), not positions", ctx, (int)ms.n_controls);
+        goto fail_busy;
+    }
+    /* a method bound to a control: its points' positions, or its bones' frames, are the
+     * targets */
+    if (dk_py_lap_read_solve_input(targets, transforms,
+                                   ms.n_controls ? (spec->control_transforms ? ms.n_controls : 0)
+                                                 : ms.n_handles,
                                    ms.n_controls ? ms.n_controls : ms.n_handle_vertices, ctx,
                                    &in, &mode) < 0)
         goto fail_busy;

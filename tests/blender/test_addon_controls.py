@@ -291,8 +291,9 @@ def test_green_cage():
     bpy.context.view_layer.update()
     got, want = S.evaluated_positions(obj), _api_cage(obj, d, cage)
     err = np.abs(got - want).max()
-    R.check("green: add-on = API (%.1e, moved %.2f)" % (err, np.abs(want - S.rest_positions(obj)).max()),
-            err < TOL and np.abs(want - S.rest_positions(obj)).max() > 0.02, d.status)
+    moved = np.abs(want - S.rest_positions(obj)).max()
+    R.check("green: add-on = API (%.1e, moved %.2f)" % (err, moved),
+            err < TOL and moved > 0.02, d.status)
 
 
 def test_errors_are_said():
@@ -435,11 +436,77 @@ def test_an_animated_control_plays_and_bakes():
             % (err, np.abs(want - rest).max()), err < TOL and np.abs(want - rest).max() > 0.05)
 
 
+def skinning_setup(blend):
+    """A 24 x 6 grid, a two-bone armature (upper, lower) and vertex groups of the bones'
+    names blending across the elbow; the Skinning deformer bound to it, and a copy of the
+    mesh with Blender's Armature modifier on the same armature and groups."""
+    S.reset_scene()
+    obj = S.make_grid(nx=24, ny=6)
+    obj.location = (0.2, 0.1, -0.3)
+    rest = S.rest_positions(obj)
+    w = np.clip((rest[:, 0] + 0.3) / 0.6, 0.0, 1.0)
+    S.group(obj, "lower", range(len(rest)), w)
+    S.group(obj, "upper", [i for i in range(len(rest)) if w[i] < 1.0],
+            [1.0 - w[i] for i in range(len(rest)) if w[i] < 1.0])
+    arm, ao = S.armature_in_edit_mode("Rig")
+    up = arm.edit_bones.new("upper")
+    up.head, up.tail = (-0.8, 0.1, -0.3), (0.2, 0.1, -0.3)
+    lo = arm.edit_bones.new("lower")
+    lo.head, lo.tail = (0.2, 0.1, -0.3), (1.2, 0.1, -0.3)
+    lo.parent, lo.use_connect = up, True
+    bpy.ops.object.mode_set(mode="OBJECT")
+    bpy.context.view_layer.objects.active = obj
+    bpy.ops.deformkit.add_deformer(method="SKINNING")
+    d = obj.deformkit.deformers[0]
+    d.options.blend = blend
+    d.control_object = ao
+    bpy.ops.deformkit.bind()
+    twin = bpy.data.objects.new("Twin", obj.data.copy())
+    bpy.context.scene.collection.objects.link(twin)
+    twin.matrix_world = obj.matrix_world
+    for a in list(twin.data.attributes):
+        if a.name.startswith("dk_"):
+            twin.data.attributes.remove(a)
+    for vg in obj.vertex_groups:
+        twin.vertex_groups.new(name=vg.name)
+    for v in obj.data.vertices:
+        for g in v.groups:
+            twin.vertex_groups[obj.vertex_groups[g.group].name].add([v.index], g.weight,
+                                                                  "REPLACE")
+    m = twin.modifiers.new("Armature", "ARMATURE")
+    m.object = ao
+    m.use_deform_preserve_volume = blend == "dual_quaternion"
+    return obj, d, ao, twin
+
+
+def test_skinning_equals_blenders_armature():
+    """Linear blend skinning equals Blender's Armature modifier vertex for vertex, and dual
+    quaternions its Preserve Volume, on a posed two-bone arm (a bend, a twist, the armature
+    object moved)."""
+    for blend in ("linear", "dual_quaternion"):
+        obj, d, ao, twin = skinning_setup(blend)
+        R.check("%s skinning bound" % blend, d.bound and not d.status_is_error, d.status)
+        rest = S.rest_positions(obj)
+        err = np.abs(S.evaluated_positions(obj) - rest).max()
+        R.check("%s: the rest pose gives the mesh back (%.1e)" % (blend, err), err < TOL)
+        for pb, rot in ((ao.pose.bones["upper"], (0.0, 0.3, 0.2)),
+                        (ao.pose.bones["lower"], (1.4, 0.0, 0.9))):
+            pb.rotation_mode = "XYZ"
+            pb.rotation_euler = rot
+        ao.location = (0.1, -0.2, 0.05)
+        bpy.context.view_layer.update()
+        got, want = S.evaluated_positions(obj), S.evaluated_positions(twin)
+        err = np.abs(got - want).max()
+        R.check("%s = Blender's Armature modifier (%.1e, moved %.2f)"
+                % (blend, err, np.abs(want - rest).max()),
+                err < 1e-4 and np.abs(want - rest).max() > 0.2, d.status)
+
+
 if __name__ == "__main__":
     for fn in (test_make_lattice_encloses_and_binds, test_linear_lattice_equals_blenders,
                test_lattice_follows_points_and_object, test_cage, test_green_cage,
                test_after_an_armature,
                test_errors_are_said, test_save_and_reload,
-               test_an_animated_control_plays_and_bakes):
+               test_an_animated_control_plays_and_bakes, test_skinning_equals_blenders_armature):
         R.run(fn)
     R.finish()

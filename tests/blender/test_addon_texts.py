@@ -295,6 +295,7 @@ STORED_IDS = {
     ("CAGE", "weights"): ("double", "single"),
     ("SHEPARD", "interpolate"): ("transforms", "displacements"),
     ("SHEPARD", "distance"): ("euclidean", "geodesic"),
+    ("SKINNING", "blend"): ("linear", "dual_quaternion"),
     ("SHEPARD", "neighbourhood"): ("all", "nearest", "radius"),
 }
 # the solver's words the issue found in the UI, which an artist cannot act on

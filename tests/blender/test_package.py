@@ -197,7 +197,8 @@ def test_deform_end_to_end():
 
 def test_control_deformers_end_to_end():
     """The methods driven by a control object, from the packaged add-on: Make Lattice or
-    Make Cage, Bind, then the control translated moves the mesh by the translation."""
+    Make Cage (or an armature of one bone), Bind, then the control (the bone) translated
+    moves the mesh by the translation."""
     for m in S.methods.METHODS:
         if m in S.handle_methods():
             continue
@@ -205,12 +206,26 @@ def test_control_deformers_end_to_end():
         obj = S.make_grid(nx=10, ny=5)
         bpy.ops.deformkit.add_deformer(method=m.id)
         d = obj.deformkit.deformers[0]
-        make = S.solver.controls.of(d).MAKE_OPERATOR.split(".")[1]
-        getattr(bpy.ops.deformkit, make)()
+        make = S.solver.controls.of(d).MAKE_OPERATOR
+        pb = None
+        if make:
+            getattr(bpy.ops.deformkit, make.split(".")[1])()
+        else:   # bones: an armature of one bone, every vertex in its group
+            arm, ao = S.armature_in_edit_mode("Rig")
+            b = arm.edit_bones.new("b")
+            b.head, b.tail = (0.0, 0.0, 0.0), (0.0, 1.0, 0.0)
+            bpy.ops.object.mode_set(mode="OBJECT")
+            bpy.context.view_layer.objects.active = obj
+            S.group(obj, "b", range(len(obj.data.vertices)))
+            d.control_object = ao
+            pb = ao.pose.bones["b"]
         bpy.ops.deformkit.bind()
         R.check("%s bound" % m.id, d.bound and not d.status_is_error, d.status)
         rest = S.rest_positions(obj)
-        d.control_object.location.z += 0.3
+        if pb is not None:
+            pb.location.z += 0.3   # the bone along y: its z is the world's
+        else:
+            d.control_object.location.z += 0.3
         bpy.context.view_layer.update()
         err = np.abs(S.evaluated_positions(obj) - (rest + [0.0, 0.0, 0.3])).max()
         R.check("%s: the control's move moves the mesh (%.1e)" % (m.id, err), err < 1e-5)

@@ -398,8 +398,10 @@ static void decode_request(dk_fuzz_input *in, const dk_mesh *m, const groups *g,
     const dk_control_desc *ctl = g->desc.control;
     if (ctl && ctl->rest && ctl->n_controls > 0 && dk_control_target_count(ctl) <= 192 &&
         dk_fuzz_u8(in) % 8 != 0) {
-        /* the control's points near their rest (a lattice's from its box), as positions */
-        r->rq.target_kind = DK_TARGETS_POSITIONS;
+        /* the control's points near their rest (a lattice's from its box), as positions;
+         * bones' frames near their rest frames, as transforms (bottom rows kept) */
+        r->rq.target_kind = ctl->kind == DK_CONTROL_BONES ? DK_TARGETS_TRANSFORMS
+                                                          : DK_TARGETS_POSITIONS;
         const size_t cnt = dk_control_target_count(ctl);
         for (size_t k = 0; k < cnt; k++) {
             double base = 0.0;
@@ -413,12 +415,15 @@ static void decode_request(dk_fuzz_input *in, const dk_mesh *m, const groups *g,
                                      (double)(q / (res0 * res1)) / (res2 - 1)};
                 const double *f = ctl->rest + 4 * (k % 3);
                 base = f[0] * u[0] + f[1] * u[1] + f[2] * u[2] + f[3];
-            } else if (ctl->kind == DK_CONTROL_POINTS || ctl->kind == DK_CONTROL_CAGE) {
+            } else if (ctl->kind == DK_CONTROL_POINTS || ctl->kind == DK_CONTROL_CAGE ||
+                       ctl->kind == DK_CONTROL_BONES) {
                 base = ctl->rest[k];
             }
             const uint8_t b = dk_fuzz_u8(in);
+            const int bottom = ctl->kind == DK_CONTROL_BONES && k % 16 >= 12;
             r->targets[k] = raw ? dk_fuzz_raw_double(in)
-                                : base + 0.5 * diag * ((double)(b % 33) - 16) / 16.0;
+                            : bottom ? base
+                                     : base + 0.5 * diag * ((double)(b % 33) - 16) / 16.0;
         }
     }
     dk_index off = 0;

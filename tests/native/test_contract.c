@@ -132,14 +132,30 @@ typedef struct control_scene {
     dk_control_desc control;
     dk_constraint_desc desc;
     double frame[16];
-    double *rest; /* n_controls x 3 */
+    double *rest;    /* the targets at rest: n_controls x stride                           */
+    int stride;      /* 3 (points, cage, lattice: positions) or 16 (bones: frames)         */
     dk_index tris[36];
+    double *weights; /* bones: n_vertices x 2                                             */
 } control_scene;
 
 static void control_scene_free(control_scene *c)
 {
     free(c->rest);
+    free(c->weights);
     memset(c, 0, sizeof *c);
+}
+
+/* Moves the targets `in` (n controls of c's stride) by the translation T[3], T[7], T[11]
+ * into `out`: positions translated, frames translated. */
+static void translate_targets(const control_scene *c, const double *T, const double *in,
+                              double *out)
+{
+    const size_t nt = (size_t)c->stride * (size_t)c->control.n_controls;
+    memcpy(out, in, nt * sizeof *out);
+    for (dk_index q = 0; q < c->control.n_controls; q++)
+        for (int d = 0; d < 3; d++)
+            out[(size_t)c->stride * (size_t)q + (c->stride == 16 ? 4 * (size_t)d + 3 : (size_t)d)] +=
+                T[4 * d + 3];
 }
 
 /* A lattice of 3 x 4 x 3 points, or a box cage (8 vertices, 12 triangles facing out), over
@@ -149,9 +165,39 @@ static void control_scene_free(control_scene *c)
 static int control_scene_make(const dk_method_ops *o, const scene *s, control_scene *c)
 {
     memset(c, 0, sizeof *c);
-    if (!(o->controls & (DK_CONTROL_LATTICE | DK_CONTROL_CAGE)))
+    c->stride = 3;
+    if (!(o->controls & (DK_CONTROL_LATTICE | DK_CONTROL_CAGE | DK_CONTROL_BONES)))
         return -1;
     const double *lo = s->mesh->bbox_min, *hi = s->mesh->bbox_max;
+    if (o->controls & DK_CONTROL_BONES) {
+        /* two bones: one at the origin, one at the box's centre turned about z; each
+         * vertex's weights a ramp along x */
+        const dk_index n = s->mesh->n_vertices;
+        c->stride = 16;
+        c->rest = calloc(32, sizeof(double));
+        c->weights = malloc(2 * (size_t)n * sizeof(double));
+        if (!c->rest || !c->weights)
+            return -1;
+        c->rest[0] = c->rest[5] = c->rest[10] = c->rest[15] = 1.0;
+        double *b = c->rest + 16;
+        b[0] = cos(0.3);
+        b[1] = -sin(0.3);
+        b[4] = sin(0.3);
+        b[5] = cos(0.3);
+        b[10] = b[15] = 1.0;
+        for (int d = 0; d < 3; d++)
+            b[4 * d + 3] = 0.5 * (lo[d] + hi[d]);
+        for (dk_index v = 0; v < n; v++) {
+            const double x = s->mesh->positions[3 * v];
+            const double w = hi[0] > lo[0] ? (x - lo[0]) / (hi[0] - lo[0]) : 0.5;
+            c->weights[2 * v] = 1.0 - w;
+            c->weights[2 * v + 1] = w;
+        }
+        c->control = (dk_control_desc){.kind = DK_CONTROL_BONES, .n_controls = 2,
+                                       .rest = c->rest, .weights = c->weights};
+        c->desc.control = &c->control;
+        return 0;
+    }
     for (int d = 0; d < 3; d++) {
         const double pad = 0.1 * (hi[d] - lo[d]) + 1e-3 * s->diag;
         c->frame[5 * d] = hi[d] - lo[d] + 2 * pad;
@@ -201,7 +247,8 @@ static void check_control_method(const dk_method_ops *ops, scene *s)
         CHECK_MSG(0, "%s: no contract scene for its controls %#x", ops->name, ops->controls);
         return;
     }
-    const size_t nt = 3 * (size_t)c.control.n_controls;
+    const size_t nt = (size_t)c.stride * (size_t)c.control.n_controls;
+    const dk_target_kind kind = c.stride == 16 ? DK_TARGETS_TRANSFORMS : DK_TARGETS_POSITIONS;
     double *x = malloc(sizeof(double) * N), *y = malloc(sizeof(double) * N);
     double *t = malloc(sizeof(double) * nt);
     void *m = NULL, *fresh = NULL;
@@ -217,7 +264,7 @@ static void check_control_method(const dk_method_ops *ops, scene *s)
               "%s: stats %d vertices, %d controls", ops->name, (int)st.n_vertices,
               (int)st.n_controls);
     /* no motion: the rest, bit for bit */
-    dk_solve_request rq = {.targets = c.rest};
+    dk_solve_request rq = {.targets = c.rest, .target_kind = kind};
     CHECK_MSG(ops->solve(m, &rq, x, &info, &e) == DK_OK && memcmp(x, s->mesh->positions,
                                                                   N * sizeof(double)) == 0,
               "%s on %s: the control at rest moves the mesh (%s)", ops->name, s->name,
@@ -228,13 +275,11 @@ static void check_control_method(const dk_method_ops *ops, scene *s)
     for (int affine = 0; affine < 2; affine++) {
         if (affine && !(ops->flags & DK_METHOD_LINEAR_PRECISION))
             continue;
-        for (size_t k = 0; k < nt; k += 3) {
-            if (affine)
+        if (affine)
+            for (size_t k = 0; k < nt; k += 3)
                 apply(T, c.rest + k, t + k);
-            else
-                for (int d = 0; d < 3; d++)
-                    t[k + d] = c.rest[k + d] + T[4 * d + 3];
-        }
+        else
+            translate_targets(&c, T, c.rest, t);
         rq.targets = t;
         double worst = INFINITY;
         if (ops->solve(m, &rq, x, &info, &e) == DK_OK) {
@@ -257,15 +302,16 @@ static void check_control_method(const dk_method_ops *ops, scene *s)
                   ops->name, s->name, affine ? "mapped affinely" : "translated", worst);
     }
     /* cold solves repeat, whatever came between; a refused request changes nothing */
-    for (size_t k = 0; k < nt; k++)
-        t[k] = c.rest[k] + 0.05 * sin(3.0 * (double)k) * s->diag;
+    for (size_t k = 0; k < nt; k++) /* frames keep their bottom row */
+        t[k] = c.rest[k] + (c.stride == 16 && k % 16 >= 12
+                                ? 0.0 : 0.05 * sin(3.0 * (double)k) * s->diag);
     rq.targets = t;
     CHECK(ops->solve(m, &rq, x, NULL, &e) == DK_OK);
     double *bad = malloc(sizeof(double) * nt);
     if (bad) {
         memcpy(bad, t, sizeof(double) * nt);
         bad[nt / 2] = NAN;
-        dk_solve_request brq = {.targets = bad};
+        dk_solve_request brq = {.targets = bad, .target_kind = kind};
         CHECK(ops->solve(m, &brq, y, NULL, &e) != DK_OK && e.message[0]);
         free(bad);
     }
@@ -274,7 +320,7 @@ static void check_control_method(const dk_method_ops *ops, scene *s)
     if (ops->flags & DK_METHOD_EDITS_INPUT) {
         for (size_t k = 0; k < N; k++)
             y[k] = s->mesh->positions[k] + 0.02 * cos((double)k) * s->diag;
-        dk_solve_request irq = {.targets = c.rest, .input_positions = y};
+        dk_solve_request irq = {.targets = c.rest, .target_kind = kind, .input_positions = y};
         double *z = malloc(sizeof(double) * N);
         CHECK(z && ops->solve(m, &irq, z, NULL, &e) == DK_OK && memcmp(z, y, N * sizeof(double)) == 0);
         free(z);

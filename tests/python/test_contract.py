@@ -112,58 +112,99 @@ BOX_TRIANGLES = np.array([[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4],
 
 def bind_control(name, v, f):
     """A method bound to a control, its control around the vertices v: a lattice with its
-    defaults, or a box cage over their bounding box grown by a tenth (a new control kind
-    needs its scene here, as in test_contract.c)."""
+    defaults, a box cage over their bounding box grown by a tenth, or two bones (one at the
+    origin, one at the box's centre, turned) with weights ramping along x (a new control
+    kind needs its scene here, as in test_contract.c)."""
     kinds = info(name)["controls"]
     if "lattice" in kinds:
         return getattr(dk, name)(dk.Mesh(v, f))
-    assert "cage" in kinds, "no contract scene for %s's controls %s" % (name, kinds)
     lo, hi = v.min(axis=0), v.max(axis=0)
+    if "bones" in kinds:
+        B = np.repeat(np.eye(4)[None], 2, axis=0)
+        B[1, :3, :3] = rotation(0.3)
+        B[1, :3, 3] = 0.5 * (lo + hi)
+        w = (v[:, 0] - lo[0]) / max(hi[0] - lo[0], 1e-300)
+        return getattr(dk, name)(dk.Mesh(v, f), bone_frames=B, weights=np.c_[1 - w, w])
+    assert "cage" in kinds, "no contract scene for %s's controls %s" % (name, kinds)
     pad = 0.1 * (hi - lo) + 1e-3 * np.linalg.norm(hi - lo)
     corners = np.array([[(q >> d) & 1 for d in range(3)] for q in range(8)], dtype=float)
     box = lo - pad + corners * (hi - lo + 2 * pad)
     return getattr(dk, name)(dk.Mesh(v, f), cage_vertices=box, cage_triangles=BOX_TRIANGLES)
 
 
+class ControlTargets:
+    """What a control method's solve takes, whatever the kind: its points' positions
+    (targets=, rest_points) or its bones' frames (transforms=, rest_frames)."""
+
+    def __init__(self, m):
+        self.m = m
+        self.frames = hasattr(m, "rest_frames")
+        self.rest = np.asarray(m.rest_frames if self.frames else m.rest_points)
+
+    def solve(self, x, **kw):
+        return self.m.solve(transforms=x, **kw) if self.frames else self.m.solve(x, **kw)
+
+    def translated(self, x, t):
+        y = x.copy()
+        if self.frames:
+            y[:, :3, 3] += t
+        else:
+            y += t
+        return y
+
+    def bent(self, scale):
+        y = self.rest.copy()
+        if self.frames:
+            y[:, :3, :] += 0.1 * scale * np.sin(3 * y[:, :3, :] / scale)
+        else:
+            y += 0.1 * scale * np.sin(3 * y / scale)
+        return y
+
+    def other_kind(self):
+        """A request of the kind it refuses."""
+        return (lambda: self.m.solve(np.zeros((2, 3)))) if self.frames else \
+            (lambda: self.m.solve(transforms=[np.eye(4)]))
+
+
 @pytest.mark.parametrize("name", CONTROL_METHODS)
 @pytest.mark.parametrize("scene", SCENES, ids=[s[0] for s in SCENES])
 def test_a_method_bound_to_a_control(name, scene):
-    """A method bound to a control (a lattice) with its defaults, at any scale and place: its
-    points at rest give the mesh back bit for bit; a translation translates it; an affine
-    map maps it (linear_precision); cold solves repeat; a refused request (NaN, transforms,
-    a wrong count) raises and changes nothing; a pose with the control at rest is returned;
-    a method that takes no handles refuses them."""
+    """A method bound to a control (a lattice, a cage, bones) with its defaults, at any scale
+    and place: its control at rest gives the mesh back bit for bit; a translation translates
+    it; an affine map maps it (linear_precision); cold solves repeat; a refused request
+    (NaN, the other kind of targets, a wrong count) raises and changes nothing; a pose with
+    the control at rest is returned; a method that takes no handles refuses them."""
     _, v, f, handles, fixed = scene
     for scale, shift in ((1.0, 0.0), (1e-3, 5e3), (250.0, -40.0)):
         vs = v * scale + shift
-        m = bind_control(name, vs, f)
-        rest = np.asarray(m.rest_points)
-        assert np.array_equal(m.solve(rest).positions, vs)
+        c = ControlTargets(bind_control(name, vs, f))
+        m, rest = c.m, c.rest
+        assert np.array_equal(c.solve(rest).positions, vs)
         t = np.array([0.3, -0.2, 0.7]) * scale
-        np.testing.assert_allclose(m.solve(rest + t).positions, vs + t, rtol=0,
+        np.testing.assert_allclose(c.solve(c.translated(rest, t)).positions, vs + t, rtol=0,
                                    atol=1e-12 * scale * 1e3 + 1e-9 * abs(shift))
         if info(name)["linear_precision"]:
             A = rotation() * 1.2
             got = m.solve(rest @ A.T + t).positions
             np.testing.assert_allclose(got, vs @ A.T + t, rtol=0,
                                        atol=1e-9 * (scale + abs(shift)))
-        bent = rest + 0.1 * scale * np.sin(3 * rest / scale)
-        a = m.solve(bent)
-        b = m.solve(bent)
+        bent = c.bent(scale)
+        a = c.solve(bent)
+        b = c.solve(bent)
         assert np.array_equal(a.positions, b.positions)
         assert m.energy(a.positions) == pytest.approx(a.energy, rel=1e-12)
         bad = bent.copy()
-        bad[1, 2] = np.nan
+        bad.reshape(len(bad), -1)[1, 2] = np.nan
         with pytest.raises(ValueError):
-            m.solve(bad)
+            c.solve(bad)
         with pytest.raises((ValueError, TypeError)):
-            m.solve(transforms=[np.eye(4)])
+            c.other_kind()()
         with pytest.raises(ValueError):
-            m.solve(bent[:-1])
-        assert np.array_equal(m.solve(bent).positions, a.positions)
+            c.solve(bent[:-1])
+        assert np.array_equal(c.solve(bent).positions, a.positions)
         if info(name)["edits_input"]:
             pose = vs + 0.01 * scale * np.cos(vs / scale)
-            assert np.array_equal(m.solve(rest, input_positions=pose).positions, pose)
+            assert np.array_equal(c.solve(rest, input_positions=pose).positions, pose)
     with pytest.raises(TypeError):
         getattr(dk, name)(dk.Mesh(v, f), handles)
 
