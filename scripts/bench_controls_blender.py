@@ -10,6 +10,9 @@ vertices):
 - cage: the 98-vertex box cage of bench_cage.py; Mesh Deform bound at precision 4 and 5
   (bpy.ops.object.meshdeform_bind, the bind runs in the next evaluation), DeformKit's Cage
   bound with its Bind operator; a frame = one cage vertex moved and the view layer updated.
+- skinning: a chain of 8 bones along the armadillo, 4 influences a vertex; the Skinning
+  deformer (linear, dual quaternion) against the Armature modifier (Preserve Volume off, on);
+  a frame = the middle bone turned and the view layer updated.
 Each frame figure is the median of --frames updates; "no modifier" is the same update with
 the mesh's deformer disabled (what the control's own re-evaluation and the update cost).
 A script, not a test: compare the ratios within one run.
@@ -170,10 +173,82 @@ def cage_bench():
     sys.stdout.flush()
 
 
+def skinning_bench(n_bones=8, influences=4):
+    """A chain of n_bones along the armadillo's height, each vertex weighted to its
+    `influences` nearest bones (inverse distance): the Skinning deformer (both blends) and
+    Blender's Armature modifier (Preserve Volume off and on) on a copy."""
+    S.reset_scene()
+    obj = armadillo_object("Armadillo")
+    V = S.rest_positions(obj)
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    heads = [lo + (hi - lo) * np.array([0.5, 0.5, k / n_bones]) for k in range(n_bones + 1)]
+    arm, ao = S.armature_in_edit_mode("Rig")
+    prev = None
+    for k in range(n_bones):
+        b = arm.edit_bones.new("b%d" % k)
+        b.head, b.tail = tuple(heads[k]), tuple(heads[k + 1])
+        if prev is not None:
+            b.parent, b.use_connect = prev, True
+        prev = b
+    bpy.ops.object.mode_set(mode="OBJECT")
+    mid = np.array([(heads[k] + heads[k + 1]) / 2 for k in range(n_bones)])
+    dist = np.linalg.norm(V[:, None, :] - mid[None], axis=2)
+    near = np.argsort(dist, axis=1)[:, :influences]
+    w = 1.0 / np.maximum(np.take_along_axis(dist, near, axis=1), 1e-9) ** 2
+    w /= w.sum(axis=1, keepdims=True)
+    twin = bpy.data.objects.new("Twin", obj.data.copy())
+    bpy.context.scene.collection.objects.link(twin)
+    for o in (obj, twin):
+        for k in range(n_bones):
+            vg = o.vertex_groups.new(name="b%d" % k)
+            for j in range(influences):
+                sel = np.flatnonzero(near[:, j] == k)
+                for v in sel:
+                    vg.add([int(v)], float(w[v, j]), "REPLACE")
+    am = twin.modifiers.new("Armature", "ARMATURE")
+    am.object = ao
+    bpy.context.view_layer.objects.active = obj
+    bpy.ops.deformkit.add_deformer(method="SKINNING")
+    d = obj.deformkit.deformers[0]
+    d.control_object = ao
+    t0 = time.perf_counter()
+    bpy.ops.deformkit.bind()
+    bind_ms = (time.perf_counter() - t0) * 1e3
+    gn = S.geonodes.find_modifier(obj, d)
+    pb = ao.pose.bones["b%d" % (n_bones // 2)]
+    pb.rotation_mode = "XYZ"
+
+    def move(i):
+        pb.rotation_euler = (0.1 * (1 + i % 5), 0.0, 0.05 * (i % 3))
+
+    rows = []
+    for label, shown, blend in (("no modifier", obj, None),
+                                ("DeformKit Skinning, linear", obj, "linear"),
+                                ("DeformKit Skinning, dual quaternion", obj, "dual_quaternion"),
+                                ("Blender Armature", twin, False),
+                                ("Blender Armature, Preserve Volume", twin, True)):
+        only((obj, twin), shown)
+        if shown is obj:
+            gn.show_viewport = gn.show_render = blend is not None
+            if blend is not None:
+                d.options.blend = blend
+        else:
+            am.use_deform_preserve_volume = blend
+        bpy.context.view_layer.update()
+        rows.append((label,) + frames(move, shown))
+    print("skinning, %d bones, %d influences a vertex, %d vertices: DeformKit bind %.0f ms"
+          % (n_bones, influences, len(V), bind_ms))
+    for label, med, mx, moved in rows:
+        print("  %-36s a frame: median %.1f ms, max %.1f ms (moved %.3g)" % (label, med, mx,
+                                                                             moved))
+    sys.stdout.flush()
+
+
 def main():
     print("Blender %s" % bpy.app.version_string)
     lattice_bench()
     cage_bench()
+    skinning_bench()
 
 
 # the UI's path (quick topology checks, interactive solves), solved in the handler
