@@ -431,6 +431,14 @@ dk_status dk_direct_solve_finish(const double *positions, const double *base, dk
                                  const dk_solve_request *request, const char *who,
                                  dk_solve_info *info, dk_error *err);
 
+/** The energy() of a direct space deformation (Lattice, Cage, Shepard, Skinning): the
+ *  squared displacement of `positions` from `base` (both n x 3), checked as
+ *  dk_energy_result_check does, into *energy. `who` prefixes the messages ("Cage energy");
+ *  DK_ERR_INVALID_ARGUMENT for NULL arguments. */
+dk_status dk_displacement_energy_result(const double *positions, const double *base,
+                                        dk_index n, const char *who, double *energy,
+                                        dk_error *err);
+
 /** Checks an energy value before energy() returns it (DK_ERR_NONFINITE when not finite). */
 dk_status dk_energy_result_check(double energy, const char *who, dk_error *err);
 

@@ -163,6 +163,19 @@ double dk_displacement_energy(const double *positions, const double *base, dk_in
     return e;
 }
 
+dk_status dk_displacement_energy_result(const double *positions, const double *base,
+                                        dk_index n, const char *who, double *energy,
+                                        dk_error *err)
+{
+    if (!positions || !base || !energy)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s: arguments must not be NULL", who);
+    const double e = dk_displacement_energy(positions, base, n);
+    const dk_status st = dk_energy_result_check(e, who, err);
+    if (st == DK_OK)
+        *energy = e;
+    return st;
+}
+
 dk_status dk_direct_solve_finish(const double *positions, const double *base, dk_index n,
                                  const dk_solve_request *rq, const char *who,
                                  dk_solve_info *info, dk_error *err)

@@ -401,14 +401,11 @@ dk_status dk_shepard_solve(dk_shepard *s, const dk_solve_request *rq, double *po
 dk_status dk_shepard_energy(const dk_shepard *s, const double *positions, double *energy,
                             dk_error *err)
 {
-    if (!s || !positions || !energy)
+    if (!s)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "Shepard energy: arguments must not be NULL");
-    const double e = dk_displacement_energy(positions, s->mesh->positions, s->mesh->n_vertices);
-    const dk_status st = dk_energy_result_check(e, "Shepard energy", err);
-    if (st == DK_OK)
-        *energy = e;
-    return st;
+    return dk_displacement_energy_result(positions, s->mesh->positions, s->mesh->n_vertices,
+                                         "Shepard energy", energy, err);
 }
 
 void dk_shepard_stats(const dk_shepard *s, dk_method_stats *st)

@@ -549,13 +549,10 @@ dk_status dk_cage_solve(dk_cage *cg, const dk_solve_request *rq, double *positio
 dk_status dk_cage_energy(const dk_cage *cg, const double *positions, double *energy,
                          dk_error *err)
 {
-    if (!cg || !positions || !energy)
+    if (!cg)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "Cage energy: arguments must not be NULL");
-    const double e = dk_displacement_energy(positions, cg->mesh->positions, cg->n);
-    const dk_status st = dk_energy_result_check(e, "Cage energy", err);
-    if (st == DK_OK)
-        *energy = e;
-    return st;
+    return dk_displacement_energy_result(positions, cg->mesh->positions, cg->n, "Cage energy",
+                                         energy, err);
 }
 
 void dk_cage_stats(const dk_cage *cg, dk_method_stats *st)

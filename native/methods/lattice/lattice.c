@@ -207,14 +207,11 @@ dk_status dk_lattice_solve(dk_lattice *lt, const dk_solve_request *rq, double *p
 dk_status dk_lattice_energy(const dk_lattice *lt, const double *positions, double *energy,
                             dk_error *err)
 {
-    if (!lt || !positions || !energy)
+    if (!lt)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "Lattice energy: arguments must not be NULL");
-    const double e = dk_displacement_energy(positions, lt->pose, lt->n);
-    const dk_status st = dk_energy_result_check(e, "Lattice energy", err);
-    if (st == DK_OK)
-        *energy = e;
-    return st;
+    return dk_displacement_energy_result(positions, lt->pose, lt->n, "Lattice energy", energy,
+                                         err);
 }
 
 void dk_lattice_stats(const dk_lattice *lt, dk_method_stats *st)

@@ -307,14 +307,11 @@ dk_status dk_skinning_solve(dk_skinning *s, const dk_solve_request *rq, double *
 dk_status dk_skinning_energy(const dk_skinning *s, const double *positions, double *energy,
                              dk_error *err)
 {
-    if (!s || !positions || !energy)
+    if (!s)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "Skinning energy: arguments must not be NULL");
-    const double e = dk_displacement_energy(positions, s->mesh->positions, s->mesh->n_vertices);
-    const dk_status st = dk_energy_result_check(e, "Skinning energy", err);
-    if (st == DK_OK)
-        *energy = e;
-    return st;
+    return dk_displacement_energy_result(positions, s->mesh->positions, s->mesh->n_vertices,
+                                         "Skinning energy", energy, err);
 }
 
 void dk_skinning_stats(const dk_skinning *s, dk_method_stats *st)
