@@ -5,6 +5,11 @@
 # build-asan/ (AddressSanitizer + UndefinedBehaviorSanitizer: the C library, the C tests and the
 # Python module, which scripts/test.sh runs with the sanitizer runtimes preloaded).
 #
+# TetGen (the volume of bounded biharmonic weights, native/operators/tetrahedralize.cpp) is
+# Debian's libtet<version>-dev: libtet1.5-dev in Debian 12, libtet1.6-dev in 13; the newest
+# apt-cache knows is taken (after apt-get update when none is installed). g++ builds the one
+# C++ file that calls TetGen's C++ API.
+#
 # python3-venv lets Debian's own CPython make virtual environments (scripts/venvs.sh finds
 # Debian 13's /usr/bin/python3.13 for the Blenders from 5.1; tests/wheel/test_wheel.sh).
 # patchelf is for scripts/package.sh (it bundles the native libraries into the add-on zips).
@@ -37,23 +42,34 @@ for arg in "$@"; do
   esac
 done
 
-packages=(cmake make gcc pkg-config libsuitesparse-dev libarpack2-dev liblapacke-dev
+packages=(cmake make gcc g++ pkg-config libsuitesparse-dev libarpack2-dev liblapacke-dev
           libopenblas-dev python3-dev python3-numpy python3-scipy python3-pytest blender xvfb
           xauth zip patchelf python3-hypothesis python3-venv)
-if [ "$bench" = 1 ]; then packages+=(g++ libcgal-dev libeigen3-dev); fi
+if [ "$bench" = 1 ]; then packages+=(libcgal-dev libeigen3-dev); fi
 # installed when the distribution has them (libclang-rt-dev is in Debian 12's llvm-defaults;
 # without it clang's Recommends bring the versioned runtime)
 optional=()
 if [ "$fuzz" = 1 ]; then packages+=(clang); optional+=(libclang-rt-dev); fi
 
 installed() { dpkg-query -W -f='${Status}' "$1" 2>/dev/null | grep -q "install ok installed"; }
-missing=(); missing_optional=()
+# the newest libtet<version>-dev apt-cache knows (empty when it knows none yet)
+tetgen_dev() { apt-cache pkgnames libtet 2>/dev/null | grep -E '^libtet[0-9.]+-dev$' | sort -V | tail -n 1; }
+tetgen_installed() {
+  dpkg-query -W -f='${Package} ${Status}\n' 'libtet*-dev' 2>/dev/null | grep -q "install ok installed"
+}
+missing=(); missing_optional=(); need_tetgen=0
 for p in "${packages[@]}"; do installed "$p" || missing+=("$p"); done
 for p in "${optional[@]}"; do installed "$p" || missing_optional+=("$p"); done
-if [ ${#missing[@]} -gt 0 ] || [ ${#missing_optional[@]} -gt 0 ]; then
+tetgen_installed || need_tetgen=1
+if [ ${#missing[@]} -gt 0 ] || [ ${#missing_optional[@]} -gt 0 ] || [ "$need_tetgen" = 1 ]; then
   sudo_cmd=()
   if [ "$(id -u)" != 0 ]; then sudo_cmd=(sudo); fi
   "${sudo_cmd[@]}" apt-get update
+  if [ "$need_tetgen" = 1 ]; then
+    t="$(tetgen_dev)"
+    if [ -z "$t" ]; then echo "setup: apt-cache knows no libtet*-dev (TetGen)" >&2; exit 1; fi
+    missing+=("$t")
+  fi
   for p in "${missing_optional[@]}"; do
     if apt-cache show "$p" >/dev/null 2>&1; then missing+=("$p"); fi
   done

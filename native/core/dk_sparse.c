@@ -476,6 +476,80 @@ dk_status dk_sparse_submatrix(const dk_sparse *a, const dk_index *row_map, dk_in
     return st;
 }
 
+dk_status dk_sparse_product(const dk_sparse *a, const double *d, const dk_sparse *b,
+                            dk_sparse **out, dk_error *err)
+{
+    static const char who[] = "sparse product";
+    if (!out) return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s: out is NULL", who);
+    *out = NULL;
+    if (!a || !b) return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s: NULL argument", who);
+    if (a->n_cols != b->n_rows)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s: %ld columns times %ld rows", who,
+                            (long)a->n_cols, (long)b->n_rows);
+    const dk_index n = a->n_rows, m = b->n_cols;
+    /* column j of C is the sum over b's entries (k, j) of b_kj d_k a(:, k): first count the
+     * distinct rows each column reaches (a marker per row), then fill a dense accumulator */
+    dk_index *mark = malloc(((size_t)n + 1) * sizeof *mark);
+    double *acc = malloc(((size_t)n + 1) * sizeof *acc);
+    int64_t *start = calloc((size_t)m + 1, sizeof *start);
+    dk_index *rows = NULL;
+    double *vals = NULL;
+    if (!mark || !acc || !start) goto oom;
+    for (dk_index i = 0; i < n; i++) mark[i] = -1;
+    for (dk_index j = 0; j < m; j++) {
+        int64_t count = 0;
+        for (dk_index p = b->col_start[j]; p < b->col_start[j + 1]; p++) {
+            dk_index k = b->row_index[p];
+            for (dk_index q = a->col_start[k]; q < a->col_start[k + 1]; q++)
+                if (mark[a->row_index[q]] != j) {
+                    mark[a->row_index[q]] = j;
+                    count++;
+                }
+        }
+        start[j + 1] = start[j] + count;
+        if (start[j + 1] >= INT32_MAX) {
+            free(mark);
+            free(acc);
+            free(start);
+            return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s: more than %ld entries", who,
+                                (long)INT32_MAX);
+        }
+    }
+    rows = malloc(((size_t)start[m] + 1) * sizeof *rows);
+    vals = malloc(((size_t)start[m] + 1) * sizeof *vals);
+    if (!rows || !vals) goto oom;
+    for (dk_index i = 0; i < n; i++) mark[i] = -1;
+    for (dk_index j = 0; j < m; j++) {
+        int64_t w = start[j];
+        for (dk_index p = b->col_start[j]; p < b->col_start[j + 1]; p++) {
+            dk_index k = b->row_index[p];
+            double f = b->values[p] * (d ? d[k] : 1.0);
+            for (dk_index q = a->col_start[k]; q < a->col_start[k + 1]; q++) {
+                dk_index i = a->row_index[q];
+                if (mark[i] != j) {
+                    mark[i] = j;
+                    acc[i] = 0.0;
+                    rows[w++] = i;
+                }
+                acc[i] += f * a->values[q];
+            }
+        }
+        for (int64_t p = start[j]; p < w; p++) vals[p] = acc[rows[p]];
+    }
+    free(mark);
+    free(acc);
+    dk_status st = finish_columns(n, m, start, rows, vals, who, out, err);
+    free(start);
+    return st;
+oom:
+    free(mark);
+    free(acc);
+    free(start);
+    free(rows);
+    free(vals);
+    return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "%s: out of memory", who);
+}
+
 double dk_sparse_asymmetry(const dk_sparse *a)
 {
     double worst = 0.0;

@@ -77,6 +77,12 @@ dk_status dk_sparse_add(double alpha, const dk_sparse *a, double beta, const dk_
 dk_status dk_sparse_add_diagonal(const dk_sparse *a, const double *d, dk_sparse **out,
                                  dk_error *err);
 
+/** C = A diag(d) B: A is n x k, d has k entries (NULL: the identity), B is k x m; C is
+ *  n x m with only the entries the product can reach (sorted columns, no duplicates). The
+ *  bilaplacian K M^-1 K of bounded biharmonic weights is one. */
+dk_status dk_sparse_product(const dk_sparse *a, const double *d, const dk_sparse *b,
+                            dk_sparse **out, dk_error *err);
+
 /** Transpose. */
 dk_status dk_sparse_transpose(const dk_sparse *a, dk_sparse **out, dk_error *err);
 

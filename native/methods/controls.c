@@ -109,6 +109,9 @@ static dk_status check_unused(const dk_control_desc *c, dk_error *err)
         (c->resolution[0] != 0 || c->resolution[1] != 0 || c->resolution[2] != 0))
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "control: %s has no resolution (only a lattice does)", name);
+    if (c->kind != DK_CONTROL_BONES && c->segments)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "control: %s has no segments (only bones do)", name);
     if (c->kind != DK_CONTROL_BONES && c->weights)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "control: %s has no per-vertex weights (only bones do)", name);
@@ -139,10 +142,16 @@ static dk_status check_cage(const dk_control_desc *c, dk_error *err)
 
 static dk_status check_weights(const dk_control_desc *c, dk_index n_vertices, dk_error *err)
 {
+    const size_t nb = (size_t)c->n_controls;
+    if (!c->weights && c->segments)
+        return check_values(c->segments, 6 * nb, "segments", err);
     if (!c->weights)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
-                            "control: bones need weights (n_vertices x n_bones)");
-    const size_t nb = (size_t)c->n_controls;
+                            "control: bones need weights (n_vertices x n_bones) or their "
+                            "segments (n_bones x 2 x 3) to compute them from");
+    if (c->segments)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "control: bones take weights or segments, not both");
     dk_status st = check_values(c->weights, (size_t)n_vertices * nb, "weights", err);
     if (st != DK_OK)
         return st;

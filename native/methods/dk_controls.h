@@ -8,7 +8,8 @@
  *   POINTS   free points in space (Shepard interpolation): their rest positions; a solve gives
  *            each point's position (targets: n_controls x 3).
  *   BONES    bone frames (skinning): each bone's rest frame B_j (a 4x4 affine, row-major)
- *            and a weight per vertex and bone; a solve gives each bone's current frame T_j
+ *            and a weight per vertex and bone (given, or computed at bind from each bone's
+ *            segment); a solve gives each bone's current frame T_j
  *            (targets: n_controls 4x4 row-major, as transforms), and the bone moves the
  *            mesh by T_j B_j^-1 (the slides' skinning), so the rest frames give it back.
  *   CAGE     a closed triangle control mesh around the mesh (mean value and Wachspress
@@ -66,7 +67,11 @@ typedef struct dk_control_desc {
                                      three distinct each                                   */
     dk_index resolution[3];     /**< LATTICE: points along x, y, z, each >= 2              */
     const double *weights;      /**< BONES: n_vertices x n_controls, row-major, each >= 0
-                                     and each row summing to 1 within 1e-6                 */
+                                     and each row summing to 1 within 1e-6; or NULL with
+                                     `segments` given: the bind computes them (bounded
+                                     biharmonic weights, dk_bbw.h)                         */
+    const double *segments;     /**< BONES without weights: n_controls x 2 x 3, each bone's
+                                     head and tail in the mesh's space                     */
 } dk_control_desc;
 
 /** The kind's name as messages and the Python module say it ("lattice"); "unknown" for a

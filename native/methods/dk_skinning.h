@@ -24,6 +24,7 @@
 #ifndef DK_SKINNING_H
 #define DK_SKINNING_H
 
+#include "dk_bbw.h"
 #include "dk_constraints.h"
 #include "dk_controls.h"
 #include "dk_mesh.h"
@@ -42,6 +43,10 @@ typedef enum dk_skinning_blend {
 
 typedef struct dk_skinning_options {
     dk_skinning_blend blend;       /**< default LINEAR                                     */
+    dk_bbw_options computed;       /**< weights computed from the bones' segments (no
+                                        weights given): bounded biharmonic weights, these
+                                        options (dk_bbw_default_options; its progress
+                                        fields are ignored: the bind reports)             */
     dk_phase_progress_fn progress; /**< bind progress (phase "weights"), NULL: none        */
     void *progress_user;
 } dk_skinning_options;
@@ -51,8 +56,10 @@ typedef struct dk_skinning dk_skinning;
 void dk_skinning_default_options(dk_skinning_options *options);
 
 /** Binds `mesh` (borrowed) to the bones `constraints->control` (DK_CONTROL_BONES, checked by
- *  dk_control_check: invertible rest frames, non-negative weights summing to 1 per vertex;
- *  no handles, fixed vertices or region). */
+ *  dk_control_check: invertible rest frames, non-negative weights summing to 1 per vertex,
+ *  or instead of weights each bone's segment, from which the bind computes bounded
+ *  biharmonic weights (phase "computed weights", options->computed); no handles, fixed
+ *  vertices or region). */
 dk_status dk_skinning_bind(const dk_mesh *mesh, const dk_constraint_desc *constraints,
                            const dk_skinning_options *options, dk_skinning **out,
                            dk_error *err);

@@ -160,6 +160,37 @@ dk_status dk_kdtree_knn(const dk_kdtree *tree, const double *queries, dk_index n
 /** Frees; NULL allowed. */
 void dk_kdtree_free(dk_kdtree *tree);
 
+/* ---------------------------------------------------------------- inside and outside -- */
+
+/** Fast generalized winding numbers of a triangle soup (winding_number.c): 1 inside a
+ *  closed outward-facing mesh, 0 outside, in between near holes; robust to several parts,
+ *  non-manifold edges and self-intersections, so ">= 1/2" is the inside of a broken scan. */
+typedef struct dk_winding dk_winding;
+
+/** Builds the hierarchy over the `n_triangles` triangles (n_triangles x 3 indices into
+ *  `vertices`, n_vertices x 3); both copied. */
+dk_status dk_winding_create(const double *vertices, dk_index n_vertices,
+                            const dk_index *triangles, dk_index n_triangles, dk_winding **out,
+                            dk_error *err);
+
+/** The winding number about each of `n_queries` points (n_queries x 3) into `out`; two
+ *  threads for many queries. Read-only on `w`. */
+void dk_winding_number(const dk_winding *w, const double *queries, dk_index n_queries,
+                       double *out);
+
+/** Frees; NULL allowed. */
+void dk_winding_free(dk_winding *w);
+
+/* ---------------------------------------------------------------- tetrahedra ----------- */
+
+/** The Delaunay tetrahedralization of `n_points` distinct points (n_points x 3), by TetGen
+ *  (Si 2015; its library, quiet, in tetrahedralize.cpp): `*tets` (malloc'ed, the caller
+ *  frees) gets `*n_tets` x 4 point indices, in either orientation. Points
+ *  all on a plane give no tetrahedra (DK_OK, *n_tets 0). TetGen's failures come back as
+ *  DK_ERR_NUMERIC or DK_ERR_OUT_OF_MEMORY. */
+dk_status dk_delaunay_tetrahedra(const double *points, dk_index n_points, dk_index **tets,
+                                 dk_index *n_tets, dk_error *err);
+
 /* ---------------------------------------------------------------- rotations ------------ */
 
 /** The rotation R (det R = +1) closest to the 3x3 matrix A in the Frobenius norm, i.e. the

@@ -241,6 +241,7 @@ PyObject *dk_py_new_solve_result(PyObject *module, PyObject *positions, double e
     X(mesh)                                                                                \
     X(operators)                                                                           \
     X(coordinates)                                                                         \
+    X(bbw)                                                                                 \
     M(arap, "ARAP")                                                                        \
     M(laplacian_edit, "LaplacianEdit")                                                     \
     M(falloff, "Falloff")                                                                  \

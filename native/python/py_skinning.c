@@ -8,6 +8,7 @@
 #include <string.h>
 
 static const char *const blend_names[] = {"linear", "dual_quaternion", NULL};
+static const char *const domain_names[] = {"auto", "volume", "surface", NULL};
 
 static void default_options(void *o)
 {
@@ -21,6 +22,16 @@ static int parse_options(PyObject *kw, void *o, const char *context)
     if (dk_py_opt_choice(kw, "blend", blend_names, &b, context) < 0)
         return -1;
     opt->blend = (dk_skinning_blend)b;
+    int d = (int)opt->computed.domain;
+    if (dk_py_opt_choice(kw, "domain", domain_names, &d, context) < 0 ||
+        dk_py_opt_int(kw, "resolution", &opt->computed.resolution) < 0)
+        return -1;
+    if (opt->computed.resolution < 4 || opt->computed.resolution > 256) {
+        PyErr_Format(PyExc_ValueError, "%s: resolution must be in [4, 256], not %d", context,
+                     opt->computed.resolution);
+        return -1;
+    }
+    opt->computed.domain = (dk_bbw_domain)d;
     return 0;
 }
 
@@ -29,6 +40,7 @@ typedef struct skinning_store {
     dk_control_desc control;
     dk_py_doubles frames;
     dk_py_doubles weights;
+    dk_py_doubles segments;
 } skinning_store;
 
 static void release_control(void *store)
@@ -36,6 +48,7 @@ static void release_control(void *store)
     skinning_store *s = (skinning_store *)store;
     dk_py_doubles_release(&s->frames);
     dk_py_doubles_release(&s->weights);
+    dk_py_doubles_release(&s->segments);
 }
 
 static int parse_control(PyObject *kw, const dk_mesh *mesh, const void *bound, void *store,
@@ -45,11 +58,13 @@ static int parse_control(PyObject *kw, const dk_mesh *mesh, const void *bound, v
     (void)bound; /* a rebind takes whole new bones */
     PyObject *f = dk_py_opt_object(kw, "bone_frames");
     PyObject *w = f ? dk_py_opt_object(kw, "weights") : NULL;
-    if (!f || !w) {
+    PyObject *g = f && !w && !PyErr_Occurred() ? dk_py_opt_object(kw, "bones") : NULL;
+    if (!f || (!w && !g)) {
         Py_XDECREF(f);
         if (!PyErr_Occurred())
             PyErr_Format(PyExc_TypeError, "%s: needs bone_frames (b x 4 x 4: each bone's rest "
-                         "frame) and weights (n_vertices x b)", context);
+                         "frame) and weights (n_vertices x b) or bones (b x 2 x 3: each bone's "
+                         "head and tail, to compute the weights from)", context);
         return -1;
     }
     PyObject *flat = PyObject_HasAttrString(f, "reshape")
@@ -61,15 +76,27 @@ static int parse_control(PyObject *kw, const dk_mesh *mesh, const void *bound, v
     int bad = dk_py_read_doubles(flat, -1, 16, "bone_frames", &s->frames) < 0;
     Py_DECREF(flat);
     Py_DECREF(f);
-    if (!bad)
+    if (!bad && w)
         bad = dk_py_read_doubles(w, mesh->n_vertices, s->frames.rows, "weights", &s->weights) < 0;
-    Py_DECREF(w);
+    if (!bad && g) {
+        PyObject *gf = PyObject_HasAttrString(g, "reshape")
+                           ? PyObject_CallMethod(g, "reshape", "(ii)", -1, 6) : Py_NewRef(g);
+        if (!gf) {
+            PyErr_Clear();
+            gf = Py_NewRef(g);
+        }
+        bad = dk_py_read_doubles(gf, s->frames.rows, 6, "bones", &s->segments) < 0;
+        Py_DECREF(gf);
+    }
+    Py_XDECREF(w);
+    Py_XDECREF(g);
     if (bad)
         return -1;
     s->control = (dk_control_desc){.kind = DK_CONTROL_BONES,
                                    .n_controls = (dk_index)s->frames.rows,
                                    .rest = s->frames.data,
-                                   .weights = s->weights.data};
+                                   .weights = s->weights.data,
+                                   .segments = s->segments.data};
     return 0;
 }
 
@@ -114,14 +141,18 @@ static PyMethodDef skinning_methods[] = {
 };
 
 PyDoc_STRVAR(skinning_doc,
-             "Skinning(mesh, bone_frames, weights, blend='linear')\n\n"
+             "Skinning(mesh, bone_frames, weights=None, bones=None, blend='linear',\n"
+             "         domain='auto', resolution=32)\n\n"
              "Skinning (the slides' skeletal subspace deformation): each bone's rest frame B_j\n"
              "(b x 4 x 4 affine) and each vertex's weights (n x b, >= 0, rows summing to 1);\n"
              "a solve with the bones' current frames T_j moves vertex i to\n"
              "sum_j w_ij T_j B_j^-1 p_i (blend='linear', linear blend skinning), or blends\n"
              "each bone's rigid part as a unit dual quaternion and its stretch linearly\n"
              "(blend='dual_quaternion': a half-turn twist keeps the limb's girth).\n"
-             "rebind(bone_frames=..., weights=...) takes other bones. See\n"
+             "Without weights, bones (b x 2 x 3: each bone's head and tail in the mesh's\n"
+             "space) give them: bounded biharmonic weights computed at bind (domain and\n"
+             "resolution as deformkit.bounded_biharmonic_weights takes them).\n"
+             "rebind(bone_frames=..., weights=... or bones=...) takes other bones. See\n"
              "docs/methods/skinning.md.");
 
 static void bind_progress(void *options, dk_py_progress *p)

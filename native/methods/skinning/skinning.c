@@ -27,12 +27,22 @@ struct dk_skinning {
     skin_data sd;
 };
 
-static const dk_progress_phase weight_phases[] = {{"weights", 1.0}};
+/* a bind that computes its weights spends nearly all its time there */
+static const dk_progress_phase weight_phases[] = {{"computed weights", 20.0}, {"weights", 1.0}};
 
 void dk_skinning_default_options(dk_skinning_options *o)
 {
     memset(o, 0, sizeof *o);
     o->blend = DK_SKINNING_LINEAR;
+    dk_bbw_default_options(&o->computed);
+}
+
+/* The computation's progress as the bind's phase "computed weights". */
+static int computed_progress(void *user, const char *phase, double fraction)
+{
+    (void)phase;
+    dk_error ignored;
+    return dk_progress_part((dk_progress *)user, fraction, &ignored) != DK_OK;
 }
 
 static void data_free(skin_data *sd)
@@ -81,8 +91,39 @@ static dk_status take_control(const dk_constraint_desc *c, dk_index n, dk_error 
     return dk_control_check(c->control, n, err);
 }
 
+static dk_status build_weights(dk_skinning *s, const dk_control_desc *c, dk_progress *prog,
+                               skin_data *sd, dk_error *err);
+
+/* The weights given, or computed from the bones' segments first. */
 static dk_status build(dk_skinning *s, const dk_control_desc *c, dk_progress *prog,
                        skin_data *sd, dk_error *err)
+{
+    dk_status st = dk_progress_begin(prog, c->weights ? 1 : 0, err);
+    if (st != DK_OK || c->weights)
+        return st == DK_OK ? build_weights(s, c, prog, sd, err) : st;
+    const dk_index n = s->mesh->n_vertices, nb = c->n_controls;
+    double *w = malloc(((size_t)n * (size_t)nb + 1) * sizeof *w);
+    if (!w)
+        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "Skinning: out of memory (weights)");
+    dk_bbw_options o = s->opt.computed;
+    o.progress = computed_progress;
+    o.progress_user = prog;
+    dk_bbw_handles h = {.n_bones = nb, .bones = c->segments};
+    st = dk_bounded_biharmonic_weights(s->mesh, &h, &o, w, NULL, err);
+    if (st == DK_ERR_CANCELLED)
+        st = dk_error_set(err, DK_ERR_CANCELLED, "Skinning bind: cancelled in phase computed "
+                          "weights");
+    dk_control_desc given = *c;
+    given.weights = w;
+    given.segments = NULL;
+    if (st == DK_OK) st = dk_progress_begin(prog, 1, err);
+    if (st == DK_OK) st = build_weights(s, &given, prog, sd, err);
+    free(w);
+    return st;
+}
+
+static dk_status build_weights(dk_skinning *s, const dk_control_desc *c, dk_progress *prog,
+                               skin_data *sd, dk_error *err)
 {
     const dk_index n = s->mesh->n_vertices, nb = c->n_controls;
     memset(sd, 0, sizeof *sd);
@@ -156,12 +197,10 @@ dk_status dk_skinning_bind(const dk_mesh *mesh, const dk_constraint_desc *constr
     if (st != DK_OK)
         return st;
     dk_progress prog;
-    dk_progress_init(&prog, opt.progress, opt.progress_user, weight_phases, 1,
+    dk_progress_init(&prog, opt.progress, opt.progress_user, weight_phases, 2,
                      "Skinning bind");
     opt.progress = NULL;
     opt.progress_user = NULL;
-    if ((st = dk_progress_begin(&prog, 0, err)) != DK_OK)
-        return st;
     dk_skinning *s = calloc(1, sizeof *s);
     if (!s)
         return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "Skinning: out of memory");
@@ -186,10 +225,9 @@ dk_status dk_skinning_rebind(dk_skinning *s, const dk_constraint_desc *constrain
     if (st != DK_OK)
         return st;
     dk_progress prog;
-    dk_progress_init(&prog, NULL, NULL, weight_phases, 1, "Skinning rebind");
+    dk_progress_init(&prog, NULL, NULL, weight_phases, 2, "Skinning rebind");
     skin_data fresh;
-    if ((st = dk_progress_begin(&prog, 0, err)) != DK_OK ||
-        (st = build(s, constraints->control, &prog, &fresh, err)) != DK_OK)
+    if ((st = build(s, constraints->control, &prog, &fresh, err)) != DK_OK)
         return st;
     data_free(&s->sd);
     s->sd = fresh;

@@ -1,0 +1,192 @@
+/* DeformKit: the quadratic program of one bounded biharmonic weight function (dk_box_qp in
+ * dk_bbw.h): minimise 1/2 x^T A x - b^T x subject to lo <= x <= hi, by the primal-dual
+ * active-set method (Bergounioux, Ito, Kunisch 1999; Hintermueller, Ito, Kunisch 2002).
+ *
+ * Each variable is free, held at lo or held at hi. An iteration solves the equality-
+ * constrained problem of that partition (the free variables' block A_FF, a sparse Cholesky
+ * factorization, the held ones moved to the right-hand side), then reads the multipliers of
+ * the held ones from the gradient g = A x - b (at lo the multiplier is g_i, at hi it is -g_i)
+ * and repartitions: a free variable that left the box is held at the bound it crossed, a
+ * held variable whose multiplier is negative (the energy wants it inside) is freed. When the
+ * partition repeats, x is the minimiser: feasible, free gradients zero, multipliers
+ * non-negative (the KKT conditions of a convex problem). On matrices that are not M-matrices
+ * (the bilaplacian is not one) the method can cycle between partitions; a repeated
+ * partition other than the last one switches it to changing one variable per iteration, the
+ * worst violator, which cannot cycle (each step lowers the energy of the equality problem).
+ */
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "bbw_internal.h"
+#include "dk_cholesky.h"
+
+enum { QP_FREE = 0, QP_LOW = 1, QP_HIGH = 2 };
+
+/* A 64-bit fingerprint of a partition, to notice a cycle. */
+static uint64_t partition_hash(const unsigned char *state, dk_index m)
+{
+    uint64_t h = 1469598103934665603ull;
+    for (dk_index i = 0; i < m; i++) {
+        h ^= (uint64_t)state[i] + 1u;
+        h *= 1099511628211ull;
+    }
+    return h;
+}
+
+/* Solves the equality-constrained problem of `state`: x held at lo / hi, the free block
+ * A_FF x_F = b_F - A_F,held x_held. */
+static dk_status solve_partition(const dk_sparse *a, const double *b, double lo, double hi,
+                                 const unsigned char *state, double *x, dk_index *map,
+                                 double *rhs, int simplicial, dk_error *err)
+{
+    const dk_index m = a->n_rows;
+    dk_index nf = 0;
+    for (dk_index i = 0; i < m; i++) {
+        map[i] = state[i] == QP_FREE ? nf++ : -1;
+        if (state[i] == QP_LOW) x[i] = lo;
+        else if (state[i] == QP_HIGH) x[i] = hi;
+    }
+    if (nf == 0)
+        return DK_OK;
+    for (dk_index i = 0; i < m; i++)
+        if (map[i] >= 0) rhs[map[i]] = b[i];
+    for (dk_index j = 0; j < m; j++) {
+        if (map[j] >= 0 || x[j] == 0.0) continue;
+        for (dk_index p = a->col_start[j]; p < a->col_start[j + 1]; p++) {
+            dk_index i = map[a->row_index[p]];
+            if (i >= 0) rhs[i] -= a->values[p] * x[j];
+        }
+    }
+    dk_sparse *sub = NULL;
+    dk_cholesky *chol = NULL;
+    dk_status st = dk_sparse_submatrix(a, map, nf, map, nf, &sub, err);
+    if (st == DK_OK)
+        st = simplicial ? dk_cholesky_analyze_simplicial(sub, &chol, err)
+                        : dk_cholesky_analyze(sub, &chol, err);
+    if (st == DK_OK) st = dk_cholesky_factorize(chol, sub, err);
+    if (st == DK_OK) st = dk_cholesky_solve(chol, rhs, 1, rhs, err);
+    if (st == DK_OK)
+        for (dk_index i = 0; i < m; i++)
+            if (map[i] >= 0) x[i] = rhs[map[i]];
+    dk_cholesky_free(chol);
+    dk_sparse_free(sub);
+    return st;
+}
+
+dk_status dk_box_qp(const dk_sparse *a, const double *b, double lo, double hi, double *x,
+                    int max_iterations, int *iterations, double *kkt_residual, dk_error *err)
+{
+    return bbw_box_qp(a, b, lo, hi, x, 0, 0, max_iterations, iterations, kkt_residual, err);
+}
+
+dk_status bbw_box_qp(const dk_sparse *a, const double *b, double lo, double hi, double *x,
+                     int start_solves, int simplicial, int max_iterations, int *iterations,
+                     double *kkt_residual, dk_error *err)
+{
+    static const char who[] = "bounded quadratic program";
+    if (iterations) *iterations = 0;
+    if (kkt_residual) *kkt_residual = 0.0;
+    if (!a || !b || !x || a->n_rows != a->n_cols || max_iterations < 1)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "%s: needs a square matrix, b, x and max_iterations >= 1", who);
+    if (!(isfinite(lo) && isfinite(hi) && lo < hi))
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s: bounds [%g, %g] are not an "
+                            "interval", who, lo, hi);
+    const dk_index m = a->n_rows;
+    if (m == 0)
+        return DK_OK;
+    unsigned char *state = malloc((size_t)m), *next = malloc((size_t)m);
+    dk_index *map = malloc((size_t)m * sizeof *map);
+    double *rhs = malloc((size_t)m * sizeof *rhs), *g = malloc((size_t)m * sizeof *g);
+    double *diag = malloc((size_t)m * sizeof *diag);
+    uint64_t *seen = malloc((size_t)(max_iterations + 1) * sizeof *seen);
+    dk_status st = DK_OK;
+    if (!state || !next || !map || !rhs || !g || !diag || !seen) {
+        st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "%s: out of memory", who);
+        goto done;
+    }
+    /* scales: a variable is past a bound by more than rounding, a multiplier is negative by
+     * more than rounding of the gradient A x - b (its size is |A| (hi - lo) + |b|) */
+    dk_sparse_diagonal(a, diag);
+    double gscale = 0.0;
+    for (dk_index i = 0; i < m; i++) {
+        if (!isfinite(b[i]) || !isfinite(x[i])) {
+            st = dk_error_set(err, DK_ERR_NONFINITE, "%s: entry %ld of b or x is not finite",
+                              who, (long)i);
+            goto done;
+        }
+        gscale = fmax(gscale, fabs(diag[i]) * (hi - lo) + fabs(b[i]));
+    }
+    if (!(gscale > 0.0)) gscale = 1.0;
+    const double xtol = 1e-10 * (hi - lo), gtol = 1e-8 * gscale;
+    for (dk_index i = 0; i < m; i++)
+        state[i] = x[i] <= lo + xtol ? QP_LOW : x[i] >= hi - xtol ? QP_HIGH : QP_FREE;
+    int it = 0, one_at_a_time = 0, settled = 0, all_free = 1;
+    for (dk_index i = 0; i < m; i++) all_free &= state[i] == QP_FREE;
+    while (it < max_iterations) {
+        seen[it] = partition_hash(state, m);
+        /* a start that solves the all-free problem and stays in the box is its own first
+         * iteration (the weights of a cage, usually: no factorization per handle) */
+        if (!(it == 0 && start_solves && all_free))
+            st = solve_partition(a, b, lo, hi, state, x, map, rhs, simplicial, err);
+        it++;
+        if (st != DK_OK) goto done;
+        dk_sparse_matvec(a, x, g);
+        dk_index worst = -1, changes = 0;
+        double worst_v = 0.0;
+        for (dk_index i = 0; i < m; i++) {
+            g[i] -= b[i];
+            double v = 0.0; /* how badly i's partition is violated, in gradient units */
+            next[i] = state[i];
+            if (state[i] == QP_FREE) {
+                if (x[i] < lo - xtol) next[i] = QP_LOW, v = (lo - x[i]) / (hi - lo) * gscale;
+                else if (x[i] > hi + xtol) next[i] = QP_HIGH, v = (x[i] - hi) / (hi - lo) * gscale;
+            } else if (state[i] == QP_LOW && g[i] < -gtol) {
+                next[i] = QP_FREE, v = -g[i];
+            } else if (state[i] == QP_HIGH && g[i] > gtol) {
+                next[i] = QP_FREE, v = g[i];
+            }
+            if (next[i] != state[i]) {
+                changes++;
+                if (v > worst_v) worst_v = v, worst = i;
+            }
+        }
+        if (changes == 0) {
+            settled = 1;
+            break;
+        }
+        if (!one_at_a_time) {
+            uint64_t h = partition_hash(next, m);
+            for (int k = 0; k + 1 < it; k++)
+                if (seen[k] == h) one_at_a_time = 1;
+        }
+        if (one_at_a_time) state[worst] = next[worst];
+        else memcpy(state, next, (size_t)m);
+    }
+    if (!settled) {
+        st = dk_error_set(err, DK_ERR_NO_CONVERGENCE, "%s: the active set of %ld variables has "
+                          "not settled in %d iterations", who, (long)m, max_iterations);
+        goto done;
+    }
+    double worst = 0.0;
+    for (dk_index i = 0; i < m; i++) {
+        double r = state[i] == QP_FREE ? fabs(g[i]) / gscale
+                   : state[i] == QP_LOW ? fmax(0.0, -g[i]) / gscale
+                                        : fmax(0.0, g[i]) / gscale;
+        worst = fmax(worst, r);
+        x[i] = fmin(hi, fmax(lo, x[i]));
+    }
+    if (iterations) *iterations = it;
+    if (kkt_residual) *kkt_residual = worst;
+done:
+    free(state);
+    free(next);
+    free(map);
+    free(rhs);
+    free(g);
+    free(diag);
+    free(seen);
+    return st;
+}

@@ -1,0 +1,249 @@
+"""deformkit.bounded_biharmonic_weights (docs/methods/skinning.md, "Computed weights"):
+each handle's quadratic program against an independent bounded least-squares solve in scipy
+(the surface domain, where the discretization is the public cotangent Laplacian and mass);
+the paper's properties on the volume domain (bounds, partition of unity, interpolation at the
+handles, a bone held along its whole segment, smoothness as the biharmonic energy's
+optimality); scale and placement; broken meshes (several parts, non-manifold, open); the
+Skinning bind that computes them; refusals."""
+import numpy as np
+import pytest
+import scipy.optimize
+import scipy.sparse as sp
+
+import deformkit as dk
+from conftest import SHARED_MESHES, make_book, make_icosphere
+
+
+def capped_cylinder(n_ring=16, n_len=21, radius=0.2, length=2.0):
+    """A closed tube along x from -length/2 to length/2 (fans closing both ends)."""
+    th = np.linspace(0, 2 * np.pi, n_ring, endpoint=False)
+    xs = np.linspace(-length / 2, length / 2, n_len)
+    V = [(x, radius * np.cos(t), radius * np.sin(t)) for x in xs for t in th]
+    F = []
+    for i in range(n_len - 1):
+        for j in range(n_ring):
+            a, b = i * n_ring + j, i * n_ring + (j + 1) % n_ring
+            F += [[a, b, a + n_ring], [b, b + n_ring, a + n_ring]]
+    c0, c1 = len(V), len(V) + 1
+    V += [(xs[0], 0, 0), (xs[-1], 0, 0)]
+    last = (n_len - 1) * n_ring
+    for j in range(n_ring):
+        F.append([c0, (j + 1) % n_ring, j])
+        F.append([c1, last + j, last + (j + 1) % n_ring])
+    return np.array(V), np.array(F)
+
+
+def check_partition(W, tol=1e-12):
+    assert W.min() >= 0.0 and W.max() <= 1.0 + tol
+    assert np.abs(W.sum(1) - 1.0).max() < 1e-12
+
+
+def test_surface_weights_solve_the_papers_program():
+    """On the surface the weights are the paper's: for each handle, minimise the discrete
+    biharmonic energy x^T L M^-1 L x with x = 1 on the handle, 0 on the others, 0 <= x <= 1,
+    then divide by the sum. scipy's bounded least squares (BVLS, an exact active-set method
+    of its own) on M^-1/2 L gives the same minimisers."""
+    V, F = make_icosphere(2)
+    V = V * np.array([1.0, 0.7, 0.5])  # not a sphere: no symmetry to hide an error
+    m = dk.Mesh(V, F)
+    handles = np.array([0, 50, 100, 150])
+    W, rep = dk.bounded_biharmonic_weights(m, points=V[handles], domain="surface", report=True)
+    assert rep["domain"] == "surface" and rep["kkt_residual"] < 1e-7
+    r, c, v = dk.cotangent_laplacian(m)
+    n = len(V)
+    L = sp.csr_matrix((v, (r, c)), shape=(n, n))
+    mass = np.asarray(dk.mass_matrix(m, "barycentric"))
+    R = sp.diags(1.0 / np.sqrt(mass)) @ L
+    free = np.setdiff1d(np.arange(n), handles)
+    raw = np.zeros((n, len(handles)))
+    energy_ours, energy_ref = [], []
+    for j, hv in enumerate(handles):
+        held = np.zeros(n)
+        held[hv] = 1.0
+        res = scipy.optimize.lsq_linear(R[:, free].toarray(), -R @ held, bounds=(0.0, 1.0),
+                                        method="bvls", tol=1e-14)
+        raw[:, j] = held
+        raw[free, j] = res.x
+        energy_ref.append(np.sum((R @ raw[:, j]) ** 2))
+    ref = raw / raw.sum(1, keepdims=True)
+    assert np.abs(W - ref).max() < 1e-6
+    check_partition(W)
+    np.testing.assert_allclose(W[handles], np.eye(len(handles)), atol=1e-12)
+
+
+def test_volume_weights_are_bounded_interpolating_and_smooth():
+    V, F = capped_cylinder()
+    m = dk.Mesh(V, F)
+    pts = np.array([[-0.9, 0, 0], [0.0, 0, 0], [0.9, 0, 0]])
+    W, rep = dk.bounded_biharmonic_weights(m, points=pts, report=True)
+    assert rep["domain"] == "volume" and rep["kkt_residual"] < 1e-6
+    check_partition(W)
+    # each handle's weight falls off along the tube, the nearest handle dominating
+    x = V[:, 0]
+    assert np.all(W[x < -0.8, 0] > 0.9) and np.all(W[x > 0.8, 2] > 0.9)
+    assert np.all(W[np.abs(x) < 0.05, 1] > 0.9)
+    # along the tube (one ring angle) the middle weight rises then falls: no wiggles
+    ring = np.arange(0, len(V) - 2, 16)
+    w1 = W[ring, 1]
+    top = np.argmax(w1)
+    assert np.all(np.diff(w1[:top + 1]) >= -1e-9) and np.all(np.diff(w1[top:]) <= 1e-9)
+
+
+def test_a_bone_holds_its_whole_segment_and_joints_are_shared():
+    V, F = capped_cylinder(n_len=41)
+    m = dk.Mesh(V, F)
+    bones = np.array([[[-1.0, 0, 0], [0.0, 0, 0]], [[0.0, 0, 0], [1.0, 0, 0]]])
+    # vertices placed on the bones' axis: the caps' centres lie on the bones' outer ends
+    W = dk.bounded_biharmonic_weights(m, bones=bones)
+    check_partition(W)
+    assert W[len(V) - 2, 0] == pytest.approx(1.0, abs=1e-9)
+    assert W[len(V) - 1, 1] == pytest.approx(1.0, abs=1e-9)
+    x = V[:, 0]
+    assert np.all(W[x < -0.5, 0] > 0.9) and np.all(W[x > 0.5, 1] > 0.9)
+    # the joint is shared: the ring around it weighs both bones about equally
+    mid = np.abs(x) < 1e-9
+    assert np.all(np.abs(W[mid, 0] - 0.5) < 0.1)
+
+
+def test_same_weights_at_any_scale_and_place():
+    V, F = capped_cylinder()
+    pts = np.array([[-0.9, 0, 0], [0.3, 0, 0]])
+    W = dk.bounded_biharmonic_weights(dk.Mesh(V, F), points=pts)
+    for s, t in ((1e-3, (5.0, -2.0, 1.0)), (1e3, (-4e3, 1e3, 7.0))):
+        Ws = dk.bounded_biharmonic_weights(dk.Mesh(V * s + t, F), points=pts * s + t)
+        assert np.abs(Ws - W).max() < 1e-3
+
+
+def test_open_and_flat_meshes_take_the_surface():
+    n = 12
+    xs, ys = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n), indexing="ij")
+    V = np.stack([xs.ravel(), ys.ravel(), np.zeros(n * n)], 1)
+    F = []
+    for i in range(n - 1):
+        for j in range(n - 1):
+            a, b, c, d = i * n + j, (i + 1) * n + j, (i + 1) * n + j + 1, i * n + j + 1
+            F += [[a, b, c], [a, c, d]]
+    m = dk.Mesh(V, np.array(F))
+    W, rep = dk.bounded_biharmonic_weights(m, points=V[[0, n * n - 1]], report=True)
+    assert rep["domain"] == "surface"
+    check_partition(W)
+    with pytest.raises(ValueError, match="encloses no volume"):
+        dk.bounded_biharmonic_weights(m, points=V[[0, 5]], domain="volume")
+
+
+def test_several_parts_and_non_manifold_edges():
+    # two spheres, one with no handle: it takes the weights of the nearest reached point
+    V1, F1 = make_icosphere(2)
+    V2, F2 = make_icosphere(2, radius=0.5)
+    V = np.vstack([V1, V2 + [3.0, 0, 0]])
+    F = np.vstack([F1, F2 + len(V1)])
+    W, rep = dk.bounded_biharmonic_weights(dk.Mesh(V, F), points=[[-0.5, 0, 0], [0.5, 0, 0]],
+                                           report=True)
+    check_partition(W)
+    assert rep["unreached"] > 0
+    far = W[len(V1):]
+    assert np.all(far[:, 1] > 0.9)
+    # a book of pages glued along a spine (non-manifold edges, no volume): the surface
+    bv, bf, page = make_book(pages=3)
+    W = dk.bounded_biharmonic_weights(dk.Mesh(bv, bf), points=bv[[10, 40]])
+    check_partition(W)
+
+
+@pytest.mark.parametrize("name", ["beast.obj", "ogre.obj"])
+def test_broken_scans(name):
+    """Several parts, holes and non-manifold edges, where Blender's bone heat reports that it
+    failed to find a solution: weights everywhere, bounded, summing to 1."""
+    path = SHARED_MESHES / name
+    if not path.exists():
+        pytest.skip("shared meshes not present")
+    m = dk.read_mesh(str(path))
+    V = np.asarray(m.vertices)
+    lo, hi = V.min(0), V.max(0)
+    c = 0.5 * (lo + hi)
+    axis = np.argmax(hi - lo)
+    a, b = c.copy(), c.copy()
+    a[axis] = lo[axis] + 0.3 * (hi[axis] - lo[axis])
+    b[axis] = lo[axis] + 0.7 * (hi[axis] - lo[axis])
+    # the handles on the surface, nearest those points (the axis may run through air)
+    at = [int(np.argmin(((V - p) ** 2).sum(1))) for p in (a, b)]
+    W, rep = dk.bounded_biharmonic_weights(m, points=V[at], report=True)
+    check_partition(W)
+    assert rep["domain"] == "volume"
+    # each handle interpolated, and weighing most around itself
+    diag = np.linalg.norm(hi - lo)
+    for j, v in enumerate(at):
+        assert W[v, j] == pytest.approx(1.0, abs=1e-9)
+        near = np.linalg.norm(V - V[v], axis=1) < 0.03 * diag
+        assert W[near, j].mean() > 0.8
+
+
+def test_skinning_computes_its_weights_from_the_bones():
+    V, F = capped_cylinder(n_len=41)
+    m = dk.Mesh(V, F)
+    bones = np.array([[[-1.0, 0, 0], [0.0, 0, 0]], [[0.0, 0, 0], [1.0, 0, 0]]])
+    frames = np.tile(np.eye(4), (2, 1, 1))
+    frames[:, :3, 3] = bones[:, 0]
+    s = dk.Skinning(m, bone_frames=frames, bones=bones)
+    W = dk.bounded_biharmonic_weights(m, bones=bones)
+    assert np.array_equal(np.asarray(s.solve(transforms=frames).positions), V)
+    # bend the second bone 90 degrees about z at the joint
+    R = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])
+    T = frames.copy()
+    T[1, :3, :3] = R
+    P = np.asarray(s.solve(transforms=T).positions)
+    expect = (1 - W[:, 1:2]) * V + W[:, 1:2] * (V @ R.T)
+    np.testing.assert_allclose(P, expect, atol=1e-12)
+    full = W[:, 1] == 1.0
+    assert full.sum() > 0
+    np.testing.assert_allclose(P[full], V[full] @ R.T, atol=1e-12)
+
+
+def test_skinning_bind_reports_and_cancels():
+    V, F = capped_cylinder()
+    bones = np.array([[[-1.0, 0, 0], [0.0, 0, 0]], [[0.0, 0, 0], [1.0, 0, 0]]])
+    frames = np.tile(np.eye(4), (2, 1, 1))
+    seen = []
+    dk.Skinning(dk.Mesh(V, F), bone_frames=frames, bones=bones,
+                progress=lambda f: seen.append((f.phase, float(f))) and False)
+    assert seen[-1][1] == 1.0 and any(p == "computed weights" for p, _ in seen)
+    assert all(b >= a for (_, a), (_, b) in zip(seen, seen[1:]))
+    with pytest.raises(RuntimeError, match="cancelled"):
+        dk.Skinning(dk.Mesh(V, F), bone_frames=frames, bones=bones,
+                    progress=lambda f: f.phase == "computed weights" and float(f) > 0.3)
+
+
+def test_refusals():
+    V, F = capped_cylinder()
+    m = dk.Mesh(V, F)
+    with pytest.raises(ValueError, match="at least one handle"):
+        dk.bounded_biharmonic_weights(m)
+    with pytest.raises(ValueError, match="domain"):
+        dk.bounded_biharmonic_weights(m, points=[[0, 0, 0]], domain="tets")
+    with pytest.raises(ValueError, match="resolution"):
+        dk.bounded_biharmonic_weights(m, points=[[0, 0, 0]], resolution=2)
+    with pytest.raises(ValueError, match="not a finite"):
+        dk.bounded_biharmonic_weights(m, points=[[0, np.nan, 0]])
+    with pytest.raises(ValueError, match="point [01] has no place"):
+        dk.bounded_biharmonic_weights(m, points=[[0, 0, 0], [0, 0, 0]])
+    with pytest.raises(ValueError, match="volume"):
+        cage_v, cage_f = make_icosphere(1, radius=3.0)
+        dk.bounded_biharmonic_weights(m, cage=(cage_v, cage_f), domain="surface")
+    frames = np.tile(np.eye(4), (2, 1, 1))
+    with pytest.raises(TypeError, match="bones"):
+        dk.Skinning(m, bone_frames=frames)
+    with pytest.raises(ValueError, match="2 rows|rows"):
+        dk.Skinning(m, bone_frames=frames, bones=np.zeros((3, 2, 3)))
+
+
+def test_cage_handles_blend_linearly_on_the_cage():
+    V, F = capped_cylinder()
+    cage_v, cage_f = make_icosphere(0, radius=1.6)
+    W, rep = dk.bounded_biharmonic_weights(dk.Mesh(V, F), cage=(cage_v, cage_f), resolution=16,
+                                           report=True)
+    assert W.shape == (len(V), len(cage_v)) and rep["domain"] == "volume"
+    check_partition(W)
+    # a cage's weights reproduce nothing exactly inside (they are not coordinates), but the
+    # nearest cage vertices weigh most: the tube's ends lean to the cage's +-x vertices
+    ends = cage_v[:, 0].argmin(), cage_v[:, 0].argmax()
+    assert W[V[:, 0] < -0.9].argmax(1).tolist().count(ends[0]) > 0
+    assert W[V[:, 0] > 0.9].argmax(1).tolist().count(ends[1]) > 0
