@@ -15,15 +15,15 @@ bl_info = {
 if "bpy" in locals():  # script reload
     import importlib
     for _m in (text, compat, methods, native, properties, geonodes, solver,  # noqa: F821
-               handlers, pc2, bake, operators, make_controls, ui):  # noqa: F821
+               handlers, pc2, bake, operators, make_controls, compute_weights, ui):  # noqa: F821
         importlib.reload(_m)
 
 import bpy  # noqa: E402
 
 from . import text, compat, methods, native, properties, geonodes, solver, handlers, pc2, bake  # noqa: E402
-from . import operators, make_controls, overlay, ui  # noqa: E402
+from . import operators, make_controls, compute_weights, overlay, ui  # noqa: E402
 
-_modules = (properties, operators, make_controls, ui, handlers, overlay)
+_modules = (properties, operators, make_controls, compute_weights, ui, handlers, overlay)
 
 
 def register():

@@ -40,7 +40,8 @@ if [ "$setup" = 1 ]; then
 fi
 
 build="$here/build-fuzz"
-cmake -S "$here" -B "$build" -DCMAKE_C_COMPILER=clang -DCMAKE_BUILD_TYPE=Release \
+cmake -S "$here" -B "$build" -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ \
+  -DCMAKE_BUILD_TYPE=Release \
   -DDK_FUZZ=ON -DDK_TESTS=OFF -DDK_PYTHON=OFF >/dev/null &&
   cmake --build "$build" -j2 >"$build/build.log" 2>&1 ||
   { cat "$build/build.log" >&2; echo "fuzz: 0 passed, 1 failed"; exit 1; }

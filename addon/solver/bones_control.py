@@ -21,7 +21,7 @@ from . import blender_data, control_objects
 KIND = "bones"
 LABEL = "Armature"
 OBJECT_TYPE = "ARMATURE"
-MAKE_OPERATOR = None
+MAKE_OPERATOR = "deformkit.compute_weights"  # the weights, into the bones' groups
 SOLVE_KEYWORD = "transforms"   # the solve takes the bones' frames as transforms
 uses_handles = False
 

@@ -12,7 +12,8 @@ table, dk_method_ops.controls), never by the method's name. A collector is a mod
     settings_key(d)   -> what of d's settings (besides the controls) its binding depends on
     exist(obj, d)     -> whether every control d names is still there (cheap: every solve)
 and, for a control object (uses_handles False), KIND, LABEL, OBJECT_TYPE, MAKE_OPERATOR (the
-operator that makes one around the mesh, or None), SOLVE_KEYWORD and
+operator the panel offers under it: the one that makes a lattice or cage around the mesh, or
+the one that computes the bones' weights into their groups), SOLVE_KEYWORD and
     targets(obj, d, e, depsgraph) -> the control's points on this frame (n_controls x 3),
                                      or its bones' frames (n_controls x 4 x 4)
     summary(d), missing(d)        -> the status line's words

@@ -69,7 +69,7 @@ typedef struct dk_bbw_handles {
 typedef struct dk_bbw_options {
     dk_bbw_domain domain;          /**< default AUTO                                      */
     int resolution;                /**< VOLUME: grid cells along the shape's longest side;
-                                        default 32, in [4, 256]                           */
+                                        default 24, in [4, 256]                           */
     int max_iterations;            /**< active-set iterations per handle; default 100    */
     dk_phase_progress_fn progress; /**< phases "domain", "operator", "weights"; NULL none */
     void *progress_user;

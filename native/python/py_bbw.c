@@ -25,7 +25,7 @@ static int read_handles(PyObject *obj, Py_ssize_t cols, const char *name, dk_py_
 
 PyDoc_STRVAR(bbw_doc,
              "bounded_biharmonic_weights(mesh, points=None, bones=None, cage=None,\n"
-             "                           domain='auto', resolution=32, max_iterations=100,\n"
+             "                           domain='auto', resolution=24, max_iterations=100,\n"
              "                           report=False, progress=None) -> weights\n\n"
              "Bounded biharmonic weights (Jacobson, Baran, Popovic, Sorkine 2011): one\n"
              "smooth weight per vertex and handle, in [0, 1], 1 on its handle and 0 on the\n"
@@ -52,7 +52,10 @@ static PyObject *py_bbw(PyObject *module, PyObject *args, PyObject *kwargs)
     PyObject *mobj, *pobj = NULL, *bobj = NULL, *cobj = NULL, *repobj = Py_False;
     PyObject *result = NULL, *kw = NULL;
     const char *domain = "auto";
-    int resolution = 32, max_iterations = 100, want_report = 0;
+    dk_bbw_options defaults;
+    dk_bbw_default_options(&defaults);
+    int resolution = defaults.resolution, max_iterations = defaults.max_iterations;
+    int want_report = 0;
     dk_py_doubles pts = {0}, bones = {0}, cv = {0};
     dk_py_indices ct = {0};
     dk_py_progress prog;

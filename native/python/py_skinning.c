@@ -142,7 +142,7 @@ static PyMethodDef skinning_methods[] = {
 
 PyDoc_STRVAR(skinning_doc,
              "Skinning(mesh, bone_frames, weights=None, bones=None, blend='linear',\n"
-             "         domain='auto', resolution=32)\n\n"
+             "         domain='auto', resolution=24)\n\n"
              "Skinning (the slides' skeletal subspace deformation): each bone's rest frame B_j\n"
              "(b x 4 x 4 affine) and each vertex's weights (n x b, >= 0, rows summing to 1);\n"
              "a solve with the bones' current frames T_j moves vertex i to\n"

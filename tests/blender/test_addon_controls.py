@@ -502,11 +502,96 @@ def test_skinning_equals_blenders_armature():
                 err < 1e-4 and np.abs(want - rest).max() > 0.2, d.status)
 
 
+def tube(n_ring=16, n_len=25, radius=0.2, length=2.0):
+    """A closed tube along x (fans close its ends)."""
+    th = np.linspace(0, 2 * np.pi, n_ring, endpoint=False)
+    xs = np.linspace(-length / 2, length / 2, n_len)
+    V = [(x, radius * np.cos(t), radius * np.sin(t)) for x in xs for t in th]
+    F = []
+    for i in range(n_len - 1):
+        for j in range(n_ring):
+            a, b = i * n_ring + j, i * n_ring + (j + 1) % n_ring
+            F += [[a, b, a + n_ring], [b, b + n_ring, a + n_ring]]
+    c0, c1 = len(V), len(V) + 1
+    V += [(xs[0], 0, 0), (xs[-1], 0, 0)]
+    last = (n_len - 1) * n_ring
+    for j in range(n_ring):
+        F += [[c0, (j + 1) % n_ring, j], [c1, last + j, last + (j + 1) % n_ring]]
+    return np.array(V), np.array(F)
+
+
+def test_compute_weights():
+    """Compute Weights writes bounded biharmonic weights of the armature's deforming bones
+    into groups of their names (the native function's, limited to the influences), which the
+    Skinning deformer and Blender's Armature modifier then read alike; without an armature it
+    says so and writes nothing."""
+    import deformkit as dk
+    from addon import compute_weights as cw
+    S.reset_scene()
+    V, F = tube()
+    obj = S.triangle_mesh_object(V, F, name="Tube")
+    obj.location = (0.3, -0.1, 0.2)
+    bpy.ops.deformkit.add_deformer(method="SKINNING")
+    d = obj.deformkit.deformers[0]
+    try:
+        bpy.ops.deformkit.compute_weights()
+        said = ""
+    except RuntimeError as e:
+        said = str(e)
+    R.check("no armature: said, nothing written", "no armature" in said
+            and len(obj.vertex_groups) == 0, said)
+    arm, ao = S.armature_in_edit_mode("Rig")
+    ao.location = obj.location
+    up = arm.edit_bones.new("upper")
+    up.head, up.tail = (-1.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+    lo = arm.edit_bones.new("lower")
+    lo.head, lo.tail = (0.0, 0.0, 0.0), (1.0, 0.0, 0.0)
+    lo.parent, lo.use_connect = up, True
+    bpy.ops.object.mode_set(mode="OBJECT")
+    bpy.context.view_layer.objects.active = obj
+    d.control_object = ao
+    bpy.ops.deformkit.compute_weights(influences=2)
+    names = [vg.name for vg in obj.vertex_groups]
+    R.check("a group per bone", names == ["upper", "lower"], names)
+    W = np.zeros((len(V), 2))
+    for v in obj.data.vertices:
+        for g in v.groups:
+            W[v.index, g.group] = g.weight
+    seg = cw.bone_segments(obj, ao)[1]
+    R.check("the bones' segments in the mesh's space",
+            np.abs(seg - [[[-1, 0, 0], [0, 0, 0]], [[0, 0, 0], [1, 0, 0]]]).max() < 1e-6, seg)
+    want = cw.limit_influences(dk.bounded_biharmonic_weights(
+        dk.Mesh(S.rest_positions(obj), F), bones=seg), 2)
+    err = np.abs(W - want).max()
+    R.check("the groups hold the native weights (%.1e)" % err, err < 1e-6)
+    R.check("each vertex's weights sum to 1", np.abs(W.sum(1) - 1).max() < 1e-6)
+    R.check("each bone's end is its own", W[V[:, 0] < -0.8, 0].min() > 0.9
+            and W[V[:, 0] > 0.8, 1].min() > 0.9)
+    bpy.ops.deformkit.bind()
+    R.check("bound", d.bound and not d.status_is_error, d.status)
+    twin = bpy.data.objects.new("Twin", obj.data.copy())
+    bpy.context.scene.collection.objects.link(twin)
+    twin.matrix_world = obj.matrix_world
+    for vg in obj.vertex_groups:
+        twin.vertex_groups.new(name=vg.name)
+    m = twin.modifiers.new("Armature", "ARMATURE")
+    m.object = ao
+    pb = ao.pose.bones["lower"]
+    pb.rotation_mode = "XYZ"
+    pb.rotation_euler = (0.0, 0.0, 1.2)
+    bpy.context.view_layer.update()
+    got, want = S.evaluated_positions(obj), S.evaluated_positions(twin)
+    err = np.abs(got - want).max()
+    R.check("the deformer = Blender's Armature modifier on the computed groups (%.1e)" % err,
+            err < 1e-4 and np.abs(want - V).max() > 0.3, d.status)
+
+
 if __name__ == "__main__":
     for fn in (test_make_lattice_encloses_and_binds, test_linear_lattice_equals_blenders,
                test_lattice_follows_points_and_object, test_cage, test_green_cage,
                test_after_an_armature,
                test_errors_are_said, test_save_and_reload,
-               test_an_animated_control_plays_and_bakes, test_skinning_equals_blenders_armature):
+               test_an_animated_control_plays_and_bakes, test_skinning_equals_blenders_armature,
+               test_compute_weights):
         R.run(fn)
     R.finish()

@@ -206,19 +206,22 @@ def test_control_deformers_end_to_end():
         obj = S.make_grid(nx=10, ny=5)
         bpy.ops.deformkit.add_deformer(method=m.id)
         d = obj.deformkit.deformers[0]
-        make = S.solver.controls.of(d).MAKE_OPERATOR
+        c = S.solver.controls.of(d)
         pb = None
-        if make:
-            getattr(bpy.ops.deformkit, make.split(".")[1])()
-        else:   # bones: an armature of one bone, every vertex in its group
+        if c.OBJECT_TYPE == "ARMATURE":
+            # bones: an armature of one bone, its weights computed (the one group, all 1)
             arm, ao = S.armature_in_edit_mode("Rig")
             b = arm.edit_bones.new("b")
             b.head, b.tail = (0.0, 0.0, 0.0), (0.0, 1.0, 0.0)
             bpy.ops.object.mode_set(mode="OBJECT")
             bpy.context.view_layer.objects.active = obj
-            S.group(obj, "b", range(len(obj.data.vertices)))
             d.control_object = ao
+            getattr(bpy.ops.deformkit, c.MAKE_OPERATOR.split(".")[1])()
+            R.check("%s: %s made the bone's group" % (m.id, c.MAKE_OPERATOR),
+                    obj.vertex_groups.get("b") is not None)
             pb = ao.pose.bones["b"]
+        else:
+            getattr(bpy.ops.deformkit, c.MAKE_OPERATOR.split(".")[1])()
         bpy.ops.deformkit.bind()
         R.check("%s bound" % m.id, d.bound and not d.status_is_error, d.status)
         rest = S.rest_positions(obj)

@@ -17,6 +17,8 @@
  *      from the rest positions; iteration cap, skip_energy and preview; a quarter of them
  *      with a pose to edit, input_positions), then a rebind
  *      with new groups and a solve after it.
+ * A method bound to a control gets one of its kind (a lattice, a cage, bones: with their
+ * weights or, a quarter of the time, with segments the bind computes the weights from).
  * Short inputs decode to small valid cases, so most inputs get through bind into solve.
  *
  * Checked besides the sanitizers (each is a promise of the contract):
@@ -126,6 +128,7 @@ typedef struct groups {
                                                                       : 3 * MAX_CONTROLS * MAX_V];
     dk_index control_tris[3 * MAX_CAGE_TRIS];
     double control_weights[MAX_CONTROLS * MAX_V];
+    double control_segments[MAX_CONTROLS * 6];
 } groups;
 
 static dk_index decode_vertex(dk_fuzz_input *in, dk_index n)
@@ -261,6 +264,17 @@ static void decode_control(dk_fuzz_input *in, const dk_mesh *m, unsigned own, gr
                     dk_fuzz_u8(in) % 8 == 0 ? dk_fuzz_real(in, 1.0)
                                             : (b == v % c->n_controls ? 1.0 : 0.0);
         c->weights = g->control_weights;
+        if (dk_fuzz_u8(in) % 4 == 0) { /* bones whose weights the bind computes */
+            for (dk_index i = 0; i < 6 * c->n_controls; i++) {
+                const int d = (int)(i % 3);
+                const double lo = m->bbox_min[d], hi = m->bbox_max[d];
+                g->control_segments[i] = dk_fuzz_u8(in) % 8 == 0
+                                             ? dk_fuzz_real(in, 1.0)
+                                             : lo + (hi - lo) * (double)(dk_fuzz_u8(in) % 17) / 16.0;
+            }
+            c->segments = g->control_segments;
+            c->weights = dk_fuzz_u8(in) % 16 == 0 ? g->control_weights : NULL; /* both: refused */
+        }
     }
     dk_error err = {0};
     if (dk_control_check(c, n, &err) != DK_OK)

@@ -11,8 +11,12 @@
  * partition repeats, x is the minimiser: feasible, free gradients zero, multipliers
  * non-negative (the KKT conditions of a convex problem). On matrices that are not M-matrices
  * (the bilaplacian is not one) the method can cycle between partitions; a repeated
- * partition other than the last one switches it to changing one variable per iteration, the
- * worst violator, which cannot cycle (each step lowers the energy of the equality problem).
+ * partition other than the last one switches it to a guarded mode that changes only the
+ * variables violated at least half as badly as the worst one (the worst always), and
+ * settles once no violation exceeds GUARDED_TOL (1e-5 relative; the exact rule otherwise
+ * crawls through violations of 1e-7, one variable an iteration). Thresholds are relative:
+ * a variable past a bound by 1e-9 of the box, a multiplier negative by 1e-7 of its row of
+ * the gradient (sum_j |A_ij| (hi - lo) + |b_i|).
  */
 #include <math.h>
 #include <stdint.h>
@@ -23,6 +27,10 @@
 #include "dk_cholesky.h"
 
 enum { QP_FREE = 0, QP_LOW = 1, QP_HIGH = 2 };
+
+/* After a cycle: settled when no variable's partition is violated by more than this
+ * (relative to its row of the gradient, or to the box's width) */
+#define GUARDED_TOL 1e-5
 
 /* A 64-bit fingerprint of a partition, to notice a cycle. */
 static uint64_t partition_hash(const unsigned char *state, dk_index m)
@@ -100,30 +108,37 @@ dk_status bbw_box_qp(const dk_sparse *a, const double *b, double lo, double hi, 
     unsigned char *state = malloc((size_t)m), *next = malloc((size_t)m);
     dk_index *map = malloc((size_t)m * sizeof *map);
     double *rhs = malloc((size_t)m * sizeof *rhs), *g = malloc((size_t)m * sizeof *g);
-    double *diag = malloc((size_t)m * sizeof *diag);
+    double *diag = malloc((size_t)m * sizeof *diag); /* each row's scale */
+    double *viol = malloc((size_t)m * sizeof *viol);
     uint64_t *seen = malloc((size_t)(max_iterations + 1) * sizeof *seen);
     dk_status st = DK_OK;
-    if (!state || !next || !map || !rhs || !g || !diag || !seen) {
+    if (!state || !next || !map || !rhs || !g || !diag || !viol || !seen) {
         st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "%s: out of memory", who);
         goto done;
     }
-    /* scales: a variable is past a bound by more than rounding, a multiplier is negative by
-     * more than rounding of the gradient A x - b (its size is |A| (hi - lo) + |b|) */
-    dk_sparse_diagonal(a, diag);
-    double gscale = 0.0;
+    /* scales: a variable is past a bound by more than rounding; a multiplier is negative
+     * by more than the rounding of its row of the gradient A x - b, whose size is
+     * row[i] = sum_j |A_ij| (hi - lo) + |b_i| (per row: the bilaplacian's rows differ by
+     * orders of magnitude between big and small elements, and one scale for all let small
+     * rows keep multipliers that were really negative: a different, wrong minimiser) */
     for (dk_index i = 0; i < m; i++) {
         if (!isfinite(b[i]) || !isfinite(x[i])) {
             st = dk_error_set(err, DK_ERR_NONFINITE, "%s: entry %ld of b or x is not finite",
                               who, (long)i);
             goto done;
         }
-        gscale = fmax(gscale, fabs(diag[i]) * (hi - lo) + fabs(b[i]));
+        diag[i] = fabs(b[i]);
     }
-    if (!(gscale > 0.0)) gscale = 1.0;
-    const double xtol = 1e-10 * (hi - lo), gtol = 1e-8 * gscale;
+    for (dk_index j = 0; j < m; j++)
+        for (dk_index p = a->col_start[j]; p < a->col_start[j + 1]; p++)
+            diag[a->row_index[p]] += fabs(a->values[p]) * (hi - lo);
+    for (dk_index i = 0; i < m; i++)
+        if (!(diag[i] > 0.0)) diag[i] = 1.0;
+    double *row = diag;
+    const double xtol = 1e-9 * (hi - lo), gtol = 1e-7;
     for (dk_index i = 0; i < m; i++)
         state[i] = x[i] <= lo + xtol ? QP_LOW : x[i] >= hi - xtol ? QP_HIGH : QP_FREE;
-    int it = 0, one_at_a_time = 0, settled = 0, all_free = 1;
+    int it = 0, guarded = 0, settled = 0, all_free = 1;
     for (dk_index i = 0; i < m; i++) all_free &= state[i] == QP_FREE;
     while (it < max_iterations) {
         seen[it] = partition_hash(state, m);
@@ -141,29 +156,35 @@ dk_status bbw_box_qp(const dk_sparse *a, const double *b, double lo, double hi, 
             double v = 0.0; /* how badly i's partition is violated, in gradient units */
             next[i] = state[i];
             if (state[i] == QP_FREE) {
-                if (x[i] < lo - xtol) next[i] = QP_LOW, v = (lo - x[i]) / (hi - lo) * gscale;
-                else if (x[i] > hi + xtol) next[i] = QP_HIGH, v = (x[i] - hi) / (hi - lo) * gscale;
-            } else if (state[i] == QP_LOW && g[i] < -gtol) {
-                next[i] = QP_FREE, v = -g[i];
-            } else if (state[i] == QP_HIGH && g[i] > gtol) {
-                next[i] = QP_FREE, v = g[i];
+                if (x[i] < lo - xtol) next[i] = QP_LOW, v = (lo - x[i]) / (hi - lo);
+                else if (x[i] > hi + xtol) next[i] = QP_HIGH, v = (x[i] - hi) / (hi - lo);
+            } else if (state[i] == QP_LOW && g[i] < -gtol * row[i]) {
+                next[i] = QP_FREE, v = -g[i] / row[i];
+            } else if (state[i] == QP_HIGH && g[i] > gtol * row[i]) {
+                next[i] = QP_FREE, v = g[i] / row[i];
             }
+            viol[i] = v;
             if (next[i] != state[i]) {
                 changes++;
-                if (v > worst_v) worst_v = v, worst = i;
+                if (v >= worst_v) worst_v = v, worst = i;
             }
         }
-        if (changes == 0) {
+        if (changes == 0 || (guarded && worst_v < GUARDED_TOL)) {
             settled = 1;
             break;
         }
-        if (!one_at_a_time) {
+        if (!guarded) {
             uint64_t h = partition_hash(next, m);
             for (int k = 0; k + 1 < it; k++)
-                if (seen[k] == h) one_at_a_time = 1;
+                if (seen[k] == h) guarded = 1;
         }
-        if (one_at_a_time) state[worst] = next[worst];
-        else memcpy(state, next, (size_t)m);
+        if (guarded) { /* only the changes at least half as bad as the worst */
+            for (dk_index i = 0; i < m; i++)
+                if (next[i] != state[i] && viol[i] >= 0.5 * worst_v) state[i] = next[i];
+            state[worst] = next[worst];
+        } else {
+            memcpy(state, next, (size_t)m);
+        }
     }
     if (!settled) {
         st = dk_error_set(err, DK_ERR_NO_CONVERGENCE, "%s: the active set of %ld variables has "
@@ -172,9 +193,10 @@ dk_status bbw_box_qp(const dk_sparse *a, const double *b, double lo, double hi, 
     }
     double worst = 0.0;
     for (dk_index i = 0; i < m; i++) {
-        double r = state[i] == QP_FREE ? fabs(g[i]) / gscale
-                   : state[i] == QP_LOW ? fmax(0.0, -g[i]) / gscale
-                                        : fmax(0.0, g[i]) / gscale;
+        double r = state[i] == QP_FREE ? fmax(fabs(g[i]) / row[i],
+                                              fmax(lo - x[i], x[i] - hi) / (hi - lo))
+                   : state[i] == QP_LOW ? fmax(0.0, -g[i]) / row[i]
+                                        : fmax(0.0, g[i]) / row[i];
         worst = fmax(worst, r);
         x[i] = fmin(hi, fmax(lo, x[i]));
     }
@@ -187,6 +209,7 @@ done:
     free(rhs);
     free(g);
     free(diag);
+    free(viol);
     free(seen);
     return st;
 }
