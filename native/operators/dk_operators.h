@@ -191,6 +191,20 @@ void dk_winding_free(dk_winding *w);
 dk_status dk_delaunay_tetrahedra(const double *points, dk_index n_points, dk_index **tets,
                                  dk_index *n_tets, dk_error *err);
 
+/* ---------------------------------------------------------------- skinning weights ---- */
+
+/** Skinning weights fitted from example poses (fit_weights.c): for each vertex the weights
+ *  (>= 0, summing to 1) with which linear blend skinning, p' = sum_j w_j T_pj B_j^-1 p,
+ *  reproduces the example positions of every pose best in least squares; exact (a primal
+ *  active-set method per vertex), two threads.
+ *  rest: n x 3 rest positions; rest_frames: n_bones 4x4 row-major (affine, invertible);
+ *  pose_frames: n_poses x n_bones 4x4, each bone's frame in each pose; pose_positions:
+ *  n_poses x n x 3, the mesh in each pose; weights: n x n_bones out. n_bones <= 1024. */
+dk_status dk_fit_skinning_weights(const double *rest, dk_index n, const double *rest_frames,
+                                  dk_index n_bones, const double *pose_frames,
+                                  const double *pose_positions, dk_index n_poses,
+                                  double *weights, dk_error *err);
+
 /* ---------------------------------------------------------------- rotations ------------ */
 
 /** The rotation R (det R = +1) closest to the 3x3 matrix A in the Frobenius norm, i.e. the

@@ -242,6 +242,7 @@ PyObject *dk_py_new_solve_result(PyObject *module, PyObject *positions, double e
     X(operators)                                                                           \
     X(coordinates)                                                                         \
     X(bbw)                                                                                 \
+    X(fit_weights)                                                                         \
     M(arap, "ARAP")                                                                        \
     M(laplacian_edit, "LaplacianEdit")                                                     \
     M(falloff, "Falloff")                                                                  \

@@ -56,7 +56,6 @@ def test_surface_weights_solve_the_papers_program():
     R = sp.diags(1.0 / np.sqrt(mass)) @ L
     free = np.setdiff1d(np.arange(n), handles)
     raw = np.zeros((n, len(handles)))
-    energy_ours, energy_ref = [], []
     for j, hv in enumerate(handles):
         held = np.zeros(n)
         held[hv] = 1.0
@@ -64,7 +63,6 @@ def test_surface_weights_solve_the_papers_program():
                                         method="bvls", tol=1e-14)
         raw[:, j] = held
         raw[free, j] = res.x
-        energy_ref.append(np.sum((R @ raw[:, j]) ** 2))
     ref = raw / raw.sum(1, keepdims=True)
     assert np.abs(W - ref).max() < 1e-6
     check_partition(W)
@@ -247,3 +245,96 @@ def test_cage_handles_blend_linearly_on_the_cage():
     ends = cage_v[:, 0].argmin(), cage_v[:, 0].argmax()
     assert W[V[:, 0] < -0.9].argmax(1).tolist().count(ends[0]) > 0
     assert W[V[:, 0] > 0.9].argmax(1).tolist().count(ends[1]) > 0
+
+
+def random_rotation(rng):
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    w, x, y, z = q
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def example_poses(V, W, n_poses, rng, noise=0.0):
+    """Bone frames (rest and posed) and the poses linear blend skinning makes of V with W."""
+    b = W.shape[1]
+    B = np.tile(np.eye(4), (b, 1, 1))
+    B[:, :3, 3] = rng.normal(size=(b, 3))
+    T = np.tile(np.eye(4), (n_poses, b, 1, 1))
+    X = np.empty((n_poses, len(V), 3))
+    for p in range(n_poses):
+        for j in range(b):
+            T[p, j, :3, :3] = random_rotation(rng)
+            T[p, j, :3, 3] = rng.normal(size=3)
+        M = T[p] @ np.linalg.inv(B)
+        Vh = np.c_[V, np.ones(len(V))]
+        X[p] = np.einsum("vj,jrc,vc->vr", W, M[:, :3, :], Vh)
+    return B, T, X + noise * rng.normal(size=X.shape)
+
+
+def test_weights_fitted_from_example_poses_recover_the_weights():
+    """Poses made by linear blend skinning with known sparse weights: the fit recovers them
+    (the slides' "weights by using example poses & skins")."""
+    rng = np.random.default_rng(3)
+    V, _ = make_icosphere(2)
+    b = 5
+    W = np.zeros((len(V), b))
+    for i in range(len(V)):  # two or three bones a vertex, summing to 1
+        k = rng.choice(b, size=rng.integers(1, 4), replace=False)
+        W[i, k] = rng.dirichlet(np.ones(len(k)))
+    B, T, X = example_poses(V, W, 4, rng)
+    F = dk.fit_skinning_weights(V, B, T, X)
+    assert F.shape == W.shape
+    assert F.min() >= 0.0 and np.abs(F.sum(1) - 1).max() < 1e-12
+    assert np.abs(F - W).max() < 1e-8
+    # with noise the fit is still the nearest (bounded, summing to 1, close)
+    B, T, X = example_poses(V, W, 6, rng, noise=1e-3)
+    F = dk.fit_skinning_weights(V, B, T, X)
+    assert F.min() >= 0.0 and np.abs(F.sum(1) - 1).max() < 1e-12
+    assert np.abs(F - W).max() < 0.05
+
+
+def test_fitted_weights_are_the_constrained_least_squares_minimisers():
+    """Against scipy's SLSQP on single vertices with inconsistent poses: same minimum."""
+    rng = np.random.default_rng(5)
+    V = rng.normal(size=(6, 3))
+    b = 4
+    W = rng.dirichlet(np.ones(b), size=len(V))
+    B, T, X = example_poses(V, W, 3, rng, noise=0.3)
+    F = dk.fit_skinning_weights(V, B, T, X)
+    M = T @ np.linalg.inv(B)[None]
+    for v in range(len(V)):
+        A = np.concatenate([np.stack([M[p, j, :3, :] @ np.r_[V[v], 1.0] for j in range(b)], 1)
+                            for p in range(len(T))])
+        x = X[:, v].ravel()
+        res = scipy.optimize.minimize(
+            lambda w: 0.5 * np.sum((A @ w - x) ** 2), np.full(b, 1.0 / b),
+            jac=lambda w: A.T @ (A @ w - x), method="SLSQP", bounds=[(0, 1)] * b,
+            constraints=[{"type": "eq", "fun": lambda w: w.sum() - 1}],
+            options={"ftol": 1e-15, "maxiter": 500})
+        ours = 0.5 * np.sum((A @ F[v] - x) ** 2)
+        assert ours <= res.fun + 1e-9 * (1 + res.fun)
+        assert np.abs(F[v] - res.x).max() < 1e-5
+
+
+def test_fit_refusals():
+    V, _ = make_icosphere(1)
+    B = np.tile(np.eye(4), (2, 1, 1))
+    T = np.tile(np.eye(4), (1, 2, 1, 1))
+    X = V[None]
+    with pytest.raises(ValueError, match="pose_frames"):
+        dk.fit_skinning_weights(V, B, np.tile(np.eye(4), (3, 1, 1)), X)
+    with pytest.raises(ValueError, match="pose_positions"):
+        dk.fit_skinning_weights(V, B, T, X[:, :5])
+    bad = B.copy()
+    bad[1, :3, :3] = 0.0
+    with pytest.raises(ValueError, match="bone 1's rest frame"):
+        dk.fit_skinning_weights(V, bad, T, X)
+    Xn = X.copy()
+    Xn[0, 3, 1] = np.nan
+    with pytest.raises(ValueError, match="vertex 3"):
+        dk.fit_skinning_weights(V, B, T, Xn)
+    # bones that move alike in every pose cannot be told apart: any split reproduces them
+    F = dk.fit_skinning_weights(V, B, T, X)
+    assert np.abs(F.sum(1) - 1).max() < 1e-12 and F.min() >= 0.0

@@ -11,10 +11,11 @@
  * partition repeats, x is the minimiser: feasible, free gradients zero, multipliers
  * non-negative (the KKT conditions of a convex problem). On matrices that are not M-matrices
  * (the bilaplacian is not one) the method can cycle between partitions; a repeated
- * partition other than the last one switches it to a guarded mode that changes only the
- * variables violated at least half as badly as the worst one (the worst always), and
- * settles once no violation exceeds GUARDED_TOL (1e-5 relative; the exact rule otherwise
- * crawls through violations of 1e-7, one variable an iteration). Thresholds are relative:
+ * partition other than the last one switches it to the primal active-set method, which
+ * cannot cycle: from the box's nearest point to the current iterate, each iteration moves
+ * towards the minimiser on the working set as far as the box allows (holding the variable
+ * that stops it), or, when it gets there, frees the one held variable whose multiplier is
+ * most negative; the energy falls at every step. Thresholds are relative:
  * a variable past a bound by 1e-9 of the box, a multiplier negative by 1e-7 of its row of
  * the gradient (sum_j |A_ij| (hi - lo) + |b_i|).
  */
@@ -28,9 +29,6 @@
 
 enum { QP_FREE = 0, QP_LOW = 1, QP_HIGH = 2 };
 
-/* After a cycle: settled when no variable's partition is violated by more than this
- * (relative to its row of the gradient, or to the box's width) */
-#define GUARDED_TOL 1e-5
 
 /* A 64-bit fingerprint of a partition, to notice a cycle. */
 static uint64_t partition_hash(const unsigned char *state, dk_index m)
@@ -109,10 +107,11 @@ dk_status bbw_box_qp(const dk_sparse *a, const double *b, double lo, double hi, 
     dk_index *map = malloc((size_t)m * sizeof *map);
     double *rhs = malloc((size_t)m * sizeof *rhs), *g = malloc((size_t)m * sizeof *g);
     double *diag = malloc((size_t)m * sizeof *diag); /* each row's scale */
-    double *viol = malloc((size_t)m * sizeof *viol);
+    double *xf = malloc((size_t)m * sizeof *xf); /* the primal method's feasible point */
+    unsigned char *keep_held = calloc((size_t)m, 1);
     uint64_t *seen = malloc((size_t)(max_iterations + 1) * sizeof *seen);
     dk_status st = DK_OK;
-    if (!state || !next || !map || !rhs || !g || !diag || !viol || !seen) {
+    if (!state || !next || !map || !rhs || !g || !diag || !xf || !keep_held || !seen) {
         st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "%s: out of memory", who);
         goto done;
     }
@@ -138,7 +137,8 @@ dk_status bbw_box_qp(const dk_sparse *a, const double *b, double lo, double hi, 
     const double xtol = 1e-9 * (hi - lo), gtol = 1e-7;
     for (dk_index i = 0; i < m; i++)
         state[i] = x[i] <= lo + xtol ? QP_LOW : x[i] >= hi - xtol ? QP_HIGH : QP_FREE;
-    int it = 0, guarded = 0, settled = 0, all_free = 1;
+    int it = 0, primal = 0, settled = 0, all_free = 1;
+    dk_index freed = -1;
     for (dk_index i = 0; i < m; i++) all_free &= state[i] == QP_FREE;
     while (it < max_iterations) {
         seen[it] = partition_hash(state, m);
@@ -148,42 +148,69 @@ dk_status bbw_box_qp(const dk_sparse *a, const double *b, double lo, double hi, 
             st = solve_partition(a, b, lo, hi, state, x, map, rhs, simplicial, err);
         it++;
         if (st != DK_OK) goto done;
+        if (primal) {
+            /* from the feasible xf towards x, the minimiser on the working set, as far as
+             * the box allows; a variable that stops the step is held where it stopped */
+            double step = 1.0;
+            dk_index block = -1;
+            for (dk_index i = 0; i < m; i++) {
+                if (state[i] != QP_FREE) continue;
+                double t = x[i] < lo ? (xf[i] - lo) / (xf[i] - x[i])
+                           : x[i] > hi ? (hi - xf[i]) / (x[i] - xf[i]) : 1.0;
+                if (t < step) step = t, block = i;
+            }
+            for (dk_index i = 0; i < m; i++) xf[i] += step * (x[i] - xf[i]);
+            if (block >= 0) {
+                /* the variable just freed stops the step at once: its multiplier was
+                 * rounding (the bilaplacian's solves carry errors of ~1e-5 of a row on
+                 * fine volumes), not a descent; it stays held from now on */
+                if (block == freed && step == 0.0) keep_held[block] = 1;
+                state[block] = x[block] < lo ? QP_LOW : QP_HIGH;
+                xf[block] = x[block] < lo ? lo : hi;
+                continue;
+            }
+            memcpy(x, xf, (size_t)m * sizeof *x);
+        }
         dk_sparse_matvec(a, x, g);
-        dk_index worst = -1, changes = 0;
-        double worst_v = 0.0;
+        dk_index changes = 0, release = -1;
+        double most = 0.0;
         for (dk_index i = 0; i < m; i++) {
             g[i] -= b[i];
-            double v = 0.0; /* how badly i's partition is violated, in gradient units */
             next[i] = state[i];
             if (state[i] == QP_FREE) {
-                if (x[i] < lo - xtol) next[i] = QP_LOW, v = (lo - x[i]) / (hi - lo);
-                else if (x[i] > hi + xtol) next[i] = QP_HIGH, v = (x[i] - hi) / (hi - lo);
-            } else if (state[i] == QP_LOW && g[i] < -gtol * row[i]) {
-                next[i] = QP_FREE, v = -g[i] / row[i];
-            } else if (state[i] == QP_HIGH && g[i] > gtol * row[i]) {
-                next[i] = QP_FREE, v = g[i] / row[i];
+                if (x[i] < lo - xtol) next[i] = QP_LOW;
+                else if (x[i] > hi + xtol) next[i] = QP_HIGH;
+            } else {
+                /* the held variable's multiplier, negative: the energy wants it inside */
+                double v = (state[i] == QP_LOW ? -g[i] : g[i]) / row[i];
+                if (v > gtol && !keep_held[i]) {
+                    next[i] = QP_FREE;
+                    if (v > most) most = v, release = i;
+                }
             }
-            viol[i] = v;
-            if (next[i] != state[i]) {
-                changes++;
-                if (v >= worst_v) worst_v = v, worst = i;
-            }
+            changes += next[i] != state[i];
         }
-        if (changes == 0 || (guarded && worst_v < GUARDED_TOL)) {
+        if (changes == 0) {
             settled = 1;
             break;
         }
-        if (!guarded) {
-            uint64_t h = partition_hash(next, m);
-            for (int k = 0; k + 1 < it; k++)
-                if (seen[k] == h) guarded = 1;
+        if (primal) { /* one variable freed at a time: the energy falls at every step */
+            state[release] = QP_FREE;
+            freed = release;
+            continue;
         }
-        if (guarded) { /* only the changes at least half as bad as the worst */
-            for (dk_index i = 0; i < m; i++)
-                if (next[i] != state[i] && viol[i] >= 0.5 * worst_v) state[i] = next[i];
-            state[worst] = next[worst];
-        } else {
+        uint64_t h = partition_hash(next, m);
+        for (int k = 0; k + 1 < it && !primal; k++)
+            primal = seen[k] == h;
+        if (!primal) {
             memcpy(state, next, (size_t)m);
+            continue;
+        }
+        /* a cycle: the primal method from the box's nearest point to x, holding the
+         * variables it puts on a bound */
+        for (dk_index i = 0; i < m; i++) {
+            xf[i] = fmin(hi, fmax(lo, x[i]));
+            state[i] = xf[i] <= lo ? QP_LOW : xf[i] >= hi ? QP_HIGH : QP_FREE;
         }
     }
     if (!settled) {
@@ -209,7 +236,8 @@ done:
     free(rhs);
     free(g);
     free(diag);
-    free(viol);
+    free(xf);
+    free(keep_held);
     free(seen);
     return st;
 }

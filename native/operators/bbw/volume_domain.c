@@ -86,7 +86,7 @@ dk_status bbw_volume_domain(const dk_mesh *mesh, const dk_bbw_handles *h, int re
     double longest = 0.0;
     for (int k = 0; k < 3; k++) longest = fmax(longest, hi[k] - lo[k]);
     if (nst == 0 || !(longest > 0.0) || !isfinite(longest)) return DK_OK;
-    const double hc = longest / resolution;
+    double hc = longest / resolution;
 
     dk_winding *wind = NULL;
     cell_grid g = {{0, 0, 0}, hc, {0, 0, 0}, NULL}, gm = g;
@@ -97,30 +97,45 @@ dk_status bbw_volume_domain(const dk_mesh *mesh, const dk_bbw_handles *h, int re
     dk_index n_tets = 0;
     dk_status st = dk_winding_create(sv, nsv, st_tris, nst, &wind, err);
     if (st != DK_OK) goto done;
+
+    /* (1) grid points and their winding numbers; the grid is centred on the box. The cost
+     * is the 3D bilaplacian's factorizations, which grow with the points inside, not with
+     * the box: a compact shape (a sphere fills half its box, the armadillo a fifth) gets
+     * coarser cells, so that about resolution^3 / 8 grid points are inside */
+    dk_index gdim[3];
+    size_t n_grid = 1, n_inside = 0;
+    const double target = (double)resolution * resolution * resolution / 8.0;
+    for (int pass = 0; pass < 2; pass++) {
+        n_grid = 1;
+        for (int k = 0; k < 3; k++) {
+            gdim[k] = (dk_index)floor((hi[k] - lo[k]) / hc) + 2;
+            g.origin[k] = 0.5 * (lo[k] + hi[k]) - 0.5 * (double)(gdim[k] - 1) * hc;
+            n_grid *= (size_t)gdim[k];
+        }
+        free(gp);
+        free(wn);
+        gp = malloc(n_grid * 3 * sizeof *gp);
+        wn = malloc(n_grid * sizeof *wn);
+        if (!gp || !wn) goto oom;
+        for (size_t i = 0; i < n_grid; i++) {
+            size_t x = i % (size_t)gdim[0], y = (i / (size_t)gdim[0]) % (size_t)gdim[1],
+                   z = i / ((size_t)gdim[0] * (size_t)gdim[1]);
+            gp[3 * i] = g.origin[0] + (double)x * hc;
+            gp[3 * i + 1] = g.origin[1] + (double)y * hc;
+            gp[3 * i + 2] = g.origin[2] + (double)z * hc;
+        }
+        dk_winding_number(wind, gp, (dk_index)n_grid, wn);
+        n_inside = 0;
+        for (size_t i = 0; i < n_grid; i++) n_inside += wn[i] >= 0.5;
+        if (pass == 0 && (double)n_inside > 1.25 * target)
+            hc *= cbrt((double)n_inside / target);
+        else
+            break;
+    }
+    g.h = hc;
+    d->cell = hc;
     st = bbw_sample_handles(h, 0.5 * hc, &d->samples, &d->n_samples, err);
     if (st != DK_OK) goto done;
-
-    /* (1) grid points and their winding numbers; the grid is centred on the box */
-    dk_index gdim[3];
-    size_t n_grid = 1;
-    for (int k = 0; k < 3; k++) {
-        gdim[k] = (dk_index)floor((hi[k] - lo[k]) / hc) + 2;
-        g.origin[k] = 0.5 * (lo[k] + hi[k]) - 0.5 * (double)(gdim[k] - 1) * hc;
-        n_grid *= (size_t)gdim[k];
-    }
-    gp = malloc(n_grid * 3 * sizeof *gp);
-    wn = malloc(n_grid * sizeof *wn);
-    if (!gp || !wn) goto oom;
-    for (size_t i = 0; i < n_grid; i++) {
-        size_t x = i % (size_t)gdim[0], y = (i / (size_t)gdim[0]) % (size_t)gdim[1],
-               z = i / ((size_t)gdim[0] * (size_t)gdim[1]);
-        gp[3 * i] = g.origin[0] + (double)x * hc;
-        gp[3 * i + 1] = g.origin[1] + (double)y * hc;
-        gp[3 * i + 2] = g.origin[2] + (double)z * hc;
-    }
-    dk_winding_number(wind, gp, (dk_index)n_grid, wn);
-    size_t n_inside = 0;
-    for (size_t i = 0; i < n_grid; i++) n_inside += wn[i] >= 0.5;
     if (n_inside == 0) goto done; /* no volume: the caller takes the surface */
     *has_volume = 1;
 
