@@ -70,7 +70,7 @@ typedef struct dk_bbw_options {
     dk_bbw_domain domain;          /**< default AUTO                                      */
     int resolution;                /**< VOLUME: grid cells along the shape's longest side;
                                         default 24, in [4, 256]                           */
-    int max_iterations;            /**< active-set iterations per handle; default 100    */
+    int max_iterations;            /**< active-set iterations per handle; default 200    */
     dk_phase_progress_fn progress; /**< phases "domain", "operator", "weights"; NULL none */
     void *progress_user;
 } dk_bbw_options;

@@ -25,7 +25,7 @@ static int read_handles(PyObject *obj, Py_ssize_t cols, const char *name, dk_py_
 
 PyDoc_STRVAR(bbw_doc,
              "bounded_biharmonic_weights(mesh, points=None, bones=None, cage=None,\n"
-             "                           domain='auto', resolution=24, max_iterations=100,\n"
+             "                           domain='auto', resolution=24, max_iterations=200,\n"
              "                           report=False, progress=None) -> weights\n\n"
              "Bounded biharmonic weights (Jacobson, Baran, Popovic, Sorkine 2011): one\n"
              "smooth weight per vertex and handle, in [0, 1], 1 on its handle and 0 on the\n"

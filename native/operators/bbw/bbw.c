@@ -29,7 +29,7 @@ void dk_bbw_default_options(dk_bbw_options *o)
     memset(o, 0, sizeof *o);
     o->domain = DK_BBW_AUTO;
     o->resolution = 24;
-    o->max_iterations = 100;
+    o->max_iterations = 200;
 }
 
 dk_index dk_bbw_handle_count(const dk_bbw_handles *h)

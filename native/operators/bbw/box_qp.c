@@ -14,8 +14,9 @@
  * partition other than the last one switches it to the primal active-set method, which
  * cannot cycle: from the box's nearest point to the current iterate, each iteration moves
  * towards the minimiser on the working set as far as the box allows (holding the variable
- * that stops it), or, when it gets there, frees the one held variable whose multiplier is
- * most negative; the energy falls at every step. Thresholds are relative:
+ * that stops it), or, when it gets there, frees the held variables whose multipliers are
+ * negative; the energy falls at every step (a variable freed that stops the very next step
+ * at once had a multiplier of rounding and stays held). Thresholds are relative:
  * a variable past a bound by 1e-9 of the box, a multiplier negative by 1e-7 of its row of
  * the gradient (sum_j |A_ij| (hi - lo) + |b_i|).
  */
@@ -108,10 +109,10 @@ dk_status bbw_box_qp(const dk_sparse *a, const double *b, double lo, double hi, 
     double *rhs = malloc((size_t)m * sizeof *rhs), *g = malloc((size_t)m * sizeof *g);
     double *diag = malloc((size_t)m * sizeof *diag); /* each row's scale */
     double *xf = malloc((size_t)m * sizeof *xf); /* the primal method's feasible point */
-    unsigned char *keep_held = calloc((size_t)m, 1);
+    unsigned char *keep_held = calloc((size_t)m, 1), *just_freed = calloc((size_t)m, 1);
     uint64_t *seen = malloc((size_t)(max_iterations + 1) * sizeof *seen);
     dk_status st = DK_OK;
-    if (!state || !next || !map || !rhs || !g || !diag || !xf || !keep_held || !seen) {
+    if (!state || !next || !map || !rhs || !g || !diag || !xf || !keep_held || !just_freed || !seen) {
         st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "%s: out of memory", who);
         goto done;
     }
@@ -138,7 +139,6 @@ dk_status bbw_box_qp(const dk_sparse *a, const double *b, double lo, double hi, 
     for (dk_index i = 0; i < m; i++)
         state[i] = x[i] <= lo + xtol ? QP_LOW : x[i] >= hi - xtol ? QP_HIGH : QP_FREE;
     int it = 0, primal = 0, settled = 0, all_free = 1;
-    dk_index freed = -1;
     for (dk_index i = 0; i < m; i++) all_free &= state[i] == QP_FREE;
     while (it < max_iterations) {
         seen[it] = partition_hash(state, m);
@@ -161,19 +161,20 @@ dk_status bbw_box_qp(const dk_sparse *a, const double *b, double lo, double hi, 
             }
             for (dk_index i = 0; i < m; i++) xf[i] += step * (x[i] - xf[i]);
             if (block >= 0) {
-                /* the variable just freed stops the step at once: its multiplier was
+                /* a variable just freed that stops the step at once: its multiplier was
                  * rounding (the bilaplacian's solves carry errors of ~1e-5 of a row on
                  * fine volumes), not a descent; it stays held from now on */
-                if (block == freed && step == 0.0) keep_held[block] = 1;
+                if (step == 0.0 && just_freed[block]) keep_held[block] = 1;
                 state[block] = x[block] < lo ? QP_LOW : QP_HIGH;
                 xf[block] = x[block] < lo ? lo : hi;
+                memset(just_freed, 0, (size_t)m);
                 continue;
             }
+            memset(just_freed, 0, (size_t)m);
             memcpy(x, xf, (size_t)m * sizeof *x);
         }
         dk_sparse_matvec(a, x, g);
-        dk_index changes = 0, release = -1;
-        double most = 0.0;
+        dk_index changes = 0;
         for (dk_index i = 0; i < m; i++) {
             g[i] -= b[i];
             next[i] = state[i];
@@ -183,10 +184,7 @@ dk_status bbw_box_qp(const dk_sparse *a, const double *b, double lo, double hi, 
             } else {
                 /* the held variable's multiplier, negative: the energy wants it inside */
                 double v = (state[i] == QP_LOW ? -g[i] : g[i]) / row[i];
-                if (v > gtol && !keep_held[i]) {
-                    next[i] = QP_FREE;
-                    if (v > most) most = v, release = i;
-                }
+                if (v > gtol && !keep_held[i]) next[i] = QP_FREE;
             }
             changes += next[i] != state[i];
         }
@@ -194,9 +192,13 @@ dk_status bbw_box_qp(const dk_sparse *a, const double *b, double lo, double hi, 
             settled = 1;
             break;
         }
-        if (primal) { /* one variable freed at a time: the energy falls at every step */
-            state[release] = QP_FREE;
-            freed = release;
+        if (primal) { /* the held variables with negative multipliers freed: the step
+                       * towards the larger face's minimiser lowers the energy */
+            for (dk_index i = 0; i < m; i++)
+                if (state[i] != QP_FREE && next[i] == QP_FREE) {
+                    state[i] = QP_FREE;
+                    just_freed[i] = 1;
+                }
             continue;
         }
         uint64_t h = partition_hash(next, m);
@@ -238,6 +240,7 @@ done:
     free(diag);
     free(xf);
     free(keep_held);
+    free(just_freed);
     free(seen);
     return st;
 }
