@@ -39,9 +39,9 @@ def main():
     points = V[np.random.default_rng(1).choice(len(V), 10, replace=False)]
     bones = chain(V, 10)
     cases = [("points", "surface", 32, dict(points=points))]
-    for r in (16, 32, 48):
+    for r in (16, 24, 32, 48):
         cases.append(("points", "volume", r, dict(points=points)))
-    for r in (16, 32, 48):
+    for r in (16, 24, 32, 48):
         cases.append(("bones", "volume", r, dict(bones=bones)))
     print("armadillo, %d vertices, 10 handles" % len(V))
     print("| handles | domain | resolution | seconds | domain vertices | iterations (max, all) "

@@ -355,6 +355,24 @@ def armature_in_edit_mode(name="Rig"):
     return arm, ao
 
 
+def tube(n_ring=16, n_len=25, radius=0.2, length=2.0):
+    """A closed tube along x (fans close its ends)."""
+    th = np.linspace(0, 2 * np.pi, n_ring, endpoint=False)
+    xs = np.linspace(-length / 2, length / 2, n_len)
+    V = [(x, radius * np.cos(t), radius * np.sin(t)) for x in xs for t in th]
+    F = []
+    for i in range(n_len - 1):
+        for j in range(n_ring):
+            a, b = i * n_ring + j, i * n_ring + (j + 1) % n_ring
+            F += [[a, b, a + n_ring], [b, b + n_ring, a + n_ring]]
+    c0, c1 = len(V), len(V) + 1
+    V += [(xs[0], 0, 0), (xs[-1], 0, 0)]
+    last = (n_len - 1) * n_ring
+    for j in range(n_ring):
+        F += [[c0, (j + 1) % n_ring, j], [c1, last + j, last + (j + 1) % n_ring]]
+    return np.array(V), np.array(F)
+
+
 def triangle_mesh_object(V, F, name="scan"):
     """A new object of the triangles F (m x 3) over the vertices V (n x 3), linked to the
     scene, active and selected (the benchmarks' scanned meshes)."""

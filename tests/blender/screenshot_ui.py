@@ -22,7 +22,7 @@ PNG3 = os.path.join(OUT, "viewport_show_graph.png")
 # the panel in each state an artist meets (DEFORMKIT_SHOT=states, a third run): one image
 # each, kept in docs/images after being looked at
 STATES = ("unbound", "bound", "bound_warning", "rebinding", "baked", "overlap_error", "handle_target",
-          "sidebar", "lattice", "cage", "cage_view")
+          "sidebar", "lattice", "cage", "cage_view", "skinning_view")
 STATE_PNGS = [os.path.join(OUT, "panel_%s.png" % s) for s in STATES]
 
 try:
@@ -326,6 +326,35 @@ def in_blender():
         r3d.view_location = Vector((0.0, 0.0, 0.15))
         r3d.view_distance = 3.2
         yield "cage_view"
+        # a tube on a two-bone rig, its weights computed (Compute Weights), bound, the lower
+        # bone bent: the elbow should bend smoothly, the ends stay round
+        S.reset_scene()
+        V, F = S.tube(n_len=41)
+        obj = S.triangle_mesh_object(V, F, name="Tube")
+        arm, ao = S.armature_in_edit_mode("Rig")
+        up = arm.edit_bones.new("upper")
+        up.head, up.tail = (-1.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+        lo = arm.edit_bones.new("lower")
+        lo.head, lo.tail = (0.0, 0.0, 0.0), (1.0, 0.0, 0.0)
+        lo.parent, lo.use_connect = up, True
+        bpy.ops.object.mode_set(mode="OBJECT")
+        bpy.context.view_layer.objects.active = obj
+        with bpy.context.temp_override(**S.ui_context()):
+            bpy.ops.deformkit.add_deformer(method="SKINNING")
+            d = obj.deformkit.deformers[0]
+            d.control_object = ao
+            bpy.ops.deformkit.compute_weights()
+            bpy.ops.deformkit.bind()
+        pb = ao.pose.bones["lower"]
+        pb.rotation_mode = "XYZ"
+        pb.rotation_euler = (0.0, 0.0, 1.0)
+        bpy.context.view_layer.update()
+        R.check("the skinning deformer bound on computed weights",
+                d.bound and not d.status_is_error and len(obj.vertex_groups) == 2, d.status)
+        r3d.view_rotation = Euler((0.0, 0.0, 0.0)).to_quaternion()
+        r3d.view_location = Vector((0.2, 0.4, 0.0))
+        r3d.view_distance = 4.0
+        yield "skinning_view"
 
     sidebar_drawn = []
     from addon import ui

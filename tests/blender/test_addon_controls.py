@@ -502,24 +502,6 @@ def test_skinning_equals_blenders_armature():
                 err < 1e-4 and np.abs(want - rest).max() > 0.2, d.status)
 
 
-def tube(n_ring=16, n_len=25, radius=0.2, length=2.0):
-    """A closed tube along x (fans close its ends)."""
-    th = np.linspace(0, 2 * np.pi, n_ring, endpoint=False)
-    xs = np.linspace(-length / 2, length / 2, n_len)
-    V = [(x, radius * np.cos(t), radius * np.sin(t)) for x in xs for t in th]
-    F = []
-    for i in range(n_len - 1):
-        for j in range(n_ring):
-            a, b = i * n_ring + j, i * n_ring + (j + 1) % n_ring
-            F += [[a, b, a + n_ring], [b, b + n_ring, a + n_ring]]
-    c0, c1 = len(V), len(V) + 1
-    V += [(xs[0], 0, 0), (xs[-1], 0, 0)]
-    last = (n_len - 1) * n_ring
-    for j in range(n_ring):
-        F += [[c0, (j + 1) % n_ring, j], [c1, last + j, last + (j + 1) % n_ring]]
-    return np.array(V), np.array(F)
-
-
 def test_compute_weights():
     """Compute Weights writes bounded biharmonic weights of the armature's deforming bones
     into groups of their names (the native function's, limited to the influences), which the
@@ -528,7 +510,7 @@ def test_compute_weights():
     import deformkit as dk
     from addon import compute_weights as cw
     S.reset_scene()
-    V, F = tube()
+    V, F = S.tube()
     obj = S.triangle_mesh_object(V, F, name="Tube")
     obj.location = (0.3, -0.1, 0.2)
     bpy.ops.deformkit.add_deformer(method="SKINNING")

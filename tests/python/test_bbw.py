@@ -103,6 +103,15 @@ def test_a_bone_holds_its_whole_segment_and_joints_are_shared():
     assert np.all(np.abs(W[mid, 0] - 0.5) < 0.1)
 
 
+def test_a_mesh_facing_inwards_still_has_its_volume():
+    V, F = capped_cylinder()
+    pts = np.array([[-0.9, 0, 0], [0.3, 0, 0]])
+    W, rep = dk.bounded_biharmonic_weights(dk.Mesh(V, F), points=pts, report=True)
+    Wi, repi = dk.bounded_biharmonic_weights(dk.Mesh(V, F[:, ::-1]), points=pts, report=True)
+    assert rep["domain"] == repi["domain"] == "volume"
+    assert np.abs(Wi - W).max() < 1e-9
+
+
 def test_same_weights_at_any_scale_and_place():
     V, F = capped_cylinder()
     pts = np.array([[-0.9, 0, 0], [0.3, 0, 0]])

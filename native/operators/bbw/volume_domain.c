@@ -125,6 +125,9 @@ dk_status bbw_volume_domain(const dk_mesh *mesh, const dk_bbw_handles *h, int re
             gp[3 * i + 2] = g.origin[2] + (double)z * hc;
         }
         dk_winding_number(wind, gp, (dk_index)n_grid, wn);
+        /* |w|: a mesh whose triangles all face inwards (the horse of ../shared/meshes) winds
+         * -1 about its inside */
+        for (size_t i = 0; i < n_grid; i++) wn[i] = fabs(wn[i]);
         n_inside = 0;
         for (size_t i = 0; i < n_grid; i++) n_inside += wn[i] >= 0.5;
         if (pass == 0 && (double)n_inside > 1.25 * target)
@@ -204,6 +207,7 @@ dk_status bbw_volume_domain(const dk_mesh *mesh, const dk_bbw_handles *h, int re
             cent[3 * (size_t)t + k] = 0.25 * s;
         }
     dk_winding_number(wind, cent, n_tets, wn);
+    for (dk_index t = 0; t < n_tets; t++) wn[t] = fabs(wn[t]);
     dk_index n_keep = 0;
     const double min_vol6 = 1e-9 * hc * hc * hc;
     for (dk_index i = 0; i < np; i++) vmap[i] = -1;
