@@ -331,14 +331,16 @@ def in_blender():
         S.reset_scene()
         V, F = S.tube(n_len=41)
         obj = S.triangle_mesh_object(V, F, name="Tube")
-        arm, ao = S.armature_in_edit_mode("Rig")
-        up = arm.edit_bones.new("upper")
-        up.head, up.tail = (-1.0, 0.0, 0.0), (0.0, 0.0, 0.0)
-        lo = arm.edit_bones.new("lower")
-        lo.head, lo.tail = (0.0, 0.0, 0.0), (1.0, 0.0, 0.0)
-        lo.parent, lo.use_connect = up, True
-        bpy.ops.object.mode_set(mode="OBJECT")
+        with bpy.context.temp_override(**S.ui_context()):
+            arm, ao = S.armature_in_edit_mode("Rig")
+            up = arm.edit_bones.new("upper")
+            up.head, up.tail = (-1.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+            lo = arm.edit_bones.new("lower")
+            lo.head, lo.tail = (0.0, 0.0, 0.0), (1.0, 0.0, 0.0)
+            lo.parent, lo.use_connect = up, True
+            bpy.ops.object.mode_set(mode="OBJECT")
         bpy.context.view_layer.objects.active = obj
+        obj.select_set(True)
         with bpy.context.temp_override(**S.ui_context()):
             bpy.ops.deformkit.add_deformer(method="SKINNING")
             d = obj.deformkit.deformers[0]
@@ -351,9 +353,16 @@ def in_blender():
         bpy.context.view_layer.update()
         R.check("the skinning deformer bound on computed weights",
                 d.bound and not d.status_is_error and len(obj.vertex_groups) == 2, d.status)
-        r3d.view_rotation = Euler((0.0, 0.0, 0.0)).to_quaternion()
+        win = bpy.context.window_manager.windows[0]  # the scene's reset made a new screen
+        area = max(win.screen.areas, key=lambda a: a.width * a.height)
+        area.type = "VIEW_3D"
+        sp = next(x for x in area.spaces if x.type == "VIEW_3D")
+        sp.shading.type = "SOLID"
+        r3d = sp.region_3d
+        r3d.view_perspective = "ORTHO"
+        r3d.view_rotation = Euler((0.0, 0.0, 0.0)).to_quaternion()  # from the top
         r3d.view_location = Vector((0.2, 0.4, 0.0))
-        r3d.view_distance = 4.0
+        r3d.view_distance = 3.0
         yield "skinning_view"
 
     sidebar_drawn = []
