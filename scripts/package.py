@@ -50,12 +50,16 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SMOKE = os.path.join(ROOT, "tests", "wheel", "smoke.py")
 
 # Libraries every Linux system that runs Blender has, never bundled: glibc's parts (the loader,
-# libc, libm, ...) and libgcc_s (GCC's unwinder; two copies in one process is worse than
-# relying on the system's). Everything else the module needs goes into the zip.
+# libc, libm, ...), libgcc_s (GCC's unwinder; two copies in one process is worse than
+# relying on the system's) and libstdc++ (GCC's C++ runtime, which TetGen's library needs:
+# part of every desktop Linux, and the manylinux policy's too; the package step prints the
+# GLIBCXX version the bundle needs beside glibc's). Everything else the module needs goes
+# into the zip.
 SYSTEM_SONAMES = {
     "linux-vdso.so.1", "ld-linux-x86-64.so.2", "ld-linux-aarch64.so.1", "libc.so.6",
     "libm.so.6", "libmvec.so.1", "libpthread.so.0", "libdl.so.2", "librt.so.1",
     "libutil.so.1", "libresolv.so.2", "libanl.so.1", "libnsl.so.1", "libgcc_s.so.1",
+    "libstdc++.so.6",
 }
 
 # Values Blender 4.2's manifest validation accepts (our own subset of its rules, checked even
@@ -226,13 +230,13 @@ def ldd(path, env=None):
     return deps
 
 
-def glibc_needed(paths):
-    """Highest GLIBC_x.y symbol version the files require."""
-    best = (0, 0)
+def glibc_needed(paths, name="GLIBC"):
+    """Highest <name>_x.y[.z] symbol version the files require (GLIBC, GLIBCXX)."""
+    best = (0,)
     for p in paths:
-        for a, b in re.findall(r"GLIBC_(\d+)\.(\d+)", run(["readelf", "-VW", p])):
-            best = max(best, (int(a), int(b)))
-    return "%d.%d" % best
+        for v in re.findall(r"\b%s_(\d+(?:\.\d+)+)" % name, run(["readelf", "-VW", p])):
+            best = max(best, tuple(int(x) for x in v.split(".")))
+    return ".".join(str(x) for x in best)
 
 
 def debian_package(path):
@@ -590,9 +594,10 @@ def main(argv=None):
                         for n in libraries)
             log("%s: %d bundled libraries (%.1f MB): %s" % (
                 os.path.basename(wheel), len(libraries), total / 1e6, ", ".join(libraries)))
-            log("the bundle needs glibc >= %s" % glibc_needed(
-                [os.path.join(native_dir, "deformkit", "_native.abi3.so")]
-                + [os.path.join(native_dir, "deformkit.libs", n) for n in libraries]))
+            closure = ([os.path.join(native_dir, "deformkit", "_native.abi3.so")]
+                       + [os.path.join(native_dir, "deformkit.libs", n) for n in libraries])
+            log("the bundle needs glibc >= %s, libstdc++ GLIBCXX >= %s"
+                % (glibc_needed(closure), glibc_needed(closure, "GLIBCXX")))
             check_module(native_dir, sources, args.python)
             files = addon_files()
             native = [(rel, p) for rel, p in tree_files(native_dir)
