@@ -39,6 +39,13 @@ if HERE not in sys.path:
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
+# the test shapes the Python suites use (tests/python/shapes.py, plain numpy), by its path:
+# that folder's test modules stay off sys.path
+_spec = importlib.util.spec_from_file_location(
+    "dk_test_shapes", os.path.join(ROOT, "tests", "python", "shapes.py"))
+shapes = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(shapes)
+
 
 # Blender as a Python module (the `bpy` wheels, run as `python FILE`) rather than the blender
 # program: no --python argument, and no binary path.
@@ -278,13 +285,7 @@ def rigged_arm(nodes, method="EMBEDDED", reset=True):
     w = np.clip((rest[:, 0] + 0.2) / 0.4, 0.0, 1.0)   # blend across the elbow at x = 0
     group(obj, "lower", range(len(rest)), w)
     group(obj, "upper", range(len(rest)), 1.0 - w)
-    arm, ao = armature_in_edit_mode("Rig")
-    up = arm.edit_bones.new("upper")
-    up.head, up.tail = (-1.0, 0, 0), (0.0, 0, 0)
-    lo = arm.edit_bones.new("lower")
-    lo.head, lo.tail = (0.0, 0, 0), (1.0, 0, 0)
-    lo.parent, lo.use_connect = up, True
-    bpy.ops.object.mode_set(mode="OBJECT")
+    arm, ao = two_bone_rig("Rig")
     for name, keys in (("upper", ((1, (0, 0, 0)), (10, (0, 0, 0.25)), (20, (0.2, 0, 0.1)))),
                        ("lower", ((1, (0, 0, 0)), (10, (0.5, 0, 0)), (20, (0.3, 0.2, -0.6))))):
         pb = ao.pose.bones[name]
@@ -355,22 +356,22 @@ def armature_in_edit_mode(name="Rig"):
     return arm, ao
 
 
-def tube(n_ring=16, n_len=25, radius=0.2, length=2.0):
-    """A closed tube along x (fans close its ends)."""
-    th = np.linspace(0, 2 * np.pi, n_ring, endpoint=False)
-    xs = np.linspace(-length / 2, length / 2, n_len)
-    V = [(x, radius * np.cos(t), radius * np.sin(t)) for x in xs for t in th]
-    F = []
-    for i in range(n_len - 1):
-        for j in range(n_ring):
-            a, b = i * n_ring + j, i * n_ring + (j + 1) % n_ring
-            F += [[a, b, a + n_ring], [b, b + n_ring, a + n_ring]]
-    c0, c1 = len(V), len(V) + 1
-    V += [(xs[0], 0, 0), (xs[-1], 0, 0)]
-    last = (n_len - 1) * n_ring
-    for j in range(n_ring):
-        F += [[c0, (j + 1) % n_ring, j], [c1, last + j, last + (j + 1) % n_ring]]
-    return np.array(V), np.array(F)
+def tube(n_len=25):
+    """A closed tube along x from -1 to 1, radius 0.2 (tests/python/shapes.py)."""
+    return shapes.capped_tube(n_len=n_len)
+
+
+def two_bone_rig(name="Rig"):
+    """An armature of two connected bones along x, 'upper' from -1 to 0 and 'lower' from 0
+    to 1, back in Object Mode: (armature data, object)."""
+    arm, ao = armature_in_edit_mode(name)
+    up = arm.edit_bones.new("upper")
+    up.head, up.tail = (-1.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+    lo = arm.edit_bones.new("lower")
+    lo.head, lo.tail = (0.0, 0.0, 0.0), (1.0, 0.0, 0.0)
+    lo.parent, lo.use_connect = up, True
+    bpy.ops.object.mode_set(mode="OBJECT")
+    return arm, ao
 
 
 def triangle_mesh_object(V, F, name="scan"):

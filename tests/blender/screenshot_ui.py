@@ -332,13 +332,7 @@ def in_blender():
         V, F = S.tube(n_len=41)
         obj = S.triangle_mesh_object(V, F, name="Tube")
         with bpy.context.temp_override(**S.ui_context()):
-            arm, ao = S.armature_in_edit_mode("Rig")
-            up = arm.edit_bones.new("upper")
-            up.head, up.tail = (-1.0, 0.0, 0.0), (0.0, 0.0, 0.0)
-            lo = arm.edit_bones.new("lower")
-            lo.head, lo.tail = (0.0, 0.0, 0.0), (1.0, 0.0, 0.0)
-            lo.parent, lo.use_connect = up, True
-            bpy.ops.object.mode_set(mode="OBJECT")
+            arm, ao = S.two_bone_rig("Rig")
         bpy.context.view_layer.objects.active = obj
         obj.select_set(True)
         with bpy.context.temp_override(**S.ui_context()):

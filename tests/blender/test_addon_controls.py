@@ -522,14 +522,8 @@ def test_compute_weights():
         said = str(e)
     R.check("no armature: said, nothing written", "no armature" in said
             and len(obj.vertex_groups) == 0, said)
-    arm, ao = S.armature_in_edit_mode("Rig")
+    arm, ao = S.two_bone_rig("Rig")
     ao.location = obj.location
-    up = arm.edit_bones.new("upper")
-    up.head, up.tail = (-1.0, 0.0, 0.0), (0.0, 0.0, 0.0)
-    lo = arm.edit_bones.new("lower")
-    lo.head, lo.tail = (0.0, 0.0, 0.0), (1.0, 0.0, 0.0)
-    lo.parent, lo.use_connect = up, True
-    bpy.ops.object.mode_set(mode="OBJECT")
     bpy.context.view_layer.objects.active = obj
     d.control_object = ao
     bpy.ops.deformkit.compute_weights(influences=2)
