@@ -193,6 +193,14 @@ dk_status dk_skinning_bind(const dk_mesh *mesh, const dk_constraint_desc *constr
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "Skinning: blend %d is not linear (0) or dual quaternion (1)",
                             (int)opt.blend);
+    if (opt.computed.domain < DK_BBW_AUTO || opt.computed.domain > DK_BBW_SURFACE ||
+        opt.computed.resolution < 4 || opt.computed.resolution > 256 ||
+        opt.computed.max_iterations < 1)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "Skinning: the computed weights' options are out of range (domain "
+                            "%d in [0, 2], resolution %d in [4, 256], max_iterations %d >= 1)",
+                            (int)opt.computed.domain, opt.computed.resolution,
+                            opt.computed.max_iterations);
     dk_status st = take_control(constraints, mesh->n_vertices, err);
     if (st != DK_OK)
         return st;
@@ -392,6 +400,11 @@ dk_status dk_skinning_estimate_memory(const dk_mesh *mesh, const dk_skinning_opt
 static const dk_option_desc skinning_fields[] = {
     {"blend", DK_OPTION_ENUM, offsetof(dk_skinning_options, blend), 0, DK_SKINNING_LINEAR,
      DK_SKINNING_DUAL_QUATERNION, DK_SKINNING_LINEAR, DK_SKINNING_DUAL_QUATERNION, 0},
+    /* the computed weights' (bones given as segments) */
+    {"domain", DK_OPTION_ENUM, offsetof(dk_skinning_options, computed.domain), 0, DK_BBW_AUTO,
+     DK_BBW_SURFACE, DK_BBW_AUTO, DK_BBW_SURFACE, 0},
+    {"resolution", DK_OPTION_INT, offsetof(dk_skinning_options, computed.resolution), 0, 4, 256,
+     24, 12, 0},
 };
 
 DK_METHOD_OPS(dk_skinning_ops, "Skinning", DK_METHOD_EDITS_INPUT, DK_CONTROL_BONES,
