@@ -213,6 +213,12 @@ dk_status dk_fit_skinning_weights(const double *rest, dk_index n, const double *
  *  fast enough to call per vertex per ARAP iteration. Returns trace(R^T A). */
 double dk_closest_rotation(const double a[9], double r[9]);
 
+/** The inverse of the affine 4x4 `m` (row-major; its bottom row is taken as 0 0 0 1) into
+ *  `inv` (16 doubles, bottom row 0 0 0 1). Returns 0, or -1 when the linear part is
+ *  singular or not finite (inv then unspecified). Skinning's bones and the fit of their
+ *  weights invert rest frames with it. */
+int dk_affine_inverse(const double *m, double *inv);
+
 /** The cofactor matrix c of the 3x3 matrix x (both row-major, 9 doubles; c = det(x) x^-T,
  *  so x^-1 = c^T / det(x)). Returns det(x). Allocation-free; x and c must not overlap. */
 double dk_mat3_cofactor(const double x[9], double c[9]);

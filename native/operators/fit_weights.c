@@ -18,6 +18,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include <lapacke.h>
+
 #include "dk_operators.h"
 #include "dk_parallel.h"
 
@@ -30,43 +32,10 @@ typedef struct fit_pass {
     char *scratch[2];
 } fit_pass;
 
-/* Solves the k x k system (row-major) by Gaussian elimination with partial pivoting;
- * -1 when singular. */
-static int solve_dense(double *a, double *b, int k)
-{
-    for (int c = 0; c < k; c++) {
-        int p = c;
-        for (int r = c + 1; r < k; r++)
-            if (fabs(a[r * k + c]) > fabs(a[p * k + c])) p = r;
-        if (!(fabs(a[p * k + c]) > 0.0)) return -1;
-        if (p != c) {
-            for (int j = 0; j < k; j++) {
-                double t = a[c * k + j];
-                a[c * k + j] = a[p * k + j];
-                a[p * k + j] = t;
-            }
-            double t = b[c];
-            b[c] = b[p];
-            b[p] = t;
-        }
-        for (int r = c + 1; r < k; r++) {
-            double f = a[r * k + c] / a[c * k + c];
-            if (f == 0.0) continue;
-            for (int j = c; j < k; j++) a[r * k + j] -= f * a[c * k + j];
-            b[r] -= f * b[c];
-        }
-    }
-    for (int c = k - 1; c >= 0; c--) {
-        for (int j = c + 1; j < k; j++) b[c] -= a[c * k + j] * b[j];
-        b[c] /= a[c * k + c];
-    }
-    return 0;
-}
-
 /* The minimiser over the free set F (f of them) of 1/2 z^T H z - c^T z with sum z = 1: the
  * KKT system [H_FF 1; 1^T 0] [z; mu] = [c_F; 1]. */
 static int free_solve(const double *H, const double *c, int nb, const int *F, int f, double *z,
-                      double *kkt)
+                      double *kkt, lapack_int *pivots)
 {
     const int k = f + 1;
     for (int r = 0; r < f; r++) {
@@ -77,7 +46,9 @@ static int free_solve(const double *H, const double *c, int nb, const int *F, in
     }
     kkt[f * k + f] = 0.0;
     z[f] = 1.0;
-    return solve_dense(kkt, z, k);
+    /* symmetric: its layout does not matter; LU with partial pivoting (the zero corner
+     * rules Cholesky out), the _work form allocates nothing */
+    return LAPACKE_dgesv_work(LAPACK_COL_MAJOR, k, 1, kkt, k, pivots, z, k) == 0 ? 0 : -1;
 }
 
 static void fit_range(void *ctx, dk_index begin, dk_index end, int part)
@@ -90,7 +61,8 @@ static void fit_range(void *ctx, dk_index begin, dk_index end, int part)
     double *c = H + (size_t)nb * (size_t)nb;          /* nb                                */
     double *w = c + nb, *g = w + nb, *z = g + nb;     /* nb, nb, nb + 1                    */
     double *kkt = z + nb + 1;                         /* (nb + 1)^2                        */
-    int *F = (int *)(kkt + (size_t)(nb + 1) * (size_t)(nb + 1));
+    lapack_int *pivots = (lapack_int *)(kkt + (size_t)(nb + 1) * (size_t)(nb + 1));
+    int *F = (int *)(pivots + nb + 1);
     unsigned char *in = (unsigned char *)(F + nb);
     for (dk_index v = begin; v < end; v++) {
         const double *q = p->rest + 3 * (size_t)v;
@@ -138,7 +110,7 @@ static void fit_range(void *ctx, dk_index begin, dk_index end, int part)
         F[0] = best;
         const double tol = 1e-12 * (mean > 0.0 ? mean : 1.0) + 1e-14 * sqrt(xx * mean);
         for (; it < 4 * nb + 20; it++) {
-            if (free_solve(H, c, nb, F, f, z, kkt) != 0) {
+            if (free_solve(H, c, nb, F, f, z, kkt, pivots) != 0) {
                 p->failed[part] = 1;
                 return;
             }
@@ -219,21 +191,13 @@ dk_status dk_fit_skinning_weights(const double *rest, dk_index n, const double *
     if (!motion) return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "%s: out of memory", who);
     for (size_t j = 0; j < nb; j++) {
         const double *B = rest_frames + 16 * j;
-        double lin[9], cof[9];
-        for (int r = 0; r < 3; r++)
-            for (int k = 0; k < 3; k++) lin[3 * r + k] = B[4 * r + k];
+        double inv[16]; /* B^-1 */
         int bad = !(B[12] == 0.0 && B[13] == 0.0 && B[14] == 0.0 && B[15] == 1.0);
         for (int k = 0; k < 16; k++) bad |= !isfinite(B[k]);
-        double det = bad ? 0.0 : dk_mat3_cofactor(lin, cof);
-        if (!(fabs(det) > 0.0) || !isfinite(det)) {
+        if (bad || dk_affine_inverse(B, inv) != 0) {
             free(motion);
             return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "%s: bone %zu's rest frame is not "
                                 "an invertible affine frame", who, j);
-        }
-        double inv[12]; /* B^-1, rows 0..2 */
-        for (int r = 0; r < 3; r++) {
-            for (int k = 0; k < 3; k++) inv[4 * r + k] = cof[3 * k + r] / det;
-            inv[4 * r + 3] = -(inv[4 * r] * B[3] + inv[4 * r + 1] * B[7] + inv[4 * r + 2] * B[11]);
         }
         for (size_t s = 0; s < np; s++) {
             const double *T = pose_frames + 16 * (s * nb + j);
@@ -252,7 +216,7 @@ dk_status dk_fit_skinning_weights(const double *rest, dk_index n, const double *
     }
     /* per part: A (3 np x nb), H, c, w, g, z, kkt, F, in */
     size_t bytes = (3 * np * nb + nb * nb + 4 * nb + 1 + (nb + 1) * (nb + 1)) * sizeof(double) +
-                   nb * sizeof(int) + nb + 16;
+                   (nb + 1) * sizeof(lapack_int) + nb * sizeof(int) + nb + 16;
     fit_pass pass = {.n = n, .nb = n_bones, .np = n_poses, .rest = rest, .motion = motion,
                      .x = pose_positions, .w = weights};
     int iters[2] = {0, 0};

@@ -36,6 +36,7 @@
  * fast path, ~0.75 us on the Jacobi fallback.
  */
 #include <math.h>
+#include <string.h>
 
 #include "dk_operators.h"
 
@@ -133,6 +134,27 @@ double dk_mat3_cofactor(const double x[9], double c[9])
     c[7] = x[2] * x[3] - x[0] * x[5];
     c[8] = x[0] * x[4] - x[1] * x[3];
     return x[0] * c[0] + x[1] * c[1] + x[2] * c[2];
+}
+
+int dk_affine_inverse(const double *m, double *inv)
+{
+    const double a = m[0], b = m[1], c = m[2], d = m[4], e = m[5], f = m[6], g = m[8],
+                 h = m[9], i = m[10];
+    const double A = e * i - f * h, B = -(d * i - f * g), C = d * h - e * g;
+    const double det = a * A + b * B + c * C;
+    if (!(fabs(det) > 0.0) || !isfinite(det))
+        return -1;
+    const double L[9] = {A / det, -(b * i - c * h) / det, (b * f - c * e) / det,
+                         B / det, (a * i - c * g) / det, -(a * f - c * d) / det,
+                         C / det, -(a * h - b * g) / det, (a * e - b * d) / det};
+    memset(inv, 0, 16 * sizeof *inv);
+    for (int r = 0; r < 3; r++) {
+        for (int k = 0; k < 3; k++)
+            inv[4 * r + k] = L[3 * r + k];
+        inv[4 * r + 3] = -(L[3 * r] * m[3] + L[3 * r + 1] * m[7] + L[3 * r + 2] * m[11]);
+    }
+    inv[15] = 1.0;
+    return 0;
 }
 
 /* Polar factor of x (det x > 0) by scaled Newton; 1 on convergence, 0 otherwise. */

@@ -56,29 +56,6 @@ static void data_free(skin_data *sd)
     memset(sd, 0, sizeof *sd);
 }
 
-/* The inverse of the affine 4x4 `m` (row-major, bottom row 0 0 0 1) into `inv`; 0, or -1
- * for a singular linear part. */
-static int affine_inverse(const double *m, double *inv)
-{
-    const double a = m[0], b = m[1], c = m[2], d = m[4], e = m[5], f = m[6], g = m[8],
-                 h = m[9], i = m[10];
-    const double A = e * i - f * h, B = -(d * i - f * g), C = d * h - e * g;
-    const double det = a * A + b * B + c * C;
-    if (!(fabs(det) > 0.0) || !isfinite(det))
-        return -1;
-    const double L[9] = {A / det, -(b * i - c * h) / det, (b * f - c * e) / det,
-                         B / det, (a * i - c * g) / det, -(a * f - c * d) / det,
-                         C / det, -(a * h - b * g) / det, (a * e - b * d) / det};
-    memset(inv, 0, 16 * sizeof *inv);
-    for (int r = 0; r < 3; r++) {
-        for (int k = 0; k < 3; k++)
-            inv[4 * r + k] = L[3 * r + k];
-        inv[4 * r + 3] = -(L[3 * r] * m[3] + L[3 * r + 1] * m[7] + L[3 * r + 2] * m[11]);
-    }
-    inv[15] = 1.0;
-    return 0;
-}
-
 static dk_status take_control(const dk_constraint_desc *c, dk_index n, dk_error *err)
 {
     dk_status st = dk_control_taken(c->control, DK_CONTROL_BONES, "Skinning", err);
@@ -143,7 +120,7 @@ static dk_status build_weights(dk_skinning *s, const dk_control_desc *c, dk_prog
     }
     memcpy(sd->rest, c->rest, 16 * (size_t)nb * sizeof *sd->rest);
     for (dk_index j = 0; j < nb; j++)
-        if (affine_inverse(sd->rest + 16 * (size_t)j, sd->rest_inv + 16 * (size_t)j) != 0) {
+        if (dk_affine_inverse(sd->rest + 16 * (size_t)j, sd->rest_inv + 16 * (size_t)j) != 0) {
             data_free(sd);
             return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                                 "Skinning: bone %d's rest frame is singular", (int)j);
