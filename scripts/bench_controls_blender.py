@@ -182,15 +182,7 @@ def skinning_bench(n_bones=8, influences=4):
     V = S.rest_positions(obj)
     lo, hi = V.min(axis=0), V.max(axis=0)
     heads = [lo + (hi - lo) * np.array([0.5, 0.5, k / n_bones]) for k in range(n_bones + 1)]
-    arm, ao = S.armature_in_edit_mode("Rig")
-    prev = None
-    for k in range(n_bones):
-        b = arm.edit_bones.new("b%d" % k)
-        b.head, b.tail = tuple(heads[k]), tuple(heads[k + 1])
-        if prev is not None:
-            b.parent, b.use_connect = prev, True
-        prev = b
-    bpy.ops.object.mode_set(mode="OBJECT")
+    arm, ao = S.bone_chain(heads, ["b%d" % k for k in range(n_bones)])
     mid = np.array([(heads[k] + heads[k + 1]) / 2 for k in range(n_bones)])
     dist = np.linalg.norm(V[:, None, :] - mid[None], axis=2)
     near = np.argsort(dist, axis=1)[:, :influences]

@@ -73,15 +73,7 @@ def chain(V, n):
 def setup(V, F, joints):
     S.reset_scene()
     obj = S.triangle_mesh_object(V, F, "Scan")
-    arm, ao = S.armature_in_edit_mode("Rig")
-    prev = None
-    for j in range(len(joints) - 1):
-        b = arm.edit_bones.new("b%02d" % j)
-        b.head, b.tail = tuple(joints[j]), tuple(joints[j + 1])
-        if prev is not None:
-            b.parent, b.use_connect = prev, True
-        prev = b
-    bpy.ops.object.mode_set(mode="OBJECT")
+    arm, ao = S.bone_chain(joints, ["b%02d" % j for j in range(len(joints) - 1)])
     return obj, ao
 
 

@@ -361,17 +361,25 @@ def tube(n_len=25):
     return shapes.capped_tube(n_len=n_len)
 
 
-def two_bone_rig(name="Rig"):
-    """An armature of two connected bones along x, 'upper' from -1 to 0 and 'lower' from 0
-    to 1, back in Object Mode: (armature data, object)."""
+def bone_chain(joints, names, name="Rig"):
+    """An armature of connected bones, bone k from joints[k] to joints[k + 1] named names[k]
+    (each the child of the one before), back in Object Mode: (armature data, object)."""
     arm, ao = armature_in_edit_mode(name)
-    up = arm.edit_bones.new("upper")
-    up.head, up.tail = (-1.0, 0.0, 0.0), (0.0, 0.0, 0.0)
-    lo = arm.edit_bones.new("lower")
-    lo.head, lo.tail = (0.0, 0.0, 0.0), (1.0, 0.0, 0.0)
-    lo.parent, lo.use_connect = up, True
+    prev = None
+    for k, bone_name in enumerate(names):
+        b = arm.edit_bones.new(bone_name)
+        b.head, b.tail = tuple(joints[k]), tuple(joints[k + 1])
+        if prev is not None:
+            b.parent, b.use_connect = prev, True
+        prev = b
     bpy.ops.object.mode_set(mode="OBJECT")
     return arm, ao
+
+
+def two_bone_rig(name="Rig"):
+    """Two connected bones along x, 'upper' from -1 to 0 and 'lower' from 0 to 1."""
+    return bone_chain([(-1.0, 0.0, 0.0), (0.0, 0.0, 0.0), (1.0, 0.0, 0.0)],
+                      ["upper", "lower"], name)
 
 
 def triangle_mesh_object(V, F, name="scan"):
