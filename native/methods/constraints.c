@@ -40,16 +40,17 @@ static dk_status oom(dk_error *err, const char *what)
 
 /* The description's shape: counts, lists present, handle sizes (none empty, their total
  * within the index type) into *total. */
-static dk_status check_shape(const dk_constraint_desc *desc, int64_t *total_out, dk_error *err)
+static dk_status check_shape(const dk_constraint_desc *desc, int handles_optional,
+                             int64_t *total_out, dk_error *err)
 {
     if (desc->n_handles < 0 || desc->n_fixed < 0 || desc->n_roi < 0)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "constraints: negative count (handles %d, fixed %d, roi %d)",
                             (int)desc->n_handles, (int)desc->n_fixed, (int)desc->n_roi);
-    if (desc->n_handles == 0)
+    if (desc->n_handles == 0 && !handles_optional)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "constraints: at least one handle group is required");
-    if (!desc->handle_sizes || !desc->handle_vertices)
+    if (desc->n_handles > 0 && (!desc->handle_sizes || !desc->handle_vertices))
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "constraints: handle sizes and vertices must not be NULL");
     if (desc->n_fixed > 0 && !desc->fixed_vertices)
@@ -254,8 +255,9 @@ static dk_status number_free(dk_constraints *c, dk_error *err)
     return DK_OK;
 }
 
-dk_status dk_constraints_create(const dk_mesh *mesh, const dk_constraint_desc *desc,
-                                dk_constraints **out, dk_error *err)
+/* dk_constraints_create (simulated 0) and dk_constraints_create_simulated (1). */
+static dk_status create(const dk_mesh *mesh, const dk_constraint_desc *desc, int simulated,
+                        dk_constraints **out, dk_error *err)
 {
     if (out)
         *out = NULL;
@@ -267,7 +269,7 @@ dk_status dk_constraints_create(const dk_mesh *mesh, const dk_constraint_desc *d
     dk_status st = dk_control_taken(desc->control, DK_CONTROL_VERTEX_GROUPS, "this method", err);
     if (st != DK_OK)
         return st;
-    st = check_shape(desc, &total, err);
+    st = check_shape(desc, simulated, &total, err);
     if (st == DK_OK)
         st = check_values(mesh, desc, err);
     if (st != DK_OK)
@@ -279,8 +281,8 @@ dk_status dk_constraints_create(const dk_mesh *mesh, const dk_constraint_desc *d
     c->n_handles = desc->n_handles;
     c->n_handle_vertices = (dk_index)total;
     c->handle_start = malloc(((size_t)c->n_handles + 1) * sizeof *c->handle_start);
-    c->handle_vertices = malloc((size_t)total * sizeof *c->handle_vertices);
-    c->handle_weights = malloc((size_t)total * sizeof *c->handle_weights);
+    c->handle_vertices = malloc(((size_t)total + 1) * sizeof *c->handle_vertices);
+    c->handle_weights = malloc(((size_t)total + 1) * sizeof *c->handle_weights);
     c->role = malloc(((size_t)n + 1) * sizeof *c->role);
     c->free_index = malloc(((size_t)n + 1) * sizeof *c->free_index);
     c->stiffness = malloc(((size_t)n + 1) * sizeof *c->stiffness);
@@ -290,8 +292,14 @@ dk_status dk_constraints_create(const dk_mesh *mesh, const dk_constraint_desc *d
         return oom(err, "arrays");
     }
     st = assign_roles(desc, c, err);
-    if (st == DK_OK)
+    if (st == DK_OK && simulated) {
+        c->first_held = -1;
+        c->held = calloc((size_t)n + 1, 1); /* nothing is held: it is simulated */
+        if (!c->held)
+            st = oom(err, "held vertices");
+    } else if (st == DK_OK) {
         st = hold_unconstrained(mesh, c, err);
+    }
     if (st == DK_OK)
         st = number_free(c, err);
     if (st != DK_OK) {
@@ -300,6 +308,18 @@ dk_status dk_constraints_create(const dk_mesh *mesh, const dk_constraint_desc *d
     }
     *out = c;
     return DK_OK;
+}
+
+dk_status dk_constraints_create(const dk_mesh *mesh, const dk_constraint_desc *desc,
+                                dk_constraints **out, dk_error *err)
+{
+    return create(mesh, desc, 0, out, err);
+}
+
+dk_status dk_constraints_create_simulated(const dk_mesh *mesh, const dk_constraint_desc *desc,
+                                          dk_constraints **out, dk_error *err)
+{
+    return create(mesh, desc, 1, out, err);
 }
 
 /* One expanded target: handle h's vertex v at row k, from a position (mode 0) or the

@@ -81,6 +81,12 @@ typedef struct dk_constraints {
 dk_status dk_constraints_create(const dk_mesh *mesh, const dk_constraint_desc *desc,
                                 dk_constraints **out, dk_error *err);
 
+/** dk_constraints_create for a method that simulates what nothing constrains (shape
+ *  matching: a part no handle holds moves by its dynamics): handles are optional (n_handles
+ *  0) and no component is held (n_held 0). */
+dk_status dk_constraints_create_simulated(const dk_mesh *mesh, const dk_constraint_desc *desc,
+                                          dk_constraints **out, dk_error *err);
+
 /** Frees; NULL allowed. */
 void dk_constraints_free(dk_constraints *c);
 

@@ -163,12 +163,19 @@ typedef enum dk_method_flags {
                                                 binding again                             */
     DK_METHOD_GRAPH = 256,                 /**< deforms through a graph of its own, whose
                                                 nodes stats.n_graph_nodes counts           */
-    DK_METHOD_LINEAR_PRECISION = 512       /**< binds to a control (dk_controls.h) and an
+    DK_METHOD_LINEAR_PRECISION = 512,      /**< binds to a control (dk_controls.h) and an
                                                 affine map of the control's points moves
                                                 every vertex by that map, with the method's
                                                 default options (a lattice, a cage with
                                                 mean value coordinates; not a cage with
                                                 Green ones, nor Shepard's interpolation)   */
+    DK_METHOD_DYNAMIC = 1024               /**< simulates in time (shape matching): a cold
+                                                solve resets the simulation to this
+                                                request, at rest; each warm or resumed solve
+                                                advances it one frame, so that a frame's
+                                                result depends on the frames before it (its
+                                                state); played in order from a cold start,
+                                                checkpointed by save_state                 */
 } dk_method_flags;
 
 /** What one field of a method's options struct holds (dk_option_desc). */
@@ -179,9 +186,10 @@ typedef enum dk_option_type {
     DK_OPTION_SEED = 3,       /**< uint64_t, every value valid                             */
     DK_OPTION_VERTICES = 4,   /**< const dk_index * at offset, its length (dk_index) at
                                    count_offset: vertex indices of the bound mesh          */
-    DK_OPTION_EDGE_VALUES = 5 /**< const double * at offset, its length (dk_index) at
+    DK_OPTION_EDGE_VALUES = 5, /**< const double * at offset, its length (dk_index) at
                                    count_offset, which must be the mesh's edge count: one
                                    value per edge in [min, max]                            */
+    DK_OPTION_VERTEX_VALUES = 6 /**< as EDGE_VALUES, one value per vertex (NULL: none) */
 } dk_option_type;
 
 /** dk_option_desc.flags */
@@ -198,7 +206,7 @@ typedef struct dk_option_desc {
     const char *name;     /**< the field's name, as the Python keyword                      */
     dk_option_type type;
     size_t offset;        /**< offsetof(options struct, field)                              */
-    size_t count_offset;  /**< VERTICES, EDGE_VALUES: offsetof the length field; else 0     */
+    size_t count_offset;  /**< VERTICES, EDGE_VALUES, VERTEX_VALUES: offsetof the length field; else 0     */
     double min, max;      /**< the valid values, inclusive (a bind refuses the others)      */
     double usual;         /**< a typical valid value (LENGTH: a fraction of the diagonal)   */
     double quick_max;     /**< INT: the largest value that keeps a bind and a solve quick

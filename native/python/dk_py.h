@@ -253,6 +253,7 @@ PyObject *dk_py_new_solve_result(PyObject *module, PyObject *positions, double e
     M(cage, "Cage")                                                                        \
     M(shepard, "Shepard")                                                                  \
     M(skinning, "Skinning")                                                                \
+    M(shape_matching, "ShapeMatching")                                                     \
     X(cholesky)
 
 #define DK_PY_DECLARE_PART(part) int dk_py_init_##part(PyObject *module);

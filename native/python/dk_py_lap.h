@@ -16,7 +16,7 @@ typedef struct dk_py_lap_constraints {
 } dk_py_lap_constraints;
 
 /** Reads `handles` (a list/tuple of index arrays, one per group, or a single 1-D index
- *  array = one group), `fixed` and `roi` (index arrays or None) and `handle_weights` (None,
+ *  array = one group; NULL: no handles, for a method that takes none), `fixed` and `roi` (index arrays or None) and `handle_weights` (None,
  *  or a list matching `handles` whose items are per-vertex arrays or one number per group).
  *  Index range and overlap checks are left to the library (which names the vertex). Returns
  *  0, or -1 with an exception set (messages prefixed by `context`). */

@@ -35,7 +35,7 @@
 typedef struct dk_py_method_spec dk_py_method_spec;
 
 /** The size of a method's pending solve keywords (see dk_py_method_spec.solve_extra). */
-#define DK_PY_EXTRA_MAX 64
+#define DK_PY_EXTRA_MAX 128
 
 /** The size of a control read from keywords (see dk_py_method_spec.parse_control). */
 #define DK_PY_CONTROL_MAX 512
@@ -61,6 +61,9 @@ struct dk_py_method_spec {
     const dk_method_ops *ops; /**< the native contract                                      */
     const char *doc;          /**< the class docstring (constructor signature first)         */
     int takes_stiffness;      /**< 0: a non-None stiffness is a ValueError naming the method */
+    int handles_optional;     /**< 1: handles may be None or [] (a method that simulates what
+                                   no handle holds): the constructor's handles keyword is
+                                   optional and solve needs no targets without handles    */
     size_t options_size;      /**< sizeof the native options struct (<= 256)                  */
     /** Fills `options` with the defaults. */
     void (*default_options)(void *options);

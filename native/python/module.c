@@ -122,7 +122,8 @@ PyDoc_STRVAR(method_info_doc,
              "What the native method contract says of method `name` (dk_method.h flags):\n"
              "iterative, transforms_as_positions, translation_invariant, rigid_invariant,\n"
              "penalty_handles, soft_regions, given_start, edits_input, graph,\n"
-             "linear_precision; and\n"
+             "linear_precision, dynamic (a simulation: a cold solve resets it, each\n"
+             "warm one advances a frame); and\n"
              "'controls', the control kinds its bind takes (dk_controls.h), a tuple of\n"
              "'vertex_groups', 'points', 'bones', 'cage', 'lattice', 'poses'; 'state',\n"
              "whether it carries state from solve to solve (save_state, restore_state).\n"
@@ -152,7 +153,8 @@ static PyObject *py_method_info(PyObject *module, PyObject *arg)
     Py_XDECREF(list);
     if (!controls)
         return NULL;
-    PyObject *info = Py_BuildValue("{s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O}",
+    PyObject *info = Py_BuildValue("{s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O}",
+                                   "dynamic", (f & DK_METHOD_DYNAMIC) ? Py_True : Py_False,
                                    "linear_precision",
                                    (f & DK_METHOD_LINEAR_PRECISION) ? Py_True : Py_False,
                                    "state", ops->state_size ? Py_True : Py_False, "iterative",

@@ -154,12 +154,14 @@ int dk_py_lap_read_constraints(PyObject *handles, PyObject *fixed, PyObject *roi
     char name[64];
 
     memset(out, 0, sizeof *out);
-    if (!handles || handles == Py_None) {
+    if (handles == Py_None) {
         PyErr_Format(PyExc_TypeError, "%s: handles are required (a list of index arrays)",
                      context);
         return -1;
     }
-    if (PyList_Check(handles) || PyTuple_Check(handles)) {
+    if (!handles) {
+        groups = PyTuple_New(0); /* none, for a method that takes none */
+    } else if (PyList_Check(handles) || PyTuple_Check(handles)) {
         /* our own copy of the outer list first: nothing below looks at the caller's again */
         PyObject *snap = PySequence_Tuple(handles);
         if (!snap)
@@ -176,7 +178,7 @@ int dk_py_lap_read_constraints(PyObject *handles, PyObject *fixed, PyObject *roi
     if (!groups)
         return -1;
     ng = PyTuple_Size(groups);
-    if (ng == 0) {
+    if (ng == 0 && handles) {
         PyErr_Format(PyExc_ValueError, "%s: handles is empty: give at least one handle group",
                      context);
         goto fail;
@@ -185,8 +187,8 @@ int dk_py_lap_read_constraints(PyObject *handles, PyObject *fixed, PyObject *roi
         PyErr_Format(PyExc_ValueError, "%s: too many handle groups", context);
         goto fail;
     }
-    out->sizes = PyMem_Malloc(sizeof(dk_index) * (size_t)ng);
-    read = PyMem_Calloc((size_t)ng, sizeof *read);
+    out->sizes = PyMem_Malloc(sizeof(dk_index) * (size_t)(ng + 1));
+    read = PyMem_Calloc((size_t)ng + 1, sizeof *read);
     if (!out->sizes || !read) {
         PyErr_NoMemory();
         goto fail;

@@ -236,7 +236,18 @@ static int read_all(const dk_py_method_spec *spec, PyObject *handles, PyObject *
                      spec->name);
         return -1;
     }
-    if (dk_py_lap_read_constraints(handles, fixed, roi, hw, context, con) < 0)
+    /* a method that simulates what no handle holds takes none (None or []): NULL */
+    int none = 0;
+    if (spec->handles_optional && handles != Py_None && PySequence_Check(handles) &&
+        !PyObject_CheckBuffer(handles)) {
+        const Py_ssize_t len = PySequence_Size(handles);
+        if (len < 0)
+            return -1;
+        none = len == 0;
+    }
+    if (spec->handles_optional && handles == Py_None)
+        none = 1;
+    if (dk_py_lap_read_constraints(none ? NULL : handles, fixed, roi, hw, context, con) < 0)
         return -1;
     if (stiffness && stiffness != Py_None) {
         if (dk_py_read_doubles(stiffness, n, 0, "stiffness", stiff) < 0) {
@@ -295,7 +306,10 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
         PyErr_Format(PyExc_SystemError, "%s: options struct too large", spec->name);
         return NULL;
     }
-    snprintf(fmt, sizeof fmt, controlled ? "O:%s" : "OO|OOOO:%s", spec->name);
+    snprintf(fmt, sizeof fmt,
+             controlled ? "O:%s" : spec->handles_optional ? "O|OOOOO:%s" : "OO|OOOO:%s",
+             spec->name);
+    handles = Py_None;
     snprintf(where, sizeof where, "%s()", spec->name);
     if (split_keywords(kwargs, controlled ? kwlist_control : kwlist, &mine, &rest) < 0)
         return NULL;
@@ -548,6 +562,13 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
                      "n x 4 x 4), not positions", ctx, (int)ms.n_controls);
         goto fail_busy;
     }
+    if (ms.n_controls == 0 && ms.n_handles == 0 && targets == Py_None &&
+        transforms == Py_None) { /* bound without handles (handles_optional): none to give */
+        Py_DECREF(targets);
+        targets = PyTuple_New(0);
+        if (!targets)
+            goto fail_busy;
+    }
     /* a method bound to a control: its points' positions, or its bones' frames, are the
      * targets */
     if (dk_py_lap_read_solve_input(targets, transforms,
@@ -585,8 +606,9 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
         dk_py_doubles_release(&input);
         goto fail_busy;
     }
+    static const double no_targets[1] = {0.0}; /* a bind without handles: none, not NULL */
     const dk_solve_request rq = {
-        .targets = in.data,
+        .targets = in.data ? in.data : no_targets,
         .target_kind = (dk_target_kind)mode,
         .start = start.data ? DK_START_GIVEN
                  : resume   ? DK_START_RESUME

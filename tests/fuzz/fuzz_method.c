@@ -296,6 +296,7 @@ enum { MAX_LISTS = 4, MAX_LIST = 4 };
 typedef struct extras {
     dk_index lists[MAX_LISTS][MAX_LIST];
     double edge_values[3 * MAX_P + 2];
+    double vertex_values[MAX_LISTS][MAX_V + 1];
 } extras;
 
 static void put_int(options *o, const dk_option_desc *f, int v)
@@ -372,6 +373,22 @@ static const void *decode_options(dk_fuzz_input *in, const dk_method_ops *ops,
                                             ? dk_fuzz_real(in, f->usual)
                                             : f->usual * 0.25 * (1 + dk_fuzz_u8(in) % 8);
                 const double *values = x->edge_values;
+                memcpy(o->bytes + f->offset, &values, sizeof values);
+                memcpy(o->bytes + f->count_offset, &count, sizeof count);
+            }
+            break;
+        }
+        case DK_OPTION_VERTEX_VALUES: {
+            const uint8_t pick = dk_fuzz_u8(in);
+            if (pick % 4 == 0 && n_lists < MAX_LISTS) {
+                /* the vertex count, or one off it (refused); room for one more */
+                dk_index count = m->n_vertices + (pick / 4) % 3 - 1;
+                if (count < 0) count = 0;
+                double *values = x->vertex_values[n_lists++];
+                for (dk_index v = 0; v < m->n_vertices + 1 && v < MAX_V + 1; v++)
+                    values[v] = dk_fuzz_u8(in) % 8 == 0
+                                    ? dk_fuzz_real(in, f->usual)
+                                    : fmin(f->max, f->usual * 0.25 * (1 + dk_fuzz_u8(in) % 4));
                 memcpy(o->bytes + f->offset, &values, sizeof values);
                 memcpy(o->bytes + f->count_offset, &count, sizeof count);
             }

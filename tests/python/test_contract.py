@@ -17,6 +17,10 @@ one handle cap:
   refuse it, direct ones ignore it;
 - every malformed input raises the same exception type from every method, and a refused
   call leaves the object answering as before.
+A dynamic method (a simulation: ShapeMatching) is held to the same with its own meaning of
+the starts: a cold solve resets the simulation to the request (its first frame), a warm or
+resumed one advances a frame, start_positions releases the shape there; it simulates loose
+parts instead of holding them, and needs no handle.
 """
 import importlib.util
 import math
@@ -265,6 +269,9 @@ def test_preview_is_fast_path_or_the_solve(name, scene):
     else:
         np.testing.assert_allclose(p.positions, q.positions, atol=1e-12)
     r = a.solve(transforms=T, resume=True) if info(name)["iterative"] else a.solve(transforms=T)
+    if info(name)["dynamic"]:   # every warm solve, resumed or not, advances a frame
+        assert np.array_equal(r.positions, b.solve(transforms=T).positions)
+        return
     np.testing.assert_allclose(r.positions, q.positions, atol=1e-4)
 
 
@@ -287,7 +294,8 @@ def test_rigid_motion_of_every_constraint(name, scene):
     flags = info(name)
     R = rotation() if flags["rigid_invariant"] else np.eye(3)
     T = transform(R)
-    kw = {"max_iterations": 2000} if flags["iterative"] else {}   # see test_contract.c
+    # see test_contract.c; a dynamic method's cold solve is its first frame (no iterations)
+    kw = {"max_iterations": 2000} if flags["iterative"] and not flags["dynamic"] else {}
     if flags["soft_regions"]:   # every vertex outside the regions is held: move them all
         handles = [np.arange(len(v))]
         flags = dict(flags, rigid_invariant=True)
@@ -417,6 +425,8 @@ def test_bad_binds_raise_the_same_type(name):
     mesh = dk.Mesh(v, f)
     cls = getattr(dk, name)
     for what, args, exc in BAD_BINDS:
+        if what == "no handle" and info(name)["dynamic"]:
+            continue   # a simulation needs no handle (tests/python/test_shape_matching.py)
         with pytest.raises(exc):
             cls(mesh, **args(v, handles, fixed))
 
@@ -462,6 +472,14 @@ def loose_scene():
 def test_loose_geometry_is_held_at_rest(name):
     v, f, handles, fixed, n0 = loose_scene()
     m = getattr(dk, name)(dk.Mesh(v, f), handles=handles, fixed=fixed)
+    if info(name)["dynamic"]:
+        # simulated, not held: at rest they stay (a cold solve, then a frame)
+        assert m.stats["n_held"] == 0 and m.warnings == ()
+        targets = np.concatenate([v[h] + [0, 0, 0.2] for h in handles])
+        for kw in ({"warm_start": False}, {}):
+            r = m.solve(targets, **kw)
+            assert np.abs(r.positions[n0:] - v[n0:]).max() < 1e-12
+        return
     assert m.stats["n_held"] == 6 and m.stats["n_held_components"] == 4
     assert len(m.warnings) == 1 and "6 vertices in 4 connected components" in m.warnings[0]
     assert "first: vertex %d)" % n0 in m.warnings[0]
@@ -515,7 +533,8 @@ def test_stanford_bunny_with_its_loose_vertices(name, shared_mesh):
     # and the default basis alone is 20 s of this suite; tests/python/test_eigen.py covers it)
     kw = {"n_eigenvectors": 50} if name == "EigenDeformation" else {}
     m = getattr(dk, name)(mesh, handles=[handle], fixed=fixed, **kw)
-    assert m.stats["n_held"] == 1113 and m.stats["n_held_components"] == 1113
+    held = 0 if info(name)["dynamic"] else 1113   # a simulation holds nothing: at rest
+    assert m.stats["n_held"] == held and m.stats["n_held_components"] == held
     r = m.solve(v[handle] + [0, 0.01, 0], **cold(name))
     assert np.isfinite(r.positions).all()
     assert np.array_equal(r.positions[~on_face], v[~on_face])
@@ -583,7 +602,10 @@ def test_given_start(name, scene):
         m.solve(transforms=[transform(rotation(-0.3), (0.2, 0, 0))] * len(handles))
         d = m.solve(transforms=T, start_positions=noisy)
         assert np.array_equal(c.positions, d.positions) and c.iterations == d.iterations
-        assert c.converged and abs(c.energy - a.energy) <= 1e-4 * a.energy
+        if info(name)["dynamic"]:   # released there at rest: the start is the result
+            assert np.array_equal(c.positions, p.positions)
+        else:
+            assert c.converged and abs(c.energy - a.energy) <= 1e-4 * a.energy
     elif info(name)["iterative"]:
         with pytest.raises(ValueError, match="given positions"):
             m.solve(transforms=T, start_positions=v)

@@ -1,0 +1,171 @@
+/* Shape matching's goals (sm_internal.h): per cluster the rotation and the fit of the rest
+ * offsets onto the current ones, each member's goal, and each vertex's mean goal; and the
+ * clusters' plasticity. The formulas are the header's (dk_shape_matching.h). */
+#include "sm_internal.h"
+
+#include <math.h>
+#include <string.h>
+
+#include "dk_operators.h"
+
+void sm_goals_clusters(const sm_clusters *c, const sm_rest *r, dk_shape_matching_mode mode,
+                       const double *beta, const double *x, double *member_goal, sm_fit *fits,
+                       dk_index begin, dk_index end)
+{
+    const int dim = r->dim;
+    for (dk_index cl = begin; cl < end; cl++) {
+        const dk_index k0 = c->start[cl], k1 = c->start[cl + 1];
+        const double M = r->mass[cl];
+        double cm[3] = {0, 0, 0};
+        for (dk_index k = k0; k < k1; k++) {
+            const double m = c->member_mass[k];
+            const double *p = x + 3 * (size_t)c->member_vertex[k];
+            for (int d = 0; d < 3; d++)
+                cm[d] += m * p[d];
+        }
+        for (int d = 0; d < 3; d++)
+            cm[d] /= M;
+        double apq[27] = {0}; /* 3 x dim */
+        for (dk_index k = k0; k < k1; k++) {
+            const double m = c->member_mass[k];
+            const double *p = x + 3 * (size_t)c->member_vertex[k];
+            const double *q = r->q + (size_t)dim * (size_t)k;
+            for (int i = 0; i < 3; i++) {
+                const double pi = m * (p[i] - cm[i]);
+                for (int j = 0; j < dim; j++)
+                    apq[i * dim + j] += pi * q[j];
+            }
+        }
+        double lin[9], R[9], A[27];
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                lin[3 * i + j] = apq[i * dim + j];
+        dk_closest_rotation(lin, R);
+        int use_fit = mode != DK_SHAPE_MATCHING_RIGID;
+        if (use_fit) { /* A = (A_pq + R~ L) (A_qq + L)^-1 */
+            const double *inv = r->inv + (size_t)(dim * dim) * (size_t)cl;
+            const double *lam = r->lambda + (size_t)dim * (size_t)cl;
+            double rhs[27];
+            memcpy(rhs, apq, sizeof(double) * 3 * (size_t)dim);
+            for (int i = 0; i < 3; i++)
+                for (int j = 0; j < 3; j++)
+                    rhs[i * dim + j] += R[3 * i + j] * lam[j];
+            for (int i = 0; i < 3; i++)
+                for (int j = 0; j < dim; j++) {
+                    double s = 0.0;
+                    for (int k = 0; k < dim; k++)
+                        s += rhs[i * dim + k] * inv[k * dim + j];
+                    A[i * dim + j] = s;
+                }
+        }
+        if (fits) {
+            memcpy(fits[cl].R, R, sizeof R);
+            if (use_fit)
+                for (int i = 0; i < 3; i++)
+                    for (int j = 0; j < 3; j++)
+                        fits[cl].A[3 * i + j] = A[i * dim + j];
+            else
+                memcpy(fits[cl].A, R, sizeof R);
+        }
+        if (mode == DK_SHAPE_MATCHING_LINEAR) { /* volume kept: A / det(A)^(1/3) */
+            const double det = A[0] * (A[4] * A[8] - A[5] * A[7]) -
+                               A[1] * (A[3] * A[8] - A[5] * A[6]) +
+                               A[2] * (A[3] * A[7] - A[4] * A[6]);
+            if (det > 0.0 && isfinite(det)) {
+                const double s = 1.0 / cbrt(det);
+                for (int i = 0; i < 9; i++)
+                    A[i] *= s;
+            } else {
+                use_fit = 0; /* inverted: the rotation */
+            }
+        }
+        for (dk_index k = k0; k < k1; k++) {
+            const dk_index v = c->member_vertex[k];
+            const double *q = r->q + (size_t)dim * (size_t)k;
+            double *g = member_goal + 3 * (size_t)k;
+            for (int i = 0; i < 3; i++) {
+                const double rq = R[3 * i] * q[0] + R[3 * i + 1] * q[1] + R[3 * i + 2] * q[2];
+                double gi = rq;
+                if (use_fit) {
+                    double aq = 0.0;
+                    for (int j = 0; j < dim; j++)
+                        aq += A[i * dim + j] * q[j];
+                    gi += beta[v] * (aq - rq);
+                }
+                g[i] = gi + cm[i];
+            }
+        }
+    }
+}
+
+void sm_goals_vertices(const sm_clusters *c, const double *member_goal, const double *x,
+                       double *goals, dk_index begin, dk_index end)
+{
+    for (dk_index v = begin; v < end; v++) {
+        const dk_index a = c->vm_start[v], b = c->vm_start[v + 1];
+        double *g = goals + 3 * (size_t)v;
+        if (a == b) {
+            memcpy(g, x + 3 * (size_t)v, 3 * sizeof(double));
+            continue;
+        }
+        double s[3] = {0, 0, 0};
+        for (dk_index t = a; t < b; t++) {
+            const double *mg = member_goal + 3 * (size_t)c->vm_index[t];
+            s[0] += mg[0], s[1] += mg[1], s[2] += mg[2];
+        }
+        const double inv = 1.0 / (double)(b - a);
+        g[0] = s[0] * inv, g[1] = s[1] * inv, g[2] = s[2] * inv;
+    }
+}
+
+static double frobenius_from_identity(const double *m)
+{
+    double s = 0.0;
+    for (int i = 0; i < 9; i++) {
+        const double d = m[i] - (i % 4 == 0 ? 1.0 : 0.0);
+        s += d * d;
+    }
+    return sqrt(s);
+}
+
+dk_index sm_plastic_update(const sm_clusters *c, const sm_fit *fits, double h,
+                           const dk_shape_matching_dynamics *dyn, double *sp,
+                           unsigned char *changed)
+{
+    dk_index n_changed = 0;
+    for (dk_index cl = 0; cl < c->n_clusters; cl++) {
+        changed[cl] = 0;
+        const double *R = fits[cl].R, *A = fits[cl].A;
+        double S[9];
+        for (int i = 0; i < 3; i++) /* S = R^T A, symmetrised */
+            for (int j = 0; j < 3; j++)
+                S[3 * i + j] = R[i] * A[j] + R[3 + i] * A[3 + j] + R[6 + i] * A[6 + j];
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < i; j++)
+                S[3 * i + j] = S[3 * j + i] = 0.5 * (S[3 * i + j] + S[3 * j + i]);
+        if (!(frobenius_from_identity(S) > dyn->plastic_yield))
+            continue;
+        double *P = sp + 9 * (size_t)cl, F[9], N[9];
+        for (int i = 0; i < 9; i++)
+            F[i] = (i % 4 == 0 ? 1.0 : 0.0) + h * dyn->plastic_creep * (S[i] - (i % 4 == 0));
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                N[3 * i + j] = F[3 * i] * P[j] + F[3 * i + 1] * P[3 + j] + F[3 * i + 2] * P[6 + j];
+        const double dev = frobenius_from_identity(N);
+        if (dev > dyn->plastic_max) {
+            const double s = dyn->plastic_max / dev;
+            for (int i = 0; i < 9; i++)
+                N[i] = (i % 4 == 0 ? 1.0 : 0.0) + s * (N[i] - (i % 4 == 0));
+        }
+        const double det = N[0] * (N[4] * N[8] - N[5] * N[7]) - N[1] * (N[3] * N[8] - N[5] * N[6]) +
+                           N[2] * (N[3] * N[7] - N[4] * N[6]);
+        if (!(det > 0.0) || !isfinite(det))
+            continue; /* no volume-keeping state from it: keep the last */
+        const double s = 1.0 / cbrt(det);
+        for (int i = 0; i < 9; i++)
+            P[i] = N[i] * s;
+        changed[cl] = 1;
+        n_changed++;
+    }
+    return n_changed;
+}

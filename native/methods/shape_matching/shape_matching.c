@@ -1,0 +1,823 @@
+/* DeformKit shape matching: the driver (dk_shape_matching.h). The steps of a bind: check the
+ * options, the constraints (kinematic vertices), the per-vertex maps, the clusters, the rest
+ * data of the bind's shape. A warm solve: the frame's goal shape and kinematic targets, then
+ * `substeps` integration steps (integrators.c), each evaluating the goals (goals.c) of the
+ * configuration and, with plasticity on, updating the clusters' plastic states. */
+#include "sm_internal.h"
+
+#include <float.h>
+#include <math.h>
+#include <stddef.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "dk_memory.h"
+
+struct dk_shape_matching {
+    const dk_mesh *mesh;
+    dk_shape_matching_options opt; /* the maps and given clusters not kept (copied below)  */
+    dk_shape_matching_dynamics dyn;
+    dk_constraints *con;
+    unsigned char *kinematic;      /* n: 1 = follows its target or the input               */
+    double *masses, *alpha_map, *beta_map, *damping_map; /* n each                         */
+    double *k, *d, *beta;          /* n: alpha_i / h^2 (h a substep), damping, beta        */
+    sm_clusters cl;
+    sm_rest rest;
+    /* the state */
+    double *x, *v;                 /* n x 3                                                */
+    double *shape;                 /* n x 3: the goal shape of the last solve              */
+    double *sp;                    /* 9 per cluster: plastic states                        */
+    int64_t frame;
+    /* scratch */
+    double *goals, *member_goal, *work, *k0, *k1, *targets;
+    double *u;                     /* n x 3: the input's velocity over this frame          */
+    sm_fit *fits;
+    unsigned char *changed;
+    int want_fits;                 /* the next goal evaluation records the fits            */
+    int substep, n_sub;            /* place(): the substep being taken                    */
+    dk_team *team;
+};
+
+static const dk_progress_phase bind_phases[] = {{"clusters", 1.0}};
+
+void dk_shape_matching_default_options(dk_shape_matching_options *o)
+{
+    memset(o, 0, sizeof *o);
+    o->mode = DK_SHAPE_MATCHING_LINEAR;
+    o->alpha = 0.3;
+    o->beta = 0.3;
+    o->damping = 4.0;
+    o->time_step = 1.0 / 24.0;
+    o->substeps = 2;
+    o->integrator = DK_INTEGRATOR_SEMI_IMPLICIT_EULER;
+    o->clusters = DK_CLUSTERS_CUBES;
+    o->cluster_size = 0.0;
+    o->plastic_yield = 0.1;
+    o->plastic_creep = 0.0;
+    o->plastic_max = 1.0;
+}
+
+static dk_status bad(dk_error *err, const char *what, double value, const char *range)
+{
+    return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "ShapeMatching: %s = %g, must be %s", what,
+                        value, range);
+}
+
+static dk_status check_dynamics(const dk_shape_matching_dynamics *y, dk_error *err)
+{
+    if (!(y->alpha >= 0.0 && y->alpha <= 1.0))
+        return bad(err, "alpha", y->alpha, "in [0, 1]");
+    if (!(y->beta >= 0.0 && y->beta <= 1.0))
+        return bad(err, "beta", y->beta, "in [0, 1]");
+    if (!(y->damping >= 0.0 && y->damping <= DBL_MAX))
+        return bad(err, "damping", y->damping, "finite and >= 0 (per second)");
+    for (int c = 0; c < 3; c++)
+        if (!isfinite(y->gravity[c]))
+            return bad(err, c == 0 ? "gravity_x" : c == 1 ? "gravity_y" : "gravity_z",
+                       y->gravity[c], "finite");
+    if (!(y->time_step >= 1e-6 && y->time_step <= 3600.0))
+        return bad(err, "time_step", y->time_step, "in [1e-6, 3600] seconds");
+    if (!(y->plastic_yield >= 0.0 && y->plastic_yield <= DBL_MAX))
+        return bad(err, "plastic_yield", y->plastic_yield, "finite and >= 0");
+    if (!(y->plastic_creep >= 0.0 && y->plastic_creep <= DBL_MAX))
+        return bad(err, "plastic_creep", y->plastic_creep, "finite and >= 0 (per second)");
+    if (!(y->plastic_max >= 0.0 && y->plastic_max <= DBL_MAX))
+        return bad(err, "plastic_max", y->plastic_max, "finite and >= 0");
+    return DK_OK;
+}
+
+static dk_shape_matching_dynamics dynamics_of(const dk_shape_matching_options *o)
+{
+    return (dk_shape_matching_dynamics){.alpha = o->alpha,
+                                        .beta = o->beta,
+                                        .damping = o->damping,
+                                        .gravity = {o->gravity_x, o->gravity_y, o->gravity_z},
+                                        .time_step = o->time_step,
+                                        .plastic_yield = o->plastic_yield,
+                                        .plastic_creep = o->plastic_creep,
+                                        .plastic_max = o->plastic_max};
+}
+
+/* A per-vertex array option: absent, or n values in [lo, hi]. */
+static dk_status check_map(const dk_mesh *m, const char *name, const double *values,
+                           dk_index count, double lo, double hi, dk_error *err)
+{
+    if (!values && count == 0)
+        return DK_OK;
+    if (!values || count != m->n_vertices)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ShapeMatching: %s must have one value per vertex (%d), not %d",
+                            name, (int)m->n_vertices, (int)count);
+    for (dk_index v = 0; v < count; v++)
+        if (!(values[v] >= lo && values[v] <= hi))
+            return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                                "ShapeMatching: %s of vertex %d is %g, must be in [%g, %g]",
+                                name, (int)v, values[v], lo, hi);
+    return DK_OK;
+}
+
+static dk_status check_options(const dk_mesh *m, const dk_shape_matching_options *o,
+                               dk_error *err)
+{
+    if ((unsigned)o->mode > DK_SHAPE_MATCHING_QUADRATIC)
+        return bad(err, "mode", (double)o->mode, "0 (rigid), 1 (linear) or 2 (quadratic)");
+    if ((unsigned)o->integrator > DK_INTEGRATOR_RK4)
+        return bad(err, "integrator", (double)o->integrator,
+                   "0 (semi-implicit Euler), 1 (explicit Euler), 2 (implicit Euler) or 3 (RK4)");
+    if ((unsigned)o->clusters > DK_CLUSTERS_PARTS)
+        return bad(err, "clusters", (double)o->clusters, "0 (cubes) or 1 (parts)");
+    if (o->substeps < 1 || o->substeps > 64)
+        return bad(err, "substeps", o->substeps, "in [1, 64]");
+    if (!(o->cluster_size >= 0.0 && o->cluster_size <= DBL_MAX))
+        return bad(err, "cluster_size", o->cluster_size, "finite and >= 0 (0: automatic)");
+    if (o->n_clusters < 0)
+        return bad(err, "n_clusters", o->n_clusters, ">= 0");
+    const dk_shape_matching_dynamics y = dynamics_of(o);
+    dk_status st = check_dynamics(&y, err);
+    if (st == DK_OK)
+        st = check_map(m, "masses", o->masses, o->n_masses, DBL_MIN, DBL_MAX, err);
+    if (st == DK_OK)
+        st = check_map(m, "alpha_map", o->alpha_map, o->n_alpha_map, 0.0, 1.0, err);
+    if (st == DK_OK)
+        st = check_map(m, "beta_map", o->beta_map, o->n_beta_map, 0.0, 1.0, err);
+    if (st == DK_OK)
+        st = check_map(m, "damping_map", o->damping_map, o->n_damping_map, 0.0, DBL_MAX, err);
+    return st;
+}
+
+/* The per-vertex coefficients from the dynamics and the maps. */
+static void coefficients(dk_shape_matching *s)
+{
+    const double h = s->dyn.time_step / (double)s->opt.substeps;
+    const double kf = s->dyn.alpha / (h * h);
+    for (dk_index v = 0; v < s->mesh->n_vertices; v++) {
+        s->k[v] = kf * s->alpha_map[v];
+        s->d[v] = s->dyn.damping * s->damping_map[v];
+        s->beta[v] = s->dyn.beta * s->beta_map[v];
+    }
+}
+
+/* ------------------------------------------------------------ passes over clusters ----- */
+
+typedef struct pass {
+    dk_shape_matching *s;
+    const double *x, *y;
+    double *goals;
+} pass;
+
+static void rest_part(void *ctx, dk_index begin, dk_index end, int part)
+{
+    (void)part;
+    const pass *p = ctx;
+    sm_rest_compute(&p->s->cl, p->y, p->s->mesh->positions, p->s->sp, &p->s->rest, begin, end);
+}
+
+/* The rest data of every cluster for goal shape y. */
+static void rest_all(dk_shape_matching *s, const double *y)
+{
+    pass p = {.s = s, .y = y};
+    dk_team_run_halves(s->team, rest_part, &p, s->cl.n_clusters, 64);
+}
+
+static void cluster_part(void *ctx, dk_index begin, dk_index end, int part)
+{
+    (void)part;
+    const pass *p = ctx;
+    dk_shape_matching *s = p->s;
+    sm_goals_clusters(&s->cl, &s->rest, s->opt.mode, s->beta, p->x, s->member_goal,
+                      s->want_fits ? s->fits : NULL, begin, end);
+}
+
+static void vertex_part(void *ctx, dk_index begin, dk_index end, int part)
+{
+    (void)part;
+    const pass *p = ctx;
+    sm_goals_vertices(&p->s->cl, p->s->member_goal, p->x, p->goals, begin, end);
+}
+
+/* sm_goals_fn: the mean goals of configuration x. */
+static void goals_of(void *ctx, const double *x, double *goals)
+{
+    dk_shape_matching *s = ctx;
+    pass p = {.s = s, .x = x, .goals = goals};
+    dk_team_run_halves(s->team, cluster_part, &p, s->cl.n_clusters, 64);
+    dk_team_run_halves(s->team, vertex_part, &p, s->mesh->n_vertices, 4096);
+    s->want_fits = 0;
+}
+
+/* sm_place_fn: the kinematic vertices at fraction tau of the current substep. */
+static void place(void *ctx, double *x, double *v, double tau)
+{
+    dk_shape_matching *s = ctx;
+    const double f = ((double)s->substep + tau) / (double)s->n_sub;
+    const double inv_t = 1.0 / s->dyn.time_step;
+    for (dk_index i = 0; i < s->mesh->n_vertices; i++) {
+        if (!s->kinematic[i])
+            continue;
+        for (int c = 0; c < 3; c++) {
+            const size_t j = 3 * (size_t)i + (size_t)c;
+            const double a = s->k0[j], b = s->k1[j];
+            x[j] = f == 1.0 ? b : a + f * (b - a);
+            v[j] = (b - a) * inv_t;
+        }
+    }
+}
+
+/* ------------------------------------------------------------------------- bind ------- */
+
+void dk_shape_matching_free(dk_shape_matching *s)
+{
+    if (!s)
+        return;
+    dk_team_free(s->team);
+    dk_constraints_free(s->con);
+    sm_clusters_free(&s->cl);
+    sm_rest_free(&s->rest);
+    free(s->kinematic);
+    free(s->masses), free(s->alpha_map), free(s->beta_map), free(s->damping_map);
+    free(s->k), free(s->d), free(s->beta);
+    free(s->x), free(s->v), free(s->shape), free(s->sp);
+    free(s->goals), free(s->member_goal), free(s->work), free(s->k0), free(s->k1), free(s->u);
+    free(s->targets), free(s->fits), free(s->changed);
+    free(s);
+}
+
+static double *copy_or_fill(const double *src, dk_index n, double fill)
+{
+    double *a = malloc(((size_t)n + 1) * sizeof *a);
+    if (!a)
+        return NULL;
+    for (dk_index i = 0; i < n; i++)
+        a[i] = src ? src[i] : fill;
+    return a;
+}
+
+/* The kinematic flags of constraints c. */
+static void mark_kinematic(const dk_constraints *c, unsigned char *kin)
+{
+    for (dk_index v = 0; v < c->n_vertices; v++)
+        kin[v] = c->role[v] != DK_VERTEX_FREE;
+}
+
+/* Rest: positions y everywhere, velocities 0, plastic states I, frame 0. */
+static void reset(dk_shape_matching *s, const double *y)
+{
+    const size_t N = 3 * (size_t)s->mesh->n_vertices;
+    memcpy(s->x, y, N * sizeof *s->x);
+    memset(s->v, 0, N * sizeof *s->v);
+    memcpy(s->shape, y, N * sizeof *s->shape);
+    for (dk_index c = 0; c < s->cl.n_clusters; c++)
+        for (int i = 0; i < 9; i++)
+            s->sp[9 * (size_t)c + (size_t)i] = i % 4 == 0 ? 1.0 : 0.0;
+    s->frame = 0;
+    rest_all(s, y);
+}
+
+/* The scratch sized by the constraints (the handles' targets). */
+static dk_status size_targets(dk_shape_matching *s, const dk_constraints *c, dk_error *err)
+{
+    double *t = malloc((3 * (size_t)c->n_handle_vertices + 1) * sizeof *t);
+    if (!t)
+        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeMatching: out of memory (targets)");
+    free(s->targets);
+    s->targets = t;
+    return DK_OK;
+}
+
+dk_status dk_shape_matching_bind(const dk_mesh *mesh, const dk_constraint_desc *desc,
+                                 const dk_shape_matching_options *options,
+                                 dk_shape_matching **out, dk_error *err)
+{
+    if (out)
+        *out = NULL;
+    if (!mesh || !desc || !out)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ShapeMatching bind: mesh, constraints and output must not be NULL");
+    dk_shape_matching_options o;
+    if (options)
+        o = *options;
+    else
+        dk_shape_matching_default_options(&o);
+    dk_status st = check_options(mesh, &o, err);
+    if (st != DK_OK)
+        return st;
+    dk_progress prog;
+    dk_progress_init(&prog, o.progress, o.progress_user, bind_phases, 1, "ShapeMatching bind");
+    dk_shape_matching *s = calloc(1, sizeof *s);
+    if (!s)
+        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeMatching: out of memory (object)");
+    const dk_index n = mesh->n_vertices;
+    const size_t N = 3 * (size_t)n;
+    s->mesh = mesh;
+    s->opt = o;
+    s->opt.masses = s->opt.alpha_map = s->opt.beta_map = s->opt.damping_map = NULL;
+    s->opt.cluster_sizes = s->opt.cluster_vertices = NULL;
+    s->opt.progress = NULL;
+    s->opt.progress_user = NULL;
+    s->dyn = dynamics_of(&o);
+    st = dk_constraints_create_simulated(mesh, desc, &s->con, err);
+    if (st == DK_OK)
+        st = dk_progress_begin(&prog, 0, err);
+    if (st != DK_OK) {
+        dk_shape_matching_free(s);
+        return st;
+    }
+    s->kinematic = malloc((size_t)n + 1);
+    s->masses = copy_or_fill(o.masses, n, 1.0);
+    s->alpha_map = copy_or_fill(o.alpha_map, n, 1.0);
+    s->beta_map = copy_or_fill(o.beta_map, n, 1.0);
+    s->damping_map = copy_or_fill(o.damping_map, n, 1.0);
+    s->k = malloc(((size_t)n + 1) * sizeof *s->k);
+    s->d = malloc(((size_t)n + 1) * sizeof *s->d);
+    s->beta = malloc(((size_t)n + 1) * sizeof *s->beta);
+    s->x = malloc((N + 1) * sizeof *s->x);
+    s->v = malloc((N + 1) * sizeof *s->v);
+    s->shape = malloc((N + 1) * sizeof *s->shape);
+    s->goals = malloc((N + 1) * sizeof *s->goals);
+    s->work = malloc((6 * N + 1) * sizeof *s->work);
+    s->k0 = malloc((N + 1) * sizeof *s->k0);
+    s->k1 = malloc((N + 1) * sizeof *s->k1);
+    s->u = malloc((N + 1) * sizeof *s->u);
+    if (!s->u ||
+        !s->kinematic || !s->masses || !s->alpha_map || !s->beta_map || !s->damping_map ||
+        !s->k || !s->d || !s->beta || !s->x || !s->v || !s->shape || !s->goals || !s->work ||
+        !s->k0 || !s->k1) {
+        dk_shape_matching_free(s);
+        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeMatching: out of memory (arrays)");
+    }
+    mark_kinematic(s->con, s->kinematic);
+    st = size_targets(s, s->con, err);
+    if (st == DK_OK)
+        st = sm_clusters_build(mesh, &o, s->masses, s->kinematic, &s->cl, err);
+    if (st == DK_OK)
+        st = sm_rest_alloc(&s->cl, o.mode == DK_SHAPE_MATCHING_QUADRATIC ? 9 : 3, &s->rest, err);
+    if (st == DK_OK) {
+        const size_t nm = (size_t)s->cl.start[s->cl.n_clusters], nc = (size_t)s->cl.n_clusters;
+        s->member_goal = malloc((3 * nm + 1) * sizeof *s->member_goal);
+        s->sp = malloc((9 * nc + 1) * sizeof *s->sp);
+        s->fits = malloc((nc + 1) * sizeof *s->fits);
+        s->changed = malloc(nc + 1);
+        if (!s->member_goal || !s->sp || !s->fits || !s->changed)
+            st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeMatching: out of memory (clusters)");
+    }
+    if (st == DK_OK)
+        st = dk_progress_part(&prog, 1.0, err);
+    if (st != DK_OK) {
+        dk_shape_matching_free(s);
+        return st;
+    }
+    s->team = dk_team_create(); /* NULL: passes run on this thread */
+    coefficients(s);
+    reset(s, mesh->positions);
+    dk_progress_done(&prog);
+    *out = s;
+    return DK_OK;
+}
+
+dk_status dk_shape_matching_rebind(dk_shape_matching *s, const dk_constraint_desc *desc,
+                                   dk_error *err)
+{
+    if (!s || !desc)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ShapeMatching rebind: object and constraints must not be NULL");
+    dk_constraints *c = NULL;
+    dk_status st = dk_constraints_create_simulated(s->mesh, desc, &c, err);
+    if (st != DK_OK)
+        return st;
+    /* the clusters cover what is simulated: given clusters must still cover it */
+    unsigned char *kin = malloc((size_t)s->mesh->n_vertices + 1);
+    if (!kin) {
+        dk_constraints_free(c);
+        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeMatching: out of memory (rebind)");
+    }
+    mark_kinematic(c, kin);
+    sm_clusters cl;
+    dk_shape_matching_options o = s->opt;
+    o.n_clusters = 0; /* given clusters are kept (checked below), automatic ones rebuilt */
+    st = DK_OK;
+    int rebuild = s->opt.n_clusters == 0;
+    if (!rebuild) /* a vertex set free must be in a given cluster */
+        for (dk_index v = 0; v < s->mesh->n_vertices; v++)
+            if (!kin[v] && s->cl.vm_start[v] == s->cl.vm_start[v + 1]) {
+                st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                                  "ShapeMatching rebind: vertex %d is simulated but lies in no "
+                                  "given cluster",
+                                  (int)v);
+                break;
+            }
+    if (st == DK_OK && rebuild)
+        st = sm_clusters_build(s->mesh, &o, s->masses, kin, &cl, err);
+    sm_rest rest;
+    double *member_goal = NULL, *sp = NULL;
+    sm_fit *fits = NULL;
+    unsigned char *changed = NULL;
+    if (st == DK_OK && rebuild) {
+        st = sm_rest_alloc(&cl, s->rest.dim, &rest, err);
+        const size_t nm = (size_t)cl.start[cl.n_clusters], nc = (size_t)cl.n_clusters;
+        if (st == DK_OK) {
+            member_goal = malloc((3 * nm + 1) * sizeof *member_goal);
+            sp = malloc((9 * nc + 1) * sizeof *sp);
+            fits = malloc((nc + 1) * sizeof *fits);
+            changed = malloc(nc + 1);
+            if (!member_goal || !sp || !fits || !changed) {
+                st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY,
+                                  "ShapeMatching: out of memory (rebind)");
+                sm_rest_free(&rest);
+            }
+        }
+        if (st != DK_OK)
+            sm_clusters_free(&cl);
+    }
+    double *targets = NULL;
+    if (st == DK_OK) {
+        targets = malloc((3 * (size_t)c->n_handle_vertices + 1) * sizeof *targets);
+        if (!targets) {
+            st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeMatching: out of memory (rebind)");
+            if (rebuild) {
+                sm_clusters_free(&cl);
+                sm_rest_free(&rest);
+            }
+        }
+    }
+    if (st != DK_OK) {
+        free(member_goal), free(sp), free(fits), free(changed);
+        free(kin);
+        dk_constraints_free(c);
+        return st;
+    }
+    dk_constraints_free(s->con);
+    s->con = c;
+    free(s->kinematic);
+    s->kinematic = kin;
+    free(s->targets);
+    s->targets = targets;
+    if (rebuild) {
+        sm_clusters_free(&s->cl);
+        sm_rest_free(&s->rest);
+        free(s->member_goal), free(s->sp), free(s->fits), free(s->changed);
+        s->cl = cl;
+        s->rest = rest;
+        s->member_goal = member_goal;
+        s->sp = sp;
+        s->fits = fits;
+        s->changed = changed;
+    }
+    reset(s, s->mesh->positions);
+    return DK_OK;
+}
+
+/* ------------------------------------------------------------------------ solve ------- */
+
+/* This frame's kinematic positions (k1) for goal shape y and the request's targets (already
+ * expanded into s->targets). */
+static void kinematic_targets(dk_shape_matching *s, const double *y)
+{
+    const dk_constraints *c = s->con;
+    const size_t N = 3 * (size_t)s->mesh->n_vertices;
+    memcpy(s->k1, y, N * sizeof *s->k1);
+    for (dk_index k = 0; k < c->n_handle_vertices; k++) {
+        const dk_index v = c->handle_vertices[k];
+        const double w = c->handle_weights[k];
+        for (int d = 0; d < 3; d++) {
+            const double a = y[3 * (size_t)v + d], t = s->targets[3 * (size_t)k + d];
+            s->k1[3 * (size_t)v + d] = w == 1.0 ? t : a + w * (t - a);
+        }
+    }
+}
+
+static double residual(const dk_shape_matching *s, const double *x, const double *member_goal)
+{
+    double e = 0.0;
+    for (dk_index k = 0; k < s->cl.start[s->cl.n_clusters]; k++) {
+        const double *g = member_goal + 3 * (size_t)k;
+        const double *p = x + 3 * (size_t)s->cl.member_vertex[k];
+        const double dx = g[0] - p[0], dy = g[1] - p[1], dz = g[2] - p[2];
+        e += s->cl.member_mass[k] * (dx * dx + dy * dy + dz * dz);
+    }
+    return e;
+}
+
+dk_status dk_shape_matching_solve(dk_shape_matching *s, const dk_solve_request *rq,
+                                  double *positions, dk_solve_info *info, dk_error *err)
+{
+    if (!s || !positions)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ShapeMatching solve: object and positions must not be NULL");
+    const dk_index n = s->mesh->n_vertices;
+    dk_status st = dk_solve_request_check_input(rq, n, "ShapeMatching solve", err);
+    if (st != DK_OK)
+        return st;
+    if (rq->start == DK_START_GIVEN) {
+        st = dk_start_positions_check(rq->start_positions, n, "ShapeMatching solve", err);
+        if (st != DK_OK)
+            return st;
+    }
+    const double *y = rq->input_positions ? rq->input_positions : s->mesh->positions;
+    /* the targets, checked before anything changes */
+    st = dk_constraints_targets(s->con, y, rq->targets, (int)rq->target_kind, s->targets, err);
+    if (st != DK_OK)
+        return st;
+    const size_t N = 3 * (size_t)n;
+    kinematic_targets(s, y);
+    int frames = 0;
+    if (rq->start == DK_START_COLD || rq->start == DK_START_GIVEN) {
+        reset(s, y);
+        if (rq->start == DK_START_GIVEN) /* released from these positions, at rest */
+            memcpy(s->x, rq->start_positions, N * sizeof *s->x);
+        for (dk_index i = 0; i < n; i++)
+            if (s->kinematic[i])
+                memcpy(s->x + 3 * (size_t)i, s->k1 + 3 * (size_t)i, 3 * sizeof(double));
+    } else {
+        /* the input's velocity over the frame: the damping is relative to it, so that a
+         * part carried by the animation is not dragged behind it */
+        const double inv_t = 1.0 / s->dyn.time_step;
+        for (size_t j = 0; j < N; j++)
+            s->u[j] = (y[j] - s->shape[j]) * inv_t;
+        if (y != s->shape && memcmp(y, s->shape, N * sizeof *y) != 0) {
+            memcpy(s->shape, y, N * sizeof *y);
+            rest_all(s, s->shape);
+        }
+        memcpy(s->k0, s->x, N * sizeof *s->k0);
+        const sm_step step = {.n = n,
+                              .kinematic = s->kinematic,
+                              .k = s->k,
+                              .d = s->d,
+                              .u = s->u,
+                              .gravity = {s->dyn.gravity[0], s->dyn.gravity[1], s->dyn.gravity[2]},
+                              .h = s->dyn.time_step / (double)s->opt.substeps};
+        const int plastic = s->dyn.plastic_creep > 0.0;
+        s->n_sub = s->opt.substeps;
+        for (s->substep = 0; s->substep < s->n_sub; s->substep++) {
+            s->want_fits = plastic;
+            sm_integrate(&step, s->opt.integrator, s->x, s->v, s->goals, goals_of, place, s,
+                         s->work);
+            if (plastic &&
+                sm_plastic_update(&s->cl, s->fits, step.h, &s->dyn, s->sp, s->changed) > 0)
+                for (dk_index c = 0; c < s->cl.n_clusters; c++)
+                    if (s->changed[c])
+                        sm_rest_compute(&s->cl, s->shape, s->mesh->positions, s->sp, &s->rest,
+                                        c, c + 1);
+        }
+        s->frame++;
+        frames = 1;
+    }
+    memcpy(positions, s->x, N * sizeof *positions);
+    double energy = NAN;
+    if (!rq->skip_energy) {
+        pass p = {.s = s, .x = s->x, .goals = s->goals};
+        dk_team_run_halves(s->team, cluster_part, &p, s->cl.n_clusters, 64);
+        energy = residual(s, s->x, s->member_goal);
+    }
+    if (info) {
+        memset(info, 0, sizeof *info);
+        info->energy = energy;
+        info->iterations = frames * s->opt.substeps;
+        info->converged = 1;
+    }
+    return dk_solve_result_check(positions, n, energy, !rq->skip_energy, "ShapeMatching solve",
+                                 err);
+}
+
+/* ------------------------------------------------------------ queries and state ------- */
+
+/* Goals of `x` per membership into `member_goal` (allocated by the caller). */
+static void member_goals_of(const dk_shape_matching *s, const double *x, double *member_goal)
+{
+    sm_goals_clusters(&s->cl, &s->rest, s->opt.mode, s->beta, x, member_goal, NULL, 0,
+                      s->cl.n_clusters);
+}
+
+static dk_status check_positions(const dk_shape_matching *s, const double *x, const char *who,
+                                 dk_error *err)
+{
+    for (size_t j = 0; j < 3 * (size_t)s->mesh->n_vertices; j++)
+        if (!isfinite(x[j]))
+            return dk_error_set(err, DK_ERR_NONFINITE,
+                                "ShapeMatching %s: vertex %d's position is not finite", who,
+                                (int)(j / 3));
+    return DK_OK;
+}
+
+dk_status dk_shape_matching_energy(const dk_shape_matching *s, const double *positions,
+                                   double *energy, dk_error *err)
+{
+    if (!s || !positions || !energy)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ShapeMatching energy: object, positions and energy must not be NULL");
+    dk_status st = check_positions(s, positions, "energy", err);
+    if (st != DK_OK)
+        return st;
+    const size_t nm = (size_t)s->cl.start[s->cl.n_clusters];
+    double *mg = malloc((3 * nm + 1) * sizeof *mg);
+    if (!mg)
+        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeMatching energy: out of memory");
+    member_goals_of(s, positions, mg);
+    *energy = residual(s, positions, mg);
+    free(mg);
+    return DK_OK;
+}
+
+dk_status dk_shape_matching_goals(const dk_shape_matching *s, const double *positions,
+                                  double *goals, dk_error *err)
+{
+    if (!s || !positions || !goals)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ShapeMatching goals: object, positions and goals must not be NULL");
+    dk_status st = check_positions(s, positions, "goals", err);
+    if (st != DK_OK)
+        return st;
+    const size_t nm = (size_t)s->cl.start[s->cl.n_clusters];
+    double *mg = malloc((3 * nm + 1) * sizeof *mg);
+    if (!mg)
+        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeMatching goals: out of memory");
+    member_goals_of(s, positions, mg);
+    sm_goals_vertices(&s->cl, mg, positions, goals, 0, s->mesh->n_vertices);
+    free(mg);
+    return DK_OK;
+}
+
+void dk_shape_matching_velocities(const dk_shape_matching *s, double *out)
+{
+    memcpy(out, s->v, 3 * (size_t)s->mesh->n_vertices * sizeof *out);
+}
+
+dk_status dk_shape_matching_set_velocities(dk_shape_matching *s, const double *velocities,
+                                           dk_error *err)
+{
+    if (!s || !velocities)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ShapeMatching set_velocities: object and velocities must not be "
+                            "NULL");
+    for (size_t j = 0; j < 3 * (size_t)s->mesh->n_vertices; j++)
+        if (!isfinite(velocities[j]))
+            return dk_error_set(err, DK_ERR_NONFINITE,
+                                "ShapeMatching set_velocities: vertex %d's velocity is not "
+                                "finite",
+                                (int)(j / 3));
+    memcpy(s->v, velocities, 3 * (size_t)s->mesh->n_vertices * sizeof *s->v);
+    return DK_OK;
+}
+
+int64_t dk_shape_matching_frame(const dk_shape_matching *s)
+{
+    return s->frame;
+}
+
+dk_index dk_shape_matching_clusters(const dk_shape_matching *s, const dk_index **start,
+                                    const dk_index **vertices)
+{
+    if (start)
+        *start = s->cl.start;
+    if (vertices)
+        *vertices = s->cl.member_vertex;
+    return s->cl.n_clusters;
+}
+
+dk_status dk_shape_matching_set_dynamics(dk_shape_matching *s,
+                                         const dk_shape_matching_dynamics *dyn, dk_error *err)
+{
+    if (!s || !dyn)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ShapeMatching set_dynamics: object and dynamics must not be NULL");
+    dk_status st = check_dynamics(dyn, err);
+    if (st != DK_OK)
+        return st;
+    s->dyn = *dyn;
+    coefficients(s);
+    return DK_OK;
+}
+
+dk_status dk_shape_matching_check_dynamics(const dk_shape_matching_dynamics *dyn, dk_error *err)
+{
+    if (!dyn)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ShapeMatching check_dynamics: dynamics must not be NULL");
+    return check_dynamics(dyn, err);
+}
+
+void dk_shape_matching_get_dynamics(const dk_shape_matching *s, dk_shape_matching_dynamics *dyn)
+{
+    *dyn = s->dyn;
+}
+
+void dk_shape_matching_stats(const dk_shape_matching *s, dk_method_stats *stats)
+{
+    memset(stats, 0, sizeof *stats);
+    stats->n_vertices = s->mesh->n_vertices;
+    stats->n_handles = s->con->n_handles;
+    stats->n_handle_vertices = s->con->n_handle_vertices;
+    stats->first_held = -1;
+}
+
+enum { N_SPANS = 5 };
+
+static void spans_of(const dk_shape_matching *s_const, dk_state_span *sp, uint64_t shape[4])
+{
+    dk_shape_matching *s = (dk_shape_matching *)s_const; /* save reads what restore writes */
+    const size_t N = 3 * (size_t)s->mesh->n_vertices * sizeof(double);
+    sp[0] = (dk_state_span){s->x, N};
+    sp[1] = (dk_state_span){s->v, N};
+    sp[2] = (dk_state_span){s->shape, N};
+    sp[3] = (dk_state_span){s->sp, 9 * (size_t)s->cl.n_clusters * sizeof(double)};
+    sp[4] = (dk_state_span){&s->frame, sizeof s->frame};
+    shape[0] = (uint64_t)s->mesh->n_vertices;
+    shape[1] = (uint64_t)s->cl.n_clusters;
+    shape[2] = (uint64_t)s->cl.start[s->cl.n_clusters];
+    shape[3] = (uint64_t)s->con->n_handle_vertices;
+}
+
+size_t dk_shape_matching_state_size(const dk_shape_matching *s)
+{
+    dk_state_span sp[N_SPANS];
+    uint64_t shape[4];
+    spans_of(s, sp, shape);
+    return dk_state_size(sp, N_SPANS);
+}
+
+dk_status dk_shape_matching_save_state(const dk_shape_matching *s, void *state, size_t size,
+                                       dk_error *err)
+{
+    dk_state_span sp[N_SPANS];
+    uint64_t shape[4];
+    spans_of(s, sp, shape);
+    return dk_state_save("ShapeMatching", shape, sp, N_SPANS, state, size, err);
+}
+
+dk_status dk_shape_matching_restore_state(dk_shape_matching *s, const void *state, size_t size,
+                                          dk_error *err)
+{
+    dk_state_span sp[N_SPANS];
+    uint64_t shape[4];
+    spans_of(s, sp, shape);
+    dk_status st = dk_state_check("ShapeMatching", shape, sp, N_SPANS, state, size, err);
+    if (st != DK_OK)
+        return st;
+    dk_state_restore_spans(sp, N_SPANS, state);
+    rest_all(s, s->shape); /* the rest data of the restored goal shape and plastic states */
+    return DK_OK;
+}
+
+dk_status dk_shape_matching_estimate_memory(const dk_mesh *mesh,
+                                            const dk_shape_matching_options *options,
+                                            uint64_t *bytes, dk_error *err)
+{
+    if (!mesh || !bytes)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ShapeMatching estimate_memory: mesh and bytes must not be NULL");
+    dk_status st = options ? check_options(mesh, options, err) : DK_OK;
+    if (st != DK_OK)
+        return st;
+    const int quad = options && options->mode == DK_SHAPE_MATCHING_QUADRATIC;
+    /* 8 memberships a vertex: offsets (3 or 9), goals (3), mass, two indices; the bind's
+     * sort of 8 (key, vertex) pairs; the vertex arrays (x, v, shape, goals, 6 of RK4's
+     * stages, two kinematic ends: 14 x 3 doubles; 7 per-vertex doubles) */
+    const double per_vertex = 8.0 * (8.0 * (quad ? 9 : 3) + 24.0 + 8.0 + 8.0) + 8.0 * 16.0 +
+                              14.0 * 24.0 + 7.0 * 8.0;
+    *bytes = dk_memory_model(per_vertex, (double)mesh->n_vertices, 0.0);
+    return DK_OK;
+}
+
+/* the options' fields (dk_option_desc): where each is, what values bind takes */
+static const dk_option_desc shape_matching_fields[] = {
+    {"mode", DK_OPTION_ENUM, offsetof(dk_shape_matching_options, mode), 0, 0, 2, 1, 2, 0},
+    {"alpha", DK_OPTION_DOUBLE, offsetof(dk_shape_matching_options, alpha), 0, 0.0, 1.0, 0.3,
+     1.0, 0},
+    {"beta", DK_OPTION_DOUBLE, offsetof(dk_shape_matching_options, beta), 0, 0.0, 1.0, 0.3, 1.0,
+     0},
+    {"damping", DK_OPTION_DOUBLE, offsetof(dk_shape_matching_options, damping), 0, 0.0, DBL_MAX,
+     4.0, DBL_MAX, 0},
+    {"gravity_x", DK_OPTION_DOUBLE, offsetof(dk_shape_matching_options, gravity_x), 0, -DBL_MAX,
+     DBL_MAX, 0.0, DBL_MAX, 0},
+    {"gravity_y", DK_OPTION_DOUBLE, offsetof(dk_shape_matching_options, gravity_y), 0, -DBL_MAX,
+     DBL_MAX, 0.0, DBL_MAX, 0},
+    {"gravity_z", DK_OPTION_DOUBLE, offsetof(dk_shape_matching_options, gravity_z), 0, -DBL_MAX,
+     DBL_MAX, -9.81, DBL_MAX, 0},
+    {"time_step", DK_OPTION_DOUBLE, offsetof(dk_shape_matching_options, time_step), 0, 1e-6,
+     3600.0, 1.0 / 24.0, 3600.0, 0},
+    {"substeps", DK_OPTION_INT, offsetof(dk_shape_matching_options, substeps), 0, 1, 64, 2, 8, 0},
+    {"integrator", DK_OPTION_ENUM, offsetof(dk_shape_matching_options, integrator), 0, 0, 3, 0, 3,
+     0},
+    {"clusters", DK_OPTION_ENUM, offsetof(dk_shape_matching_options, clusters), 0, 0, 1, 0, 1, 0},
+    {"cluster_size", DK_OPTION_DOUBLE, offsetof(dk_shape_matching_options, cluster_size), 0,
+     DBL_TRUE_MIN, DBL_MAX, 0.25, DBL_MAX, DK_OPTION_LENGTH | DK_OPTION_ZERO_AUTO},
+    {"plastic_yield", DK_OPTION_DOUBLE, offsetof(dk_shape_matching_options, plastic_yield), 0,
+     0.0, DBL_MAX, 0.1, DBL_MAX, 0},
+    {"plastic_creep", DK_OPTION_DOUBLE, offsetof(dk_shape_matching_options, plastic_creep), 0,
+     0.0, DBL_MAX, 1.0, DBL_MAX, 0},
+    {"plastic_max", DK_OPTION_DOUBLE, offsetof(dk_shape_matching_options, plastic_max), 0, 0.0,
+     DBL_MAX, 1.0, DBL_MAX, 0},
+    {"masses", DK_OPTION_VERTEX_VALUES, offsetof(dk_shape_matching_options, masses),
+     offsetof(dk_shape_matching_options, n_masses), DBL_MIN, DBL_MAX, 1.0, DBL_MAX, 0},
+    {"alpha_map", DK_OPTION_VERTEX_VALUES, offsetof(dk_shape_matching_options, alpha_map),
+     offsetof(dk_shape_matching_options, n_alpha_map), 0.0, 1.0, 1.0, 1.0, 0},
+    {"beta_map", DK_OPTION_VERTEX_VALUES, offsetof(dk_shape_matching_options, beta_map),
+     offsetof(dk_shape_matching_options, n_beta_map), 0.0, 1.0, 1.0, 1.0, 0},
+    {"damping_map", DK_OPTION_VERTEX_VALUES, offsetof(dk_shape_matching_options, damping_map),
+     offsetof(dk_shape_matching_options, n_damping_map), 0.0, DBL_MAX, 1.0, DBL_MAX, 0},
+};
+
+DK_METHOD_OPS_STATEFUL(dk_shape_matching_ops, "ShapeMatching",
+                       DK_METHOD_ITERATIVE | DK_METHOD_GIVEN_START | DK_METHOD_EDITS_INPUT |
+                           DK_METHOD_DYNAMIC,
+                       DK_CONTROL_VERTEX_GROUPS, dk_shape_matching, dk_shape_matching,
+                       dk_shape_matching_options, shape_matching_fields);

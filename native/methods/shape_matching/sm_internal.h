@@ -1,0 +1,98 @@
+/* Shape matching's pieces (dk_shape_matching.h): the clusters (clusters.c), their rest data
+ * for a goal shape (rest_shape.c), the goals of a configuration (goals.c), the integrators
+ * (integrators.c) and the driver (shape_matching.c). Not installed. */
+#ifndef DK_SM_INTERNAL_H
+#define DK_SM_INTERNAL_H
+
+#include "dk_parallel.h"
+#include "dk_shape_matching.h"
+
+/* Clusters in CSR form, with the vertex -> membership map. Membership k is vertex
+ * member_vertex[k] in the cluster whose range holds k. */
+typedef struct sm_clusters {
+    dk_index n_clusters;
+    dk_index *start;         /* n_clusters + 1                                            */
+    dk_index *member_vertex; /* start[n_clusters]                                         */
+    double *member_mass;     /* m_i / n_i                                                 */
+    dk_index *vm_start;      /* n_vertices + 1: vertex v's memberships are               */
+    dk_index *vm_index;      /* vm_index[vm_start[v] .. vm_start[v+1]-1]                 */
+} sm_clusters;
+
+/* Builds the clusters: the given ones (options->n_clusters > 0), one per connected part
+ * (PARTS), or the automatic cubes of edge cluster_size overlapping by half, each
+ * split into its connected pieces (a mesh with faces); a piece of fewer than 4 vertices is
+ * dropped, and a vertex left in no cluster gets one of the nearest 8 vertices of its part
+ * by edges. `kinematic` (n_vertices, 1 = not simulated) only decides what must be covered. */
+dk_status sm_clusters_build(const dk_mesh *mesh, const dk_shape_matching_options *options,
+                            const double *masses, const unsigned char *kinematic,
+                            sm_clusters *out, dk_error *err);
+void sm_clusters_free(sm_clusters *c);
+
+/* The rest data of every cluster for a goal shape: mass centre, the offsets q (3 per
+ * membership; 9 for QUADRATIC: q~), and the regularised inverse (A_qq + L)^-1 (3x3 or 9x9
+ * per cluster) with its regulariser L (the diagonal, 3 or 9 per cluster). */
+typedef struct sm_rest {
+    int dim;          /* 3 (RIGID, LINEAR) or 9 (QUADRATIC)                               */
+    double *q;        /* dim per membership                                               */
+    double *inv;      /* dim x dim per cluster                                            */
+    double *lambda;   /* dim per cluster                                                  */
+    double *mass;     /* per cluster: sum of its members' masses                          */
+} sm_rest;
+
+dk_status sm_rest_alloc(const sm_clusters *c, int dim, sm_rest *r, dk_error *err);
+void sm_rest_free(sm_rest *r);
+
+/* Fills `r` for the goal shape `y` (n_vertices x 3) and the clusters' plastic states `sp`
+ * (9 per cluster, row-major; NULL: none), whose frame is the bind rest's: `rest` (the bind's
+ * positions) turns each into the goal shape's frame when `y` is not the rest. Clusters
+ * [begin, end) only (so that passes can split them). */
+void sm_rest_compute(const sm_clusters *c, const double *y, const double *rest,
+                     const double *sp, sm_rest *r, dk_index begin, dk_index end);
+
+/* Per-cluster scratch of a goal pass: the rotation and the linear fit (for plasticity). */
+typedef struct sm_fit {
+    double R[9];
+    double A[9];
+} sm_fit;
+
+/* The goals of configuration x (n_vertices x 3): per membership its cluster's goal into
+ * `member_goal` (3 per membership), for clusters [begin, end), with the per-vertex beta
+ * `beta` (n_vertices). `fits` (per cluster) receives R and the linear fit. */
+void sm_goals_clusters(const sm_clusters *c, const sm_rest *r, dk_shape_matching_mode mode,
+                       const double *beta, const double *x, double *member_goal, sm_fit *fits,
+                       dk_index begin, dk_index end);
+
+/* The mean goal of each vertex in [begin, end) from member_goal; a vertex in no cluster gets
+ * its own position. */
+void sm_goals_vertices(const sm_clusters *c, const double *member_goal, const double *x,
+                       double *goals, dk_index begin, dk_index end);
+
+/* Where a plastic state changes: updates sp (9 per cluster) from the fits for a step of h
+ * seconds; returns how many clusters changed (their rest data must be recomputed). */
+dk_index sm_plastic_update(const sm_clusters *c, const sm_fit *fits, double h,
+                           const dk_shape_matching_dynamics *dyn, double *sp,
+                           unsigned char *changed);
+
+/* What one substep needs (integrators.c). */
+typedef struct sm_step {
+    dk_index n;
+    const unsigned char *kinematic; /* n                                                    */
+    const double *k;                /* n: stiffness per unit mass, alpha_i / h_frame^2      */
+    const double *d;                /* n: damping rates                                     */
+    const double *u;                /* n x 3: the input's velocity over the frame, which the
+                                       damping is relative to (0 for a still input)         */
+    double gravity[3];
+    double h;                       /* the substep                                          */
+} sm_step;
+
+/* One substep of the chosen integrator for the free vertices, x and v in place. `goals_at`
+ * evaluates the goals of a configuration (goals.c through the driver), with the kinematic
+ * vertices placed at fraction `tau` of the substep by `place`; `ctx` is theirs. Scratch:
+ * `work` holds 6 n x 3 doubles (RK4's stages). */
+typedef void (*sm_goals_fn)(void *ctx, const double *x, double *goals);
+typedef void (*sm_place_fn)(void *ctx, double *x, double *v, double tau);
+void sm_integrate(const sm_step *st, dk_shape_matching_integrator integrator, double *x,
+                  double *v, double *goals, sm_goals_fn goals_at, sm_place_fn place, void *ctx,
+                  double *work);
+
+#endif
