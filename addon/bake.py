@@ -4,10 +4,12 @@ Each frame is solved cold (its result depends only on that frame's inputs), so f
 baked on different machines and joined give the same cache as one bake.
 """
 
+import os
+
 import bpy
 import numpy as np
 
-from . import animated_input, compat, geonodes, handlers, pc2, solver
+from . import animated_input, compat, geonodes, handlers, methods, pc2, solver
 from .text import plural
 
 
@@ -37,6 +39,15 @@ class FrameBaker:
         self.obj_name, self.uid = obj.name, d.uid
         self.frames = list(range(frame_start, frame_end + 1))
         self.i = 0
+        # a simulation plays the frames before the range first (kept ones cost no solve),
+        # unless the frame before it was imported as a checkpoint (a chunk of a split bake)
+        self.dynamic = solver.simulation.is_dynamic(methods.get(d.method))
+        e = solver.cache._cache.get((obj.name, d.uid))
+        sim = getattr(e, "sim", None) if e is not None else None
+        have = sim is not None and frame_start - 1 in sim.items and \
+            sim.items[frame_start - 1][1] is not None
+        self.preroll = [] if not self.dynamic or have else \
+            list(range(min(self.scene.frame_start, frame_start), frame_start))
         self.saved_frame = self.scene.frame_current
         self.handlers_were = handlers.enabled[0]
         handlers.enabled[0] = False  # the bake solves itself, cold; no double work per frame
@@ -54,8 +65,17 @@ class FrameBaker:
     def done(self):
         return self.i >= len(self.frames)
 
+    def _preroll(self):
+        while self.preroll:
+            f = self.preroll.pop(0)
+            self.scene.frame_set(f)
+            obj, d = self._objects()
+            solver.deformed_positions(obj, d, self.context.evaluated_depsgraph_get(), cold=True,
+                                      check_groups=False)
+
     def step(self):
         """Solves the next frame; returns (frame, positions n x 3 float64)."""
+        self._preroll()
         f = self.frames[self.i]
         self.scene.frame_set(f)
         obj, d = self._objects()
@@ -63,8 +83,19 @@ class FrameBaker:
         # the first frame reads the vertex groups again (a script may have edited them
         # without an update that said so)
         pos = solver.deformed_positions(obj, d, dg, cold=True, check_groups=self.i == 0)
+        if self.dynamic:
+            self._check_followed(obj, d, f)
         self.i += 1
         return f, pos
+
+    def _check_followed(self, obj, d, f):
+        """A simulation's frame must have followed from the frame before it (never the
+        input shown ahead of what was simulated, which playback may show)."""
+        s = solver.simulation.summary(solver.binding_of(obj, d))
+        if s is None or s[2] is not None:
+            raise solver.DeformKitError(
+                "simulation: frame %d could not follow from frame %d (its checkpoint is "
+                "gone): bake again from frame %d" % (f, f - 1, self.scene.frame_start))
 
     # ---- the modal bake's steps: the frame's native solve in a worker thread
     # (solver.FrameSolve), so that the window stays live and Esc answers while a big mesh's
@@ -103,6 +134,8 @@ class FrameBaker:
     def step_async(self):
         """One tick of a modal bake: starts the next frame's solve, or returns (frame,
         positions) when it is done (None meanwhile)."""
+        if self.dynamic:  # each frame follows from the last: in order, milliseconds each
+            return self.step()
         if self.pending is None:
             self.step_begin()
             # a small mesh's frame is solved within this: one tick a frame, as before (a
@@ -117,6 +150,55 @@ class FrameBaker:
         handlers.enabled[0] = self.handlers_were
         if self.scene.frame_current != self.saved_frame:
             self.scene.frame_set(self.saved_frame)
+
+
+# ---- a simulation's checkpoints between the chunks of a split bake (solver.simulation): the
+# chunk that ends at frame B leaves the native state after B in a file; the chunk that starts
+# at B + 1 continues from it instead of playing frames 1..B again
+
+def checkpoint_path(folder, obj, d, frame):
+    return os.path.join(folder, "%s_%s.%d.dkstate" % (bpy.path.clean_name(obj.name),
+                                                      bpy.path.clean_name(d.name), frame))
+
+
+def load_checkpoint(obj, d, folder, frame_start):
+    """Imports the checkpoint of the frame before `frame_start` from `folder` when there is
+    one; returns its path, or None (the bake then plays the frames before its range). A file
+    that does not fit this binding (another mesh, method or settings) is refused by the
+    native check with a DeformKitError naming it."""
+    if not solver.simulation.is_dynamic(methods.get(d.method)):
+        return None
+    scene = bpy.context.scene
+    if frame_start <= scene.frame_start:
+        return None
+    path = checkpoint_path(folder, obj, d, frame_start - 1)
+    if not os.path.isfile(path):
+        return None
+    with open(path, "rb") as f:
+        state = f.read()
+    e = solver.binding_of(obj, d)
+    try:
+        solver.simulation.import_checkpoint(e, frame_start - 1, state, scene.frame_start)
+    except (ValueError, TypeError) as ex:
+        raise solver.DeformKitError("checkpoint %s does not fit '%s': %s" % (path, d.name, ex))
+    return path
+
+
+def save_checkpoint(obj, d, folder, frame):
+    """Writes the checkpoint kept after `frame` into `folder` (a hidden file moved into
+    place: a reader never sees half of it); returns its path, or None when the method keeps
+    none."""
+    if not solver.simulation.is_dynamic(methods.get(d.method)):
+        return None
+    state = solver.simulation.export_checkpoint(solver.binding_of(obj, d), frame)
+    if state is None:
+        raise solver.DeformKitError("no checkpoint of frame %d was kept" % frame)
+    path = checkpoint_path(folder, obj, d, frame)
+    part = os.path.join(folder, ".%s.%d.part" % (os.path.basename(path), os.getpid()))
+    with open(part, "wb") as f:
+        f.write(state)
+    os.replace(part, path)
+    return path
 
 
 def add_mesh_cache(obj, d, path, frame_start, frame_end=None):

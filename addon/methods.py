@@ -124,6 +124,10 @@ class Method:
     # handle's affine motion): while a solve runs in a worker thread, each update shows the
     # last result moved by it to the handles' current transforms (solver.previews._basis_preview)
     response_basis: bool = False
+    # extra solve keywords read from the scene on each frame: solve_args(obj, options, scene)
+    # -> dict (a simulation's gravity, turned into the object's space, and its time step, the
+    # scene's frame length)
+    solve_args: Optional[Callable] = None
 
 
 METHODS = [
@@ -625,6 +629,97 @@ METHODS.append(Method(
                        "The bones' turns blended as dual quaternions (as the Armature "
                        "modifier's Preserve Volume): twisted and bent joints keep their "
                        "girth"))),
+    ],
+))
+
+
+def shape_matching_solve_args(obj, opts, scene):
+    """Gravity (the scene's, when the deformer's Gravity is on and the scene's is too) in the
+    object's space, where the native object simulates; the frame's length in seconds."""
+    import mathutils
+    g = (0.0, 0.0, 0.0)
+    if opts.use_gravity and scene.use_gravity:
+        inv = obj.matrix_world.to_3x3().inverted_safe()
+        g = tuple(inv @ mathutils.Vector(scene.gravity))
+    fps = scene.render.fps / (scene.render.fps_base or 1.0)
+    return {"gravity": g, "time_step": 1.0 / fps}
+
+
+# A simulation (the native table's `dynamic`): each frame follows from the one before it,
+# played from the scene's first frame (solver.simulation); handles are optional
+METHODS.append(Method(
+    id="SHAPE_MATCHING",
+    label="Jiggle",
+    native_class="ShapeMatching",
+    description="Physically based jiggle and secondary motion (meshless shape matching): the "
+                "mesh follows its input and handles with inertia, overshoots and settles",
+    icon="PHYSICS",
+    needs_faces=False,
+    solve_args=shape_matching_solve_args,
+    options=[
+        Option("alpha", "FLOAT", 0.3, "Stiffness",
+               "How strongly each part is pulled back to its shape on each step (the paper's "
+               "alpha): low jiggles slowly and far, 1 snaps back at once. Keyable",
+               min=0.0, max=1.0, bind_time=False),
+        Option("damping", "FLOAT", 4.0, "Damping",
+               "How fast the jiggle dies out, per second (against the animation's own "
+               "motion, so that moving parts are not dragged behind). Keyable",
+               min=0.0, max=1000.0, bind_time=False),
+        Option("mode", "ENUM", "linear", "Shape",
+               "What each cluster of the mesh may do besides turning",
+               items=(("rigid", "Rigid",
+                       "Each cluster keeps its shape exactly: the stiffest wobble"),
+                      ("linear", "Squash and Stretch",
+                       "Clusters may also shear and stretch, keeping their volume (the "
+                       "default): soft, fleshy motion"),
+                      ("quadratic", "Bend and Twist",
+                       "Clusters may also bend and twist: the softest, for long parts "
+                       "(ears, tails)"))),
+        Option("beta", "FLOAT", 0.3, "Squash Amount",
+               "How far the clusters squash, stretch, bend or twist beyond turning (the "
+               "paper's beta; Shape Rigid ignores it). Keyable",
+               min=0.0, max=1.0, bind_time=False, shown_if=("mode", ("linear", "quadratic"))),
+        Option("use_gravity", "BOOL", False, "Gravity",
+               "Add the scene's gravity (off by default: an animated pose already hangs as it "
+               "should, and gravity would sag it further)", kw=None, bind_time=False),
+        Option("clusters", "ENUM", "cubes", "Clusters",
+               "How the mesh is split into the overlapping pieces that keep their shape",
+               items=(("cubes", "Local",
+                       "Overlapping cubes of Cluster Size, split where the mesh is not "
+                       "connected (the default): each region wobbles on its own"),
+                      ("parts", "Whole Parts",
+                       "One cluster per connected part: each part keeps its shape as a whole "
+                       "(the paper's basic method)"))),
+        Option("cluster_size", "FLOAT", 0.0, "Cluster Size",
+               "Edge of the cubes (0: a quarter of the mesh's size): smaller clusters let "
+               "smaller regions wobble and make long parts floppier",
+               min=0.0, max=1e9, subtype="DISTANCE", shown_if=("clusters", ("cubes",)),
+               advanced=True),
+        Option("substeps", "INT", 2, "Substeps",
+               "Integration steps per frame: more make the same Stiffness stiffer and the "
+               "motion smoother", min=1, max=64, advanced=True),
+        Option("integrator", "ENUM", "semi_implicit_euler", "Integrator",
+               "How each step moves the points",
+               items=(("semi_implicit_euler", "Semi-Implicit Euler",
+                       "Velocity first, then position (the paper's scheme, the default): "
+                       "stable for any Stiffness, keeps the jiggle's energy"),
+                      ("explicit_euler", "Explicit Euler",
+                       "Position from the old velocity (the lecture's first integrator): "
+                       "gains energy and blows up; for comparison only"),
+                      ("implicit_euler", "Implicit Euler",
+                       "Backward Euler: stable and strongly damped, the jiggle dies fast"),
+                      ("rk4", "Runge-Kutta 4",
+                       "Four evaluations per step: accurate, loses a little energy")),
+               advanced=True),
+        Option("plastic_creep", "FLOAT", 0.0, "Plasticity",
+               "How fast a strongly deformed region keeps its new shape, per second (0: "
+               "always springs back)", min=0.0, max=1000.0, bind_time=False, advanced=True),
+        Option("plastic_yield", "FLOAT", 0.1, "Yield",
+               "How far a region must deform before Plasticity keeps any of it",
+               min=0.0, max=100.0, bind_time=False, advanced=True),
+        Option("plastic_max", "FLOAT", 1.0, "Max Plastic",
+               "The most Plasticity may keep of a deformation", min=0.0, max=100.0,
+               bind_time=False, advanced=True),
     ],
 ))
 

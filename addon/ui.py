@@ -155,6 +155,9 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
         summary = solver.solve_summary(obj, d)
         if summary:
             layout.label(text=summary, icon="TIME")
+        sim = solver.simulation_text(obj, d)
+        if sim:
+            draw_wrapped(layout, sim, "PHYSICS", width)
         fit = solver.fit_warning(obj, d) if d.bound else None
         if fit:
             draw_wrapped(layout, fit, "INFO", width)

@@ -1,14 +1,18 @@
 """Headless DeformKit bake: solves every frame of a range and writes a PC2 point cache.
 
   blender -b scene.blend --python-exit-code 1 --python scripts/batch_bake.py -- \
-      --object NAME [--deformer NAME] --frames A-B --out FILE.pc2 [--save]
+      --object NAME [--deformer NAME] --frames A-B --out FILE.pc2 [--checkpoints DIR] [--save]
   blender -b --python-exit-code 1 --python scripts/batch_bake.py -- --join a.pc2 b.pc2 --out all.pc2
   python3 scripts/batch_bake.py --join a.pc2 b.pc2 --out all.pc2      (join needs no Blender)
   python scripts/batch_bake.py --blend scene.blend [--scene NAME] --object NAME ...
                                  (Blender as a Python module: a venv with the `bpy` wheel)
 
 Each frame is solved from a cold start, so a frame's result depends only on that frame's inputs:
-ranges baked on different machines and joined equal one bake of the whole range. If the
+ranges baked on different machines and joined equal one bake of the whole range. A simulation
+(Jiggle) is the exception: each frame follows from the one before, so a range starting after
+the scene's first frame either plays the frames before it, or, with --checkpoints DIR,
+continues from the checkpoint the chunk before it left there (chunks then run in order); both
+equal one bake, bit for bit. If the
 deformer is not bound, it is bound at the scene's start frame (the same on every machine).
 --save adds a Mesh Cache modifier reading the cache (in place of the deformer's modifier) and
 saves the .blend. Progress lines go to stderr; any failure exits non-zero.
@@ -72,6 +76,11 @@ def parse(argv):
                         "as in Blender); its folder must exist, and an existing file there is "
                         "only replaced if it is a point cache")
     p.add_argument("--join", nargs="+", metavar="PC2", help="join these caches into --out")
+    p.add_argument("--checkpoints", metavar="DIR",
+                   help="a simulation (Jiggle): continue from DIR's checkpoint of the frame "
+                        "before --frames when there is one (else play the frames before the "
+                        "range), and leave the checkpoint of the range's last frame there "
+                        "for the next chunk")
     p.add_argument("--save", action="store_true",
                    help="add a Mesh Cache modifier reading --out and save the .blend")
     return p.parse_args(argv)
@@ -205,7 +214,19 @@ def do_bake(args):
                                                     (now - last[0]) * 1000))
             last[0] = now
 
+        folder = os.path.abspath(args.checkpoints) if args.checkpoints else None
+        if folder and not os.path.isdir(folder):
+            fail("--checkpoints: no folder %s" % folder)
+        if folder:
+            got = bake.load_checkpoint(obj, d, folder, a)
+            log("continuing from the checkpoint of frame %d (%s)" % (a - 1, got) if got else
+                "no checkpoint of frame %d in %s: playing from frame %d"
+                % (a - 1, folder, scene.frame_start))
         bake.bake_pc2(bpy.context, obj, d, a, b, out, progress)
+        if folder:
+            saved = bake.save_checkpoint(obj, d, folder, b)
+            if saved:
+                log("left the checkpoint of frame %d: %s" % (b, saved))
         log("wrote %s: %d frames x %d vertices in %.2f s"
             % (out, n, len(obj.data.vertices), time.perf_counter() - t_start))
         if args.save:

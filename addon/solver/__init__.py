@@ -15,14 +15,16 @@ errors), blender_data (reading the mesh, writing the result), controls (the coll
 the control kinds a method declares), vertex_groups (the collector for vertex-group
 controls), identity (topology and deformer uids), binding, rebind (re-binds
 in worker threads), solving, budget (interactive time budgets), workers (solves off the main
-thread), previews, status (what the panel says), material (linear reconstruction's map).
+thread), previews, status (what the panel says), material (linear reconstruction's map),
+simulation (a dynamic method's frames, played from the scene's start, and checkpoints).
 The names below are what the rest of the add-on uses; tests that tune or spy on a module
 reach into it (solver.budget.INTERACTIVE_BUDGET_MS).
 """
 
 from ..errors import DeformKitError, OverlapError  # noqa: F401
 from . import (binding, blender_data, budget, cache, calls, controls, identity,  # noqa: F401
-               material, previews, progress, rebind, solving, status, vertex_groups, workers)
+               material, previews, progress, rebind, simulation, solving, status,
+               vertex_groups, workers)
 from .binding import (BindJob, bind, bind_begin, bind_end,  # noqa: F401
                       bind_warnings, rest_frame, unbind)
 from .blender_data import (check_editable, check_mesh_type, evaluated_positions,  # noqa: F401
@@ -37,8 +39,8 @@ from .material import material_map  # noqa: F401
 from .progress import BIND_PHASES  # noqa: F401
 from .rebind import (REBIND_ASYNC_MIN_VERTICES, GroupsRebindJob, RebindPending,  # noqa: F401
                      finish_rebinds, rebind_text, rebinding, threaded_rebinds)
-from .solving import (deformed_positions, evaluate_object, finish, shown_positions,  # noqa: F401
-                      solve)
+from .solving import (binding_of, deformed_positions, evaluate_object, finish,  # noqa: F401
+                      shown_positions, solve)
 from .status import (fit_warning, idle_status, reset_status, set_status,  # noqa: F401
-                     solve_summary, status_text)
+                     simulation_text, solve_summary, status_text)
 from .workers import FrameSolve, threaded_solves  # noqa: F401

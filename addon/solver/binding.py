@@ -96,6 +96,7 @@ class BindJob(progress.Reporting):
         e.last_cold = False  # whether the shown result is a cold solve's (solve())
         e.last_T = None      # the handle transforms of the last written solve
         e.fit_for, e.fit_text = None, None   # fit_warning's cache
+        e.sim = None   # a simulation's kept frames (solver.simulation)
         cache._cache[(obj.name, d.uid)] = e
         return e
 
@@ -113,6 +114,7 @@ def _install_groups(entry, d, kw, groups_key):
     entry.basis, entry.result_pos, entry.result_T = None, None, None
     entry.preview_inputs = None
     entry.warned = None  # new constraints: other loose parts
+    entry.sim = None     # the native rebind restarted a simulation: its frames are gone
     return entry
 
 

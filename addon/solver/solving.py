@@ -2,8 +2,10 @@
 native object (the handles' transforms, the animated input), and what reaches the modifier."""
 
 import math
+import struct
 import time
 
+import bpy
 import numpy as np
 
 from .. import geonodes, methods, native
@@ -11,7 +13,7 @@ from ..animated_input import depends_on_input, edit_targets, input_transforms, m
 from ..errors import DeformKitError
 from ..handles import transforms, turn_with_the_pose
 from . import (binding, blender_data, budget, cache, calls, controls, identity, material,
-               previews, rebind, status, workers)
+               previews, rebind, simulation, status, workers)
 
 
 def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_groups=False,
@@ -54,6 +56,11 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
         w = None  # a bake's frame (finished): its owner takes the result (FrameSolve.result)
     shown = None
     T, source, inputs = _solve_inputs(obj, d, e, depsgraph)
+    m = methods.get(d.method)
+    dynamic = simulation.is_dynamic(m)
+    if dynamic:  # a simulation: the frame is an input (solver.simulation)
+        scene = bpy.context.scene
+        inputs += struct.pack("<qq", scene.frame_current, scene.frame_start)
     if w is not None:  # a worker's solve ended: its result shows now (if still wanted)
         if w.error is not None:
             e.pending = False
@@ -79,6 +86,12 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
         return shown
     plan = _plan_solve(obj, d, e, key, T, source, inputs, cold, write, interactive,
                        resume and shown is None)
+    if dynamic:  # this frame from the one before it, or kept (milliseconds: no worker)
+        t0 = time.perf_counter()
+        res = simulation.solve(e, plan, calls._native_call, scene.frame_current,
+                               scene.frame_start)
+        ms = (time.perf_counter() - t0) * 1000.0
+        return _finish_solve(obj, d, e, key, plan, res, ms)
     if workers._async_wanted(e, interactive, cold, write):
         previews._fetch_basis(e, methods.get(d.method))  # the object is idle now
         e.worker = workers._Worker(e, plan)
@@ -135,6 +148,8 @@ def _plan_solve(obj, d, e, key, T, source, inputs, cold, write, interactive, res
     m = methods.get(d.method)
     goal = dict(transforms=T)
     kw = methods.solve_kwargs(m, d.options, cold)
+    if m.solve_args is not None:  # from the scene (a simulation's gravity and frame length)
+        kw.update(m.solve_args(obj, d.options, bpy.context.scene))
     if not controls.collector(m).uses_handles:
         # a control object's points (_solve_inputs); a method that edits its input
         # registers the input to the control where it lies, the others solve on the rest
@@ -246,6 +261,16 @@ def _finish_solve(obj, d, e, key, plan, res, ms):
         e.preview_inputs = None
         cache._written_at_undo[key] = cache._undo_serial[0]
     return pos
+
+
+def binding_of(obj, d):
+    """The binding `d` solves with (the cache entry), built or checked against the mesh as a
+    solve would: for what works on it between solves (a simulation's checkpoints)."""
+    if not d.bound:
+        raise DeformKitError("not bound: press Bind")
+    blender_data.check_object(obj, d)
+    identity.ensure_own_uid(obj, d)
+    return binding._entry_for(obj, d, False)
 
 
 def finish(obj, d, depsgraph=None):

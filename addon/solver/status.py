@@ -6,7 +6,7 @@ import numpy as np
 from .. import methods
 from ..errors import OverlapError
 from ..text import plural
-from . import cache, controls
+from . import cache, controls, simulation
 
 
 def set_status(d, msg, is_error):
@@ -35,7 +35,7 @@ def idle_status(d):
     if d.bound:
         return "bound: %s, %s" % (plural(d.bind_n_vertices, "vertex"),
                                   plural(len(d.handles), "handle"))
-    if len(d.handles) == 0:
+    if len(d.handles) == 0 and not simulation.is_dynamic(methods.get(d.method)):
         return "not bound: add a handle, then Bind"
     return "not bound: press Bind"
 
@@ -117,3 +117,20 @@ def solve_summary(obj, d):
     return "last solve %.1f ms, %s%s" % (
         rt["ms"], plural(rt["iterations"], "iteration"),
         "" if rt["converged"] or refining else " (not converged)")
+
+
+def simulation_text(obj, d):
+    """A simulation's panel line (the native table's `dynamic`), or None for other methods:
+    the frames kept, and when the frame shown is ahead of them, where to play from."""
+    if not d.bound or not simulation.is_dynamic(methods.get(d.method)):
+        return None
+    e = cache._cache.get((obj.name, d.uid))
+    s = simulation.summary(e) if e is not None else None
+    if s is None or s[0] is None:
+        return "simulation: plays from the scene's first frame"
+    first, last, gap = s
+    text = "simulated frames %d-%d" % (first, last)
+    if gap is not None:
+        text += ("; this frame is ahead of them and shows the input: play from frame %d"
+                 % gap)
+    return text

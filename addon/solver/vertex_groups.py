@@ -7,7 +7,7 @@ from .. import methods
 from ..errors import DeformKitError, OverlapError
 from ..handles import target_world
 from ..text import plural
-from . import blender_data
+from . import blender_data, simulation
 
 uses_handles = True
 
@@ -52,7 +52,7 @@ def collect(obj, d, captured=None):
     `captured` is capture()'s None."""
     blender_data.check_object(obj, d)
     m = methods.get(d.method)
-    if len(d.handles) == 0:
+    if len(d.handles) == 0 and not simulation.is_dynamic(m):  # a simulation needs none
         raise DeformKitError("no handles: add one (Add Handle from Selection in Edit Mode)")
     names = set()
     for h in d.handles:

@@ -258,7 +258,8 @@ static int set_dyn(PyObject *obj, PyObject *value, void *closure)
     return 0;
 }
 
-/* solve(alpha=, beta=, damping=, gravity=, time_step=): this frame's keyed dynamics, kept
+/* solve(alpha=, beta=, damping=, gravity=, time_step=, plastic_yield=, plastic_creep=,
+ * plastic_max=): this frame's keyed dynamics, kept
  * for the later frames (as the attributes); read and checked first, set only when the whole
  * call has been validated (apply_extra), put back if the solve fails. */
 typedef struct sm_extra {
@@ -268,11 +269,14 @@ typedef struct sm_extra {
 
 static int solve_extra(dk_py_method *self, PyObject *kw, void *pending, const char *context)
 {
-    static const char *const keys[] = {"alpha", "beta", "damping", "time_step"};
-    static const int which[] = {DYN_ALPHA, DYN_BETA, DYN_DAMPING, DYN_TIME_STEP};
+    static const char *const keys[] = {"alpha",         "beta",          "damping",
+                                       "time_step",     "plastic_yield", "plastic_creep",
+                                       "plastic_max"};
+    static const int which[] = {DYN_ALPHA, DYN_BETA,  DYN_DAMPING, DYN_TIME_STEP,
+                                DYN_YIELD, DYN_CREEP, DYN_MAX};
     sm_extra *x = (sm_extra *)pending;
     dk_shape_matching_get_dynamics(self->native, &x->dyn);
-    for (int k = 0; k < 4; k++) {
+    for (int k = 0; k < 7; k++) {
         PyObject *v = kw ? PyDict_GetItemString(kw, keys[k]) : NULL;
         if (!v)
             continue;
@@ -432,7 +436,8 @@ PyDoc_STRVAR(solve_doc,
              "solve(targets=None, transforms=None, warm_start=True, max_iterations=None,\n"
              "      resume=False, energy=True, preview=False, start_positions=None,\n"
              "      input_positions=None, alpha=None, beta=None, damping=None, gravity=None,\n"
-             "      time_step=None) -> SolveResult\n\n"
+             "      time_step=None, plastic_yield=None, plastic_creep=None,\n"
+             "      plastic_max=None) -> SolveResult\n\n"
              "One frame of the simulation (alpha ... time_step: this frame's keyed values,\n"
              "kept for the next frames as the attributes are). warm_start=True (the default) or resume=True:\n"
              "advance one frame (time_step seconds in `substeps` steps) from the current\n"

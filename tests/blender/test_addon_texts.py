@@ -296,6 +296,10 @@ STORED_IDS = {
     ("SHEPARD", "interpolate"): ("transforms", "displacements"),
     ("SHEPARD", "distance"): ("euclidean", "geodesic"),
     ("SKINNING", "blend"): ("linear", "dual_quaternion"),
+    ("SHAPE_MATCHING", "mode"): ("rigid", "linear", "quadratic"),
+    ("SHAPE_MATCHING", "clusters"): ("cubes", "parts"),
+    ("SHAPE_MATCHING", "integrator"): ("semi_implicit_euler", "explicit_euler", "implicit_euler",
+                                       "rk4"),
     ("SHEPARD", "neighbourhood"): ("all", "nearest", "radius"),
 }
 # the solver's words the issue found in the UI, which an artist cannot act on

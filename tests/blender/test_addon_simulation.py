@@ -1,0 +1,244 @@
+"""Issue 42: the Jiggle deformer (deformkit.ShapeMatching, a simulation) after an Armature:
+playback from the scene's first frame equals the Python API simulating the same input frame
+by frame; kept frames show again with no solve; an edit re-simulates from the first frame it
+changes; a frame ahead of the simulation shows the input and the panel says where to play
+from; a keyed Stiffness reaches each frame; a bake writes what playback showed, a bake of a
+later range plays the frames before it, and a batch bake split into chunks with checkpoints
+equals one bake, bit for bit."""
+import os
+import shutil
+import subprocess
+import sys
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import _setup as S  # noqa: E402
+import bpy  # noqa: E402
+import numpy as np  # noqa: E402
+from addon import bake, pc2  # noqa: E402
+
+R = S.Results("test_addon_simulation")
+TOL = 2e-5
+LAST = 40
+BATCH = os.path.join(S.ROOT, "scripts", "batch_bake.py")
+
+
+def run_batch(*args, blend=None):
+    """scripts/batch_bake.py as a pipeline runs it (tests/blender/test_addon_animation.py)."""
+    if S.AS_MODULE:
+        cmd = [sys.executable, BATCH] + (["--blend", blend] if blend else []) + list(args)
+    else:
+        cmd = S.blender_command(blend=blend, script=BATCH, args=args)
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+
+
+def jiggle_arm():
+    """A 24 x 6 grid bent by a two-bone Armature (keyed over frames 1-20, still after), a
+    Jiggle deformer after it with no handle: the upper arm (x < -0.4) follows the rig, the
+    rest jiggles after it."""
+    S.reset_scene()
+    nx, ny = 24, 6
+    obj = S.make_grid(nx=nx, ny=ny)
+    rest = S.rest_positions(obj)
+    S.group(obj, "held", np.where(rest[:, 0] < -0.4)[0])
+    w = np.clip((rest[:, 0] + 0.2) / 0.4, 0.0, 1.0)
+    S.group(obj, "lower", range(len(rest)), w)
+    S.group(obj, "upper", range(len(rest)), 1.0 - w)
+    arm, ao = S.two_bone_rig("Rig")
+    for name, keys in (("upper", ((1, (0, 0, 0)), (10, (0, 0, 0.5)), (20, (0.2, 0, 0.1)))),
+                       ("lower", ((1, (0, 0, 0)), (10, (0.8, 0, 0)), (20, (0.3, 0.2, -0.6))))):
+        pb = ao.pose.bones[name]
+        pb.rotation_mode = "XYZ"
+        for f, rot in keys:
+            pb.rotation_euler = rot
+            pb.keyframe_insert("rotation_euler", frame=f)
+    mod = obj.modifiers.new("Armature", "ARMATURE")
+    mod.object = ao
+    bpy.context.view_layer.objects.active = obj
+    bpy.ops.deformkit.add_deformer(method="SHAPE_MATCHING")
+    d = obj.deformkit.deformers[0]
+    d.fixed_group = "held"
+    sc = bpy.context.scene
+    sc.frame_start, sc.frame_end = 1, LAST
+    sc.frame_set(1)
+    bpy.ops.deformkit.bind()
+    R.check("binds without a handle", d.bound and not d.status_is_error, d.status)
+    return obj, d, ao
+
+
+def inputs(obj, d, frames):
+    """The Armature's output on each frame (what the deformer receives)."""
+    out = {}
+    for f in frames:
+        bpy.context.scene.frame_set(f)
+        out[f] = S.armature_input(obj, d)
+    return out
+
+
+def direct(obj, d, inp, frames, alpha=None):
+    """The Python API simulating the same inputs frame by frame (the add-on's keywords)."""
+    m = S.methods.get(d.method)
+    rest = S.rest_positions(obj)
+    mesh = S.dk.Mesh(rest, S.solver.triangles(obj.data))
+    fixed = np.where(rest[:, 0] < -0.4)[0]
+    kw = dict(fixed=fixed)
+    sm = S.dk.ShapeMatching(mesh, **kw, **S.methods.bind_kwargs(m, d.options, rest, kw, mesh))
+    skw = S.methods.solve_kwargs(m, d.options, True)
+    skw.update(m.solve_args(obj, d.options, bpy.context.scene))
+    out = {}
+    for f in frames:
+        if alpha is not None:
+            skw["alpha"] = alpha[f]
+        out[f] = np.asarray(sm.solve(input_positions=inp[f], warm_start=f > frames[0],
+                                     **skw).positions)
+    return out
+
+
+def play(obj, frames):
+    got = {}
+    for f in frames:
+        bpy.context.scene.frame_set(f)
+        got[f] = S.evaluated_positions(obj)
+    return got
+
+
+def worst(a, b):
+    return max(float(np.abs(a[f] - b[f]).max()) for f in a)
+
+
+def test_playback_is_the_simulation():
+    obj, d, ao = jiggle_arm()
+    frames = list(range(1, LAST + 1))
+    inp = inputs(obj, d, frames)
+    want = direct(obj, d, inp, frames)
+    got = play(obj, frames)
+    R.check("playback = the API simulating the same input (max %.2e)" % worst(got, want),
+            worst(got, want) < TOL, worst(got, want))
+    lag = max(float(np.abs(got[f] - inp[f]).max()) for f in frames)
+    late = float(np.abs(got[LAST] - inp[LAST]).max())
+    R.check("the forearm lags and swings (%.3f) and settles once the rig stops (%.4f)"
+            % (lag, late), lag > 0.02 and late < 0.2 * lag, (lag, late))
+    key = (obj.name, d.uid)
+    # scrubbing back: the kept frames, no native solve
+    calls = []
+    native = S.solver.cache._cache[key].native
+    real = native.solve
+
+    class Spy:
+        def __getattr__(self, k):
+            return getattr(native, k)
+
+        def solve(self, *a, **kw):
+            calls.append(1)
+            return real(*a, **kw)
+    S.solver.cache._cache[key].native = Spy()
+    again = play(obj, (12, 5, 30))
+    S.solver.cache._cache[key].native = native
+    R.check("kept frames show again without a solve", not calls and all(
+        np.array_equal(again[f], got[f]) for f in again), len(calls))
+    first, last, gap = S.solver.simulation.summary(S.solver.cache._cache[key])
+    R.check("the panel's range: frames 1-%d kept" % LAST, (first, last, gap) == (1, LAST, None),
+            (first, last, gap))
+    text = S.solver.status.simulation_text(obj, d)
+    R.check("the panel says what is simulated", "1-%d" % LAST in text, text)
+
+
+def test_an_edit_resimulates_from_the_frame_it_changes():
+    obj, d, ao = jiggle_arm()
+    frames = list(range(1, LAST + 1))
+    play(obj, frames)
+    # a key of the forearm at frame 10 changed while frame 30 is shown
+    bpy.context.scene.frame_set(30)
+    pb = ao.pose.bones["lower"]
+    pb.rotation_euler = (0.2, 0.5, 0.0)
+    pb.keyframe_insert("rotation_euler", frame=10)
+    bpy.context.view_layer.update()
+    inp = inputs(obj, d, frames)
+    want = direct(obj, d, inp, frames)
+    got = play(obj, frames)
+    R.check("after an edit, playback from frame 1 = the new simulation (max %.2e)"
+            % worst(got, want), worst(got, want) < TOL, worst(got, want))
+
+
+def test_a_frame_ahead_of_the_simulation():
+    obj, d, ao = jiggle_arm()
+    play(obj, range(1, 6))
+    bpy.context.scene.frame_set(25)
+    got = S.evaluated_positions(obj)
+    inp = S.armature_input(obj, d)
+    R.check("a frame ahead of the kept ones shows the input", np.abs(got - inp).max() < TOL,
+            np.abs(got - inp).max())
+    text = S.solver.status.simulation_text(obj, d)
+    R.check("the panel says to play from frame 5", "play from frame 5" in text, text)
+
+
+def test_a_keyed_stiffness_reaches_each_frame():
+    obj, d, ao = jiggle_arm()
+    d.options_shape_matching.alpha = 0.1
+    d.options_shape_matching.keyframe_insert("alpha", frame=1)
+    d.options_shape_matching.alpha = 0.9
+    d.options_shape_matching.keyframe_insert("alpha", frame=20)
+    frames = list(range(1, 31))
+    alpha = {}
+    for f in frames:
+        bpy.context.scene.frame_set(f)
+        alpha[f] = d.options_shape_matching.alpha
+    inp = inputs(obj, d, frames)
+    want = direct(obj, d, inp, frames, alpha=alpha)
+    got = play(obj, frames)
+    R.check("keyed Stiffness: playback = the API given each frame's (max %.2e)"
+            % worst(got, want), worst(got, want) < TOL and alpha[1] != alpha[20],
+            worst(got, want))
+
+
+def test_bakes_write_what_played():
+    obj, d, ao = jiggle_arm()
+    frames = list(range(1, LAST + 1))
+    got = play(obj, frames)
+    path = os.path.join(S.OUTPUT, "jiggle_all.pc2")
+    later = os.path.join(S.OUTPUT, "jiggle_later.pc2")
+    for p in (path, later):
+        if os.path.exists(p):
+            os.remove(p)
+    bake.bake_pc2(bpy.context, obj, d, 1, LAST, path)
+    _, all_frames = pc2.read(path)
+    diff = max(float(np.abs(np.array(all_frames[f - 1]).reshape(-1, 3) - got[f]).max())
+               for f in frames)
+    R.check("the bake = playback (max %.2e)" % diff, diff < TOL, diff)
+    # a bake of a later range, the simulation's kept frames dropped first (a rebind)
+    S.solver.cache._cache[(obj.name, d.uid)].sim = None
+    bake.bake_pc2(bpy.context, obj, d, 21, LAST, later)
+    _, tail = pc2.read(later)
+    same = all(np.array_equal(np.array(a), np.array(b)) for a, b in zip(tail, all_frames[20:]))
+    R.check("a bake of frames 21-%d plays the frames before it: the same, bit for bit" % LAST,
+            len(tail) == LAST - 20 and same)
+    blend = os.path.join(S.OUTPUT, "jiggle.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=blend)
+    folder = os.path.join(S.OUTPUT, "jiggle_checkpoints")
+    shutil.rmtree(folder, ignore_errors=True)
+    os.makedirs(folder)
+    outs = [os.path.join(S.OUTPUT, "jiggle_%s.pc2" % k) for k in ("a", "b", "joined")]
+    for p in outs:
+        if os.path.exists(p):
+            os.remove(p)
+    logs = []
+    for fr, out in (("1-20", outs[0]), ("21-%d" % LAST, outs[1])):   # in order: a chain
+        r = run_batch("--object", obj.name, "--frames", fr, "--out", out, "--checkpoints",
+                      folder, blend=blend)
+        logs.append(r)
+        R.check("chunk %s exits 0" % fr, r.returncode == 0, r.stderr[-1500:])
+    R.check("the second chunk continues from the first's checkpoint",
+            "continuing from the checkpoint of frame 20" in logs[1].stderr,
+            logs[1].stderr[-800:])
+    r = run_batch("--join", outs[0], outs[1], "--out", outs[2], blend=None)
+    R.check("join exits 0", r.returncode == 0, r.stderr[-500:])
+    if r.returncode == 0:
+        _, joined = pc2.read(outs[2])
+        same = len(joined) == LAST and all(
+            np.array_equal(np.array(a), np.array(b)) for a, b in zip(joined, all_frames))
+        R.check("chunks with checkpoints = one bake, bit for bit", same)
+
+
+for t in (test_playback_is_the_simulation, test_an_edit_resimulates_from_the_frame_it_changes,
+          test_a_frame_ahead_of_the_simulation, test_a_keyed_stiffness_reaches_each_frame,
+          test_bakes_write_what_played):
+    R.run(t)
+R.finish()
