@@ -157,6 +157,10 @@ dk_status dk_shape_matching_bind(const dk_mesh *mesh, const dk_constraint_desc *
 dk_status dk_shape_matching_rebind(dk_shape_matching *s, const dk_constraint_desc *constraints,
                                    dk_error *err);
 
+/** The progress hook of later rebinds (phase "clusters"; NULL: none); a cancel there keeps
+ *  the object as it was. */
+void dk_shape_matching_set_progress(dk_shape_matching *s, dk_phase_progress_fn fn, void *user);
+
 /** One frame (see the header's "Solves"): `request->targets` the handles' targets
  *  (positions or transforms of the input's handle vertices; a request for a bind without
  *  handles passes any non-NULL pointer), `request->input_positions` this frame's goal shape

@@ -374,10 +374,12 @@ static PyObject *get_frame(PyObject *obj, void *c)
     return PyLong_FromLongLong((long long)dk_shape_matching_frame(self->native));
 }
 
-static PyObject *get_clusters(PyObject *obj, void *c)
+PyDoc_STRVAR(clusters_doc, "clusters() -> list of vertex index arrays: the clusters, as bound");
+
+static PyObject *sm_clusters(PyObject *obj, PyObject *unused)
 {
     dk_py_method *self = (dk_py_method *)obj;
-    (void)c;
+    (void)unused;
     if (!dk_py_method_readable(self))
         return NULL;
     const dk_index *start, *verts;
@@ -482,6 +484,7 @@ PyDoc_STRVAR(
 static PyMethodDef shape_matching_methods[] = {
     DK_PY_METHOD_METHODS(solve_doc),
     {"goals", sm_goals, METH_O, goals_doc},
+    {"clusters", sm_clusters, METH_NOARGS, clusters_doc},
     {NULL, NULL, 0, NULL},
 };
 
@@ -501,7 +504,6 @@ static PyGetSetDef shape_matching_getset[] = {
     {"velocities", get_velocities, set_velocities,
      "the particles' velocities (n x 3, a copy; settable: a throw, a spin)", NULL},
     {"frame", get_frame, NULL, "frames advanced since the last reset (cold solve)", NULL},
-    {"clusters", get_clusters, NULL, "the clusters: a list of vertex index arrays", NULL},
     {NULL, NULL, NULL, NULL, NULL},
 };
 
@@ -509,6 +511,12 @@ static void bind_progress(void *options, dk_py_progress *p)
 {
     ((dk_shape_matching_options *)options)->progress = dk_py_progress_phase;
     ((dk_shape_matching_options *)options)->progress_user = p;
+}
+
+static void rebind_progress(void *native, dk_py_progress *p)
+{
+    dk_shape_matching_set_progress((dk_shape_matching *)native, p ? dk_py_progress_phase : NULL,
+                                   p);
 }
 
 static const dk_py_method_spec shape_matching_spec = {
@@ -522,6 +530,7 @@ static const dk_py_method_spec shape_matching_spec = {
     .parse_options = parse_options,
     .release_options = release_options,
     .bind_progress = bind_progress,
+    .rebind_progress = rebind_progress,
     .solve_extra = solve_extra,
     .apply_extra = apply_extra,
     .getset = shape_matching_getset,

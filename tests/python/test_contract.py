@@ -99,7 +99,7 @@ def test_registries_agree():
                                    "translation_invariant", "rigid_invariant",
                                    "penalty_handles", "soft_regions", "given_start",
                                    "edits_input", "graph", "controls", "state",
-                                   "linear_precision"}
+                                   "linear_precision", "dynamic"}
         # a warm start reads what the last solve left: every iterative method carries state
         assert info(name)["state"] or not info(name)["iterative"], name
         # the control kinds its bind takes (dk_controls.h): a non-empty tuple of known ids

@@ -714,6 +714,8 @@ BAD_OPTIONS = {
     "EigenDeformation": [{"n_eigenvectors": -1}, {"bsw_width": 0.0}, {"refine": -3}],
     "LinearReconstruction": [{"w": -1.0}, {"w": float("nan")}],
     "Shepard": [{"power": 0.0}, {"power": float("nan")}, {"k": 0}, {"radius": -1.0}],
+    "ShapeMatching": [{"alpha": float("nan")}, {"substeps": 0}, {"cluster_size": -1.0},
+                      {"damping": -1.0}, {"time_step": 0.0}],
 }
 
 

@@ -105,9 +105,9 @@ def test_goals_match_numpy(tube, mode, clusters):
     X = V @ np.array([[1.1, 0.2, 0], [0, 0.9, 0.1], [0.05, 0, 1.0]]).T + 0.05 * rng.normal(
         size=V.shape) + [0.3, -0.1, 0.2]
     got = np.asarray(sm.goals(X))
-    want = numpy_goals(sm.clusters, V, X, masses, 0.7 * beta_map, mode)
+    want = numpy_goals(sm.clusters(), V, X, masses, 0.7 * beta_map, mode)
     assert np.abs(got - want).max() < 1e-10
-    assert sum(len(c) for c in sm.clusters) >= len(V)
+    assert sum(len(c) for c in sm.clusters()) >= len(V)
 
 
 def test_clusters_cover_the_mesh_and_split_what_edges_do_not_join():
@@ -117,13 +117,13 @@ def test_clusters_cover_the_mesh_and_split_what_edges_do_not_join():
     F2 = np.r_[F, F + len(V)]
     sm = dk.ShapeMatching(dk.Mesh(V2, F2), cluster_size=0.8)
     covered = np.zeros(len(V2), int)
-    for c in sm.clusters:
+    for c in sm.clusters():
         covered[c] += 1
         assert (c < len(V)).all() or (c >= len(V)).all()
         assert len(c) >= 4
     assert (covered >= 1).all() and covered.max() <= 8
     parts = dk.ShapeMatching(dk.Mesh(V2, F2), clusters="parts")
-    assert len(parts.clusters) == 2
+    assert len(parts.clusters()) == 2
 
 
 # ------------------------------------------------------------------- dynamics -------------

@@ -36,6 +36,8 @@ struct dk_shape_matching {
     int want_fits;                 /* the next goal evaluation records the fits            */
     int substep, n_sub;            /* place(): the substep being taken                    */
     dk_team *team;
+    dk_phase_progress_fn rebind_progress; /* dk_shape_matching_set_progress                */
+    void *rebind_progress_user;
 };
 
 static const dk_progress_phase bind_phases[] = {{"clusters", 1.0}};
@@ -374,96 +376,130 @@ dk_status dk_shape_matching_bind(const dk_mesh *mesh, const dk_constraint_desc *
     return DK_OK;
 }
 
+/* What a rebind builds before it changes anything: freed whole on any failure. */
+typedef struct sm_rebuilt {
+    dk_constraints *con;
+    unsigned char *kinematic;
+    double *targets;
+    int has_clusters; /* automatic clusters were rebuilt (given ones are kept)             */
+    sm_clusters cl;
+    sm_rest rest;
+    double *member_goal, *sp;
+    sm_fit *fits;
+    unsigned char *changed;
+} sm_rebuilt;
+
+static void rebuilt_free(sm_rebuilt *r)
+{
+    dk_constraints_free(r->con);
+    free(r->kinematic), free(r->targets);
+    if (r->has_clusters) {
+        sm_clusters_free(&r->cl);
+        sm_rest_free(&r->rest);
+    }
+    free(r->member_goal), free(r->sp), free(r->fits), free(r->changed);
+    memset(r, 0, sizeof *r);
+}
+
+/* The clusters' buffers of a rebuild (r->cl built). */
+static dk_status cluster_buffers(sm_rebuilt *r, int dim, dk_error *err)
+{
+    dk_status st = sm_rest_alloc(&r->cl, dim, &r->rest, err);
+    if (st != DK_OK)
+        return st;
+    const size_t nm = (size_t)r->cl.start[r->cl.n_clusters], nc = (size_t)r->cl.n_clusters;
+    r->member_goal = malloc((3 * nm + 1) * sizeof *r->member_goal);
+    r->sp = malloc((9 * nc + 1) * sizeof *r->sp);
+    r->fits = malloc((nc + 1) * sizeof *r->fits);
+    r->changed = malloc(nc + 1);
+    if (!r->member_goal || !r->sp || !r->fits || !r->changed)
+        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeMatching: out of memory (rebind)");
+    return DK_OK;
+}
+
+/* Builds everything a rebind for `desc` needs (r zeroed; on failure r is freed). */
+static dk_status rebuild(const dk_shape_matching *s, const dk_constraint_desc *desc,
+                         sm_rebuilt *r, dk_error *err)
+{
+    const dk_index n = s->mesh->n_vertices;
+    dk_status st = dk_constraints_create_simulated(s->mesh, desc, &r->con, err);
+    if (st != DK_OK)
+        return st;
+    r->kinematic = malloc((size_t)n + 1);
+    r->targets = malloc((3 * (size_t)r->con->n_handle_vertices + 1) * sizeof *r->targets);
+    if (!r->kinematic || !r->targets) {
+        rebuilt_free(r);
+        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeMatching: out of memory (rebind)");
+    }
+    mark_kinematic(r->con, r->kinematic);
+    if (s->opt.n_clusters > 0) { /* given clusters are kept: they must cover what is free */
+        for (dk_index v = 0; v < n; v++)
+            if (!r->kinematic[v] && s->cl.vm_start[v] == s->cl.vm_start[v + 1]) {
+                rebuilt_free(r);
+                return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                                    "ShapeMatching rebind: vertex %d is simulated but lies in "
+                                    "no given cluster",
+                                    (int)v);
+            }
+        return DK_OK;
+    }
+    st = sm_clusters_build(s->mesh, &s->opt, s->masses, r->kinematic, &r->cl, err);
+    if (st == DK_OK) {
+        r->has_clusters = 1;
+        st = cluster_buffers(r, s->rest.dim, err);
+    }
+    if (st != DK_OK)
+        rebuilt_free(r);
+    return st;
+}
+
 dk_status dk_shape_matching_rebind(dk_shape_matching *s, const dk_constraint_desc *desc,
                                    dk_error *err)
 {
     if (!s || !desc)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "ShapeMatching rebind: object and constraints must not be NULL");
-    dk_constraints *c = NULL;
-    dk_status st = dk_constraints_create_simulated(s->mesh, desc, &c, err);
+    dk_progress prog;
+    dk_progress_init(&prog, s->rebind_progress, s->rebind_progress_user, bind_phases, 1,
+                     "ShapeMatching rebind");
+    sm_rebuilt r;
+    memset(&r, 0, sizeof r);
+    dk_status st = dk_progress_begin(&prog, 0, err);
+    if (st == DK_OK)
+        st = rebuild(s, desc, &r, err);
+    if (st == DK_OK) {
+        st = dk_progress_part(&prog, 1.0, err); /* a cancel here keeps the old binding */
+        if (st != DK_OK)
+            rebuilt_free(&r);
+    }
     if (st != DK_OK)
         return st;
-    /* the clusters cover what is simulated: given clusters must still cover it */
-    unsigned char *kin = malloc((size_t)s->mesh->n_vertices + 1);
-    if (!kin) {
-        dk_constraints_free(c);
-        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeMatching: out of memory (rebind)");
+    /* install: swap the new parts in, free the old ones through r */
+    dk_constraints *oc = s->con;
+    unsigned char *ok = s->kinematic;
+    double *ot = s->targets;
+    s->con = r.con, s->kinematic = r.kinematic, s->targets = r.targets;
+    r.con = oc, r.kinematic = ok, r.targets = ot;
+    if (r.has_clusters) {
+        sm_clusters tc = s->cl;
+        sm_rest tr = s->rest;
+        double *tg = s->member_goal, *tsp = s->sp;
+        sm_fit *tf = s->fits;
+        unsigned char *tch = s->changed;
+        s->cl = r.cl, s->rest = r.rest, s->member_goal = r.member_goal, s->sp = r.sp;
+        s->fits = r.fits, s->changed = r.changed;
+        r.cl = tc, r.rest = tr, r.member_goal = tg, r.sp = tsp, r.fits = tf, r.changed = tch;
     }
-    mark_kinematic(c, kin);
-    sm_clusters cl;
-    dk_shape_matching_options o = s->opt;
-    o.n_clusters = 0; /* given clusters are kept (checked below), automatic ones rebuilt */
-    st = DK_OK;
-    int rebuild = s->opt.n_clusters == 0;
-    if (!rebuild) /* a vertex set free must be in a given cluster */
-        for (dk_index v = 0; v < s->mesh->n_vertices; v++)
-            if (!kin[v] && s->cl.vm_start[v] == s->cl.vm_start[v + 1]) {
-                st = dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
-                                  "ShapeMatching rebind: vertex %d is simulated but lies in no "
-                                  "given cluster",
-                                  (int)v);
-                break;
-            }
-    if (st == DK_OK && rebuild)
-        st = sm_clusters_build(s->mesh, &o, s->masses, kin, &cl, err);
-    sm_rest rest;
-    double *member_goal = NULL, *sp = NULL;
-    sm_fit *fits = NULL;
-    unsigned char *changed = NULL;
-    if (st == DK_OK && rebuild) {
-        st = sm_rest_alloc(&cl, s->rest.dim, &rest, err);
-        const size_t nm = (size_t)cl.start[cl.n_clusters], nc = (size_t)cl.n_clusters;
-        if (st == DK_OK) {
-            member_goal = malloc((3 * nm + 1) * sizeof *member_goal);
-            sp = malloc((9 * nc + 1) * sizeof *sp);
-            fits = malloc((nc + 1) * sizeof *fits);
-            changed = malloc(nc + 1);
-            if (!member_goal || !sp || !fits || !changed) {
-                st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY,
-                                  "ShapeMatching: out of memory (rebind)");
-                sm_rest_free(&rest);
-            }
-        }
-        if (st != DK_OK)
-            sm_clusters_free(&cl);
-    }
-    double *targets = NULL;
-    if (st == DK_OK) {
-        targets = malloc((3 * (size_t)c->n_handle_vertices + 1) * sizeof *targets);
-        if (!targets) {
-            st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeMatching: out of memory (rebind)");
-            if (rebuild) {
-                sm_clusters_free(&cl);
-                sm_rest_free(&rest);
-            }
-        }
-    }
-    if (st != DK_OK) {
-        free(member_goal), free(sp), free(fits), free(changed);
-        free(kin);
-        dk_constraints_free(c);
-        return st;
-    }
-    dk_constraints_free(s->con);
-    s->con = c;
-    free(s->kinematic);
-    s->kinematic = kin;
-    free(s->targets);
-    s->targets = targets;
-    if (rebuild) {
-        sm_clusters_free(&s->cl);
-        sm_rest_free(&s->rest);
-        free(s->member_goal), free(s->sp), free(s->fits), free(s->changed);
-        s->cl = cl;
-        s->rest = rest;
-        s->member_goal = member_goal;
-        s->sp = sp;
-        s->fits = fits;
-        s->changed = changed;
-    }
+    rebuilt_free(&r);
     reset(s, s->mesh->positions);
+    dk_progress_done(&prog);
     return DK_OK;
+}
+
+void dk_shape_matching_set_progress(dk_shape_matching *s, dk_phase_progress_fn fn, void *user)
+{
+    s->rebind_progress = fn;
+    s->rebind_progress_user = user;
 }
 
 /* ------------------------------------------------------------------------ solve ------- */
@@ -587,15 +623,9 @@ static void member_goals_of(const dk_shape_matching *s, const double *x, double 
                       s->cl.n_clusters);
 }
 
-static dk_status check_positions(const dk_shape_matching *s, const double *x, const char *who,
-                                 dk_error *err)
+static dk_status check_positions(const dk_shape_matching *s, const double *x, dk_error *err)
 {
-    for (size_t j = 0; j < 3 * (size_t)s->mesh->n_vertices; j++)
-        if (!isfinite(x[j]))
-            return dk_error_set(err, DK_ERR_NONFINITE,
-                                "ShapeMatching %s: vertex %d's position is not finite", who,
-                                (int)(j / 3));
-    return DK_OK;
+    return dk_check_positions(x, s->mesh->n_vertices, err); /* finite, within DK_COORD_MAX */
 }
 
 dk_status dk_shape_matching_energy(const dk_shape_matching *s, const double *positions,
@@ -604,7 +634,7 @@ dk_status dk_shape_matching_energy(const dk_shape_matching *s, const double *pos
     if (!s || !positions || !energy)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "ShapeMatching energy: object, positions and energy must not be NULL");
-    dk_status st = check_positions(s, positions, "energy", err);
+    dk_status st = check_positions(s, positions, err);
     if (st != DK_OK)
         return st;
     const size_t nm = (size_t)s->cl.start[s->cl.n_clusters];
@@ -614,7 +644,7 @@ dk_status dk_shape_matching_energy(const dk_shape_matching *s, const double *pos
     member_goals_of(s, positions, mg);
     *energy = residual(s, positions, mg);
     free(mg);
-    return DK_OK;
+    return dk_energy_result_check(*energy, "ShapeMatching energy", err);
 }
 
 dk_status dk_shape_matching_goals(const dk_shape_matching *s, const double *positions,
@@ -623,7 +653,7 @@ dk_status dk_shape_matching_goals(const dk_shape_matching *s, const double *posi
     if (!s || !positions || !goals)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "ShapeMatching goals: object, positions and goals must not be NULL");
-    dk_status st = check_positions(s, positions, "goals", err);
+    dk_status st = check_positions(s, positions, err);
     if (st != DK_OK)
         return st;
     const size_t nm = (size_t)s->cl.start[s->cl.n_clusters];
