@@ -8,56 +8,98 @@
 
 #include "dk_operators.h"
 
+/* One cluster's sums in one pass over its members, relative to its first member's position
+ * x0 (so that a model far from the origin loses no precision): cm = x0 + sum m (x - x0) / M
+ * and A_pq = sum m (x - x0) q^T - (sum m (x - x0) / M) (sum m q)^T, the second term the
+ * rounding of sum m q = 0. DIM is 3 or 9: a constant, so that the loops unroll. */
+#define SM_CLUSTER_SUMS(DIM)                                                                  \
+    static void sums##DIM(const sm_clusters *c, const sm_rest *r, const double *x,            \
+                          dk_index cl, double cm[3], double apq[3 * DIM])                     \
+    {                                                                                         \
+        const dk_index k0 = c->start[cl], k1 = c->start[cl + 1];                              \
+        const double *x0 = x + 3 * (size_t)c->member_vertex[k0];                              \
+        double sx[3] = {0, 0, 0}, sq[DIM];                                                    \
+        for (int j = 0; j < 3 * DIM; j++)                                                     \
+            apq[j] = 0.0;                                                                     \
+        for (int j = 0; j < DIM; j++)                                                         \
+            sq[j] = 0.0;                                                                      \
+        for (dk_index k = k0; k < k1; k++) {                                                  \
+            const double m = c->member_mass[k];                                               \
+            const double *p = x + 3 * (size_t)c->member_vertex[k];                            \
+            const double *q = r->q + (size_t)DIM * (size_t)k;                                 \
+            const double d[3] = {m * (p[0] - x0[0]), m * (p[1] - x0[1]), m * (p[2] - x0[2])}; \
+            for (int i = 0; i < 3; i++) {                                                     \
+                sx[i] += d[i];                                                                \
+                for (int j = 0; j < DIM; j++)                                                 \
+                    apq[i * DIM + j] += d[i] * q[j];                                          \
+            }                                                                                 \
+            for (int j = 0; j < DIM; j++)                                                     \
+                sq[j] += m * q[j];                                                            \
+        }                                                                                     \
+        const double M = r->mass[cl];                                                         \
+        for (int i = 0; i < 3; i++) {                                                         \
+            const double off = sx[i] / M;                                                     \
+            cm[i] = x0[i] + off;                                                              \
+            for (int j = 0; j < DIM; j++)                                                     \
+                apq[i * DIM + j] -= off * sq[j];                                              \
+        }                                                                                     \
+    }
+SM_CLUSTER_SUMS(3)
+SM_CLUSTER_SUMS(9)
+#undef SM_CLUSTER_SUMS
+
+/* The fit A = (A_pq + R~ L) (A_qq + L)^-1 (3 x dim). */
+static void fit(int dim, const double *apq, const double R[9], const double *lam,
+                const double *inv, double *A)
+{
+    double rhs[27];
+    memcpy(rhs, apq, sizeof(double) * 3 * (size_t)dim);
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            rhs[i * dim + j] += R[3 * i + j] * lam[j];
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < dim; j++) {
+            double t = 0.0;
+            for (int k = 0; k < dim; k++)
+                t += rhs[i * dim + k] * inv[k * dim + j];
+            A[i * dim + j] = t;
+        }
+}
+
+/* Where a member's goal goes: its own row of member_goal, or added to its vertex's row of
+ * acc (the sum over the vertex's clusters). */
+static inline double *goal_row(const sm_clusters *c, double *member_goal, double *acc,
+                               dk_index k, double g[3])
+{
+    double *row = acc ? acc + 3 * (size_t)c->member_vertex[k] : member_goal + 3 * (size_t)k;
+    if (acc) {
+        row[0] += g[0], row[1] += g[1], row[2] += g[2];
+    } else {
+        row[0] = g[0], row[1] = g[1], row[2] = g[2];
+    }
+    return row;
+}
+
 void sm_goals_clusters(const sm_clusters *c, const sm_rest *r, dk_shape_matching_mode mode,
-                       const double *beta, const double *x, double *member_goal, sm_fit *fits,
-                       dk_index begin, dk_index end)
+                       const double *beta, const double *x, double *member_goal, double *acc,
+                       sm_fit *fits, dk_index begin, dk_index end)
 {
     const int dim = r->dim;
     for (dk_index cl = begin; cl < end; cl++) {
         const dk_index k0 = c->start[cl], k1 = c->start[cl + 1];
-        const double M = r->mass[cl];
-        double cm[3] = {0, 0, 0};
-        for (dk_index k = k0; k < k1; k++) {
-            const double m = c->member_mass[k];
-            const double *p = x + 3 * (size_t)c->member_vertex[k];
-            for (int d = 0; d < 3; d++)
-                cm[d] += m * p[d];
-        }
-        for (int d = 0; d < 3; d++)
-            cm[d] /= M;
-        double apq[27] = {0}; /* 3 x dim */
-        for (dk_index k = k0; k < k1; k++) {
-            const double m = c->member_mass[k];
-            const double *p = x + 3 * (size_t)c->member_vertex[k];
-            const double *q = r->q + (size_t)dim * (size_t)k;
-            for (int i = 0; i < 3; i++) {
-                const double pi = m * (p[i] - cm[i]);
-                for (int j = 0; j < dim; j++)
-                    apq[i * dim + j] += pi * q[j];
-            }
-        }
-        double lin[9], R[9], A[27];
+        double cm[3], apq[27], lin[9], R[9], A[27];
+        if (dim == 9)
+            sums9(c, r, x, cl, cm, apq);
+        else
+            sums3(c, r, x, cl, cm, apq);
         for (int i = 0; i < 3; i++)
             for (int j = 0; j < 3; j++)
                 lin[3 * i + j] = apq[i * dim + j];
         dk_closest_rotation(lin, R);
         int use_fit = mode != DK_SHAPE_MATCHING_RIGID;
-        if (use_fit) { /* A = (A_pq + R~ L) (A_qq + L)^-1 */
-            const double *inv = r->inv + (size_t)(dim * dim) * (size_t)cl;
-            const double *lam = r->lambda + (size_t)dim * (size_t)cl;
-            double rhs[27];
-            memcpy(rhs, apq, sizeof(double) * 3 * (size_t)dim);
-            for (int i = 0; i < 3; i++)
-                for (int j = 0; j < 3; j++)
-                    rhs[i * dim + j] += R[3 * i + j] * lam[j];
-            for (int i = 0; i < 3; i++)
-                for (int j = 0; j < dim; j++) {
-                    double s = 0.0;
-                    for (int k = 0; k < dim; k++)
-                        s += rhs[i * dim + k] * inv[k * dim + j];
-                    A[i * dim + j] = s;
-                }
-        }
+        if (use_fit)
+            fit(dim, apq, R, r->lambda + (size_t)dim * (size_t)cl,
+                r->inv + (size_t)(dim * dim) * (size_t)cl, A);
         if (fits) {
             memcpy(fits[cl].R, R, sizeof R);
             if (use_fit)
@@ -79,21 +121,32 @@ void sm_goals_clusters(const sm_clusters *c, const sm_rest *r, dk_shape_matching
                 use_fit = 0; /* inverted: the rotation */
             }
         }
-        for (dk_index k = k0; k < k1; k++) {
-            const dk_index v = c->member_vertex[k];
-            const double *q = r->q + (size_t)dim * (size_t)k;
-            double *g = member_goal + 3 * (size_t)k;
-            for (int i = 0; i < 3; i++) {
-                const double rq = R[3 * i] * q[0] + R[3 * i + 1] * q[1] + R[3 * i + 2] * q[2];
-                double gi = rq;
-                if (use_fit) {
-                    double aq = 0.0;
-                    for (int j = 0; j < dim; j++)
-                        aq += A[i * dim + j] * q[j];
-                    gi += beta[v] * (aq - rq);
-                }
-                g[i] = gi + cm[i];
+        if (!use_fit) { /* g = R q + cm */
+            for (dk_index k = k0; k < k1; k++) {
+                const double *q = r->q + (size_t)dim * (size_t)k;
+                double g[3];
+                for (int i = 0; i < 3; i++)
+                    g[i] = R[3 * i] * q[0] + R[3 * i + 1] * q[1] + R[3 * i + 2] * q[2] + cm[i];
+                goal_row(c, member_goal, acc, k, g);
             }
+            continue;
+        }
+        /* g = R q + beta (A q~ - R q) + cm, with D = A - R~ */
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                A[i * dim + j] -= R[3 * i + j];
+        for (dk_index k = k0; k < k1; k++) {
+            const double *q = r->q + (size_t)dim * (size_t)k;
+            const double b = beta[c->member_vertex[k]];
+            double g[3];
+            for (int i = 0; i < 3; i++) {
+                double dq = 0.0;
+                for (int j = 0; j < dim; j++)
+                    dq += A[i * dim + j] * q[j];
+                g[i] = R[3 * i] * q[0] + R[3 * i + 1] * q[1] + R[3 * i + 2] * q[2] + b * dq +
+                       cm[i];
+            }
+            goal_row(c, member_goal, acc, k, g);
         }
     }
 }
@@ -115,6 +168,22 @@ void sm_goals_vertices(const sm_clusters *c, const double *member_goal, const do
         }
         const double inv = 1.0 / (double)(b - a);
         g[0] = s[0] * inv, g[1] = s[1] * inv, g[2] = s[2] * inv;
+    }
+}
+
+void sm_goals_from_sums(const sm_clusters *c, const double *acc0, const double *acc1,
+                        const double *x, double *goals, dk_index begin, dk_index end)
+{
+    for (dk_index v = begin; v < end; v++) {
+        const dk_index n = c->vm_start[v + 1] - c->vm_start[v];
+        const size_t j = 3 * (size_t)v;
+        if (n == 0) {
+            memcpy(goals + j, x + j, 3 * sizeof(double));
+            continue;
+        }
+        const double inv = 1.0 / (double)n;
+        for (int d = 0; d < 3; d++)
+            goals[j + (size_t)d] = (acc0[j + (size_t)d] + acc1[j + (size_t)d]) * inv;
     }
 }
 

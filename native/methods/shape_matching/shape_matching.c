@@ -31,6 +31,7 @@ struct dk_shape_matching {
     /* scratch */
     double *goals, *member_goal, *work, *k0, *k1, *targets;
     double *u;                     /* n x 3: the input's velocity over this frame          */
+    double *acc;                   /* 2 x n x 3: the goals summed per vertex, per half     */
     sm_fit *fits;
     unsigned char *changed;
     int want_fits;                 /* the next goal evaluation records the fits            */
@@ -181,12 +182,25 @@ static void rest_all(dk_shape_matching *s, const double *y)
     dk_team_run_halves(s->team, rest_part, &p, s->cl.n_clusters, 64);
 }
 
-static void cluster_part(void *ctx, dk_index begin, dk_index end, int part)
+/* Per membership goals (the energy's residual). */
+static void member_part(void *ctx, dk_index begin, dk_index end, int part)
 {
     (void)part;
     const pass *p = ctx;
     dk_shape_matching *s = p->s;
-    sm_goals_clusters(&s->cl, &s->rest, s->opt.mode, s->beta, p->x, s->member_goal,
+    sm_goals_clusters(&s->cl, &s->rest, s->opt.mode, s->beta, p->x, s->member_goal, NULL,
+                      NULL, begin, end);
+}
+
+/* The goals summed per vertex, each half of the clusters into its own buffer (zeroed here:
+ * the halves are the same whether or not the helper runs, so the sums are too). */
+static void cluster_part(void *ctx, dk_index begin, dk_index end, int part)
+{
+    const pass *p = ctx;
+    dk_shape_matching *s = p->s;
+    double *acc = s->acc + 3 * (size_t)s->mesh->n_vertices * (size_t)part;
+    memset(acc, 0, 3 * (size_t)s->mesh->n_vertices * sizeof *acc);
+    sm_goals_clusters(&s->cl, &s->rest, s->opt.mode, s->beta, p->x, NULL, acc,
                       s->want_fits ? s->fits : NULL, begin, end);
 }
 
@@ -194,7 +208,8 @@ static void vertex_part(void *ctx, dk_index begin, dk_index end, int part)
 {
     (void)part;
     const pass *p = ctx;
-    sm_goals_vertices(&p->s->cl, p->s->member_goal, p->x, p->goals, begin, end);
+    const size_t N = 3 * (size_t)p->s->mesh->n_vertices;
+    sm_goals_from_sums(&p->s->cl, p->s->acc, p->s->acc + N, p->x, p->goals, begin, end);
 }
 
 /* sm_goals_fn: the mean goals of configuration x. */
@@ -240,6 +255,7 @@ void dk_shape_matching_free(dk_shape_matching *s)
     free(s->k), free(s->d), free(s->beta);
     free(s->x), free(s->v), free(s->shape), free(s->sp);
     free(s->goals), free(s->member_goal), free(s->work), free(s->k0), free(s->k1), free(s->u);
+    free(s->acc);
     free(s->targets), free(s->fits), free(s->changed);
     free(s);
 }
@@ -340,7 +356,8 @@ dk_status dk_shape_matching_bind(const dk_mesh *mesh, const dk_constraint_desc *
     s->k0 = malloc((N + 1) * sizeof *s->k0);
     s->k1 = malloc((N + 1) * sizeof *s->k1);
     s->u = malloc((N + 1) * sizeof *s->u);
-    if (!s->u ||
+    s->acc = malloc((2 * N + 1) * sizeof *s->acc);
+    if (!s->u || !s->acc ||
         !s->kinematic || !s->masses || !s->alpha_map || !s->beta_map || !s->damping_map ||
         !s->k || !s->d || !s->beta || !s->x || !s->v || !s->shape || !s->goals || !s->work ||
         !s->k0 || !s->k1) {
@@ -601,7 +618,7 @@ dk_status dk_shape_matching_solve(dk_shape_matching *s, const dk_solve_request *
     double energy = NAN;
     if (!rq->skip_energy) {
         pass p = {.s = s, .x = s->x, .goals = s->goals};
-        dk_team_run_halves(s->team, cluster_part, &p, s->cl.n_clusters, 64);
+        dk_team_run_halves(s->team, member_part, &p, s->cl.n_clusters, 64);
         energy = residual(s, s->x, s->member_goal);
     }
     if (info) {
@@ -619,7 +636,7 @@ dk_status dk_shape_matching_solve(dk_shape_matching *s, const dk_solve_request *
 /* Goals of `x` per membership into `member_goal` (allocated by the caller). */
 static void member_goals_of(const dk_shape_matching *s, const double *x, double *member_goal)
 {
-    sm_goals_clusters(&s->cl, &s->rest, s->opt.mode, s->beta, x, member_goal, NULL, 0,
+    sm_goals_clusters(&s->cl, &s->rest, s->opt.mode, s->beta, x, member_goal, NULL, NULL, 0,
                       s->cl.n_clusters);
 }
 

@@ -55,12 +55,19 @@ typedef struct sm_fit {
     double A[9];
 } sm_fit;
 
-/* The goals of configuration x (n_vertices x 3): per membership its cluster's goal into
- * `member_goal` (3 per membership), for clusters [begin, end), with the per-vertex beta
- * `beta` (n_vertices). `fits` (per cluster) receives R and the linear fit. */
+/* The goals of configuration x (n_vertices x 3) for clusters [begin, end), with the
+ * per-vertex beta `beta` (n_vertices): per membership its cluster's goal into `member_goal`
+ * (3 per membership), or, when `acc` is given, added to its vertex's row of acc (n_vertices
+ * x 3; the caller zeroes it). `fits` (per cluster, may be NULL) receives R and the linear
+ * fit. */
 void sm_goals_clusters(const sm_clusters *c, const sm_rest *r, dk_shape_matching_mode mode,
-                       const double *beta, const double *x, double *member_goal, sm_fit *fits,
-                       dk_index begin, dk_index end);
+                       const double *beta, const double *x, double *member_goal, double *acc,
+                       sm_fit *fits, dk_index begin, dk_index end);
+
+/* The mean goal of each vertex in [begin, end) from the two halves' sums acc0 + acc1 (the
+ * clusters split in two passes); a vertex in no cluster gets its own position. */
+void sm_goals_from_sums(const sm_clusters *c, const double *acc0, const double *acc1,
+                        const double *x, double *goals, dk_index begin, dk_index end);
 
 /* The mean goal of each vertex in [begin, end) from member_goal; a vertex in no cluster gets
  * its own position. */
