@@ -52,7 +52,8 @@ class Method:
     # and the Region and Fixed groups that every method takes:
     # which vertex-group maps: 'stiffness' (the material group's weights become the
     # per-vertex `stiffness` keyword), 'material' (they become the per-edge `material` map
-    # of linear reconstruction: solver.material_map), 'handle_weights' (soft handles) and/or
+    # of linear reconstruction: solver.material_map), 'paint' (they become the per-vertex
+    # `paint_keyword`, as they are), 'handle_weights' (soft handles) and/or
     # 'cut' (two
     # GROUP options become the `cut=(group_a, group_b)` keyword: section 7 of Sumner et al.)
     maps: tuple = ()
@@ -67,6 +68,9 @@ class Method:
     # 'stiffness' map: the option holding the stiffness where the material weight is 1
     # (weight 0 gives 1, linear in between)
     stiffness_option: Optional[str] = None
+    # 'paint' map: the constructor keyword that takes the Material group's weights as they
+    # are, one value per vertex (0 where the group has none): a simulation's attachment
+    paint_keyword: Optional[str] = None
     # solve keywords that make a frame's result depend only on that frame (cold start)
     cold_solve: dict = field(default_factory=dict)
     # solve keywords for interactive updates
@@ -656,6 +660,9 @@ METHODS.append(Method(
     icon="PHYSICS",
     needs_faces=False,
     solve_args=shape_matching_solve_args,
+    maps=("paint",),
+    paint_keyword="attach_map",
+    material_label="Hold",
     options=[
         Option("alpha", "FLOAT", 0.3, "Stiffness",
                "How strongly each part is pulled back to its shape on each step (the paper's "
@@ -695,6 +702,11 @@ METHODS.append(Method(
                "smaller regions wobble and make long parts floppier",
                min=0.0, max=1e9, subtype="DISTANCE", shown_if=("clusters", ("cubes",)),
                advanced=True),
+        Option("falloff", "FLOAT", 0.0, "Blend Distance",
+               "How far from what follows the rig (the Fixed group, outside the Region, the "
+               "handles) the jiggle fades in (0: half the depth of the region): no crease "
+               "where the two meet. Paint the Hold group to hold more", min=0.0, max=1e9,
+               subtype="DISTANCE", advanced=True),
         Option("substeps", "INT", 2, "Substeps",
                "Integration steps per frame: more make the same Stiffness stiffer and the "
                "motion smoother", min=1, max=64, advanced=True),
@@ -750,6 +762,8 @@ def _check_registry():
                                  % (m.id, field_name, ref))
         if ("stiffness" in m.maps) != (m.stiffness_option is not None):
             raise ValueError("%s: a 'stiffness' map needs a stiffness_option" % m.id)
+        if ("paint" in m.maps) != (m.paint_keyword is not None):
+            raise ValueError("%s: a 'paint' map needs a paint_keyword" % m.id)
         groups = {o.name for o in m.options if o.type == "GROUP"}
         if any(o.type == "GROUP" and o.kw is not None for o in m.options):
             raise ValueError("%s: GROUP options are read by the add-on (kw=None)" % m.id)

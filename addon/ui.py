@@ -181,7 +181,7 @@ def draw_handles(layout, col, obj, d, m):
     """The groups and handles of a method driven by vertex groups moved by targets."""
     col.prop_search(d, "roi_group", obj, "vertex_groups", text="Region")
     col.prop_search(d, "fixed_group", obj, "vertex_groups", text="Fixed")
-    if "stiffness" in m.maps or "material" in m.maps:
+    if {"stiffness", "material", "paint"} & set(m.maps):
         col.prop_search(d, "material_group", obj, "vertex_groups", text=m.material_label)
 
     layout.label(text="Handles")

@@ -144,6 +144,11 @@ def collect(obj, d, captured=None):
         s = np.ones(len(obj.data.vertices))
         s[idx] = 1.0 + (getattr(d.options, m.stiffness_option) - 1.0) * w
         kw["stiffness"] = s
+    if "paint" in m.maps and d.material_group:
+        idx, w = groups[d.material_group]
+        p = np.zeros(len(obj.data.vertices))
+        p[idx] = w
+        kw[m.paint_keyword] = p
     if "material" in m.maps and d.material_group:
         idx, w = groups[d.material_group]
         kw["material_paint"] = (idx, w)
@@ -156,7 +161,8 @@ def collect(obj, d, captured=None):
                 raise DeformKitError("%s: vertex group '%s' is empty" % (label, g))
     key = b"".join(np.ascontiguousarray(a).tobytes() for a in handles) + b"|" + b"|".join(
         b"" if x is None else np.ascontiguousarray(x).tobytes()
-        for x in (fixed, roi, kw.get("stiffness")) + kw.get("cut", ())
+        for x in (fixed, roi, kw.get("stiffness"), kw.get(m.paint_keyword or "")) +
+        kw.get("cut", ())
         + kw.get("material_paint", ()))
     key += b"|" + b"".join(w.tobytes() for w in kw.get("handle_weights", []))
     key += b"|" + repr(sorted((k, x) for k, x in kw.items() if isinstance(x, str))).encode()

@@ -43,6 +43,13 @@
  *     iterated to its fixed point (each pass contracts by at most alpha / (1 + alpha) <= 1/2): damps
  *     vibrations, keeps rigid motions, stable for any alpha;
  *   RK4: the classical Runge-Kutta of order 4, the goals evaluated at each stage.
+ * Attachment (for secondary motion; not in the paper): a free vertex i with attachment a_i
+ * in [0, 1] (the falloff near the kinematic vertices, and a painted map) is also pulled
+ * towards y_i(t), where the input puts it at that time (interpolated over the frame), moved
+ * as its nearest kinematic vertex (at the rest) is moved off the input (by a handle), with
+ * the stiffness a_i / h^2: its goal becomes (k g + k_a y) / (k + k_a), its stiffness k + k_a,
+ * so every integrator treats it alike. A region that follows the rig at its border and
+ * jiggles inside then has no crease where the two meet.
  * Kinematic vertices (handles: their targets; fixed vertices and those outside the region:
  * the input) are not integrated: over a frame's substeps they move linearly from where the
  * last frame left them to where this frame puts them, and drive the clusters they share.
@@ -108,6 +115,13 @@ typedef struct dk_shape_matching_options {
     double cluster_size; /**< CUBES: the cubes' edge, mesh units (overlapping by half: each
                               vertex lies in 8); 0 (default): a quarter of the bounding
                               box's diagonal                                                */
+    double falloff;       /**< attachment near the kinematic vertices: a free vertex at
+                               distance d from the nearest one (at the bind's rest) gets the
+                               attachment s(1 - d / falloff) (s the smoothstep: 1 at a
+                               kinematic vertex, 0 from falloff on), so that a jiggling region
+                               blends into what follows the rig instead of tearing from it;
+                               mesh units, 0 (default): half the simulated region's depth
+                               (its farthest vertex from the kinematic ones)              */
     double plastic_yield; /**< |S - I|_F above which a cluster creeps; default 0.1          */
     double plastic_creep; /**< creep rate per second, >= 0; 0 (default): elastic only      */
     double plastic_max;   /**< the largest |S_p - I|_F; default 1                           */
@@ -119,6 +133,10 @@ typedef struct dk_shape_matching_options {
     dk_index n_beta_map;
     const double *damping_map; /**< n_vertices factors >= 0 on damping, or NULL              */
     dk_index n_damping_map;
+    const double *attach_map;  /**< n_vertices attachments in [0, 1] to the input's positions
+                                    (painted: 1 held to the rig's pose, 0 free), combined with
+                                    the falloff's a as 1 - (1 - a)(1 - map); or NULL          */
+    dk_index n_attach_map;
     /** Clusters given instead of the automatic ones (regions of the surface): n_clusters
      *  lists of vertices, cluster_sizes[c] each, concatenated in cluster_vertices; every
      *  vertex that is not kinematic must lie in one. Not in the option table (Python's

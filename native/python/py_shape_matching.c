@@ -28,11 +28,13 @@ static void release_options(void *o)
     PyMem_Free((void *)opt->alpha_map);
     PyMem_Free((void *)opt->beta_map);
     PyMem_Free((void *)opt->damping_map);
+    PyMem_Free((void *)opt->attach_map);
     PyMem_Free((void *)opt->cluster_sizes);
     PyMem_Free((void *)opt->cluster_vertices);
-    opt->masses = opt->alpha_map = opt->beta_map = opt->damping_map = NULL;
+    opt->masses = opt->alpha_map = opt->beta_map = opt->damping_map = opt->attach_map = NULL;
     opt->cluster_sizes = opt->cluster_vertices = NULL;
     opt->n_masses = opt->n_alpha_map = opt->n_beta_map = opt->n_damping_map = 0;
+    opt->n_attach_map = 0;
     opt->n_clusters = 0;
 }
 
@@ -157,13 +159,15 @@ static int parse_options(PyObject *kw, void *o, const char *context)
         dk_py_opt_int(kw, "substeps", &opt->substeps) < 0 ||
         dk_py_opt_choice(kw, "integrator", integrator_names, &integ, context) < 0 ||
         dk_py_opt_double(kw, "cluster_size", &opt->cluster_size) < 0 ||
+        dk_py_opt_double(kw, "falloff", &opt->falloff) < 0 ||
         dk_py_opt_double(kw, "plastic_yield", &opt->plastic_yield) < 0 ||
         dk_py_opt_double(kw, "plastic_creep", &opt->plastic_creep) < 0 ||
         dk_py_opt_double(kw, "plastic_max", &opt->plastic_max) < 0 ||
         read_map(kw, "masses", &opt->masses, &opt->n_masses) < 0 ||
         read_map(kw, "alpha_map", &opt->alpha_map, &opt->n_alpha_map) < 0 ||
         read_map(kw, "beta_map", &opt->beta_map, &opt->n_beta_map) < 0 ||
-        read_map(kw, "damping_map", &opt->damping_map, &opt->n_damping_map) < 0)
+        read_map(kw, "damping_map", &opt->damping_map, &opt->n_damping_map) < 0 ||
+        read_map(kw, "attach_map", &opt->attach_map, &opt->n_attach_map) < 0)
         return -1;
     opt->mode = (dk_shape_matching_mode)mode;
     opt->integrator = (dk_shape_matching_integrator)integ;
@@ -459,21 +463,25 @@ PyDoc_STRVAR(
     "ShapeMatching(mesh, handles=None, fixed=None, roi=None, handle_weights=None,\n"
     "              mode='linear', alpha=0.3, beta=0.3, damping=4.0, gravity=(0, 0, 0),\n"
     "              time_step=1/24, substeps=2, integrator='semi_implicit_euler',\n"
-    "              clusters='cubes', cluster_size=0.0, plastic_yield=0.1, plastic_creep=0.0,\n"
-    "              plastic_max=1.0, masses=None, alpha_map=None, beta_map=None,\n"
-    "              damping_map=None, progress=None)\n\n"
+    "              clusters='cubes', cluster_size=0.0, falloff=0.0, plastic_yield=0.1,\n"
+    "              plastic_creep=0.0, plastic_max=1.0, masses=None, alpha_map=None,\n"
+    "              beta_map=None, damping_map=None, attach_map=None, progress=None)\n\n"
     "Meshless deformation based on shape matching (Mueller et al. 2005), simulated in\n"
     "time: the vertices are particles (mass 1, or masses), grouped into overlapping\n"
     "clusters; each cluster finds the rotation R (mode='rigid'), or blends it by beta with\n"
     "the best linear ('linear', volume kept) or quadratic ('quadratic') map, that takes its\n"
     "rest shape onto the particles, and pulls them towards the goals g with stiffness alpha\n"
     "(in [0, 1] per integration step h = time_step / substeps; 1 reaches the goals in one\n"
-    "step): v += alpha (g - x) / h + h gravity, damped at `damping` per second, then x += h v (integrator\n"
-    "'semi_implicit_euler', the paper's scheme; 'explicit_euler' as the slides' code,\n"
-    "'implicit_euler', 'rk4'). Handles follow their targets, fixed vertices and those\n"
-    "outside roi the input; they drive the rest. Clusters: 'cubes' (overlapping cubes of\n"
-    "edge cluster_size, 0 = a quarter of the bounding box's diagonal, split where the mesh\n"
-    "is not connected), 'parts' (one per connected part), or a list of index arrays.\n"
+    "step): v += alpha (g - x) / h + h gravity, damped at `damping` per second (against\n"
+    "the input's own motion), then x += h v (integrator 'semi_implicit_euler', the\n"
+    "paper's scheme; 'explicit_euler' as the slides' code, 'implicit_euler', 'rk4').\n"
+    "Handles follow their targets, fixed vertices and those outside roi the input; they\n"
+    "drive the rest, and the free vertices within falloff of them (0: half the depth of\n"
+    "what is simulated) are also pulled to where the input puts them, fading with the\n"
+    "distance (attach_map adds a painted attachment in [0, 1]). Clusters: 'cubes'\n"
+    "(overlapping cubes of edge cluster_size, 0 = a quarter of the bounding box's\n"
+    "diagonal, split where the mesh is not connected), 'parts' (one per connected part),\n"
+    "or a list of index arrays.\n"
     "Plasticity (plastic_creep > 0): a cluster deformed beyond plastic_yield creeps into\n"
     "its new rest shape, at most plastic_max from the original. alpha_map, beta_map,\n"
     "damping_map: per-vertex factors (painted). alpha, beta, damping, gravity and the\n"

@@ -73,13 +73,13 @@ def inputs(obj, d, frames):
     return out
 
 
-def direct(obj, d, inp, frames, alpha=None):
+def direct(obj, d, inp, frames, alpha=None, **extra):
     """The Python API simulating the same inputs frame by frame (the add-on's keywords)."""
     m = S.methods.get(d.method)
     rest = S.rest_positions(obj)
     mesh = S.dk.Mesh(rest, S.solver.triangles(obj.data))
     fixed = np.where(rest[:, 0] < -0.4)[0]
-    kw = dict(fixed=fixed)
+    kw = dict(fixed=fixed, **extra)
     sm = S.dk.ShapeMatching(mesh, **kw, **S.methods.bind_kwargs(m, d.options, rest, kw, mesh))
     skw = S.methods.solve_kwargs(m, d.options, True)
     skw.update(m.solve_args(obj, d.options, bpy.context.scene))
@@ -156,6 +156,29 @@ def test_an_edit_resimulates_from_the_frame_it_changes():
     got = play(obj, frames)
     R.check("after an edit, playback from frame 1 = the new simulation (max %.2e)"
             % worst(got, want), worst(got, want) < TOL, worst(got, want))
+
+
+def test_the_hold_paint_reaches_each_vertex():
+    """The Hold group's weights are the native attach_map: painted 0.8 over the forearm, the
+    jiggle shrinks, and playback is still the API's simulation given that map."""
+    obj, d, ao = jiggle_arm()
+    frames = list(range(1, 25))
+    inp = inputs(obj, d, frames)
+    free = play(obj, frames)
+    rest = S.rest_positions(obj)
+    held = np.where(rest[:, 0] > 0.0)[0]
+    S.group(obj, "hold", held, np.full(len(held), 0.8))
+    d.material_group = "hold"
+    bpy.context.view_layer.update()
+    attach = np.where(rest[:, 0] > 0.0, 0.8, 0.0)
+    want = direct(obj, d, inp, frames, attach_map=attach)
+    got = play(obj, frames)
+    R.check("held: playback = the API given the paint (max %.2e)" % worst(got, want),
+            worst(got, want) < TOL, worst(got, want))
+    lag = {k: max(float(np.abs(r[f] - inp[f]).max()) for f in frames)
+           for k, r in (("free", free), ("held", got))}
+    R.check("the Hold paint shrinks the jiggle (%.3f -> %.3f)" % (lag["free"], lag["held"]),
+            lag["held"] < 0.5 * lag["free"], lag)
 
 
 def test_a_frame_ahead_of_the_simulation():
@@ -238,7 +261,8 @@ def test_bakes_write_what_played():
 
 
 for t in (test_playback_is_the_simulation, test_an_edit_resimulates_from_the_frame_it_changes,
-          test_a_frame_ahead_of_the_simulation, test_a_keyed_stiffness_reaches_each_frame,
+          test_the_hold_paint_reaches_each_vertex, test_a_frame_ahead_of_the_simulation,
+          test_a_keyed_stiffness_reaches_each_frame,
           test_bakes_write_what_played):
     R.run(t)
 R.finish()

@@ -347,11 +347,11 @@ def test_material_group_label():
     """The Material group's label in the panel speaks the method's language."""
     S.reset_scene()
     obj, d, e, fixed, handle = S.grid_setup("ARAP")
-    want = {"ARAP": "Stiffness", "LINEAR_RECONSTRUCTION": "Material"}
+    want = {"ARAP": "Stiffness", "LINEAR_RECONSTRUCTION": "Material", "SHAPE_MATCHING": "Hold"}
     for m in S.methods.METHODS:
         d.method = m.id
         got = [c[3] for c in draw_panel(obj) if c[1:3] == ("prop_search", "material_group")]
-        uses = "stiffness" in m.maps or "material" in m.maps
+        uses = bool({"stiffness", "material", "paint"} & set(m.maps))
         R.check("%s: the material group is %s" % (
             m.id, "labelled %r" % want.get(m.id) if uses else "not drawn"),
             got == ([want[m.id]] if uses else []), got)

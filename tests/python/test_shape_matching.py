@@ -427,3 +427,34 @@ def test_bad_velocities_change_nothing(tube):
     with pytest.raises(ValueError, match="vertex 7"):
         sm.velocities = bad
     assert np.array_equal(np.asarray(sm.velocities), np.ones_like(V))
+
+
+def test_the_attachment_blends_a_jiggling_region_into_what_follows(tube):
+    """Secondary motion: without the falloff the edges where the simulated half meets the
+    half that follows the input stretch (a crease); with it (the default) they stretch far
+    less, while the far end still swings. attach_map = 1 holds every vertex to the input."""
+    V, F, mesh = tube
+    fixed = np.where(V[:, 0] < 0.0)[0]
+    E = edges_of(F)
+    seam = E[(V[E[:, 0], 0] < 0.0) != (V[E[:, 1], 0] < 0.0)]
+    seam = np.r_[seam, E[(np.abs(V[E[:, 0], 0]) < 0.3) & (np.abs(V[E[:, 1], 0]) < 0.3)]]
+    rest_len = np.linalg.norm(V[seam[:, 0]] - V[seam[:, 1]], axis=1)
+    tip = np.where(V[:, 0] > 0.95)[0]
+
+    def run(**kw):
+        sm = dk.ShapeMatching(mesh, fixed=fixed, cluster_size=1.0, **kw)
+        sm.solve(warm_start=False)
+        strain = swing = 0.0
+        for f in range(48):
+            inp = V + [0, 0.5 * np.sin(f / 3.0), 0]
+            X = np.asarray(sm.solve(input_positions=inp).positions)
+            ln = np.linalg.norm(X[seam[:, 0]] - X[seam[:, 1]], axis=1)
+            strain = max(strain, float(np.abs(ln / rest_len - 1).max()))
+            swing = max(swing, float(np.abs(X[tip] - inp[tip]).max()))
+        return strain, swing
+    loose, loose_swing = run(falloff=1e-12)
+    blended, swing = run()
+    held, held_swing = run(attach_map=np.ones(len(V)))
+    assert blended < 0.5 * loose, (blended, loose)
+    assert swing > 0.05, swing
+    assert held_swing < 0.2 * swing, (held_swing, swing)

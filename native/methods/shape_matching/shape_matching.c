@@ -12,6 +12,7 @@
 #include <string.h>
 
 #include "dk_memory.h"
+#include "dk_operators.h"
 
 struct dk_shape_matching {
     const dk_mesh *mesh;
@@ -20,7 +21,13 @@ struct dk_shape_matching {
     dk_constraints *con;
     unsigned char *kinematic;      /* n: 1 = follows its target or the input               */
     double *masses, *alpha_map, *beta_map, *damping_map; /* n each                         */
+    double *attach_map;            /* n, or NULL: the painted attachments                  */
+    double *attach;                /* n: the attachments (falloff and map), 0 if kinematic  */
+    dk_index *near;                /* n: the nearest kinematic vertex at the rest, or -1    */
     double *k, *d, *beta;          /* n: alpha_i / h^2 (h a substep), damping, beta        */
+    double *ka, *ktot;             /* n: a_i / h^2, and k + ka (what the integrators use)   */
+    int attached;                  /* some free vertex has an attachment                   */
+    double tau;                    /* the fraction of the substep the goals are taken at   */
     sm_clusters cl;
     sm_rest rest;
     /* the state */
@@ -133,6 +140,8 @@ static dk_status check_options(const dk_mesh *m, const dk_shape_matching_options
         return bad(err, "substeps", o->substeps, "in [1, 64]");
     if (!(o->cluster_size >= 0.0 && o->cluster_size <= DBL_MAX))
         return bad(err, "cluster_size", o->cluster_size, "finite and >= 0 (0: automatic)");
+    if (!(o->falloff >= 0.0 && o->falloff <= DBL_MAX))
+        return bad(err, "falloff", o->falloff, "finite and >= 0 (0: automatic)");
     if (o->n_clusters < 0)
         return bad(err, "n_clusters", o->n_clusters, ">= 0");
     const dk_shape_matching_dynamics y = dynamics_of(o);
@@ -145,19 +154,90 @@ static dk_status check_options(const dk_mesh *m, const dk_shape_matching_options
         st = check_map(m, "beta_map", o->beta_map, o->n_beta_map, 0.0, 1.0, err);
     if (st == DK_OK)
         st = check_map(m, "damping_map", o->damping_map, o->n_damping_map, 0.0, DBL_MAX, err);
+    if (st == DK_OK)
+        st = check_map(m, "attach_map", o->attach_map, o->n_attach_map, 0.0, 1.0, err);
     return st;
 }
 
-/* The per-vertex coefficients from the dynamics and the maps. */
+/* The per-vertex coefficients from the dynamics, the maps and the attachments. */
 static void coefficients(dk_shape_matching *s)
 {
     const double h = s->dyn.time_step / (double)s->opt.substeps;
     const double kf = s->dyn.alpha / (h * h);
+    s->attached = 0;
     for (dk_index v = 0; v < s->mesh->n_vertices; v++) {
         s->k[v] = kf * s->alpha_map[v];
         s->d[v] = s->dyn.damping * s->damping_map[v];
         s->beta[v] = s->dyn.beta * s->beta_map[v];
+        s->ka[v] = s->attach[v] / (h * h);
+        s->ktot[v] = s->k[v] + s->ka[v];
+        s->attached |= s->attach[v] > 0.0;
     }
+}
+
+/* The attachments of the free vertices for the kinematic set `kin` (0 for kinematic ones):
+ * the falloff from the nearest kinematic vertex at the rest, combined with the map. */
+static dk_status attachments(const dk_shape_matching *s, const unsigned char *kin, double *out,
+                             dk_index *near_out, dk_error *err)
+{
+    const dk_mesh *m = s->mesh;
+    const dk_index n = m->n_vertices;
+    dk_index nk = 0;
+    for (dk_index v = 0; v < n; v++)
+        nk += kin[v] != 0;
+    for (dk_index v = 0; v < n; v++) {
+        out[v] = 0.0;
+        near_out[v] = -1;
+    }
+    if (nk > 0 && nk < n) {
+        double *pts = malloc(3 * (size_t)nk * sizeof *pts + 1);
+        dk_index *ids = malloc(((size_t)nk + 1) * sizeof *ids);
+        dk_kdtree *tree = NULL;
+        if (!pts || !ids) {
+            free(pts), free(ids);
+            return dk_error_set(err, DK_ERR_OUT_OF_MEMORY,
+                                "ShapeMatching: out of memory (attachments)");
+        }
+        for (dk_index v = 0, j = 0; v < n; v++)
+            if (kin[v]) {
+                memcpy(pts + 3 * (size_t)j, m->positions + 3 * (size_t)v, 3 * sizeof *pts);
+                ids[j++] = v;
+            }
+        dk_status st = dk_kdtree_create(pts, nk, &tree, err);
+        free(pts);
+        for (dk_index v = 0; v < n && st == DK_OK; v++) {
+            if (kin[v])
+                continue;
+            dk_index near;
+            double d2;
+            st = dk_kdtree_knn(tree, m->positions + 3 * (size_t)v, 1, 1, &near, &d2, err);
+            out[v] = sqrt(d2); /* the distance, for now */
+            near_out[v] = ids[near];
+        }
+        dk_kdtree_free(tree);
+        free(ids);
+        if (st != DK_OK)
+            return st;
+        /* 0: half the depth of the simulated region (its farthest vertex from the kinematic
+         * ones), so that its core swings freely whatever its size */
+        double F = s->opt.falloff, depth = 0.0;
+        for (dk_index v = 0; v < n; v++)
+            if (!kin[v])
+                depth = fmax(depth, out[v]);
+        if (F == 0.0)
+            F = 0.5 * depth;
+        for (dk_index v = 0; v < n; v++) {
+            const double t = F > 0.0 && !kin[v] ? 1.0 - out[v] / F : 0.0;
+            out[v] = t > 0.0 ? t * t * (3.0 - 2.0 * t) : 0.0;
+        }
+    }
+    for (dk_index v = 0; v < n; v++) {
+        if (kin[v])
+            out[v] = 0.0;
+        else if (s->attach_map)
+            out[v] = 1.0 - (1.0 - out[v]) * (1.0 - s->attach_map[v]);
+    }
+    return DK_OK;
 }
 
 /* ------------------------------------------------------------ passes over clusters ----- */
@@ -212,7 +292,8 @@ static void vertex_part(void *ctx, dk_index begin, dk_index end, int part)
     sm_goals_from_sums(&p->s->cl, p->s->acc, p->s->acc + N, p->x, p->goals, begin, end);
 }
 
-/* sm_goals_fn: the mean goals of configuration x. */
+/* sm_goals_fn: the mean goals of configuration x, each blended with where the input puts
+ * its vertex at this time by its attachment: (k g + k_a y(t)) / (k + k_a). */
 static void goals_of(void *ctx, const double *x, double *goals)
 {
     dk_shape_matching *s = ctx;
@@ -220,12 +301,34 @@ static void goals_of(void *ctx, const double *x, double *goals)
     dk_team_run_halves(s->team, cluster_part, &p, s->cl.n_clusters, 64);
     dk_team_run_halves(s->team, vertex_part, &p, s->mesh->n_vertices, 4096);
     s->want_fits = 0;
+    if (!s->attached)
+        return;
+    /* y(t) = y - u T (1 - f): the frame's input less what is left of its motion; a vertex
+     * is attached to y(t) moved as its nearest kinematic vertex is moved off its own y(t)
+     * (by a handle; a fixed vertex follows the input: no move) */
+    const double back = s->dyn.time_step * (1.0 - ((double)s->substep + s->tau) / s->n_sub);
+    for (dk_index v = 0; v < s->mesh->n_vertices; v++) {
+        if (!(s->ka[v] > 0.0))
+            continue;
+        const double inv = 1.0 / s->ktot[v];
+        const dk_index w = s->near[v];
+        for (int c = 0; c < 3; c++) {
+            const size_t j = 3 * (size_t)v + (size_t)c;
+            double y = s->shape[j] - s->u[j] * back;
+            if (w >= 0) {
+                const size_t i = 3 * (size_t)w + (size_t)c;
+                y += x[i] - (s->shape[i] - s->u[i] * back);
+            }
+            goals[j] = (s->k[v] * goals[j] + s->ka[v] * y) * inv;
+        }
+    }
 }
 
 /* sm_place_fn: the kinematic vertices at fraction tau of the current substep. */
 static void place(void *ctx, double *x, double *v, double tau)
 {
     dk_shape_matching *s = ctx;
+    s->tau = tau;
     const double f = ((double)s->substep + tau) / (double)s->n_sub;
     const double inv_t = 1.0 / s->dyn.time_step;
     for (dk_index i = 0; i < s->mesh->n_vertices; i++) {
@@ -252,7 +355,9 @@ void dk_shape_matching_free(dk_shape_matching *s)
     sm_rest_free(&s->rest);
     free(s->kinematic);
     free(s->masses), free(s->alpha_map), free(s->beta_map), free(s->damping_map);
-    free(s->k), free(s->d), free(s->beta);
+    free(s->attach_map);
+    free(s->k), free(s->d), free(s->beta), free(s->ka), free(s->ktot), free(s->attach);
+    free(s->near);
     free(s->x), free(s->v), free(s->shape), free(s->sp);
     free(s->goals), free(s->member_goal), free(s->work), free(s->k0), free(s->k1), free(s->u);
     free(s->acc);
@@ -329,6 +434,7 @@ dk_status dk_shape_matching_bind(const dk_mesh *mesh, const dk_constraint_desc *
     s->mesh = mesh;
     s->opt = o;
     s->opt.masses = s->opt.alpha_map = s->opt.beta_map = s->opt.damping_map = NULL;
+    s->opt.attach_map = NULL;
     s->opt.cluster_sizes = s->opt.cluster_vertices = NULL;
     s->opt.progress = NULL;
     s->opt.progress_user = NULL;
@@ -345,6 +451,11 @@ dk_status dk_shape_matching_bind(const dk_mesh *mesh, const dk_constraint_desc *
     s->alpha_map = copy_or_fill(o.alpha_map, n, 1.0);
     s->beta_map = copy_or_fill(o.beta_map, n, 1.0);
     s->damping_map = copy_or_fill(o.damping_map, n, 1.0);
+    s->attach_map = o.attach_map ? copy_or_fill(o.attach_map, n, 0.0) : NULL;
+    s->attach = malloc(((size_t)n + 1) * sizeof *s->attach);
+    s->near = malloc(((size_t)n + 1) * sizeof *s->near);
+    s->ka = malloc(((size_t)n + 1) * sizeof *s->ka);
+    s->ktot = malloc(((size_t)n + 1) * sizeof *s->ktot);
     s->k = malloc(((size_t)n + 1) * sizeof *s->k);
     s->d = malloc(((size_t)n + 1) * sizeof *s->d);
     s->beta = malloc(((size_t)n + 1) * sizeof *s->beta);
@@ -357,7 +468,7 @@ dk_status dk_shape_matching_bind(const dk_mesh *mesh, const dk_constraint_desc *
     s->k1 = malloc((N + 1) * sizeof *s->k1);
     s->u = malloc((N + 1) * sizeof *s->u);
     s->acc = malloc((2 * N + 1) * sizeof *s->acc);
-    if (!s->u || !s->acc ||
+    if (!s->u || !s->acc || !s->attach || !s->near || !s->ka || !s->ktot || (o.attach_map && !s->attach_map) ||
         !s->kinematic || !s->masses || !s->alpha_map || !s->beta_map || !s->damping_map ||
         !s->k || !s->d || !s->beta || !s->x || !s->v || !s->shape || !s->goals || !s->work ||
         !s->k0 || !s->k1) {
@@ -366,6 +477,8 @@ dk_status dk_shape_matching_bind(const dk_mesh *mesh, const dk_constraint_desc *
     }
     mark_kinematic(s->con, s->kinematic);
     st = size_targets(s, s->con, err);
+    if (st == DK_OK)
+        st = attachments(s, s->kinematic, s->attach, s->near, err);
     if (st == DK_OK)
         st = sm_clusters_build(mesh, &o, s->masses, s->kinematic, &s->cl, err);
     if (st == DK_OK)
@@ -397,6 +510,8 @@ dk_status dk_shape_matching_bind(const dk_mesh *mesh, const dk_constraint_desc *
 typedef struct sm_rebuilt {
     dk_constraints *con;
     unsigned char *kinematic;
+    double *attach;
+    dk_index *near;
     double *targets;
     int has_clusters; /* automatic clusters were rebuilt (given ones are kept)             */
     sm_clusters cl;
@@ -409,7 +524,7 @@ typedef struct sm_rebuilt {
 static void rebuilt_free(sm_rebuilt *r)
 {
     dk_constraints_free(r->con);
-    free(r->kinematic), free(r->targets);
+    free(r->kinematic), free(r->targets), free(r->attach), free(r->near);
     if (r->has_clusters) {
         sm_clusters_free(&r->cl);
         sm_rest_free(&r->rest);
@@ -444,11 +559,18 @@ static dk_status rebuild(const dk_shape_matching *s, const dk_constraint_desc *d
         return st;
     r->kinematic = malloc((size_t)n + 1);
     r->targets = malloc((3 * (size_t)r->con->n_handle_vertices + 1) * sizeof *r->targets);
-    if (!r->kinematic || !r->targets) {
+    r->attach = malloc(((size_t)n + 1) * sizeof *r->attach);
+    r->near = malloc(((size_t)n + 1) * sizeof *r->near);
+    if (!r->kinematic || !r->targets || !r->attach || !r->near) {
         rebuilt_free(r);
         return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeMatching: out of memory (rebind)");
     }
     mark_kinematic(r->con, r->kinematic);
+    st = attachments(s, r->kinematic, r->attach, r->near, err);
+    if (st != DK_OK) {
+        rebuilt_free(r);
+        return st;
+    }
     if (s->opt.n_clusters > 0) { /* given clusters are kept: they must cover what is free */
         for (dk_index v = 0; v < n; v++)
             if (!r->kinematic[v] && s->cl.vm_start[v] == s->cl.vm_start[v + 1]) {
@@ -494,9 +616,11 @@ dk_status dk_shape_matching_rebind(dk_shape_matching *s, const dk_constraint_des
     /* install: swap the new parts in, free the old ones through r */
     dk_constraints *oc = s->con;
     unsigned char *ok = s->kinematic;
-    double *ot = s->targets;
-    s->con = r.con, s->kinematic = r.kinematic, s->targets = r.targets;
-    r.con = oc, r.kinematic = ok, r.targets = ot;
+    double *ot = s->targets, *oa = s->attach;
+    dk_index *on = s->near;
+    s->con = r.con, s->kinematic = r.kinematic, s->targets = r.targets, s->attach = r.attach;
+    s->near = r.near;
+    r.con = oc, r.kinematic = ok, r.targets = ot, r.attach = oa, r.near = on;
     if (r.has_clusters) {
         sm_clusters tc = s->cl;
         sm_rest tr = s->rest;
@@ -508,6 +632,7 @@ dk_status dk_shape_matching_rebind(dk_shape_matching *s, const dk_constraint_des
         r.cl = tc, r.rest = tr, r.member_goal = tg, r.sp = tsp, r.fits = tf, r.changed = tch;
     }
     rebuilt_free(&r);
+    coefficients(s);
     reset(s, s->mesh->positions);
     dk_progress_done(&prog);
     return DK_OK;
@@ -593,7 +718,7 @@ dk_status dk_shape_matching_solve(dk_shape_matching *s, const dk_solve_request *
         memcpy(s->k0, s->x, N * sizeof *s->k0);
         const sm_step step = {.n = n,
                               .kinematic = s->kinematic,
-                              .k = s->k,
+                              .k = s->ktot,
                               .d = s->d,
                               .u = s->u,
                               .gravity = {s->dyn.gravity[0], s->dyn.gravity[1], s->dyn.gravity[2]},
@@ -602,6 +727,7 @@ dk_status dk_shape_matching_solve(dk_shape_matching *s, const dk_solve_request *
         s->n_sub = s->opt.substeps;
         for (s->substep = 0; s->substep < s->n_sub; s->substep++) {
             s->want_fits = plastic;
+            s->tau = 0.0;
             sm_integrate(&step, s->opt.integrator, s->x, s->v, s->goals, goals_of, place, s,
                          s->work);
             if (plastic &&
@@ -847,6 +973,8 @@ static const dk_option_desc shape_matching_fields[] = {
     {"clusters", DK_OPTION_ENUM, offsetof(dk_shape_matching_options, clusters), 0, 0, 1, 0, 1, 0},
     {"cluster_size", DK_OPTION_DOUBLE, offsetof(dk_shape_matching_options, cluster_size), 0,
      DBL_TRUE_MIN, DBL_MAX, 0.25, DBL_MAX, DK_OPTION_LENGTH | DK_OPTION_ZERO_AUTO},
+    {"falloff", DK_OPTION_DOUBLE, offsetof(dk_shape_matching_options, falloff), 0, DBL_TRUE_MIN,
+     DBL_MAX, 0.1, DBL_MAX, DK_OPTION_LENGTH | DK_OPTION_ZERO_AUTO},
     {"plastic_yield", DK_OPTION_DOUBLE, offsetof(dk_shape_matching_options, plastic_yield), 0,
      0.0, DBL_MAX, 0.1, DBL_MAX, 0},
     {"plastic_creep", DK_OPTION_DOUBLE, offsetof(dk_shape_matching_options, plastic_creep), 0,
@@ -861,6 +989,8 @@ static const dk_option_desc shape_matching_fields[] = {
      offsetof(dk_shape_matching_options, n_beta_map), 0.0, 1.0, 1.0, 1.0, 0},
     {"damping_map", DK_OPTION_VERTEX_VALUES, offsetof(dk_shape_matching_options, damping_map),
      offsetof(dk_shape_matching_options, n_damping_map), 0.0, DBL_MAX, 1.0, DBL_MAX, 0},
+    {"attach_map", DK_OPTION_VERTEX_VALUES, offsetof(dk_shape_matching_options, attach_map),
+     offsetof(dk_shape_matching_options, n_attach_map), 0.0, 1.0, 0.5, 1.0, 0},
 };
 
 DK_METHOD_OPS_STATEFUL(dk_shape_matching_ops, "ShapeMatching",
