@@ -8,6 +8,15 @@
 
 #include "dk_operators.h"
 
+/* The rest offset y_v - cm of vertex v (into `out`), as rest_shape.c computed it: the linear
+ * modes read it from the goal shape (cached with the positions) instead of streaming q. */
+static inline const double *offset(const double *y, const double *cm, dk_index v, double out[3])
+{
+    const double *p = y + 3 * (size_t)v;
+    out[0] = p[0] - cm[0], out[1] = p[1] - cm[1], out[2] = p[2] - cm[2];
+    return out;
+}
+
 /* One cluster's sums in one pass over its members, relative to its first member's position
  * x0 (so that a model far from the origin loses no precision): cm = x0 + sum m (x - x0) / M
  * and A_pq = sum m (x - x0) q^T - (sum m (x - x0) / M) (sum m q)^T, the second term the
@@ -23,10 +32,15 @@
             apq[j] = 0.0;                                                                     \
         for (int j = 0; j < DIM; j++)                                                         \
             sq[j] = 0.0;                                                                      \
+        const int from_shape = DIM == 3 && !r->plastic[cl];                                   \
+        const double *cy = r->cm + 3 * (size_t)cl;                                            \
         for (dk_index k = k0; k < k1; k++) {                                                  \
             const double m = c->member_mass[k];                                               \
-            const double *p = x + 3 * (size_t)c->member_vertex[k];                            \
-            const double *q = r->q + (size_t)DIM * (size_t)k;                                 \
+            const dk_index v = c->member_vertex[k];                                           \
+            const double *p = x + 3 * (size_t)v;                                              \
+            double qy[3];                                                                     \
+            const double *q = from_shape ? offset(r->shape, cy, v, qy)                        \
+                                         : r->q + (size_t)DIM * (size_t)k;                    \
             const double d[3] = {m * (p[0] - x0[0]), m * (p[1] - x0[1]), m * (p[2] - x0[2])}; \
             for (int i = 0; i < 3; i++) {                                                     \
                 sx[i] += d[i];                                                                \
@@ -121,9 +135,13 @@ void sm_goals_clusters(const sm_clusters *c, const sm_rest *r, dk_shape_matching
                 use_fit = 0; /* inverted: the rotation */
             }
         }
+        const int from_shape = dim == 3 && !r->plastic[cl];
+        const double *cy = r->cm + 3 * (size_t)cl;
         if (!use_fit) { /* g = R q + cm */
             for (dk_index k = k0; k < k1; k++) {
-                const double *q = r->q + (size_t)dim * (size_t)k;
+                double qy[3];
+                const double *q = from_shape ? offset(r->shape, cy, c->member_vertex[k], qy)
+                                             : r->q + (size_t)dim * (size_t)k;
                 double g[3];
                 for (int i = 0; i < 3; i++)
                     g[i] = R[3 * i] * q[0] + R[3 * i + 1] * q[1] + R[3 * i + 2] * q[2] + cm[i];
@@ -136,7 +154,9 @@ void sm_goals_clusters(const sm_clusters *c, const sm_rest *r, dk_shape_matching
             for (int j = 0; j < 3; j++)
                 A[i * dim + j] -= R[3 * i + j];
         for (dk_index k = k0; k < k1; k++) {
-            const double *q = r->q + (size_t)dim * (size_t)k;
+            double qy[3];
+            const double *q = from_shape ? offset(r->shape, cy, c->member_vertex[k], qy)
+                                         : r->q + (size_t)dim * (size_t)k;
             const double b = beta[c->member_vertex[k]];
             double g[3];
             for (int i = 0; i < 3; i++) {

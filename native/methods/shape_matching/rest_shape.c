@@ -31,7 +31,9 @@ dk_status sm_rest_alloc(const sm_clusters *c, int dim, sm_rest *r, dk_error *err
     r->inv = malloc((nc * (size_t)(dim * dim) + 1) * sizeof *r->inv);
     r->lambda = malloc((nc * (size_t)dim + 1) * sizeof *r->lambda);
     r->mass = malloc((nc + 1) * sizeof *r->mass);
-    if (!r->q || !r->inv || !r->lambda || !r->mass) {
+    r->cm = malloc((3 * nc + 1) * sizeof *r->cm);
+    r->plastic = malloc(nc + 1);
+    if (!r->q || !r->inv || !r->lambda || !r->mass || !r->cm || !r->plastic) {
         sm_rest_free(r);
         return dk_error_set(err, DK_ERR_OUT_OF_MEMORY,
                             "ShapeMatching: out of memory (rest offsets)");
@@ -47,6 +49,8 @@ void sm_rest_free(sm_rest *r)
     free(r->inv);
     free(r->lambda);
     free(r->mass);
+    free(r->cm);
+    free(r->plastic);
     memset(r, 0, sizeof *r);
 }
 
@@ -119,10 +123,12 @@ void sm_rest_compute(const sm_clusters *c, const double *y, const double *rest,
         for (int d = 0; d < 3; d++)
             cm[d] /= M;
         r->mass[cl] = M;
+        memcpy(r->cm + 3 * (size_t)cl, cm, sizeof cm);
         /* the plastic state in the goal shape's frame: S = Q S_p Q^T, Q the rotation from
          * the cluster at the bind rest to the goal shape */
         double S[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
         int plastic = sp && !is_identity(sp + 9 * (size_t)cl);
+        r->plastic[cl] = (unsigned char)plastic;
         if (plastic) {
             const double *P = sp + 9 * (size_t)cl;
             memcpy(S, P, sizeof S);

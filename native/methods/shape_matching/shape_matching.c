@@ -205,15 +205,27 @@ static dk_status attachments(const dk_shape_matching *s, const unsigned char *ki
             }
         dk_status st = dk_kdtree_create(pts, nk, &tree, err);
         free(pts);
-        for (dk_index v = 0; v < n && st == DK_OK; v++) {
-            if (kin[v])
-                continue;
-            dk_index near;
-            double d2;
-            st = dk_kdtree_knn(tree, m->positions + 3 * (size_t)v, 1, 1, &near, &d2, err);
-            out[v] = sqrt(d2); /* the distance, for now */
-            near_out[v] = ids[near];
+        /* the free vertices' nearest kinematic one, in one query */
+        const dk_index nf = n - nk;
+        double *q = malloc(3 * (size_t)nf * sizeof *q + 1);
+        dk_index *hit = malloc(((size_t)nf + 1) * sizeof *hit);
+        double *d2 = malloc(((size_t)nf + 1) * sizeof *d2);
+        if (st == DK_OK && (!q || !hit || !d2))
+            st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY,
+                              "ShapeMatching: out of memory (attachments)");
+        if (st == DK_OK) {
+            for (dk_index v = 0, j = 0; v < n; v++)
+                if (!kin[v])
+                    memcpy(q + 3 * (size_t)j++, m->positions + 3 * (size_t)v, 3 * sizeof *q);
+            st = dk_kdtree_knn(tree, q, nf, 1, hit, d2, err);
         }
+        if (st == DK_OK)
+            for (dk_index v = 0, j = 0; v < n; v++)
+                if (!kin[v]) {
+                    out[v] = sqrt(d2[j]); /* the distance, for now */
+                    near_out[v] = ids[hit[j++]];
+                }
+        free(q), free(hit), free(d2);
         dk_kdtree_free(tree);
         free(ids);
         if (st != DK_OK)
@@ -255,11 +267,12 @@ static void rest_part(void *ctx, dk_index begin, dk_index end, int part)
     sm_rest_compute(&p->s->cl, p->y, p->s->mesh->positions, p->s->sp, &p->s->rest, begin, end);
 }
 
-/* The rest data of every cluster for goal shape y. */
+/* The rest data of every cluster for goal shape y (whose content is s->shape's). */
 static void rest_all(dk_shape_matching *s, const double *y)
 {
     pass p = {.s = s, .y = y};
     dk_team_run_halves(s->team, rest_part, &p, s->cl.n_clusters, 64);
+    s->rest.shape = s->shape;
 }
 
 /* Per membership goals (the energy's residual). */

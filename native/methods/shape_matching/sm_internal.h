@@ -37,6 +37,11 @@ typedef struct sm_rest {
     double *inv;      /* dim x dim per cluster                                            */
     double *lambda;   /* dim per cluster                                                  */
     double *mass;     /* per cluster: sum of its members' masses                          */
+    double *cm;       /* 3 per cluster: the goal shape's mass centre                      */
+    unsigned char *plastic; /* per cluster: 1 when q is S_p (y - cm), not y - cm           */
+    const double *shape; /* the goal shape (n_vertices x 3) the data were computed from:
+                            the linear modes read y - cm from it rather than q (set by the
+                            driver; its content stays that shape while the data are used)  */
 } sm_rest;
 
 dk_status sm_rest_alloc(const sm_clusters *c, int dim, sm_rest *r, dk_error *err);
