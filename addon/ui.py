@@ -172,7 +172,9 @@ class DEFORMKIT_PT_modifiers(bpy.types.Panel):
         row = layout.row(align=True)
         row.operator("deformkit.apply", text="Apply").mode = "MESH"
         row.operator("deformkit.apply", text="Apply as Shape Key").mode = "SHAPE_KEY"
-        if d.bound and any(m.type == "ARMATURE" for m in animated_input.modifiers_above(obj, d)):
+        # a corrective key holds a still edit: not a simulation's frame
+        if d.bound and not solver.simulation.is_dynamic(methods.get(d.method)) and any(
+                m.type == "ARMATURE" for m in animated_input.modifiers_above(obj, d)):
             layout.operator("deformkit.bake_corrective", icon="SHAPEKEY_DATA")
         draw_bake(layout, obj, d, width)
 
@@ -204,7 +206,8 @@ def draw_handles(layout, col, obj, d, m):
             hc.prop(h, "use_weights")
         if animated_input.input_movers(obj, d) is not None:  # what the edit does there
             hc.prop(h, "follow")
-    if animated_input.input_movers(obj, d) is not None:
+    # a simulation always moves towards its input (its goal shape): no Solve From
+    if animated_input.input_movers(obj, d) is not None and not solver.simulation.is_dynamic(m):
         layout.prop(d, "solve_from")
     if obj.mode == "EDIT":
         layout.operator("deformkit.add_handle_from_selection", icon="HOOK")

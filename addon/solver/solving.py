@@ -160,7 +160,7 @@ def _plan_solve(obj, d, e, key, T, source, inputs, cold, write, interactive, res
         e.source = e.rest if source is None else source
     elif depends_on_input(m, d):
         want = e.rest if source is None else source
-        from_rest = d.solve_from == "REST"
+        from_rest = d.solve_from == "REST" and not simulation.is_dynamic(m)  # (not drawn)
         solve_on = e.rest if from_rest else want   # what the native object deforms
         ns = getattr(e, "native_source", None)
         if m.follows_input and (ns is None or not np.array_equal(ns, solve_on)):

@@ -22,7 +22,7 @@ PNG3 = os.path.join(OUT, "viewport_show_graph.png")
 # the panel in each state an artist meets (DEFORMKIT_SHOT=states, a third run): one image
 # each, kept in docs/images after being looked at
 STATES = ("unbound", "bound", "bound_warning", "rebinding", "baked", "overlap_error", "handle_target",
-          "sidebar", "lattice", "cage", "cage_view", "skinning_view")
+          "sidebar", "lattice", "cage", "cage_view", "skinning_view", "jiggle")
 STATE_PNGS = [os.path.join(OUT, "panel_%s.png" % s) for s in STATES]
 
 try:
@@ -180,6 +180,8 @@ def in_blender():
         """A generator: puts the scene in each of STATES, yields (the shot is taken 0.8 s
         later, when the timer resumes it)."""
         import time
+
+        import numpy as np
         S.reset_scene()
         win = bpy.context.window_manager.windows[0]
         area = max(win.screen.areas, key=lambda a: a.width * a.height)
@@ -358,6 +360,45 @@ def in_blender():
         r3d.view_location = Vector((0.2, 0.4, 0.0))
         r3d.view_distance = 3.0
         yield "skinning_view"
+        # the Jiggle deformer after an Armature, its Region the forearm, played to frame 12:
+        # the panel shows its options and the simulated range
+        S.reset_scene()
+        win = bpy.context.window_manager.windows[0]
+        area = max(win.screen.areas, key=lambda a: a.width * a.height)
+        area.type = "PROPERTIES"
+        yield None
+        with bpy.context.temp_override(**S.ui_context()):
+            obj = S.make_grid(nx=24, ny=6)
+            rest = S.rest_positions(obj)
+            S.group(obj, "forearm", np.flatnonzero(rest[:, 0] > -0.2))
+            w = np.clip((rest[:, 0] + 0.2) / 0.4, 0.0, 1.0)
+            S.group(obj, "lower", range(len(rest)), w)
+            S.group(obj, "upper", range(len(rest)), 1.0 - w)
+            arm, ao = S.two_bone_rig("Rig")
+            pb = ao.pose.bones["lower"]
+            pb.rotation_mode = "XYZ"
+            for f, rot in ((1, (0, 0, 0)), (10, (0.8, 0, 0)), (20, (0, 0, 0))):
+                pb.rotation_euler = rot
+                pb.keyframe_insert("rotation_euler", frame=f)
+            mod = obj.modifiers.new("Armature", "ARMATURE")
+            mod.object = ao
+            bpy.context.view_layer.objects.active = obj
+            obj.select_set(True)
+            bpy.ops.deformkit.add_deformer(method="SHAPE_MATCHING")
+            d = obj.deformkit.deformers[0]
+            d.roi_group = "forearm"
+            sc = bpy.context.scene
+            sc.frame_start, sc.frame_end = 1, 40
+            sc.frame_set(1)
+            bpy.ops.deformkit.bind()
+            for f in range(1, 13):
+                sc.frame_set(f)
+        S.geonodes.find_modifier(obj, d).show_expanded = False
+        R.check("the jiggle deformer bound and played",
+                d.bound and not d.status_is_error and
+                "1-12" in (S.solver.simulation_text(obj, d) or ""),
+                (d.status, S.solver.simulation_text(obj, d)))
+        yield "jiggle"
 
     sidebar_drawn = []
     from addon import ui
