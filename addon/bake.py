@@ -44,8 +44,10 @@ class FrameBaker:
         self.dynamic = solver.simulation.is_dynamic(methods.get(d.method))
         e = solver.cache._cache.get((obj.name, d.uid))
         sim = getattr(e, "sim", None) if e is not None else None
-        have = sim is not None and frame_start - 1 in sim.items and \
-            sim.items[frame_start - 1][1] is not None
+        rec = sim.items.get(frame_start - 1) if sim is not None else None
+        # only a checkpoint imported for this bake (its key is b""): a kept frame before the
+        # range may follow from frames an edit has changed since, which the preroll checks
+        have = rec is not None and rec[0] == b"" and rec[1] is not None
         self.preroll = [] if not self.dynamic or have else \
             list(range(min(self.scene.frame_start, frame_start), frame_start))
         self.saved_frame = self.scene.frame_current
@@ -154,18 +156,36 @@ class FrameBaker:
 
 # ---- a simulation's checkpoints between the chunks of a split bake (solver.simulation): the
 # chunk that ends at frame B leaves the native state after B in a file; the chunk that starts
-# at B + 1 continues from it instead of playing frames 1..B again
+# at B + 1 continues from it instead of playing frames 1..B again. The file begins with a
+# line of JSON naming the binding (method, settings, groups, topology, first frame) and the
+# hash of the history of frames 1..B (each frame's key: what it was computed from), checked
+# before the state is used (the loader evaluates those frames, without simulating them): a
+# file left by another binding or another animation is refused by name.
+CHECKPOINT_MAGIC = b"DKCHECKPOINT1\n"
+
 
 def checkpoint_path(folder, obj, d, frame):
     return os.path.join(folder, "%s_%s.%d.dkstate" % (bpy.path.clean_name(obj.name),
                                                       bpy.path.clean_name(d.name), frame))
 
 
+def _binding_id(obj, d, e):
+    import hashlib
+    h = hashlib.sha256()
+    h.update(repr(methods.signature(methods.get(d.method), d.options)).encode())
+    g = e.groups
+    h.update(g if isinstance(g, bytes) else repr(g).encode())
+    h.update(repr(d.bind_topology).encode())
+    h.update(repr(bpy.context.scene.frame_start).encode())
+    return h.hexdigest()
+
+
 def load_checkpoint(obj, d, folder, frame_start):
     """Imports the checkpoint of the frame before `frame_start` from `folder` when there is
     one; returns its path, or None (the bake then plays the frames before its range). A file
-    that does not fit this binding (another mesh, method or settings) is refused by the
-    native check with a DeformKitError naming it."""
+    made by another binding (method, settings, groups, mesh) or from another animation of
+    the frames before it is refused with a DeformKitError naming it."""
+    import json
     if not solver.simulation.is_dynamic(methods.get(d.method)):
         return None
     scene = bpy.context.scene
@@ -175,10 +195,38 @@ def load_checkpoint(obj, d, folder, frame_start):
     if not os.path.isfile(path):
         return None
     with open(path, "rb") as f:
-        state = f.read()
-    e = solver.binding_of(obj, d)
+        data = f.read()
+    head, _, state = data[len(CHECKPOINT_MAGIC):].partition(b"\n")
     try:
-        solver.simulation.import_checkpoint(e, frame_start - 1, state, scene.frame_start)
+        meta = json.loads(head) if data.startswith(CHECKPOINT_MAGIC) else None
+    except ValueError:
+        meta = None
+    if not isinstance(meta, dict):
+        raise solver.DeformKitError("%s is not a DeformKit checkpoint" % path)
+    e = solver.binding_of(obj, d)
+    if meta.get("binding") != _binding_id(obj, d, e) or meta.get("frame") != frame_start - 1:
+        raise solver.DeformKitError(
+            "checkpoint %s was made by another binding of '%s' (its settings, groups, mesh or "
+            "first frame differ): delete it, or bake from frame %d"
+            % (path, d.name, scene.frame_start))
+    was = handlers.enabled[0]
+    handlers.enabled[0] = False   # the history of the frames up to it, without solving them
+    history = b""
+    try:
+        for f in range(scene.frame_start, frame_start):
+            scene.frame_set(f)
+            history = solver.simulation.chain(
+                history, solver.frame_key(obj, d, bpy.context.evaluated_depsgraph_get()))
+    finally:
+        handlers.enabled[0] = was
+    if meta.get("history") != history.hex():
+        raise solver.DeformKitError(
+            "checkpoint %s was made from another animation of frames %d-%d (their input, "
+            "handles or keyed settings differ): delete it, or bake from frame %d"
+            % (path, scene.frame_start, frame_start - 1, scene.frame_start))
+    try:
+        solver.simulation.import_checkpoint(e, frame_start - 1, state, scene.frame_start,
+                                            history)
     except (ValueError, TypeError) as ex:
         raise solver.DeformKitError("checkpoint %s does not fit '%s': %s" % (path, d.name, ex))
     return path
@@ -188,15 +236,19 @@ def save_checkpoint(obj, d, folder, frame):
     """Writes the checkpoint kept after `frame` into `folder` (a hidden file moved into
     place: a reader never sees half of it); returns its path, or None when the method keeps
     none."""
+    import json
     if not solver.simulation.is_dynamic(methods.get(d.method)):
         return None
-    state = solver.simulation.export_checkpoint(solver.binding_of(obj, d), frame)
-    if state is None:
+    e = solver.binding_of(obj, d)
+    got = solver.simulation.export_checkpoint(e, frame)
+    if got is None:
         raise solver.DeformKitError("no checkpoint of frame %d was kept" % frame)
+    state, history = got
+    meta = {"binding": _binding_id(obj, d, e), "frame": frame, "history": history.hex()}
     path = checkpoint_path(folder, obj, d, frame)
     part = os.path.join(folder, ".%s.%d.part" % (os.path.basename(path), os.getpid()))
     with open(part, "wb") as f:
-        f.write(state)
+        f.write(CHECKPOINT_MAGIC + json.dumps(meta).encode() + b"\n" + state)
     os.replace(part, path)
     return path
 

@@ -83,25 +83,15 @@ def per_frame(fn, frames):
 def frame_object(name, P, F, heat):
     """A still object of positions P (n x 3) and triangles F, coloured by `heat` in [0, 1]
     (white to orange to red, per vertex)."""
-    me = bpy.data.meshes.new(name)
-    me.vertices.add(len(P))
-    me.vertices.foreach_set("co", P.astype(np.float32).ravel())
-    me.loops.add(F.size)
-    me.loops.foreach_set("vertex_index", F.astype(np.int32).ravel())
-    me.polygons.add(len(F))
-    me.polygons.foreach_set("loop_start", np.arange(0, F.size, 3, dtype=np.int32))
-    if bpy.app.version < (4, 0):
-        me.polygons.foreach_set("loop_total", np.full(len(F), 3, np.int32))
-    me.update()
+    obj = S.triangle_mesh_object(P, F, name)
     h = np.clip(heat, 0.0, 1.0)[:, None]
     white, orange, red = np.array([0.85, 0.85, 0.87]), np.array([1.0, 0.55, 0.1]), \
         np.array([0.8, 0.05, 0.05])
     rgb = np.where(h < 0.5, white + 2 * h * (orange - white), orange + (2 * h - 1) * (red - orange))
+    me = obj.data
     col = me.color_attributes.new("offset", "FLOAT_COLOR", "POINT")
     col.data.foreach_set("color", np.c_[rgb, np.ones(len(P))].astype(np.float32).ravel())
     me.color_attributes.active_color = col
-    obj = bpy.data.objects.new(name, me)
-    bpy.context.scene.collection.objects.link(obj)
     return obj
 
 

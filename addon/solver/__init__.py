@@ -40,7 +40,7 @@ from .progress import BIND_PHASES  # noqa: F401
 from .rebind import (REBIND_ASYNC_MIN_VERTICES, GroupsRebindJob, RebindPending,  # noqa: F401
                      finish_rebinds, rebind_text, rebinding, threaded_rebinds)
 from .solving import (binding_of, deformed_positions, evaluate_object, finish,  # noqa: F401
-                      shown_positions, solve)
+                      frame_key, shown_positions, solve)
 from .status import (fit_warning, idle_status, reset_status, set_status,  # noqa: F401
                      simulation_text, solve_summary, status_text)
 from .workers import FrameSolve, threaded_solves  # noqa: F401

@@ -147,7 +147,10 @@ def finish_rebinds():
                 # superseded by a later groups change: re-read the groups on the next update
                 e = cache._cache.get(key)
                 if e is not None:
-                    e.verified, e.last_inputs = False, None
+                    # its native rebind may have run to the end: the entry's groups no longer
+                    # say what the native object holds (a change back would not re-bind), and
+                    # a simulation restarted there
+                    e.verified, e.last_inputs, e.groups, e.sim = False, None, None, None
                 obj.update_tag()
             continue
         if getattr(job, "inplace", False) and job.error is not None:

@@ -12,9 +12,10 @@ keyed settings). On a frame:
   simulated: the frames after it are dropped (they followed from the old one), so a change
   anywhere invalidates the cache from the first frame it changes, found as playback reaches
   it; an edit at the frame shown (moving a handle there) re-simulates that frame at once;
-- a frame with no kept frame before it (a jump ahead of the cache) cannot be simulated: it
-  shows the input, and the panel says from which frame to play (a bake plays the frames
-  before its range itself).
+- a frame with no kept frame before it (a jump ahead of the cache, or a frame before it
+  whose checkpoint was dropped for memory) cannot be simulated: it shows the input, the
+  kept frames after the last checkpoint before it are dropped, and the panel says from
+  which frame to play (a bake plays the frames before its range itself).
 A bake therefore writes what playback showed, bit for bit, and a bake split into chunks
 starts each chunk from the checkpoint of the frame before it (export_checkpoint /
 import_checkpoint, scripts/batch_bake.py --checkpoints)."""
@@ -42,7 +43,8 @@ class Frames:
 
     def __init__(self):
         self.start = None   # the scene frame the simulation starts at
-        self.items = {}     # frame -> [key, state bytes or None, positions n x 3 float64]
+        self.items = {}     # frame -> [key, state bytes or None, positions n x 3 float64,
+                            #           chain: the history's hash, chain(previous, key)]
         self.at = None      # the frame whose state the native object holds now, or None
         self.gap_from = None  # the frame playback must start from to reach the shown one
 
@@ -72,14 +74,21 @@ class Frames:
                 total -= s
 
 
-def _key(plan, frame):
-    """What a frame's result depends on besides the frames before it."""
+def frame_key(plan, frame):
+    """What a frame's result depends on besides the frames before it (bytes)."""
     h = hashlib.blake2b(digest_size=20)
     h.update(struct.pack("<q", frame))
     h.update(plan["inputs"])
-    h.update(repr(sorted((k, v) for k, v in plan["kw"].items()
-                         if k not in ("energy", "warm_start"))).encode())
+    h.update(repr(sorted((k, v) for k, v in plan["kw"].items()   # arrays: in the inputs
+                         if k not in ("energy", "warm_start") and not hasattr(v, "shape"))
+                  ).encode())
     return h.digest()
+
+
+def chain(previous, key):
+    """The hash of a frame's history: its key after its previous frame's chain (b"" before
+    the first frame)."""
+    return hashlib.blake2b(previous + key, digest_size=20).digest()
 
 
 class _Result:
@@ -96,43 +105,54 @@ def solve(e, plan, call, frame, start):
     """The positions of `frame` (scene frame) for the solve `plan` (solving._plan_solve) of
     the cache entry `e`: a kept frame, or one simulated from the frame before it, or a reset
     at the start. `call(label, fn, **kw)` runs a native call (solver.calls). Returns a
-    SolveResult-like object; its `simulated` attribute says whether the native object
-    advanced."""
+    SolveResult-like object."""
     sim = getattr(e, "sim", None)
     if sim is None or sim.start != start:
         sim = e.sim = Frames()
         sim.start = start
-    key = _key(plan, frame)
+    key = frame_key(plan, frame)
     kw = dict(plan["kw"])
     kw.pop("warm_start", None)
     kw.pop("resume", None)
     kw.pop("max_iterations", None)
     label = plan["label"]
-    if frame <= start:
-        frame = start
-        rec = sim.items.get(frame)
+    rec = sim.items.get(frame)
+    if frame >= start and rec is not None and rec[0] == key:   # kept: no solve
         sim.gap_from = None
-        if rec is not None and rec[0] == key:
-            return _Result(rec[2])
+        return _Result(rec[2])
+    if frame <= start:
+        # the start (kept for the frames after it), or a frame before it: a reset there,
+        # not kept (it is no frame of the simulation)
+        sim.at = None   # the native object is reset whatever follows
         res = call(label + " solve", e.native.solve, warm_start=False, **plan["goal"], **kw)
+        sim.gap_from = None
+        if frame < start:
+            return res
     else:
-        rec = sim.items.get(frame)
-        if rec is not None and rec[0] == key:
-            sim.gap_from = None
-            return _Result(rec[2])
         prev = sim.items.get(frame - 1)
         if prev is None or (prev[1] is None and sim.at != frame - 1):
-            # ahead of what was simulated: the input as it arrives, at rest
-            first = sim.cached_range()
-            sim.gap_from = first[1] if first else start
+            # ahead of what can be simulated from here: the input as it arrives, at rest.
+            # Playback must go back to the last frame with a checkpoint and simulate on: the
+            # kept frames after it are dropped so that they are simulated again (a kept frame
+            # shows with no solve and would not advance the native object)
+            c = max((f for f, r in sim.items.items() if f < frame and r[1] is not None),
+                    default=None)
+            if c is not None and c + 1 in sim.items:
+                sim.drop_after(c)
+            sim.gap_from = c + 1 if c is not None else start
+            sim.at = None
             return call(label + " solve", e.native.solve, warm_start=False, **plan["goal"],
                         **kw)
         if sim.at != frame - 1:
+            sim.at = None
             call(label + " restore", e.native.restore_state, prev[1])
+        sim.at = None   # until the step below succeeds
         res = call(label + " solve", e.native.solve, warm_start=True, **plan["goal"], **kw)
     positions = np.asarray(res.positions, dtype=np.float64).reshape(-1, 3)
     sim.drop_after(frame)
-    sim.items[frame] = [key, call(label + " checkpoint", e.native.save_state), positions]
+    history = chain(b"" if frame == start else sim.items[frame - 1][3], key)
+    sim.items[frame] = [key, call(label + " checkpoint", e.native.save_state), positions,
+                        history]
     sim.at = frame
     sim.gap_from = None
     sim._trim()
@@ -140,23 +160,26 @@ def solve(e, plan, call, frame, start):
 
 
 def export_checkpoint(e, frame):
-    """The checkpoint kept after `frame` (bytes), or None: for a chunk that starts after it."""
+    """(the checkpoint kept after `frame`, the hash of its history: chain()), or None: for a
+    chunk that starts after it."""
     sim = getattr(e, "sim", None)
     rec = sim.items.get(frame) if sim is not None else None
-    return None if rec is None else rec[1]
+    return None if rec is None or rec[1] is None else (rec[1], rec[3])
 
 
-def import_checkpoint(e, frame, state, start):
-    """Makes `state` (export_checkpoint's, from another process) the frame `frame` of this
-    binding's simulation, as if it had been simulated here: the next frame continues from
-    it. The native object checks that the state fits (ValueError otherwise)."""
+def import_checkpoint(e, frame, state, start, history):
+    """Makes `state` (export_checkpoint's, from another process, whose history the caller
+    checked) the frame `frame` of this binding's simulation, as if it had been simulated
+    here: the next frame continues from it. The native object checks that the state fits
+    (ValueError otherwise)."""
     sim = getattr(e, "sim", None)
     if sim is None or sim.start != start:
         sim = e.sim = Frames()
         sim.start = start
     e.native.restore_state(state)
     sim.drop_after(frame - 1)
-    sim.items[frame] = [b"", bytes(state), None]   # a key no frame has: never shown as kept
+    # a key no frame has: never shown as kept; its history continues the chain
+    sim.items[frame] = [b"", bytes(state), None, history]
     sim.at = frame
 
 

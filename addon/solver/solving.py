@@ -58,9 +58,9 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
     T, source, inputs = _solve_inputs(obj, d, e, depsgraph)
     m = methods.get(d.method)
     dynamic = simulation.is_dynamic(m)
-    if dynamic:  # a simulation: the frame is an input (solver.simulation)
+    if dynamic:  # a simulation: the frame, and the keyed settings, are inputs
         scene = bpy.context.scene
-        inputs += struct.pack("<qq", scene.frame_current, scene.frame_start)
+        inputs += _frame_inputs(m, d, obj, scene)
     if w is not None:  # a worker's solve ended: its result shows now (if still wanted)
         if w.error is not None:
             e.pending = False
@@ -108,6 +108,17 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
     return _finish_solve(obj, d, e, key, plan, res, ms)
 
 
+def _frame_inputs(m, d, obj, scene):
+    """What a simulation's frame depends on besides the handles and the input (bytes): the
+    frame, the first frame, and this frame's keyed options and scene settings (gravity, the
+    frame's length)."""
+    kw = methods.solve_kwargs(m, d.options, True)
+    if m.solve_args is not None:
+        kw.update(m.solve_args(obj, d.options, scene))
+    return struct.pack("<qq", scene.frame_current, scene.frame_start) + \
+        repr(sorted(kw.items())).encode()
+
+
 def _input_or_none(obj, d, depsgraph):
     """The deformer's input for a method that solves from the rest (where its handles' edits
     turn with the pose), or None when it is the rest, or cannot be read (a modifier below
@@ -132,7 +143,9 @@ def _solve_inputs(obj, d, e, depsgraph):
     T = budget.snap_identity(turn_with_the_pose(d, e.rest, e.handles,
                                                 transforms(obj, d, depsgraph), inp), e.extent)
     last = e.last_T
-    if last is not None and last.shape == T.shape and budget._within_rounding(T, last, e.extent):
+    # (not for a simulation: a frame's input must not depend on the frame shown before it)
+    if last is not None and last.shape == T.shape and budget._within_rounding(T, last, e.extent) \
+            and not simulation.is_dynamic(m):
         # the same placement seen through other float32 products (the object and its
         # child target moved together): the last solve's, so that nothing is solved again
         # (a warm iterative solve from its own result moves it by up to its tolerance)
@@ -261,6 +274,18 @@ def _finish_solve(obj, d, e, key, plan, res, ms):
         e.preview_inputs = None
         cache._written_at_undo[key] = cache._undo_serial[0]
     return pos
+
+
+def frame_key(obj, d, depsgraph=None):
+    """A simulation's key of the frame shown (solver.simulation: what the frame is computed
+    from besides the frames before it), computed as a solve of it would, without solving."""
+    e = binding_of(obj, d)
+    T, source, inputs = _solve_inputs(obj, d, e, depsgraph)
+    scene = bpy.context.scene
+    inputs += _frame_inputs(methods.get(d.method), d, obj, scene)
+    plan = _plan_solve(obj, d, e, (obj.name, d.uid), T, source, inputs, True, False, False,
+                       False)
+    return simulation.frame_key(plan, scene.frame_current)
 
 
 def binding_of(obj, d):

@@ -125,7 +125,7 @@ typedef struct dk_shape_matching_options {
     double plastic_yield; /**< |S - I|_F above which a cluster creeps; default 0.1          */
     double plastic_creep; /**< creep rate per second, >= 0; 0 (default): elastic only      */
     double plastic_max;   /**< the largest |S_p - I|_F; default 1                           */
-    const double *masses; /**< n_vertices masses > 0, or NULL: all 1                        */
+    const double *masses; /**< n_vertices masses in (0, 1e100], or NULL: all 1              */
     dk_index n_masses;
     const double *alpha_map;   /**< n_vertices factors in [0, 1] on alpha (painted), or NULL */
     dk_index n_alpha_map;
@@ -192,8 +192,9 @@ dk_status dk_shape_matching_energy(const dk_shape_matching *s, const double *pos
                                    double *energy, dk_error *err);
 
 /** The mean goal g_i of every vertex (n_vertices x 3) for `positions` (n_vertices x 3)
- *  against the last solve's goal shape and the current plastic states: the quantity the
- *  integrators pull towards (kinematic vertices included). */
+ *  against the last solve's goal shape and the current plastic states: what the clusters
+ *  pull each vertex towards (kinematic vertices included; the attachment's blend with the
+ *  input, which the integrators add, is not). */
 dk_status dk_shape_matching_goals(const dk_shape_matching *s, const double *positions,
                                   double *goals, dk_error *err);
 

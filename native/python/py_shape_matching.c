@@ -408,7 +408,8 @@ PyDoc_STRVAR(goals_doc,
              "Each vertex's goal g_i (the mean over its clusters of R q_i + x_cm, or the\n"
              "linear / quadratic blend with beta) for the configuration `positions`\n"
              "(n x 3), against the last solve's goal shape and the current plastic states:\n"
-             "what the integrators pull each vertex towards.");
+             "what the clusters pull each vertex towards (the attachment's blend with the\n"
+             "input, which the integrators add, left out).");
 
 static PyObject *sm_goals(PyObject *obj, PyObject *arg)
 {

@@ -282,19 +282,8 @@ def rigged_arm(nodes, method="EMBEDDED", reset=True):
     handle = np.array([j * nx + i for j in range(ny) for i in range(nx - 2, nx)])
     group(obj, "fixed", fixed)
     group(obj, "tip", handle)
-    w = np.clip((rest[:, 0] + 0.2) / 0.4, 0.0, 1.0)   # blend across the elbow at x = 0
-    group(obj, "lower", range(len(rest)), w)
-    group(obj, "upper", range(len(rest)), 1.0 - w)
-    arm, ao = two_bone_rig("Rig")
-    for name, keys in (("upper", ((1, (0, 0, 0)), (10, (0, 0, 0.25)), (20, (0.2, 0, 0.1)))),
-                       ("lower", ((1, (0, 0, 0)), (10, (0.5, 0, 0)), (20, (0.3, 0.2, -0.6))))):
-        pb = ao.pose.bones[name]
-        pb.rotation_mode = "XYZ"
-        for f, rot in keys:
-            pb.rotation_euler = rot
-            pb.keyframe_insert("rotation_euler", frame=f)
-    mod = obj.modifiers.new("Armature", "ARMATURE")
-    mod.object = ao
+    arm_rig(obj, {"upper": ((1, (0, 0, 0)), (10, (0, 0, 0.25)), (20, (0.2, 0, 0.1))),
+                  "lower": ((1, (0, 0, 0)), (10, (0.5, 0, 0)), (20, (0.3, 0.2, -0.6)))})
     bpy.context.view_layer.objects.active = obj
     e = empty("Tip", (1.0, 0.0, 0.0))
     bpy.ops.deformkit.add_deformer(method=method)
@@ -312,6 +301,32 @@ def rigged_arm(nodes, method="EMBEDDED", reset=True):
     e.location = (1.0, 0.1, 0.25)    # the edit, made on the pose of frame 1
     bpy.context.view_layer.update()
     return obj, d, e, fixed, handle, bind_world
+
+
+def arm_rig(obj, keys):
+    """A two-bone Armature modifier (two_bone_rig, first in obj's stack) bending obj (a mesh
+    along x) at x = 0, the weights blended across -0.2..0.2, its bones' XYZ rotations keyed:
+    keys = {bone: ((frame, (x, y, z)), ...)}. Returns the armature object."""
+    rest = rest_positions(obj)
+    w = np.clip((rest[:, 0] + 0.2) / 0.4, 0.0, 1.0)   # blend across the elbow at x = 0
+    group(obj, "lower", range(len(rest)), w)
+    group(obj, "upper", range(len(rest)), 1.0 - w)
+    arm, ao = two_bone_rig("Rig")
+    key_rotations(ao, keys)
+    mod = obj.modifiers.new("Armature", "ARMATURE")
+    mod.object = ao
+    return ao
+
+
+def key_rotations(ao, keys):
+    """Keys the XYZ rotations of armature object ao's pose bones: keys = {bone: ((frame,
+    (x, y, z)), ...)}."""
+    for name, frames in keys.items():
+        pb = ao.pose.bones[name]
+        pb.rotation_mode = "XYZ"
+        for f, rot in frames:
+            pb.rotation_euler = rot
+            pb.keyframe_insert("rotation_euler", frame=f)
 
 
 def armature_input(obj, d):

@@ -371,17 +371,7 @@ def in_blender():
             obj = S.make_grid(nx=24, ny=6)
             rest = S.rest_positions(obj)
             S.group(obj, "forearm", np.flatnonzero(rest[:, 0] > -0.2))
-            w = np.clip((rest[:, 0] + 0.2) / 0.4, 0.0, 1.0)
-            S.group(obj, "lower", range(len(rest)), w)
-            S.group(obj, "upper", range(len(rest)), 1.0 - w)
-            arm, ao = S.two_bone_rig("Rig")
-            pb = ao.pose.bones["lower"]
-            pb.rotation_mode = "XYZ"
-            for f, rot in ((1, (0, 0, 0)), (10, (0.8, 0, 0)), (20, (0, 0, 0))):
-                pb.rotation_euler = rot
-                pb.keyframe_insert("rotation_euler", frame=f)
-            mod = obj.modifiers.new("Armature", "ARMATURE")
-            mod.object = ao
+            S.arm_rig(obj, {"lower": ((1, (0, 0, 0)), (10, (0.8, 0, 0)), (20, (0, 0, 0)))})
             bpy.context.view_layer.objects.active = obj
             obj.select_set(True)
             bpy.ops.deformkit.add_deformer(method="SHAPE_MATCHING")

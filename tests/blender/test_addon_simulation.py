@@ -39,19 +39,8 @@ def jiggle_arm():
     obj = S.make_grid(nx=nx, ny=ny)
     rest = S.rest_positions(obj)
     S.group(obj, "held", np.where(rest[:, 0] < -0.4)[0])
-    w = np.clip((rest[:, 0] + 0.2) / 0.4, 0.0, 1.0)
-    S.group(obj, "lower", range(len(rest)), w)
-    S.group(obj, "upper", range(len(rest)), 1.0 - w)
-    arm, ao = S.two_bone_rig("Rig")
-    for name, keys in (("upper", ((1, (0, 0, 0)), (10, (0, 0, 0.5)), (20, (0.2, 0, 0.1)))),
-                       ("lower", ((1, (0, 0, 0)), (10, (0.8, 0, 0)), (20, (0.3, 0.2, -0.6))))):
-        pb = ao.pose.bones[name]
-        pb.rotation_mode = "XYZ"
-        for f, rot in keys:
-            pb.rotation_euler = rot
-            pb.keyframe_insert("rotation_euler", frame=f)
-    mod = obj.modifiers.new("Armature", "ARMATURE")
-    mod.object = ao
+    ao = S.arm_rig(obj, {"upper": ((1, (0, 0, 0)), (10, (0, 0, 0.5)), (20, (0.2, 0, 0.1))),
+                         "lower": ((1, (0, 0, 0)), (10, (0.8, 0, 0)), (20, (0.3, 0.2, -0.6)))})
     bpy.context.view_layer.objects.active = obj
     bpy.ops.deformkit.add_deformer(method="SHAPE_MATCHING")
     d = obj.deformkit.deformers[0]
@@ -183,14 +172,14 @@ def test_the_hold_paint_reaches_each_vertex():
 
 def test_a_frame_ahead_of_the_simulation():
     obj, d, ao = jiggle_arm()
-    play(obj, range(1, 6))
+    play(obj, range(1, 6))   # frames 1-5 simulated: the next to simulate is 6
     bpy.context.scene.frame_set(25)
     got = S.evaluated_positions(obj)
     inp = S.armature_input(obj, d)
     R.check("a frame ahead of the kept ones shows the input", np.abs(got - inp).max() < TOL,
             np.abs(got - inp).max())
     text = S.solver.status.simulation_text(obj, d)
-    R.check("the panel says to play from frame 5", "play from frame 5" in text, text)
+    R.check("the panel says to play from frame 6", "play from frame 6" in text, text)
 
 
 def test_a_keyed_stiffness_reaches_each_frame():
@@ -258,11 +247,58 @@ def test_bakes_write_what_played():
         same = len(joined) == LAST and all(
             np.array_equal(np.array(a), np.array(b)) for a, b in zip(joined, all_frames))
         R.check("chunks with checkpoints = one bake, bit for bit", same)
+    # a checkpoint of another animation (a key at 15: frames 11-19 change, 20 does not) is
+    # refused by name, nothing written
+    obj = bpy.data.objects[obj.name]
+    ao = bpy.data.objects["Rig"]
+    S.key_rotations(ao, {"lower": ((15, (0.1, 0.6, 0.0)),)})
+    other = os.path.join(S.OUTPUT, "jiggle_other.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=other)
+    os.remove(outs[1])
+    r = run_batch("--object", obj.name, "--frames", "21-%d" % LAST, "--out", outs[1],
+                  "--checkpoints", folder, blend=other)
+    R.check("a checkpoint from another animation is refused by name",
+            r.returncode != 0 and "another animation of frames 1-20" in r.stderr
+            and not os.path.exists(outs[1]), r.stderr[-600:])
+
+
+def test_a_dropped_checkpoint_sends_playback_back():
+    """Beyond the memory budget old checkpoints are dropped (every tenth kept); an edit
+    that reaches a frame whose previous checkpoint was dropped names the frame after the
+    last checkpoint before it, and playing from there gives the new simulation."""
+    obj, d, ao = jiggle_arm()
+    budget = S.solver.simulation.MEMORY_BUDGET[0]
+    e = None
+    try:
+        frames = list(range(1, 31))
+        play(obj, frames[:1])
+        e = S.solver.cache._cache[(obj.name, d.uid)]
+        per = len(e.sim.items[1][1])
+        S.solver.simulation.MEMORY_BUDGET[0] = 4 * per
+        play(obj, frames)
+        kept = sorted(f for f, r in e.sim.items.items() if r[1] is not None)
+        R.check("checkpoints thinned to every tenth and the newest (%s)" % kept,
+                len(kept) <= 5 and 11 in kept and 30 in kept, kept)
+        bpy.context.scene.frame_set(25)
+        S.key_rotations(ao, {"lower": ((15, (0.1, 0.6, 0.0)),)})
+        bpy.context.view_layer.update()
+        play(obj, frames)
+        # the key at 15 changes frames 11-19; frame 10's checkpoint was dropped, frame 1's
+        # is the last before it
+        text = S.solver.status.simulation_text(obj, d)
+        R.check("the panel sends playback back to frame 2", "play from frame 2" in text, text)
+        inp = inputs(obj, d, frames)
+        want = direct(obj, d, inp, frames)
+        got = play(obj, frames)
+        R.check("played on from there: the new simulation (max %.2e)" % worst(got, want),
+                worst(got, want) < TOL, worst(got, want))
+    finally:
+        S.solver.simulation.MEMORY_BUDGET[0] = budget
 
 
 for t in (test_playback_is_the_simulation, test_an_edit_resimulates_from_the_frame_it_changes,
           test_the_hold_paint_reaches_each_vertex, test_a_frame_ahead_of_the_simulation,
           test_a_keyed_stiffness_reaches_each_frame,
-          test_bakes_write_what_played):
+          test_bakes_write_what_played, test_a_dropped_checkpoint_sends_playback_back):
     R.run(t)
 R.finish()

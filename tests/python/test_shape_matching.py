@@ -458,3 +458,45 @@ def test_the_attachment_blends_a_jiggling_region_into_what_follows(tube):
     assert blended < 0.5 * loose, (blended, loose)
     assert swing > 0.05, swing
     assert held_swing < 0.2 * swing, (held_swing, swing)
+
+
+def test_a_solve_that_fails_changes_nothing(tube):
+    """A frame whose result overflows (torn apart at 1e308 per second) raises, and the
+    object is as it was: the frame count, the velocities, the next solve's result."""
+    V, F, mesh = tube
+    sm = dk.ShapeMatching(mesh)
+    sm.solve(warm_start=False)
+    sm.solve()
+    before = (sm.frame, np.asarray(sm.velocities).copy(), sm.save_state())
+    sm.velocities = 1e308 * np.where(np.arange(V.size).reshape(V.shape) % 2, 1.0, -1.0)
+    thrown = sm.save_state()
+    with pytest.raises(ValueError):
+        sm.solve()
+    assert sm.frame == before[0] and sm.save_state() == thrown
+    sm.restore_state(before[2])
+    a = np.asarray(sm.solve().positions)
+    b = dk.ShapeMatching(mesh)
+    b.solve(warm_start=False)
+    b.solve()
+    assert np.array_equal(a, np.asarray(b.solve().positions))
+
+
+def test_plasticity_turns_with_an_animated_input(tube):
+    """The plastic states live in the bind rest's frame: a stretch released on an input
+    turned by a quarter turn creeps into the same shape, turned (with the clusters of the
+    parts, which do not depend on the axes)."""
+    V, F, mesh = tube
+    R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    kw = dict(clusters="parts", plastic_creep=20.0, plastic_yield=0.01, mode="linear",
+              beta=0.8)
+    out = []
+    for turn in (np.eye(3), R):
+        sm = dk.ShapeMatching(mesh, **kw)
+        inp = V @ turn.T
+        sm.solve(start_positions=(V * [1.3, 0.8, 1.1]) @ turn.T, input_positions=inp)
+        for _ in range(60):
+            x = np.asarray(sm.solve(input_positions=inp).positions)
+        out.append(x)
+    diag = np.linalg.norm(V.max(0) - V.min(0))
+    assert procrustes(out[0], V) > 0.02 * diag          # it crept
+    assert np.abs(out[0] @ R.T - out[1]).max() < 1e-8 * diag

@@ -217,9 +217,35 @@ static double frobenius_from_identity(const double *m)
     return sqrt(s);
 }
 
-dk_index sm_plastic_update(const sm_clusters *c, const sm_fit *fits, double h,
-                           const dk_shape_matching_dynamics *dyn, double *sp,
-                           unsigned char *changed)
+/* The rotation Q from cluster cl at the bind's rest to it in the goal shape y (the closest
+ * rotation to their cross-covariance). */
+static void rest_to_goal(const sm_clusters *c, const sm_rest *r, const double *y,
+                         const double *rest, dk_index cl, double Q[9])
+{
+    const dk_index k0 = c->start[cl], k1 = c->start[cl + 1];
+    const double *cy = r->cm + 3 * (size_t)cl;
+    double cr[3] = {0, 0, 0}, cov[9] = {0};
+    for (dk_index k = k0; k < k1; k++) {
+        const double *p = rest + 3 * (size_t)c->member_vertex[k];
+        for (int d = 0; d < 3; d++)
+            cr[d] += c->member_mass[k] * p[d];
+    }
+    for (int d = 0; d < 3; d++)
+        cr[d] /= r->mass[cl];
+    for (dk_index k = k0; k < k1; k++) {
+        const double m = c->member_mass[k];
+        const double *a = y + 3 * (size_t)c->member_vertex[k];
+        const double *b = rest + 3 * (size_t)c->member_vertex[k];
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                cov[3 * i + j] += m * (a[i] - cy[i]) * (b[j] - cr[j]);
+    }
+    dk_closest_rotation(cov, Q);
+}
+
+dk_index sm_plastic_update(const sm_clusters *c, const sm_rest *r, const sm_fit *fits, double h,
+                           const dk_shape_matching_dynamics *dyn, const double *y,
+                           const double *rest, double *sp, unsigned char *changed)
 {
     dk_index n_changed = 0;
     for (dk_index cl = 0; cl < c->n_clusters; cl++) {
@@ -234,9 +260,16 @@ dk_index sm_plastic_update(const sm_clusters *c, const sm_fit *fits, double h,
                 S[3 * i + j] = S[3 * j + i] = 0.5 * (S[3 * i + j] + S[3 * j + i]);
         if (!(frobenius_from_identity(S) > dyn->plastic_yield))
             continue;
-        double *P = sp + 9 * (size_t)cl, F[9], N[9];
+        double *P = sp + 9 * (size_t)cl, G[9], F[9], N[9], Q[9], T[9];
         for (int i = 0; i < 9; i++)
-            F[i] = (i % 4 == 0 ? 1.0 : 0.0) + h * dyn->plastic_creep * (S[i] - (i % 4 == 0));
+            G[i] = (i % 4 == 0 ? 1.0 : 0.0) + h * dyn->plastic_creep * (S[i] - (i % 4 == 0));
+        rest_to_goal(c, r, y, rest, cl, Q); /* F = Q^T G Q: the step in the rest's frame */
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                T[3 * i + j] = G[3 * i] * Q[j] + G[3 * i + 1] * Q[3 + j] + G[3 * i + 2] * Q[6 + j];
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                F[3 * i + j] = Q[i] * T[j] + Q[3 + i] * T[3 + j] + Q[6 + i] * T[6 + j];
         for (int i = 0; i < 3; i++)
             for (int j = 0; j < 3; j++)
                 N[3 * i + j] = F[3 * i] * P[j] + F[3 * i + 1] * P[3 + j] + F[3 * i + 2] * P[6 + j];

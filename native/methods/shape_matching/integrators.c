@@ -3,6 +3,7 @@
  * by the driver's `place` at the stage's time; their velocities are the driver's. */
 #include "sm_internal.h"
 
+#include <math.h>
 #include <string.h>
 
 /* Acceleration of free vertex i at (x, v) with goals g: k (g - x) + gravity - d (v - u). */
@@ -21,11 +22,13 @@ static void semi_implicit(const sm_step *st, double *x, double *v, const double 
     for (dk_index i = 0; i < st->n; i++) {
         if (st->kinematic[i])
             continue;
-        const double inv = 1.0 / (1.0 + h * st->d[i]);
+        /* (v + h (k (g - x) + gravity) + h d u) / (1 + h d), the damping's share of u
+         * written as hd / (1 + hd) so that no damping rate overflows it */
+        const double hd = h * st->d[i], inv = 1.0 / (1.0 + hd), share = hd / (1.0 + hd);
         for (int c = 0; c < 3; c++) {
             const size_t j = 3 * (size_t)i + (size_t)c;
-            v[j] = (v[j] + h * (st->k[i] * (g[j] - x[j]) + st->gravity[c] + st->d[i] * st->u[j])) *
-                   inv;
+            v[j] = (v[j] + h * (st->k[i] * (g[j] - x[j]) + st->gravity[c])) * inv +
+                   (isfinite(share) ? share : 1.0) * st->u[j];
             x[j] += h * v[j];
         }
     }
@@ -67,12 +70,12 @@ static void implicit_euler(const sm_step *st, double *x, double *v, double *g,
         for (dk_index i = 0; i < st->n; i++) {
             if (st->kinematic[i])
                 continue;
-            const double inv = 1.0 / (1.0 + h * st->d[i] + h * h * st->k[i]);
+            const double den = 1.0 + h * st->d[i] + h * h * st->k[i], inv = 1.0 / den;
+            const double share = isfinite(den) ? h * st->d[i] / den : 1.0;
             for (int c = 0; c < 3; c++) {
                 const size_t j = 3 * (size_t)i + (size_t)c;
-                const double vj =
-                    (v[j] + h * (st->k[i] * (g[j] - x[j]) + st->gravity[c] + st->d[i] * st->u[j])) *
-                    inv;
+                const double vj = (v[j] + h * (st->k[i] * (g[j] - x[j]) + st->gravity[c])) * inv +
+                                  share * st->u[j];
                 if (pass > 0) {
                     const double dv = vj - vn[j];
                     change = dv > change ? dv : -dv > change ? -dv : change;

@@ -44,11 +44,21 @@ struct dk_shape_matching {
     int want_fits;                 /* the next goal evaluation records the fits            */
     int substep, n_sub;            /* place(): the substep being taken                    */
     dk_team *team;
+    unsigned char *backup;         /* a solve's own checkpoint: a failed solve puts it back */
+    size_t backup_size;
     dk_phase_progress_fn rebind_progress; /* dk_shape_matching_set_progress                */
     void *rebind_progress_user;
 };
 
 static const dk_progress_phase bind_phases[] = {{"clusters", 1.0}};
+
+/* The bytes of a state (dk_shape_matching_state_size) for n vertices and nc clusters: the
+ * header, positions, velocities, goal shape, plastic states and the frame count (spans_of). */
+static size_t state_bytes(dk_index n, dk_index nc)
+{
+    return sizeof(dk_state_header) + 3 * (3 * (size_t)n * sizeof(double)) +
+           9 * (size_t)nc * sizeof(double) + sizeof(int64_t);
+}
 
 void dk_shape_matching_default_options(dk_shape_matching_options *o)
 {
@@ -147,7 +157,7 @@ static dk_status check_options(const dk_mesh *m, const dk_shape_matching_options
     const dk_shape_matching_dynamics y = dynamics_of(o);
     dk_status st = check_dynamics(&y, err);
     if (st == DK_OK)
-        st = check_map(m, "masses", o->masses, o->n_masses, DBL_MIN, DBL_MAX, err);
+        st = check_map(m, "masses", o->masses, o->n_masses, DBL_MIN, 1e100, err);
     if (st == DK_OK)
         st = check_map(m, "alpha_map", o->alpha_map, o->n_alpha_map, 0.0, 1.0, err);
     if (st == DK_OK)
@@ -371,6 +381,7 @@ void dk_shape_matching_free(dk_shape_matching *s)
     free(s->attach_map);
     free(s->k), free(s->d), free(s->beta), free(s->ka), free(s->ktot), free(s->attach);
     free(s->near);
+    free(s->backup);
     free(s->x), free(s->v), free(s->shape), free(s->sp);
     free(s->goals), free(s->member_goal), free(s->work), free(s->k0), free(s->k1), free(s->u);
     free(s->acc);
@@ -505,6 +516,12 @@ dk_status dk_shape_matching_bind(const dk_mesh *mesh, const dk_constraint_desc *
         if (!s->member_goal || !s->sp || !s->fits || !s->changed)
             st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeMatching: out of memory (clusters)");
     }
+    if (st == DK_OK) {
+        s->backup_size = state_bytes(n, s->cl.n_clusters);
+        s->backup = malloc(s->backup_size);
+        if (!s->backup)
+            st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeMatching: out of memory (backup)");
+    }
     if (st == DK_OK)
         st = dk_progress_part(&prog, 1.0, err);
     if (st != DK_OK) {
@@ -521,6 +538,8 @@ dk_status dk_shape_matching_bind(const dk_mesh *mesh, const dk_constraint_desc *
 
 /* What a rebind builds before it changes anything: freed whole on any failure. */
 typedef struct sm_rebuilt {
+    unsigned char *backup;
+    size_t backup_size;
     dk_constraints *con;
     unsigned char *kinematic;
     double *attach;
@@ -537,7 +556,7 @@ typedef struct sm_rebuilt {
 static void rebuilt_free(sm_rebuilt *r)
 {
     dk_constraints_free(r->con);
-    free(r->kinematic), free(r->targets), free(r->attach), free(r->near);
+    free(r->kinematic), free(r->targets), free(r->attach), free(r->near), free(r->backup);
     if (r->has_clusters) {
         sm_clusters_free(&r->cl);
         sm_rest_free(&r->rest);
@@ -559,6 +578,16 @@ static dk_status cluster_buffers(sm_rebuilt *r, int dim, dk_error *err)
     r->changed = malloc(nc + 1);
     if (!r->member_goal || !r->sp || !r->fits || !r->changed)
         return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeMatching: out of memory (rebind)");
+    return DK_OK;
+}
+
+/* The solves' backup of a rebuild with nc clusters (on failure the caller frees r). */
+static dk_status backup_for(sm_rebuilt *r, dk_index n, dk_index nc, dk_error *err)
+{
+    r->backup_size = state_bytes(n, nc);
+    r->backup = malloc(r->backup_size);
+    if (!r->backup)
+        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeMatching: out of memory (backup)");
     return DK_OK;
 }
 
@@ -593,13 +622,18 @@ static dk_status rebuild(const dk_shape_matching *s, const dk_constraint_desc *d
                                     "no given cluster",
                                     (int)v);
             }
-        return DK_OK;
+        st = backup_for(r, n, s->cl.n_clusters, err); /* the kept clusters' */
+        if (st != DK_OK)
+            rebuilt_free(r);
+        return st;
     }
     st = sm_clusters_build(s->mesh, &s->opt, s->masses, r->kinematic, &r->cl, err);
     if (st == DK_OK) {
         r->has_clusters = 1;
         st = cluster_buffers(r, s->rest.dim, err);
     }
+    if (st == DK_OK)
+        st = backup_for(r, n, r->cl.n_clusters, err);
     if (st != DK_OK)
         rebuilt_free(r);
     return st;
@@ -634,6 +668,10 @@ dk_status dk_shape_matching_rebind(dk_shape_matching *s, const dk_constraint_des
     s->con = r.con, s->kinematic = r.kinematic, s->targets = r.targets, s->attach = r.attach;
     s->near = r.near;
     r.con = oc, r.kinematic = ok, r.targets = ot, r.attach = oa, r.near = on;
+    unsigned char *ob = s->backup;
+    const size_t obs = s->backup_size;
+    s->backup = r.backup, s->backup_size = r.backup_size;
+    r.backup = ob, r.backup_size = obs;
     if (r.has_clusters) {
         sm_clusters tc = s->cl;
         sm_rest tr = s->rest;
@@ -710,6 +748,11 @@ dk_status dk_shape_matching_solve(dk_shape_matching *s, const dk_solve_request *
         return st;
     const size_t N = 3 * (size_t)n;
     kinematic_targets(s, y);
+    /* the object as it was, put back if this solve fails (a non-finite result): a refused
+     * or failed solve changes nothing */
+    st = dk_shape_matching_save_state(s, s->backup, s->backup_size, err);
+    if (st != DK_OK)
+        return st;
     int frames = 0;
     if (rq->start == DK_START_COLD || rq->start == DK_START_GIVEN) {
         reset(s, y);
@@ -743,8 +786,9 @@ dk_status dk_shape_matching_solve(dk_shape_matching *s, const dk_solve_request *
             s->tau = 0.0;
             sm_integrate(&step, s->opt.integrator, s->x, s->v, s->goals, goals_of, place, s,
                          s->work);
-            if (plastic &&
-                sm_plastic_update(&s->cl, s->fits, step.h, &s->dyn, s->sp, s->changed) > 0)
+            if (plastic && sm_plastic_update(&s->cl, &s->rest, s->fits, step.h, &s->dyn,
+                                             s->shape, s->mesh->positions, s->sp,
+                                             s->changed) > 0)
                 for (dk_index c = 0; c < s->cl.n_clusters; c++)
                     if (s->changed[c])
                         sm_rest_compute(&s->cl, s->shape, s->mesh->positions, s->sp, &s->rest,
@@ -766,22 +810,34 @@ dk_status dk_shape_matching_solve(dk_shape_matching *s, const dk_solve_request *
         info->iterations = frames * s->opt.substeps;
         info->converged = 1;
     }
-    return dk_solve_result_check(positions, n, energy, !rq->skip_energy, "ShapeMatching solve",
-                                 err);
+    st = dk_solve_result_check(positions, n, energy, !rq->skip_energy, "ShapeMatching solve",
+                               err);
+    if (st != DK_OK)
+        (void)dk_shape_matching_restore_state(s, s->backup, s->backup_size, NULL);
+    dk_team_park(s->team);
+    return st;
 }
 
 /* ------------------------------------------------------------ queries and state ------- */
 
-/* Goals of `x` per membership into `member_goal` (allocated by the caller). */
-static void member_goals_of(const dk_shape_matching *s, const double *x, double *member_goal)
+/* The per-membership goals of `positions` (checked: finite, within DK_COORD_MAX) in a new
+ * array (*out, 3 per membership; the caller frees it), for the const queries below. `who`
+ * names the query in the messages. */
+static dk_status member_goals(const dk_shape_matching *s, const double *positions,
+                              double **out, const char *who, dk_error *err)
 {
-    sm_goals_clusters(&s->cl, &s->rest, s->opt.mode, s->beta, x, member_goal, NULL, NULL, 0,
+    *out = NULL;
+    dk_status st = dk_check_positions(positions, s->mesh->n_vertices, err);
+    if (st != DK_OK)
+        return st;
+    const size_t nm = (size_t)s->cl.start[s->cl.n_clusters];
+    double *mg = malloc((3 * nm + 1) * sizeof *mg);
+    if (!mg)
+        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeMatching %s: out of memory", who);
+    sm_goals_clusters(&s->cl, &s->rest, s->opt.mode, s->beta, positions, mg, NULL, NULL, 0,
                       s->cl.n_clusters);
-}
-
-static dk_status check_positions(const dk_shape_matching *s, const double *x, dk_error *err)
-{
-    return dk_check_positions(x, s->mesh->n_vertices, err); /* finite, within DK_COORD_MAX */
+    *out = mg;
+    return DK_OK;
 }
 
 dk_status dk_shape_matching_energy(const dk_shape_matching *s, const double *positions,
@@ -790,14 +846,10 @@ dk_status dk_shape_matching_energy(const dk_shape_matching *s, const double *pos
     if (!s || !positions || !energy)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "ShapeMatching energy: object, positions and energy must not be NULL");
-    dk_status st = check_positions(s, positions, err);
+    double *mg;
+    dk_status st = member_goals(s, positions, &mg, "energy", err);
     if (st != DK_OK)
         return st;
-    const size_t nm = (size_t)s->cl.start[s->cl.n_clusters];
-    double *mg = malloc((3 * nm + 1) * sizeof *mg);
-    if (!mg)
-        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeMatching energy: out of memory");
-    member_goals_of(s, positions, mg);
     *energy = residual(s, positions, mg);
     free(mg);
     return dk_energy_result_check(*energy, "ShapeMatching energy", err);
@@ -809,14 +861,10 @@ dk_status dk_shape_matching_goals(const dk_shape_matching *s, const double *posi
     if (!s || !positions || !goals)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "ShapeMatching goals: object, positions and goals must not be NULL");
-    dk_status st = check_positions(s, positions, err);
+    double *mg;
+    dk_status st = member_goals(s, positions, &mg, "goals", err);
     if (st != DK_OK)
         return st;
-    const size_t nm = (size_t)s->cl.start[s->cl.n_clusters];
-    double *mg = malloc((3 * nm + 1) * sizeof *mg);
-    if (!mg)
-        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeMatching goals: out of memory");
-    member_goals_of(s, positions, mg);
     sm_goals_vertices(&s->cl, mg, positions, goals, 0, s->mesh->n_vertices);
     free(mg);
     return DK_OK;
@@ -995,7 +1043,7 @@ static const dk_option_desc shape_matching_fields[] = {
     {"plastic_max", DK_OPTION_DOUBLE, offsetof(dk_shape_matching_options, plastic_max), 0, 0.0,
      DBL_MAX, 1.0, DBL_MAX, 0},
     {"masses", DK_OPTION_VERTEX_VALUES, offsetof(dk_shape_matching_options, masses),
-     offsetof(dk_shape_matching_options, n_masses), DBL_MIN, DBL_MAX, 1.0, DBL_MAX, 0},
+     offsetof(dk_shape_matching_options, n_masses), DBL_MIN, 1e100, 1.0, 1e100, 0},
     {"alpha_map", DK_OPTION_VERTEX_VALUES, offsetof(dk_shape_matching_options, alpha_map),
      offsetof(dk_shape_matching_options, n_alpha_map), 0.0, 1.0, 1.0, 1.0, 0},
     {"beta_map", DK_OPTION_VERTEX_VALUES, offsetof(dk_shape_matching_options, beta_map),

@@ -79,11 +79,13 @@ void sm_goals_from_sums(const sm_clusters *c, const double *acc0, const double *
 void sm_goals_vertices(const sm_clusters *c, const double *member_goal, const double *x,
                        double *goals, dk_index begin, dk_index end);
 
-/* Where a plastic state changes: updates sp (9 per cluster) from the fits for a step of h
- * seconds; returns how many clusters changed (their rest data must be recomputed). */
-dk_index sm_plastic_update(const sm_clusters *c, const sm_fit *fits, double h,
-                           const dk_shape_matching_dynamics *dyn, double *sp,
-                           unsigned char *changed);
+/* Where a plastic state changes: updates sp (9 per cluster, in the bind rest's frame) from
+ * the fits (in the frame of the goal shape y) for a step of h seconds, turning each step back
+ * by the rotation Q from the cluster at the bind's `rest` to it in y: S_p <- Q^T F Q S_p.
+ * Returns how many clusters changed (their rest data must be recomputed). */
+dk_index sm_plastic_update(const sm_clusters *c, const sm_rest *r, const sm_fit *fits, double h,
+                           const dk_shape_matching_dynamics *dyn, const double *y,
+                           const double *rest, double *sp, unsigned char *changed);
 
 /* What one substep needs (integrators.c). */
 typedef struct sm_step {
