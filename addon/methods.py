@@ -71,6 +71,10 @@ class Method:
     # 'paint' map: the constructor keyword that takes the Material group's weights as they
     # are, one value per vertex (0 where the group has none): a simulation's attachment
     paint_keyword: Optional[str] = None
+    # painted per-vertex factors: {GROUP option: constructor keyword}; the group's weights
+    # become the keyword's values, 1 where the group has none (a simulation's stiffness,
+    # damping and squash, painted)
+    group_maps: dict = field(default_factory=dict)
     # solve keywords that make a frame's result depend only on that frame (cold start)
     cold_solve: dict = field(default_factory=dict)
     # solve keywords for interactive updates
@@ -663,6 +667,8 @@ METHODS.append(Method(
     maps=("paint",),
     paint_keyword="attach_map",
     material_label="Hold",
+    group_maps={"stiffness_group": "alpha_map", "damping_group": "damping_map",
+                "squash_group": "beta_map"},
     options=[
         Option("alpha", "FLOAT", 0.3, "Stiffness",
                "How strongly each part is pulled back to its shape on each step (the paper's "
@@ -702,6 +708,15 @@ METHODS.append(Method(
                "smaller regions wobble and make long parts floppier",
                min=0.0, max=1e9, subtype="DISTANCE", shown_if=("clusters", ("cubes",)),
                advanced=True),
+        Option("stiffness_group", "GROUP", "", "Stiffness Paint",
+               "A vertex group whose weights scale the Stiffness per vertex (1 where it has "
+               "none): paint softer flesh low", kw=None, advanced=True),
+        Option("damping_group", "GROUP", "", "Damping Paint",
+               "A vertex group whose weights scale the Damping per vertex (1 where it has "
+               "none): paint parts that should settle sooner high", kw=None, advanced=True),
+        Option("squash_group", "GROUP", "", "Squash Paint",
+               "A vertex group whose weights scale the Squash Amount per vertex (1 where it "
+               "has none)", kw=None, advanced=True),
         Option("falloff", "FLOAT", 0.0, "Blend Distance",
                "How far from what follows the rig (the Fixed group, outside the Region, the "
                "handles) the jiggle fades in (0: half the depth of the region): no crease "
@@ -772,6 +787,8 @@ def _check_registry():
                                                or not set(m.cut_options) <= groups)):
             raise ValueError("%s: a 'cut' map needs cut_options naming two GROUP options"
                              % m.id)
+        if not set(m.group_maps) <= groups:
+            raise ValueError("%s: group_maps must name GROUP options" % m.id)
         if m.graph and "show_graph" not in {o.name for o in m.options if o.type == "BOOL"}:
             raise ValueError("%s: a method that draws a graph needs a BOOL show_graph" % m.id)
         if m.iterative and m.iteration_cap is None:

@@ -34,6 +34,7 @@ def group_names(obj, d):
     names.update(g for g in (d.roi_group, d.fixed_group, d.material_group) if g)
     if "cut" in m.maps:
         names.update(g for g in (getattr(d.options, o) for o in m.cut_options) if g)
+    names.update(g for g in (getattr(d.options, o) for o in m.group_maps) if g)
     return names
 
 
@@ -82,6 +83,13 @@ def collect(obj, d, captured=None):
             raise DeformKitError("%s and %s are the same vertex group '%s'"
                                  % (labels[0], labels[1], cut[0]))
         names.update(cut)
+    for o in m.group_maps:   # painted factors
+        g = getattr(d.options, o)
+        if g:
+            if obj.vertex_groups.get(g) is None:
+                label = next(x.label for x in m.options if x.name == o)
+                raise DeformKitError("%s: vertex group '%s' does not exist" % (label, g))
+            names.add(g)
     groups = blender_data.read_groups(obj, names)
     handles, weights = [], []
     seen = {}
@@ -149,6 +157,13 @@ def collect(obj, d, captured=None):
         p = np.zeros(len(obj.data.vertices))
         p[idx] = w
         kw[m.paint_keyword] = p
+    for o, keyword in m.group_maps.items():
+        g = getattr(d.options, o)
+        if g:
+            idx, w = groups[g]
+            p = np.ones(len(obj.data.vertices))
+            p[idx] = w
+            kw[keyword] = p
     if "material" in m.maps and d.material_group:
         idx, w = groups[d.material_group]
         kw["material_paint"] = (idx, w)
@@ -162,7 +177,7 @@ def collect(obj, d, captured=None):
     key = b"".join(np.ascontiguousarray(a).tobytes() for a in handles) + b"|" + b"|".join(
         b"" if x is None else np.ascontiguousarray(x).tobytes()
         for x in (fixed, roi, kw.get("stiffness"), kw.get(m.paint_keyword or "")) +
-        kw.get("cut", ())
+        tuple(kw.get(k) for k in m.group_maps.values()) + kw.get("cut", ())
         + kw.get("material_paint", ()))
     key += b"|" + b"".join(w.tobytes() for w in kw.get("handle_weights", []))
     key += b"|" + repr(sorted((k, x) for k, x in kw.items() if isinstance(x, str))).encode()

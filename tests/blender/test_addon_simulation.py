@@ -170,6 +170,33 @@ def test_the_hold_paint_reaches_each_vertex():
             lag["held"] < 0.5 * lag["free"], lag)
 
 
+def test_painted_stiffness_damping_and_squash_reach_each_vertex():
+    """The Advanced section's paints: each group's weights are the native per-vertex factor
+    (1 where the group has none)."""
+    obj, d, ao = jiggle_arm()
+    rest = S.rest_positions(obj)
+    fore = np.where(rest[:, 0] > 0.3)[0]
+    o = d.options_shape_matching
+    maps = {}
+    for opt, keyword, weight in (("stiffness_group", "alpha_map", 0.2),
+                                 ("damping_group", "damping_map", 0.5),
+                                 ("squash_group", "beta_map", 0.7)):
+        S.group(obj, opt, fore, np.full(len(fore), weight))
+        setattr(o, opt, opt)
+        m = np.ones(len(rest))
+        m[fore] = weight
+        maps[keyword] = m
+    bpy.context.view_layer.update()
+    frames = list(range(1, 21))
+    inp = inputs(obj, d, frames)
+    want = direct(obj, d, inp, frames, **maps)
+    got = play(obj, frames)
+    plain = direct(obj, d, inp, frames)
+    R.check("painted factors: playback = the API given them (max %.2e; %.3f from unpainted)"
+            % (worst(got, want), worst(got, plain)),
+            worst(got, want) < TOL and worst(got, plain) > 0.01, worst(got, want))
+
+
 def test_a_frame_ahead_of_the_simulation():
     obj, d, ao = jiggle_arm()
     play(obj, range(1, 6))   # frames 1-5 simulated: the next to simulate is 6
@@ -297,7 +324,9 @@ def test_a_dropped_checkpoint_sends_playback_back():
 
 
 for t in (test_playback_is_the_simulation, test_an_edit_resimulates_from_the_frame_it_changes,
-          test_the_hold_paint_reaches_each_vertex, test_a_frame_ahead_of_the_simulation,
+          test_the_hold_paint_reaches_each_vertex,
+          test_painted_stiffness_damping_and_squash_reach_each_vertex,
+          test_a_frame_ahead_of_the_simulation,
           test_a_keyed_stiffness_reaches_each_frame,
           test_bakes_write_what_played, test_a_dropped_checkpoint_sends_playback_back):
     R.run(t)
