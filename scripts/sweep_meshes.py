@@ -107,18 +107,25 @@ def simulate(m, T, c):
     return out
 
 
+def bind(name, mesh, handle, fixed):
+    """(the object, the bind's seconds), or (None, the refusal's message)."""
+    t0 = time.perf_counter()
+    try:
+        m = getattr(dk, name)(mesh, handles=[handle], fixed=fixed)
+    except ValueError as e:
+        return None, str(e)
+    return m, time.perf_counter() - t0
+
+
 def check_dynamic(name, mesh, handle, fixed, T, diag):
     """check() for a simulation: every frame finite, the handle on its frame's target, the
     fixed part still, nothing flung beyond three moves; its placement: the scene scaled and
     shifted (the automatic clusters are cubes along the axes, so a turned scene has other
     clusters) gives the scaled, shifted frames."""
     v = np.asarray(mesh.vertices)
-    t0 = time.perf_counter()
-    try:
-        m = getattr(dk, name)(mesh, handles=[handle], fixed=fixed)
-    except ValueError as e:
-        return "refused", str(e)
-    t_bind = time.perf_counter() - t0
+    m, t_bind = bind(name, mesh, handle, fixed)
+    if m is None:
+        return "refused", t_bind
     t0 = time.perf_counter()
     c = v[handle].mean(axis=0)
     frames = simulate(m, T, c)
@@ -160,12 +167,9 @@ def check(name, mesh, handle, fixed, T, diag):
     if info["dynamic"]:
         return check_dynamic(name, mesh, handle, fixed, T, diag)
     v = np.asarray(mesh.vertices)
-    t0 = time.perf_counter()
-    try:
-        m = getattr(dk, name)(mesh, handles=[handle], fixed=fixed)
-    except ValueError as e:
-        return "refused", str(e)
-    t_bind = time.perf_counter() - t0
+    m, t_bind = bind(name, mesh, handle, fixed)
+    if m is None:
+        return "refused", t_bind
     cold = {"warm_start": False} if info["iterative"] else {}
     problems = []
     r = m.solve(transforms=[np.eye(4)], **cold)

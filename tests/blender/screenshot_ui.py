@@ -176,6 +176,15 @@ def in_blender():
             R.failed += 1
         finish()
 
+    def fresh_properties():
+        """An empty scene, its largest area the Properties editor (a generator: the editor
+        takes the next event loop tick)."""
+        S.reset_scene()
+        win = bpy.context.window_manager.windows[0]
+        area = max(win.screen.areas, key=lambda a: a.width * a.height)
+        area.type = "PROPERTIES"
+        yield None
+
     def states():
         """A generator: puts the scene in each of STATES, yields (the shot is taken 0.8 s
         later, when the timer resumes it)."""
@@ -274,11 +283,7 @@ def in_blender():
         R.check("the sidebar's DeformKit tab drew the deformer", bool(sidebar_drawn))
         # the deformers driven by a control object: a lattice made around a grid, one point
         # raised; a cage made around a sphere, a few of its vertices pulled
-        S.reset_scene()
-        win = bpy.context.window_manager.windows[0]
-        area = max(win.screen.areas, key=lambda a: a.width * a.height)
-        area.type = "PROPERTIES"
-        yield None
+        yield from fresh_properties()
         with bpy.context.temp_override(**S.ui_context()):
             obj = S.make_grid(nx=24, ny=12)
             bpy.ops.deformkit.add_deformer(method="LATTICE")
@@ -362,11 +367,7 @@ def in_blender():
         yield "skinning_view"
         # the Jiggle deformer after an Armature, its Region the forearm, played to frame 12:
         # the panel shows its options and the simulated range
-        S.reset_scene()
-        win = bpy.context.window_manager.windows[0]
-        area = max(win.screen.areas, key=lambda a: a.width * a.height)
-        area.type = "PROPERTIES"
-        yield None
+        yield from fresh_properties()
         with bpy.context.temp_override(**S.ui_context()):
             obj = S.make_grid(nx=24, ny=6)
             rest = S.rest_positions(obj)

@@ -217,10 +217,8 @@ static double frobenius_from_identity(const double *m)
     return sqrt(s);
 }
 
-/* The rotation Q from cluster cl at the bind's rest to it in the goal shape y (the closest
- * rotation to their cross-covariance). */
-static void rest_to_goal(const sm_clusters *c, const sm_rest *r, const double *y,
-                         const double *rest, dk_index cl, double Q[9])
+void sm_rest_to_goal(const sm_clusters *c, const sm_rest *r, const double *y,
+                     const double *rest, dk_index cl, double Q[9])
 {
     const dk_index k0 = c->start[cl], k1 = c->start[cl + 1];
     const double *cy = r->cm + 3 * (size_t)cl;
@@ -263,7 +261,7 @@ dk_index sm_plastic_update(const sm_clusters *c, const sm_rest *r, const sm_fit 
         double *P = sp + 9 * (size_t)cl, G[9], F[9], N[9], Q[9], T[9];
         for (int i = 0; i < 9; i++)
             G[i] = (i % 4 == 0 ? 1.0 : 0.0) + h * dyn->plastic_creep * (S[i] - (i % 4 == 0));
-        rest_to_goal(c, r, y, rest, cl, Q); /* F = Q^T G Q: the step in the rest's frame */
+        sm_rest_to_goal(c, r, y, rest, cl, Q); /* F = Q^T G Q: the step in the rest's frame */
         for (int i = 0; i < 3; i++)
             for (int j = 0; j < 3; j++)
                 T[3 * i + j] = G[3 * i] * Q[j] + G[3 * i + 1] * Q[3 + j] + G[3 * i + 2] * Q[6 + j];

@@ -112,7 +112,7 @@ void sm_rest_compute(const sm_clusters *c, const double *y, const double *rest,
     const int dim = r->dim;
     for (dk_index cl = begin; cl < end; cl++) {
         const dk_index k0 = c->start[cl], k1 = c->start[cl + 1];
-        double M = 0.0, cm[3] = {0, 0, 0}, cr[3] = {0, 0, 0};
+        double M = 0.0, cm[3] = {0, 0, 0};
         for (dk_index k = k0; k < k1; k++) {
             const double m = c->member_mass[k];
             const double *p = y + 3 * (size_t)c->member_vertex[k];
@@ -133,23 +133,8 @@ void sm_rest_compute(const sm_clusters *c, const double *y, const double *rest,
             const double *P = sp + 9 * (size_t)cl;
             memcpy(S, P, sizeof S);
             if (rest != y) {
-                double cov[9] = {0}, Q[9], T[9];
-                for (dk_index k = k0; k < k1; k++) {
-                    const double *p = rest + 3 * (size_t)c->member_vertex[k];
-                    for (int d = 0; d < 3; d++)
-                        cr[d] += c->member_mass[k] * p[d];
-                }
-                for (int d = 0; d < 3; d++)
-                    cr[d] /= M;
-                for (dk_index k = k0; k < k1; k++) {
-                    const double m = c->member_mass[k];
-                    const double *a = y + 3 * (size_t)c->member_vertex[k];
-                    const double *b = rest + 3 * (size_t)c->member_vertex[k];
-                    for (int i = 0; i < 3; i++)
-                        for (int j = 0; j < 3; j++)
-                            cov[3 * i + j] += m * (a[i] - cm[i]) * (b[j] - cr[j]);
-                }
-                dk_closest_rotation(cov, Q);
+                double Q[9], T[9];
+                sm_rest_to_goal(c, r, y, rest, cl, Q);
                 for (int i = 0; i < 3; i++) /* T = Q P */
                     for (int j = 0; j < 3; j++)
                         T[3 * i + j] = Q[3 * i] * P[j] + Q[3 * i + 1] * P[3 + j] +

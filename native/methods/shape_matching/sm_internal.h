@@ -79,6 +79,11 @@ void sm_goals_from_sums(const sm_clusters *c, const double *acc0, const double *
 void sm_goals_vertices(const sm_clusters *c, const double *member_goal, const double *x,
                        double *goals, dk_index begin, dk_index end);
 
+/* The rotation Q from cluster cl at the bind's `rest` to it in the goal shape y: the closest
+ * rotation to their cross-covariance, about their mass centres (y's: r->cm, with r->mass). */
+void sm_rest_to_goal(const sm_clusters *c, const sm_rest *r, const double *y,
+                     const double *rest, dk_index cl, double Q[9]);
+
 /* Where a plastic state changes: updates sp (9 per cluster, in the bind rest's frame) from
  * the fits (in the frame of the goal shape y) for a step of h seconds, turning each step back
  * by the rotation Q from the cluster at the bind's `rest` to it in y: S_p <- Q^T F Q S_p.
