@@ -203,6 +203,17 @@ int dk_py_method_enter(dk_py_method *self);
  *  free, so every such getter asks this first. */
 int dk_py_method_readable(dk_py_method *self);
 
+/** A native query from n x 3 values to n x 3 values (positions, normals) on the bound
+ *  object: `in` is NULL when the caller gave None. */
+typedef dk_status (*dk_py_map_fn)(void *native, const double *in, double *out, dk_error *err);
+
+/** Runs `fn` on the entered object without the GIL: reads `in_obj` (n x 3 of the mesh's
+ *  vertices, named `arg` in errors; Py_None passes NULL) and returns a new n x 3 array, or
+ *  NULL with the native error raised (prefixed `context`). For the methods' own queries
+ *  (EmbeddedDeformation.normals, ShapeMatching.goals). */
+PyObject *dk_py_method_map_n3(PyObject *obj, PyObject *in_obj, const char *arg,
+                              const char *context, dk_py_map_fn fn);
+
 /* Reading options: each takes `key` out of the dict `kw` when present (absent: `*value`
  * keeps its default) and converts it as PyArg_ParseTuple would ("i", "d", "p"), or matches
  * a choice against `names` (NULL-terminated; ValueError naming the accepted values). Return

@@ -155,37 +155,19 @@ PyDoc_STRVAR(normals_doc,
              "the blend of R^-T n, renormalised). normals: the rest normals (n x 3), or None\n"
              "for the mesh's area-weighted vertex normals.");
 
+static dk_status normals_of(void *native, const double *in, double *out, dk_error *err)
+{
+    return dk_embedded_normals(native, in, out, err);
+}
+
 static PyObject *ed_normals(PyObject *obj, PyObject *args, PyObject *kwargs)
 {
     static char *kwlist[] = {"normals", NULL};
-    dk_py_method *self = (dk_py_method *)obj;
     PyObject *in_obj = Py_None;
-    dk_py_doubles in = {0};
-    dk_error err = {0};
-    double *out;
     if (!PyArg_ParseTupleAndKeywords(args, kwargs, "|O:normals", kwlist, &in_obj))
         return NULL;
-    if (dk_py_method_enter(self) < 0)
-        return NULL;
-    if (in_obj != Py_None &&
-        dk_py_read_doubles(in_obj, self->mesh->n_vertices, 3, "normals", &in) < 0) {
-        self->busy = 0;
-        return NULL;
-    }
-    PyObject *res = dk_py_new_doubles(2, self->mesh->n_vertices, 3, &out);
-    dk_status st = DK_OK;
-    if (res) {
-        DK_PY_BEGIN_NATIVE(dk_py_state_of(obj))
-        st = dk_embedded_normals(self->native, in.data, out, &err);
-        DK_PY_END_NATIVE
-    }
-    dk_py_doubles_release(&in);
-    self->busy = 0;
-    if (res && st != DK_OK) {
-        Py_DECREF(res);
-        return dk_py_raise(&err, "EmbeddedDeformation.normals");
-    }
-    return res;
+    return dk_py_method_map_n3(obj, in_obj, "normals", "EmbeddedDeformation.normals",
+                               normals_of);
 }
 
 PyDoc_STRVAR(deformed_doc,

@@ -982,6 +982,36 @@ const char dk_py_method_restore_state_doc[] =
 /* Whether the object still has its native part (the garbage collector's tp_clear frees it
  * when the object is in a cycle; anything that reaches the object afterwards gets an
  * error instead of a NULL dereference). 0 with RuntimeError set when not. */
+PyObject *dk_py_method_map_n3(PyObject *obj, PyObject *in_obj, const char *arg,
+                              const char *context, dk_py_map_fn fn)
+{
+    dk_py_method *self = (dk_py_method *)obj;
+    dk_py_doubles in = {0};
+    dk_error err = {0};
+    double *out;
+    if (dk_py_method_enter(self) < 0)
+        return NULL;
+    if (in_obj != Py_None &&
+        dk_py_read_doubles(in_obj, self->mesh->n_vertices, 3, arg, &in) < 0) {
+        self->busy = 0;
+        return NULL;
+    }
+    PyObject *res = dk_py_new_doubles(2, self->mesh->n_vertices, 3, &out);
+    dk_status st = DK_OK;
+    if (res) {
+        DK_PY_BEGIN_NATIVE(dk_py_state_of(obj))
+        st = fn(self->native, in.data, out, &err);
+        DK_PY_END_NATIVE
+    }
+    dk_py_doubles_release(&in);
+    self->busy = 0;
+    if (res && st != DK_OK) {
+        Py_DECREF(res);
+        return dk_py_raise(&err, context);
+    }
+    return res;
+}
+
 int dk_py_method_readable(dk_py_method *self)
 {
     if (!self->native || !self->mesh_obj) {

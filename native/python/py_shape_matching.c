@@ -411,32 +411,18 @@ PyDoc_STRVAR(goals_doc,
              "what the clusters pull each vertex towards (the attachment's blend with the\n"
              "input, which the integrators add, left out).");
 
+static dk_status goals_of(void *native, const double *in, double *out, dk_error *err)
+{
+    return dk_shape_matching_goals(native, in, out, err);
+}
+
 static PyObject *sm_goals(PyObject *obj, PyObject *arg)
 {
-    dk_py_method *self = (dk_py_method *)obj;
-    dk_py_doubles in = {0};
-    dk_error err = {0};
-    double *out;
-    if (dk_py_method_enter(self) < 0)
-        return NULL;
-    if (dk_py_read_doubles(arg, self->mesh->n_vertices, 3, "positions", &in) < 0) {
-        self->busy = 0;
+    if (arg == Py_None) {
+        PyErr_SetString(PyExc_TypeError, "ShapeMatching.goals: positions are required");
         return NULL;
     }
-    PyObject *res = dk_py_new_doubles(2, self->mesh->n_vertices, 3, &out);
-    dk_status st = DK_OK;
-    if (res) {
-        DK_PY_BEGIN_NATIVE(dk_py_state_of(obj))
-        st = dk_shape_matching_goals(self->native, in.data, out, &err);
-        DK_PY_END_NATIVE
-    }
-    dk_py_doubles_release(&in);
-    self->busy = 0;
-    if (res && st != DK_OK) {
-        Py_DECREF(res);
-        return dk_py_raise(&err, "ShapeMatching.goals");
-    }
-    return res;
+    return dk_py_method_map_n3(obj, arg, "positions", "ShapeMatching.goals", goals_of);
 }
 
 PyDoc_STRVAR(solve_doc,

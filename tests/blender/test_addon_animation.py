@@ -44,13 +44,18 @@ def build(method=MID):
     return obj, d, e, fixed, handle
 
 
-def direct_cold(obj, d, e, fixed, handle, bind_world):
+def direct_bind(obj, d, fixed, handle):
+    """(the registry's method, the native object bound as the add-on binds d)."""
     m = S.methods.get(d.method)
     rest = S.rest_positions(obj)
     mesh = S.dk.Mesh(rest, S.solver.triangles(obj.data))
     kw = dict(handles=[handle], fixed=fixed)
-    meth = getattr(S.dk, m.native_class)(mesh, **kw, **S.methods.bind_kwargs(m, d.options, rest,
-                                                                            kw, mesh))
+    return m, getattr(S.dk, m.native_class)(mesh, **kw, **S.methods.bind_kwargs(
+        m, d.options, rest, kw, mesh))
+
+
+def direct_cold(obj, d, e, fixed, handle, bind_world):
+    m, meth = direct_bind(obj, d, fixed, handle)
     T = np.array(e.matrix_world @ bind_world.inverted())[None]
     return np.asarray(meth.solve(transforms=T, **S.methods.solve_kwargs(m, d.options, True)).positions)
 
@@ -120,12 +125,7 @@ def run_batches(*calls):
 def direct_simulation(obj, d, fixed, handle):
     """A simulation through the API (a dynamic method): sim(T, frame) gives the frame's
     positions for the handle transform T, frame 1 a reset and each later one a step."""
-    m = S.methods.get(d.method)
-    rest = S.rest_positions(obj)
-    mesh = S.dk.Mesh(rest, S.solver.triangles(obj.data))
-    kw = dict(handles=[handle], fixed=fixed)
-    meth = getattr(S.dk, m.native_class)(mesh, **kw, **S.methods.bind_kwargs(m, d.options, rest,
-                                                                            kw, mesh))
+    m, meth = direct_bind(obj, d, fixed, handle)
     skw = S.methods.solve_kwargs(m, d.options, True)
     skw.update(m.solve_args(obj, d.options, bpy.context.scene))
 
