@@ -13,6 +13,7 @@
 #include "dk_fundamental.h"
 #include "dk_laplacian_edit.h"
 #include "dk_lattice.h"
+#include "dk_shape_interpolation.h"
 #include "dk_shape_matching.h"
 #include "dk_shepard.h"
 #include "dk_skinning.h"
@@ -22,7 +23,8 @@ static const dk_method_ops *const registry[] = {&dk_arap_ops, &dk_laplacian_edit
                                                 &dk_falloff_ops, &dk_embedded_ops, &dk_eigen_ops,
                                                 &dk_fundamental_ops, &dk_lattice_ops, &dk_cage_ops,
                                                 &dk_shepard_ops, &dk_skinning_ops,
-                                                &dk_shape_matching_ops, NULL};
+                                                &dk_shape_matching_ops,
+                                                &dk_shape_interpolation_ops, NULL};
 
 const dk_method_ops *const *dk_methods(void)
 {

@@ -254,6 +254,7 @@ PyObject *dk_py_new_solve_result(PyObject *module, PyObject *positions, double e
     M(shepard, "Shepard")                                                                  \
     M(skinning, "Skinning")                                                                \
     M(shape_matching, "ShapeMatching")                                                     \
+    M(shape_interpolation, "ShapeInterpolation")                                           \
     X(cholesky)
 
 #define DK_PY_DECLARE_PART(part) int dk_py_init_##part(PyObject *module);

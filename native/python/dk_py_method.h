@@ -114,6 +114,17 @@ struct dk_py_method_spec {
      *  bind or rebind, and after a failed parse (so parse_control leaves `store`
      *  releasable at every exit). */
     void (*release_control)(void *store);
+    /** 1: the method binds to vertex groups (handles, fixed, ...) with an optional
+     *  control beside them (poses): the constructor takes the groups as every vertex-group
+     *  method does and the control's keywords through parse_control (absent: a store whose
+     *  kind is 0, no control); rebind takes both (absent control keywords keep the bound
+     *  control); solve takes the handles' targets as targets / transforms. */
+    int control_with_groups;
+    /** Optional, with control_with_groups: the solve keyword holding one value per control
+     *  ("weights": a weight per pose), required when the bind has a control, put in front
+     *  of the handles' targets; control_values_of names what they are for ("poses"). */
+    const char *control_values;
+    const char *control_values_of;
     /** 1: the control's targets are one 4 x 4 transform per control (bones' frames, from
      *  solve(transforms=...)); 0: one position per control point (solve(targets=...)). */
     int control_transforms;

@@ -298,7 +298,9 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
     memset(&control, 0, sizeof control);
     memset(&con, 0, sizeof con);
     memset(&stiff, 0, sizeof stiff);
-    const int controlled = spec->parse_control != NULL;
+    /* bound to a control only (a lattice), or to vertex groups with an optional control
+     * beside them (poses: control_with_groups) */
+    const int controlled = spec->parse_control != NULL && !spec->control_with_groups;
 
     if (!module)
         return NULL;
@@ -324,7 +326,8 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
     /* mesh_obj ... borrow from `mine`, which stays alive until the end */
     const dk_mesh *mesh = ok ? dk_py_mesh_get(module, mesh_obj, "mesh") : NULL;
     ok = mesh &&
-         (!controlled || spec->parse_control(rest, mesh, NULL, control.bytes, spec->name) == 0) &&
+         (!spec->parse_control ||
+          spec->parse_control(rest, mesh, NULL, control.bytes, spec->name) == 0) &&
          refuse_leftovers(rest, where) == 0;
     Py_DECREF(rest);
     if (ok && prog.callable)
@@ -335,7 +338,7 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
     }
     if (!ok || (!controlled && read_all(spec, handles, fixed, roi, hw, stiffness,
                                         mesh->n_vertices, spec->name, &con, &stiff) < 0)) {
-        if (controlled && spec->release_control)
+        if (spec->release_control)
             spec->release_control(control.bytes);
         if (spec->release_options)
             spec->release_options(&opt);
@@ -343,6 +346,8 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
         Py_DECREF(mine);
         return NULL;
     }
+    if (spec->control_with_groups && ((const dk_control_desc *)control.bytes)->kind != 0)
+        con.desc.control = (const dk_control_desc *)control.bytes;
     dk_py_state *state = spec->serialise_bind ? dk_py_get_state(module) : NULL;
     /* refused before anything big is allocated when it cannot fit (issue 18 class 4) */
     uint64_t need = 0;
@@ -353,7 +358,7 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
         st = dk_memory_check(need, spec->name, what, &err);
     }
     if (st != DK_OK) {
-        if (controlled && spec->release_control)
+        if (spec->release_control)
             spec->release_control(control.bytes);
         if (spec->release_options)
             spec->release_options(&opt);
@@ -364,7 +369,7 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
         return dk_py_raise(&err, NULL);
     }
     if (dk_py_arpack_check(state, spec->name) < 0) {
-        if (controlled && spec->release_control)
+        if (spec->release_control)
             spec->release_control(control.bytes);
         if (spec->release_options)
             spec->release_options(&opt);
@@ -381,7 +386,7 @@ PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,
     if (state)
         dk_py_arpack_release(state);
     DK_PY_END_NATIVE
-    if (controlled && spec->release_control)
+    if (spec->release_control)
         spec->release_control(control.bytes);
     if (spec->release_options)
         spec->release_options(&opt);
@@ -467,6 +472,49 @@ static void method_dealloc(PyObject *obj)
 
 /* ------------------------------------------------------------------ solve -------------- */
 
+/* The solve's control values (spec->control_values: a weight per pose), n of them, finite. */
+static int read_control_values(const dk_py_method_spec *spec, PyObject *obj, dk_index n,
+                               const char *ctx, dk_py_doubles *out)
+{
+    if (!obj || obj == Py_None) {
+        PyErr_Format(PyExc_TypeError, "%s: give %s, one value for each of its %d %s", ctx,
+                     spec->control_values, (int)n, spec->control_values_of);
+        return -1;
+    }
+    if (dk_py_read_doubles(obj, n, 0, spec->control_values, out) < 0)
+        return -1;
+    for (Py_ssize_t k = 0; k < out->rows; k++)
+        if (!isfinite(out->data[k])) {
+            PyErr_Format(PyExc_ValueError, "%s: %s[%zd] is not finite", ctx, spec->control_values,
+                         k);
+            dk_py_doubles_release(out);
+            return -1;
+        }
+    return 0;
+}
+
+/* Puts the control values in front of the handles' targets in `in` (one buffer, as the
+ * native solve takes them); `values` is emptied. */
+static int prepend_values(dk_py_doubles *values, dk_py_doubles *in)
+{
+    const Py_ssize_t nv = values->rows, nt = in->data ? in->rows * in->cols : 0;
+    double *all = PyMem_Malloc((size_t)(nv + nt + 1) * sizeof(double));
+    if (!all) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    memcpy(all, values->data, (size_t)nv * sizeof(double));
+    if (nt)
+        memcpy(all + nv, in->data, (size_t)nt * sizeof(double));
+    dk_py_doubles_release(in);
+    dk_py_doubles_release(values);
+    in->data = all;
+    in->rows = nv + nt;
+    in->cols = 1;
+    in->ndim = 1;
+    return 0;
+}
+
 PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
 {
     static char *kwlist[] = {"targets", "transforms", "warm_start", "max_iterations",
@@ -480,7 +528,8 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
              *preview_obj = Py_False;
     PyObject *mine = NULL, *rest = NULL, *positions, *module;
     int warm = 1, resume = 0, want_energy = 1, maxit = 0, preview = 0, mode;
-    dk_py_doubles in = {0}, start = {0}, input = {0};
+    dk_py_doubles in = {0}, start = {0}, input = {0}, values = {0};
+    PyObject *values_obj = NULL; /* borrowed from `rest` */
     dk_solve_info info;
     dk_method_stats ms;
     dk_error err = {0};
@@ -548,21 +597,37 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
     /* Everything is read and checked before anything changes (issue 18, class 8): the
      * method's own keywords into `pending`, applied only just before the native solve,
      * and put back if the solve fails. */
+    if (spec->control_values) {
+        values_obj = PyDict_GetItemString(rest, spec->control_values);
+        if (values_obj) {
+            Py_INCREF(values_obj);
+            if (PyDict_DelItemString(rest, spec->control_values) < 0) {
+                Py_CLEAR(values_obj);
+                goto fail_busy;
+            }
+        }
+    }
     if ((spec->solve_extra && spec->solve_extra(self, rest, pending.bytes, ctx) < 0) ||
         refuse_leftovers(rest, "solve()") < 0)
         goto fail_busy;
     spec->ops->stats(self->native, &ms);
-    if (ms.n_controls > 0 && !spec->control_transforms && transforms != Py_None) {
+    /* the control's values (a weight per pose) come before the handles' targets */
+    if (spec->control_values && ms.n_controls > 0 &&
+        read_control_values(spec, values_obj, ms.n_controls, ctx, &values) < 0)
+        goto fail_busy;
+    /* the targets are the control's (its points, its bones' frames), not the handles' */
+    const int control_targets = ms.n_controls > 0 && !spec->control_with_groups;
+    if (control_targets && !spec->control_transforms && transforms != Py_None) {
         PyErr_Format(PyExc_TypeError, "%s: takes the positions of its %d control points "
                      "(targets), not transforms", ctx, (int)ms.n_controls);
         goto fail_busy;
     }
-    if (ms.n_controls > 0 && spec->control_transforms && targets != Py_None) {
+    if (control_targets && spec->control_transforms && targets != Py_None) {
         PyErr_Format(PyExc_TypeError, "%s: takes the frames of its %d bones (transforms, "
                      "n x 4 x 4), not positions", ctx, (int)ms.n_controls);
         goto fail_busy;
     }
-    if (ms.n_controls == 0 && ms.n_handles == 0 && targets == Py_None &&
+    if (!control_targets && ms.n_handles == 0 && targets == Py_None &&
         transforms == Py_None) { /* bound without handles (handles_optional): none to give */
         Py_DECREF(targets);
         targets = PyTuple_New(0);
@@ -572,10 +637,13 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
     /* a method bound to a control: its points' positions, or its bones' frames, are the
      * targets */
     if (dk_py_lap_read_solve_input(targets, transforms,
-                                   ms.n_controls ? (spec->control_transforms ? ms.n_controls : 0)
-                                                 : ms.n_handles,
-                                   ms.n_controls ? ms.n_controls : ms.n_handle_vertices, ctx,
+                                   control_targets
+                                       ? (spec->control_transforms ? ms.n_controls : 0)
+                                       : ms.n_handles,
+                                   control_targets ? ms.n_controls : ms.n_handle_vertices, ctx,
                                    &in, &mode) < 0)
+        goto fail_busy;
+    if (values.data && prepend_values(&values, &in) < 0)
         goto fail_busy;
     if (start_obj != Py_None) { /* read and checked for every method, used by some */
         if (dk_py_read_doubles(start_obj, self->mesh->n_vertices, 3, "start_positions",
@@ -630,6 +698,8 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
     dk_py_doubles_release(&in);
     dk_py_doubles_release(&start);
     dk_py_doubles_release(&input);
+    dk_py_doubles_release(&values);
+    Py_XDECREF(values_obj);
     self->busy = 0;
     Py_DECREF(rest);
     Py_DECREF(targets);
@@ -643,6 +713,8 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
 fail_busy:
     self->busy = 0;
 fail:
+    dk_py_doubles_release(&values);
+    Py_XDECREF(values_obj);
     Py_XDECREF(rest);
     Py_DECREF(targets);
     Py_DECREF(transforms);
@@ -761,7 +833,8 @@ static PyObject *control_rebind(dk_py_method *self, PyObject *args, PyObject *kw
 
 PyObject *dk_py_method_rebind(PyObject *obj, PyObject *args, PyObject *kwargs)
 {
-    if (((dk_py_method *)obj)->spec->parse_control)
+    if (((dk_py_method *)obj)->spec->parse_control &&
+        !((dk_py_method *)obj)->spec->control_with_groups)
         return control_rebind((dk_py_method *)obj, args, kwargs);
     static char *kwlist[] = {"handles", "fixed", "roi", "handle_weights", "stiffness", NULL};
     dk_py_method *self = (dk_py_method *)obj;
@@ -774,14 +847,34 @@ PyObject *dk_py_method_rebind(PyObject *obj, PyObject *args, PyObject *kwargs)
     dk_status st;
     char ctx[80];
 
+    union {
+        max_align_t align;
+        unsigned char bytes[DK_PY_CONTROL_MAX];
+    } control;
+    memset(&control, 0, sizeof control);
     snprintf(ctx, sizeof ctx, "%s.rebind", self->spec->name);
     memset(&prog, 0, sizeof prog);
+    /* the control's keywords beside the groups (control_with_groups): taken out first;
+     * absent, the bound control stays */
+    if (kwargs && self->spec->control_with_groups) {
+        kw = PyDict_Copy(kwargs);
+        if (!kw || self->spec->parse_control(kw, self->mesh, NULL, control.bytes, ctx) < 0) {
+            if (self->spec->release_control)
+                self->spec->release_control(control.bytes);
+            Py_XDECREF(kw);
+            return NULL;
+        }
+        kwargs = kw;
+    }
     /* progress=: only for a method whose rebind reports (else a TypeError, as any unknown
      * keyword) */
     if (kwargs && self->spec->rebind_progress && PyDict_GetItemString(kwargs, "progress")) {
         PyObject *module = PyType_GetModule(Py_TYPE(obj));
-        kw = PyDict_Copy(kwargs);
+        if (!kw)
+            kw = PyDict_Copy(kwargs);
         if (!kw || !module || dk_py_progress_take(kw, module, ctx, &prog) < 0) {
+            if (self->spec->release_control)
+                self->spec->release_control(control.bytes);
             Py_XDECREF(kw);
             return NULL;
         }
@@ -789,6 +882,8 @@ PyObject *dk_py_method_rebind(PyObject *obj, PyObject *args, PyObject *kwargs)
     }
     if (!PyArg_ParseTupleAndKeywords(args, kwargs, "|OOOOO:rebind", kwlist, &handles, &fixed,
                                      &roi, &hw, &stiffness)) {
+        if (self->spec->release_control)
+            self->spec->release_control(control.bytes);
         Py_XDECREF(kw);
         dk_py_progress_release(&prog);
         return NULL;
@@ -816,6 +911,8 @@ PyObject *dk_py_method_rebind(PyObject *obj, PyObject *args, PyObject *kwargs)
         prog.paused = &self->busy_paused;
         self->spec->rebind_progress(self->native, &prog);
     }
+    if (((const dk_control_desc *)control.bytes)->kind != 0)
+        con.desc.control = (const dk_control_desc *)control.bytes;
     DK_PY_BEGIN_NATIVE(dk_py_state_of(obj))
     st = self->spec->ops->rebind(self->native, &con.desc, &err);
     DK_PY_END_NATIVE
@@ -832,6 +929,8 @@ PyObject *dk_py_method_rebind(PyObject *obj, PyObject *args, PyObject *kwargs)
     /* raised at "done": the rebind is complete (its new constraints stay), the error goes up */
     result = dk_py_progress_raised(&prog) ? NULL : Py_NewRef(Py_None);
 out:
+    if (self->spec->release_control)
+        self->spec->release_control(control.bytes);
     dk_py_progress_release(&prog);
     Py_XDECREF(kw);
     return result;

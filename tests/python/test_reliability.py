@@ -716,6 +716,7 @@ BAD_OPTIONS = {
     "Shepard": [{"power": 0.0}, {"power": float("nan")}, {"k": 0}, {"radius": -1.0}],
     "ShapeMatching": [{"alpha": float("nan")}, {"substeps": 0}, {"cluster_size": -1.0},
                       {"damping": -1.0}, {"time_step": 0.0}],
+    "ShapeInterpolation": [{"rotations": "spiral"}, {"edge_weights": "heat"}],
 }
 
 
