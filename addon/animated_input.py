@@ -40,11 +40,19 @@ def pose_note(obj, d):
     handles (2-6% of the model from a bind on the pose, docs/methods/fundamental.md), with
     the methods that edit the pose. None otherwise."""
     m = methods.get(d.method)
+    if m.stack_first:  # a blend of shape keys: exact first in the stack
+        above = [mm.name for mm in modifiers_above(obj, d)]
+        if above and obj.data.shape_keys is not None:
+            return ("%s sits below %s: the keys' straight blend it replaces is taken off in "
+                    "the rest's directions, which a pose turns; move it to the top of the "
+                    "stack for the exact blend" % (m.label, ", ".join(above)))
+        return None
     if depends_on_input(m, d) or not any(mm.type == "ARMATURE"
                                          for mm in modifiers_above(obj, d)):
         return None
     kinds = native.control_kinds(m.native_class)
-    editors = [x.label for x in methods.METHODS if x.id != m.id and follows(x)
+    # (a blend of poses is not suggested for a handle's edit)
+    editors = [x.label for x in methods.METHODS if x.id != m.id and follows(x) and x.poses is None
                and native.has_class(x.native_class)
                and native.control_kinds(x.native_class) == kinds]
     names = (", ".join(editors[:-1]) + " and " + editors[-1]) if len(editors) > 1 else \
@@ -154,4 +162,4 @@ def edit_targets(e, T, source):
     for h, t in zip(e.handles, T):
         r = e.rest[h]
         out.append(source[h] + (r @ t[:3, :3].T + t[:3, 3] - r))
-    return np.concatenate(out)
+    return np.concatenate(out) if out else np.zeros((0, 3))   # no handles (a blend of poses)

@@ -14,7 +14,7 @@ from typing import Any, Callable, Optional
 @dataclass
 class Option:
     name: str                    # property name (and constructor keyword unless kw given)
-    type: str                    # 'ENUM' | 'INT' | 'FLOAT' | 'BOOL' | 'GROUP' (a vertex
+    type: str                    # 'ENUM' | 'INT' | 'FLOAT' | 'BOOL' | 'STRING' | 'GROUP' (a vertex
                                  # group's name, read by the add-on: kw must be None)
     default: Any
     label: str = ""              # shown in the UI: the artist's word, not the solver's
@@ -136,6 +136,19 @@ class Method:
     # -> dict (a simulation's gravity, turned into the object's space, and its time step, the
     # scene's frame length)
     solve_args: Optional[Callable] = None
+    # False: the method binds without handles (a simulation moves by its dynamics, a blend of
+    # poses by its weights): the panel asks for none, and Solve From does not apply
+    needs_handles: bool = True
+    # a method driven by example poses (shape interpolation): the name of the add-on module
+    # that reads them from Blender (poses_reader; shape_keys.py: poses(obj, options, rest) ->
+    # P x n x 3 or None, the bind's `poses`; edit_input(obj, options, input) -> what the
+    # native solve edits; signature(obj, options) -> what else of them the binding depends
+    # on); its solve_args give the weights
+    poses: Optional[str] = None
+    # True: on a mesh with shape keys, Add makes the deformer's modifier the first of the
+    # stack (a blend of shape keys belongs where Blender applies them: above an Armature,
+    # which then poses the blend)
+    stack_first: bool = False
 
 
 METHODS = [
@@ -663,6 +676,7 @@ METHODS.append(Method(
                 "mesh follows its input and handles with inertia, overshoots and settles",
     icon="PHYSICS",
     needs_faces=False,
+    needs_handles=False,
     solve_args=shape_matching_solve_args,
     maps=("paint",),
     paint_keyword="attach_map",
@@ -751,6 +765,47 @@ METHODS.append(Method(
 ))
 
 
+METHODS.append(Method(
+    id="SHAPE_BLEND",
+    label="Shape Blend",
+    native_class="ShapeInterpolation",
+    description="Blends the mesh's shape keys keeping the shape: parts turn and stretch "
+                "between the keys instead of sliding straight through (shape interpolation)",
+    icon="SHAPEKEY_DATA",
+    needs_handles=False,
+    poses="shape_keys",
+    stack_first=True,
+    solve_args=lambda obj, opts, scene: poses_reader(get("SHAPE_BLEND")).solve_args(obj, opts,
+                                                                                  scene),
+    options=[
+        Option("key_names", "STRING", "", "Shape Keys",
+               "The shape keys this deformer blends, by name, separated by commas (empty: "
+               "every key but the Basis). Their sliders, keyframes and drivers set the blend; "
+               "the other keys stay Blender's straight blend", kw=None),
+        Option("rotations", "ENUM", "consistent", "Turns",
+               "How far a part may turn between the Basis and a key",
+               items=(("consistent", "Any Angle",
+                       "Turns beyond half a turn, and twists of whole turns, go the way the "
+                       "key took them, judged across the mesh (the default)"),
+                      ("principal", "Shortest Way",
+                       "Each triangle turns the shortest way: a part turned by more than half "
+                       "a turn unwinds the other way, a whole-turn twist does not turn at "
+                       "all; for comparison")),
+               advanced=True),
+        Option("edge_weights", "ENUM", "clamped_cotangent", "Edge Weights",
+               "How much each edge counts when the blended triangles are stitched together",
+               items=(("clamped_cotangent", "Cotangent, Clamped",
+                       "From the triangles' angles, negative weights dropped (the default): "
+                       "safe on any mesh"),
+                      ("cotangent", "Cotangent",
+                       "From the triangles' angles, negative weights kept: a mesh with many "
+                       "long thin triangles can fail to bind"),
+                      ("uniform", "Uniform",
+                       "Every edge counts the same, whatever the triangles' shapes")),
+               advanced=True),
+    ],
+))
+
 BY_ID = {m.id: m for m in METHODS}
 
 
@@ -804,6 +859,14 @@ _check_registry()
 
 def get(method_id):
     return BY_ID[method_id]
+
+
+def poses_reader(method):
+    """The add-on module that reads method's example poses (Method.poses), or None."""
+    if method.poses is None:
+        return None
+    import importlib
+    return importlib.import_module("." + method.poses, __package__)
 
 
 def enum_items():

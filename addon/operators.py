@@ -70,7 +70,15 @@ class DEFORMKIT_OT_add_deformer(_Base, bpy.types.Operator):
                                         "Deformation also deforms vertex clouds)"
                                         % (obj.data.name, methods.get(self.method).label))
         d = properties.new_deformer(obj, self.method)
-        geonodes.ensure_modifier(obj, d)
+        mod = geonodes.ensure_modifier(obj, d)
+        if (methods.get(self.method).stack_first and obj.data.shape_keys is not None
+                and list(obj.modifiers).index(mod) > 0):
+            with context.temp_override(object=obj):
+                bpy.ops.object.modifier_move_to_index(modifier=mod.name, index=0)
+            dks = obj.deformkit   # the deformers keep the stack's order
+            dks.deformers.move(len(dks.deformers) - 1, 0)
+            dks.active_index = 0
+            d = dks.deformers[0]
         solver.reset_status(d)
         if not native.has_class(methods.get(self.method).native_class):
             self.report({"WARNING"}, "the native module lacks deformkit.%s: %s"

@@ -129,7 +129,7 @@ def _make_options_group(method):
                                         **kw, **common)
         elif o.type == "BOOL":
             ann[o.name] = BoolProperty(default=o.default, **common)
-        elif o.type == "GROUP":
+        elif o.type in ("GROUP", "STRING"):
             ann[o.name] = StringProperty(default=o.default, **common)
         else:
             raise ValueError("unknown option type %r" % o.type)

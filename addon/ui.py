@@ -206,8 +206,9 @@ def draw_handles(layout, col, obj, d, m):
             hc.prop(h, "use_weights")
         if animated_input.input_movers(obj, d) is not None:  # what the edit does there
             hc.prop(h, "follow")
-    # a simulation always moves towards its input (its goal shape): no Solve From
-    if animated_input.input_movers(obj, d) is not None and not solver.simulation.is_dynamic(m):
+    # a simulation always moves towards its input (its goal shape), a blend of poses edits
+    # it: no Solve From
+    if animated_input.input_movers(obj, d) is not None and m.needs_handles:
         layout.prop(d, "solve_from")
     if obj.mode == "EDIT":
         layout.operator("deformkit.add_handle_from_selection", icon="HOOK")

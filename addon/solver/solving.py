@@ -61,6 +61,8 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
     if dynamic:  # a simulation: the frame, and the keyed settings, are inputs
         scene = bpy.context.scene
         inputs += _frame_inputs(m, d, obj, scene)
+    elif m.solve_args is not None:  # keywords read from the scene (a blend's weights)
+        inputs += repr(sorted(m.solve_args(obj, d.options, bpy.context.scene).items())).encode()
     if w is not None:  # a worker's solve ended: its result shows now (if still wanted)
         if w.error is not None:
             e.pending = False
@@ -173,7 +175,7 @@ def _plan_solve(obj, d, e, key, T, source, inputs, cold, write, interactive, res
         e.source = e.rest if source is None else source
     elif depends_on_input(m, d):
         want = e.rest if source is None else source
-        from_rest = d.solve_from == "REST" and not simulation.is_dynamic(m)  # (not drawn)
+        from_rest = d.solve_from == "REST" and m.needs_handles  # (else not drawn)
         solve_on = e.rest if from_rest else want   # what the native object deforms
         ns = getattr(e, "native_source", None)
         if m.follows_input and (ns is None or not np.array_equal(ns, solve_on)):
@@ -193,6 +195,9 @@ def _plan_solve(obj, d, e, key, T, source, inputs, cold, write, interactive, res
                     else dict(transforms=input_transforms(e, T, source)))
             if not m.follows_input:
                 kw["input_positions"] = source
+        if source is not None and not from_rest and m.poses is not None:
+            # a blend of poses edits the input less the linear blend it replaces
+            kw["input_positions"] = methods.poses_reader(m).edit_input(obj, d.options, source)
     else:
         e.source = e.rest   # solved on the rest, its offset lands on the input as it is
     # after an undo or redo: a full solve before showing (mark_all_dirty)

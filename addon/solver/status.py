@@ -35,7 +35,7 @@ def idle_status(d):
     if d.bound:
         return "bound: %s, %s" % (plural(d.bind_n_vertices, "vertex"),
                                   plural(len(d.handles), "handle"))
-    if len(d.handles) == 0 and not simulation.is_dynamic(methods.get(d.method)):
+    if len(d.handles) == 0 and methods.get(d.method).needs_handles:
         return "not bound: add a handle, then Bind"
     return "not bound: press Bind"
 

@@ -7,7 +7,7 @@ from .. import methods
 from ..errors import DeformKitError, OverlapError
 from ..handles import target_world
 from ..text import plural
-from . import blender_data, simulation
+from . import blender_data
 
 uses_handles = True
 
@@ -24,7 +24,9 @@ def store(d, captured):
 def settings_key(d):
     m = methods.get(d.method)
     return (methods.signature(m, d.options), d.roi_group, d.fixed_group, d.material_group,
-            tuple((h.vertex_group, h.use_weights) for h in d.handles))
+            tuple((h.vertex_group, h.use_weights) for h in d.handles),
+            methods.poses_reader(m).signature(d.id_data, d.options) if m.poses is not None
+            else None)
 
 
 def group_names(obj, d):
@@ -53,7 +55,8 @@ def collect(obj, d, captured=None):
     `captured` is capture()'s None."""
     blender_data.check_object(obj, d)
     m = methods.get(d.method)
-    if len(d.handles) == 0 and not simulation.is_dynamic(m):  # a simulation needs none
+    # a simulation or a blend of poses needs none (a blend: unless it has no poses)
+    if len(d.handles) == 0 and m.needs_handles:
         raise DeformKitError("no handles: add one (Add Handle from Selection in Edit Mode)")
     names = set()
     for h in d.handles:
@@ -147,6 +150,13 @@ def collect(obj, d, captured=None):
     else:
         kw = {}
     kw.update(handles=handles, fixed=fixed, roi=roi)
+    if m.poses is not None:  # the example poses (shape keys): their shapes are part of the key
+        P = methods.poses_reader(m).poses(obj, d.options, blender_data.rest_positions(obj.data))
+        if P is None and not handles:
+            raise DeformKitError("no shape keys to blend: add shape keys to the mesh (Object "
+                                 "Data properties, Shape Keys)")
+        if P is not None:
+            kw["poses"] = P
     if "stiffness" in m.maps and d.material_group:
         idx, w = groups[d.material_group]
         s = np.ones(len(obj.data.vertices))
@@ -180,5 +190,6 @@ def collect(obj, d, captured=None):
         tuple(kw.get(k) for k in m.group_maps.values()) + kw.get("cut", ())
         + kw.get("material_paint", ()))
     key += b"|" + b"".join(w.tobytes() for w in kw.get("handle_weights", []))
+    key += b"|" + (kw["poses"].tobytes() if "poses" in kw else b"")
     key += b"|" + repr(sorted((k, x) for k, x in kw.items() if isinstance(x, str))).encode()
     return kw, key

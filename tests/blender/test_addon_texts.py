@@ -300,6 +300,8 @@ STORED_IDS = {
     ("SHAPE_MATCHING", "clusters"): ("cubes", "parts"),
     ("SHAPE_MATCHING", "integrator"): ("semi_implicit_euler", "explicit_euler", "implicit_euler",
                                        "rk4"),
+    ("SHAPE_BLEND", "rotations"): ("consistent", "principal"),
+    ("SHAPE_BLEND", "edge_weights"): ("clamped_cotangent", "cotangent", "uniform"),
     ("SHEPARD", "neighbourhood"): ("all", "nearest", "radius"),
 }
 # the solver's words the issue found in the UI, which an artist cannot act on
