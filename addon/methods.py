@@ -792,6 +792,16 @@ METHODS.append(Method(
                        "a turn unwinds the other way, a whole-turn twist does not turn at "
                        "all; for comparison")),
                advanced=True),
+        Option("stretches", "ENUM", "linear", "Stretch Blend",
+               "How each triangle's stretch is blended between the Basis and a key",
+               items=(("linear", "Straight",
+                       "Stretch blended in proportion (the default): exact where a limb "
+                       "bends, its inside squeezing and outside stretching with the angle"),
+                      ("log", "Area Keeping",
+                       "Stretch blended so that a shear keeps each triangle's area: better "
+                       "volume where a wide body twists; the blend takes about twice as "
+                       "long")),
+               advanced=True),
         Option("edge_weights", "ENUM", "clamped_cotangent", "Edge Weights",
                "How much each edge counts when the blended triangles are stitched together",
                items=(("clamped_cotangent", "Cotangent, Clamped",

@@ -11,6 +11,7 @@
 #include <string.h>
 
 static const char *const rotations_names[] = {"consistent", "principal", NULL};
+static const char *const stretches_names[] = {"linear", "log", NULL};
 static const char *const edge_weights_names[] = {"clamped_cotangent", "cotangent", "uniform",
                                                  NULL};
 
@@ -22,11 +23,13 @@ static void default_options(void *o)
 static int parse_options(PyObject *kw, void *o, const char *context)
 {
     dk_shape_interpolation_options *opt = (dk_shape_interpolation_options *)o;
-    int r = (int)opt->rotations, w = (int)opt->edge_weights;
+    int r = (int)opt->rotations, w = (int)opt->edge_weights, st = (int)opt->stretches;
     if (dk_py_opt_choice(kw, "rotations", rotations_names, &r, context) < 0 ||
+        dk_py_opt_choice(kw, "stretches", stretches_names, &st, context) < 0 ||
         dk_py_opt_choice(kw, "edge_weights", edge_weights_names, &w, context) < 0)
         return -1;
     opt->rotations = (dk_shape_interpolation_rotations)r;
+    opt->stretches = (dk_shape_interpolation_stretches)st;
     opt->edge_weights = (dk_shape_interpolation_weights)w;
     return 0;
 }
@@ -116,7 +119,7 @@ PyDoc_STRVAR(solve_doc,
 
 PyDoc_STRVAR(shape_interpolation_doc,
              "ShapeInterpolation(mesh, handles=None, fixed=None, roi=None, handle_weights=None,\n"
-             "                   poses=None, rotations='consistent',\n"
+             "                   poses=None, rotations='consistent', stretches='linear',\n"
              "                   edge_weights='clamped_cotangent', progress=None)\n\n"
              "In-betweens of example poses that keep the shape (the slides' shape\n"
              "interpolation; Alexa, Cohen-Or, Levin 2000; the gradient-domain solve of Xu et al.\n"
@@ -128,6 +131,9 @@ PyDoc_STRVAR(shape_interpolation_doc,
              "triangle's rotation angle chosen across the mesh, so a part turned beyond 180\n"
              "degrees, or a bar twisted by 360, keeps turning the same way in between; the\n"
              "default) or 'principal' (each angle within [0, pi]: for comparison).\n"
+             "stretches: 'linear' (I + sum w (S - I), the paper's: exact for bends; the\n"
+             "default) or 'log' (exp(sum w log S): keeps areas under shears, as a wide body\n"
+             "twisted; about twice the solve's time).\n"
              "edge_weights: 'clamped_cotangent' (default), 'cotangent' or 'uniform'. Handles\n"
              "and fixed vertices are optional and kept exactly, so an in-between can be\n"
              "pinned; a part without any follows the linear blend's mean. rebind(poses=...)\n"

@@ -301,6 +301,7 @@ STORED_IDS = {
     ("SHAPE_MATCHING", "integrator"): ("semi_implicit_euler", "explicit_euler", "implicit_euler",
                                        "rk4"),
     ("SHAPE_BLEND", "rotations"): ("consistent", "principal"),
+    ("SHAPE_BLEND", "stretches"): ("linear", "log"),
     ("SHAPE_BLEND", "edge_weights"): ("clamped_cotangent", "cotangent", "uniform"),
     ("SHEPARD", "neighbourhood"): ("all", "nearest", "radius"),
 }

@@ -186,6 +186,40 @@ def test_a_bent_tube_keeps_its_shape_half_way(tube):
     assert ours["edge"] < 0.01 and abs(ours["volume"] - 1) < 0.01 and ours["off"] < 0.01, ours
 
 
+def test_stretches_linear_for_bends_log_for_shears():
+    """A plane sheared by 1 (45 degrees): half way the linear blend of the stretches inflates
+    every triangle by (1 + sqrt(1 + 1/4)) / 2 = 1.059 (the paper's blend), the logarithmic
+    blend keeps each area exactly; a bend is exact with the linear blend only."""
+    n = 12
+    g = np.linspace(0, 1, n + 1)
+    X, Y = np.meshgrid(g, g)
+    V = np.column_stack([X.ravel(), Y.ravel(), np.zeros(X.size)])
+    F = []
+    for j in range(n):
+        for i in range(n):
+            a = j * (n + 1) + i
+            F += [[a, a + 1, a + n + 2], [a, a + n + 2, a + n + 1]]
+    F = np.array(F)
+    mesh = dk.Mesh(V, F)
+    P = V.copy()
+    P[:, 0] += V[:, 1]
+
+    def area(Z):
+        e1, e2 = Z[F[:, 1]] - Z[F[:, 0]], Z[F[:, 2]] - Z[F[:, 0]]
+        return 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1).sum()
+    for stretches, want in (("linear", (1 + np.sqrt(1.25)) / 2), ("log", 1.0)):
+        Z = dk.ShapeInterpolation(mesh, poses=[P], stretches=stretches).solve(
+            weights=[0.5]).positions
+        assert abs(area(Z) / area(V) - want) < 1e-9, (stretches, area(Z) / area(V))
+        assert np.abs(dk.ShapeInterpolation(mesh, poses=[P], stretches=stretches).solve(
+            weights=[1.0]).positions - P).max() < 1e-9
+    T, Ft = capped_tube(n_ring=16, n_len=41, radius=0.2, length=2.0)
+    angle = np.radians(150)
+    lin = half_way_figures(T, Ft, bend(T, angle), bend(T, angle / 2))
+    log = half_way_figures(T, Ft, bend(T, angle), bend(T, angle / 2), stretches="log")
+    assert lin["edge"] < 1e-3 and log["edge"] > 10 * lin["edge"], (lin, log)
+
+
 # ------------------------------------------------------------------ several poses -----
 
 def test_several_poses_blend_continuously(tube):

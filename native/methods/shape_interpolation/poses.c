@@ -69,8 +69,10 @@ void si_poses_free(si_poses *p)
     memset(p, 0, sizeof *p);
 }
 
-void si_pose_rotation(const dk_mesh *mesh, const double *vinv, const double *pose, dk_index t,
-                      double R[9], double S[6])
+/* Pose `pose`'s rotation R (9) and stretch S (6: xx, xy, xz, yy, yz, zz) of the
+ * non-degenerate triangle t. */
+static void pose_rotation(const dk_mesh *mesh, const double *vinv, const double *pose,
+                          dk_index t, double R[9], double S[6])
 {
     const dk_index *f = mesh->faces + 3 * (size_t)t;
     double V[9], J[9], RJ[9];
@@ -78,12 +80,12 @@ void si_pose_rotation(const dk_mesh *mesh, const double *vinv, const double *pos
     si_mat3_mul(V, vinv + 9 * (size_t)t, J);
     dk_closest_rotation(J, R);
     si_mat3_tmul(R, J, RJ); /* S = R^T J, symmetrised */
-    S[0] = RJ[0] - 1.0;
+    S[0] = RJ[0];
     S[1] = 0.5 * (RJ[1] + RJ[3]);
     S[2] = 0.5 * (RJ[2] + RJ[6]);
-    S[3] = RJ[4] - 1.0;
+    S[3] = RJ[4];
     S[4] = 0.5 * (RJ[5] + RJ[7]);
-    S[5] = RJ[8] - 1.0;
+    S[5] = RJ[8];
 }
 
 /* A triangle's sort key for the roots: those touching a seed vertex first, each group by
@@ -109,10 +111,12 @@ static int touches(const dk_mesh *m, dk_index t, const unsigned char *seed_verte
     return seed_vertex[f[0]] || seed_vertex[f[1]] || seed_vertex[f[2]];
 }
 
-/* Pose k's rotations into R (identity where degenerate) and stretches; adds each rotation's
- * angle to keys[t].key when keys is given. */
+/* Pose k's rotations into R (identity where degenerate) and stretches as the blend takes
+ * them (S - I, or log S for `stretches` LOG; 0 where degenerate); adds each rotation's angle
+ * to keys[t].key when keys is given. */
 static void rotations_of(const dk_mesh *m, const double *vinv, const unsigned char *degenerate,
-                         const double *pose, double *R, double *stretch, keyed *keys)
+                         const double *pose, dk_shape_interpolation_stretches stretches,
+                         double *R, double *stretch, keyed *keys)
 {
     static const double I[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
     for (dk_index t = 0; t < m->n_faces; t++) {
@@ -122,7 +126,14 @@ static void rotations_of(const dk_mesh *m, const double *vinv, const unsigned ch
             memset(S, 0, 6 * sizeof(double));
             continue;
         }
-        si_pose_rotation(m, vinv, pose, t, Rt, S);
+        double full[6];
+        pose_rotation(m, vinv, pose, t, Rt, full);
+        if (stretches == DK_SI_STRETCHES_LOG) {
+            si_sym_log(full, S);
+        } else {
+            memcpy(S, full, sizeof full);
+            S[0] -= 1.0, S[3] -= 1.0, S[5] -= 1.0;
+        }
         if (keys) {
             double w[3];
             keys[t].key += si_rotation_log(Rt, w);
@@ -149,10 +160,11 @@ static void part_shifts(const dk_mesh *m, const double *pose, double *shift, dou
 
 dk_status si_poses_build(const dk_mesh *mesh, const double *vinv, const unsigned char *degenerate,
                          const double *poses, dk_index n_poses,
-                         dk_shape_interpolation_rotations rotations,
+                         const dk_shape_interpolation_options *options,
                          const unsigned char *seed_vertex, si_poses *out, dk_progress *progress,
                          int phase, dk_error *err)
 {
+    const dk_shape_interpolation_rotations rotations = options->rotations;
     memset(out, 0, sizeof *out);
     dk_status st = dk_progress_begin(progress, phase, err);
     if (st != DK_OK || n_poses == 0)
@@ -184,7 +196,8 @@ dk_status si_poses_build(const dk_mesh *mesh, const double *vinv, const unsigned
     }
     /* the lift's roots, from the poses' angles */
     for (size_t k = 0; k < P && st == DK_OK; k++) {
-        rotations_of(mesh, vinv, degenerate, poses + k * n * 3, R, out->stretch + k * F * 6, keys);
+        rotations_of(mesh, vinv, degenerate, poses + k * n * 3, options->stretches, R,
+                     out->stretch + k * F * 6, keys);
         st = dk_progress_part(progress, 0.5 * (double)(k + 1) / (double)P, err);
     }
     if (st == DK_OK && rotations == DK_SI_ROTATIONS_CONSISTENT) {
@@ -195,7 +208,8 @@ dk_status si_poses_build(const dk_mesh *mesh, const double *vinv, const unsigned
     }
     for (size_t k = 0; k < P && st == DK_OK; k++) {
         double *om = out->omega + k * F * 3, *ep = out->eps + k * F * 3;
-        rotations_of(mesh, vinv, degenerate, poses + k * n * 3, R, out->stretch + k * F * 6, NULL);
+        rotations_of(mesh, vinv, degenerate, poses + k * n * 3, options->stretches, R,
+                     out->stretch + k * F * 6, NULL);
         if (rotations == DK_SI_ROTATIONS_CONSISTENT) {
             st = si_lift_pose(&lift, mesh, degenerate, R, om, ep, err);
         } else {

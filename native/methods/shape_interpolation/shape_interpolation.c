@@ -47,6 +47,7 @@ void dk_shape_interpolation_default_options(dk_shape_interpolation_options *o)
 {
     memset(o, 0, sizeof *o);
     o->rotations = DK_SI_ROTATIONS_CONSISTENT;
+    o->stretches = DK_SI_STRETCHES_LINEAR;
     o->edge_weights = DK_SI_WEIGHTS_CLAMPED_COTANGENT;
 }
 
@@ -55,6 +56,9 @@ static dk_status check_options(const dk_shape_interpolation_options *o, dk_error
     if ((unsigned)o->rotations > DK_SI_ROTATIONS_PRINCIPAL)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "ShapeInterpolation: rotations = %d, "
                             "must be 0 (consistent) or 1 (principal)", (int)o->rotations);
+    if ((unsigned)o->stretches > DK_SI_STRETCHES_LOG)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "ShapeInterpolation: stretches = %d, "
+                            "must be 0 (linear) or 1 (log)", (int)o->stretches);
     if ((unsigned)o->edge_weights > DK_SI_WEIGHTS_UNIFORM)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "ShapeInterpolation: edge_weights = "
                             "%d, must be 0 (clamped cotangent), 1 (cotangent) or 2 (uniform)",
@@ -125,8 +129,8 @@ static dk_status build(dk_shape_interpolation *s, const dk_constraint_desc *desc
     si_poses np;
     memset(&np, 0, sizeof np);
     if (st == DK_OK)
-        st = si_poses_build(m, s->vinv, s->degenerate, poses, n_poses, s->opt.rotations, seed, &np,
-                            prog, PHASE_POSES, err);
+        st = si_poses_build(m, s->vinv, s->degenerate, poses, n_poses, &s->opt, seed, &np, prog,
+                            PHASE_POSES, err);
     free(seed);
     double *tgt = st == DK_OK ? malloc(3 * (size_t)con->n_handle_vertices * sizeof(double) + 1)
                               : NULL;
@@ -323,9 +327,14 @@ static void gradients(void *ctx, dk_index begin, dk_index end, int part)
             si_mat3_mul(R, E, RE);
             memcpy(R, RE, sizeof R);
         }
-        const double Sm[9] = {1.0 + S[0], S[1], S[2], S[1], 1.0 + S[3], S[4],
-                              S[2], S[4], 1.0 + S[5]};
-        double G[9];
+        double Sm[9], G[9];
+        if (s->opt.stretches == DK_SI_STRETCHES_LOG) {
+            si_sym_exp(S, Sm);
+        } else {
+            Sm[0] = 1.0 + S[0], Sm[1] = S[1], Sm[2] = S[2];
+            Sm[3] = S[1], Sm[4] = 1.0 + S[3], Sm[5] = S[4];
+            Sm[6] = S[2], Sm[7] = S[4], Sm[8] = 1.0 + S[5];
+        }
         si_mat3_mul(R, Sm, G);
         if (p->has_input) {
             const dk_index *f = m->faces + 3 * (size_t)t;
@@ -641,6 +650,8 @@ dk_status dk_shape_interpolation_estimate_memory(const dk_mesh *mesh,
 
 static const dk_option_desc si_fields[] = {
     {"rotations", DK_OPTION_ENUM, offsetof(dk_shape_interpolation_options, rotations), 0, 0, 1, 0,
+     1, 0},
+    {"stretches", DK_OPTION_ENUM, offsetof(dk_shape_interpolation_options, stretches), 0, 0, 1, 0,
      1, 0},
     {"edge_weights", DK_OPTION_ENUM, offsetof(dk_shape_interpolation_options, edge_weights), 0, 0,
      2, 0, 2, 0},

@@ -23,6 +23,14 @@ double si_rotation_log(const double R[9], double w[3]);
 void si_mat3_mul(const double a[9], const double b[9], double c[9]);
 void si_mat3_tmul(const double a[9], const double b[9], double c[9]);
 
+/* ---- stretch.c: symmetric 3 x 3 as 6 entries (xx, xy, xz, yy, yz, zz) ---- */
+
+/* log of a symmetric positive definite matrix (eigenvalues below 1e-8 taken as 1e-8). */
+void si_sym_log(const double s[6], double out[6]);
+
+/* exp of a symmetric matrix, as a full row-major 3 x 3. */
+void si_sym_exp(const double s[6], double out[9]);
+
 /* ---- poses.c ---- */
 
 /* The frame of the triangle p0, p1, p2 (columns p1 - p0, p2 - p0, n / sqrt|n|), row-major. */
@@ -39,7 +47,7 @@ typedef struct si_poses {
     double *positions;        /* P x n x 3: the poses as given (a rebind builds again)     */
     double *omega;            /* P x F x 3                                                 */
     double *eps;              /* P x F x 3: log(exp(omega)^T R)                             */
-    double *stretch;          /* P x F x 6: S - I, (xx, xy, xz, yy, yz, zz)                */
+    double *stretch;          /* P x F x 6: S - I, or log S (stretches LOG: stretch.c)     */
     double *shift;            /* P x n_components x 3: the mean displacement of each part  */
 } si_poses;
 
@@ -49,7 +57,7 @@ typedef struct si_poses {
  * shifts. `progress` gets phase `phase`. */
 dk_status si_poses_build(const dk_mesh *mesh, const double *vinv, const unsigned char *degenerate,
                          const double *poses, dk_index n_poses,
-                         dk_shape_interpolation_rotations rotations,
+                         const dk_shape_interpolation_options *options,
                          const unsigned char *seed_vertex, si_poses *out, dk_progress *progress,
                          int phase, dk_error *err);
 void si_poses_free(si_poses *p);
