@@ -802,6 +802,11 @@ METHODS.append(Method(
                        "volume where a wide body twists; the blend takes about twice as "
                        "long")),
                advanced=True),
+        Option("refine", "INT", 0, "Refine Passes",
+               "Passes that turn each triangle to fit the blended shape, keeping its blended "
+               "stretch: they even out big twists (a whole-turn twist thins in the middle "
+               "without them); each pass takes about twice the blend's time",
+               min=0, max=100, advanced=True),
         Option("edge_weights", "ENUM", "clamped_cotangent", "Edge Weights",
                "How much each edge counts when the blended triangles are stitched together",
                items=(("clamped_cotangent", "Cotangent, Clamped",

@@ -16,6 +16,10 @@ test_contract.py):
 - an iterative method says it converged;
 - a simulation (shape matching) is played over 24 frames, the handle dragged over the first
   12, with these checks on every frame;
+- a method that also binds to poses (shape interpolation) is bound, without handles, to the
+  mesh twisted by 270 degrees along that axis: weight 1 gives the pose and 0 the rest (within
+  the tolerance), half way is finite and keeps the edges better than the linear blend, and
+  the scene turned, moved and scaled by 1000 gives the moved in-between;
 and prints the RMS relative change of the edge lengths (how much the detail was stretched)
 and the times. Exit status 1 when any check fails (a refusal with a message is not a
 failure; it is listed).
@@ -233,6 +237,60 @@ def moved_scene_error(name, mesh, handle, fixed, T, p, cold):
             float(max(np.linalg.norm(v.max(axis=0) - v.min(axis=0)), np.abs(want).max())))
 
 
+def twisted(v, degrees):
+    """v turned about its centre line along the longest axis by up to `degrees`."""
+    axis = int(np.argmax(v.max(axis=0) - v.min(axis=0)))
+    c = v.mean(axis=0)
+    h = (v[:, axis] - v[:, axis].min()) / np.ptp(v[:, axis])
+    a, b = [k for k in range(3) if k != axis]
+    th = math.radians(degrees) * h
+    p = v.copy()
+    p[:, a] = c[a] + np.cos(th) * (v[:, a] - c[a]) - np.sin(th) * (v[:, b] - c[b])
+    p[:, b] = c[b] + np.sin(th) * (v[:, a] - c[a]) + np.cos(th) * (v[:, b] - c[b])
+    return p
+
+
+def check_poses(name, mesh, diag):
+    """(status, detail) for a method that binds to poses (see the module's comment)."""
+    v = np.asarray(mesh.vertices)
+    pose = twisted(v, 270.0)
+    t0 = time.perf_counter()
+    try:
+        m = getattr(dk, name)(mesh, poses=[pose])
+    except ValueError as e:
+        return "refused", str(e)
+    t_bind = time.perf_counter() - t0
+    problems = []
+    for w, want in ((0.0, v), (1.0, pose)):
+        err = float(np.abs(np.asarray(m.solve(weights=[w]).positions) - want).max())
+        if not err <= EXACT * diag:
+            problems.append("weight %g is %.3g off" % (w, err))
+    t0 = time.perf_counter()
+    p = np.asarray(m.solve(weights=[0.5]).positions)
+    t_solve = time.perf_counter() - t0
+    if not np.isfinite(p).all():
+        return "FAILED", "non-finite in-between"
+    ours, linear = edge_change(mesh, p), edge_change(mesh, 0.5 * (v + pose))
+    if not ours < linear:
+        problems.append("half way changes the edges more (%.3g) than the linear blend (%.3g)"
+                        % (ours, linear))
+    M = np.eye(4)
+    M[:3, :3] = 1000.0 * rotation(2.1, [0.3, -0.5, 0.8])
+    M[:3, 3] = np.array([3.0, -7.0, 5.0]) * 1000.0 * np.abs(v).max()
+    move = lambda x: x @ M[:3, :3].T + M[:3, 3]  # noqa: E731
+    moved = getattr(dk, name)(dk.Mesh(move(v), np.asarray(mesh.triangles)), poses=[move(pose)])
+    off = float(np.abs(np.asarray(moved.solve(weights=[0.5]).positions) - move(p)).max())
+    scale = float(max(1000.0 * diag, np.abs(move(p)).max()))
+    if not off <= EXACT * scale:
+        problems.append("the moved scene's in-between is %.3g off" % off)
+    detail = ("poses: bind %6.2f s  solve %6.3f s  half way edge change %5.1f%% (linear "
+              "%5.1f%%)  scene moved: %.0e" % (t_bind, t_solve, 100 * ours, 100 * linear,
+                                                off / scale))
+    if problems:
+        return "FAILED", detail + "; " + "; ".join(problems)
+    return "ok", detail
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--meshes", default="", help="comma-separated file names (default: all)")
@@ -260,6 +318,10 @@ def main():
             status, detail = check(name, mesh, handle, fixed, T, diag)
             failed += status == "FAILED"
             print("  %-21s %-7s %s" % (name, status, detail), flush=True)
+            if "poses" in dk._native._method_info(name)["controls"]:
+                status, detail = check_poses(name, mesh, diag)
+                failed += status == "FAILED"
+                print("  %-21s %-7s %s" % (name, status, detail), flush=True)
     print("%d failed" % failed)
     return 1 if failed else 0
 

@@ -26,6 +26,7 @@ static int parse_options(PyObject *kw, void *o, const char *context)
     int r = (int)opt->rotations, w = (int)opt->edge_weights, st = (int)opt->stretches;
     if (dk_py_opt_choice(kw, "rotations", rotations_names, &r, context) < 0 ||
         dk_py_opt_choice(kw, "stretches", stretches_names, &st, context) < 0 ||
+        dk_py_opt_int(kw, "refine", &opt->refine) < 0 ||
         dk_py_opt_choice(kw, "edge_weights", edge_weights_names, &w, context) < 0)
         return -1;
     opt->rotations = (dk_shape_interpolation_rotations)r;
@@ -120,7 +121,7 @@ PyDoc_STRVAR(solve_doc,
 PyDoc_STRVAR(shape_interpolation_doc,
              "ShapeInterpolation(mesh, handles=None, fixed=None, roi=None, handle_weights=None,\n"
              "                   poses=None, rotations='consistent', stretches='linear',\n"
-             "                   edge_weights='clamped_cotangent', progress=None)\n\n"
+             "                   refine=0, edge_weights='clamped_cotangent', progress=None)\n\n"
              "In-betweens of example poses that keep the shape (the slides' shape\n"
              "interpolation; Alexa, Cohen-Or, Levin 2000; the gradient-domain solve of Xu et al.\n"
              "2005): every triangle's gradient from the rest to each pose is split into a\n"
@@ -133,7 +134,10 @@ PyDoc_STRVAR(shape_interpolation_doc,
              "default) or 'principal' (each angle within [0, pi]: for comparison).\n"
              "stretches: 'linear' (I + sum w (S - I), the paper's: exact for bends; the\n"
              "default) or 'log' (exp(sum w log S): keeps areas under shears, as a wide body\n"
-             "twisted; about twice the solve's time).\n"
+             "twisted; about twice the solve's time). refine: local/global iterations that\n"
+             "fit each triangle's rotation to the blended shape, its blended stretch kept\n"
+             "(0 to 100; a bar twisted by 360 degrees narrows in the middle without them;\n"
+             "each costs about twice the blend).\n"
              "edge_weights: 'clamped_cotangent' (default), 'cotangent' or 'uniform'. Handles\n"
              "and fixed vertices are optional and kept exactly, so an in-between can be\n"
              "pinned; a part without any follows the linear blend's mean. rebind(poses=...)\n"

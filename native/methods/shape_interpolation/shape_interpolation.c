@@ -12,6 +12,7 @@
 #include <string.h>
 
 #include "dk_memory.h"
+#include "dk_operators.h"
 
 /* The largest weight a solve takes: far beyond any extrapolation an artist means, and small
  * enough that the blended rotation vectors and stretches stay finite. */
@@ -31,6 +32,7 @@ struct dk_shape_interpolation {
     dk_csys_counts counts;
     /* scratch and the last solve */
     double *J;                  /* F x 9: blended gradients                               */
+    double *Pt;                 /* F x 6: their stretches, kept by the refining iterations */
     double *d;                  /* n_edges x 3: edge targets of the last solve            */
     double *rhs;                /* nu x 3, column-major                                   */
     double *tgt;                /* n_handle_vertices x 3                                  */
@@ -48,6 +50,7 @@ void dk_shape_interpolation_default_options(dk_shape_interpolation_options *o)
     memset(o, 0, sizeof *o);
     o->rotations = DK_SI_ROTATIONS_CONSISTENT;
     o->stretches = DK_SI_STRETCHES_LINEAR;
+    o->refine = 0;
     o->edge_weights = DK_SI_WEIGHTS_CLAMPED_COTANGENT;
 }
 
@@ -59,6 +62,9 @@ static dk_status check_options(const dk_shape_interpolation_options *o, dk_error
     if ((unsigned)o->stretches > DK_SI_STRETCHES_LOG)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "ShapeInterpolation: stretches = %d, "
                             "must be 0 (linear) or 1 (log)", (int)o->stretches);
+    if (o->refine < 0 || o->refine > DK_SI_MAX_REFINE)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "ShapeInterpolation: refine = %d, "
+                            "must be in [0, %d]", o->refine, DK_SI_MAX_REFINE);
     if ((unsigned)o->edge_weights > DK_SI_WEIGHTS_UNIFORM)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "ShapeInterpolation: edge_weights = "
                             "%d, must be 0 (clamped cotangent), 1 (cotangent) or 2 (uniform)",
@@ -220,9 +226,10 @@ dk_status dk_shape_interpolation_bind(const dk_mesh *mesh, const dk_constraint_d
     s->ew = malloc(E * sizeof(double) + 1);
     s->edge_faces = malloc(E + 1);
     s->J = malloc(9 * F * sizeof(double));
+    s->Pt = malloc(6 * F * sizeof(double));
     s->d = malloc(3 * E * sizeof(double) + 1);
     s->part_sum = malloc(4 * nc * sizeof(double) + 1);
-    if (!s->vinv || !s->degenerate || !s->ew || !s->edge_faces || !s->J || !s->d || !s->part_sum) {
+    if (!s->vinv || !s->degenerate || !s->ew || !s->edge_faces || !s->J || !s->Pt || !s->d || !s->part_sum) {
         dk_shape_interpolation_free(s);
         return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeInterpolation: out of memory "
                             "(%d triangles)", (int)F);
@@ -336,6 +343,11 @@ static void gradients(void *ctx, dk_index begin, dk_index end, int part)
             Sm[6] = S[2], Sm[7] = S[4], Sm[8] = 1.0 + S[5];
         }
         si_mat3_mul(R, Sm, G);
+        if (s->opt.refine > 0 && !p->has_input) { /* J = R S: the refinement keeps S */
+            double *Pt = s->Pt + 6 * (size_t)t;
+            Pt[0] = Sm[0], Pt[1] = Sm[1], Pt[2] = Sm[2];
+            Pt[3] = Sm[4], Pt[4] = Sm[5], Pt[5] = Sm[8];
+        }
         if (p->has_input) {
             const dk_index *f = m->faces + 3 * (size_t)t;
             double V[9], A[9];
@@ -382,6 +394,67 @@ static void edge_targets(void *ctx, dk_index begin, dk_index end, int part)
         const double inv = 1.0 / (double)s->edge_faces[e];
         for (int k = 0; k < 3; k++)
             d[k] = sum[k] * inv;
+    }
+}
+
+/* Each triangle's stretch P (J = U P, U its closest rotation), for triangles [begin, end):
+ * what the refining iterations keep of the blend. */
+static void target_stretches(void *ctx, dk_index begin, dk_index end, int part)
+{
+    (void)part;
+    const pass *p = ctx;
+    const dk_shape_interpolation *s = p->s;
+    for (dk_index t = begin; t < end; t++) {
+        if (s->degenerate[t])
+            continue;
+        const double *J = s->J + 9 * (size_t)t;
+        double U[9], UJ[9];
+        dk_closest_rotation(J, U);
+        si_mat3_tmul(U, J, UJ);
+        double *P = s->Pt + 6 * (size_t)t;
+        P[0] = UJ[0];
+        P[1] = 0.5 * (UJ[1] + UJ[3]);
+        P[2] = 0.5 * (UJ[2] + UJ[6]);
+        P[3] = UJ[4];
+        P[4] = 0.5 * (UJ[5] + UJ[7]);
+        P[5] = UJ[8];
+    }
+}
+
+/* A refining iteration's local step, for triangles [begin, end): the rotation U that best
+ * takes the triangle's stretched rest edges P r onto its edges in p->x (weighted by the
+ * edges' weights: Procrustes), and J = U P. */
+static void local_rotations(void *ctx, dk_index begin, dk_index end, int part)
+{
+    (void)part;
+    const pass *p = ctx;
+    const dk_shape_interpolation *s = p->s;
+    const dk_mesh *m = s->mesh;
+    const double *rest = m->positions, *x = p->x;
+    for (dk_index t = begin; t < end; t++) {
+        if (s->degenerate[t])
+            continue;
+        const double *P = s->Pt + 6 * (size_t)t;
+        const double Pm[9] = {P[0], P[1], P[2], P[1], P[3], P[4], P[2], P[4], P[5]};
+        const dk_index *f = m->faces + 3 * (size_t)t;
+        double C[9] = {0};
+        for (int k = 0; k < 3; k++) {
+            const dk_index a = f[k], b = f[(k + 1) % 3];
+            const double c = s->ew[m->face_edges[3 * (size_t)t + (size_t)((k + 2) % 3)]];
+            double r[3], q[3], e[3];
+            for (int d = 0; d < 3; d++) {
+                r[d] = rest[3 * (size_t)a + d] - rest[3 * (size_t)b + d];
+                e[d] = x[3 * (size_t)a + d] - x[3 * (size_t)b + d];
+            }
+            for (int d = 0; d < 3; d++)
+                q[d] = Pm[3 * d] * r[0] + Pm[3 * d + 1] * r[1] + Pm[3 * d + 2] * r[2];
+            for (int i = 0; i < 3; i++)
+                for (int j = 0; j < 3; j++)
+                    C[3 * i + j] += c * e[i] * q[j];
+        }
+        double U[9];
+        dk_closest_rotation(C, U);
+        si_mat3_mul(U, Pm, s->J + 9 * (size_t)t);
     }
 }
 
@@ -501,6 +574,32 @@ static void place_free_parts(dk_shape_interpolation *s, const double *base, cons
     }
 }
 
+/* The positions whose edges best fit the gradients in s->J: the edges' targets, the
+ * right-hand side, one back-substitution, the constrained vertices, the free parts placed. */
+static dk_status positions_for_gradients(dk_shape_interpolation *s, pass *p, double *positions,
+                                         dk_error *err)
+{
+    const dk_mesh *m = s->mesh;
+    dk_team_run_halves(s->team, edge_targets, p, m->n_edges, PARALLEL_ITEMS);
+    const dk_index nu = s->sys.nu;
+    if (nu > 0) {
+        dk_team_run_halves(s->team, right_hand_side, p, nu, PARALLEL_ITEMS);
+        const dk_status st = dk_cholesky_solve(s->sys.chol, s->rhs, 3, s->rhs, err);
+        if (st != DK_OK)
+            return st;
+    }
+    for (dk_index v = 0; v < m->n_vertices; v++) {
+        const dk_index u = s->sys.unk[v];
+        if (u >= 0)
+            for (int k = 0; k < 3; k++)
+                positions[3 * (size_t)v + k] = s->rhs[(size_t)k * (size_t)nu + (size_t)u];
+        else
+            eliminated_at(s, p->base, v, positions + 3 * (size_t)v);
+    }
+    place_free_parts(s, p->base, p->w, positions);
+    return DK_OK;
+}
+
 /* Zero weights and every handle where the input puts it: the input itself. */
 static int is_identity(const dk_shape_interpolation *s, const double *w, const double *base)
 {
@@ -548,25 +647,18 @@ dk_status dk_shape_interpolation_solve(dk_shape_interpolation *s, const dk_solve
         rest_edges(m, base, s->d);
     } else {
         dk_team_run_halves(s->team, gradients, &p, m->n_faces, PARALLEL_ITEMS);
-        dk_team_run_halves(s->team, edge_targets, &p, m->n_edges, PARALLEL_ITEMS);
-        const dk_index nu = s->sys.nu;
-        if (nu > 0) {
-            dk_team_run_halves(s->team, right_hand_side, &p, nu, PARALLEL_ITEMS);
-            st = dk_cholesky_solve(s->sys.chol, s->rhs, 3, s->rhs, err);
-            if (st != DK_OK) {
-                dk_team_park(s->team);
-                return st;
-            }
+        if (s->opt.refine > 0 && p.has_input) /* J = A R S: its own polar stretch */
+            dk_team_run_halves(s->team, target_stretches, &p, m->n_faces, PARALLEL_ITEMS);
+        st = positions_for_gradients(s, &p, positions, err);
+        for (int it = 0; it < s->opt.refine && st == DK_OK; it++) {
+            p.x = positions;
+            dk_team_run_halves(s->team, local_rotations, &p, m->n_faces, PARALLEL_ITEMS);
+            st = positions_for_gradients(s, &p, positions, err);
         }
-        for (dk_index v = 0; v < m->n_vertices; v++) {
-            const dk_index u = s->sys.unk[v];
-            if (u >= 0)
-                for (int k = 0; k < 3; k++)
-                    positions[3 * (size_t)v + k] = s->rhs[(size_t)k * (size_t)nu + (size_t)u];
-            else
-                eliminated_at(s, base, v, positions + 3 * (size_t)v);
+        if (st != DK_OK) {
+            dk_team_park(s->team);
+            return st;
         }
-        place_free_parts(s, base, w, positions);
     }
     const double e = rq->skip_energy ? NAN : energy_of(s, positions);
     dk_team_park(s->team);
@@ -625,6 +717,7 @@ void dk_shape_interpolation_free(dk_shape_interpolation *s)
     si_poses_free(&s->poses);
     si_system_free(&s->sys);
     free(s->J);
+    free(s->Pt);
     free(s->d);
     free(s->rhs);
     free(s->tgt);
@@ -655,6 +748,8 @@ static const dk_option_desc si_fields[] = {
      1, 0},
     {"edge_weights", DK_OPTION_ENUM, offsetof(dk_shape_interpolation_options, edge_weights), 0, 0,
      2, 0, 2, 0},
+    {"refine", DK_OPTION_INT, offsetof(dk_shape_interpolation_options, refine), 0, 0,
+     DK_SI_MAX_REFINE, 2, 4, 0},
 };
 
 DK_METHOD_OPS(dk_shape_interpolation_ops, "ShapeInterpolation",
