@@ -32,10 +32,22 @@ def idle_status(d):
             return "bound: %s to %s" % (plural(d.bind_n_vertices, "vertex"), c.summary(d))
         want = c.missing(d)
         return "not bound: %s, then Bind" % want if want else "not bound: press Bind"
+    m = methods.get(d.method)
+    if d.bound and m.poses is not None:   # a blend of poses: what it blends
+        try:
+            names = [kb.name for kb in methods.poses_reader(m).owned(d.id_data, d.options)]
+        except Exception:  # a wrong key name: the solve reports it
+            names = []
+        what = ("blending %s" % ", ".join(names[:3]) + (" and %d more" % (len(names) - 3)
+                                                         if len(names) > 3 else "")
+                if names else "no shape key to blend")
+        return "bound: %s, %s%s" % (plural(d.bind_n_vertices, "vertex"), what,
+                                    ", %s" % plural(len(d.handles), "handle")
+                                    if len(d.handles) else "")
     if d.bound:
         return "bound: %s, %s" % (plural(d.bind_n_vertices, "vertex"),
                                   plural(len(d.handles), "handle"))
-    if len(d.handles) == 0 and methods.get(d.method).needs_handles:
+    if len(d.handles) == 0 and m.needs_handles:
         return "not bound: add a handle, then Bind"
     return "not bound: press Bind"
 

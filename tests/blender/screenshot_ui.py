@@ -22,7 +22,7 @@ PNG3 = os.path.join(OUT, "viewport_show_graph.png")
 # the panel in each state an artist meets (DEFORMKIT_SHOT=states, a third run): one image
 # each, kept in docs/images after being looked at
 STATES = ("unbound", "bound", "bound_warning", "rebinding", "baked", "overlap_error", "handle_target",
-          "sidebar", "lattice", "cage", "cage_view", "skinning_view", "jiggle")
+          "sidebar", "lattice", "cage", "cage_view", "skinning_view", "jiggle", "shape_blend")
 STATE_PNGS = [os.path.join(OUT, "panel_%s.png" % s) for s in STATES]
 
 try:
@@ -390,6 +390,33 @@ def in_blender():
                 "1-12" in (S.solver.simulation_text(obj, d) or ""),
                 (d.status, S.solver.simulation_text(obj, d)))
         yield "jiggle"
+        # the Shape Blend deformer on a rigged tube with a key twisted by 360 degrees at 0.5:
+        # added above the Armature, its options (Advanced open)
+        yield from fresh_properties()
+        with bpy.context.temp_override(**S.ui_context()):
+            V, F = S.tube(n_len=41)
+            obj = S.triangle_mesh_object(V, F, name="Tube")
+            rest = S.rest_positions(obj)
+            S.arm_rig(obj, {"lower": ((1, (0, 0, 0.4)),)})
+            bpy.context.view_layer.objects.active = obj
+            obj.select_set(True)
+            obj.shape_key_add(name="Basis")
+            kb = obj.shape_key_add(name="Twist", from_mix=False)
+            t = (rest[:, 0] - rest[:, 0].min()) / np.ptp(rest[:, 0]) * 2 * np.pi
+            P = rest.copy()
+            P[:, 1] = np.cos(t) * rest[:, 1] - np.sin(t) * rest[:, 2]
+            P[:, 2] = np.sin(t) * rest[:, 1] + np.cos(t) * rest[:, 2]
+            kb.data.foreach_set("co", P.astype(np.float32).ravel())
+            kb.value = 0.5
+            bpy.ops.deformkit.add_deformer(method="SHAPE_BLEND")
+            d = obj.deformkit.deformers[0]
+            d.show_advanced = True
+            bpy.ops.deformkit.bind()
+        S.geonodes.find_modifier(obj, d).show_expanded = False
+        R.check("the shape blend deformer bound above the Armature",
+                d.bound and not d.status_is_error and obj.modifiers[0].type == "NODES",
+                (d.status, [m.type for m in obj.modifiers]))
+        yield "shape_blend"
 
     sidebar_drawn = []
     from addon import ui

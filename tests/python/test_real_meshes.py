@@ -44,3 +44,19 @@ def scenario(name):
 def test_method_on_real_mesh(mesh_file, method):
     status, detail = sweep.check(method, *scenario(mesh_file))
     assert status == "ok", "%s on %s: %s %s" % (method, mesh_file, status, detail)
+
+
+POSE_METHODS = [m for m in GROUP_METHODS if "poses" in dk._native._method_info(m)["controls"]]
+
+
+@pytest.mark.heavy
+@pytest.mark.skipif(not MESH_FILES, reason="../shared/meshes not present")
+@pytest.mark.parametrize("method", POSE_METHODS)
+@pytest.mark.parametrize("mesh_file", MESH_FILES)
+def test_poses_on_real_mesh(mesh_file, method):
+    """A method that binds to poses, bound to a 270-degree twist of the mesh (the sweep's
+    check_poses): poses and rest exact, half way finite and less stretched than the linear
+    blend, the moved scene's in-between the moved one."""
+    mesh, _, _, _, diag = scenario(mesh_file)
+    status, detail = sweep.check_poses(method, mesh, diag)
+    assert status == "ok", "%s on %s: %s %s" % (method, mesh_file, status, detail)
