@@ -24,6 +24,8 @@ from mathutils import Matrix
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "tests", "blender"))
 import _setup as S  # noqa: E402  (the add-on, registered from addon/)
+sys.path.insert(0, HERE)
+from bench_shape_interpolation import turned, volume  # noqa: E402
 
 SHARED = os.path.join(HERE, "..", "..", "shared", "meshes")
 
@@ -34,22 +36,6 @@ def args():
     p.add_argument("--frames", type=int, default=48)
     p.add_argument("--render", default="", help="write the comparison here (PNG)")
     return p.parse_args(argv)
-
-
-def turned(V, axis, degrees):
-    c = V.mean(0)
-    h = (V[:, axis] - V[:, axis].min()) / np.ptp(V[:, axis])
-    th = np.radians(degrees) * h
-    a, b = [k for k in range(3) if k != axis]
-    P = V.copy()
-    P[:, a] = c[a] + np.cos(th) * (V[:, a] - c[a]) - np.sin(th) * (V[:, b] - c[b])
-    P[:, b] = c[b] + np.sin(th) * (V[:, a] - c[a]) + np.cos(th) * (V[:, b] - c[b])
-    return P
-
-
-def volume(X, F):
-    a, b, c = X[F[:, 0]], X[F[:, 1]], X[F[:, 2]]
-    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
 
 
 def keyed(name, V, F, axis, degrees):

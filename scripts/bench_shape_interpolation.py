@@ -27,19 +27,15 @@ import numpy as np
 import deformkit as dk
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from bench_common import midpoint_subdivide  # noqa: E402
-
-HERE = os.path.dirname(os.path.abspath(__file__))
-SHARED = os.path.join(HERE, "..", "..", "shared", "meshes")
+from bench_common import best as best_of, midpoint_subdivide  # noqa: E402
 
 
 def best(fn, repeat):
-    t = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        t.append(time.perf_counter() - t0)
-    return min(t)
+    """fn's best wall time in seconds over `repeat` calls (bench_common.best)."""
+    return best_of(fn, repeat)[1]
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+SHARED = os.path.join(HERE, "..", "..", "shared", "meshes")
 
 
 def turned(V, axis, degrees):

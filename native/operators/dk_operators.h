@@ -213,6 +213,11 @@ dk_status dk_fit_skinning_weights(const double *rest, dk_index n, const double *
  *  fast enough to call per vertex per ARAP iteration. Returns trace(R^T A). */
 double dk_closest_rotation(const double a[9], double r[9]);
 
+/** The rotation R (det +1, row-major 3x3) as the unit quaternion q = (w, x, y, z) with
+ *  w >= 0 (Shepperd's choice of the largest pivot: no cancellation near a half turn). For
+ *  dual quaternion skinning and the logarithm of shape interpolation's rotations. */
+void dk_rotation_quaternion(const double R[9], double q[4]);
+
 /** The inverse of the affine 4x4 `m` (row-major; its bottom row is taken as 0 0 0 1) into
  *  `inv` (16 doubles, bottom row 0 0 0 1). Returns 0, or -1 when the linear part is
  *  singular or not finite (inv then unspecified). Skinning's bones and the fit of their

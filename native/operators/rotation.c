@@ -214,3 +214,40 @@ double dk_closest_rotation(const double a[9], double r[9])
     for (int i = 0; i < 9; i++) tr += r[i] * a[i];
     return tr;
 }
+
+void dk_rotation_quaternion(const double R[9], double q[4])
+{
+    /* the largest of the four candidates for stability (Shepperd) */
+    const double tr = R[0] + R[4] + R[8];
+    if (tr > R[0] && tr > R[4] && tr > R[8]) {
+        const double s = 2.0 * sqrt(1.0 + tr);
+        q[0] = 0.25 * s;
+        q[1] = (R[7] - R[5]) / s;
+        q[2] = (R[2] - R[6]) / s;
+        q[3] = (R[3] - R[1]) / s;
+    } else if (R[0] >= R[4] && R[0] >= R[8]) {
+        const double s = 2.0 * sqrt(fmax(1.0 + R[0] - R[4] - R[8], 0.0));
+        q[0] = (R[7] - R[5]) / s;
+        q[1] = 0.25 * s;
+        q[2] = (R[1] + R[3]) / s;
+        q[3] = (R[2] + R[6]) / s;
+    } else if (R[4] >= R[8]) {
+        const double s = 2.0 * sqrt(fmax(1.0 + R[4] - R[0] - R[8], 0.0));
+        q[0] = (R[2] - R[6]) / s;
+        q[1] = (R[1] + R[3]) / s;
+        q[2] = 0.25 * s;
+        q[3] = (R[5] + R[7]) / s;
+    } else {
+        const double s = 2.0 * sqrt(fmax(1.0 + R[8] - R[0] - R[4], 0.0));
+        q[0] = (R[3] - R[1]) / s;
+        q[1] = (R[2] + R[6]) / s;
+        q[2] = (R[5] + R[7]) / s;
+        q[3] = 0.25 * s;
+    }
+    const double len = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    for (int k = 0; k < 4; k++)
+        q[k] /= len;
+    if (q[0] < 0.0)
+        for (int k = 0; k < 4; k++)
+            q[k] = -q[k];
+}

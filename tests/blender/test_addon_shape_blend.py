@@ -15,31 +15,8 @@ import numpy as np  # noqa: E402
 from addon import animated_input, bake, pc2  # noqa: E402
 
 R = S.Results("test_addon_shape_blend")
+twist, bend, volume = S.shapes.twist, S.shapes.bend, S.shapes.volume   # tests/python/shapes.py
 TOL = 2e-5   # float32 storage of the mesh, the keys and the result
-
-
-def twist(V, turn):
-    t = (V[:, 0] - V[:, 0].min()) / np.ptp(V[:, 0]) * turn
-    out = V.copy()
-    out[:, 1] = np.cos(t) * V[:, 1] - np.sin(t) * V[:, 2]
-    out[:, 2] = np.sin(t) * V[:, 1] + np.cos(t) * V[:, 2]
-    return out
-
-
-def bend(V, angle, start=-0.5, length=1.0):
-    x, y = V[:, 0], V[:, 1]
-    rho = length / angle
-    phi = angle * np.clip((x - start) / length, 0, 1)
-    past = np.maximum(x - start - length, 0.0)
-    out = V.copy()
-    out[:, 0] = np.where(x < start, x, start + (rho - y) * np.sin(phi) + past * np.cos(phi))
-    out[:, 1] = np.where(x < start, y, rho - (rho - y) * np.cos(phi) + past * np.sin(phi))
-    return out
-
-
-def volume(X, F):
-    a, b, c = X[F[:, 0]], X[F[:, 1]], X[F[:, 2]]
-    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
 
 
 def keyed_tube(rig=None):

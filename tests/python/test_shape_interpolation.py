@@ -16,7 +16,7 @@ import pytest
 import deformkit as dk
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from shapes import capped_tube  # noqa: E402
+from shapes import bend, capped_tube, rigid_fit, twist, volume  # noqa: E402
 
 
 def rotation(axis, angle):
@@ -32,45 +32,6 @@ def edges_of(F):
 
 def edge_lengths(X, E):
     return np.linalg.norm(X[E[:, 0]] - X[E[:, 1]], axis=1)
-
-
-def volume(X, F):
-    a, b, c = X[F[:, 0]], X[F[:, 1]], X[F[:, 2]]
-    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
-
-
-def rigid_fit(X, Y):
-    """(rms distance of Y from the rigid motion of X closest to it, that motion's R)."""
-    cx, cy = X.mean(0), Y.mean(0)
-    U, _, Vt = np.linalg.svd((X - cx).T @ (Y - cy))
-    d = np.sign(np.linalg.det(U @ Vt))
-    R = (U @ np.diag([1, 1, d]) @ Vt).T
-    return float(np.sqrt((((X - cx) @ R.T + cy - Y) ** 2).sum(1).mean())), R
-
-
-def twist(V, angle):
-    """The tube along x twisted about x by `angle` from its -x end to its +x end."""
-    x = V[:, 0]
-    t = (x - x.min()) / np.ptp(x) * angle
-    c, s = np.cos(t), np.sin(t)
-    out = V.copy()
-    out[:, 1] = c * V[:, 1] - s * V[:, 2]
-    out[:, 2] = s * V[:, 1] + c * V[:, 2]
-    return out
-
-
-def bend(V, angle, start=-0.5, length=1.0):
-    """The tube along x bent about z towards +y by `angle` over x in [start, start +
-    length] (its centre line on a circular arc, unstretched; the inside compressed and the
-    outside stretched as a bent elbow's): an arm."""
-    x, y = V[:, 0], V[:, 1]
-    rho = length / angle
-    phi = angle * np.clip((x - start) / length, 0, 1)
-    past = np.maximum(x - start - length, 0.0)
-    out = V.copy()
-    out[:, 0] = np.where(x < start, x, start + (rho - y) * np.sin(phi) + past * np.cos(phi))
-    out[:, 1] = np.where(x < start, y, rho - (rho - y) * np.cos(phi) + past * np.sin(phi))
-    return out
 
 
 @pytest.fixture(scope="module")

@@ -3,6 +3,8 @@
  * times the unit axis, turning counter-clockwise about it (R x = exp([w]_x) x). */
 #include "si_internal.h"
 
+#include "dk_operators.h"
+
 #include <math.h>
 
 void si_rotation_exp(const double w[3], double R[9])
@@ -32,38 +34,8 @@ void si_rotation_exp(const double w[3], double R[9])
 
 double si_rotation_log(const double R[9], double w[3])
 {
-    /* the unit quaternion of R (Shepperd's choice of the largest pivot: no cancellation
-     * near a half turn), then w = 2 atan2(|v|, q0) v / |v| with q0 >= 0 */
-    const double tr = R[0] + R[4] + R[8];
-    double q[4];
-    if (tr >= R[0] && tr >= R[4] && tr >= R[8]) {
-        const double s = 2.0 * sqrt(fmax(1.0 + tr, 0.0));
-        q[0] = 0.25 * s;
-        q[1] = (R[7] - R[5]) / s;
-        q[2] = (R[2] - R[6]) / s;
-        q[3] = (R[3] - R[1]) / s;
-    } else if (R[0] >= R[4] && R[0] >= R[8]) {
-        const double s = 2.0 * sqrt(fmax(1.0 + R[0] - R[4] - R[8], 0.0));
-        q[0] = (R[7] - R[5]) / s;
-        q[1] = 0.25 * s;
-        q[2] = (R[1] + R[3]) / s;
-        q[3] = (R[2] + R[6]) / s;
-    } else if (R[4] >= R[8]) {
-        const double s = 2.0 * sqrt(fmax(1.0 + R[4] - R[0] - R[8], 0.0));
-        q[0] = (R[2] - R[6]) / s;
-        q[1] = (R[1] + R[3]) / s;
-        q[2] = 0.25 * s;
-        q[3] = (R[5] + R[7]) / s;
-    } else {
-        const double s = 2.0 * sqrt(fmax(1.0 + R[8] - R[0] - R[4], 0.0));
-        q[0] = (R[3] - R[1]) / s;
-        q[1] = (R[2] + R[6]) / s;
-        q[2] = (R[5] + R[7]) / s;
-        q[3] = 0.25 * s;
-    }
-    if (q[0] < 0.0)
-        for (int k = 0; k < 4; k++)
-            q[k] = -q[k];
+    double q[4]; /* unit, q[0] >= 0: w = 2 atan2(|v|, q0) v / |v| */
+    dk_rotation_quaternion(R, q);
     const double sv = sqrt(q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
     if (!(sv > 0.0)) {
         w[0] = w[1] = w[2] = 0.0;

@@ -3,44 +3,8 @@
  * applied here after normalisation. */
 #include <math.h>
 
+#include "dk_operators.h"
 #include "skinning_internal.h"
-
-void skin_quat_from_rotation(const double R[9], double q[4])
-{
-    /* the largest of the four candidates for stability (Shepperd) */
-    const double tr = R[0] + R[4] + R[8];
-    if (tr > R[0] && tr > R[4] && tr > R[8]) {
-        const double s = 2.0 * sqrt(1.0 + tr);
-        q[0] = 0.25 * s;
-        q[1] = (R[7] - R[5]) / s;
-        q[2] = (R[2] - R[6]) / s;
-        q[3] = (R[3] - R[1]) / s;
-    } else if (R[0] >= R[4] && R[0] >= R[8]) {
-        const double s = 2.0 * sqrt(fmax(1.0 + R[0] - R[4] - R[8], 0.0));
-        q[0] = (R[7] - R[5]) / s;
-        q[1] = 0.25 * s;
-        q[2] = (R[1] + R[3]) / s;
-        q[3] = (R[2] + R[6]) / s;
-    } else if (R[4] >= R[8]) {
-        const double s = 2.0 * sqrt(fmax(1.0 + R[4] - R[0] - R[8], 0.0));
-        q[0] = (R[2] - R[6]) / s;
-        q[1] = (R[1] + R[3]) / s;
-        q[2] = 0.25 * s;
-        q[3] = (R[5] + R[7]) / s;
-    } else {
-        const double s = 2.0 * sqrt(fmax(1.0 + R[8] - R[0] - R[4], 0.0));
-        q[0] = (R[3] - R[1]) / s;
-        q[1] = (R[2] + R[6]) / s;
-        q[2] = (R[5] + R[7]) / s;
-        q[3] = 0.25 * s;
-    }
-    const double len = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
-    for (int k = 0; k < 4; k++)
-        q[k] /= len;
-    if (q[0] < 0.0)
-        for (int k = 0; k < 4; k++)
-            q[k] = -q[k];
-}
 
 /* a b (Hamilton product, w x y z) */
 static void qmul(const double a[4], const double b[4], double c[4])
@@ -53,7 +17,7 @@ static void qmul(const double a[4], const double b[4], double c[4])
 
 void skin_dq_from_rigid(const double R[9], const double t[3], double r[4], double d[4])
 {
-    skin_quat_from_rotation(R, r);
+    dk_rotation_quaternion(R, r);
     const double tq[4] = {0.0, t[0], t[1], t[2]};
     qmul(tq, r, d);
     for (int k = 0; k < 4; k++)

@@ -11,8 +11,6 @@ typedef struct skin_bone {
     double r[4], d[4];
 } skin_bone;
 
-/* The rotation R (row-major 3x3, det +1) as a unit quaternion (w, x, y, z), w >= 0. */
-void skin_quat_from_rotation(const double R[9], double q[4]);
 
 /* The dual quaternion (r, d) of the rigid motion x -> R x + t: r from R, d = (0, t) r / 2. */
 void skin_dq_from_rigid(const double R[9], const double t[3], double r[4], double d[4]);
