@@ -74,11 +74,16 @@ class DEFORMKIT_OT_add_deformer(_Base, bpy.types.Operator):
         if (methods.get(self.method).stack_first and obj.data.shape_keys is not None
                 and list(obj.modifiers).index(mod) > 0):
             with context.temp_override(object=obj):
+                # Blender may refuse, or stop part way (above a modifier that needs the
+                # original mesh): the deformer goes where its modifier went
                 bpy.ops.object.modifier_move_to_index(modifier=mod.name, index=0)
             dks = obj.deformkit   # the deformers keep the stack's order
-            dks.deformers.move(len(dks.deformers) - 1, 0)
-            dks.active_index = 0
-            d = dks.deformers[0]
+            rank = sum(1 for x in obj.modifiers[:list(obj.modifiers).index(mod)]
+                       if geonodes.is_ours(x))
+            if rank < len(dks.deformers) - 1:
+                dks.deformers.move(len(dks.deformers) - 1, rank)
+                dks.active_index = rank
+                d = dks.deformers[rank]
         solver.reset_status(d)
         if not native.has_class(methods.get(self.method).native_class):
             self.report({"WARNING"}, "the native module lacks deformkit.%s: %s"

@@ -10,7 +10,8 @@ keys, and the modifiers above -- so that the owned keys' linear blend is replace
 in-between that keeps the shape. Exactly so where the deformer sits directly below the shape
 keys (the top of the stack); below an Armature the keys' deltas are taken off in the rest's
 directions, as Blender adds them. Muted keys weigh 0; "Shape Key Lock" (the pin: the active
-key alone, at 1) is followed."""
+key alone) is followed as the active key at weight 1 (what Blender shows then, the key's own
+shape, is that when the key is relative to the Basis)."""
 
 import numpy as np
 
@@ -37,12 +38,8 @@ def owned(obj, opts):
         if key.key_blocks.get(n) is None:
             raise DeformKitError("Shape Keys: the mesh has no shape key '%s'" % n)
     ref = key.reference_key
-    blocks = [kb for kb in key.key_blocks if kb != ref and (not names or kb.name in names)]
-    for kb in blocks:
-        if kb.relative_key == kb:
-            raise DeformKitError("shape key '%s' is relative to itself: it adds nothing to "
-                                 "blend" % kb.name)
-    return blocks
+    # (a key relative to itself adds nothing, in Blender and as a pose equal to the Basis)
+    return [kb for kb in key.key_blocks if kb != ref and (not names or kb.name in names)]
 
 
 def _co(kb, n):
@@ -52,18 +49,22 @@ def _co(kb, n):
 
 
 def _mask(obj, kb, n):
-    """The key's vertex-group weights (n; 1 everywhere without a group, 0 off it)."""
+    """The key's vertex-group weights (n, 0 off the group), or None where Blender applies the
+    key unmasked: no group named, a group name the object lacks, or a mesh whose vertices
+    carry no group at all (Blender's key.cc, get_weights_array)."""
     if not kb.vertex_group:
         return None
     vg = obj.vertex_groups.get(kb.vertex_group)
-    m = np.zeros(n)
     if vg is None:
-        return m  # Blender applies nothing of a key whose group is missing
+        return None
+    m = np.zeros(n)
+    any_group = False
     for v in obj.data.vertices:
         for g in v.groups:
+            any_group = True
             if g.group == vg.index:
                 m[v.index] = g.weight
-    return m
+    return m if any_group else None
 
 
 def deltas(obj, opts):
@@ -98,12 +99,15 @@ def solve_args(obj, opts, scene):
     return {"weights": weights(obj, opts)}
 
 
-def edit_input(obj, opts, source):
-    """What the native solve edits: the input less the owned keys' linear blend."""
+def edit_input(obj, opts, source, bound_deltas=None):
+    """What the native solve edits: the input less the owned keys' linear blend. `bound_deltas`
+    (P x n x 3): the keys' deltas the binding was made with (the binding is made again when
+    they change), read from the keys when None."""
     w = np.asarray(weights(obj, opts))
     if not w.any():
         return source
-    return source - np.tensordot(w, deltas(obj, opts), axes=1)
+    D = deltas(obj, opts) if bound_deltas is None or len(bound_deltas) != len(w) else bound_deltas
+    return source - np.tensordot(w, D, axes=1)
 
 
 def signature(obj, opts):

@@ -40,6 +40,8 @@ class BindJob(progress.Reporting):
             args["material"] = self.material = material.material_map(
                 dk, self.dkmesh, paint, kw, d.options)
         args.update(methods.bind_kwargs(m, d.options, self.rest, kw, self.dkmesh))
+        # a blend of poses: the poses' displacements, kept for its solves (edit_input)
+        self.pose_deltas = kw["poses"] - self.rest[None] if "poses" in kw else None
         self.fraction, self.phase, self.cancelled = None, None, False
         if m.bind_progress:  # called from the worker thread: plain attribute writes only
             args["progress"] = self._progress
@@ -97,6 +99,7 @@ class BindJob(progress.Reporting):
         e.last_T = None      # the handle transforms of the last written solve
         e.fit_for, e.fit_text = None, None   # fit_warning's cache
         e.sim = None   # a simulation's kept frames (solver.simulation)
+        e.pose_deltas = self.pose_deltas   # a blend of poses' displacements (BindJob)
         cache._cache[(obj.name, d.uid)] = e
         return e
 

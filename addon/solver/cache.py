@@ -39,7 +39,7 @@ class _Entry:
                  "handles", "source", "preview_at", "material", "material_shown", "slice_cost",
                  "moved_at", "quick", "worker", "slice_ms", "graph_shown", "basis",
                  "result_pos", "result_T", "preview_inputs", "warned", "last_cold", "last_T",
-                 "fit_for", "fit_text", "native_source", "sim")
+                 "fit_for", "fit_text", "native_source", "sim", "pose_deltas")
 
 
 def mark_settings_changed():

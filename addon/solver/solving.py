@@ -176,6 +176,10 @@ def _plan_solve(obj, d, e, key, T, source, inputs, cold, write, interactive, res
     elif depends_on_input(m, d):
         want = e.rest if source is None else source
         from_rest = d.solve_from == "REST" and m.needs_handles  # (else not drawn)
+        if source is not None and not from_rest and m.poses is not None:
+            # a blend of poses edits the input less the linear blend it replaces: its handles
+            # too are placed on that (kw["input_positions"] below)
+            source = methods.poses_reader(m).edit_input(obj, d.options, source, e.pose_deltas)
         solve_on = e.rest if from_rest else want   # what the native object deforms
         ns = getattr(e, "native_source", None)
         if m.follows_input and (ns is None or not np.array_equal(ns, solve_on)):
@@ -195,9 +199,6 @@ def _plan_solve(obj, d, e, key, T, source, inputs, cold, write, interactive, res
                     else dict(transforms=input_transforms(e, T, source)))
             if not m.follows_input:
                 kw["input_positions"] = source
-        if source is not None and not from_rest and m.poses is not None:
-            # a blend of poses edits the input less the linear blend it replaces
-            kw["input_positions"] = methods.poses_reader(m).edit_input(obj, d.options, source)
     else:
         e.source = e.rest   # solved on the rest, its offset lands on the input as it is
     # after an undo or redo: a full solve before showing (mark_all_dirty)

@@ -26,16 +26,16 @@
  * motion exp(w log R) (the shape is kept), where the linear blend shrinks it.
  *
  * Rotations beyond 180 degrees (rotations CONSISTENT, the default): the rotation vectors are
- * chosen per pose along a spanning tree of the triangles' adjacency, each triangle's closest
- * to its parent's vector advanced by their relative rotation: of the vectors that represent
- * R_k exactly (its axis times angle + 2 pi m) the nearest is taken when it lies within pi / 4
- * of that prediction; otherwise (a rotation near a whole turn, whose axis is numerical noise)
- * the prediction itself, and eps carries the difference. A bar twisted by 360 degrees then
- * keeps its twist half way (180 degrees at its end) instead of untwisting. Each part of the
- * mesh starts its tree at a triangle touching a handle or fixed vertex if it has one (a part
- * pinned there does not turn), else at its least turned triangle. PRINCIPAL takes each
- * rotation's own angle in [0, pi] (a part turned by more than 180 degrees unwinds the short
- * way, and a twist of 360 degrees has no interpolation at all): for comparison.
+ * lifted across the mesh (lift.c): between neighbouring triangles p, c the relative rotation
+ * R_c R_p^T is small, its vector delta_pc counts the turn without ambiguity, and omega_k is
+ * the field closest to those steps in the least-squares sense (a graph Laplacian on the
+ * triangles, factored once per bind), fixed at one root per connected group of triangles to
+ * the root's own vector: a triangle touching a handle or fixed vertex if there is one (a part
+ * pinned there does not turn), else the least turned one. eps carries what omega does not
+ * represent exactly. A bar twisted by 360 degrees then keeps its twist half way (180 degrees
+ * at its end) instead of untwisting. PRINCIPAL takes each rotation's own angle in [0, pi] (a
+ * part turned by more than 180 degrees unwinds the short way, and a twist of 360 degrees has
+ * no interpolation at all): for comparison.
  *
  * Positions: the least-squares fit of every edge (i, j) to its blended gradient,
  *     E(x) = sum_edges c_ij |x_i - x_j - Jbar_ij (p_i - p_j)|^2,

@@ -615,6 +615,17 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
     if (spec->control_values && ms.n_controls > 0 &&
         read_control_values(spec, values_obj, ms.n_controls, ctx, &values) < 0)
         goto fail_busy;
+    if (spec->control_values && ms.n_controls == 0 && values_obj && values_obj != Py_None) {
+        /* bound without a control: only an empty sequence of values is accepted */
+        const Py_ssize_t len = PySequence_Check(values_obj) ? PySequence_Size(values_obj) : -1;
+        if (len != 0) {
+            if (len < 0)
+                PyErr_Clear();
+            PyErr_Format(PyExc_TypeError, "%s: bound without %s, it takes no %s", ctx,
+                         spec->control_values_of, spec->control_values);
+            goto fail_busy;
+        }
+    }
     /* the targets are the control's (its points, its bones' frames), not the handles' */
     const int control_targets = ms.n_controls > 0 && !spec->control_with_groups;
     if (control_targets && !spec->control_transforms && transforms != Py_None) {
@@ -643,8 +654,10 @@ PyObject *dk_py_method_solve(PyObject *obj, PyObject *args, PyObject *kwargs)
                                    control_targets ? ms.n_controls : ms.n_handle_vertices, ctx,
                                    &in, &mode) < 0)
         goto fail_busy;
-    if (values.data && prepend_values(&values, &in) < 0)
+    if (values.data && prepend_values(&values, &in) < 0) {
+        dk_py_doubles_release(&in);
         goto fail_busy;
+    }
     if (start_obj != Py_None) { /* read and checked for every method, used by some */
         if (dk_py_read_doubles(start_obj, self->mesh->n_vertices, 3, "start_positions",
                                &start) < 0) {
@@ -857,6 +870,8 @@ PyObject *dk_py_method_rebind(PyObject *obj, PyObject *args, PyObject *kwargs)
     /* the control's keywords beside the groups (control_with_groups): taken out first;
      * absent, the bound control stays */
     if (kwargs && self->spec->control_with_groups) {
+        if (!dk_py_method_readable(self)) /* the control is read for the bound mesh */
+            return NULL;
         kw = PyDict_Copy(kwargs);
         if (!kw || self->spec->parse_control(kw, self->mesh, NULL, control.bytes, ctx) < 0) {
             if (self->spec->release_control)

@@ -90,6 +90,28 @@ def test_still_mesh():
     diff = float(np.abs(shown(obj) - want).max())
     R.check("a muted key weighs nothing (max %.2e)" % diff, diff < TOL, diff)
     keys["Twist"].mute = False
+    # a key masked by a vertex group: its pose is masked as Blender masks it; a group name
+    # the object lacks leaves the key unmasked, in Blender and in the pose
+    S.group(obj, "tip", np.flatnonzero(rest[:, 0] > 0.3), np.clip(rest[rest[:, 0] > 0.3, 0], 0, 1))
+    keys["Bend"].vertex_group = "tip"
+    mask = np.zeros(len(rest))
+    vg = obj.vertex_groups["tip"]
+    for v in obj.data.vertices:
+        for g in v.groups:
+            if g.group == vg.index:
+                mask[v.index] = g.weight
+    masked = rest + mask[:, None] * (key_positions(obj, "Bend") - rest)
+    mesh = S.dk.Mesh(rest, S.solver.triangles(obj.data))
+    sm = S.dk.ShapeInterpolation(mesh, poses=[key_positions(obj, "Twist"), masked])
+    want = np.asarray(sm.solve(weights=[0.5, 0.7]).positions)
+    diff = float(np.abs(shown(obj) - want).max())
+    R.check("a key masked by a group blends its masked shape (max %.2e)" % diff, diff < TOL, diff)
+    keys["Bend"].vertex_group = "no such group"
+    want = np.asarray(si.solve(weights=[0.5, 0.7]).positions)
+    diff = float(np.abs(shown(obj) - want).max())
+    R.check("a key's missing group leaves it unmasked, as in Blender (max %.2e)" % diff,
+            diff < TOL, diff)
+    keys["Bend"].vertex_group = ""
     # a key the deformer does not own stays Blender's linear blend under it
     d.options_shape_blend.key_names = "Twist"
     one, _ = api(obj, ["Twist"])
@@ -143,6 +165,36 @@ def test_keyed_playback_and_bake():
     d = obj.deformkit.deformers[0]
     R.check("Shape Keys survives a reload", d.options_shape_blend.key_names == "Twist",
             d.options_shape_blend.key_names)
+
+
+def test_a_pinned_blend():
+    """A handle on the bar's +x cap (its empty left where it was bound) and the -x end fixed:
+    both are placed on the input less the keys' blend, so zero weights give the mesh back and
+    half way is the API's in-between pinned there."""
+    obj, d, _ = keyed_tube()
+    rest = S.rest_positions(obj)
+    tip = np.flatnonzero(rest[:, 0] > 0.95)
+    root = np.flatnonzero(rest[:, 0] < -0.95)
+    S.group(obj, "tip", tip)
+    S.group(obj, "root", root)
+    e = S.empty("Tip", tuple(rest[tip].mean(0)))
+    bpy.ops.deformkit.add_handle(vertex_group="tip", target=e.name)
+    d.fixed_group = "root"
+    bpy.ops.deformkit.bind()
+    R.check("binds with a handle and a fixed group", d.bound and not d.status_is_error, d.status)
+    R.check("zero weights with the handle at rest: the mesh", np.array_equal(shown(obj), rest))
+    obj.data.shape_keys.key_blocks["Bend"].value = 0.5   # the tip moves with the Bend key
+    mesh = S.dk.Mesh(rest, S.solver.triangles(obj.data))
+    si = S.dk.ShapeInterpolation(mesh, [tip], fixed=root,
+                                 poses=[key_positions(obj, "Twist"), key_positions(obj, "Bend")])
+    want = np.asarray(si.solve(weights=[0.0, 0.5], targets=rest[tip],
+                               input_positions=rest).positions)
+    got = shown(obj)
+    diff = float(np.abs(got - want).max())
+    R.check("half way, pinned at both ends: the API's in-between (max %.2e)" % diff,
+            diff < TOL, diff)
+    R.check("the pinned ends stay", float(np.abs(got[tip] - rest[tip]).max()) < TOL and
+            float(np.abs(got[root] - rest[root]).max()) < TOL)
 
 
 def rig(obj):
@@ -211,6 +263,7 @@ def test_after_an_armature():
     R.check("the panel says to move it to the top", note and "top of the stack" in note, note)
 
 
-for t in (test_still_mesh, test_keyed_playback_and_bake, test_after_an_armature):
+for t in (test_still_mesh, test_keyed_playback_and_bake, test_a_pinned_blend,
+          test_after_an_armature):
     R.run(t)
 R.finish()

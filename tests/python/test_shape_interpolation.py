@@ -346,6 +346,11 @@ def test_refusals(tube):
         si.solve(weights=[float("nan")])
     with pytest.raises(ValueError, match="weight of pose 0"):
         si.solve(weights=[1e7])
+    # bound without poses: an empty list of weights is fine, any other is refused
+    grouped = dk.ShapeInterpolation(mesh, [np.arange(16)])
+    assert np.isfinite(grouped.solve(weights=[], targets=V[:16]).positions).all()
+    with pytest.raises(TypeError, match="without poses"):
+        grouped.solve(weights=[0.5], targets=V[:16])
     with pytest.raises(ValueError, match="poses\\[1\\]"):
         dk.ShapeInterpolation(mesh, poses=[V, V[:10]])
     bad = V.copy()

@@ -217,6 +217,8 @@ dk_status si_poses_build(const dk_mesh *mesh, const double *vinv, const unsigned
                 si_rotation_log(R + 9 * t, om + 3 * t);
             memset(ep, 0, 3 * F * sizeof(double));
         }
+        if (st != DK_OK)
+            break; /* the lift's solve failed: omega and eps are not written */
         part_shifts(mesh, poses + k * n * 3, out->shift + k * nc * 3, count);
         st = dk_progress_part(progress, 0.5 + 0.5 * (double)(k + 1) / (double)P, err);
     }

@@ -1,6 +1,7 @@
 /* DeformKit shape interpolation: the driver (dk_shape_interpolation.h). A bind: check the
  * options and the mesh, the rest frames, the edge weights, the constraints, the poses'
- * rotations and stretches (poses.c, branches.c), the factored system (system.c). A solve:
+ * rotations and stretches (poses.c, lift.c, stretch.c), the factored system (system.c). A
+ * solve:
  * the blended gradient of every triangle, each edge's target, the right-hand side, one
  * back-substitution, the constrained vertices, the parts placed by their means. */
 #include "si_internal.h"
@@ -147,16 +148,21 @@ static dk_status build(dk_shape_interpolation *s, const dk_constraint_desc *desc
         si_poses_free(&np);
         return st;
     }
+    /* the right-hand side's room first (the unknowns are at most the vertices): once the new
+     * system has taken the old one's factor over, nothing may fail */
+    double *rhs = malloc(3 * (size_t)m->n_vertices * sizeof(double) + 1);
+    if (!rhs) {
+        dk_constraints_free(con);
+        si_poses_free(&np);
+        free(tgt);
+        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeInterpolation: out of memory (rhs)");
+    }
     si_system sys;
     dk_csys_counts counts = s->counts;
     st = si_system_build(m, s->ew, con, s->sys.con ? &s->sys : NULL, s->team, &counts, prog,
                          PHASE_ANALYZE, &sys, err); /* takes con */
-    double *rhs = st == DK_OK ? malloc(3 * (size_t)sys.nu * sizeof(double) + 1) : NULL;
-    if (st == DK_OK && !rhs) {
-        si_system_free(&sys);
-        st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeInterpolation: out of memory (rhs)");
-    }
     if (st != DK_OK) {
+        free(rhs);
         si_poses_free(&np);
         free(tgt);
         if (st != DK_ERR_CANCELLED)
@@ -682,6 +688,7 @@ dk_status dk_shape_interpolation_energy(const dk_shape_interpolation *s, const d
         return st;
     /* the passes write only their own sums: the object is not changed */
     *energy = energy_of((dk_shape_interpolation *)s, positions);
+    dk_team_park(s->team);
     return dk_energy_result_check(*energy, "ShapeInterpolation energy", err);
 }
 

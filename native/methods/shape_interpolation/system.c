@@ -147,7 +147,7 @@ dk_status si_system_build(const dk_mesh *mesh, const double *edge_weights, dk_co
         if (st == DK_OK) {
             const int same = old && old->chol && same_unknowns(old, out, n);
             st = dk_csys_factor(out->a, &out->chol, old ? &old->chol : NULL, old ? old->a : NULL,
-                                same, DK_CSYS_REFACTOR_ALWAYS, team, counts, progress, phase,
+                                same, DK_CSYS_REFACTOR_IF_CHANGED, team, counts, progress, phase,
                                 err);
         }
     }
