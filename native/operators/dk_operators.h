@@ -191,6 +191,25 @@ void dk_winding_free(dk_winding *w);
 dk_status dk_delaunay_tetrahedra(const double *points, dk_index n_points, dk_index **tets,
                                  dk_index *n_tets, dk_error *err);
 
+/** The interior of a closed surface tetrahedralized by TetGen (its -p with -Y: the surface is
+ *  the boundary and gets no point of its own, so the first n_vertices points are the surface's
+ *  vertices, bit for bit; -q and -a bound the interior tetrahedra's quality and size).
+ *  positions: n_vertices x 3, finite; triangles: n_triangles x 3, a closed manifold surface
+ *  (every edge in exactly two triangles, none degenerate, every vertex used; refused by name
+ *  otherwise, before TetGen runs). quality: 0 (none: no interior point, slivers allowed) or
+ *  the largest radius-edge ratio in [1.1, 10] (TetGen's q; 1.5 is usual); max_volume: 0
+ *  (none) or the largest tetrahedron volume (TetGen's a). Out (malloc'ed, the caller frees):
+ *  *points (*n_points x 3) and *tets (*n_tets x 4 point indices); the interior may get
+ *  points of its own even without bounds (a region that cannot be split otherwise). A
+ *  self-intersecting surface is DK_ERR_DEGENERATE, found by TetGen's own check (-d) before
+ *  meshing; TetGen's other failures DK_ERR_NUMERIC or DK_ERR_OUT_OF_MEMORY. Nothing is
+ *  written on failure. */
+dk_status dk_tetrahedralize_surface(const double *positions, dk_index n_vertices,
+                                    const dk_index *triangles, dk_index n_triangles,
+                                    double quality, double max_volume, double **points,
+                                    dk_index *n_points, dk_index **tets, dk_index *n_tets,
+                                    dk_error *err);
+
 /* ---------------------------------------------------------------- skinning weights ---- */
 
 /** Skinning weights fitted from example poses (fit_weights.c): for each vertex the weights

@@ -10,6 +10,7 @@
 
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "dk_eigs.h"
@@ -678,6 +679,65 @@ static PyObject *py_knn(PyObject *module, PyObject *args, PyObject *kwargs)
     return result;
 }
 
+PyDoc_STRVAR(tetrahedralize_doc,
+             "tetrahedralize(vertices, triangles, quality=0.0, max_volume=0.0)\n"
+             "    -> (points, tetrahedra)\n\n"
+             "The interior of a closed surface tetrahedralized by TetGen: vertices (n x 3)\n"
+             "and triangles (m x 3) a closed manifold surface (every edge in two triangles,\n"
+             "none degenerate, no self-intersection: refused by name, ValueError). The\n"
+             "surface is the boundary and gets no point of its own: points[:n] is\n"
+             "vertices, bit for bit; points past n lie inside. quality: 0 (none) or the\n"
+             "largest radius-edge ratio in [1.1, 10] (1.5 is usual); max_volume: 0 (none)\n"
+             "or the largest tetrahedron volume. tetrahedra: int32 (k, 4) indices into\n"
+             "points.");
+
+static PyObject *py_tetrahedralize(PyObject *module, PyObject *args, PyObject *kwargs)
+{
+    static char *kwlist[] = {"vertices", "triangles", "quality", "max_volume", NULL};
+    PyObject *vobj, *fobj;
+    double quality = 0.0, max_volume = 0.0;
+    dk_py_doubles v = {0};
+    dk_py_indices f = {0};
+    double *points = NULL;
+    dk_index *tets = NULL, np = 0, nt = 0;
+    dk_error err = {0};
+    dk_status st;
+
+    (void)module;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|dd:tetrahedralize", kwlist, &vobj, &fobj,
+                                     &quality, &max_volume))
+        return NULL;
+    if (dk_py_read_doubles(vobj, -1, 3, "vertices", &v) < 0)
+        return NULL;
+    if (dk_py_read_indices(fobj, -1, 3, "triangles", &f) < 0) {
+        dk_py_doubles_release(&v);
+        return NULL;
+    }
+    Py_BEGIN_ALLOW_THREADS
+    st = dk_tetrahedralize_surface(v.data, (dk_index)v.rows, f.data, (dk_index)f.rows, quality,
+                                   max_volume, &points, &np, &tets, &nt, &err);
+    Py_END_ALLOW_THREADS
+    dk_py_doubles_release(&v);
+    dk_py_indices_release(&f);
+    if (st != DK_OK)
+        return dk_py_raise(&err, NULL); /* the message names it */
+    double *pd;
+    dk_index *td;
+    PyObject *po = dk_py_new_doubles(2, np, 3, &pd);
+    PyObject *to = po ? dk_py_new_indices(2, nt, 4, &td) : NULL;
+    if (to) {
+        memcpy(pd, points, sizeof(double) * 3 * (size_t)np);
+        memcpy(td, tets, sizeof(dk_index) * 4 * (size_t)nt);
+    }
+    free(points);
+    free(tets);
+    if (!to) {
+        Py_XDECREF(po);
+        return NULL;
+    }
+    return Py_BuildValue("(NN)", po, to);
+}
+
 /** deformkit.KDTree: a static k-d tree over a copy of the points. */
 typedef struct KDTreeObject {
     PyObject_HEAD
@@ -892,6 +952,8 @@ static PyMethodDef operator_functions[] = {
     {"laplacian_eigenpairs", (PyCFunction)(void (*)(void))py_laplacian_eigenpairs,
      METH_VARARGS | METH_KEYWORDS, eigenpairs_doc},
     {"knn", (PyCFunction)(void (*)(void))py_knn, METH_VARARGS | METH_KEYWORDS, knn_doc},
+    {"tetrahedralize", (PyCFunction)(void (*)(void))py_tetrahedralize,
+     METH_VARARGS | METH_KEYWORDS, tetrahedralize_doc},
     {"closest_rotation", py_closest_rotation, METH_O, closest_rotation_doc},
     {"harmonic_material", (PyCFunction)(void (*)(void))py_harmonic_material,
      METH_VARARGS | METH_KEYWORDS, harmonic_material_doc},
