@@ -55,6 +55,44 @@ static bool spans_space(const double *p, dk_index n)
     return false;
 }
 
+// TetGen's tetrahedra copied out (malloc'ed, 4 corners each), every corner checked against
+// the `n_points` points TetGen returned.
+static dk_status copy_tets(const tetgenio &out, size_t n_points, dk_index **tets,
+                           dk_index *n_tets, const char *who, dk_error *err)
+{
+    const size_t nt = (size_t)(out.numberoftetrahedra > 0 ? out.numberoftetrahedra : 0);
+    dk_index *t = static_cast<dk_index *>(std::malloc((4 * nt + 1) * sizeof(dk_index)));
+    if (!t)
+        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "%s: out of memory", who);
+    for (size_t i = 0; i < 4 * nt; i++) {
+        const int v = out.tetrahedronlist[i];
+        if (v < 0 || (size_t)v >= n_points) {
+            std::free(t);
+            return dk_error_set(err, DK_ERR_NUMERIC, "%s: TetGen returned corner %d", who, v);
+        }
+        t[i] = (dk_index)v;
+    }
+    *tets = t;
+    *n_tets = (dk_index)nt;
+    return DK_OK;
+}
+
+// The error for TetGen's thrown code (1 out of memory, 3 self-intersection, 4 a feature too
+// small, others internal or bad input), on `count` points or vertices.
+static dk_status tetgen_failure(int code, const char *who, long count, dk_error *err)
+{
+    if (code == 1)
+        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "%s: out of memory in TetGen", who);
+    if (code == 3)
+        return dk_error_set(err, DK_ERR_DEGENERATE, "%s: the surface intersects itself "
+                            "(TetGen's code 3): it does not bound one volume", who);
+    if (code == 4)
+        return dk_error_set(err, DK_ERR_DEGENERATE, "%s: a feature of the surface is too "
+                            "small for TetGen (its code 4)", who);
+    return dk_error_set(err, DK_ERR_NUMERIC, "%s: TetGen failed (its code %d) on %ld points",
+                        who, code, count);
+}
+
 extern "C" dk_status dk_delaunay_tetrahedra(const double *points, dk_index n_points,
                                             dk_index **tets, dk_index *n_tets, dk_error *err)
 {
@@ -77,28 +115,11 @@ extern "C" dk_status dk_delaunay_tetrahedra(const double *points, dk_index n_poi
         if (out.numberofpoints != (int)n_points || out.numberofcorners != 4)
             return dk_error_set(err, DK_ERR_NUMERIC, "%s: TetGen returned %d points of %ld",
                                 who, out.numberofpoints, (long)n_points);
-        size_t nt = (size_t)(out.numberoftetrahedra > 0 ? out.numberoftetrahedra : 0);
-        dk_index *t = static_cast<dk_index *>(std::malloc((4 * nt + 1) * sizeof(dk_index)));
-        if (!t)
-            return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "%s: out of memory", who);
-        for (size_t i = 0; i < 4 * nt; i++) {
-            int v = out.tetrahedronlist[i];
-            if (v < 0 || v >= (int)n_points) {
-                std::free(t);
-                return dk_error_set(err, DK_ERR_NUMERIC, "%s: TetGen returned corner %d", who, v);
-            }
-            t[i] = (dk_index)v;
-        }
-        *tets = t;
-        *n_tets = (dk_index)nt;
-        return DK_OK;
+        return copy_tets(out, (size_t)n_points, tets, n_tets, who, err);
     } catch (const std::bad_alloc &) {
         return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "%s: out of memory in TetGen", who);
     } catch (int code) {
-        if (code == 1)
-            return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "%s: out of memory in TetGen", who);
-        return dk_error_set(err, DK_ERR_NUMERIC, "%s: TetGen failed (its code %d) on %ld points",
-                            who, code, (long)n_points);
+        return tetgen_failure(code, who, (long)n_points, err);
     } catch (...) {
         return dk_error_set(err, DK_ERR_NUMERIC, "%s: TetGen failed on %ld points", who,
                             (long)n_points);
@@ -254,42 +275,23 @@ extern "C" dk_status dk_tetrahedralize_surface(const double *positions, dk_index
         if (std::memcmp(out.pointlist, positions, 3 * (size_t)n_vertices * sizeof(REAL)) != 0)
             return dk_error_set(err, DK_ERR_DEGENERATE, "%s: TetGen moved or merged surface "
                                 "vertices (two at the same place?)", who);
-        const size_t np = (size_t)out.numberofpoints, nt = (size_t)out.numberoftetrahedra;
+        const size_t np = (size_t)out.numberofpoints;
         double *p = static_cast<double *>(std::malloc((3 * np + 1) * sizeof(double)));
-        dk_index *t = static_cast<dk_index *>(std::malloc((4 * nt + 1) * sizeof(dk_index)));
-        if (!p || !t) {
-            std::free(p);
-            std::free(t);
+        if (!p)
             return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "%s: out of memory", who);
-        }
         std::memcpy(p, out.pointlist, 3 * np * sizeof(double));
-        for (size_t i = 0; i < 4 * nt; i++) {
-            const int v = out.tetrahedronlist[i];
-            if (v < 0 || (size_t)v >= np) {
-                std::free(p);
-                std::free(t);
-                return dk_error_set(err, DK_ERR_NUMERIC, "%s: TetGen returned corner %d", who, v);
-            }
-            t[i] = (dk_index)v;
+        const dk_status st2 = copy_tets(out, np, tets, n_tets, who, err);
+        if (st2 != DK_OK) {
+            std::free(p);
+            return st2;
         }
         *points = p;
         *n_points = (dk_index)np;
-        *tets = t;
-        *n_tets = (dk_index)nt;
         return DK_OK;
     } catch (const std::bad_alloc &) {
         return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "%s: out of memory in TetGen", who);
     } catch (int code) {
-        if (code == 1)
-            return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "%s: out of memory in TetGen", who);
-        if (code == 3)
-            return dk_error_set(err, DK_ERR_DEGENERATE, "%s: the surface intersects itself "
-                                "(TetGen's code 3): it does not bound one volume", who);
-        if (code == 4)
-            return dk_error_set(err, DK_ERR_DEGENERATE, "%s: a feature of the surface is too "
-                                "small for TetGen (its code 4)", who);
-        return dk_error_set(err, DK_ERR_NUMERIC, "%s: TetGen failed (its code %d) on %ld "
-                            "vertices", who, code, (long)n_vertices);
+        return tetgen_failure(code, who, (long)n_vertices, err);
     } catch (...) {
         return dk_error_set(err, DK_ERR_NUMERIC, "%s: TetGen failed on %ld vertices", who,
                             (long)n_vertices);
