@@ -27,6 +27,9 @@ import numpy as np
 import deformkit as dk
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests",
+                                "python"))
+import shapes  # noqa: E402  (tests/python/shapes.py: the twist, volume and rigid fit)
 from bench_common import best as best_of, midpoint_subdivide  # noqa: E402
 
 
@@ -40,14 +43,7 @@ SHARED = os.path.join(HERE, "..", "..", "shared", "meshes")
 
 def turned(V, axis, degrees):
     """V twisted about its centre line along `axis` by up to `degrees` from one end."""
-    c = V.mean(0)
-    h = (V[:, axis] - V[:, axis].min()) / np.ptp(V[:, axis])
-    th = np.radians(degrees) * h
-    a, b = [k for k in range(3) if k != axis]
-    P = V.copy()
-    P[:, a] = c[a] + np.cos(th) * (V[:, a] - c[a]) - np.sin(th) * (V[:, b] - c[b])
-    P[:, b] = c[b] + np.sin(th) * (V[:, a] - c[a]) + np.cos(th) * (V[:, b] - c[b])
-    return P
+    return shapes.twist(V, np.radians(degrees), axis, V.mean(0))
 
 
 def bent(V, axis, degrees):
@@ -65,17 +61,11 @@ def bent(V, axis, degrees):
     return P
 
 
-def volume(X, F):
-    a, b, c = X[F[:, 0]], X[F[:, 1]], X[F[:, 2]]
-    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
+volume = shapes.volume
 
 
 def rigid_rms(X, Y):
-    cx, cy = X.mean(0), Y.mean(0)
-    U, _, Vt = np.linalg.svd((X - cx).T @ (Y - cy))
-    d = np.sign(np.linalg.det(U @ Vt))
-    R = (U @ np.diag([1, 1, d]) @ Vt).T
-    return float(np.sqrt((((X - cx) @ R.T + cy - Y) ** 2).sum(1).mean()))
+    return shapes.rigid_fit(X, Y)[0]
 
 
 def run(name, repeat, levels):

@@ -75,6 +75,11 @@ typedef struct dk_py_indices {
 int dk_py_read_indices(PyObject *obj, Py_ssize_t rows, Py_ssize_t cols, const char *name,
                        dk_py_indices *out);
 
+/** Reads a surface: vertices (n x 3 doubles) and triangles (m x 3 indices), each as
+ *  dk_py_read_doubles / dk_py_read_indices do; on failure nothing is held. Returns 0 or -1
+ *  with an exception set. */
+int dk_py_read_surface(PyObject *vobj, PyObject *fobj, dk_py_doubles *v, dk_py_indices *f);
+
 void dk_py_doubles_release(dk_py_doubles *a);
 void dk_py_indices_release(dk_py_indices *a);
 

@@ -700,6 +700,17 @@ int dk_py_read_indices(PyObject *obj, Py_ssize_t rows, Py_ssize_t cols, const ch
     return 0;
 }
 
+int dk_py_read_surface(PyObject *vobj, PyObject *fobj, dk_py_doubles *v, dk_py_indices *f)
+{
+    if (dk_py_read_doubles(vobj, -1, 3, "vertices", v) < 0)
+        return -1;
+    if (dk_py_read_indices(fobj, -1, 3, "triangles", f) < 0) {
+        dk_py_doubles_release(v);
+        return -1;
+    }
+    return 0;
+}
+
 void dk_py_doubles_release(dk_py_doubles *a)
 {
     if (!a)

@@ -57,12 +57,8 @@ static PyObject *mesh_new(PyTypeObject *type, PyObject *args, PyObject *kwargs)
 
     if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO:Mesh", kwlist, &vobj, &fobj))
         return NULL;
-    if (dk_py_read_doubles(vobj, -1, 3, "vertices", &v) < 0)
+    if (dk_py_read_surface(vobj, fobj, &v, &f) < 0)
         return NULL;
-    if (dk_py_read_indices(fobj, -1, 3, "triangles", &f) < 0) {
-        dk_py_doubles_release(&v);
-        return NULL;
-    }
     Py_BEGIN_ALLOW_THREADS
     st = dk_mesh_create(v.data, (dk_index)v.rows, f.data, (dk_index)f.rows, &mesh, &err);
     Py_END_ALLOW_THREADS

@@ -707,12 +707,8 @@ static PyObject *py_tetrahedralize(PyObject *module, PyObject *args, PyObject *k
     if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|dd:tetrahedralize", kwlist, &vobj, &fobj,
                                      &quality, &max_volume))
         return NULL;
-    if (dk_py_read_doubles(vobj, -1, 3, "vertices", &v) < 0)
+    if (dk_py_read_surface(vobj, fobj, &v, &f) < 0)
         return NULL;
-    if (dk_py_read_indices(fobj, -1, 3, "triangles", &f) < 0) {
-        dk_py_doubles_release(&v);
-        return NULL;
-    }
     Py_BEGIN_ALLOW_THREADS
     st = dk_tetrahedralize_surface(v.data, (dk_index)v.rows, f.data, (dk_index)f.rows, quality,
                                    max_volume, &points, &np, &tets, &nt, &err);
