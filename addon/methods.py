@@ -821,6 +821,56 @@ METHODS.append(Method(
     ],
 ))
 
+METHODS.append(Method(
+    id="VOLUME_ARAP",
+    label="Volume ARAP",
+    native_class="VolumetricARAP",
+    description="As-rigid-as-possible on the solid inside the mesh (tetrahedra): bent and "
+                "twisted limbs keep their volume instead of thinning or bulging",
+    icon="MESH_ICOSPHERE",
+    bind_progress=True,
+    rebind_progress=True,
+    maps=("stiffness",),
+    material_label="Stiffness",
+    stiffness_option="stiffness_scale",
+    cold_solve={"warm_start": False},
+    warm_solve={"warm_start": True},
+    iterative=True,
+    iteration_cap="max_iterations",
+    inner_iterations="cg_iterations",
+    inner_when=("acceleration", "newton"),
+    options=[
+        Option("quality", "FLOAT", 1.5, "Tetrahedra Shape",
+               "How well-shaped the solid's tetrahedra must be (their longest radius against "
+               "their shortest edge): lower adds more inner points and binds slower; 0 adds "
+               "none", min=0.0, max=10.0, advanced=True),
+        Option("max_iterations", "INT", 1000, "Max Iterations",
+               "Most steps one solve takes: raise it when the panel says 'not converged', "
+               "lower it to trade accuracy for speed", min=1, max=100000, advanced=True),
+        Option("tolerance", "FLOAT", 1e-6, "Tolerance",
+               "How settled the shape must be for a solve to stop: smaller is more exact and "
+               "slower", min=0.0, max=1.0, advanced=True),
+        Option("acceleration", "ENUM", "newton", "Solver",
+               "How a solve steps towards the shape",
+               items=(("anderson", "Accelerated",
+                       "Many cheap local/global steps, sped up (Anderson acceleration): long, "
+                       "slow bends can stop short of their final shape"),
+                      ("none", "Basic",
+                       "The plain local/global steps: the slowest to settle"),
+                      ("newton", "Newton",
+                       "Fewer, costlier steps that also settle long, slow bends (the "
+                       "default): the quickest to the finished shape")),
+               advanced=True),
+        Option("cg_iterations", "INT", 12, "Newton Inner Steps",
+               "Newton: inner (conjugate-gradient) steps per Newton step: more make each "
+               "step costlier and closer to exact", min=1, max=100, advanced=True),
+        Option("stiffness_scale", "FLOAT", 10.0, "Painted Stiffness",
+               "How stiff the Stiffness group's vertices painted 1 are, against 1 for the "
+               "rest (the inside takes the stiffness of the surface around it)",
+               min=0.001, max=1e6, kw=None, shown_with="material_group"),
+    ],
+))
+
 BY_ID = {m.id: m for m in METHODS}
 
 

@@ -153,6 +153,21 @@ void dk_arap_default_options(dk_arap_options *options);
 dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraints,
                        const dk_arap_options *options, dk_arap **out, dk_error *err);
 
+/** dk_arap_bind for a volume (the slides' volume-based deformation): one cell per
+ *  tetrahedron, the energy sum_t s_t vol_t |F_t - R_t|^2 (F_t = D_s D_m^-1 the element's
+ *  deformation gradient, s_t the mean stiffness of its corners) plus the soft penalties.
+ *  Each cell holds the tetrahedron's six edges weighted by the linear element's stiffness
+ *  (|e| cot(dihedral angle at the opposite edge) / 6), exactly, so options.energy and
+ *  options.weights do not apply (nothing is clamped: a cell's sum is >= 0 whatever its
+ *  signs). mesh: its vertices are the points (the surface's and the interior's), its
+ *  triangles any that join them (the tetrahedra's faces): they give the locality order and
+ *  the connected components (dk_constraints.h), nothing else. tetrahedra: n_tetrahedra x 4
+ *  vertex indices, four distinct per row, in either orientation; a degenerate one weighs
+ *  nothing. Everything else -- constraints, solves, starts, state -- as for a surface. */
+dk_status dk_arap_bind_tetrahedra(const dk_mesh *mesh, const dk_index *tetrahedra,
+                                  dk_index n_tetrahedra, const dk_constraint_desc *constraints,
+                                  const dk_arap_options *options, dk_arap **out, dk_error *err);
+
 /** Replaces the constraints. The cells are kept; the reduced matrix is reassembled and
  *  refactored, reusing the symbolic analysis when the set of unknown vertices is unchanged
  *  (for example only the handle groups, their weights or the stiffness changed). On failure

@@ -169,13 +169,18 @@ typedef enum dk_method_flags {
                                                 default options (a lattice, a cage with
                                                 mean value coordinates; not a cage with
                                                 Green ones, nor Shepard's interpolation)   */
-    DK_METHOD_DYNAMIC = 1024               /**< simulates in time (shape matching): a cold
+    DK_METHOD_DYNAMIC = 1024,              /**< simulates in time (shape matching): a cold
                                                 solve resets the simulation to this
                                                 request, at rest; each warm or resumed solve
                                                 advances it one frame, so that a frame's
                                                 result depends on the frames before it (its
                                                 state); played in order from a cold start,
                                                 checkpointed by save_state                 */
+    DK_METHOD_INTERIOR = 2048              /**< solves for points the positions do not
+                                                carry too (a volume's interior: volumetric
+                                                ARAP): a given start rebuilds them from
+                                                the positions, so a start at its own result
+                                                takes a few steps more than one            */
 } dk_method_flags;
 
 /** What one field of a method's options struct holds (dk_option_desc). */

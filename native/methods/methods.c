@@ -17,6 +17,7 @@
 #include "dk_shape_matching.h"
 #include "dk_shepard.h"
 #include "dk_skinning.h"
+#include "dk_volumetric_arap.h"
 
 /* Adding a method: its table here, in the order the Python module lists its classes. */
 static const dk_method_ops *const registry[] = {&dk_arap_ops, &dk_laplacian_edit_ops,
@@ -24,7 +25,8 @@ static const dk_method_ops *const registry[] = {&dk_arap_ops, &dk_laplacian_edit
                                                 &dk_fundamental_ops, &dk_lattice_ops, &dk_cage_ops,
                                                 &dk_shepard_ops, &dk_skinning_ops,
                                                 &dk_shape_matching_ops,
-                                                &dk_shape_interpolation_ops, NULL};
+                                                &dk_shape_interpolation_ops,
+                                                &dk_volumetric_arap_ops, NULL};
 
 const dk_method_ops *const *dk_methods(void)
 {

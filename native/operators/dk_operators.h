@@ -210,6 +210,16 @@ dk_status dk_tetrahedralize_surface(const double *positions, dk_index n_vertices
                                     dk_index *n_points, dk_index **tets, dk_index *n_tets,
                                     dk_error *err);
 
+/** A tetrahedron's linear finite-element stiffness per edge: w_ab = -vol grad(phi_a) .
+ *  grad(phi_b) for its edges (0,1), (0,2), (0,3), (1,2), (1,3), (2,3) into w (in the cotangent
+ *  form |e_cd| cot(the dihedral angle at the opposite edge cd) / 6; negative at an obtuse
+ *  angle), so that vol |grad u|^2 = sum_edges w_ab (u_a - u_b)^2 for every linear u. Returns
+ *  the signed volume (positive when p1 - p0, p2 - p0, p3 - p0 are right-handed); a
+ *  degenerate tetrahedron (|6 vol| at most 1e-12 of its longest edge cubed) gets w = 0 and
+ *  returns 0. */
+double dk_tetrahedron_stiffness(const double *p0, const double *p1, const double *p2,
+                                const double *p3, double w[6]);
+
 /* ---------------------------------------------------------------- skinning weights ---- */
 
 /** Skinning weights fitted from example poses (fit_weights.c): for each vertex the weights

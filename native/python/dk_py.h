@@ -260,6 +260,7 @@ PyObject *dk_py_new_solve_result(PyObject *module, PyObject *positions, double e
     M(skinning, "Skinning")                                                                \
     M(shape_matching, "ShapeMatching")                                                     \
     M(shape_interpolation, "ShapeInterpolation")                                           \
+    M(volumetric_arap, "VolumetricARAP")                                                   \
     X(cholesky)
 
 #define DK_PY_DECLARE_PART(part) int dk_py_init_##part(PyObject *module);

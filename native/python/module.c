@@ -123,7 +123,8 @@ PyDoc_STRVAR(method_info_doc,
              "iterative, transforms_as_positions, translation_invariant, rigid_invariant,\n"
              "penalty_handles, soft_regions, given_start, edits_input, graph,\n"
              "linear_precision, dynamic (a simulation: a cold solve resets it, each\n"
-             "warm one advances a frame); and\n"
+             "warm one advances a frame), interior (solves for points the positions do\n"
+             "not carry: a volume's interior); and\n"
              "'controls', the control kinds its bind takes (dk_controls.h), a tuple of\n"
              "'vertex_groups', 'points', 'bones', 'cage', 'lattice', 'poses'; 'state',\n"
              "whether it carries state from solve to solve (save_state, restore_state).\n"
@@ -153,7 +154,8 @@ static PyObject *py_method_info(PyObject *module, PyObject *arg)
     Py_XDECREF(list);
     if (!controls)
         return NULL;
-    PyObject *info = Py_BuildValue("{s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O}",
+    PyObject *info = Py_BuildValue("{s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O,s:O}",
+                                   "interior", (f & DK_METHOD_INTERIOR) ? Py_True : Py_False,
                                    "dynamic", (f & DK_METHOD_DYNAMIC) ? Py_True : Py_False,
                                    "linear_precision",
                                    (f & DK_METHOD_LINEAR_PRECISION) ? Py_True : Py_False,

@@ -1,7 +1,7 @@
 /* DeformKit CPython module: deformkit.ARAP (native/methods/dk_arap.h), on the generic method
  * type (dk_py_method.h). What is ARAP's own: its options, solve(tolerance=...), its counters
  * and handle_sizes. */
-#include "dk_py_method.h"
+#include "dk_py_arap.h"
 
 #include "dk_arap.h"
 
@@ -53,7 +53,7 @@ typedef struct arap_extra {
     int cg; /* 0: as bound */
 } arap_extra;
 
-static int solve_extra(dk_py_method *self, PyObject *kw, void *pending, const char *context)
+int dk_py_arap_solve_extra(dk_py_method *self, PyObject *kw, void *pending, const char *context)
 {
     arap_extra *x = (arap_extra *)pending;
     PyObject *cg_obj = kw ? PyDict_GetItemString(kw, "cg_iterations") : NULL;
@@ -91,18 +91,23 @@ static int solve_extra(dk_py_method *self, PyObject *kw, void *pending, const ch
     return 0;
 }
 
-static void apply_extra(dk_py_method *self, const void *pending, void *saved)
+void dk_py_arap_apply_extra_to(dk_arap *ar, const void *pending, void *saved)
 {
     const arap_extra *x = (const arap_extra *)pending;
     dk_error err = {0};
     if (saved) {
         ((arap_extra *)saved)->given = x->given;
-        ((arap_extra *)saved)->tolerance = dk_arap_tolerance(self->native);
+        ((arap_extra *)saved)->tolerance = dk_arap_tolerance(ar);
     }
     if (x->given)
-        (void)dk_arap_set_tolerance(self->native, x->tolerance, &err); /* checked above */
+        (void)dk_arap_set_tolerance(ar, x->tolerance, &err); /* checked above */
     /* every call sets the CG count (its own, or the bound one): nothing to save */
-    (void)dk_arap_set_cg_iterations(self->native, x->cg, &err);      /* checked above */
+    (void)dk_arap_set_cg_iterations(ar, x->cg, &err);      /* checked above */
+}
+
+static void apply_extra(dk_py_method *self, const void *pending, void *saved)
+{
+    dk_py_arap_apply_extra_to(self->native, pending, saved);
 }
 
 static PyObject *stats(dk_py_method *self)
@@ -251,7 +256,7 @@ static const dk_py_method_spec arap_spec = {
     .options_size = sizeof(dk_arap_options),
     .default_options = default_options,
     .parse_options = parse_options,
-    .solve_extra = solve_extra,
+    .solve_extra = dk_py_arap_solve_extra,
     .apply_extra = apply_extra,
     .stats = stats,
     .bind_progress = bind_progress,

@@ -88,7 +88,7 @@ static void test_estimates(void)
         CHECK_MSG(b > a && a > 0, "%s: %llu then %llu", (*m)->name, (unsigned long long)a,
                   (unsigned long long)b);
     }
-    CHECK(n_methods == 12);
+    CHECK(n_methods == 13);
     dk_eigen_options o;
     dk_eigen_default_options(&o);
     uint64_t k20 = 0, k200 = 0;

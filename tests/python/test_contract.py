@@ -99,7 +99,7 @@ def test_registries_agree():
                                    "translation_invariant", "rigid_invariant",
                                    "penalty_handles", "soft_regions", "given_start",
                                    "edits_input", "graph", "controls", "state",
-                                   "linear_precision", "dynamic"}
+                                   "linear_precision", "dynamic", "interior"}
         # a warm start reads what the last solve left: every iterative method carries state
         assert info(name)["state"] or not info(name)["iterative"], name
         # the control kinds its bind takes (dk_controls.h): a non-empty tuple of known ids
@@ -260,7 +260,7 @@ def test_preview_is_fast_path_or_the_solve(name, scene):
     p = a.solve(transforms=T, preview=True)
     q = b.solve(transforms=T)
     assert np.isfinite(np.asarray(p.positions)).all()
-    if name == "ARAP":
+    if name in ("ARAP", "VolumetricARAP"):  # the start alone (the solver inside is ARAP)
         assert p.iterations == 0
         np.testing.assert_allclose(np.asarray(p.positions)[np.concatenate(handles)],
                                    np.asarray(q.positions)[np.concatenate(handles)], atol=1e-12)
@@ -586,7 +586,8 @@ def test_given_start(name, scene):
         assert info(name)["iterative"]
         # from its own converged result: the same minimum, at once
         b = m.solve(transforms=T, start_positions=a.positions)
-        assert b.converged and b.iterations <= 2
+        # (a volume's interior, not in the positions, is rebuilt and relaxes in a few steps)
+        assert b.converged and b.iterations <= (5 if info(name)["interior"] else 2)
         assert abs(b.energy - a.energy) <= 1e-9 * max(a.energy, 1e-12)
         np.testing.assert_allclose(b.positions, a.positions, atol=1e-6)
         # the start alone: constrained vertices in place, the others where given

@@ -442,7 +442,8 @@ def _observable(m):
         if callable(attr) and not type(attr).__name__ == "getset_descriptor":
             continue
         value = getattr(m, name)
-        out[name] = np.array(value).copy() if not isinstance(value, (dict, dk.Mesh)) else value
+        out[name] = (np.array(value).copy() if not isinstance(value, (dict, dk.Mesh, str))
+                     else value)
     return out
 
 
@@ -458,7 +459,8 @@ def _same(a, b):
 def _bad_calls(name, v, handles, fixed, hv):
     good = lift(v, handles)
     nh = len(handles)
-    extra = {"ARAP": {"tolerance": 0.5}, "EigenDeformation": {"preview": True}}.get(name, {})
+    extra = {"ARAP": {"tolerance": 0.5}, "VolumetricARAP": {"tolerance": 0.5},
+             "EigenDeformation": {"preview": True}}.get(name, {})
     calls = [
         ("NaN targets", lambda m: m.solve(np.full((hv, 3), np.nan), **extra)),
         ("wrong target rows", lambda m: m.solve(np.zeros((hv + 1, 3)), **extra)),
@@ -717,6 +719,8 @@ BAD_OPTIONS = {
     "ShapeMatching": [{"alpha": float("nan")}, {"substeps": 0}, {"cluster_size": -1.0},
                       {"damping": -1.0}, {"time_step": 0.0}],
     "ShapeInterpolation": [{"rotations": "spiral"}, {"edge_weights": "heat"}],
+    "VolumetricARAP": [{"quality": 0.5}, {"quality": float("nan")}, {"max_volume": -1.0},
+                       {"tolerance": float("nan")}, {"cg_iterations": 0}],
 }
 
 

@@ -100,6 +100,8 @@ void dk_arap_free(dk_arap *ar)
         return;
     arap_system_free(&ar->sys);
     free(ar->cell_start);
+    free(ar->cc_start);
+    free(ar->cc);
     free(ar->ta);
     free(ar->tb);
     free(ar->tw);
@@ -115,8 +117,36 @@ void dk_arap_free(dk_arap *ar)
     free(ar);
 }
 
-dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraints,
-                       const dk_arap_options *options, dk_arap **out, dk_error *err)
+/* Every corner a vertex of the mesh, four distinct ones per tetrahedron, and few enough
+ * tetrahedra that their six terms each are numbered by a dk_index. */
+static dk_status check_tetrahedra(const dk_index *tets, dk_index n_tets, dk_index n,
+                                  dk_error *err)
+{
+    if (n_tets > (INT32_MAX - n) / 6)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP bind: %ld tetrahedra, at most %ld", (long)n_tets,
+                            (long)((INT32_MAX - n) / 6));
+    for (dk_index t = 0; t < n_tets; t++) {
+        const dk_index *q = tets + 4 * (size_t)t;
+        for (int a = 0; a < 4; a++) {
+            if (q[a] < 0 || q[a] >= n)
+                return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                                    "ARAP bind: tetrahedron %ld has corner %ld, the mesh has "
+                                    "%ld vertices", (long)t, (long)q[a], (long)n);
+            for (int b = 0; b < a; b++)
+                if (q[a] == q[b])
+                    return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                                        "ARAP bind: tetrahedron %ld has vertex %ld twice",
+                                        (long)t, (long)q[a]);
+        }
+    }
+    return DK_OK;
+}
+
+/* dk_arap_bind (tets NULL) and dk_arap_bind_tetrahedra. */
+static dk_status bind(const dk_mesh *mesh, const dk_index *tets, dk_index n_tets,
+                      const dk_constraint_desc *constraints, const dk_arap_options *options,
+                      dk_arap **out, dk_error *err)
 {
     if (out)
         *out = NULL;
@@ -133,6 +163,8 @@ dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraint
         return st;
     if (mesh->n_faces == 0)
         return dk_error_set(err, DK_ERR_TOPOLOGY, "ARAP bind: the mesh has no triangle");
+    if (tets && (st = check_tetrahedra(tets, n_tets, mesh->n_vertices, err)) != DK_OK)
+        return st;
     dk_arap *ar = calloc(1, sizeof *ar);
     if (!ar)
         return oom(err, "object");
@@ -147,6 +179,7 @@ dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraint
     ar->cg = opt.cg_iterations;
     ar->cg_scheduled = 1;
     ar->n = mesh->n_vertices;
+    ar->nc = tets ? ar->n + n_tets : ar->n;
     st = dk_progress_begin(&prog, 0, err); /* renumber */
     if (st == DK_OK)
         st = dk_reorder_create(mesh, 0, &ar->ro, err);
@@ -159,25 +192,32 @@ dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraint
     ar->opt.progress = NULL; /* the caller's callback is for this bind only */
     ar->opt.progress_user = NULL;
     ar->x = malloc(((size_t)ar->n * 3 + 1) * sizeof *ar->x);
-    ar->rot = malloc(((size_t)ar->n * 9 + 1) * sizeof *ar->rot);
+    ar->rot = malloc(((size_t)ar->nc * 9 + 1) * sizeof *ar->rot);
+    dk_index *itets = tets ? malloc(4 * (size_t)n_tets * sizeof *tets + 1) : NULL;
+    if (itets) /* in the internal numbering */
+        for (size_t k = 0; k < 4 * (size_t)n_tets; k++)
+            itets[k] = ar->ro->iperm[tets[k]];
     ar->prev = malloc(((size_t)ar->n * 3 + 1) * sizeof *ar->prev);
     ar->prev2 = malloc(((size_t)ar->n * 3 + 1) * sizeof *ar->prev2);
-    if (!ar->x || !ar->rot || !ar->prev || !ar->prev2) {
+    if (!ar->x || !ar->rot || !ar->prev || !ar->prev2 || (tets && !itets)) {
+        free(itets);
         dk_arap_free(ar);
         return oom(err, "positions");
     }
-    for (dk_index v = 0; v < ar->n; v++) /* rotations are always valid guesses */
+    for (dk_index v = 0; v < ar->nc; v++) /* rotations are always valid guesses */
         for (int k = 0; k < 9; k++)
             ar->rot[9 * (size_t)v + k] = k % 4 == 0 ? 1.0 : 0.0;
     dk_reorder_desc rd;
     st = dk_reorder_desc_create(ar->ro, mesh, constraints, &rd, err);
     if (st != DK_OK) {
+        free(itets);
         dk_arap_free(ar);
         return dk_error_prefix(err, "ARAP");
     }
     st = dk_progress_begin(&prog, 1, err); /* cells */
     if (st == DK_OK)
-        st = arap_build_cells(ar, err);
+        st = tets ? arap_build_volume_cells(ar, itets, n_tets, err) : arap_build_cells(ar, err);
+    free(itets);
     if (st == DK_OK)
         st = arap_system_build(ar, &rd.desc, NULL, &ar->sys, err);
     dk_reorder_desc_free(&rd);
@@ -189,6 +229,25 @@ dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraint
     dk_progress_done(&prog);
     *out = ar;
     return DK_OK;
+}
+
+dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraints,
+                       const dk_arap_options *options, dk_arap **out, dk_error *err)
+{
+    return bind(mesh, NULL, 0, constraints, options, out, err);
+}
+
+dk_status dk_arap_bind_tetrahedra(const dk_mesh *mesh, const dk_index *tetrahedra,
+                                  dk_index n_tetrahedra, const dk_constraint_desc *constraints,
+                                  const dk_arap_options *options, dk_arap **out, dk_error *err)
+{
+    if (out)
+        *out = NULL;
+    if (!tetrahedra || n_tetrahedra < 1)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP bind: no tetrahedra (tetrahedra NULL or n_tetrahedra %ld)",
+                            (long)n_tetrahedra);
+    return bind(mesh, tetrahedra, n_tetrahedra, constraints, options, out, err);
 }
 
 dk_status dk_arap_rebind(dk_arap *ar, const dk_constraint_desc *constraints, dk_error *err)

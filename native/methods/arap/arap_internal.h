@@ -22,7 +22,7 @@
  * Files, one idea each:
  *   arap.c        the public verbs: options, bind, rebind, solve (a driver naming its
  *                 steps), energy, stats, the method-contract table
- *   cells.c       the cells: each vertex's weighted rest edges
+ *   cells.c       the cells: each vertex's weighted rest edges, or each tetrahedron's
  *   system.c      the constraint system: unknowns, component check, reduced matrix, its
  *                 factor (analysis reused by rebind), the right-hand-side map
  *   local_step.c  rotations (refined by Newton steps on SO(3)), energies, right-hand sides
@@ -165,6 +165,13 @@ struct dk_arap {
     int cg_scheduled;     /* 1: the bound count, scaled by opt.cg_schedule (newton.c); 0: a
                              count given to dk_arap_set_cg_iterations, run as given          */
     dk_index n;
+    /* The cells: one per vertex (nc == n) on a surface; on a volume (dk_arap_bind_tetrahedra)
+     * the n vertices' surface cells (empty for a vertex in a tetrahedron) then one per
+     * tetrahedron (nc == n + tetrahedra), whose corners are cc[cc_start[c] .. cc_start[c + 1]
+     * - 1] (its vertex, or its four; both NULL on a surface): a cell's stiffness is its
+     * corners' mean. rot and Newton's kinv and omega are per cell. */
+    dk_index nc;
+    dk_index *cc_start, *cc;
     int64_t n_terms;
     dk_index *cell_start, *ta, *tb;
     double *tw, *te;
@@ -262,8 +269,12 @@ static inline double dist2(const double *p, const double *q)
     return d0 * d0 + d1 * d1 + d2 * d2;
 }
 
-/* cells.c; arap_cells_set_edges: te from the positions p (n x 3, internal numbering) */
+/* cells.c; arap_cells_set_edges: te from the positions p (n x 3, internal numbering);
+ * arap_build_volume_cells: the cells of a volume, `tets` (nt x 4, internal numbering) and
+ * the surface of what no tetrahedron holds (see dk_arap_bind_tetrahedra) */
 dk_status arap_build_cells(dk_arap *ar, dk_error *err);
+dk_status arap_build_volume_cells(dk_arap *ar, const dk_index *tets, dk_index nt,
+                                  dk_error *err);
 void arap_cells_set_edges(dk_arap *ar, const double *p);
 
 /* system.c: builds a complete system for `desc`; `old` (may be NULL) lends its symbolic

@@ -24,10 +24,12 @@ static int term_less(const raw_term *x, const raw_term *y)
     return x->a < y->a || (x->a == y->a && x->b < y->b);
 }
 
-dk_status arap_build_cells(dk_arap *ar, dk_error *err)
+/* The cells of the triangles `faces` (nf x 3): one per vertex (empty for a vertex in none). */
+static dk_status build_surface_cells(dk_arap *ar, const dk_index *faces, dk_index nf,
+                                     dk_error *err)
 {
     const dk_mesh *m = ar->mesh;
-    const dk_index n = m->n_vertices, nf = m->n_faces;
+    const dk_index n = m->n_vertices;
     const int rims = ar->opt.energy == DK_ARAP_SPOKES_AND_RIMS;
     const int per_corner = rims ? 3 : 2;
     const double *p = m->positions;
@@ -41,7 +43,7 @@ dk_status arap_build_cells(dk_arap *ar, dk_error *err)
     }
     for (dk_index f = 0; f < nf; f++)
         for (int k = 0; k < 3; k++)
-            start[m->faces[3 * f + k] + 1] += per_corner;
+            start[faces[3 * f + k] + 1] += per_corner;
     for (dk_index v = 0; v < n; v++)
         start[v + 1] += start[v];
     memcpy(fill, start, (size_t)n * sizeof *fill);
@@ -49,7 +51,7 @@ dk_status arap_build_cells(dk_arap *ar, dk_error *err)
     for (dk_index f = 0; f < nf; f++) {
         if ((st = arap_tick(ar, f, work, err)) != DK_OK)
             goto done;
-        const dk_index *t = m->faces + 3 * f;
+        const dk_index *t = faces + 3 * f;
         double l0 = dist2(p + 3 * t[1], p + 3 * t[2]), l1 = dist2(p + 3 * t[2], p + 3 * t[0]),
                l2 = dist2(p + 3 * t[0], p + 3 * t[1]);
         double longest2 = fmax(l0, fmax(l1, l2));
@@ -128,9 +130,106 @@ done:
     return st;
 }
 
+dk_status arap_build_cells(dk_arap *ar, dk_error *err)
+{
+    return build_surface_cells(ar, ar->mesh->faces, ar->mesh->n_faces, err);
+}
+
 void arap_cells_set_edges(dk_arap *ar, const double *p)
 {
     for (int64_t t = 0; t < ar->n_terms; t++)
         for (int d = 0; d < 3; d++)
             ar->te[3 * t + d] = p[3 * ar->ta[t] + d] - p[3 * ar->tb[t] + d];
+}
+
+/* A tetrahedron's cell: its six edges weighted by the linear element's stiffness
+ * (dk_tetrahedron_stiffness), so that the cell's sum over its edges of
+ * w_ab |(x_a - x_b) - R (p_a - p_b)|^2 = vol |F - R|^2 for every x and R, F = D_s D_m^-1
+ * the element's deformation gradient: the slides' volumetric ARAP term with lambda = vol,
+ * whatever the signs of the w (an obtuse dihedral angle makes one negative; the sum stays
+ * vol |F - R|^2 >= 0, so nothing is clamped).
+ *
+ * The layout: cells 0 .. n-1 are the vertices' surface cells, built from the triangles none
+ * of whose corners is in a tetrahedron (the parts that bound no volume; empty cells for the
+ * others), then one cell per tetrahedron; a cell's corners (cc) are its vertex, or its
+ * tetrahedron's four. */
+dk_status arap_build_volume_cells(dk_arap *ar, const dk_index *tets, dk_index nt,
+                                  dk_error *err)
+{
+    const dk_mesh *m = ar->mesh;
+    const dk_index n = ar->n;
+    const double *p = m->positions;
+    unsigned char *in_tet = calloc((size_t)n + 1, 1);
+    dk_index *faces = malloc(3 * (size_t)m->n_faces * sizeof *faces + sizeof *faces);
+    if (!in_tet || !faces) {
+        free(in_tet);
+        free(faces);
+        return oom(err, "cells");
+    }
+    for (size_t k = 0; k < 4 * (size_t)nt; k++)
+        in_tet[tets[k]] = 1;
+    dk_index nf = 0;
+    for (dk_index f = 0; f < m->n_faces; f++) {
+        const dk_index *t = m->faces + 3 * (size_t)f;
+        if (!in_tet[t[0]] && !in_tet[t[1]] && !in_tet[t[2]])
+            memcpy(faces + 3 * (size_t)nf++, t, 3 * sizeof *t);
+    }
+    free(in_tet);
+    dk_status st = build_surface_cells(ar, faces, nf, err);
+    free(faces);
+    if (st != DK_OK)
+        return st;
+    const int64_t ns = ar->n_terms, nterms = ns + 6 * (int64_t)nt;
+    if (nterms > INT32_MAX)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP bind: %lld cell terms, at most %ld", (long long)nterms,
+                            (long)INT32_MAX);
+    dk_index *cs = realloc(ar->cell_start, ((size_t)n + (size_t)nt + 1) * sizeof *cs);
+    if (cs)
+        ar->cell_start = cs;
+    dk_index *ta = realloc(ar->ta, ((size_t)nterms + 1) * sizeof *ta);
+    if (ta)
+        ar->ta = ta;
+    dk_index *tb = realloc(ar->tb, ((size_t)nterms + 1) * sizeof *tb);
+    if (tb)
+        ar->tb = tb;
+    double *tw = realloc(ar->tw, ((size_t)nterms + 1) * sizeof *tw);
+    if (tw)
+        ar->tw = tw;
+    double *te = realloc(ar->te, ((size_t)nterms * 3 + 1) * sizeof *te);
+    if (te)
+        ar->te = te;
+    ar->cc_start = malloc(((size_t)n + (size_t)nt + 1) * sizeof *ar->cc_start);
+    ar->cc = malloc(((size_t)n + 4 * (size_t)nt + 1) * sizeof *ar->cc);
+    if (!cs || !ta || !tb || !tw || !te || !ar->cc_start || !ar->cc)
+        return oom(err, "cell terms"); /* freed with the object */
+    for (dk_index v = 0; v <= n; v++) {
+        ar->cc_start[v] = v;
+        if (v < n)
+            ar->cc[v] = v;
+    }
+    for (dk_index c = 0; c < nt; c++) {
+        if ((c & 4095) == 0 && (st = arap_tick(ar, c, nt, err)) != DK_OK)
+            return st;
+        const dk_index *q = tets + 4 * (size_t)c;
+        double w[6];
+        dk_tetrahedron_stiffness(p + 3 * q[0], p + 3 * q[1], p + 3 * q[2], p + 3 * q[3], w);
+        ar->cell_start[n + c] = (dk_index)(ns + 6 * (int64_t)c);
+        ar->cc_start[n + c + 1] = n + 4 * (c + 1);
+        memcpy(ar->cc + n + 4 * (size_t)c, q, 4 * sizeof *q);
+        int e = 0;
+        for (int a = 0; a < 4; a++)
+            for (int b = a + 1; b < 4; b++, e++) {
+                const int64_t t = ns + 6 * (int64_t)c + e;
+                ar->ta[t] = q[a] < q[b] ? q[a] : q[b];
+                ar->tb[t] = q[a] < q[b] ? q[b] : q[a];
+                ar->tw[t] = w[e];
+                for (int k = 0; k < 3; k++)
+                    ar->te[3 * t + k] = p[3 * ar->ta[t] + k] - p[3 * ar->tb[t] + k];
+            }
+    }
+    ar->cell_start[n + nt] = (dk_index)nterms;
+    ar->n_terms = nterms;
+    ar->nc = n + nt;
+    return DK_OK;
 }

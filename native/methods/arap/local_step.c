@@ -354,10 +354,10 @@ double arap_local_energy(const dk_arap *ar, const arap_system *s, const double *
     double energy;
     if (ar->n_terms >= PARALLEL_TERMS) {
         cells_job job = {ar, s, x, rot, {0.0, 0.0}};
-        dk_team_run_halves(ar->team, cells_part, &job, ar->n, 0);
+        dk_team_run_halves(ar->team, cells_part, &job, ar->nc, 0);
         energy = job.energy[0] + job.energy[1];
     } else {
-        energy = cells_energy(ar, s, x, rot, 0, ar->n);
+        energy = cells_energy(ar, s, x, rot, 0, ar->nc);
     }
     return energy + soft_penalties(s, x);
 }
@@ -377,7 +377,7 @@ typedef struct sample_job {
 static void sample_part(void *ctx, dk_index k0, dk_index k1, int part)
 {
     sample_job *j = ctx;
-    const dk_index n = j->ar->n;
+    const dk_index n = j->ar->nc;
     double energy = 0.0;
     for (dk_index k = k0; k < k1; k++) {
         const dk_index i0 = k * j->stride * SAMPLE_BLOCK;
@@ -398,7 +398,7 @@ double arap_sampled_energy(const dk_arap *ar, const arap_system *s, const double
                            dk_index stride)
 {
     sample_job job = {ar, s, x, stride, {0.0, 0.0}};
-    const dk_index span = stride * SAMPLE_BLOCK, m = (ar->n + span - 1) / span;
+    const dk_index span = stride * SAMPLE_BLOCK, m = (ar->nc + span - 1) / span;
     dk_team_run_halves(ar->team, sample_part, &job, m, 64);
     double energy = job.energy[0] + job.energy[1];
     return energy + soft_penalties(s, x);

@@ -244,7 +244,7 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
     const dk_index nu = s->nu;
     const size_t N = 3 * (size_t)nu;
     const int par = ar->n_terms >= PARALLEL_TERMS;
-    const dk_index cells_min = par ? 0 : ar->n + 1, rows_min = par ? 0 : nu + 1;
+    const dk_index cells_min = par ? 0 : ar->nc + 1, rows_min = par ? 0 : nu + 1;
     double *r = s->nt_r, *z = s->nt_z, *p = s->nt_p, *q = s->nt_q, *d = s->nt_d;
     double *z0 = s->nt_z0, ignored;
     const int whole = ar->cg >= ar->opt.cg_iterations;
@@ -273,7 +273,7 @@ static dk_status newton_step(dk_arap *ar, arap_system *s, double energy, double 
     job.out = q;
     job.rhs = NULL;
     for (int k = 0; k < cg; k++) {
-        dk_team_run_halves(ar->team, hv_cells_part, &job, ar->n, cells_min);
+        dk_team_run_halves(ar->team, hv_cells_part, &job, ar->nc, cells_min);
         dk_team_run_halves(ar->team, hv_rows_part, &job, nu, rows_min);
         (*cg_total)++;
         const double pq = job.dot[0] + job.dot[1];

@@ -30,7 +30,7 @@ static int spans_of(const dk_arap *ar_const, arap_scalars *sc, double *pose, dk_
     sp[k++] = (dk_state_span){sc, sizeof *sc};
     sp[k++] = (dk_state_span){pose, 3 * n * D};
     SPAN(ar->x, 3 * n);
-    SPAN(ar->rot, 9 * n);
+    SPAN(ar->rot, 9 * (size_t)ar->nc);
     SPAN(ar->prev, 3 * n);
     SPAN(ar->prev2, 3 * n);
     SPAN(s->targets, nhv);
@@ -47,8 +47,8 @@ static int spans_of(const dk_arap *ar_const, arap_scalars *sc, double *pose, dk_
     SPAN(s->dg, N * m);
     SPAN(s->df, N * m);
     sp[k++] = (dk_state_span){s->aa_gram, sizeof s->aa_gram};
-    SPAN(s->kinv, 6 * n);
-    SPAN(s->omega, 3 * n);
+    SPAN(s->kinv, 6 * (size_t)ar->nc);
+    SPAN(s->omega, 3 * (size_t)ar->nc);
     SPAN(s->vfull, 3 * n);
     SPAN(s->nt_r, N);
     SPAN(s->nt_z, N);

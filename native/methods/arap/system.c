@@ -201,29 +201,102 @@ static int cell_gather_vector(const dk_arap *ar, const arap_system *s, dk_index 
     return touches;
 }
 
+/* The cells that may touch vertex v: on a surface v's own and its one-ring's (a spoke
+ * (c, v), or a rim of a triangle (c, v, k)); on a volume those with a term touching v, from
+ * the incidence `vt` (vt_start[v] .. vt_start[v + 1] - 1). Entry q of first .. end - 1
+ * (candidate_cell). */
+static void candidates(const dk_arap *ar, const dk_index *vt_start, dk_index v, dk_index *first,
+                       dk_index *end)
+{
+    if (vt_start) {
+        *first = vt_start[v];
+        *end = vt_start[v + 1];
+    } else {
+        *first = ar->mesh->ring_start[v] - 1;
+        *end = ar->mesh->ring_start[v + 1];
+    }
+}
+static dk_index candidate_cell(const dk_arap *ar, const dk_index *vt, dk_index v, dk_index q)
+{
+    if (vt)
+        return vt[q];
+    return q < ar->mesh->ring_start[v] ? v : ar->mesh->ring_index[q];
+}
+
+/* A volume's vertex-to-cell incidence: the cells with a term touching each vertex
+ * (*vt_start: n + 1 offsets, *vt: the cells, ascending per vertex); both NULL on a
+ * surface. */
+static dk_status tet_incidence(const dk_arap *ar, dk_index **vt_start, dk_index **vt,
+                               dk_error *err)
+{
+    *vt_start = *vt = NULL;
+    if (!ar->cc_start)
+        return DK_OK;
+    const dk_index n = ar->n, nc = ar->nc;
+    dk_index *start = calloc((size_t)n + 2, sizeof *start);
+    dk_index *seen = malloc(((size_t)n + 1) * sizeof *seen);
+    dk_index *cells = NULL;
+    if (!start || !seen)
+        goto oom;
+    for (int pass = 0; pass < 2; pass++) {
+        for (dk_index v = 0; v < n; v++)
+            seen[v] = -1;
+        for (dk_index c = 0; c < nc; c++)
+            for (dk_index t = ar->cell_start[c]; t < ar->cell_start[c + 1]; t++) {
+                const dk_index ends[2] = {ar->ta[t], ar->tb[t]};
+                for (int k = 0; k < 2; k++)
+                    if (seen[ends[k]] != c) {
+                        seen[ends[k]] = c;
+                        if (pass == 0)
+                            start[ends[k] + 2]++;
+                        else
+                            cells[start[ends[k] + 1]++] = c;
+                    }
+            }
+        if (pass == 0) {
+            for (dk_index v = 0; v < n; v++)
+                start[v + 2] += start[v + 1];
+            if (!(cells = malloc(((size_t)start[n + 1] + 1) * sizeof *cells)))
+                goto oom;
+        }
+    }
+    free(seen);
+    *vt_start = start; /* start[v] .. start[v + 1] - 1 after the fill shifted it */
+    *vt = cells;
+    return DK_OK;
+oom:
+    free(start);
+    free(seen);
+    free(cells);
+    return oom(err, "right-hand-side map");
+}
+
 /* The rotations-to-right-hand-side map s->rg (needs s->unknowns, s->tws). Every cell with a
- * term touching v is v's own or one of its one-ring's (a spoke (c, v), or a rim of a
- * triangle (c, v, k)), so candidates are scanned there: O(sum of one-ring cell sizes). */
+ * term touching v is among candidates(): O(sum of their sizes). */
 static dk_status build_rhs_map(const dk_arap *ar, arap_system *s, dk_error *err)
 {
-    const dk_mesh *m = ar->mesh;
     const dk_index nu = s->nu;
     double g[3];
+    dk_index *vt_start, *vt;
     s->rg_start = malloc(((size_t)nu + 1) * sizeof *s->rg_start);
     if (!s->rg_start)
         return oom(err, "right-hand-side map");
+    dk_status st = tet_incidence(ar, &vt_start, &vt, err);
+    if (st != DK_OK)
+        return st;
     int64_t k = 0;
-    for (int pass = 0; pass < 2; pass++) {
+    for (int pass = 0; pass < 2 && st == DK_OK; pass++) {
         k = 0;
         for (dk_index u = 0; u < nu; u++) {
-            const dk_status st = arap_tick(ar, (double)pass * nu + u, 2.0 * nu, err);
-            if (st != DK_OK)
-                return st; /* rg_start, rg: freed with the system */
+            if ((st = arap_tick(ar, (double)pass * nu + u, 2.0 * nu, err)) != DK_OK)
+                break; /* rg_start, rg: freed with the system */
             const dk_index v = s->unknowns[u];
             if (pass == 0)
                 s->rg_start[u] = k;
-            for (dk_index q = m->ring_start[v] - 1; q < m->ring_start[v + 1]; q++) {
-                const dk_index c = q < m->ring_start[v] ? v : m->ring_index[q];
+            dk_index first, end;
+            candidates(ar, vt_start, v, &first, &end);
+            for (dk_index q = first; q < end; q++) {
+                const dk_index c = candidate_cell(ar, vt, v, q);
                 if (!cell_gather_vector(ar, s, c, v, g))
                     continue;
                 if (pass == 1) {
@@ -233,14 +306,16 @@ static dk_status build_rhs_map(const dk_arap *ar, arap_system *s, dk_error *err)
                 k++;
             }
         }
-        if (pass == 0) {
+        if (pass == 0 && st == DK_OK) {
             s->rg_start[nu] = k;
             s->rg = malloc(((size_t)k + 1) * sizeof *s->rg);
             if (!s->rg)
-                return oom(err, "right-hand-side map");
+                st = oom(err, "right-hand-side map");
         }
     }
-    return DK_OK;
+    free(vt_start);
+    free(vt);
+    return st;
 }
 
 /* ARAP's unknowns: free vertices, and handle vertices of weight w < 1, pulled to their
@@ -268,12 +343,19 @@ static dk_status classify(const dk_arap *ar, arap_system *s, dk_error *err)
     dk_csys_target_rows(c, s->target_of);
     /* Weights with stiffness, the ARAP diagonal, then the soft penalties. */
     double diag = 0.0, escale = 0.0;
-    for (dk_index i = 0; i < n; i++) {
-        const dk_status st = arap_tick(ar, i, n, err);
+    for (dk_index i = 0; i < ar->nc; i++) {
+        const dk_status st = arap_tick(ar, i, ar->nc, err);
         if (st != DK_OK)
             return st;
+        double stiffness = c->stiffness[i]; /* on a volume: the cell's corners' mean */
+        if (ar->cc_start) {
+            stiffness = 0.0;
+            for (dk_index k = ar->cc_start[i]; k < ar->cc_start[i + 1]; k++)
+                stiffness += c->stiffness[ar->cc[k]];
+            stiffness /= (double)(ar->cc_start[i + 1] - ar->cc_start[i]);
+        }
         for (dk_index t = ar->cell_start[i]; t < ar->cell_start[i + 1]; t++) {
-            s->tws[t] = c->stiffness[i] * ar->tw[t];
+            s->tws[t] = stiffness * ar->tw[t];
             diag += 2.0 * s->tws[t];
             const double *e = ar->te + 3 * t;
             escale += s->tws[t] * (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
@@ -318,8 +400,8 @@ static dk_status solve_buffers(const dk_arap *ar, arap_system *s, dk_error *err)
     }
     const int newton = ar->opt.acceleration == DK_ARAP_ACCEL_NEWTON;
     if (newton) {
-        s->kinv = malloc(6 * (size_t)n * sizeof(double) + sizeof(double));
-        s->omega = malloc(3 * (size_t)n * sizeof(double) + sizeof(double));
+        s->kinv = malloc(6 * (size_t)ar->nc * sizeof(double) + sizeof(double));
+        s->omega = malloc(3 * (size_t)ar->nc * sizeof(double) + sizeof(double));
         s->vfull = calloc(3 * (size_t)n + 1, sizeof(double));
         s->nt_r = malloc(N * sizeof(double));
         s->nt_z = malloc(N * sizeof(double));

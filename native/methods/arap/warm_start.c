@@ -22,7 +22,7 @@ static void place_known(dk_arap *ar, arap_system *s, const double *from)
 static void identity_rotations(dk_arap *ar)
 {
     static const double id[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-    for (dk_index v = 0; v < ar->n; v++)
+    for (dk_index v = 0; v < ar->nc; v++)
         memcpy(ar->rot + 9 * (size_t)v, id, sizeof id);
 }
 
@@ -145,7 +145,7 @@ static dk_status start_warm(dk_arap *ar, arap_system *s, int lazy, double *energ
          * cell (~0.2 s at 692k vertices, five times the rest of the start): on the
          * 692k armadillo's first drag step after a converged solve, taking the predictor
          * unchecked gave 1.10x the step's minimum (docs/methods/arap.md, "Preview"). */
-        const dk_index stride = ar->n > PREVIEW_SAMPLE ? ar->n / PREVIEW_SAMPLE : 1;
+        const dk_index stride = ar->nc > PREVIEW_SAMPLE ? ar->nc / PREVIEW_SAMPLE : 1;
         const double e_plain = arap_sampled_energy(ar, s, ar->x, stride);
         arap_gather(s, ar->x, s->xu); /* keep the plain start */
         for (dk_index u = 0; u < nu; u++)
