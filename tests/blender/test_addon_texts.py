@@ -304,6 +304,7 @@ STORED_IDS = {
     ("SHAPE_BLEND", "stretches"): ("linear", "log"),
     ("SHAPE_BLEND", "edge_weights"): ("clamped_cotangent", "cotangent", "uniform"),
     ("SHEPARD", "neighbourhood"): ("all", "nearest", "radius"),
+    ("VOLUME_ARAP", "acceleration"): ("anderson", "none", "newton"),
 }
 # the solver's words the issue found in the UI, which an artist cannot act on
 SOLVER_WORDS = ("Tikhonov", "Regularization", "Material Stiffness", "CG Iterations",
