@@ -145,6 +145,10 @@ class Method:
     # native solve edits; signature(obj, options) -> what else of them the binding depends
     # on); its solve_args give the weights
     poses: Optional[str] = None
+    # what a bind made that the artist should know, read from the native object once bound:
+    # bind_summary(native) -> short text the status line ends with (Volume ARAP: how many
+    # tetrahedra, or that the mesh bounds no volume and deforms as a surface)
+    bind_summary: Optional[Callable] = None
     # True: on a mesh with shape keys, Add makes the deformer's modifier the first of the
     # stack (a blend of shape keys belongs where Blender applies them: above an Armature,
     # which then poses the blend)
@@ -821,6 +825,21 @@ METHODS.append(Method(
     ],
 ))
 
+def _volume_summary(native):
+    """Volume ARAP's bind, in the status line: the solid's tetrahedra, or why (part of) the
+    mesh bounds no volume and deforms as a surface (the native volume_note)."""
+    n, note = getattr(native, "n_tetrahedra", None), getattr(native, "volume_note", "")
+    if n is None:   # the tests' stand-in module (tests/blender/mock)
+        return ""
+    if n == 0:
+        why = ("its closed surface crosses itself" if "intersects" in note
+               else "it is not closed (a hole, or an edge shared by more than two faces)"
+               if "no closed part" in note else note.replace("no volume: ", ""))
+        return "no volume: deformed as a surface (%s)" % why
+    text = "%d tetrahedra inside" % n
+    return text + ("; parts with holes deform as surfaces" if note else "")
+
+
 METHODS.append(Method(
     id="VOLUME_ARAP",
     label="Volume ARAP",
@@ -839,6 +858,7 @@ METHODS.append(Method(
     iteration_cap="max_iterations",
     inner_iterations="cg_iterations",
     inner_when=("acceleration", "newton"),
+    bind_summary=lambda native: _volume_summary(native),
     options=[
         Option("quality", "FLOAT", 1.5, "Tetrahedra Shape",
                "How well-shaped the solid's tetrahedra must be (their longest radius against "

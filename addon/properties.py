@@ -195,6 +195,8 @@ _deformer_ann = {
                               description="Bind's rest frame (Rest Frame: Frame)"),
     "bind_n_vertices": IntProperty(name="Vertices at Bind", default=0),
     "bind_n_faces": IntProperty(name="Faces at Bind", default=0),
+    # methods.Method.bind_summary's text at the last Bind (empty for the other methods)
+    "bind_summary": StringProperty(name="Bind Summary", default=""),
     # solver.topology_fingerprint of the mesh at bind (connectivity and vertex order): a
     # short string, so a file saved with it opens (and renders) without the add-on
     "bind_topology": StringProperty(name="Topology at Bind",

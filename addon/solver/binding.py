@@ -191,6 +191,8 @@ def bind_end(obj, d, job, mats, depsgraph=None):
         h.is_bound = True
     d.bind_n_vertices = e.n_vertices
     d.bind_n_faces = e.n_faces
+    summary = methods.get(d.method).bind_summary
+    d.bind_summary = summary(e.native) if summary else ""
     d.bound = True
     cache.runtime.pop((obj.name, d.uid), None)
     geonodes.ensure_modifier(obj, d)

@@ -45,8 +45,9 @@ def idle_status(d):
                                     ", %s" % plural(len(d.handles), "handle")
                                     if len(d.handles) else "")
     if d.bound:
-        return "bound: %s, %s" % (plural(d.bind_n_vertices, "vertex"),
-                                  plural(len(d.handles), "handle"))
+        return "bound: %s, %s%s" % (plural(d.bind_n_vertices, "vertex"),
+                                    plural(len(d.handles), "handle"),
+                                    "; " + d.bind_summary if d.bind_summary else "")
     if len(d.handles) == 0 and m.needs_handles:
         return "not bound: add a handle, then Bind"
     return "not bound: press Bind"

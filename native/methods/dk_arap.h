@@ -157,13 +157,15 @@ dk_status dk_arap_bind(const dk_mesh *mesh, const dk_constraint_desc *constraint
  *  tetrahedron, the energy sum_t s_t vol_t |F_t - R_t|^2 (F_t = D_s D_m^-1 the element's
  *  deformation gradient, s_t the mean stiffness of its corners) plus the soft penalties.
  *  Each cell holds the tetrahedron's six edges weighted by the linear element's stiffness
- *  (|e| cot(dihedral angle at the opposite edge) / 6), exactly, so options.energy and
- *  options.weights do not apply (nothing is clamped: a cell's sum is >= 0 whatever its
- *  signs). mesh: its vertices are the points (the surface's and the interior's), its
- *  triangles any that join them (the tetrahedra's faces): they give the locality order and
- *  the connected components (dk_constraints.h), nothing else. tetrahedra: n_tetrahedra x 4
- *  vertex indices, four distinct per row, in either orientation; a degenerate one weighs
- *  nothing. Everything else -- constraints, solves, starts, state -- as for a surface. */
+ *  (|e| cot(dihedral angle at the opposite edge) / 6), exactly (nothing is clamped: a
+ *  cell's sum is >= 0 whatever its signs). mesh: its vertices are the points (the
+ *  surface's and the interior's), its triangles the tetrahedra's faces and any others: the
+ *  triangles none of whose corners is in a tetrahedron (a part of the mesh that bounds no
+ *  volume) give their vertices surface cells as dk_arap_bind does, with options.energy and
+ *  options.weights, in the same solve; all of them give the locality order and the
+ *  connected components (dk_constraints.h). tetrahedra: n_tetrahedra x 4 vertex indices,
+ *  four distinct per row, in either orientation; a degenerate one weighs nothing.
+ *  Everything else -- constraints, solves, starts, state -- as for a surface. */
 dk_status dk_arap_bind_tetrahedra(const dk_mesh *mesh, const dk_index *tetrahedra,
                                   dk_index n_tetrahedra, const dk_constraint_desc *constraints,
                                   const dk_arap_options *options, dk_arap **out, dk_error *err);

@@ -22,7 +22,8 @@ PNG3 = os.path.join(OUT, "viewport_show_graph.png")
 # the panel in each state an artist meets (DEFORMKIT_SHOT=states, a third run): one image
 # each, kept in docs/images after being looked at
 STATES = ("unbound", "bound", "bound_warning", "rebinding", "baked", "overlap_error", "handle_target",
-          "sidebar", "lattice", "cage", "cage_view", "skinning_view", "jiggle", "shape_blend")
+          "sidebar", "lattice", "cage", "cage_view", "skinning_view", "jiggle", "shape_blend",
+          "volume_arap")
 STATE_PNGS = [os.path.join(OUT, "panel_%s.png" % s) for s in STATES]
 
 try:
@@ -417,6 +418,29 @@ def in_blender():
                 d.bound and not d.status_is_error and obj.modifiers[0].type == "NODES",
                 (d.status, [m.type for m in obj.modifiers]))
         yield "shape_blend"
+        # the Volume ARAP deformer on a tube bent by its handle: bound, its status counting the
+        # tetrahedra, its options (Advanced open)
+        yield from fresh_properties()
+        with bpy.context.temp_override(**S.ui_context()):
+            V, F = S.tube(n_len=41)
+            obj = S.triangle_mesh_object(V, F, name="Tube")
+            S.group(obj, "fixed", np.flatnonzero(V[:, 0] < -0.9))
+            S.group(obj, "tip", np.flatnonzero(V[:, 0] > 0.9))
+            e = S.empty("Tip", (1.0, 0.0, 0.0))
+            bpy.context.view_layer.objects.active = obj
+            obj.select_set(True)
+            bpy.ops.deformkit.add_deformer(method="VOLUME_ARAP")
+            d = obj.deformkit.deformers[0]
+            d.fixed_group = "fixed"
+            bpy.ops.deformkit.add_handle(vertex_group="tip", target=e.name)
+            d.show_advanced = True
+            bpy.ops.deformkit.bind()
+            e.location = (0.6, 0.7, 0.0)
+            e.rotation_euler = (0.0, 0.0, 1.2)
+        S.geonodes.find_modifier(obj, d).show_expanded = False
+        R.check("the volume ARAP deformer bound", d.bound and not d.status_is_error and
+                "tetrahedra inside" in S.solver.status_text(d), S.solver.status_text(d))
+        yield "volume_arap"
 
     sidebar_drawn = []
     from addon import ui
