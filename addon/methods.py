@@ -861,9 +861,9 @@ METHODS.append(Method(
     bind_summary=lambda native: _volume_summary(native),
     options=[
         Option("quality", "FLOAT", 1.5, "Tetrahedra Shape",
-               "How well-shaped the solid's tetrahedra must be (their longest radius against "
-               "their shortest edge): lower adds more inner points and binds slower; 0 adds "
-               "none", min=0.0, max=10.0, advanced=True),
+               "How well-shaped the solid's tetrahedra must be (the radius of each one's "
+               "sphere against its shortest edge): lower adds more inner points, binds slower "
+               "and bends more evenly", min=1.1, max=10.0, advanced=True),
         Option("max_iterations", "INT", 1000, "Max Iterations",
                "Most steps one solve takes: raise it when the panel says 'not converged', "
                "lower it to trade accuracy for speed", min=1, max=100000, advanced=True),

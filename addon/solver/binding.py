@@ -100,6 +100,12 @@ class BindJob(progress.Reporting):
         e.fit_for, e.fit_text = None, None   # fit_warning's cache
         e.sim = None   # a simulation's kept frames (solver.simulation)
         e.pose_deltas = self.pose_deltas   # a blend of poses' displacements (BindJob)
+        # what this native object made (every new one: a Bind, a re-build for other
+        # settings or a reopened file), for the status line
+        summary = methods.get(d.method).bind_summary
+        text = summary(e.native) if summary else ""
+        if d.bind_summary != text:
+            d.bind_summary = text
         cache._cache[(obj.name, d.uid)] = e
         return e
 
@@ -191,8 +197,6 @@ def bind_end(obj, d, job, mats, depsgraph=None):
         h.is_bound = True
     d.bind_n_vertices = e.n_vertices
     d.bind_n_faces = e.n_faces
-    summary = methods.get(d.method).bind_summary
-    d.bind_summary = summary(e.native) if summary else ""
     d.bound = True
     cache.runtime.pop((obj.name, d.uid), None)
     geonodes.ensure_modifier(obj, d)

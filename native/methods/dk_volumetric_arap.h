@@ -21,7 +21,7 @@
  *
  * Only a closed manifold surface bounds a volume. Each connected part of the mesh whose every
  * edge is in two triangles is tetrahedralized (one TetGen run for all of them); the other
- * parts -- a hole, a non-manifold edge, a loose vertex -- bound none and deform as surfaces
+ * parts -- with a hole or a non-manifold edge -- bound none and deform as surfaces
  * (ARAP's spoke cells, in the same solve), and when TetGen refuses the closed parts
  * (crossing or degenerate triangles) the whole mesh does: dk_volumetric_arap_note says which,
  * stats count the tetrahedra. (Ours: the issue's embedding lattice for scans with holes is
@@ -54,7 +54,8 @@ typedef struct dk_volumetric_arap_options {
                               (none: no interior point, slivers allowed) or in [1.1, 10];
                               default 1.5                                                 */
     double max_volume;   /**< the largest tetrahedron's volume, in the mesh's units cubed:
-                              0 (none, the default) or > 0                                */
+                              0 (none, the default) or > 0, at least 1 / 5e7 of the
+                              mesh's bounding box (TetGen's refinement cannot be stopped) */
     int max_iterations;  /**< >= 1, default 1000 (dk_arap_options)                        */
     double tolerance;    /**< >= 0, default 1e-6 (dk_arap_options)                        */
     dk_arap_acceleration acceleration; /**< default DK_ARAP_ACCEL_NEWTON                  */
@@ -91,7 +92,9 @@ void dk_volumetric_arap_set_progress(dk_volumetric_arap *va, dk_phase_progress_f
 dk_status dk_volumetric_arap_solve(dk_volumetric_arap *va, const dk_solve_request *request,
                                    double *positions, dk_solve_info *info, dk_error *err);
 
-/** E (above) of the surface `positions` (n_vertices x 3) into `energy`. Allocation-free. */
+/** E (above) of the surface `positions` (n_vertices x 3) into `energy`. Uses the object's
+ *  scratch (not re-entrant: one call on an object at a time, as for every verb) and ARAP's
+ *  energy, which allocates an n_points x 3 copy. */
 dk_status dk_volumetric_arap_energy(const dk_volumetric_arap *va, const double *positions,
                                     double *energy, dk_error *err);
 
@@ -118,7 +121,7 @@ void dk_volumetric_arap_get_counters(const dk_volumetric_arap *va,
                                      dk_volumetric_arap_counters *counters);
 
 /** The current tetrahedral mesh, for display and checks: `points` (n_points x 3: the last
- *  solve's result, or the edited pose before any solve) and `tetrahedra` (n_tetrahedra x 4,
+ *  solve's result, or the rest before any solve) and `tetrahedra` (n_tetrahedra x 4,
  *  positively oriented at rest); either may be NULL. */
 void dk_volumetric_arap_tetrahedra(const dk_volumetric_arap *va, double *points,
                                    dk_index *tetrahedra);

@@ -62,6 +62,7 @@ def test_still_mesh():
     R.check("binds", d.bound and not d.status_is_error, d.status)
     R.check("the status counts the tetrahedra", "tetrahedra inside" in S.solver.status_text(d),
             S.solver.status_text(d))
+    first = d.bind_summary
     e.matrix_world = bend_end(np.pi / 2) @ bind_world
     bpy.context.view_layer.update()
     got = S.evaluated_positions(obj)
@@ -85,8 +86,18 @@ def test_still_mesh():
     bpy.ops.wm.open_mainfile(filepath=path)
     d = bpy.data.objects["Tube"].deformkit.deformers[0]
     R.check("settings survive saving", d.method == "VOLUME_ARAP" and
-            abs(d.options_volume_arap.quality - 2.0) < 1e-9 and "tetrahedra" in d.bind_summary,
-            (d.method, d.bind_summary))
+            abs(d.options_volume_arap.quality - 2.0) < 1e-9, d.method)
+    # the quality change re-built the binding: the summary counts its tetrahedra
+    obj = bpy.data.objects["Tube"]
+    bpy.data.objects["Tip"].location.z += 0.05   # a drag re-builds the solver on demand
+    bpy.context.view_layer.update()
+    S.evaluated_positions(obj)
+    e = S.solver.cache._cache.get((obj.name, d.uid))
+    n = e.native.n_tetrahedra if e is not None else -1
+    R.check("the summary follows the re-built binding (%s, at bind %s)"
+            % (d.bind_summary, first),
+            n > 0 and d.bind_summary.startswith("%d tetrahedra" % n) and d.bind_summary != first,
+            (n, d.bind_summary))
 
 
 def test_open_mesh_deforms_as_a_surface():
@@ -106,6 +117,16 @@ def rig(obj):
     """A two-bone Armature first in the stack, its lower bone turned about z by 0 at frame 1
     and 0.8 at frame 5."""
     return S.arm_rig(obj, {"lower": ((1, (0, 0, 0.0)), (5, (0, 0, 0.8)))})
+
+
+def bone_turn(obj, name):
+    """The rotation (3 x 3, the mesh's space) by which the rig's bone `name` turns what it
+    carries on the current frame."""
+    rig = bpy.data.objects["Rig"]
+    pb = rig.pose.bones[name]
+    M = (obj.matrix_world.inverted() @ rig.matrix_world @ pb.matrix
+         @ pb.bone.matrix_local.inverted() @ rig.matrix_world.inverted() @ obj.matrix_world)
+    return np.array(M)[:3, :3]
 
 
 def test_after_an_armature():
@@ -128,6 +149,21 @@ def test_after_an_armature():
     R.check("its fixed end stays where the Armature puts it",
             float(np.abs(got[fixed] - inp[fixed]).max()) < TOL,
             float(np.abs(got[fixed] - inp[fixed]).max()))
+    # the API on the pose: the handle where the edit (a lift), turned with the lower bone,
+    # puts it (tests/blender/test_addon_animation.py, for every method that edits its input)
+    m = S.methods.get(d.method)
+    rest = S.rest_positions(obj)
+    mesh = S.dk.Mesh(rest, S.solver.triangles(obj.data))
+    kw = dict(handles=[tip], fixed=fixed)
+    native = S.dk.VolumetricARAP(mesh, **kw, **S.methods.bind_kwargs(m, d.options, rest, kw,
+                                                                       mesh))
+    T = np.array(e.matrix_world @ bind_world.inverted())
+    edit = rest[tip] @ T[:3, :3].T + T[:3, 3] - rest[tip]
+    B = bone_turn(obj, "lower")
+    want = np.asarray(native.solve(inp[tip] + edit @ B.T, input_positions=inp,
+                                   **S.methods.solve_kwargs(m, d.options, True)).positions)
+    diff = float(np.abs(got - want).max())
+    R.check("frame 5 is the API's edit of the pose (max %.2e)" % diff, diff < TOL, diff)
     F = S.solver.triangles(obj.data)
     v_in, v_out = volume(inp, F), volume(got, F)
     R.check("keeps the pose's volume (%.3f)" % (v_out / v_in), abs(v_out / v_in - 1) < 0.05,

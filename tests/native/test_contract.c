@@ -729,7 +729,7 @@ static void test_loose_geometry(void)
 
 /* test_loose_geometry with volumes, for the DK_METHOD_INTERIOR methods: small_scene's
  * icosphere and a second, smaller one beside it that nothing constrains: that one is held
- * at rest, interior and all, the first deforms. */
+ * at rest, the first deforms. */
 static void test_loose_volumes(void)
 {
     for (const dk_method_ops *const *m = dk_methods(); *m; m++) {

@@ -117,11 +117,14 @@ void dk_arap_free(dk_arap *ar)
     free(ar);
 }
 
-/* Every corner a vertex of the mesh, four distinct ones per tetrahedron, and few enough
- * tetrahedra that their six terms each are numbered by a dk_index. */
-static dk_status check_tetrahedra(const dk_index *tets, dk_index n_tets, dk_index n,
+/* Every corner a vertex of the mesh, four distinct ones per tetrahedron, every edge one of
+ * the mesh's (its triangles give the components: a tetrahedron's edge missing there would
+ * leave its interior corner a part of its own, held at rest), and few enough tetrahedra that
+ * their six terms each are numbered by a dk_index. */
+static dk_status check_tetrahedra(const dk_mesh *mesh, const dk_index *tets, dk_index n_tets,
                                   dk_error *err)
 {
+    const dk_index n = mesh->n_vertices;
     if (n_tets > (INT32_MAX - n) / 6)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "ARAP bind: %ld tetrahedra, at most %ld", (long)n_tets,
@@ -139,6 +142,13 @@ static dk_status check_tetrahedra(const dk_index *tets, dk_index n_tets, dk_inde
                                         "ARAP bind: tetrahedron %ld has vertex %ld twice",
                                         (long)t, (long)q[a]);
         }
+        for (int a = 0; a < 4; a++)
+            for (int b = a + 1; b < 4; b++)
+                if (dk_mesh_find_edge(mesh, q[a], q[b]) < 0)
+                    return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                                        "ARAP bind: tetrahedron %ld's edge (%ld, %ld) is no "
+                                        "edge of the mesh's triangles (give the tetrahedra's "
+                                        "faces)", (long)t, (long)q[a], (long)q[b]);
     }
     return DK_OK;
 }
@@ -163,7 +173,7 @@ static dk_status bind(const dk_mesh *mesh, const dk_index *tets, dk_index n_tets
         return st;
     if (mesh->n_faces == 0)
         return dk_error_set(err, DK_ERR_TOPOLOGY, "ARAP bind: the mesh has no triangle");
-    if (tets && (st = check_tetrahedra(tets, n_tets, mesh->n_vertices, err)) != DK_OK)
+    if (tets && (st = check_tetrahedra(mesh, tets, n_tets, err)) != DK_OK)
         return st;
     dk_arap *ar = calloc(1, sizeof *ar);
     if (!ar)

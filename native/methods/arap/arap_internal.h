@@ -1,8 +1,8 @@
 /* DeformKit ARAP, internal: the object, its constraint system and the functions the files of
  * native/methods/arap/ share. Not part of the public API (dk_arap.h is).
  *
- * Layout. The bind builds the cells once: for vertex i, terms cell_start[i] ..
- * cell_start[i+1]-1, each an edge (ta, tb) with a base weight tw and its rest vector
+ * Layout. The bind builds the cells once: for cell i (vertex i on a surface; see nc for a
+ * volume), terms cell_start[i] .. cell_start[i+1]-1, each an edge (ta, tb) with a base weight tw and its rest vector
  * te = p_a - p_b. Everything that depends on the constraints lives in an arap_system (the
  * validated constraints, the unknown map, the reduced matrix and its factor, the
  * per-iteration buffers) that rebind replaces atomically.
@@ -166,10 +166,10 @@ struct dk_arap {
                              count given to dk_arap_set_cg_iterations, run as given          */
     dk_index n;
     /* The cells: one per vertex (nc == n) on a surface; on a volume (dk_arap_bind_tetrahedra)
-     * the n vertices' surface cells (empty for a vertex in a tetrahedron) then one per
-     * tetrahedron (nc == n + tetrahedra), whose corners are cc[cc_start[c] .. cc_start[c + 1]
-     * - 1] (its vertex, or its four; both NULL on a surface): a cell's stiffness is its
-     * corners' mean. rot and Newton's kinv and omega are per cell. */
+     * a surface cell per vertex in no tetrahedron, then one per tetrahedron, whose corners
+     * are cc[cc_start[c] .. cc_start[c + 1] - 1] (its vertex, or its four; both NULL on a
+     * surface): a cell's stiffness is its corners' mean. rot (allocated for n + tetrahedra)
+     * and Newton's kinv and omega are per cell. */
     dk_index nc;
     dk_index *cc_start, *cc;
     int64_t n_terms;
@@ -184,7 +184,7 @@ struct dk_arap {
     double *input, *input_next;
     arap_system sys;
     double *x;            /* n x 3 row-major current positions                           */
-    double *rot;          /* n x 9 rotations                                             */
+    double *rot;          /* nc x 9 rotations, one per cell                              */
     double *prev;         /* n x 3 previous solution (warm start)                        */
     int have_prev;
     /* secant predictor of a warm start: prev2 (n x 3) is the end of the last call before

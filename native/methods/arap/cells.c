@@ -149,10 +149,9 @@ void arap_cells_set_edges(dk_arap *ar, const double *p)
  * whatever the signs of the w (an obtuse dihedral angle makes one negative; the sum stays
  * vol |F - R|^2 >= 0, so nothing is clamped).
  *
- * The layout: cells 0 .. n-1 are the vertices' surface cells, built from the triangles none
- * of whose corners is in a tetrahedron (the parts that bound no volume; empty cells for the
- * others), then one cell per tetrahedron; a cell's corners (cc) are its vertex, or its
- * tetrahedron's four. */
+ * The layout: first one surface cell per vertex in no tetrahedron (the parts that bound no
+ * volume), built from the triangles among them, then one cell per tetrahedron; a cell's
+ * corners (cc) are its vertex, or its tetrahedron's four. */
 dk_status arap_build_volume_cells(dk_arap *ar, const dk_index *tets, dk_index nt,
                                   dk_error *err)
 {
@@ -174,17 +173,37 @@ dk_status arap_build_volume_cells(dk_arap *ar, const dk_index *tets, dk_index nt
         if (!in_tet[t[0]] && !in_tet[t[1]] && !in_tet[t[2]])
             memcpy(faces + 3 * (size_t)nf++, t, 3 * sizeof *t);
     }
-    free(in_tet);
     dk_status st = build_surface_cells(ar, faces, nf, err);
     free(faces);
-    if (st != DK_OK)
+    if (st != DK_OK) {
+        free(in_tet);
         return st;
+    }
+    /* the surface cells of the vertices in no tetrahedron, in vertex order (those of the
+     * others are empty: dropping them keeps the terms contiguous), so the two threads'
+     * halves of the cells hold comparable work */
+    dk_index ncs = 0;
+    for (dk_index v = 0; v < n; v++)
+        ncs += !in_tet[v];
+    ar->cc_start = malloc(((size_t)ncs + (size_t)nt + 1) * sizeof *ar->cc_start);
+    ar->cc = malloc(((size_t)ncs + 4 * (size_t)nt + 1) * sizeof *ar->cc);
+    if (!ar->cc_start || !ar->cc) {
+        free(in_tet);
+        return oom(err, "cells"); /* freed with the object */
+    }
+    for (dk_index v = 0, k = 0; v < n; v++)
+        if (!in_tet[v]) {
+            ar->cell_start[k] = ar->cell_start[v]; /* k <= v: read before written */
+            ar->cc_start[k] = k;
+            ar->cc[k++] = v;
+        }
+    free(in_tet);
     const int64_t ns = ar->n_terms, nterms = ns + 6 * (int64_t)nt;
     if (nterms > INT32_MAX)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "ARAP bind: %lld cell terms, at most %ld", (long long)nterms,
                             (long)INT32_MAX);
-    dk_index *cs = realloc(ar->cell_start, ((size_t)n + (size_t)nt + 1) * sizeof *cs);
+    dk_index *cs = realloc(ar->cell_start, ((size_t)ncs + (size_t)nt + 1) * sizeof *cs);
     if (cs)
         ar->cell_start = cs;
     dk_index *ta = realloc(ar->ta, ((size_t)nterms + 1) * sizeof *ta);
@@ -199,24 +218,18 @@ dk_status arap_build_volume_cells(dk_arap *ar, const dk_index *tets, dk_index nt
     double *te = realloc(ar->te, ((size_t)nterms * 3 + 1) * sizeof *te);
     if (te)
         ar->te = te;
-    ar->cc_start = malloc(((size_t)n + (size_t)nt + 1) * sizeof *ar->cc_start);
-    ar->cc = malloc(((size_t)n + 4 * (size_t)nt + 1) * sizeof *ar->cc);
-    if (!cs || !ta || !tb || !tw || !te || !ar->cc_start || !ar->cc)
+    if (!cs || !ta || !tb || !tw || !te)
         return oom(err, "cell terms"); /* freed with the object */
-    for (dk_index v = 0; v <= n; v++) {
-        ar->cc_start[v] = v;
-        if (v < n)
-            ar->cc[v] = v;
-    }
+    ar->cc_start[ncs] = ncs;
     for (dk_index c = 0; c < nt; c++) {
         if ((c & 4095) == 0 && (st = arap_tick(ar, c, nt, err)) != DK_OK)
             return st;
         const dk_index *q = tets + 4 * (size_t)c;
         double w[6];
         dk_tetrahedron_stiffness(p + 3 * q[0], p + 3 * q[1], p + 3 * q[2], p + 3 * q[3], w);
-        ar->cell_start[n + c] = (dk_index)(ns + 6 * (int64_t)c);
-        ar->cc_start[n + c + 1] = n + 4 * (c + 1);
-        memcpy(ar->cc + n + 4 * (size_t)c, q, 4 * sizeof *q);
+        ar->cell_start[ncs + c] = (dk_index)(ns + 6 * (int64_t)c);
+        ar->cc_start[ncs + c + 1] = ncs + 4 * (c + 1);
+        memcpy(ar->cc + ncs + 4 * (size_t)c, q, 4 * sizeof *q);
         int e = 0;
         for (int a = 0; a < 4; a++)
             for (int b = a + 1; b < 4; b++, e++) {
@@ -228,8 +241,8 @@ dk_status arap_build_volume_cells(dk_arap *ar, const dk_index *tets, dk_index nt
                     ar->te[3 * t + k] = p[3 * ar->ta[t] + k] - p[3 * ar->tb[t] + k];
             }
     }
-    ar->cell_start[n + nt] = (dk_index)nterms;
+    ar->cell_start[ncs + nt] = (dk_index)nterms;
     ar->n_terms = nterms;
-    ar->nc = n + nt;
+    ar->nc = ncs + nt;
     return DK_OK;
 }

@@ -347,12 +347,13 @@ static dk_status classify(const dk_arap *ar, arap_system *s, dk_error *err)
         const dk_status st = arap_tick(ar, i, ar->nc, err);
         if (st != DK_OK)
             return st;
-        double stiffness = c->stiffness[i]; /* on a volume: the cell's corners' mean */
+        double stiffness = 0.0; /* vertex i's; on a volume the cell's corners' mean */
         if (ar->cc_start) {
-            stiffness = 0.0;
             for (dk_index k = ar->cc_start[i]; k < ar->cc_start[i + 1]; k++)
                 stiffness += c->stiffness[ar->cc[k]];
             stiffness /= (double)(ar->cc_start[i + 1] - ar->cc_start[i]);
+        } else {
+            stiffness = c->stiffness[i];
         }
         for (dk_index t = ar->cell_start[i]; t < ar->cell_start[i + 1]; t++) {
             s->tws[t] = stiffness * ar->tw[t];
@@ -487,10 +488,12 @@ static dk_status factor(dk_arap *ar, arap_system *old, arap_system *s, dk_error 
             snprintf(at, sizeof at, " at vertex %ld", vertex);
         dk_error_set(err, DK_ERR_DEGENERATE,
                      "ARAP: the reduced matrix is not positive definite%s (%s)", at,
-                     clamped ? "degenerate triangles around it, or a part held only along a "
-                               "line"
-                             : "degenerate triangles or negative cotangent weights; try "
-                               "weights='clamped_cotangent'");
+                     ar->cc_start ? "degenerate tetrahedra or triangles around it, or a part "
+                                    "held only along a line"
+                     : clamped    ? "degenerate triangles around it, or a part held only "
+                                    "along a line"
+                                  : "degenerate triangles or negative cotangent weights; try "
+                                    "weights='clamped_cotangent'");
         return DK_ERR_DEGENERATE;
     }
     return dk_error_prefix(err, "ARAP: factorization");

@@ -4,6 +4,7 @@
 
 #include "dk_operators.h"
 
+#include <math.h>
 #include <stdio.h>
 
 static int tri_less(const dk_index *a, const dk_index *b)
@@ -84,6 +85,93 @@ static dk_status closed_parts(const dk_mesh *m, unsigned char *in_volume, dk_ind
     return DK_OK;
 }
 
+/* The frame TetGen meshes in: TetGen's choices (which points it adds, where) depend on the
+ * coordinates, so that a mesh moved, turned or scaled would get other tetrahedra and another
+ * result. The frame moves with the mesh: its origin the first vertex, its x axis towards the
+ * vertex farthest from it, its y axis towards the one farthest from that line (the first in
+ * index order among those within 1e-9 of the farthest: a symmetric mesh has ties that
+ * rounding would break differently), its unit their distance; and the coordinates there are
+ * rounded to 2^-22 of the unit, so that every placement and scale of one mesh gives TetGen
+ * the same input (unless a coordinate lies within rounding of a step: about 1e-8 of them).
+ * frame: origin (3), axes (3 rows), unit; returns 0 when the points are collinear. */
+static dk_index farthest(const double *p, dk_index n, const double *o, const double *x,
+                         double *dist2)
+{
+    double best = 0.0;
+    for (int pass = 0; pass < 2; pass++)
+        for (dk_index k = 1; k < n; k++) {
+            const double *q = p + 3 * (size_t)k;
+            double r[3] = {q[0] - o[0], q[1] - o[1], q[2] - o[2]};
+            if (x) { /* the distance from the line through o along x */
+                const double t = r[0] * x[0] + r[1] * x[1] + r[2] * x[2];
+                for (int d = 0; d < 3; d++)
+                    r[d] -= t * x[d];
+            }
+            const double d = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+            if (pass == 0 && d > best)
+                best = d;
+            else if (pass == 1 && d >= best * (1.0 - 2e-9)) {
+                *dist2 = best;
+                return k;
+            }
+        }
+    *dist2 = 0.0;
+    return 0;
+}
+
+static int canonical_frame(const double *p, dk_index n, double frame[13])
+{
+    const double *o = p;
+    double best;
+    const dk_index a = farthest(p, n, o, NULL, &best);
+    if (!(best > 0.0))
+        return 0;
+    const double unit = sqrt(best);
+    double x[3], y[3], z[3];
+    for (int d = 0; d < 3; d++)
+        x[d] = (p[3 * (size_t)a + d] - o[d]) / unit;
+    const dk_index b = farthest(p, n, o, x, &best);
+    if (!(best > 1e-24 * unit * unit))
+        return 0;
+    double r[3];
+    for (int d = 0; d < 3; d++)
+        r[d] = p[3 * (size_t)b + d] - o[d];
+    const double t = r[0] * x[0] + r[1] * x[1] + r[2] * x[2];
+    for (int d = 0; d < 3; d++)
+        y[d] = r[d] - t * x[d];
+    const double ly = sqrt(y[0] * y[0] + y[1] * y[1] + y[2] * y[2]);
+    for (int d = 0; d < 3; d++)
+        y[d] /= ly;
+    z[0] = x[1] * y[2] - x[2] * y[1];
+    z[1] = x[2] * y[0] - x[0] * y[2];
+    z[2] = x[0] * y[1] - x[1] * y[0];
+    memcpy(frame, o, 3 * sizeof *frame);
+    memcpy(frame + 3, x, sizeof x);
+    memcpy(frame + 6, y, sizeof y);
+    memcpy(frame + 9, z, sizeof z);
+    frame[12] = unit;
+    return 1;
+}
+
+/* p (n x 3) into the frame's coordinates, rounded to 2^-22 (to_frame), or back, in place. */
+static void frame_map(const double frame[13], double *p, dk_index n, int to_frame)
+{
+    const double *o = frame, *ax = frame + 3, unit = frame[12], step = 0x1p-22;
+    for (dk_index k = 0; k < n; k++) {
+        double *q = p + 3 * (size_t)k, r[3];
+        if (to_frame) {
+            const double d[3] = {q[0] - o[0], q[1] - o[1], q[2] - o[2]};
+            for (int i = 0; i < 3; i++)
+                r[i] = step * nearbyint((ax[3 * i] * d[0] + ax[3 * i + 1] * d[1] +
+                                         ax[3 * i + 2] * d[2]) / unit / step);
+        } else {
+            for (int i = 0; i < 3; i++)
+                r[i] = o[i] + unit * (ax[i] * q[0] + ax[3 + i] * q[1] + ax[6 + i] * q[2]);
+        }
+        memcpy(q, r, sizeof r);
+    }
+}
+
 dk_status volumetric_domain(dk_volumetric_arap *va, dk_progress *prog, dk_error *err)
 {
     const dk_mesh *m = va->mesh;
@@ -115,10 +203,16 @@ dk_status volumetric_domain(dk_volumetric_arap *va, dk_progress *prog, dk_error 
     for (size_t k = 0; k < 3 * (size_t)nf; k++)
         faces[k] = to_sub[faces[k]];
     free(to_sub);
+    double frame[13];
+    const int framed = nf > 0 && canonical_frame(sp, nsub, frame);
+    if (framed)
+        frame_map(frame, sp, nsub, 1);
     if (nf > 0) {
         dk_error why = {0};
-        st = dk_tetrahedralize_surface(sp, nsub, faces, nf, va->opt.quality, va->opt.max_volume,
-                                       &points, &np, &tets, &nt, &why);
+        const double unit3 = framed ? frame[12] * frame[12] * frame[12] : 1.0;
+        st = dk_tetrahedralize_surface(sp, nsub, faces, nf, va->opt.quality,
+                                       va->opt.max_volume / unit3, &points, &np, &tets, &nt,
+                                       &why);
         if (st == DK_ERR_OUT_OF_MEMORY) {
             st = dk_error_set(err, st, "VolumetricARAP bind: %s", why.message);
             goto done;
@@ -142,8 +236,11 @@ dk_status volumetric_domain(dk_volumetric_arap *va, dk_progress *prog, dk_error 
         goto done;
     }
     memcpy(all, m->positions, 3 * (size_t)n * sizeof *all);
-    if (ni > 0)
+    if (ni > 0) {
         memcpy(all + 3 * (size_t)n, points + 3 * (size_t)nsub, 3 * (size_t)ni * sizeof *all);
+        if (framed) /* the interior back where the mesh is (its vertices are the caller's) */
+            frame_map(frame, all + 3 * (size_t)n, ni, 0);
+    }
     for (size_t k = 0; k < 4 * (size_t)nt; k++)
         tets[k] = tets[k] < nsub ? sub[tets[k]] : n + (tets[k] - nsub);
     /* positively oriented: two corners swapped where TetGen's order is left-handed */

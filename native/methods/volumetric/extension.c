@@ -3,8 +3,9 @@
  * With L the linear elements' Laplacian of the rest tetrahedra (edge weights
  * dk_tetrahedron_stiffness summed over the tetrahedra), a move d of the surface moves the
  * interior by the harmonic u with L_II u = -L_IB d, i.e. u_i = L_II^-1 (sum_b w_ib d_b): the
- * interior points' Dirichlet problem, positive definite for any tetrahedra that are not all
- * degenerate, with linear precision (an affine move of the surface moves the interior by the
+ * interior points' Dirichlet problem, positive definite when every interior point is in a
+ * tetrahedron that is not degenerate (TetGen's are not; the factorization says so otherwise),
+ * with linear precision (an affine move of the surface moves the interior by the
  * same map, exactly). */
 #include "volumetric_internal.h"
 
