@@ -194,3 +194,24 @@ def test_the_arm_bends_keeping_its_volume(shared_mesh):
         assert r.converged
         out[cls.__name__] = volume(r.positions, f) / v0
     assert abs(out["VolumetricARAP"] - 1) < abs(out["ARAP"] - 1), out
+
+
+def test_the_result_does_not_depend_on_placement_or_scale():
+    """TetGen's choices depend on the coordinates: the method meshes in a frame that moves
+    with the mesh, so the same tube turned, moved far away and scaled by 1000 gets the same
+    tetrahedra and the same result, moved and scaled."""
+    v, f, handles = tube()
+    c, s = np.cos(2.1), np.sin(2.1)
+    R = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]]) @ np.array(
+        [[1, 0, 0], [0, np.cos(0.7), -np.sin(0.7)], [0, np.sin(0.7), np.cos(0.7)]])
+    k, t = 1000.0, np.array([3e4, -7e4, 5e4])
+    a = dk.VolumetricARAP(dk.Mesh(v, f), handles=handles)
+    b = dk.VolumetricARAP(dk.Mesh(k * v @ R.T + t, f), handles=handles)
+    pa, ta = a.tetrahedra()
+    pb, tb = b.tetrahedra()
+    assert np.array_equal(ta, tb)
+    np.testing.assert_allclose(k * pa @ R.T + t, pb, atol=1e-9 * k)
+    shape = bend(v, 2.0, -0.5, 1.0)
+    ra = solve_to(a, v, handles, shape)
+    rb = b.solve(targets=np.vstack([k * shape[h] @ R.T + t for h in handles]), warm_start=False)
+    np.testing.assert_allclose(k * ra.positions @ R.T + t, rb.positions, atol=1e-6 * k)
