@@ -351,7 +351,8 @@ def test_material_group_label():
     """The Material group's label in the panel speaks the method's language."""
     S.reset_scene()
     obj, d, e, fixed, handle = S.grid_setup("ARAP")
-    want = {"ARAP": "Stiffness", "LINEAR_RECONSTRUCTION": "Material", "SHAPE_MATCHING": "Hold"}
+    want = {"ARAP": "Stiffness", "LINEAR_RECONSTRUCTION": "Material", "SHAPE_MATCHING": "Hold",
+            "VOLUME_ARAP": "Stiffness"}
     for m in S.methods.METHODS:
         d.method = m.id
         got = [c[3] for c in draw_panel(obj) if c[1:3] == ("prop_search", "material_group")]
