@@ -155,6 +155,41 @@ class Method:
     stack_first: bool = False
 
 
+def _arap_solver_options():
+    """The options of ARAP's solver (its Newton steps and stopping test), one wording for
+    ARAP and Volume ARAP, which solves with it."""
+    return [
+        # 1000: a guard against stalls, above the 88-268 steps an honest 1e-6 takes at
+        # 692k vertices (a bake's frames and the refine solve stop at it)
+        Option("max_iterations", "INT", 1000, "Max Iterations",
+               "Most steps one solve takes: raise it when the panel says 'not "
+               "converged', lower it to trade accuracy for speed",
+               min=1, max=100000, advanced=True),
+        Option("tolerance", "FLOAT", 1e-6, "Tolerance",
+               "How settled the shape must be for a solve to stop (a step would change "
+               "the energy by less than this fraction; Newton: and the energy left above "
+               "the minimum is estimated below it): smaller is more exact and slower",
+               min=0.0, max=1.0, advanced=True),
+        # item order is stored in files: new items go last. Default: Newton (faster to
+        # convergence and closer to the minimum, docs/methods/arap.md)
+        Option("acceleration", "ENUM", "newton", "Solver",
+               "How a solve steps towards the shape",
+               items=(("anderson", "Accelerated",
+                       "Many cheap local/global steps, sped up (Anderson acceleration): "
+                       "long, slow bends can stop short of their final shape"),
+                      ("none", "Basic",
+                       "The paper's plain local/global steps: the slowest to settle; to "
+                       "compare with other ARAP tools"),
+                      ("newton", "Newton",
+                       "Fewer, costlier steps that also settle long, slow bends (the "
+                       "default): the quickest to the finished shape")),
+               advanced=True),
+        Option("cg_iterations", "INT", 12, "Newton Inner Steps",
+               "Newton: inner (conjugate-gradient) steps per Newton step: more make each "
+               "step costlier and closer to exact", min=1, max=100, advanced=True),
+    ]
+
+
 METHODS = [
     Method(
         id="ARAP",
@@ -200,34 +235,7 @@ METHODS = [
                            "Every edge counts the same, whatever the triangles' shapes: a "
                            "rougher result that shifts with the mesh's density")),
                    advanced=True),
-            # 1000: a guard against stalls, above the 88-268 steps an honest 1e-6 takes at
-            # 692k vertices (a bake's frames and the refine solve stop at it)
-            Option("max_iterations", "INT", 1000, "Max Iterations",
-                   "Most steps one solve takes: raise it when the panel says 'not "
-                   "converged', lower it to trade accuracy for speed",
-                   min=1, max=100000, advanced=True),
-            Option("tolerance", "FLOAT", 1e-6, "Tolerance",
-                   "How settled the shape must be for a solve to stop (a step would change "
-                   "the energy by less than this fraction; Newton: and the energy left above "
-                   "the minimum is estimated below it): smaller is more exact and slower",
-                   min=0.0, max=1.0, advanced=True),
-            # item order is stored in files: new items go last. Default: Newton (faster to
-            # convergence and closer to the minimum, docs/methods/arap.md)
-            Option("acceleration", "ENUM", "newton", "Solver",
-                   "How a solve steps towards the shape",
-                   items=(("anderson", "Accelerated",
-                           "Many cheap local/global steps, sped up (Anderson acceleration): "
-                           "long, slow bends can stop short of their final shape"),
-                          ("none", "Basic",
-                           "The paper's plain local/global steps: the slowest to settle; to "
-                           "compare with other ARAP tools"),
-                          ("newton", "Newton",
-                           "Fewer, costlier steps that also settle long, slow bends (the "
-                           "default): the quickest to the finished shape")),
-                   advanced=True),
-            Option("cg_iterations", "INT", 12, "Newton Inner Steps",
-                   "Newton: inner (conjugate-gradient) steps per Newton step: more make each "
-                   "step costlier and closer to exact", min=1, max=100, advanced=True),
+            *_arap_solver_options(),
             Option("stiffness_scale", "FLOAT", 10.0, "Painted Stiffness",
                    "How stiff the Stiffness group's vertices painted 1 are, against 1 for "
                    "the rest (paint in between blends): raise it to keep painted parts from "
@@ -864,26 +872,7 @@ METHODS.append(Method(
                "How well-shaped the solid's tetrahedra must be (the radius of each one's "
                "sphere against its shortest edge): lower adds more inner points, binds slower "
                "and bends more evenly", min=1.1, max=10.0, advanced=True),
-        Option("max_iterations", "INT", 1000, "Max Iterations",
-               "Most steps one solve takes: raise it when the panel says 'not converged', "
-               "lower it to trade accuracy for speed", min=1, max=100000, advanced=True),
-        Option("tolerance", "FLOAT", 1e-6, "Tolerance",
-               "How settled the shape must be for a solve to stop: smaller is more exact and "
-               "slower", min=0.0, max=1.0, advanced=True),
-        Option("acceleration", "ENUM", "newton", "Solver",
-               "How a solve steps towards the shape",
-               items=(("anderson", "Accelerated",
-                       "Many cheap local/global steps, sped up (Anderson acceleration): long, "
-                       "slow bends can stop short of their final shape"),
-                      ("none", "Basic",
-                       "The plain local/global steps: the slowest to settle"),
-                      ("newton", "Newton",
-                       "Fewer, costlier steps that also settle long, slow bends (the "
-                       "default): the quickest to the finished shape")),
-               advanced=True),
-        Option("cg_iterations", "INT", 12, "Newton Inner Steps",
-               "Newton: inner (conjugate-gradient) steps per Newton step: more make each "
-               "step costlier and closer to exact", min=1, max=100, advanced=True),
+        *_arap_solver_options(),
         Option("stiffness_scale", "FLOAT", 10.0, "Painted Stiffness",
                "How stiff the Stiffness group's vertices painted 1 are, against 1 for the "
                "rest (the inside takes the stiffness of the surface around it)",

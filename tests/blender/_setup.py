@@ -329,6 +329,16 @@ def key_rotations(ao, keys):
             pb.keyframe_insert("rotation_euler", frame=f)
 
 
+def bone_turn(obj, name):
+    """The rotation (3 x 3, the mesh's space) by which the rig's bone `name` turns what it
+    carries on the current frame."""
+    rig = bpy.data.objects["Rig"]
+    pb = rig.pose.bones[name]
+    M = (obj.matrix_world.inverted() @ rig.matrix_world @ pb.matrix
+         @ pb.bone.matrix_local.inverted() @ rig.matrix_world.inverted() @ obj.matrix_world)
+    return np.array(M)[:3, :3]
+
+
 def armature_input(obj, d):
     """What the Armature modifier gives the deformer: the stack with DeformKit's modifier off."""
     mod = geonodes.find_modifier(obj, d)

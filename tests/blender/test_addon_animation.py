@@ -344,7 +344,7 @@ def test_embedded_follows_an_armature():
             native.update_source(inp)
             # the edit follows the pose (the tip rides the lower bone alone: its fit is the
             # bone's turn)
-            turned = edit @ bone_turn(obj, "lower").T
+            turned = edit @ S.bone_turn(obj, "lower").T
             want = np.asarray(native.solve(inp[handle] + turned,
                                            **S.methods.solve_kwargs(m, d.options, True)).positions)
             R.check("%s nodes, frame %d: playback = direct API on the armature's output"
@@ -524,16 +524,6 @@ def test_rebind_takes_the_rest_frame():
             np.abs(S.evaluated_positions(obj) - rest).max() < TOL)
 
 
-def bone_turn(obj, name):
-    """The rotation (3 x 3, the mesh's space) by which the rig's bone `name` turns what it
-    carries on the current frame."""
-    rig = bpy.data.objects["Rig"]
-    pb = rig.pose.bones[name]
-    M = (obj.matrix_world.inverted() @ rig.matrix_world @ pb.matrix
-         @ pb.bone.matrix_local.inverted() @ rig.matrix_world.inverted() @ obj.matrix_world)
-    return np.array(M)[:3, :3]
-
-
 def test_an_edit_turns_with_the_pose():
     """Issue 39: the tip lifted at the bind pose (frame 1), the forearm then bent by the
     rig. By default the edit follows the pose: the tip's offset from the posed input, seen
@@ -556,7 +546,7 @@ def test_an_edit_turns_with_the_pose():
         for f in (10, 20):
             sc.frame_set(f)
             got, inp = S.evaluated_positions(obj), S.armature_input(obj, d)
-            seen = (got[handle] - inp[handle]) @ bone_turn(obj, "lower")
+            seen = (got[handle] - inp[handle]) @ S.bone_turn(obj, "lower")
             off = np.abs(seen - edit).max() if exact else np.linalg.norm((seen - edit).mean(0))
             R.check("%s frame %d: the edit, seen from the forearm, is the bind frame's"
                     % (m.id, f), off < tol(edit), off)
@@ -604,7 +594,7 @@ def test_a_method_that_edits_its_input_solves_on_the_pose():
         for f in (10, 20):
             sc.frame_set(f)
             got, inp = S.evaluated_positions(obj), S.armature_input(obj, d)
-            B = bone_turn(obj, "lower")
+            B = S.bone_turn(obj, "lower")
             want = np.asarray(native.solve(inp[handle] + edit @ B.T, input_positions=inp,
                                            **S.methods.solve_kwargs(m, d.options, True)).positions)
             R.check("%s frame %d: playback = the direct API on the pose" % (m.id, f),

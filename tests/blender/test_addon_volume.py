@@ -119,16 +119,6 @@ def rig(obj):
     return S.arm_rig(obj, {"lower": ((1, (0, 0, 0.0)), (5, (0, 0, 0.8)))})
 
 
-def bone_turn(obj, name):
-    """The rotation (3 x 3, the mesh's space) by which the rig's bone `name` turns what it
-    carries on the current frame."""
-    rig = bpy.data.objects["Rig"]
-    pb = rig.pose.bones[name]
-    M = (obj.matrix_world.inverted() @ rig.matrix_world @ pb.matrix
-         @ pb.bone.matrix_local.inverted() @ rig.matrix_world.inverted() @ obj.matrix_world)
-    return np.array(M)[:3, :3]
-
-
 def test_after_an_armature():
     obj, d, e, fixed, tip, ao = tube_setup(rig)
     sc = bpy.context.scene
@@ -159,7 +149,7 @@ def test_after_an_armature():
                                                                        mesh))
     T = np.array(e.matrix_world @ bind_world.inverted())
     edit = rest[tip] @ T[:3, :3].T + T[:3, 3] - rest[tip]
-    B = bone_turn(obj, "lower")
+    B = S.bone_turn(obj, "lower")
     want = np.asarray(native.solve(inp[tip] + edit @ B.T, input_positions=inp,
                                    **S.methods.solve_kwargs(m, d.options, True)).positions)
     diff = float(np.abs(got - want).max())
