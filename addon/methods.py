@@ -866,6 +866,7 @@ METHODS.append(Method(
     iteration_cap="max_iterations",
     inner_iterations="cg_iterations",
     inner_when=("acceleration", "newton"),
+    response_basis=True,
     bind_summary=lambda native: _volume_summary(native),
     options=[
         Option("quality", "FLOAT", 1.5, "Tetrahedra Shape",

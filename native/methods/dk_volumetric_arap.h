@@ -112,6 +112,13 @@ typedef struct dk_volumetric_arap_counters {
  *  dk_arap_set_cg_iterations); owned by `va`. NULL for NULL. */
 dk_arap *dk_volumetric_arap_solver(dk_volumetric_arap *va);
 
+/** dk_arap_response_basis of the solver on the tetrahedra, the mesh's vertices' rows:
+ *  `out` n_vertices x (4 n_handles) (dk_arap_get_counters(dk_volumetric_arap_solver(va))
+ *  .basis_columns columns). DK_ERR_INVALID_ARGUMENT when the basis was not built.
+ *  Allocates an n_points x columns scratch. */
+dk_status dk_volumetric_arap_response_basis(const dk_volumetric_arap *va, double *out,
+                                            dk_error *err);
+
 /** Why a part (or the whole mesh) deforms as a surface: "" when every part bounds a volume;
  *  valid while the object lives. */
 const char *dk_volumetric_arap_note(const dk_volumetric_arap *va);

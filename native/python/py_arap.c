@@ -197,28 +197,46 @@ static PyGetSetDef arap_getset[] = {
 };
 
 /* response_basis() -> (n_vertices, 4 n_handles) array, or None when not built */
-static PyObject *arap_response_basis(PyObject *obj, PyObject *unused)
+PyObject *dk_py_arap_response_basis(dk_py_method *self, const char *who,
+                                    dk_status (*fill)(void *native, double *out,
+                                                      dk_error *err),
+                                    dk_arap *(*solver)(void *native))
 {
-    dk_py_method *self = (dk_py_method *)obj;
     dk_arap_counters ac;
     dk_error err = {0};
     double *out;
-    (void)unused;
     if (dk_py_method_enter(self) < 0)
         return NULL;
-    dk_arap_get_counters(self->native, &ac);
+    dk_arap_get_counters(solver(self->native), &ac);
     if (ac.basis_columns == 0) {
         self->busy = 0;
         Py_RETURN_NONE;
     }
     PyObject *res = dk_py_new_doubles(2, self->mesh->n_vertices, ac.basis_columns, &out);
-    dk_status st = res ? dk_arap_response_basis(self->native, out, &err) : DK_OK;
+    dk_status st = res ? fill(self->native, out, &err) : DK_OK;
     self->busy = 0;
     if (res && st != DK_OK) {
         Py_DECREF(res);
-        return dk_py_raise(&err, "ARAP.response_basis");
+        return dk_py_raise(&err, who);
     }
     return res;
+}
+
+static dk_status fill_basis(void *native, double *out, dk_error *err)
+{
+    return dk_arap_response_basis(native, out, err);
+}
+
+static dk_arap *itself(void *native)
+{
+    return native;
+}
+
+static PyObject *arap_response_basis(PyObject *obj, PyObject *unused)
+{
+    (void)unused;
+    return dk_py_arap_response_basis((dk_py_method *)obj, "ARAP.response_basis", fill_basis,
+                                     itself);
 }
 
 PyDoc_STRVAR(response_basis_doc,

@@ -57,6 +57,29 @@ static PyObject *get_count(PyObject *obj, void *which)
     return PyLong_FromLong(v[(Py_ssize_t)which]);
 }
 
+static dk_status fill_basis(void *native, double *out, dk_error *err)
+{
+    return dk_volumetric_arap_response_basis(native, out, err);
+}
+
+static dk_arap *solver(void *native)
+{
+    return dk_volumetric_arap_solver(native);
+}
+
+static PyObject *vol_response_basis(PyObject *obj, PyObject *unused)
+{
+    (void)unused;
+    return dk_py_arap_response_basis((dk_py_method *)obj, "VolumetricARAP.response_basis",
+                                     fill_basis, solver);
+}
+
+PyDoc_STRVAR(response_basis_doc,
+             "response_basis() -> ndarray (n_vertices, 4 * n_handles), or None\n\n"
+             "ARAP.response_basis of the solver on the tetrahedra, the mesh's vertices' rows:\n"
+             "the global step's response to each handle's affine motion (rotations held).\n"
+             "None over the limits (16 handles, 128 MB).");
+
 static PyObject *get_note(PyObject *obj, void *c)
 {
     (void)c;
@@ -123,6 +146,7 @@ PyDoc_STRVAR(volumetric_doc,
 static PyMethodDef vol_methods[] = {
     DK_PY_METHOD_METHODS(solve_doc),
     {"tetrahedra", vol_tetrahedra, METH_NOARGS, tetrahedra_doc},
+    {"response_basis", vol_response_basis, METH_NOARGS, response_basis_doc},
     {NULL, NULL, 0, NULL},
 };
 

@@ -215,3 +215,28 @@ def test_the_result_does_not_depend_on_placement_or_scale():
     ra = solve_to(a, v, handles, shape)
     rb = b.solve(targets=np.vstack([k * shape[h] @ R.T + t for h in handles]), warm_start=False)
     np.testing.assert_allclose(k * ra.positions @ R.T + t, rb.positions, atol=1e-6 * k)
+
+
+def test_the_response_basis_is_the_solvers_rows_for_the_vertices():
+    """response_basis(): the global step's response to each handle's affine motion, the mesh's
+    vertices' rows of the solver's on the tetrahedra: a handle vertex's row is its own affine
+    coordinates, a fixed one's zero, and a preview from a converged result for a moved handle
+    lands where the basis moves it, the handle exactly."""
+    v, f, handles = tube()
+    fixed = handles[0]
+    m = dk.VolumetricARAP(dk.Mesh(v, f), handles=[handles[1]], fixed=fixed)
+    B = m.response_basis()
+    assert B.shape == (len(v), 4)
+    np.testing.assert_allclose(B[handles[1]], np.c_[v[handles[1]], np.ones(len(handles[1]))],
+                               atol=1e-12)
+    assert np.abs(B[fixed]).max() == 0.0
+    free = np.setdiff1d(np.arange(len(v)), np.concatenate(handles))
+    assert np.abs(B[free]).max() > 0.1
+    T = np.eye(4)
+    T[:3, 3] = [0.0, 0.2, 0.0]
+    x0 = m.solve(transforms=[np.eye(4)], warm_start=False).positions
+    C = (T - np.eye(4))[:3, :].T          # C[j, d] = (T - T0)[d, j]
+    moved = x0 + B @ C
+    np.testing.assert_allclose(moved[handles[1]], v[handles[1]] + [0.0, 0.2, 0.0], atol=1e-12)
+    assert dk.VolumetricARAP(dk.Mesh(*make_grid(6, 5)), handles=[[0, 1]]).response_basis() \
+        is not None                       # no volume: ARAP's own rows

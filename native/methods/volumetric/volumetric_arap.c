@@ -322,6 +322,28 @@ dk_arap *dk_volumetric_arap_solver(dk_volumetric_arap *va)
     return va ? va->arap : NULL;
 }
 
+dk_status dk_volumetric_arap_response_basis(const dk_volumetric_arap *va, double *out,
+                                            dk_error *err)
+{
+    if (!va || !out)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "VolumetricARAP response basis: object and out must not be NULL");
+    dk_arap_counters c;
+    dk_arap_get_counters(va->arap, &c);
+    if (va->np == va->n || c.basis_columns == 0) /* no interior: the rows are the mesh's */
+        return dk_arap_response_basis(va->arap, out, err);
+    const size_t row = (size_t)c.basis_columns * sizeof(double);
+    double *all = malloc((size_t)va->np * row);
+    if (!all)
+        return dk_error_set(err, DK_ERR_OUT_OF_MEMORY,
+                            "VolumetricARAP response basis: out of memory");
+    const dk_status st = dk_arap_response_basis(va->arap, all, err);
+    if (st == DK_OK)
+        memcpy(out, all, (size_t)va->n * row); /* the vertices are the first points */
+    free(all);
+    return st;
+}
+
 const char *dk_volumetric_arap_note(const dk_volumetric_arap *va)
 {
     return va ? va->note : "";
