@@ -155,6 +155,17 @@ class Method:
     stack_first: bool = False
 
 
+# What a method that solves with ARAP's solver declares (ARAP, Volume ARAP): its progress,
+# the Stiffness group scaled by stiffness_scale, cold and warm solves, iterations with
+# Newton's inner steps, the response basis for previews
+_ARAP_SOLVER = dict(bind_progress=True, rebind_progress=True, maps=("stiffness",),
+                    material_label="Stiffness", stiffness_option="stiffness_scale",
+                    cold_solve={"warm_start": False}, warm_solve={"warm_start": True},
+                    iterative=True, iteration_cap="max_iterations",
+                    inner_iterations="cg_iterations", inner_when=("acceleration", "newton"),
+                    response_basis=True)
+
+
 def _arap_solver_options():
     """The options of ARAP's solver (its Newton steps and stopping test), one wording for
     ARAP and Volume ARAP, which solves with it."""
@@ -197,18 +208,7 @@ METHODS = [
         native_class="ARAP",
         description="As-rigid-as-possible: keeps local shape, bends and twists naturally",
         icon="MOD_SIMPLEDEFORM",
-        bind_progress=True,
-        rebind_progress=True,
-        maps=("stiffness",),
-        material_label="Stiffness",
-        stiffness_option="stiffness_scale",
-        cold_solve={"warm_start": False},
-        warm_solve={"warm_start": True},
-        iterative=True,
-        iteration_cap="max_iterations",
-        inner_iterations="cg_iterations",
-        inner_when=("acceleration", "newton"),
-        response_basis=True,
+        **_ARAP_SOLVER,
         options=[
             Option("energy", "ENUM", "spokes", "Keep Rigid",
                    "Which pieces of the surface the solve keeps rigid",
@@ -855,18 +855,7 @@ METHODS.append(Method(
     description="As-rigid-as-possible on the solid inside the mesh (tetrahedra): bent and "
                 "twisted limbs keep their volume instead of thinning or bulging",
     icon="MESH_ICOSPHERE",
-    bind_progress=True,
-    rebind_progress=True,
-    maps=("stiffness",),
-    material_label="Stiffness",
-    stiffness_option="stiffness_scale",
-    cold_solve={"warm_start": False},
-    warm_solve={"warm_start": True},
-    iterative=True,
-    iteration_cap="max_iterations",
-    inner_iterations="cg_iterations",
-    inner_when=("acceleration", "newton"),
-    response_basis=True,
+    **_ARAP_SOLVER,
     bind_summary=lambda native: _volume_summary(native),
     options=[
         Option("quality", "FLOAT", 1.5, "Tetrahedra Shape",
