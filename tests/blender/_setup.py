@@ -201,7 +201,7 @@ else:
     import addon  # noqa: E402
     addon.register()
 from addon import (solver, geonodes, native, handlers, handles, methods, overlay, compat,  # noqa: E402,F401
-                   properties)
+                   properties, bake, pc2)
 
 dk = native.load()
 
@@ -337,6 +337,19 @@ def bone_turn(obj, name):
     M = (obj.matrix_world.inverted() @ rig.matrix_world @ pb.matrix
          @ pb.bone.matrix_local.inverted() @ rig.matrix_world.inverted() @ obj.matrix_world)
     return np.array(M)[:3, :3]
+
+
+def bake_differs_from(obj, d, shown, name):
+    """Bakes d's frames min(shown) .. max(shown) to OUTPUT/name (a point cache) and returns the
+    largest distance of a baked vertex from what played (`shown`: frame -> positions)."""
+    first, last = min(shown), max(shown)
+    path = os.path.join(OUTPUT, name)
+    if os.path.exists(path):
+        os.remove(path)
+    bake.bake_pc2(bpy.context, obj, d, first, last, path)
+    _, baked = pc2.read(path)
+    return max(float(np.abs(np.array(baked[f - first]).reshape(-1, 3) - shown[f]).max())
+               for f in shown)
 
 
 def armature_input(obj, d):

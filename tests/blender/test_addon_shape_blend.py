@@ -12,7 +12,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _setup as S  # noqa: E402
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
-from addon import animated_input, bake, pc2  # noqa: E402
+from addon import animated_input  # noqa: E402
 
 R = S.Results("test_addon_shape_blend")
 twist, bend, volume = S.shapes.twist, S.shapes.bend, S.shapes.volume   # tests/python/shapes.py
@@ -148,13 +148,7 @@ def test_keyed_playback_and_bake():
         worst = max(worst, float(np.abs(got[f] - want).max()))
     R.check("a keyed slider plays as the API computes each frame (max %.2e)" % worst,
             worst < TOL, worst)
-    path = os.path.join(S.OUTPUT, "shape_blend.pc2")
-    if os.path.exists(path):
-        os.remove(path)
-    bake.bake_pc2(bpy.context, obj, d, 1, 12, path)
-    _, baked = pc2.read(path)
-    diff = max(float(np.abs(np.array(baked[f - 1]).reshape(-1, 3) - got[f]).max())
-               for f in frames)
+    diff = S.bake_differs_from(obj, d, {f: got[f] for f in frames}, "shape_blend.pc2")
     R.check("the bake = playback (max %.2e)" % diff, diff < TOL, diff)
     # the settings survive saving and reopening
     d.options_shape_blend.key_names = "Twist"

@@ -12,7 +12,6 @@ import _setup as S  # noqa: E402
 import bpy  # noqa: E402
 import mathutils  # noqa: E402
 import numpy as np  # noqa: E402
-from addon import bake, pc2  # noqa: E402
 
 R = S.Results("test_addon_volume")
 volume = S.shapes.volume   # tests/python/shapes.py
@@ -163,13 +162,7 @@ def test_after_an_armature():
     for f in range(1, 6):
         sc.frame_set(f)
         shown[f] = S.evaluated_positions(obj)
-    path = os.path.join(S.OUTPUT, "volume_arap.pc2")
-    if os.path.exists(path):
-        os.remove(path)
-    bake.bake_pc2(bpy.context, obj, d, 1, 5, path)
-    _, baked = pc2.read(path)
-    diff = max(float(np.abs(np.array(baked[f - 1]).reshape(-1, 3) - shown[f]).max())
-               for f in range(1, 6))
+    diff = S.bake_differs_from(obj, d, shown, "volume_arap.pc2")
     R.check("the bake = playback (max %.2e)" % diff, diff < TOL, diff)
 
 for t in (test_still_mesh, test_open_mesh_deforms_as_a_surface, test_after_an_armature):
