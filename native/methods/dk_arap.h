@@ -121,6 +121,18 @@ typedef struct dk_arap_options {
                                             (the secant of the last two solutions, see
                                             dk_arap_solve); 0 or 1, default 1             */
     dk_arap_basis basis;               /**< default DK_ARAP_BASIS_AUTO                    */
+    int levels;                        /**< the multi-scale solve (docs/methods/arap.md,
+                                            "Multi-scale"): 1 the mesh alone; L > 1 adds
+                                            L - 1 coarse levels, each with 1/16 of the
+                                            vertices of the one above (dk_decimate, every
+                                            vertex's handle, fixed or free role kept), of at
+                                            least 16 vertices; 0 (the default): automatic,
+                                            a coarse level from 100,000 vertices on. A cold
+                                            start (no previous solution, or asked cold)
+                                            solves the coarsest level first and starts each
+                                            finer one from the prolonged result; the
+                                            answer is still the mesh's minimum. Not used by
+                                            dk_arap_bind_tetrahedra (a volume's cells). 0..8 */
     dk_arap_iteration_fn on_iteration; /**< optional, NULL by default                     */
     void *user;                        /**< passed to on_iteration                        */
     dk_phase_progress_fn progress;     /**< bind progress (dk_progress.h), NULL by default:
@@ -266,6 +278,9 @@ void dk_arap_stats(const dk_arap *arap, dk_method_stats *stats);
 typedef struct dk_arap_counters {
     int basis_columns; /**< columns of the response basis (4 per handle), 0 when not built */
     int basis_starts;  /**< warm starts since bind that combined it instead of substituting */
+    int levels;        /**< levels of the multi-scale solve: 1 (the mesh alone) or more    */
+    dk_index coarse_vertices[7]; /**< vertices of each coarse level, finest first (levels-1) */
+    int coarse_starts; /**< cold starts from the coarse level since the last bind/rebind  */
 } dk_arap_counters;
 
 /** Fills `counters` (zeros for NULL). */

@@ -270,6 +270,60 @@ double dk_mat3_cofactor(const double x[9], double c[9]);
 int dk_affine_fit(const double *rest, const dk_index *verts, dk_index count, const double *q,
                   double rel_tol, double T[16]);
 
+/* ---------------------------------------------------------------- simplification ------ */
+
+/** A simplified copy of a mesh by half-edge collapses (see dk_decimate): the coarse
+ *  vertices are a subset of the mesh's, where they were, and every removed vertex is
+ *  recorded with the three vertices it is carried by (the corners of the coarse triangle
+ *  nearest to it when it was removed) for the prolongation back to the mesh. */
+typedef struct dk_decimation {
+    dk_index n_vertices;   /**< the mesh's                                               */
+    dk_index n_kept;       /**< coarse vertices                                          */
+    dk_index *kept;        /**< n_kept: the mesh vertex of each coarse vertex, ascending  */
+    dk_index *coarse_of;   /**< n_vertices: the coarse index of a kept vertex, else -1    */
+    dk_index n_faces;      /**< coarse triangles                                         */
+    dk_index *faces;       /**< n_faces x 3, coarse indices, orientation kept            */
+    dk_index n_removed;    /**< n_vertices - n_kept                                      */
+    dk_index *removed;     /**< n_removed: mesh vertices in the order they were removed   */
+    dk_index *carrier;     /**< n_removed x 3: mesh vertices present when removed[k] was
+                                (so kept, or removed later), corners of its nearest
+                                remaining triangle; a corner repeats when fewer carry it */
+    double *weight;        /**< n_removed x 3: barycentric weights of the nearest point of
+                                that triangle, >= 0, summing to 1                         */
+} dk_decimation;
+
+/** Simplifies `mesh` to at most `target_vertices` vertices where it can, by half-edge
+ *  collapses u -> v (u removed, v stays where it is) in the order of Garland & Heckbert's
+ *  quadric error (face planes weighted by area; a boundary edge adds a plane through it
+ *  perpendicular to its face, so boundaries keep their shape), each collapse checked to keep
+ *  the mesh what it was: the link condition (no pinched edge or vertex), no triangle turned
+ *  over or made degenerate, no duplicated triangle, a boundary vertex moved only along its
+ *  boundary, valences at most 16, and no vertex removed that sits on a non-manifold edge or
+ *  non-manifold boundary. vertex_class (n_vertices, may be NULL: all 0): u collapses only
+ *  into a v of the same class, and a negative class is never removed: so every connected
+ *  region of one class keeps a vertex (ARAP's coarse level passes each vertex's handle,
+ *  fixed or free role). Stops at target_vertices or when no valid collapse is left. The
+ *  order depends on the shape only up to rounding: uniform scale by a power of two gives the
+ *  same result bit for bit. target_vertices >= 1. */
+dk_status dk_decimate(const dk_mesh *mesh, const int *vertex_class, dk_index target_vertices,
+                      dk_decimation **out, dk_error *err);
+
+/** Frees; NULL allowed. */
+void dk_decimation_free(dk_decimation *decimation);
+
+/** The prolongation: mesh positions `fine` (n_vertices x 3) from coarse positions `coarse`
+ *  (n_kept x 3): a kept vertex takes its coarse position; a removed vertex u, in reverse
+ *  removal order, x_u = sum_k w_k (x_k + R_k (p_u - p_k)) over its carriers k, p = `pose`
+ *  (n_vertices x 3: the positions the coarse level was made from, or a pose of them), R_k
+ *  the carrier's rotation: `coarse_rotations` (n_kept x 9, row-major; NULL: identities)
+ *  for kept vertices, for removed ones the normalised blend of their carriers' (as unit
+ *  quaternions, `scratch`: n_vertices x 4, unused when coarse_rotations is NULL). So the
+ *  pose prolongs to itself exactly, and a rigid motion of it to that motion. O(n),
+ *  allocation-free. */
+void dk_decimation_prolong(const dk_decimation *decimation, const double *pose,
+                           const double *coarse, const double *coarse_rotations,
+                           double *fine, double *scratch);
+
 #ifdef __cplusplus
 }
 #endif

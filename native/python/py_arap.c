@@ -33,7 +33,8 @@ static int parse_options(PyObject *kw, void *o, const char *context)
         dk_py_opt_bool(kw, "predict", &opt->predict) < 0 ||
         dk_py_opt_int(kw, "cg_iterations", &opt->cg_iterations) < 0 ||
         dk_py_opt_choice(kw, "cg_schedule", cg_schedule_names, &cg_schedule, context) < 0 ||
-        dk_py_opt_choice(kw, "basis", basis_names, &basis, context) < 0)
+        dk_py_opt_choice(kw, "basis", basis_names, &basis, context) < 0 ||
+        dk_py_opt_int(kw, "levels", &opt->levels) < 0)
         return -1;
     opt->basis = (dk_arap_basis)basis;
     opt->cg_schedule = (dk_arap_cg_schedule)cg_schedule;
@@ -117,10 +118,22 @@ static PyObject *stats(dk_py_method *self)
     dk_arap_counters ac;
     dk_arap_stats(self->native, &ms);
     dk_arap_get_counters(self->native, &ac);
-    return Py_BuildValue("{s:i,s:i,s:i,s:i,s:i,s:i}", "n_unknowns", (int)ms.n_unknowns,
-                         "n_free", (int)k->n_free, "analysis_count", ms.analysis_count,
-                         "factorization_count", ms.factorization_count, "basis_columns",
-                         ac.basis_columns, "basis_starts", ac.basis_starts);
+    PyObject *coarse = PyTuple_New(ac.levels - 1);
+    if (!coarse)
+        return NULL;
+    for (int k = 0; k < ac.levels - 1; k++) {
+        PyObject *v = PyLong_FromLong((long)ac.coarse_vertices[k]);
+        if (!v || PyTuple_SetItem(coarse, k, v) < 0) { /* SetItem steals v, even failing */
+            Py_DECREF(coarse);
+            return NULL;
+        }
+    }
+    return Py_BuildValue("{s:i,s:i,s:i,s:i,s:i,s:i,s:i,s:N,s:i}", "n_unknowns",
+                         (int)ms.n_unknowns, "n_free", (int)k->n_free, "analysis_count",
+                         ms.analysis_count, "factorization_count", ms.factorization_count,
+                         "basis_columns", ac.basis_columns, "basis_starts", ac.basis_starts,
+                         "levels", ac.levels, "coarse_vertices", coarse, "coarse_starts",
+                         ac.coarse_starts);
 }
 
 static PyObject *get_handle_sizes(PyObject *obj, void *c)
@@ -172,7 +185,7 @@ PyDoc_STRVAR(arap_doc,
              "ARAP(mesh, handles, fixed=None, roi=None, handle_weights=None, stiffness=None,\n"
              "     energy='spokes', weights='clamped_cotangent', max_iterations=1000,\n"
              "     tolerance=1e-6, acceleration='newton', anderson_depth=5, predict=True,\n"
-             "     cg_iterations=12, cg_schedule='fixed', basis='auto')\n\n"
+             "     cg_iterations=12, cg_schedule='fixed', basis='auto', levels=0)\n\n"
              "As-rigid-as-possible deformation (Sorkine & Alexa 2007; 'spokes_and_rims' after\n"
              "Chao et al. 2010). Fixed vertices, vertices outside roi and handle vertices of\n"
              "weight 1 are eliminated exactly; handle weights w < 1 become soft penalties\n"
@@ -188,6 +201,11 @@ PyDoc_STRVAR(arap_doc,
              "two solutions). basis='auto' precomputes, 4 columns per handle (up to 16\n"
              "handles, 128 MB), the global step's response to each handle's affine motion, so\n"
              "warm starts after such a move need no back-substitution ('off': never).\n"
+             "levels: the multi-scale solve: 1 the mesh alone, L > 1 adds L - 1 coarse levels\n"
+             "(each 1/16 of the vertices, by quadric-error simplification); 0 (default)\n"
+             "automatic: one from 100,000 vertices on. A cold start solves the coarsest level\n"
+             "first and starts the finer ones from its prolonged result; the answer is still\n"
+             "the mesh's minimum. stats()['coarse_vertices'] lists the levels built.\n"
              "See docs/methods/arap.md.");
 
 static PyGetSetDef arap_getset[] = {

@@ -734,6 +734,86 @@ static PyObject *py_tetrahedralize(PyObject *module, PyObject *args, PyObject *k
     return Py_BuildValue("(NN)", po, to);
 }
 
+PyDoc_STRVAR(decimate_doc,
+             "decimate(mesh, target_vertices, classes=None) -> dict\n\n"
+             "The mesh (a deformkit.Mesh) simplified by half-edge collapses in quadric-error\n"
+             "order to at most target_vertices vertices where it can (fewer collapses when\n"
+             "none keeps the mesh manifold and unfolded): the coarse level of ARAP's multi-\n"
+             "scale solve. The coarse vertices are mesh vertices, where they were. classes:\n"
+             "None or one int per vertex: a vertex collapses only into one of its class, and\n"
+             "a negative class is never removed. Returns {'kept': coarse vertex -> mesh\n"
+             "vertex (ascending), 'triangles': the coarse triangles (coarse indices),\n"
+             "'removed': mesh vertices in removal order, 'carriers' (len(removed) x 3) and\n"
+             "'weights' (len(removed) x 3): the corners of the coarse triangle nearest to\n"
+             "each when it was removed and its nearest point's barycentric weights}.");
+
+static PyObject *py_decimate(PyObject *module, PyObject *args, PyObject *kwargs)
+{
+    static char *kwlist[] = {"mesh", "target_vertices", "classes", NULL};
+    PyObject *mobj, *cobj = Py_None;
+    Py_ssize_t target = 0;
+    dk_py_indices c = {0};
+    dk_decimation *d = NULL;
+    dk_error err = {0};
+    dk_status st;
+
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "On|O:decimate", kwlist, &mobj, &target,
+                                     &cobj))
+        return NULL;
+    const dk_mesh *mesh = dk_py_mesh_get(module, mobj, "mesh");
+    if (!mesh)
+        return NULL;
+    if (target < 1 || target > (Py_ssize_t)mesh->n_vertices) {
+        PyErr_Format(PyExc_ValueError,
+                     "decimate: target_vertices is %zd, must be in [1, %ld] (the mesh's)",
+                     target, (long)mesh->n_vertices);
+        return NULL;
+    }
+    if (cobj != Py_None && dk_py_read_indices(cobj, mesh->n_vertices, 0, "classes", &c) < 0)
+        return NULL;
+    int *cls = NULL;
+    if (c.data) {
+        cls = malloc(sizeof(int) * ((size_t)mesh->n_vertices + 1));
+        if (!cls) {
+            dk_py_indices_release(&c);
+            return PyErr_NoMemory();
+        }
+        for (dk_index v = 0; v < mesh->n_vertices; v++)
+            cls[v] = (int)c.data[v];
+        dk_py_indices_release(&c);
+    }
+    Py_BEGIN_ALLOW_THREADS
+    st = dk_decimate(mesh, cls, (dk_index)target, &d, &err);
+    Py_END_ALLOW_THREADS
+    free(cls);
+    if (st != DK_OK)
+        return dk_py_raise(&err, NULL);
+    dk_index *kd, *fd, *rd, *cd;
+    double *wd;
+    PyObject *ko = dk_py_new_indices(1, d->n_kept, 1, &kd);
+    PyObject *fo = ko ? dk_py_new_indices(2, d->n_faces, 3, &fd) : NULL;
+    PyObject *ro = fo ? dk_py_new_indices(1, d->n_removed, 1, &rd) : NULL;
+    PyObject *co = ro ? dk_py_new_indices(2, d->n_removed, 3, &cd) : NULL;
+    PyObject *wo = co ? dk_py_new_doubles(2, d->n_removed, 3, &wd) : NULL;
+    PyObject *result = NULL;
+    if (wo) {
+        memcpy(kd, d->kept, sizeof(dk_index) * (size_t)d->n_kept);
+        memcpy(fd, d->faces, sizeof(dk_index) * 3 * (size_t)d->n_faces);
+        memcpy(rd, d->removed, sizeof(dk_index) * (size_t)d->n_removed);
+        memcpy(cd, d->carrier, sizeof(dk_index) * 3 * (size_t)d->n_removed);
+        memcpy(wd, d->weight, sizeof(double) * 3 * (size_t)d->n_removed);
+        result = Py_BuildValue("{sOsOsOsOsO}", "kept", ko, "triangles", fo, "removed", ro,
+                               "carriers", co, "weights", wo);
+    }
+    Py_XDECREF(ko);
+    Py_XDECREF(fo);
+    Py_XDECREF(ro);
+    Py_XDECREF(co);
+    Py_XDECREF(wo);
+    dk_decimation_free(d);
+    return result;
+}
+
 /** deformkit.KDTree: a static k-d tree over a copy of the points. */
 typedef struct KDTreeObject {
     PyObject_HEAD
@@ -950,6 +1030,8 @@ static PyMethodDef operator_functions[] = {
     {"knn", (PyCFunction)(void (*)(void))py_knn, METH_VARARGS | METH_KEYWORDS, knn_doc},
     {"tetrahedralize", (PyCFunction)(void (*)(void))py_tetrahedralize,
      METH_VARARGS | METH_KEYWORDS, tetrahedralize_doc},
+    {"decimate", (PyCFunction)(void (*)(void))py_decimate, METH_VARARGS | METH_KEYWORDS,
+     decimate_doc},
     {"closest_rotation", py_closest_rotation, METH_O, closest_rotation_doc},
     {"harmonic_material", (PyCFunction)(void (*)(void))py_harmonic_material,
      METH_VARARGS | METH_KEYWORDS, harmonic_material_doc},

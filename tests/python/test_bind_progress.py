@@ -35,7 +35,7 @@ TARGETS = V[HANDLE] + [0.05, 0.0, 0.25]
 
 PHASES = {
     "ARAP": {"renumber", "cells", "constraints", "system", "assemble", "analyze",
-             "factorize", "basis"},
+             "factorize", "basis", "coarse"},
     "LaplacianEdit": {"renumber", "operator", "constraints", "assemble", "analyze",
                       "factorize", "basis"},
     "Falloff": {"distances"},  # distance="hops"; "geodesic" adds "heat" (below)

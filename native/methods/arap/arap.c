@@ -23,6 +23,7 @@ void dk_arap_default_options(dk_arap_options *o)
     o->cg_schedule = DK_ARAP_CG_FIXED;
     o->predict = 1;
     o->basis = DK_ARAP_BASIS_AUTO;
+    o->levels = 0;
     o->on_iteration = NULL;
     o->user = NULL;
     o->progress = NULL;
@@ -44,10 +45,12 @@ static const dk_progress_phase bind_phases[] = {
     {"assemble", 0.32},
     {"analyze", 0.83},
     {"factorize", 1.80},
-    {"basis", 0.10}};      /* the response basis: 4 columns per handle                     */
+    {"basis", 0.10},       /* the response basis: 4 columns per handle                     */
+    {"coarse", 0.40}};     /* the multi-scale solve's coarse level (none below 100k vertices
+                              by default: then the phase is empty)                         */
 static const dk_progress_phase rebind_phases[] = {
     {"constraints", 0.06}, {"system", 0.35}, {"assemble", 0.32}, {"analyze", 0.83},
-    {"factorize", 1.80}, {"basis", 0.10}};
+    {"factorize", 1.80}, {"basis", 0.10}, {"coarse", 0.40}};
 #define BIND_PHASE_BASE 2 /* ARAP_PHASE_CONSTRAINTS in bind_phases */
 
 static dk_status check_options(const dk_arap_options *o, dk_error *err)
@@ -79,6 +82,9 @@ static dk_status check_options(const dk_arap_options *o, dk_error *err)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "ARAP: unknown cg_schedule %d (fixed = 0, growing = 1)",
                             (int)o->cg_schedule);
+    if (o->levels < 0 || o->levels > 8)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "ARAP: levels is %d, must be in [1, 8] (0: automatic)", o->levels);
     if (o->predict != 0 && o->predict != 1)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "ARAP: predict is %d, must be 0 or 1",
                             o->predict);
@@ -181,6 +187,8 @@ static dk_status bind(const dk_mesh *mesh, const dk_index *tets, dk_index n_tets
     ar->caller_mesh = mesh;
     ar->team = dk_team_create(); /* NULL (no thread available) is fine: passes start threads */
     ar->opt = opt;
+    if (tets) /* a volume's cells: no simplified surface stands for them */
+        ar->opt.levels = 1;
     dk_progress prog;
     dk_progress_init(&prog, opt.progress, opt.progress_user, bind_phases,
                      (int)(sizeof bind_phases / sizeof bind_phases[0]), "ARAP bind");
@@ -409,6 +417,10 @@ static dk_status solve_rest(dk_arap *ar, const dk_solve_request *rq, double *pos
     const size_t nhv3 = 3 * (size_t)s->con->n_handle_vertices;
     const int resume = rq->start == DK_START_RESUME && ar->have_prev && s->resumable &&
                        memcmp(s->targets, s->targets_prev, nhv3 * sizeof(double)) == 0;
+    /* a cold start on a system with a coarse level: from its solve, prolonged (multiscale.c) */
+    if (!resume && !given && !(warm_start && ar->have_prev) && s->coarse &&
+        (st = arap_coarse_start(ar, s, &given, err)) != DK_OK)
+        return st;
     arap_progress p = {0};
     if (!resume) {
         s->cg_level = 0;       /* the CG schedule starts again (newton.c) */
@@ -550,6 +562,14 @@ void dk_arap_get_counters(const dk_arap *ar, dk_arap_counters *counters)
         return;
     counters->basis_columns = ar->sys.zcols;
     counters->basis_starts = ar->basis_starts;
+    for (const dk_arap *a = ar; a->sys.coarse; a = a->sys.coarse->arap) {
+        counters->coarse_vertices[counters->levels] = a->sys.coarse->dec->n_kept;
+        if (counters->levels++ == 0)
+            counters->coarse_starts = a->sys.coarse->starts;
+        if (counters->levels == 7)
+            break;
+    }
+    counters->levels++; /* the mesh itself */
 }
 
 dk_status dk_arap_response_basis(const dk_arap *ar, double *out, dk_error *err)
@@ -593,6 +613,18 @@ dk_status dk_arap_estimate_memory(const dk_mesh *mesh, const dk_arap_options *op
     const double n = (double)mesh->n_vertices, lg = n > 2.0 ? log2(n) : 1.0;
     /* measured 1950 B/vertex at 8k and 43k vertices, 2180-2450 at 692k */
     *bytes = dk_memory_model(1700.0 + 40.0 * lg, n, 0.0);
+    /* the coarse levels (multiscale.c): each a sixteenth of the one above, and the
+     * simplification's working arrays (~300 B a vertex of the finer level, freed after) */
+    const int levels = options ? options->levels : 0;
+    double m = n;
+    for (int k = 1; levels == 0 ? m >= 100000.0 : k < levels; k++) {
+        const double c = floor(m / 16.0);
+        if (c < 16.0)
+            break;
+        const double lc = c > 2.0 ? log2(c) : 1.0;
+        *bytes += dk_memory_model(1700.0 + 40.0 * lc, c, 0.0) + (uint64_t)(300.0 * m);
+        m = c;
+    }
     return DK_OK;
 }
 
@@ -615,6 +647,8 @@ static const dk_option_desc arap_fields[] = {
     {"cg_schedule", DK_OPTION_ENUM, offsetof(dk_arap_options, cg_schedule), 0, 0, 1, 0, 1, 0},
     {"predict", DK_OPTION_INT, offsetof(dk_arap_options, predict), 0, 0, 1, 1, 1, 0},
     {"basis", DK_OPTION_ENUM, offsetof(dk_arap_options, basis), 0, 0, 1, 0, 1, 0},
+    {"levels", DK_OPTION_INT, offsetof(dk_arap_options, levels), 0, 1, 8, 2, 2,
+     DK_OPTION_ZERO_AUTO},
 };
 
 DK_METHOD_OPS_STATEFUL(dk_arap_ops, "ARAP",

@@ -31,6 +31,7 @@
  *   anderson.c    local/global iterations, plain or Anderson-accelerated
  *   newton.c      inexact Newton steps with matrix-free Hessian products
  *   state.c       the state a solve leaves for the next call, saved and restored
+ *   multiscale.c  the coarse level a cold start is solved on first, then prolonged
  */
 #ifndef DK_ARAP_INTERNAL_H
 #define DK_ARAP_INTERNAL_H
@@ -68,6 +69,24 @@
 #define NEWTON_FAR 0.03
 /* A preview compares its two starts (plain, predicted) on about this many cells. */
 #define PREVIEW_SAMPLE 16384
+
+/* The multi-scale solve's coarse level (multiscale.c): the mesh simplified (dk_decimate,
+ * internal numbering, each vertex's role kept) and an ARAP object bound on it for the
+ * restricted constraints; buffers for its targets, pose, result and rotations, and the
+ * prolonged start (fine: internal numbering; start: the caller's, for arap_start). */
+typedef struct arap_coarse {
+    dk_decimation *dec;
+    dk_mesh *mesh;
+    dk_arap *arap;
+    dk_index n_handle_vertices;
+    dk_index *target_row; /* per coarse handle vertex: its row of the system's targets */
+    double *targets, *pose, *y, *rot, *fine, *start, *scratch;
+    int starts;           /* cold starts it gave since it was built                     */
+    /* the corrections (arap_coarse_correct): the coarse vectors in its vertex order (n_kept
+     * x 3), its unknowns' blocks (3 of its nu), and the fine direction and product (3 nu) */
+    double *cr, *cb, *cd, *fd, *fq;
+    int corrections;      /* corrections taken since it was built                        */
+} arap_coarse;
 
 typedef struct arap_system {
     dk_constraints *con;
@@ -150,6 +169,7 @@ typedef struct arap_system {
     double *zb, *zdx, *zfit;
     dk_index *zverts, *zstart;
     int zcols;
+    arap_coarse *coarse;  /* the multi-scale solve's coarse level, NULL: none            */
 } arap_system;
 
 struct dk_arap {
@@ -210,8 +230,10 @@ enum {
     ARAP_PHASE_ASSEMBLE = 2,    /* the reduced matrix                                      */
     ARAP_PHASE_ANALYZE = 3,     /* CHOLMOD's symbolic analysis (uninterruptible)            */
     ARAP_PHASE_FACTORIZE = 4,   /* CHOLMOD's numeric factorization (uninterruptible)        */
-    ARAP_PHASE_BASIS = 5        /* the warm start's response basis: one solve of 4 columns
+    ARAP_PHASE_BASIS = 5,       /* the warm start's response basis: one solve of 4 columns
                                    per handle (uninterruptible)                            */
+    ARAP_PHASE_COARSE = 6       /* the multi-scale solve's coarse level: simplification and
+                                   its bind (uninterruptible)                              */
 };
 
 /* dk_progress_begin / dk_progress_tick for a system phase of the running bind or rebind */
@@ -334,5 +356,26 @@ dk_status arap_iterate_local_global(dk_arap *ar, arap_system *s, int max_iterati
 void arap_gap_restart(arap_system *s, int cold);
 dk_status arap_iterate_newton(dk_arap *ar, arap_system *s, int max_iterations,
                               arap_progress *p, dk_error *err);
+
+/* multiscale.c: the coarse level for the constraints of `s` (*out NULL: none, by the
+ * levels option, the mesh's size, or a coarse mesh that would not bind); the cold start it
+ * gives (*start: n x 3 in the caller's order, owned by the level; NULL: none this time) */
+dk_status arap_coarse_build(dk_arap *ar, const arap_system *s, arap_coarse **out, dk_error *err);
+dk_status arap_coarse_start(dk_arap *ar, arap_system *s, const double **start, dk_error *err);
+void arap_coarse_free(arap_coarse *c);
+/* multiscale.c: after a Newton step (the iterate's rotations, K^-1 and right-hand side in
+ * place), the coarse level's correction of the slow modes: the gradient restricted, the
+ * coarse Hessian's Newton direction at the restricted iterate, prolonged, a line search on
+ * E; *energy lowered when it is taken (the iterate's data with it), unchanged when not */
+dk_status arap_coarse_correct(dk_arap *ar, arap_system *s, double *energy, int *products,
+                              dk_error *err);
+/* newton.c: out = rhs - A x at the iterate (minus half the gradient over the unknowns, 3
+ * blocks of nu); out = H v (returns v . H v); the Newton direction out ~ H^-1 rhs by at
+ * most maxit conjugate-gradient products preconditioned by A^-1, from 0, ending at
+ * non-positive curvature (the first: out = A^-1 rhs). Use s->nt_r, nt_z, nt_p, nt_q, vfull. */
+dk_status arap_minus_gradient(dk_arap *ar, arap_system *s, double *out);
+double arap_hessian_product(dk_arap *ar, arap_system *s, const double *v, double *out);
+dk_status arap_newton_direction(dk_arap *ar, arap_system *s, const double *rhs, double *out,
+                                int maxit, int *products, dk_error *err);
 
 #endif

@@ -14,6 +14,8 @@ static void sparse_release(dk_sparse *a)
 
 void arap_system_free(arap_system *s)
 {
+    arap_coarse_free(s->coarse);
+    s->coarse = NULL;
     dk_constraints_free(s->con);
     free(s->unk);
     free(s->unknowns);
@@ -551,10 +553,18 @@ dk_status arap_system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_sy
         old = NULL;
     const int had_factor = old && old->chol;
     st = factor(ar, old, s, err);
-    if (st == DK_OK && (st = arap_phase(ar, ARAP_PHASE_BASIS, err)) != DK_OK) {
-        /* cancelled before the basis: a rebind that took over the old analysis (the same
-         * unknowns) gives it back, refactored with the old values -- that stop costs the
-         * factorization -- and its counters stay as they were */
+    if (st != DK_OK)
+        return st;
+    if ((st = arap_phase(ar, ARAP_PHASE_BASIS, err)) == DK_OK) {
+        arap_response_basis_build(ar, s);
+        if ((st = arap_phase(ar, ARAP_PHASE_COARSE, err)) == DK_OK)
+            st = arap_coarse_build(ar, s, &s->coarse, err);
+    }
+    if (st != DK_OK) {
+        /* cancelled after the factor (or out of memory at the coarse level): a rebind that
+         * took over the old analysis (the same unknowns) gives it back, refactored with the
+         * old values -- that stop costs the factorization -- and its counters stay as they
+         * were */
         if (had_factor && !old->chol && s->chol) {
             old->chol = s->chol;
             s->chol = NULL;
@@ -569,9 +579,7 @@ dk_status arap_system_build(dk_arap *ar, const dk_constraint_desc *desc, arap_sy
         arap_system_free(s);
         return st;
     }
-    if (st == DK_OK)
-        arap_response_basis_build(ar, s);
-    return st;
+    return DK_OK;
 }
 
 void arap_system_edges_changed(const dk_arap *ar, arap_system *s)
