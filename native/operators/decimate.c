@@ -3,8 +3,8 @@
  *
  * The working mesh is the input's triangles, rewritten in place as vertices go: each
  * vertex keeps the list of its triangles (dead ones dropped lazily), its quadric, and its
- * best collapse (target and cost), kept in a heap whose stale entries are skipped by a
- * per-vertex stamp. A collapse u -> v kills the triangles on the edge, moves u's others to
+ * best collapse (target and cost), kept in an indexed heap (one entry per vertex that has
+ * a collapse, moved when its cost changes). A collapse u -> v kills the triangles on the edge, moves u's others to
  * v, adds u's quadric to v's and recomputes the best collapse of v and its neighbours (the
  * only vertices whose neighbourhoods changed). Quadrics are taken in coordinates centred on
  * the bounding box and divided by its diagonal: costs are then free of the mesh's units and
@@ -24,12 +24,6 @@
  * weights on the coarse level */
 #define MIN_COMPACTNESS 0.05
 
-typedef struct heap_item {
-    double cost;
-    dk_index v;
-    uint32_t stamp;
-} heap_item;
-
 typedef struct work {
     const double *p; /* the mesh's positions */
     dk_index n, nf;
@@ -43,58 +37,77 @@ typedef struct work {
     double *q;       /* n x 10: symmetric 4 x 4 quadrics, upper triangle */
     double *x;       /* n x 3: normalised coordinates for the quadrics */
     dk_index *best;  /* n: best collapse target, -1 none */
-    uint32_t *stamp;
-    heap_item *heap;
-    size_t heap_n, heap_cap;
+    double *best_cost; /* n: its cost */
+    dk_index *heap;  /* the vertices with a collapse, a binary heap on (best_cost, vertex) */
+    dk_index *pos;   /* n: a vertex's place in heap, -1 when not there */
+    dk_index heap_n;
     dk_index alive_count;
 } work;
 
-static int item_less(const heap_item *a, const heap_item *b)
+static int vertex_less(const work *w, dk_index a, dk_index b)
 {
-    return a->cost < b->cost || (a->cost == b->cost && a->v < b->v);
+    const double ca = w->best_cost[a], cb = w->best_cost[b];
+    return ca < cb || (ca == cb && a < b);
 }
 
-static int heap_push(work *w, double cost, dk_index v)
+static void heap_place(work *w, dk_index i, dk_index v)
 {
-    if (w->heap_n == w->heap_cap) {
-        size_t cap = w->heap_cap * 2 + 64;
-        heap_item *h = realloc(w->heap, cap * sizeof *h);
-        if (!h)
-            return -1;
-        w->heap = h;
-        w->heap_cap = cap;
-    }
-    heap_item it = {cost, v, w->stamp[v]};
-    size_t i = w->heap_n++;
+    w->heap[i] = v;
+    w->pos[v] = i;
+}
+
+static void sift_up(work *w, dk_index i)
+{
+    const dk_index v = w->heap[i];
     while (i > 0) {
-        size_t parent = (i - 1) / 2;
-        if (!item_less(&it, &w->heap[parent]))
+        const dk_index parent = (i - 1) / 2;
+        if (!vertex_less(w, v, w->heap[parent]))
             break;
-        w->heap[i] = w->heap[parent];
+        heap_place(w, i, w->heap[parent]);
         i = parent;
     }
-    w->heap[i] = it;
-    return 0;
+    heap_place(w, i, v);
 }
 
-static heap_item heap_pop(work *w)
+static void sift_down(work *w, dk_index i)
 {
-    heap_item top = w->heap[0], last = w->heap[--w->heap_n];
-    size_t i = 0, n = w->heap_n;
+    const dk_index v = w->heap[i], n = w->heap_n;
     for (;;) {
-        size_t c = 2 * i + 1;
+        dk_index c = 2 * i + 1;
         if (c >= n)
             break;
-        if (c + 1 < n && item_less(&w->heap[c + 1], &w->heap[c]))
+        if (c + 1 < n && vertex_less(w, w->heap[c + 1], w->heap[c]))
             c++;
-        if (!item_less(&w->heap[c], &last))
+        if (!vertex_less(w, w->heap[c], v))
             break;
-        w->heap[i] = w->heap[c];
+        heap_place(w, i, w->heap[c]);
         i = c;
     }
-    if (n > 0)
-        w->heap[i] = last;
-    return top;
+    heap_place(w, i, v);
+}
+
+/* v's entry after its best collapse changed (best[v] < 0: none, taken out) */
+static void heap_update(work *w, dk_index v)
+{
+    dk_index i = w->pos[v];
+    if (w->best[v] < 0) {
+        if (i < 0)
+            return;
+        w->pos[v] = -1;
+        const dk_index last = w->heap[--w->heap_n];
+        if (i == w->heap_n)
+            return;
+        heap_place(w, i, last);
+        sift_up(w, i);
+        sift_down(w, w->pos[last]);
+        return;
+    }
+    if (i < 0) {
+        i = w->heap_n++;
+        heap_place(w, i, v);
+    }
+    sift_up(w, i);
+    sift_down(w, w->pos[v]);
 }
 
 /* appends triangle t to v's list, moving the list to the pool's end when it is full */
@@ -285,52 +298,59 @@ static void quadric_add_plane(double *q, const double *nrm, double d, double wei
     q[9] += weight * d * d;
 }
 
+/* The cost of collapsing u into v (INFINITY: other classes): the quadric error plus the
+ * edge's length^4 (both in units of the diagonal^4). Where the surface is flat on the
+ * edge's scale, as a cylinder is along its axis, the quadric is ~0 and the shortest edge
+ * goes first, so that the coarse triangles stay about as long as wide -- a deformation
+ * needs them to bend where the mesh does; the quadric alone strings a tube's triangles
+ * along its whole length (measured: a coarse tube that bent 8% of the diagonal off). */
+static double collapse_cost(const work *w, dk_index u, dk_index v)
+{
+    if ((w->cls ? w->cls[v] : 0) != (w->cls ? w->cls[u] : 0))
+        return INFINITY;
+    double qs[10], e[3];
+    for (int j = 0; j < 10; j++)
+        qs[j] = w->q[10 * (size_t)u + j] + w->q[10 * (size_t)v + j];
+    sub3(w->x + 3 * (size_t)u, w->x + 3 * (size_t)v, e);
+    const double l2 = dot3(e, e);
+    return fmax(quadric_at(qs, w->x + 3 * (size_t)v), 0.0) + l2 * l2;
+}
+
 /* u's cheapest collapse, pushed on the heap (none: not pushed); -1 on exhausted memory.
  * checked: the cheapest that collapse_ok accepts; else the cheapest, checked when it is
  * popped (most are never popped: the checks are what costs) */
 static int update_candidate(work *w, dk_index u, int checked)
 {
-    w->stamp[u]++;
     w->best[u] = -1;
-    if (!w->alive[u] || w->locked[u])
+    if (!w->alive[u] || w->locked[u]) {
+        heap_update(w, u);
         return 0;
+    }
     list_compact(w, u);
     dk_index nb[MAX_RING];
     double cost[MAX_RING];
     const int k = neighbours(w, u, nb);
-    if (k <= 0)
+    if (k <= 0) {
+        heap_update(w, u);
         return 0;
-    const int cu = w->cls ? w->cls[u] : 0;
-    for (int i = 0; i < k; i++) {
-        const dk_index v = nb[i];
-        if ((w->cls ? w->cls[v] : 0) != cu) {
-            cost[i] = INFINITY;
-            continue;
-        }
-        double qs[10];
-        for (int j = 0; j < 10; j++)
-            qs[j] = w->q[10 * (size_t)u + j] + w->q[10 * (size_t)v + j];
-        /* the quadric error plus the edge's length^4 (both in units of the diagonal^4):
-         * where the surface is flat on the edge's scale, as a cylinder is along its axis,
-         * the quadric is ~0 and the shortest edge goes first, so that the coarse triangles
-         * stay about as long as wide -- a deformation needs them to bend where the mesh
-         * does; the quadric alone strings a tube's triangles along its whole length */
-        double e[3];
-        sub3(w->x + 3 * (size_t)u, w->x + 3 * (size_t)v, e);
-        const double l2 = dot3(e, e);
-        cost[i] = fmax(quadric_at(qs, w->x + 3 * (size_t)v), 0.0) + l2 * l2;
     }
+    for (int i = 0; i < k; i++)
+        cost[i] = collapse_cost(w, u, nb[i]);
     for (;;) { /* the cheapest valid one */
         int bi = -1;
         for (int i = 0; i < k; i++)
             if (cost[i] < INFINITY && (bi < 0 || cost[i] < cost[bi] ||
                                        (cost[i] == cost[bi] && nb[i] < nb[bi])))
                 bi = i;
-        if (bi < 0)
+        if (bi < 0) {
+            heap_update(w, u);
             return 0;
+        }
         if (!checked || collapse_ok(w, u, nb[bi])) {
             w->best[u] = nb[bi];
-            return heap_push(w, cost[bi], u);
+            w->best_cost[u] = cost[bi];
+            heap_update(w, u);
+            return 0;
         }
         cost[bi] = INFINITY;
     }
@@ -424,6 +444,8 @@ static int collapse(work *w, dk_decimation *d, dk_index u, dk_index v)
             memcpy(wt, bw, sizeof bw);
         }
     }
+    dk_index nbu[MAX_RING]; /* collapse_ok read them: at most MAX_RING */
+    const int ku = neighbours(w, u, nbu);
     const dk_index nu = w->cnt[u];
     for (dk_index i = 0; i < nu; i++) {
         const dk_index t = w->pool[w->off[u] + (size_t)i];
@@ -445,14 +467,36 @@ static int collapse(work *w, dk_decimation *d, dk_index u, dk_index v)
         w->q[10 * (size_t)v + j] += w->q[10 * (size_t)u + j];
     w->alive[u] = 0;
     w->alive_count--;
+    w->best[u] = -1;
+    heap_update(w, u);
+    /* whose best collapse can have changed: v's (its quadric and ring); a neighbour's whose
+     * best went to u or v (gone, or dearer: v's quadric only grows); u's former neighbours
+     * gained v, one cost to compare. The others' costs and rings are as they were. */
     dk_index nb[MAX_RING];
     list_compact(w, v);
     const int kv = neighbours(w, v, nb);
     if (update_candidate(w, v, 0) < 0)
         return -1;
-    for (int i = 0; i < kv; i++) /* kv <= MAX_VALENCE: collapse_ok checked it */
-        if (update_candidate(w, nb[i], 0) < 0)
-            return -1;
+    for (int i = 0; i < kv; i++) { /* kv <= MAX_VALENCE: collapse_ok checked it */
+        const dk_index x = nb[i];
+        if (w->best[x] == u || w->best[x] == v) {
+            if (update_candidate(w, x, 0) < 0)
+                return -1;
+            continue;
+        }
+        int was_u = 0;
+        for (int j = 0; j < ku && !was_u; j++)
+            was_u = nbu[j] == x;
+        if (!was_u || !w->alive[x] || w->locked[x])
+            continue;
+        const double c = collapse_cost(w, x, v);
+        if (w->best[x] < 0 ? c < INFINITY
+                           : c < w->best_cost[x] || (c == w->best_cost[x] && v < w->best[x])) {
+            w->best[x] = v;
+            w->best_cost[x] = c;
+            heap_update(w, x);
+        }
+    }
     return 0;
 }
 
@@ -506,8 +550,9 @@ static void work_free(work *w)
     free(w->q);
     free(w->x);
     free(w->best);
-    free(w->stamp);
+    free(w->best_cost);
     free(w->heap);
+    free(w->pos);
 }
 
 static dk_status oom(dk_error *err)
@@ -517,6 +562,14 @@ static dk_status oom(dk_error *err)
 
 dk_status dk_decimate(const dk_mesh *mesh, const int *vertex_class, dk_index target_vertices,
                       dk_decimation **out, dk_error *err)
+{
+    return dk_decimate_progress(mesh, vertex_class, target_vertices, NULL, NULL, out, err);
+}
+
+dk_status dk_decimate_progress(const dk_mesh *mesh, const int *vertex_class,
+                               dk_index target_vertices,
+                               int (*progress)(void *user, double done, double total),
+                               void *user, dk_decimation **out, dk_error *err)
 {
     if (out)
         *out = NULL;
@@ -549,7 +602,9 @@ dk_status dk_decimate(const dk_mesh *mesh, const int *vertex_class, dk_index tar
     w.q = calloc(10 * nn, sizeof *w.q);
     w.x = malloc(3 * nn * sizeof *w.x);
     w.best = malloc(nn * sizeof *w.best);
-    w.stamp = calloc(nn, sizeof *w.stamp);
+    w.best_cost = malloc(nn * sizeof *w.best_cost);
+    w.heap = malloc(nn * sizeof *w.heap);
+    w.pos = malloc(nn * sizeof *w.pos);
     dk_decimation *d = calloc(1, sizeof *d);
     if (d) {
         d->removed = malloc(nn * sizeof *d->removed);
@@ -558,7 +613,7 @@ dk_status dk_decimate(const dk_mesh *mesh, const int *vertex_class, dk_index tar
         d->coarse_of = malloc(nn * sizeof *d->coarse_of);
     }
     if (!w.f || !w.face_alive || !w.alive || !w.locked || !w.bnd || !w.pool || !w.off ||
-        !w.cnt || !w.cap || !w.q || !w.x || !w.best || !w.stamp || !d || !d->removed ||
+        !w.cnt || !w.cap || !w.q || !w.x || !w.best || !w.best_cost || !w.heap || !w.pos || !d || !d->removed ||
         !d->carrier || !d->weight || !d->coarse_of) {
         work_free(&w);
         dk_decimation_free(d);
@@ -568,6 +623,7 @@ dk_status dk_decimate(const dk_mesh *mesh, const int *vertex_class, dk_index tar
     memcpy(w.f, mesh->faces, 3 * (size_t)nf * sizeof *w.f);
     memset(w.face_alive, 1, (size_t)nf);
     memset(w.alive, 1, (size_t)n);
+    memset(w.pos, 0xff, nn * sizeof *w.pos); /* -1: in no heap place */
     for (dk_index v = 0; v < n; v++) {
         w.bnd[v] = mesh->is_boundary_vertex[v];
         w.locked[v] = vertex_class && vertex_class[v] < 0;
@@ -636,22 +692,37 @@ dk_status dk_decimate(const dk_mesh *mesh, const int *vertex_class, dk_index tar
             quadric_add_plane(w.q + 10 * (size_t)i1, m, md, weight);
         }
     }
-    int failed = 0;
-    for (dk_index v = 0; v < n && !failed; v++)
-        failed = update_candidate(&w, v, 0) < 0;
-    while (!failed && w.alive_count > target_vertices && w.heap_n > 0) {
-        const heap_item it = heap_pop(&w);
-        const dk_index u = it.v;
-        if (it.stamp != w.stamp[u] || !w.alive[u] || w.best[u] < 0)
+    int failed = 0, cancelled = 0;
+    /* the first candidates from the mesh's rings (in order in memory), the heap built at once */
+    for (dk_index v = 0; v < n; v++) {
+        w.best[v] = -1;
+        if (w.locked[v])
             continue;
-        const dk_index v = w.best[u];
+        for (dk_index r = mesh->ring_start[v]; r < mesh->ring_start[v + 1]; r++) {
+            const dk_index x = mesh->ring_index[r];
+            const double c = collapse_cost(&w, v, x);
+            if (c < INFINITY && (w.best[v] < 0 || c < w.best_cost[v])) /* ring ascending */
+                w.best[v] = x, w.best_cost[v] = c;
+        }
+        if (w.best[v] >= 0)
+            heap_place(&w, w.heap_n++, v);
+    }
+    for (dk_index i = w.heap_n / 2 - 1; i >= 0; i--)
+        sift_down(&w, i);
+    const double total = (double)(n > target_vertices ? n - target_vertices : 0);
+    while (!failed && w.alive_count > target_vertices && w.heap_n > 0) {
+        if (progress && progress(user, (double)d->n_removed, total)) {
+            cancelled = 1;
+            break;
+        }
+        const dk_index u = w.heap[0], v = w.best[u];
         if (!w.alive[v] || !collapse_ok(&w, u, v)) { /* its cheapest valid one instead */
             failed = update_candidate(&w, u, 1) < 0;
             continue;
         }
         failed = collapse(&w, d, u, v) < 0;
     }
-    if (!failed) { /* the coarse mesh */
+    if (!failed && !cancelled) { /* the coarse mesh */
         d->n_kept = w.alive_count;
         d->kept = malloc(((size_t)d->n_kept + 1) * sizeof *d->kept);
         dk_index nfc = 0;
@@ -676,9 +747,10 @@ dk_status dk_decimate(const dk_mesh *mesh, const int *vertex_class, dk_index tar
         }
     }
     work_free(&w);
-    if (failed) {
+    if (failed || cancelled) {
         dk_decimation_free(d);
-        return oom(err);
+        return cancelled ? dk_error_set(err, DK_ERR_CANCELLED, "decimate: cancelled")
+                         : oom(err);
     }
     *out = d;
     return DK_OK;

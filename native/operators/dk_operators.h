@@ -308,6 +308,15 @@ typedef struct dk_decimation {
 dk_status dk_decimate(const dk_mesh *mesh, const int *vertex_class, dk_index target_vertices,
                       dk_decimation **out, dk_error *err);
 
+/** dk_decimate with a progress callback (NULL: none): called before every collapse (keep it
+ *  cheap: dk_progress_tick asks its own callback every few thousand calls) with the
+ *  collapses done and the most there can be (n_vertices - target_vertices); a non-zero
+ *  return stops it (DK_ERR_CANCELLED, nothing written, nothing leaked). */
+dk_status dk_decimate_progress(const dk_mesh *mesh, const int *vertex_class,
+                               dk_index target_vertices,
+                               int (*progress)(void *user, double done, double total),
+                               void *user, dk_decimation **out, dk_error *err);
+
 /** Frees; NULL allowed. */
 void dk_decimation_free(dk_decimation *decimation);
 

@@ -37,6 +37,7 @@ if HERE not in sys.path:
     sys.path.insert(0, HERE)
 
 import bpy  # noqa: E402
+import mathutils  # noqa: E402
 import numpy as np  # noqa: E402
 
 # the test shapes the Python suites use (tests/python/shapes.py, plain numpy), by its path:
@@ -392,6 +393,15 @@ def armature_in_edit_mode(name="Rig"):
     ao = linked_object(name, arm)
     bpy.ops.object.mode_set(mode="EDIT")
     return arm, ao
+
+
+def bend_end(angle, start=-0.5, length=1.0):
+    """The rigid motion S.shapes.bend gives the part past the bend (x > start + length): the
+    tube's middle on a circular arc of its own length, so the tube bends without stretching."""
+    rho = length / angle
+    return (mathutils.Matrix.Translation((start, rho, 0.0))
+            @ mathutils.Matrix.Rotation(angle, 4, "Z")
+            @ mathutils.Matrix.Translation((-(start + length), -rho, 0.0)))
 
 
 def tube(n_len=25):

@@ -10,7 +10,6 @@ import sys
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _setup as S  # noqa: E402
 import bpy  # noqa: E402
-import mathutils  # noqa: E402
 import numpy as np  # noqa: E402
 
 R = S.Results("test_addon_volume")
@@ -45,15 +44,6 @@ def api(obj, d, fixed, tip, cls="VolumetricARAP"):
                               max_iterations=o.max_iterations), rest
 
 
-def bend_end(angle, start=-0.5, length=1.0):
-    """The rigid motion S.shapes.bend gives the part past the bend (x > start + length): the
-    tube's middle on a circular arc of its own length, so the tube bends without stretching."""
-    rho = length / angle
-    return (mathutils.Matrix.Translation((start, rho, 0.0))
-            @ mathutils.Matrix.Rotation(angle, 4, "Z")
-            @ mathutils.Matrix.Translation((-(start + length), -rho, 0.0)))
-
-
 def test_still_mesh():
     obj, d, e, fixed, tip, _ = tube_setup()
     bind_world = e.matrix_world.copy()
@@ -62,7 +52,7 @@ def test_still_mesh():
     R.check("the status counts the tetrahedra", "tetrahedra inside" in S.solver.status_text(d),
             S.solver.status_text(d))
     first = d.bind_summary
-    e.matrix_world = bend_end(np.pi / 2) @ bind_world
+    e.matrix_world = S.bend_end(np.pi / 2) @ bind_world
     bpy.context.view_layer.update()
     got = S.evaluated_positions(obj)
     T = np.array(e.matrix_world @ bind_world.inverted())

@@ -198,4 +198,25 @@ static void test_grid_classes(void)
     dk_test_mesh_free(&g);
 }
 
-DK_TEST_MAIN(test_sphere, test_grid_classes)
+static int stop_after(void *user, double done, double total)
+{
+    int *calls = user;
+    CHECK(done >= 0.0 && done <= total);
+    return ++*calls > 100;
+}
+
+static void test_cancelled(void)
+{
+    dk_test_mesh s;
+    CHECK(dk_test_icosphere(3, 1.0, &s) == 0);
+    dk_mesh *m = dk_test_mesh_build(&s);
+    dk_decimation *d = (dk_decimation *)&s; /* overwritten with NULL */
+    dk_error err;
+    int calls = 0;
+    CHECK(dk_decimate_progress(m, NULL, 50, stop_after, &calls, &d, &err) == DK_ERR_CANCELLED);
+    CHECK(d == NULL && calls == 101);
+    dk_mesh_free(m);
+    dk_test_mesh_free(&s);
+}
+
+DK_TEST_MAIN(test_sphere, test_grid_classes, test_cancelled)

@@ -424,6 +424,11 @@ static dk_status solve_rest(dk_arap *ar, const dk_solve_request *rq, double *pos
     arap_progress p = {0};
     if (!resume) {
         s->cg_level = 0;       /* the CG schedule starts again (newton.c) */
+        /* coarse corrections in cold and given solves only: their error is in the slow
+         * bending modes, which the coarse level carries (the 692k armadillo from the bind
+         * pose: 194 -> 83 Newton steps); a drag step's small error mostly is not (measured
+         * with them: 32 -> 39 and 84 -> 340 steps for two 2% drag steps at 692k) */
+        s->coarse_active = !(warm_start && ar->have_prev);
         arap_gap_restart(s, 0); /* and the decreases the stopping test extrapolates */
     }
     if (resume)

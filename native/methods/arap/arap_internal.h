@@ -170,6 +170,9 @@ typedef struct arap_system {
     dk_index *zverts, *zstart;
     int zcols;
     arap_coarse *coarse;  /* the multi-scale solve's coarse level, NULL: none            */
+    /* the Newton steps of this solve are followed by coarse corrections: set by a cold or
+     * given start, cleared by a warm one, kept by a resume (arap.c, solve_rest) */
+    int coarse_active;
 } arap_system;
 
 struct dk_arap {

@@ -106,6 +106,18 @@ static dk_status coarse_desc(const dk_arap *ar, const arap_system *s, arap_coars
     return DK_OK;
 }
 
+/* the simplification's progress, as ticks of the bind's coarse phase */
+typedef struct tick_ctx {
+    const dk_arap *ar;
+    dk_error *err;
+} tick_ctx;
+
+static int tick(void *user, double done, double total)
+{
+    const tick_ctx *t = user;
+    return arap_tick(t->ar, done, total, t->err) != DK_OK;
+}
+
 dk_status arap_coarse_build(dk_arap *ar, const arap_system *s, arap_coarse **out, dk_error *err)
 {
     *out = NULL;
@@ -125,7 +137,8 @@ dk_status arap_coarse_build(dk_arap *ar, const arap_system *s, arap_coarse **out
     for (dk_index v = 0; v < ar->n; v++)
         cls[v] = con->role[v] >= 0 ? (int)con->role[v] + 2
                  : con->role[v] == DK_VERTEX_FIXED ? 1 : 0;
-    dk_status st = dk_decimate(ar->mesh, cls, m, &c->dec, err);
+    tick_ctx tc = {ar, err};
+    dk_status st = dk_decimate_progress(ar->mesh, cls, m, tick, &tc, &c->dec, err);
     free(cls);
     if (st != DK_OK) {
         arap_coarse_free(c);

@@ -430,7 +430,7 @@ dk_status arap_iterate_newton(dk_arap *ar, arap_system *s, int maxit, arap_progr
          * steps keep to the basin they descend into (NEWTON_FAR), and a long correction
          * there can leave it (measured: a tube bent by 90 degrees, 91 coarse vertices, a
          * minimum 0.2% higher and 8% of the diagonal away) */
-        if (st == DK_OK && !newton_converged && !far && s->coarse)
+        if (st == DK_OK && !newton_converged && !far && s->coarse && s->coarse_active)
             st = arap_coarse_correct(ar, s, &e_new, &cg_total, err);
         if (st != DK_OK)
             return dk_error_prefix(err, "ARAP solve");

@@ -10,7 +10,7 @@ enum { MAX_SPANS = 48 };
 typedef struct arap_scalars {
     int have_prev, n_hist, basis_starts;
     int have_targets, resumable, aa_hist, aa_head, aa_have_pair, predicted, start_pending;
-    int cut, cg_level, nt_indefinite, base_is_input;
+    int cut, cg_level, nt_indefinite, base_is_input, coarse_active;
     double last_energy, nt_decrease, nt_ratio[2], nt_ratio_before;
 } arap_scalars;
 
@@ -81,6 +81,7 @@ static void gather_scalars(const dk_arap *ar, arap_scalars *sc)
                          .cg_level = s->cg_level,
                          .nt_indefinite = s->nt_indefinite,
                          .base_is_input = ar->base != ar->mesh->positions,
+                         .coarse_active = s->coarse_active,
                          .last_energy = s->last_energy,
                          .nt_decrease = s->nt_decrease,
                          .nt_ratio = {s->nt_ratio[0], s->nt_ratio[1]},
@@ -103,6 +104,7 @@ static void scatter_scalars(dk_arap *ar, const arap_scalars *sc)
     s->cut = sc->cut;
     s->cg_level = sc->cg_level;
     s->nt_indefinite = sc->nt_indefinite;
+    s->coarse_active = sc->coarse_active;
     s->last_energy = sc->last_energy;
     s->nt_decrease = sc->nt_decrease;
     s->nt_ratio[0] = sc->nt_ratio[0];
@@ -119,7 +121,7 @@ static int scalars_valid(const dk_arap *ar, const arap_scalars *sc)
     const int flags[] = {sc->have_prev,    sc->have_targets,
                          sc->resumable,    sc->aa_have_pair, sc->predicted,
                          sc->start_pending, sc->cut,         sc->nt_indefinite,
-                         sc->base_is_input};
+                         sc->base_is_input, sc->coarse_active};
     for (size_t k = 0; k < sizeof flags / sizeof flags[0]; k++)
         if (flags[k] != 0 && flags[k] != 1)
             return 0;
