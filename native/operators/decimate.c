@@ -206,6 +206,22 @@ static int triangle_shape(const double *a, const double *b, const double *c, dou
     return dk_triangle_degenerate(a, b, c, twice_area, fmax(l0, fmax(l1, l2)));
 }
 
+static dk_index lu_face(const work *w, dk_index v, dk_index i)
+{
+    return w->pool[w->off[v] + (size_t)i];
+}
+
+/* the live triangles with the edge (a, b) */
+static int edge_triangles(const work *w, dk_index a, dk_index b)
+{
+    int k = 0;
+    for (dk_index i = 0; i < w->cnt[a]; i++) {
+        const dk_index f = lu_face(w, a, i);
+        k += w->face_alive[f] && has(w->f + 3 * (size_t)f, b);
+    }
+    return k;
+}
+
 /* Whether collapsing u into v keeps the mesh what it was (dk_operators.h, dk_decimate). */
 static int collapse_ok(const work *w, dk_index u, dk_index v)
 {
@@ -234,6 +250,17 @@ static int collapse_ok(const work *w, dk_index u, dk_index v)
     }
     if (common != shared) /* the link condition */
         return 0;
+    if (shared == 1) { /* on a boundary: not the part's last triangle (x's edges to u and v
+                        * both on the boundary too: the collapse would leave no triangle) */
+        dk_index x = -1;
+        for (dk_index i = 0; i < w->cnt[u] && x < 0; i++) {
+            const dk_index *t = w->f + 3 * (size_t)lu_face(w, u, i);
+            if (w->face_alive[lu_face(w, u, i)] && has(t, v))
+                x = t[0] != u && t[0] != v ? t[0] : t[1] != u && t[1] != v ? t[1] : t[2];
+        }
+        if (x >= 0 && edge_triangles(w, u, x) == 1 && edge_triangles(w, v, x) == 1)
+            return 0;
+    }
     if (uni - 2 > MAX_VALENCE)
         return 0;
     const double *pv = w->p + 3 * (size_t)v;
@@ -502,6 +529,43 @@ static int collapse(work *w, dk_decimation *d, dk_index u, dk_index v)
 
 /* Vertices on a non-manifold edge, with other than two boundary edges, or whose triangles
  * form more than one fan are never removed. */
+/* How many fans v's triangles form: groups joined across the edges at v that two
+ * triangles share (a manifold vertex has one; two cones tip to tip have two). More than
+ * MAX_RING triangles: counted as many (such a vertex is never removed anyway: valence). */
+static int fans(const dk_mesh *m, dk_index v)
+{
+    const dk_index t0 = m->vf_start[v], nt = m->vf_start[v + 1] - t0;
+    if (nt > MAX_RING)
+        return 2;
+    int group[MAX_RING];
+    for (int i = 0; i < nt; i++)
+        group[i] = i;
+    for (dk_index r = m->ring_start[v]; r < m->ring_start[v + 1]; r++) {
+        const dk_index e = m->ring_edge[r];
+        if (m->edge_face_count[e] != 2)
+            continue;
+        int a = -1, b = -1; /* the two triangles' places in v's list, their groups joined */
+        for (int i = 0; i < nt; i++) {
+            const dk_index f = m->vf_index[t0 + i];
+            if (f == m->edge_faces[2 * (size_t)e])
+                a = i;
+            if (f == m->edge_faces[2 * (size_t)e + 1])
+                b = i;
+        }
+        if (a < 0 || b < 0)
+            continue;
+        const int ga = group[a], gb = group[b];
+        if (ga != gb)
+            for (int i = 0; i < nt; i++)
+                if (group[i] == gb)
+                    group[i] = ga;
+    }
+    int count = 0;
+    for (int i = 0; i < nt; i++)
+        count += group[i] == i;
+    return count;
+}
+
 static void lock_nonmanifold(const dk_mesh *m, work *w)
 {
     for (dk_index v = 0; v < m->n_vertices; v++) {
@@ -514,11 +578,7 @@ static void lock_nonmanifold(const dk_mesh *m, work *w)
         }
         if (boundary_edges != 0 && boundary_edges != 2)
             w->locked[v] = 1;
-        /* one fan: the triangles around v are reachable from the first across edges at v
-         * (as many ring vertices as triangles inside, one more on a boundary) */
-        const dk_index nt = m->vf_start[v + 1] - m->vf_start[v];
-        const dk_index nr = m->ring_start[v + 1] - m->ring_start[v];
-        if (nt > 0 && nr != nt + (boundary_edges == 2))
+        if (!w->locked[v] && fans(m, v) > 1)
             w->locked[v] = 1;
     }
 }
@@ -749,8 +809,11 @@ dk_status dk_decimate_progress(const dk_mesh *mesh, const int *vertex_class,
     work_free(&w);
     if (failed || cancelled) {
         dk_decimation_free(d);
-        return cancelled ? dk_error_set(err, DK_ERR_CANCELLED, "decimate: cancelled")
-                         : oom(err);
+        if (cancelled) /* the callback's own message (a bind's phase) stays */
+            return err && err->message[0] ? (err->status = DK_ERR_CANCELLED)
+                                          : dk_error_set(err, DK_ERR_CANCELLED,
+                                                         "decimate: cancelled");
+        return oom(err);
     }
     *out = d;
     return DK_OK;

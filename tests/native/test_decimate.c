@@ -167,20 +167,32 @@ static void test_grid_classes(void)
     CHECK(dk_decimate(m, cls, 60, &d, &err) == DK_OK);
     CHECK(d->coarse_of[15 * 31 + 15] >= 0);
     CHECK_MSG(check_manifold(d, 0) == 1, "a disc stays a disc");
-    /* each class keeps vertices, and a removed vertex's carriers are of its class or the
-     * triangle it lies in spans classes (never merged: the collapse target has its class) */
+    /* each class keeps vertices */
     int seen[3] = {0, 0, 0};
     for (dk_index c = 0; c < d->n_kept; c++)
         if (cls[d->kept[c]] >= 0)
             seen[cls[d->kept[c]]] = 1;
     CHECK(seen[0] && seen[1] && seen[2]);
     /* the square's corners are kept (each is a boundary vertex with a right angle: its
-     * boundary planes make moving it cost) and the boundary stays on the square */
+     * boundary planes make moving it cost) and every boundary edge of the coarse mesh runs
+     * along a side of the square (boundary vertices collapse along the boundary only) */
+    int along = 0, boundary = 0;
     for (dk_index f = 0; f < d->n_faces; f++)
         for (int k = 0; k < 3; k++) {
-            const double *p = m->positions + 3 * d->kept[d->faces[3 * f + k]];
-            CHECK(p[0] >= 0.0 && p[0] <= 1.0 && p[1] >= 0.0 && p[1] <= 1.0);
+            const dk_index a = d->faces[3 * f + k], b = d->faces[3 * f + (k + 1) % 3];
+            int twin = 0; /* the edge (b, a) in another triangle */
+            for (dk_index g = 0; g < d->n_faces && !twin; g++)
+                for (int j = 0; j < 3 && !twin; j++)
+                    twin = d->faces[3 * g + j] == b && d->faces[3 * g + (j + 1) % 3] == a;
+            if (twin)
+                continue;
+            const double *p = m->positions + 3 * d->kept[a], *q = m->positions + 3 * d->kept[b];
+            boundary++;
+            along += (p[0] == q[0] && (p[0] == 0.0 || p[0] == 1.0)) ||
+                     (p[1] == q[1] && (p[1] == 0.0 || p[1] == 1.0));
         }
+    CHECK_MSG(boundary >= 4 && along == boundary, "%d of %d boundary edges along the square",
+              along, boundary);
     const dk_index corners[4] = {0, 30, 30 * 31, 31 * 31 - 1};
     for (int k = 0; k < 4; k++)
         CHECK_MSG(d->coarse_of[corners[k]] >= 0, "corner %ld removed", (long)corners[k]);

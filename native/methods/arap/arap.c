@@ -427,7 +427,9 @@ static dk_status solve_rest(dk_arap *ar, const dk_solve_request *rq, double *pos
         /* coarse corrections in cold and given solves only: their error is in the slow
          * bending modes, which the coarse level carries (the 692k armadillo from the bind
          * pose: 194 -> 83 Newton steps); a drag step's small error mostly is not (measured
-         * with them: 32 -> 39 and 84 -> 340 steps for two 2% drag steps at 692k) */
+         * with them at 692k: 32 -> 39 steps to the same minimum for a 2% drag step; 84 ->
+         * 340 for the next, ending lower where the single level stopped on a plateau:
+         * docs/methods/arap.md, "Multi-scale"), and drags keep their time */
         s->coarse_active = !(warm_start && ar->have_prev);
         arap_gap_restart(s, 0); /* and the decreases the stopping test extrapolates */
     }

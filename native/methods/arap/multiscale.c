@@ -46,10 +46,10 @@ void arap_coarse_free(arap_coarse *c)
     free(c);
 }
 
-/* the coarse level's size for levels (0: automatic), or 0 for none */
-static dk_index coarse_size(dk_index n, int levels)
+/* the coarse level's size for levels (0: automatic, by the nu unknowns), or 0 for none */
+static dk_index coarse_size(dk_index n, dk_index nu, int levels)
 {
-    if (levels == 1 || (levels == 0 && n < AUTO_MIN_VERTICES))
+    if (levels == 1 || (levels == 0 && nu < AUTO_MIN_VERTICES))
         return 0;
     const dk_index m = n / COARSE_RATIO;
     return m >= MIN_COARSE_VERTICES ? m : 0;
@@ -121,12 +121,14 @@ static int tick(void *user, double done, double total)
 dk_status arap_coarse_build(dk_arap *ar, const arap_system *s, arap_coarse **out, dk_error *err)
 {
     *out = NULL;
-    const dk_index m = coarse_size(ar->n, ar->opt.levels);
+    const dk_index m = coarse_size(ar->n, s->nu, ar->opt.levels);
     if (m == 0 || s->nu == 0)
         return DK_OK;
     const dk_constraints *con = s->con;
-    /* classes: a handle's id, or the fixed or free role, so that every region of one role
-     * keeps vertices (a handle that lost them all would be missing at the coarse level) */
+    /* classes: the fixed or free role, or a handle's id and whether its vertex is hard or
+     * soft (weight < 1), so that every region of one role keeps vertices (a handle that lost
+     * them all would be missing at the coarse level, one that kept only soft ones would
+     * pull by penalties alone where the mesh's hard ones are exact) */
     int *cls = malloc(((size_t)ar->n + 1) * sizeof *cls);
     arap_coarse *c = calloc(1, sizeof *c);
     if (!cls || !c) {
@@ -135,8 +137,8 @@ dk_status arap_coarse_build(dk_arap *ar, const arap_system *s, arap_coarse **out
         return oom(err, "coarse level");
     }
     for (dk_index v = 0; v < ar->n; v++)
-        cls[v] = con->role[v] >= 0 ? (int)con->role[v] + 2
-                 : con->role[v] == DK_VERTEX_FIXED ? 1 : 0;
+        cls[v] = con->role[v] == DK_VERTEX_FIXED ? 1 : con->role[v] < 0 ? 0
+                 : 2 + 2 * (int)con->role[v] + (s->soft_k[v] > 0.0);
     tick_ctx tc = {ar, err};
     dk_status st = dk_decimate_progress(ar->mesh, cls, m, tick, &tc, &c->dec, err);
     free(cls);
@@ -146,7 +148,8 @@ dk_status arap_coarse_build(dk_arap *ar, const arap_system *s, arap_coarse **out
     }
     const dk_decimation *d = c->dec;
     const dk_index mk = d->n_kept;
-    if (mk >= ar->n || d->n_faces == 0) { /* nothing removed: no level */
+    if (mk > ar->n / 4 || d->n_faces == 0) { /* blocked collapses (a triangle soup, high
+                                               * valences): a level would not pay its solve */
         arap_coarse_free(c);
         return DK_OK;
     }
@@ -160,6 +163,8 @@ dk_status arap_coarse_build(dk_arap *ar, const arap_system *s, arap_coarse **out
     dk_error ignored = {0};
     st = dk_mesh_create(cp, mk, d->faces, d->n_faces, &c->mesh, &ignored);
     free(cp);
+    if (st == DK_ERR_OUT_OF_MEMORY)
+        dk_error_set(err, st, "ARAP: out of memory (coarse level)");
     dk_constraint_desc desc;
     dk_index *buf[3] = {NULL, NULL, NULL};
     double *dbuf[2] = {NULL, NULL};
@@ -225,6 +230,8 @@ dk_status arap_coarse_start(dk_arap *ar, arap_system *s, const double **start, d
         for (dk_index k = 0; k < mk; k++)
             memcpy(c->pose + 3 * (size_t)k, ar->base + 3 * (size_t)d->kept[k],
                    3 * sizeof *c->pose);
+    /* the tolerance the mesh solves to now (dk_arap_set_tolerance), down every level */
+    c->arap->opt.tolerance = ar->opt.tolerance;
     dk_solve_request rq;
     memset(&rq, 0, sizeof rq);
     rq.targets = c->targets;
