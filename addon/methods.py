@@ -236,12 +236,12 @@ METHODS = [
                            "rougher result that shifts with the mesh's density")),
                    advanced=True),
             *_arap_solver_options(),
-            # 0 = the native default (automatic: a coarse level from 100,000 vertices on)
+            # 0 = the native default (automatic: a coarse level from 100,000 moving vertices on)
             Option("levels", "INT", 0, "Coarse Levels",
                    "The multi-scale solve: a simplified copy of the mesh per level (each "
                    "with a sixteenth of the vertices) first finds the overall shape, then "
                    "steers the full mesh's steps to it: 0 picks (one level from 100,000 "
-                   "vertices on), 1 solves the mesh alone. The result is the same; big "
+                   "moving vertices on), 1 solves the mesh alone. The result is the same; big "
                    "meshes get there faster, at a slightly longer bind",
                    min=0, max=8, advanced=True),
             Option("stiffness_scale", "FLOAT", 10.0, "Painted Stiffness",
@@ -844,7 +844,7 @@ METHODS.append(Method(
 
 def _levels_summary(native):
     """ARAP's bind, in the status line: the coarse levels of its multi-scale solve, if any
-    (from 100,000 vertices on by default: the artist sees why the bind took longer)."""
+    (from 100,000 moving vertices on by default: the artist sees why the bind took longer)."""
     stats = getattr(native, "stats", None)
     coarse = stats.get("coarse_vertices", ()) if isinstance(stats, dict) else ()
     if not coarse:

@@ -127,11 +127,16 @@ typedef struct dk_arap_options {
                                             vertices of the one above (dk_decimate, every
                                             vertex's handle, fixed or free role kept), of at
                                             least 16 vertices; 0 (the default): automatic,
-                                            a coarse level from 100,000 vertices on. A cold
+                                            a coarse level from 100,000 unknowns on. A cold
                                             start (no previous solution, or asked cold)
                                             solves the coarsest level first and starts each
-                                            finer one from the prolonged result; the
-                                            answer is still the mesh's minimum. Not used by
+                                            finer one from the prolonged result; in cold
+                                            and given solves (NEWTON) each Newton step near
+                                            the minimum is followed by the coarse level's
+                                            correction (its Newton direction for the
+                                            restricted gradient, prolonged, line-searched);
+                                            warm solves take none. The answer is still the
+                                            mesh's minimum. Not used by
                                             dk_arap_bind_tetrahedra (a volume's cells). 0..8 */
     dk_arap_iteration_fn on_iteration; /**< optional, NULL by default                     */
     void *user;                        /**< passed to on_iteration                        */

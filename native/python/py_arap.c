@@ -203,7 +203,7 @@ PyDoc_STRVAR(arap_doc,
              "warm starts after such a move need no back-substitution ('off': never).\n"
              "levels: the multi-scale solve: 1 the mesh alone, L > 1 adds L - 1 coarse levels\n"
              "(each 1/16 of the vertices, by quadric-error simplification); 0 (default)\n"
-             "automatic: one from 100,000 vertices on. A cold start solves the coarsest level\n"
+             "automatic: one from 100,000 unknowns on. A cold start solves the coarsest level\n"
              "first and starts the finer ones from its prolonged result; the answer is still\n"
              "the mesh's minimum. stats()['coarse_vertices'] lists the levels built.\n"
              "See docs/methods/arap.md.");

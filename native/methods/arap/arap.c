@@ -621,7 +621,8 @@ dk_status dk_arap_estimate_memory(const dk_mesh *mesh, const dk_arap_options *op
     /* measured 1950 B/vertex at 8k and 43k vertices, 2180-2450 at 692k */
     *bytes = dk_memory_model(1700.0 + 40.0 * lg, n, 0.0);
     /* the coarse levels (multiscale.c): each a sixteenth of the one above, and the
-     * simplification's working arrays (~300 B a vertex of the finer level, freed after) */
+     * simplification's working arrays (~300 B a vertex of the finer level, freed after);
+     * automatic levels counted by vertices, an upper bound of the unknowns that decide */
     const int levels = options ? options->levels : 0;
     double m = n;
     for (int k = 1; levels == 0 ? m >= 100000.0 : k < levels; k++) {

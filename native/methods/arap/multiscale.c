@@ -18,8 +18,8 @@
 /* how many times fewer vertices each coarse level has: the armadillo scenario's measured
  * levels (docs/methods/arap.md, "A million vertices": 692k from 43k) */
 #define COARSE_RATIO 16
-/* levels 0 (automatic) adds a coarse level from this many vertices on */
-#define AUTO_MIN_VERTICES 100000
+/* levels 0 (automatic) adds a coarse level from this many unknowns on */
+#define AUTO_MIN_UNKNOWNS 100000
 /* no coarse level of fewer vertices (a level asked for on a small mesh: tests) */
 #define MIN_COARSE_VERTICES 16
 
@@ -49,7 +49,7 @@ void arap_coarse_free(arap_coarse *c)
 /* the coarse level's size for levels (0: automatic, by the nu unknowns), or 0 for none */
 static dk_index coarse_size(dk_index n, dk_index nu, int levels)
 {
-    if (levels == 1 || (levels == 0 && nu < AUTO_MIN_VERTICES))
+    if (levels == 1 || (levels == 0 && nu < AUTO_MIN_UNKNOWNS))
         return 0;
     const dk_index m = n / COARSE_RATIO;
     return m >= MIN_COARSE_VERTICES ? m : 0;
