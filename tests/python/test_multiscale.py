@@ -88,6 +88,22 @@ def test_prolonged_start_is_near_the_minimum():
     assert r.converged and abs(r.energy - minimum) <= 1e-5 * minimum
 
 
+def test_energy_never_rises_from_the_prolonged_start():
+    """Slices of one step (resume=True, equal to one solve): from the prolonged start every
+    Newton step with its coarse correction lowers the energy or keeps it."""
+    V, F, fixed, handle = tube_setup()
+    arap = deformkit.ARAP(deformkit.Mesh(V, F), [handle], fixed=fixed, levels=2)
+    t = bent_targets(V, handle)
+    r = arap.solve(t, warm_start=False, max_iterations=1)
+    energies = [arap.solve(t, warm_start=False, preview=True).energy, r.energy]
+    arap.solve(t, warm_start=False, max_iterations=1)
+    while not r.converged:
+        r = arap.solve(t, resume=True, max_iterations=1)
+        energies.append(r.energy)
+    assert len(energies) > 10
+    assert all(b <= a for a, b in zip(energies, energies[1:])), energies
+
+
 def test_rigid_motion_at_once():
     """Handles moved rigidly with nothing fixed: the coarse level returns the motion, its
     prolongation turns every offset by the same rotation, and the mesh is that motion, in a
