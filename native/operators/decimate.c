@@ -223,10 +223,11 @@ static int edge_triangles(const work *w, dk_index a, dk_index b)
 }
 
 /* Whether collapsing u into v keeps the mesh what it was (dk_operators.h, dk_decimate). */
-static int collapse_ok(const work *w, dk_index u, dk_index v)
+static int collapse_ok(const work *w, dk_index u, dk_index v, dk_index *nbu, int *ku_out)
 {
-    dk_index nbu[MAX_RING], nbv[MAX_RING];
+    dk_index nbv[MAX_RING];
     const int ku = neighbours(w, u, nbu), kv = neighbours(w, v, nbv);
+    *ku_out = ku;
     if (ku < 0 || kv < 0)
         return 0;
     int shared = 0;
@@ -346,17 +347,25 @@ static double collapse_cost(const work *w, dk_index u, dk_index v)
 /* u's cheapest collapse, pushed on the heap (none: not pushed); -1 on exhausted memory.
  * checked: the cheapest that collapse_ok accepts; else the cheapest, checked when it is
  * popped (most are never popped: the checks are what costs) */
+static int update_candidate_ring(work *w, dk_index u, const dk_index *nb, int k, int checked);
+
 static int update_candidate(work *w, dk_index u, int checked)
 {
-    w->best[u] = -1;
     if (!w->alive[u] || w->locked[u]) {
+        w->best[u] = -1;
         heap_update(w, u);
         return 0;
     }
     list_compact(w, u);
     dk_index nb[MAX_RING];
+    return update_candidate_ring(w, u, nb, neighbours(w, u, nb), checked);
+}
+
+/* update_candidate for a live, unlocked u whose ring (k entries, -1: too many) is nb */
+static int update_candidate_ring(work *w, dk_index u, const dk_index *nb, int k, int checked)
+{
     double cost[MAX_RING];
-    const int k = neighbours(w, u, nb);
+    w->best[u] = -1;
     if (k <= 0) {
         heap_update(w, u);
         return 0;
@@ -373,7 +382,9 @@ static int update_candidate(work *w, dk_index u, int checked)
             heap_update(w, u);
             return 0;
         }
-        if (!checked || collapse_ok(w, u, nb[bi])) {
+        dk_index ring[MAX_RING];
+        int kr;
+        if (!checked || collapse_ok(w, u, nb[bi], ring, &kr)) {
             w->best[u] = nb[bi];
             w->best_cost[u] = cost[bi];
             heap_update(w, u);
@@ -439,7 +450,8 @@ static void nearest_on_triangle(const double *p, const double *a, const double *
 }
 
 /* Collapses u into v, recording u's carriers as removal k; -1 on exhausted memory. */
-static int collapse(work *w, dk_decimation *d, dk_index u, dk_index v)
+static int collapse(work *w, dk_decimation *d, dk_index u, dk_index v, const dk_index *nbu,
+                    int ku)
 {
     const dk_index k = d->n_removed++;
     d->removed[k] = u;
@@ -471,9 +483,7 @@ static int collapse(work *w, dk_decimation *d, dk_index u, dk_index v)
             memcpy(wt, bw, sizeof bw);
         }
     }
-    dk_index nbu[MAX_RING]; /* collapse_ok read them: at most MAX_RING */
-    const int ku = neighbours(w, u, nbu);
-    const dk_index nu = w->cnt[u];
+    const dk_index nu = w->cnt[u]; /* nbu: u's ring as collapse_ok read it (ku <= MAX_RING) */
     for (dk_index i = 0; i < nu; i++) {
         const dk_index t = w->pool[w->off[u] + (size_t)i];
         if (!w->face_alive[t])
@@ -502,8 +512,12 @@ static int collapse(work *w, dk_decimation *d, dk_index u, dk_index v)
     dk_index nb[MAX_RING];
     list_compact(w, v);
     const int kv = neighbours(w, v, nb);
-    if (update_candidate(w, v, 0) < 0)
+    if (w->locked[v]) {
+        w->best[v] = -1;
+        heap_update(w, v);
+    } else if (update_candidate_ring(w, v, nb, kv, 0) < 0) {
         return -1;
+    }
     for (int i = 0; i < kv; i++) { /* kv <= MAX_VALENCE: collapse_ok checked it */
         const dk_index x = nb[i];
         if (w->best[x] == u || w->best[x] == v) {
@@ -776,11 +790,13 @@ dk_status dk_decimate_progress(const dk_mesh *mesh, const int *vertex_class,
             break;
         }
         const dk_index u = w.heap[0], v = w.best[u];
-        if (!w.alive[v] || !collapse_ok(&w, u, v)) { /* its cheapest valid one instead */
+        dk_index ring[MAX_RING];
+        int kr = 0;
+        if (!w.alive[v] || !collapse_ok(&w, u, v, ring, &kr)) { /* its cheapest valid one */
             failed = update_candidate(&w, u, 1) < 0;
             continue;
         }
-        failed = collapse(&w, d, u, v) < 0;
+        failed = collapse(&w, d, u, v, ring, kr) < 0;
     }
     if (!failed && !cancelled) { /* the coarse mesh */
         d->n_kept = w.alive_count;
