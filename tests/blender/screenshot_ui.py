@@ -23,7 +23,7 @@ PNG3 = os.path.join(OUT, "viewport_show_graph.png")
 # each, kept in docs/images after being looked at
 STATES = ("unbound", "bound", "bound_warning", "rebinding", "baked", "overlap_error", "handle_target",
           "sidebar", "lattice", "cage", "cage_view", "skinning_view", "jiggle", "shape_blend",
-          "volume_arap")
+          "volume_arap", "arap_levels")
 STATE_PNGS = [os.path.join(OUT, "panel_%s.png" % s) for s in STATES]
 
 try:
@@ -441,6 +441,30 @@ def in_blender():
         R.check("the volume ARAP deformer bound", d.bound and not d.status_is_error and
                 "tetrahedra inside" in S.solver.status_text(d), S.solver.status_text(d))
         yield "volume_arap"
+        # ARAP with a coarse level (Coarse Levels 2 on a tube): bound, its status naming the
+        # level, its options (Advanced open, Coarse Levels among them)
+        yield from fresh_properties()
+        with bpy.context.temp_override(**S.ui_context()):
+            V, F = S.tube(n_len=61)
+            obj = S.triangle_mesh_object(V, F, name="Tube")
+            S.group(obj, "fixed", np.flatnonzero(V[:, 0] < -0.9))
+            S.group(obj, "tip", np.flatnonzero(V[:, 0] > 0.9))
+            e = S.empty("Tip", (1.0, 0.0, 0.0))
+            bpy.context.view_layer.objects.active = obj
+            obj.select_set(True)
+            bpy.ops.deformkit.add_deformer(method="ARAP")
+            d = obj.deformkit.deformers[0]
+            d.fixed_group = "fixed"
+            d.options_arap.levels = 2
+            bpy.ops.deformkit.add_handle(vertex_group="tip", target=e.name)
+            d.show_advanced = True
+            bpy.ops.deformkit.bind()
+            e.location = (0.6, 0.7, 0.0)
+            e.rotation_euler = (0.0, 0.0, 1.2)
+        S.geonodes.find_modifier(obj, d).show_expanded = False
+        R.check("ARAP bound with a coarse level", d.bound and not d.status_is_error and
+                "coarse level of" in S.solver.status_text(d), S.solver.status_text(d))
+        yield "arap_levels"
 
     sidebar_drawn = []
     from addon import ui
