@@ -409,6 +409,80 @@ def tube(n_len=25):
     return shapes.capped_tube(n_len=n_len)
 
 
+def tube_deformer(method, n_len=33, rig=None, **options):
+    """A capped tube along x (tube), 'fixed' its x < -0.9 end, 'tip' its x > 0.9 end on an
+    empty 'Tip' at (1, 0, 0), a deformer of `method` with that Fixed group, that handle and
+    `options` (below the Armature `rig(obj)` makes, if any), in the current scene:
+    (object, deformer, empty, fixed, tip)."""
+    V, F = tube(n_len=n_len)
+    obj = triangle_mesh_object(V, F, name="Tube")
+    if rig is not None:
+        rig(obj)
+    fixed, tip = np.flatnonzero(V[:, 0] < -0.9), np.flatnonzero(V[:, 0] > 0.9)
+    group(obj, "fixed", fixed)
+    group(obj, "tip", tip)
+    e = empty("Tip", (1.0, 0.0, 0.0))
+    bpy.context.view_layer.objects.active = obj
+    obj.select_set(True)
+    bpy.ops.deformkit.add_deformer(method=method)
+    d = obj.deformkit.deformers[-1]
+    d.fixed_group = "fixed"
+    for name, value in options.items():
+        setattr(d.options, name, value)
+    bpy.ops.deformkit.add_handle(vertex_group="tip", target=e.name)
+    return obj, d, e, fixed, tip
+
+
+def lower_bone_rig(obj):
+    """A two-bone Armature first in obj's stack, its lower bone turned about z by 0 at frame
+    1 and 0.8 at frame 5."""
+    return arm_rig(obj, {"lower": ((1, (0, 0, 0.0)), (5, (0, 0, 0.8)))})
+
+
+def check_edit_after_armature(R, obj, d, e, fixed, tip, tol, cache_name):
+    """A deformer made by tube_deformer(..., rig=lower_bone_rig) in a 1-5 shot: bound at
+    frame 1, its handle lifted by 0.2, frame 5 shown; checks that the Armature bends the
+    input, that the fixed end stays where the Armature puts it, that the frame is the API's
+    edit of the pose (the method's native class bound as the add-on binds, the handle where
+    the lift, turned with the lower bone, puts it: test_addon_animation.py's rule), and that
+    a bake writes what played (`cache_name` in OUTPUT). Returns (shown, input) at frame 5."""
+    sc = bpy.context.scene
+    sc.frame_start, sc.frame_end = 1, 5
+    sc.frame_set(1)
+    bind_world = e.matrix_world.copy()
+    bpy.ops.deformkit.bind()
+    R.check("binds after an Armature", d.bound and not d.status_is_error, d.status)
+    e.location.z += 0.2
+    sc.frame_set(5)
+    got = evaluated_positions(obj)
+    inp = armature_input(obj, d)
+    rest = rest_positions(obj)
+    R.check("the Armature bends the input", np.abs(inp - rest).max() > 0.3,
+            np.abs(inp - rest).max())
+    R.check("its fixed end stays where the Armature puts it",
+            float(np.abs(got[fixed] - inp[fixed]).max()) < tol,
+            float(np.abs(got[fixed] - inp[fixed]).max()))
+    m = methods.get(d.method)
+    mesh = dk.Mesh(rest, solver.triangles(obj.data))
+    kw = dict(handles=[tip], fixed=fixed)
+    native = getattr(dk, m.native_class)(mesh, **kw, **methods.bind_kwargs(m, d.options, rest,
+                                                                           kw, mesh))
+    T = np.array(e.matrix_world @ bind_world.inverted())
+    edit = rest[tip] @ T[:3, :3].T + T[:3, 3] - rest[tip]
+    B = bone_turn(obj, "lower")
+    want = np.asarray(native.solve(inp[tip] + edit @ B.T, input_positions=inp,
+                                   **methods.solve_kwargs(m, d.options, True)).positions)
+    diff = float(np.abs(got - want).max())
+    R.check("frame 5 is the API's edit of the pose (max %.2e)" % diff, diff < tol, diff)
+    shown = {}
+    for f in range(1, 6):
+        sc.frame_set(f)
+        shown[f] = evaluated_positions(obj)
+    diff = bake_differs_from(obj, d, shown, cache_name)
+    R.check("the bake = playback (max %.2e)" % diff, diff < tol, diff)
+    return shown[5], inp
+
+
 def bone_chain(joints, names, name="Rig"):
     """An armature of connected bones, bone k from joints[k] to joints[k + 1] named names[k]
     (each the child of the one before), back in Object Mode: (armature data, object)."""

@@ -422,17 +422,7 @@ def in_blender():
         # tetrahedra, its options (Advanced open)
         yield from fresh_properties()
         with bpy.context.temp_override(**S.ui_context()):
-            V, F = S.tube(n_len=41)
-            obj = S.triangle_mesh_object(V, F, name="Tube")
-            S.group(obj, "fixed", np.flatnonzero(V[:, 0] < -0.9))
-            S.group(obj, "tip", np.flatnonzero(V[:, 0] > 0.9))
-            e = S.empty("Tip", (1.0, 0.0, 0.0))
-            bpy.context.view_layer.objects.active = obj
-            obj.select_set(True)
-            bpy.ops.deformkit.add_deformer(method="VOLUME_ARAP")
-            d = obj.deformkit.deformers[0]
-            d.fixed_group = "fixed"
-            bpy.ops.deformkit.add_handle(vertex_group="tip", target=e.name)
+            obj, d, e, _, _ = S.tube_deformer("VOLUME_ARAP", n_len=41)
             d.show_advanced = True
             bpy.ops.deformkit.bind()
             e.location = (0.6, 0.7, 0.0)
@@ -445,18 +435,7 @@ def in_blender():
         # level, its options (Advanced open, Coarse Levels among them)
         yield from fresh_properties()
         with bpy.context.temp_override(**S.ui_context()):
-            V, F = S.tube(n_len=61)
-            obj = S.triangle_mesh_object(V, F, name="Tube")
-            S.group(obj, "fixed", np.flatnonzero(V[:, 0] < -0.9))
-            S.group(obj, "tip", np.flatnonzero(V[:, 0] > 0.9))
-            e = S.empty("Tip", (1.0, 0.0, 0.0))
-            bpy.context.view_layer.objects.active = obj
-            obj.select_set(True)
-            bpy.ops.deformkit.add_deformer(method="ARAP")
-            d = obj.deformkit.deformers[0]
-            d.fixed_group = "fixed"
-            d.options_arap.levels = 2
-            bpy.ops.deformkit.add_handle(vertex_group="tip", target=e.name)
+            obj, d, e, _, _ = S.tube_deformer("ARAP", n_len=61, levels=2)
             d.show_advanced = True
             bpy.ops.deformkit.bind()
             e.location = (0.6, 0.7, 0.0)

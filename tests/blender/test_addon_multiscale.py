@@ -17,32 +17,11 @@ R = S.Results("test_addon_multiscale")
 TOL = 2e-4   # float32 storage, and two converged Newton solves (tolerance 1e-6) of one edit
 
 
-def rig(obj):
-    """A two-bone Armature first in the stack, its lower bone turned about z by 0 at frame 1
-    and 0.8 at frame 5."""
-    return S.arm_rig(obj, {"lower": ((1, (0, 0, 0.0)), (5, (0, 0, 0.8)))})
-
-
 def tube_setup(levels, rig=None):
-    """A capped tube along x (S.tube, 61 rings), 'fixed' its x < -0.9 end, 'tip' its
-    x > 0.9 end on an empty at (1, 0, 0), an ARAP deformer with `levels` (below the Armature
-    `rig` makes, if any)."""
+    """S.tube_deformer's tube (61 rings) with an ARAP deformer of `levels`, in a fresh
+    scene."""
     S.reset_scene()
-    V, F = S.tube(n_len=61)
-    obj = S.triangle_mesh_object(V, F, name="Tube")
-    if rig is not None:
-        rig(obj)
-    fixed, tip = np.flatnonzero(V[:, 0] < -0.9), np.flatnonzero(V[:, 0] > 0.9)
-    S.group(obj, "fixed", fixed)
-    S.group(obj, "tip", tip)
-    e = S.empty("Tip", (1.0, 0.0, 0.0))
-    bpy.context.view_layer.objects.active = obj
-    bpy.ops.deformkit.add_deformer(method="ARAP")
-    d = obj.deformkit.deformers[-1]
-    d.fixed_group = "fixed"
-    d.options_arap.levels = levels
-    bpy.ops.deformkit.add_handle(vertex_group="tip", target=e.name)
-    return obj, d, e, fixed, tip
+    return S.tube_deformer("ARAP", n_len=61, rig=rig, levels=levels)
 
 
 def api(obj, d, fixed, tip):
@@ -92,37 +71,8 @@ def test_automatic_on_a_small_mesh():
 
 
 def test_after_an_armature():
-    obj, d, e, fixed, tip = tube_setup(2, rig)
-    sc = bpy.context.scene
-    sc.frame_start, sc.frame_end = 1, 5
-    sc.frame_set(1)
-    bind_world = e.matrix_world.copy()
-    bpy.ops.deformkit.bind()
-    R.check("binds after an Armature", d.bound and not d.status_is_error, d.status)
-    e.location.z += 0.2
-    sc.frame_set(5)
-    got = S.evaluated_positions(obj)
-    inp = S.armature_input(obj, d)
-    R.check("the Armature bends the input", np.abs(inp - S.rest_positions(obj)).max() > 0.3,
-            np.abs(inp - S.rest_positions(obj)).max())
-    R.check("its fixed end stays where the Armature puts it",
-            float(np.abs(got[fixed] - inp[fixed]).max()) < TOL,
-            float(np.abs(got[fixed] - inp[fixed]).max()))
-    native, m = api(obj, d, fixed, tip)
-    rest = S.rest_positions(obj)
-    T = np.array(e.matrix_world @ bind_world.inverted())
-    edit = rest[tip] @ T[:3, :3].T + T[:3, 3] - rest[tip]
-    B = S.bone_turn(obj, "lower")
-    want = np.asarray(native.solve(inp[tip] + edit @ B.T, input_positions=inp,
-                                   **S.methods.solve_kwargs(m, d.options, True)).positions)
-    diff = float(np.abs(got - want).max())
-    R.check("frame 5 is the API's edit of the pose (max %.2e)" % diff, diff < TOL, diff)
-    shown = {}
-    for f in range(1, 6):
-        sc.frame_set(f)
-        shown[f] = S.evaluated_positions(obj)
-    diff = S.bake_differs_from(obj, d, shown, "arap_levels.pc2")
-    R.check("the bake = playback (max %.2e)" % diff, diff < TOL, diff)
+    obj, d, e, fixed, tip = tube_setup(2, S.lower_bone_rig)
+    S.check_edit_after_armature(R, obj, d, e, fixed, tip, TOL, "arap_levels.pc2")
 
 
 for t in (test_still_mesh, test_automatic_on_a_small_mesh, test_after_an_armature):

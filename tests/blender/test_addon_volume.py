@@ -18,22 +18,9 @@ TOL = 2e-4   # float32 storage, and two converged Newton solves (tolerance 1e-6)
 
 
 def tube_setup(rig=None):
-    """A capped tube along x (S.tube), 'fixed' its x < -0.9 end, 'tip' its x > 0.9 end on an
-    empty at (1, 0, 0), a Volume ARAP deformer (below the Armature `rig` makes, if any)."""
+    """S.tube_deformer's tube with a Volume ARAP deformer, in a fresh scene."""
     S.reset_scene()
-    V, F = S.tube(n_len=33)
-    obj = S.triangle_mesh_object(V, F, name="Tube")
-    ao = rig(obj) if rig is not None else None
-    fixed, tip = np.flatnonzero(V[:, 0] < -0.9), np.flatnonzero(V[:, 0] > 0.9)
-    S.group(obj, "fixed", fixed)
-    S.group(obj, "tip", tip)
-    e = S.empty("Tip", (1.0, 0.0, 0.0))
-    bpy.context.view_layer.objects.active = obj
-    bpy.ops.deformkit.add_deformer(method="VOLUME_ARAP")
-    d = obj.deformkit.deformers[-1]
-    d.fixed_group = "fixed"
-    bpy.ops.deformkit.add_handle(vertex_group="tip", target=e.name)
-    return obj, d, e, fixed, tip, ao
+    return S.tube_deformer("VOLUME_ARAP", rig=rig)
 
 
 def api(obj, d, fixed, tip, cls="VolumetricARAP"):
@@ -45,7 +32,7 @@ def api(obj, d, fixed, tip, cls="VolumetricARAP"):
 
 
 def test_still_mesh():
-    obj, d, e, fixed, tip, _ = tube_setup()
+    obj, d, e, fixed, tip = tube_setup()
     bind_world = e.matrix_world.copy()
     bpy.ops.deformkit.bind()
     R.check("binds", d.bound and not d.status_is_error, d.status)
@@ -102,58 +89,16 @@ def test_open_mesh_deforms_as_a_surface():
     R.check("its handle follows", abs(got[handle, 2].mean() - 0.3) < 0.02, got[handle, 2].mean())
 
 
-def rig(obj):
-    """A two-bone Armature first in the stack, its lower bone turned about z by 0 at frame 1
-    and 0.8 at frame 5."""
-    return S.arm_rig(obj, {"lower": ((1, (0, 0, 0.0)), (5, (0, 0, 0.8)))})
-
-
 def test_after_an_armature():
-    obj, d, e, fixed, tip, ao = tube_setup(rig)
-    sc = bpy.context.scene
-    sc.frame_start, sc.frame_end = 1, 5
-    sc.frame_set(1)
-    bind_world = e.matrix_world.copy()
-    bpy.ops.deformkit.bind()
-    R.check("binds after an Armature", d.bound and not d.status_is_error, d.status)
-    # the handle (parented to nothing) lifted: at each frame the deformer edits the pose
-    e.location.z += 0.2
-    sc.frame_set(5)
-    got = S.evaluated_positions(obj)
-    inp = S.armature_input(obj, d)
-    R.check("the Armature bends the input", np.abs(inp - S.rest_positions(obj)).max() > 0.3,
-            np.abs(inp - S.rest_positions(obj)).max())
+    obj, d, e, fixed, tip = tube_setup(S.lower_bone_rig)
+    got, inp = S.check_edit_after_armature(R, obj, d, e, fixed, tip, TOL, "volume_arap.pc2")
     moved = float(np.abs(got - inp).max())
     R.check("the deformer edits the pose (moved %.3f)" % moved, 0.05 < moved < 1.0, moved)
-    R.check("its fixed end stays where the Armature puts it",
-            float(np.abs(got[fixed] - inp[fixed]).max()) < TOL,
-            float(np.abs(got[fixed] - inp[fixed]).max()))
-    # the API on the pose: the handle where the edit (a lift), turned with the lower bone,
-    # puts it (tests/blender/test_addon_animation.py, for every method that edits its input)
-    m = S.methods.get(d.method)
-    rest = S.rest_positions(obj)
-    mesh = S.dk.Mesh(rest, S.solver.triangles(obj.data))
-    kw = dict(handles=[tip], fixed=fixed)
-    native = S.dk.VolumetricARAP(mesh, **kw, **S.methods.bind_kwargs(m, d.options, rest, kw,
-                                                                       mesh))
-    T = np.array(e.matrix_world @ bind_world.inverted())
-    edit = rest[tip] @ T[:3, :3].T + T[:3, 3] - rest[tip]
-    B = S.bone_turn(obj, "lower")
-    want = np.asarray(native.solve(inp[tip] + edit @ B.T, input_positions=inp,
-                                   **S.methods.solve_kwargs(m, d.options, True)).positions)
-    diff = float(np.abs(got - want).max())
-    R.check("frame 5 is the API's edit of the pose (max %.2e)" % diff, diff < TOL, diff)
     F = S.solver.triangles(obj.data)
     v_in, v_out = volume(inp, F), volume(got, F)
     R.check("keeps the pose's volume (%.3f)" % (v_out / v_in), abs(v_out / v_in - 1) < 0.05,
             v_out / v_in)
-    # a bake writes what played
-    shown = {}
-    for f in range(1, 6):
-        sc.frame_set(f)
-        shown[f] = S.evaluated_positions(obj)
-    diff = S.bake_differs_from(obj, d, shown, "volume_arap.pc2")
-    R.check("the bake = playback (max %.2e)" % diff, diff < TOL, diff)
+
 
 for t in (test_still_mesh, test_open_mesh_deforms_as_a_surface, test_after_an_armature):
     R.run(t)
