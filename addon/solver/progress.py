@@ -10,7 +10,9 @@ BIND_PHASES = {
     "basis": "handle basis", "heat": "heat method", "distances": "distances",
     "nodes": "placing nodes", "weights": "node weights", "edges": "graph edges",
     "eigenvectors": "eigenvectors", "forms": "fundamental forms", "regions": "regions",
-    "skeletons": "skeletons", "done": "finishing",
+    "skeletons": "skeletons", "coarse": "simplifying (coarse level)",
+    "tetrahedralize": "filling with tetrahedra", "interior": "interior", "arap": "binding ARAP",
+    "done": "finishing",
 }
 
 
