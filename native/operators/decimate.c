@@ -835,20 +835,6 @@ dk_status dk_decimate_progress(const dk_mesh *mesh, const int *vertex_class,
     return DK_OK;
 }
 
-static void quat_matrix(const double *q, double r[9])
-{
-    const double w = q[0], x = q[1], y = q[2], z = q[3];
-    r[0] = 1.0 - 2.0 * (y * y + z * z);
-    r[1] = 2.0 * (x * y - w * z);
-    r[2] = 2.0 * (x * z + w * y);
-    r[3] = 2.0 * (x * y + w * z);
-    r[4] = 1.0 - 2.0 * (x * x + z * z);
-    r[5] = 2.0 * (y * z - w * x);
-    r[6] = 2.0 * (x * z - w * y);
-    r[7] = 2.0 * (y * z + w * x);
-    r[8] = 1.0 - 2.0 * (x * x + y * y);
-}
-
 void dk_decimation_prolong(const dk_decimation *d, const double *pose, const double *coarse,
                            const double *coarse_rotations, double *fine, double *scratch)
 {
@@ -890,7 +876,7 @@ void dk_decimation_prolong(const dk_decimation *d, const double *pose, const dou
             sub3(pu, pose + 3 * c, off);
             if (rotate) {
                 double r[9], ro[3];
-                quat_matrix(scratch + 4 * c, r);
+                dk_quaternion_rotation(scratch + 4 * c, r);
                 ro[0] = r[0] * off[0] + r[1] * off[1] + r[2] * off[2];
                 ro[1] = r[3] * off[0] + r[4] * off[1] + r[5] * off[2];
                 ro[2] = r[6] * off[0] + r[7] * off[1] + r[8] * off[2];

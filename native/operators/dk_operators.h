@@ -247,6 +247,11 @@ double dk_closest_rotation(const double a[9], double r[9]);
  *  dual quaternion skinning and the logarithm of shape interpolation's rotations. */
 void dk_rotation_quaternion(const double R[9], double q[4]);
 
+/** The inverse: the rotation R (row-major 3x3) of the unit quaternion q = (w, x, y, z) (q and
+ *  -q give the same R). For blends of rotations taken as normalised sums of quaternions (the
+ *  multi-scale prolongation, dk_decimation_prolong). */
+void dk_quaternion_rotation(const double q[4], double R[9]);
+
 /** The inverse of the affine 4x4 `m` (row-major; its bottom row is taken as 0 0 0 1) into
  *  `inv` (16 doubles, bottom row 0 0 0 1). Returns 0, or -1 when the linear part is
  *  singular or not finite (inv then unspecified). Skinning's bones and the fit of their

@@ -275,4 +275,29 @@ static void test_timing(void)
     CHECK(isfinite(acc) && isfinite(random_acc) && isfinite(flat_acc));
 }
 
-DK_TEST_MAIN(test_special, test_random_families, test_timing)
+/* dk_rotation_quaternion and dk_quaternion_rotation are inverses: R -> q -> R to rounding
+ * (half turns and the identity included), and q -> R -> q up to the sign (w >= 0). */
+static void test_quaternion_round_trip(void)
+{
+    const double axes[4][3] = {{1, 0, 0}, {0, 0.6, 0.8}, {0.48, 0.6, 0.64}, {-0.36, 0.48, 0.8}};
+    const double angles[5] = {0.0, 0.3, 1.7, 3.14159265358979, -2.5};
+    for (int a = 0; a < 4; a++)
+        for (int k = 0; k < 5; k++) {
+            const double *u = axes[a], th = angles[k], c = cos(th), s = sin(th);
+            double R[9], q[4], back[9];
+            for (int i = 0; i < 3; i++)
+                for (int j = 0; j < 3; j++)
+                    R[3 * i + j] = (i == j ? c : 0.0) + (1 - c) * u[i] * u[j];
+            R[1] -= s * u[2], R[2] += s * u[1], R[3] += s * u[2];
+            R[5] -= s * u[0], R[6] -= s * u[1], R[7] += s * u[0];
+            dk_rotation_quaternion(R, q);
+            dk_quaternion_rotation(q, back);
+            double err = 0.0;
+            for (int i = 0; i < 9; i++)
+                err = fmax(err, fabs(back[i] - R[i]));
+            CHECK_MSG(err < 1e-14, "axis %d angle %g: %g", a, th, err);
+            CHECK(q[0] >= 0.0);
+        }
+}
+
+DK_TEST_MAIN(test_special, test_random_families, test_timing, test_quaternion_round_trip)
