@@ -417,10 +417,14 @@ static dk_status solve_rest(dk_arap *ar, const dk_solve_request *rq, double *pos
     const size_t nhv3 = 3 * (size_t)s->con->n_handle_vertices;
     const int resume = rq->start == DK_START_RESUME && ar->have_prev && s->resumable &&
                        memcmp(s->targets, s->targets_prev, nhv3 * sizeof(double)) == 0;
-    /* a cold start on a system with a coarse level: from its solve, prolonged (multiscale.c) */
-    if (!resume && !given && !(warm_start && ar->have_prev) && s->coarse &&
-        (st = arap_coarse_start(ar, s, &given, err)) != DK_OK)
-        return st;
+    /* a cold start on a system with a coarse level: from its solve, prolonged (multiscale.c,
+     * in the internal order) */
+    int given_internal = 0;
+    if (!resume && !given && !(warm_start && ar->have_prev) && s->coarse) {
+        if ((st = arap_coarse_start(ar, s, &given, err)) != DK_OK)
+            return st;
+        given_internal = given != NULL;
+    }
     arap_progress p = {0};
     if (!resume) {
         s->cg_level = 0;       /* the CG schedule starts again (newton.c) */
@@ -435,8 +439,8 @@ static dk_status solve_rest(dk_arap *ar, const dk_solve_request *rq, double *pos
     }
     if (resume)
         p.energy = s->last_energy; /* ar->x, s->xu, s->rhs, ar->rot: as the last call left them */
-    else if ((st = arap_start(ar, s, given, warm_start && ar->have_prev, rq->preview,
-                              &p.energy, err)) != DK_OK)
+    else if ((st = arap_start(ar, s, given, given_internal, warm_start && ar->have_prev,
+                              rq->preview, &p.energy, err)) != DK_OK)
         return st;
     /* a preview's local step is done when the energy is asked for, or by the first
      * iteration of the solve that refines it */

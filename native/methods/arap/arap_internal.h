@@ -73,14 +73,14 @@
 /* The multi-scale solve's coarse level (multiscale.c): the mesh simplified (dk_decimate,
  * internal numbering, each vertex's role kept) and an ARAP object bound on it for the
  * restricted constraints; buffers for its targets, pose, result and rotations, and the
- * prolonged start (fine: internal numbering; start: the caller's, for arap_start). */
+ * prolonged start (fine: internal numbering, also the corrections' scratch). */
 typedef struct arap_coarse {
     dk_decimation *dec;
     dk_mesh *mesh;
     dk_arap *arap;
     dk_index n_handle_vertices;
     dk_index *target_row; /* per coarse handle vertex: its row of the system's targets */
-    double *targets, *pose, *y, *rot, *fine, *start, *scratch;
+    double *targets, *pose, *y, *rot, *fine, *scratch;
     int starts;           /* cold starts it gave since it was built                     */
     /* the corrections (arap_coarse_correct): the coarse vectors in its vertex order (n_kept
      * x 3), its unknowns' blocks (3 of its nu), and the fine direction and product (3 nu) */
@@ -328,15 +328,16 @@ void arap_scatter(const arap_system *s, const double *xu, double *x);
 void arap_gather(const arap_system *s, const double *x, double *xu);
 
 /* warm_start.c: sets the iterate where a solve starts (ar->x, ar->rot, s->xu, s->rhs) and
- * its energy; `given` (DK_START_GIVEN, n x 3 in the caller's vertex order, checked finite):
+ * its energy; `given` (DK_START_GIVEN, n x 3 in the caller's vertex order, checked finite;
+ * with `given_internal`, in the internal order: the coarse level's prolonged start):
  * from those positions, `warm` and `lazy` ignored; `warm`: from the previous solution (there
  * must be one). `lazy` (a preview):
  * positions only (ar->x, s->xu), the predictor taken whenever the drag goes on, energy NaN,
  * s->start_pending set; arap_start_complete then does the rest (rotations, energy,
  * right-hand side) before any iteration. After the solve, arap_keep_history records its end
  * for the next warm start's predictor. */
-dk_status arap_start(dk_arap *ar, arap_system *s, const double *given, int warm, int lazy,
-                     double *energy, dk_error *err);
+dk_status arap_start(dk_arap *ar, arap_system *s, const double *given, int given_internal,
+                     int warm, int lazy, double *energy, dk_error *err);
 dk_status arap_start_complete(dk_arap *ar, arap_system *s, double *energy, dk_error *err);
 void arap_keep_history(dk_arap *ar, arap_system *s, int warm_start);
 
@@ -362,7 +363,8 @@ dk_status arap_iterate_newton(dk_arap *ar, arap_system *s, int max_iterations,
 
 /* multiscale.c: the coarse level for the constraints of `s` (*out NULL: none, by the
  * levels option, the mesh's size, or a coarse mesh that would not bind); the cold start it
- * gives (*start: n x 3 in the caller's order, owned by the level; NULL: none this time) */
+ * gives (*start: n x 3 in the internal order, owned by the level and valid until its next
+ * correction; NULL: none this time) */
 dk_status arap_coarse_build(dk_arap *ar, const arap_system *s, arap_coarse **out, dk_error *err);
 dk_status arap_coarse_start(dk_arap *ar, arap_system *s, const double **start, dk_error *err);
 void arap_coarse_free(arap_coarse *c);

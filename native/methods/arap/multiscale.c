@@ -36,7 +36,6 @@ void arap_coarse_free(arap_coarse *c)
     free(c->y);
     free(c->rot);
     free(c->fine);
-    free(c->start);
     free(c->scratch);
     free(c->cr);
     free(c->cb);
@@ -193,7 +192,6 @@ dk_status arap_coarse_build(dk_arap *ar, const arap_system *s, arap_coarse **out
         c->y = malloc((3 * (size_t)mk + 1) * sizeof *c->y);
         c->rot = malloc((9 * (size_t)mk + 1) * sizeof *c->rot);
         c->fine = malloc(n3 * sizeof *c->fine);
-        c->start = malloc(n3 * sizeof *c->start);
         c->scratch = malloc((4 * (size_t)ar->n + 1) * sizeof *c->scratch);
         const size_t cn = 3 * (size_t)c->arap->sys.nu + 1, fn = 3 * (size_t)s->nu + 1;
         c->cr = malloc((3 * (size_t)mk + 1) * sizeof *c->cr);
@@ -201,7 +199,7 @@ dk_status arap_coarse_build(dk_arap *ar, const arap_system *s, arap_coarse **out
         c->cd = malloc(cn * sizeof *c->cd);
         c->fd = malloc(fn * sizeof *c->fd);
         c->fq = malloc(fn * sizeof *c->fq);
-        if (!c->targets || !c->pose || !c->y || !c->rot || !c->fine || !c->start ||
+        if (!c->targets || !c->pose || !c->y || !c->rot || !c->fine ||
             !c->scratch || !c->cr || !c->cb || !c->cd || !c->fd || !c->fq)
             st = oom(err, "coarse level");
     }
@@ -252,9 +250,8 @@ dk_status arap_coarse_start(dk_arap *ar, arap_system *s, const double **start, d
         memcpy(c->rot + 9 * (size_t)ca->ro->perm[i], ca->rot + 9 * (size_t)i,
                9 * sizeof *c->rot);
     dk_decimation_prolong(d, ar->base, c->y, c->rot, c->fine, c->scratch);
-    dk_reorder_rows_out(ar->ro, c->fine, c->start);
     c->starts++;
-    *start = c->start;
+    *start = c->fine;
     return DK_OK;
 }
 

@@ -178,8 +178,8 @@ static dk_status start_warm(dk_arap *ar, arap_system *s, int lazy, double *energ
     return DK_OK;
 }
 
-dk_status arap_start(dk_arap *ar, arap_system *s, const double *given, int warm, int lazy,
-                     double *energy_out, dk_error *err)
+dk_status arap_start(dk_arap *ar, arap_system *s, const double *given, int given_internal,
+                     int warm, int lazy, double *energy_out, dk_error *err)
 {
     double energy = 0.0;
     int have_energy = 0;
@@ -192,7 +192,10 @@ dk_status arap_start(dk_arap *ar, arap_system *s, const double *given, int warm,
         arap_gap_restart(s, 1);
     }
     if (given) { /* the given positions, constrained vertices in place, their rotations */
-        dk_reorder_rows_in(ar->ro, given, ar->x);
+        if (given_internal)
+            memcpy(ar->x, given, 3 * (size_t)ar->n * sizeof *ar->x);
+        else
+            dk_reorder_rows_in(ar->ro, given, ar->x);
         identity_rotations(ar);
     }
     place_known(ar, s, given ? ar->x : warm ? ar->prev : ar->base);
