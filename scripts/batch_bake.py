@@ -6,6 +6,8 @@
   python3 scripts/batch_bake.py --join a.pc2 b.pc2 --out all.pc2      (join needs no Blender)
   python scripts/batch_bake.py --blend scene.blend [--scene NAME] --object NAME ...
                                  (Blender as a Python module: a venv with the `bpy` wheel)
+  ... --object NAME [--deformer NAME] [--out FILE.pc2] --describe FILE.json
+                                 (what a bake would do, for scripts/farm_bake.py: no solving)
 
 Each frame is solved from a cold start, so a frame's result depends only on that frame's inputs:
 ranges baked on different machines and joined equal one bake of the whole range. A simulation
@@ -15,7 +17,9 @@ continues from the checkpoint the chunk before it left there (chunks then run in
 equal one bake, bit for bit. If the
 deformer is not bound, it is bound at the scene's start frame (the same on every machine).
 --save adds a Mesh Cache modifier reading the cache (in place of the deformer's modifier) and
-saves the .blend. Progress lines go to stderr; any failure exits non-zero.
+saves the .blend. --describe writes the scene's frame range, the deformer's method, whether
+it is a simulation (chunks must then run in order) and the vertex count as JSON, after checking
+--out as a bake would. Progress lines go to stderr; any failure exits non-zero.
 """
 
 import argparse
@@ -71,7 +75,7 @@ def parse(argv):
     p.add_argument("--object", help="name of the deformed mesh object")
     p.add_argument("--deformer", help="deformer name (default: the object's active deformer)")
     p.add_argument("--frames", help="frame range A-B (inclusive); default: the scene's range")
-    p.add_argument("--out", required=True,
+    p.add_argument("--out",
                    help="output .pc2 file (a path starting with // is relative to the .blend, "
                         "as in Blender); its folder must exist, and an existing file there is "
                         "only replaced if it is a point cache")
@@ -83,6 +87,9 @@ def parse(argv):
                         "for the next chunk")
     p.add_argument("--save", action="store_true",
                    help="add a Mesh Cache modifier reading --out and save the .blend")
+    p.add_argument("--describe", metavar="JSON",
+                   help="write what a bake would do into this file (frame range, method, "
+                        "simulation or not, vertices; --out checked if given) and stop")
     return p.parse_args(argv)
 
 
@@ -134,6 +141,10 @@ def ensure_addon():
             continue
         if mod is not None and hasattr(mod, "solver"):
             return mod
+    if not os.path.isfile(os.path.join(ROOT, "addon", "__init__.py")):
+        fail("the DeformKit add-on is not installed in this Blender (%s), and there is no "
+             "addon/ folder beside this script: install the add-on's zip in it"
+             % bpy.app.version_string)
     if ROOT not in sys.path:
         sys.path.insert(0, ROOT)
     import addon
@@ -154,7 +165,9 @@ def parse_frames(text, scene):
     return a, b
 
 
-def do_bake(args):
+def open_target(args):
+    """Opens --blend (and --scene) when given, registers the add-on and finds the object and
+    its deformer: (add-on module, scene, object, deformer). Fails with a message otherwise."""
     import bpy
     if not args.object:
         fail("--object NAME is required (or --join)")
@@ -172,7 +185,6 @@ def do_bake(args):
                 fail("--scene: this Blender has no window to switch scenes in")
             wins[0].scene = sc
     ext = ensure_addon()
-    solver, bake = ext.solver, ext.bake
     if ext.native.load() is None:
         fail(ext.native.error)
     scene = bpy.context.scene
@@ -191,6 +203,39 @@ def do_bake(args):
                                                     ", ".join(x.name for x in dks.deformers)))
     else:
         d = dks.deformers[min(dks.active_index, len(dks.deformers) - 1)]
+    return ext, scene, obj, d
+
+
+def do_describe(args):
+    import json
+    import bpy
+    ext, scene, obj, d = open_target(args)
+    a, b = parse_frames(args.frames, scene)
+    out = None
+    if args.out:
+        try:
+            out = ext.bake.check_cache_path(obj, d, ext.bake.resolve_path(args.out, obj, d))
+        except ext.solver.DeformKitError as e:
+            fail(str(e))
+    info = {"blend": bpy.data.filepath, "scene": scene.name, "object": obj.name,
+            "deformer": d.name, "method": d.method, "bound": bool(d.bound),
+            "simulation": bool(ext.solver.simulation.is_dynamic(ext.methods.get(d.method))),
+            "vertices": len(obj.data.vertices), "frame_start": a, "frame_end": b,
+            "scene_frame_start": scene.frame_start, "fps": scene.render.fps / scene.render.fps_base,
+            "out": out, "protected": [list(p) for p in ext.bake.protected_files(obj, d)]}
+    part = args.describe + ".part"
+    with open(part, "w") as f:
+        json.dump(info, f)
+    os.replace(part, args.describe)
+    log("described '%s' of %r: %s, frames %d-%d, %d vertices%s"
+        % (d.name, obj.name, d.method, a, b, info["vertices"],
+           ", a simulation (chunks in order)" if info["simulation"] else ""))
+
+
+def do_bake(args):
+    import bpy
+    ext, scene, obj, d = open_target(args)
+    solver, bake = ext.solver, ext.bake
     a, b = parse_frames(args.frames, scene)
     if args.save and not bpy.data.filepath:
         fail("--save needs a .blend file (open one with --blend, or give it to blender)")
@@ -239,9 +284,13 @@ def do_bake(args):
 
 def main():
     args = parse(sys.argv)
+    if not args.describe and not args.out:
+        fail("--out FILE is required: the .pc2 file to write")
     try:
         if args.join:
             do_join(args)
+        elif args.describe:
+            do_describe(args)
         else:
             do_bake(args)
     except SystemExit:

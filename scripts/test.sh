@@ -10,6 +10,10 @@
 #   3. the packages: scripts/package.sh builds the wheel and the two add-on zips into dist/
 #      (and validates the extension in every Blender 4.2+ here); the wheel is installed into
 #      a clean virtual environment and smoke-tested there,
+#   3b. farm bakes (tests/farm, in the [farm] environment): scripts/farm_bake.py on a Dask
+#      scheduler and two workers started on loopback (chunks joined byte-identical to one
+#      bake, a worker killed mid-chunk, a chunk failing for good) and the generated job files
+#      for Open Job Description (openjd check / run), Flamenco (Node) and Slurm,
 #   4. the add-on in every Blender (tests/blender/run_all.sh): Debian's `blender` program,
 #      with the window suites under Xvfb, and each bpy-* environment of scripts/pins.txt
 #      (the official releases as Python modules: 4.5 LTS, 5.2 LTS, 5.3), each also installing
@@ -70,6 +74,9 @@ if [ "$quick" = 0 ]; then
 fi
 run_suite "package" scripts/package.sh --no-setup
 run_suite "wheel in a clean venv" tests/wheel/test_wheel.sh
+# farm bakes on a Dask scheduler and two workers started on loopback, and the job files for
+# other farms (the [farm] environment of scripts/pins.txt: Dask, openjd-cli, Blender 5.2)
+run_suite "farm" build/venvs/farm/bin/python -m pytest -q -p no:cacheprovider tests/farm
 
 # ---- the add-on in each Blender: run_all.sh prints "ok NAME" / "FAILED NAME" per suite
 blenders=(debian $(scripts/venvs.sh --blenders))

@@ -4,6 +4,7 @@
 
 #include <dlfcn.h>
 #include <pthread.h>
+#include <sched.h>
 #include <signal.h>
 #include <stdatomic.h>
 #include <stdlib.h>
@@ -24,6 +25,17 @@ static void *run_half(void *arg)
     return NULL;
 }
 
+/* 1 when the calling thread may run on one CPU only (taskset, a cpuset, a farm's binding of
+ * one core per task): a helper thread would only take turns with it there, its spinning
+ * taking the caller's time. 0 when it may run on more, or when the mask cannot be read. */
+static int one_cpu(void)
+{
+    cpu_set_t set;
+    if (sched_getaffinity(0, sizeof set, &set) != 0)
+        return 0;
+    return CPU_COUNT(&set) < 2;
+}
+
 void dk_run_halves(dk_range_fn fn, void *ctx, dk_index n, dk_index min_parallel)
 {
     const dk_index mid = n / 2;
@@ -32,7 +44,7 @@ void dk_run_halves(dk_range_fn fn, void *ctx, dk_index n, dk_index min_parallel)
     int started = 0;
     if (n < 0)
         return;
-    if (n >= min_parallel && n >= 2)
+    if (n >= min_parallel && n >= 2 && !one_cpu())
         started = pthread_create(&th, NULL, run_half, &job) == 0;
     fn(ctx, 0, mid, 0);
     if (started)
@@ -128,6 +140,10 @@ dk_team *dk_team_create(void)
     int have_mu = 0, have_wake = 0, have_fin = 0, started = 0;
     if (!t)
         return NULL;
+    if (one_cpu()) { /* no helper: every pass runs on the caller (dk_run_halves) */
+        free(t);
+        return NULL;
+    }
     atomic_init(&t->gen, 0u);
     atomic_init(&t->done, 0u);
     atomic_init(&t->busy, 0);

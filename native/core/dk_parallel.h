@@ -21,8 +21,9 @@
 typedef void (*dk_range_fn)(void *ctx, dk_index begin, dk_index end, int part);
 
 /** Runs fn(ctx, 0, n/2, 0) on the calling thread and fn(ctx, n/2, n, 1) on a helper thread
- *  when n >= min_parallel; otherwise, or when no thread can be started, both on the calling
- *  thread, part 0 first. Always two parts with the same split, so the caller may combine
+ *  when n >= min_parallel; otherwise, when no thread can be started, or when the calling
+ *  thread's CPU affinity allows one CPU only (taskset, cpusets, a farm binding one core per
+ *  task), both on the calling thread, part 0 first. Always two parts with the same split, so the caller may combine
  *  part results in order and get the same answer either way. n may be 0. Never fails. */
 void dk_run_halves(dk_range_fn fn, void *ctx, dk_index n, dk_index min_parallel);
 
@@ -30,7 +31,7 @@ void dk_run_halves(dk_range_fn fn, void *ctx, dk_index n, dk_index min_parallel)
 typedef struct dk_team dk_team;
 
 /** Starts a team. Returns NULL when its helper thread or its synchronisation objects cannot
- *  be created; NULL is a valid team for every function below (passes then run through
+ *  be created, or when the calling thread may run on one CPU only; NULL is a valid team for every function below (passes then run through
  *  dk_run_halves). */
 dk_team *dk_team_create(void);
 

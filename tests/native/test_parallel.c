@@ -2,8 +2,11 @@
  * once, by the part the split assigns it to, for empty, tiny, odd and large ranges, with and
  * without the helper thread; the two parts really run at the same time when the helper is
  * used; a team survives many passes back to back, passes after parking (the helper asleep),
- * nested passes (which must not deadlock) and a fork (the child has no helper). */
-#define _POSIX_C_SOURCE 200809L
+ * nested passes (which must not deadlock) and a fork (the child has no helper); a thread
+ * bound to one CPU gets no helper at all (every part on the caller). */
+#define _GNU_SOURCE /* sched_setaffinity; includes POSIX 2008 */
+#include <pthread.h>
+#include <sched.h>
 #include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
@@ -232,6 +235,53 @@ static void test_team_after_fork(void)
     dk_team_free(team);
 }
 
+/* Bound to one CPU (as taskset or a farm's one-core binding does), the caller runs both parts
+ * itself: no team helper, no started thread. Run in a child process, so the binding ends
+ * with it. */
+typedef struct who_job {
+    pthread_t caller;
+    int parts_on_caller;
+} who_job;
+
+static void record_thread(void *ctx, dk_index b, dk_index e, int part)
+{
+    (void)b, (void)e, (void)part;
+    who_job *j = ctx;
+    if (pthread_equal(pthread_self(), j->caller))
+        j->parts_on_caller++;
+}
+
+static void test_one_cpu_no_helper(void)
+{
+    const pid_t pid = fork();
+    CHECK(pid >= 0);
+    if (pid == 0) {
+        cpu_set_t one;
+        CPU_ZERO(&one);
+        const int cpu = sched_getcpu();
+        CPU_SET(cpu < 0 ? 0 : cpu, &one);
+        if (sched_setaffinity(0, sizeof one, &one) != 0)
+            _exit(4);
+        alarm(20);
+        who_job j = {pthread_self(), 0};
+        dk_run_halves(record_thread, &j, 1000, 2);
+        int ok = j.parts_on_caller == 2;
+        dk_team *team = dk_team_create();
+        ok = ok && team == NULL;
+        j.parts_on_caller = 0;
+        dk_team_run_halves(team, record_thread, &j, 1000, 2);
+        ok = ok && j.parts_on_caller == 2;
+        _exit(ok ? 0 : 3);
+    }
+    int status = 0;
+    CHECK(pid > 0 && waitpid(pid, &status, 0) == pid);
+    CHECK_MSG(WIFEXITED(status) && WEXITSTATUS(status) == 0, "child status %d", status);
+    /* and unbound (two CPUs here), the second part runs on a helper */
+    who_job j = {pthread_self(), 0};
+    dk_run_halves(record_thread, &j, 1000, 2);
+    CHECK_MSG(j.parts_on_caller == 1, "%d parts on the caller", j.parts_on_caller);
+}
+
 DK_TEST_MAIN(test_every_item_once, test_parts_run_concurrently, test_team_every_item_once,
              test_team_parts_run_concurrently, test_team_many_passes, test_team_nested,
-             test_team_after_fork)
+             test_team_after_fork, test_one_cpu_no_helper)
