@@ -54,6 +54,14 @@ def fail(msg, code=1):
     os._exit(code)
 
 
+def default_workers():
+    """One local worker per two CPUs this process may use: a solve runs its passes on two
+    threads, faster than two one-thread solves side by side on a 2-core machine
+    (docs/farm.md, "Chunk size and speed")."""
+    n = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return max(1, (n or 1) // 2)
+
+
 class Fail(Exception):
     """Stops the run with this message once everything started is shut down."""
 
@@ -81,9 +89,11 @@ def parse(argv):
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="a running Dask scheduler (tcp://host:8786); default: a local "
                         "cluster started for this run")
-    p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
-                   help="without --scheduler: worker processes of the local cluster "
-                        "(default: one per core, %(default)s here)")
+    p.add_argument("--workers", type=int, default=default_workers(),
+                   help="without --scheduler: worker processes of the local cluster, each "
+                        "keeping its Blender to an equal share of the cores (default: one "
+                        "per two cores, as DeformKit's solvers use two threads: %(default)s "
+                        "here)")
     p.add_argument("--retries", type=int, default=1,
                    help="times a chunk whose Blender failed is run again (default "
                         "%(default)s); a worker that dies is the scheduler's to retry")
@@ -200,7 +210,8 @@ def farm(args, spec):
         except dask_bake.FarmError as e:
             raise Fail(str(e))
         out = check_out(pc2, args.out, described)
-        spec = chunk_mod.BakeSpec(**{**spec.__dict__, "simulation": described["simulation"]})
+        spec = chunk_mod.BakeSpec(**{**spec.__dict__, "simulation": described["simulation"],
+                                     "local_workers": 0 if args.scheduler else args.workers})
         plan = plan_mod.make_plan(described["frame_start"], described["frame_end"],
                                   args.chunk, described["simulation"])
         log("%s of %r (%s, %d vertices): frames %d-%d in %d chunk%s of up to %d%s"

@@ -45,6 +45,8 @@ class BakeSpec:
                                     # (None: the interpreter running the task)
     batch_script: str = BATCH_SCRIPT    # where it is missing, the copy shipped with the package
     simulation: bool = False        # chunks continue from checkpoints (describe() says)
+    local_workers: int = 0          # > 0: the workers of a local cluster of this many, each
+                                    # keeping its Blender to its share of the CPUs (cpu_share)
     env: dict = field(default_factory=dict)   # added to the Blender's environment
 
     def command(self, batch_args, script=None):
@@ -66,14 +68,36 @@ class BakeSpec:
         return ["--object", self.object] + (["--deformer", self.deformer] if self.deformer else [])
 
 
-def _die_with_parent():
-    """In the child before exec: SIGKILL when the thread that started it ends (the worker
-    killed), so that no orphaned Blender goes on baking."""
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(1, signal.SIGKILL)      # PR_SET_PDEATHSIG
-    except (OSError, AttributeError):      # not Linux: the orphan finishes on its own
-        pass
+def _child_setup(cpus):
+    """What the Blender's process does before exec: die with the thread that started it
+    (SIGKILL when the worker is killed: no orphaned Blender goes on baking; Linux
+    PR_SET_PDEATHSIG), and keep to `cpus` when given (a share of this machine's CPUs)."""
+    def setup():
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, signal.SIGKILL)      # PR_SET_PDEATHSIG
+        except (OSError, AttributeError):      # not Linux: the orphan finishes on its own
+            pass
+        if cpus and hasattr(os, "sched_setaffinity"):
+            try:
+                os.sched_setaffinity(0, cpus)
+            except OSError:
+                pass
+    return setup
+
+
+def cpu_share(index, count):
+    """The CPUs the index-th of `count` workers on this machine keeps to: an equal share of
+    the CPUs this process may use (None when there are fewer CPUs than workers, or no
+    affinity on this system). Bound so, two chunks do not each start two threads on the
+    same two cores (DeformKit's solvers then run their passes on one thread)."""
+    if not hasattr(os, "sched_getaffinity") or count < 1:
+        return None
+    cpus = sorted(os.sched_getaffinity(0))
+    k = len(cpus) // count
+    if k < 1:
+        return None
+    return cpus[index * k:(index + 1) * k] if 0 <= index < count else None
 
 
 def _script(spec, folder):
@@ -93,7 +117,7 @@ def _script(spec, folder):
     return path
 
 
-def _run(spec, batch_args, folder, what):
+def _run(spec, batch_args, folder, what, cpus=None):
     """Runs batch_bake.py: (wall time, its own progress lines). ChunkFailed with the output's
     tail (its error line when it said one) when it exits non-zero."""
     log_path = os.path.join(folder, "blender.log")
@@ -109,7 +133,7 @@ def _run(spec, batch_args, folder, what):
         with open(log_path, "wb") as log:
             proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=log, stderr=log,
                                     env=env, cwd=folder,
-                                    preexec_fn=_die_with_parent if os.name == "posix" else None)
+                                    preexec_fn=_child_setup(cpus) if os.name == "posix" else None)
             rc = proc.wait()
     except OSError as e:
         raise ChunkFailed("%s on %s: cannot start %s: %s"
@@ -143,10 +167,11 @@ def describe(spec, frames=None, out=None):
         shutil.rmtree(folder, ignore_errors=True)
 
 
-def bake_chunk(spec, chunk, checkpoint=None):
+def bake_chunk(spec, chunk, checkpoint=None, cpus=None):
     """Bakes `chunk` (scripts/deformkit_farm/plan.Chunk). `checkpoint`: (file name, bytes) the chunk
     before it left, for a simulation. Returns a dict: index, first, last, pc2 (the cache's
     bytes), checkpoint ((name, bytes) of the last frame's, or None), seconds, host,
+    cpus (those the Blender was bound to: `cpus`, None for all),
     continued (True when it started from `checkpoint` rather than playing the frames before
     it)."""
     folder = tempfile.mkdtemp(prefix="deformkit-farm-")
@@ -161,7 +186,7 @@ def bake_chunk(spec, chunk, checkpoint=None):
             name, data = checkpoint
             with open(os.path.join(states, os.path.basename(name)), "wb") as f:
                 f.write(data)
-        seconds, said = _run(spec, args, folder, "its Blender")
+        seconds, said = _run(spec, args, folder, "its Blender", cpus)
         with open(out, "rb") as f:
             pc2 = f.read()
         left = None
@@ -171,6 +196,7 @@ def bake_chunk(spec, chunk, checkpoint=None):
                 left = (os.path.basename(mine[0]), f.read())
         return {"index": chunk.index, "first": chunk.first, "last": chunk.last, "pc2": pc2,
                 "checkpoint": left, "seconds": seconds, "host": socket.gethostname(),
+                "cpus": list(cpus) if cpus else None,
                 "continued": any("continuing from the checkpoint" in ln for ln in said)}
     finally:
         shutil.rmtree(folder, ignore_errors=True)

@@ -57,7 +57,13 @@ def _worker_address():
 
 
 def _bake_task(spec, chunk, checkpoint):
-    result = chunk_mod.bake_chunk(spec, chunk, checkpoint)
+    cpus = None
+    if spec.local_workers:        # a local cluster's workers are named 0, 1, ...
+        try:
+            cpus = chunk_mod.cpu_share(int(get_worker().name), spec.local_workers)
+        except (ValueError, TypeError):
+            cpus = None
+    result = chunk_mod.bake_chunk(spec, chunk, checkpoint, cpus)
     result["worker"] = _worker_address()
     return result
 
@@ -106,7 +112,8 @@ class Progress:
         w[0] += c.frames
         w[1] += result["seconds"]
         self.done.append({"index": c.index, "frames": c.label, "worker": result["worker"],
-                          "seconds": result["seconds"], "continued": result["continued"]})
+                          "seconds": result["seconds"], "continued": result["continued"],
+                          "cpus": result["cpus"]})
         elapsed = time.perf_counter() - self.t0
         slow = min(self.per_worker.items(), key=lambda kv: kv[1][0] / max(kv[1][1], 1e-9))
         self.say("chunk %d (frames %s) done on %s in %.1f s; %d/%d chunks, %d/%d frames, "

@@ -9,7 +9,11 @@ processes started here, scripts/farm_bake.py submitting the demo's arm-lift scen
   worker's Blender died with it;
 - a chunk that fails for good (a handle keyed to NaN in its frames) is reported with its
   frame range and the Blender's message, exit status 1, and --out is left as it was;
-- bad arguments and a protected --out are refused before any chunk runs.
+- bad arguments and a protected --out are refused before any chunk runs;
+- farm_bake.py's own local cluster binds each chunk's Blender to its worker's CPUs;
+- the job files: `openjd check` and `openjd run` of the template (the cache equals one bake),
+  the Flamenco job type's compileJob under Node against the Python plan, the Slurm scripts
+  run under bash with their array index and submitted through a stand-in sbatch.
 
 Run with the farm environment's Python (scripts/pins.txt [farm]; scripts/test.sh does):
   PYTHONPATH=build/python build/venvs/farm/bin/python -m pytest -q tests/farm
@@ -24,18 +28,20 @@ import time
 
 import psutil
 import pytest
-from distributed import Client
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+sys.path.insert(0, os.path.join(ROOT, "scripts"))
+from deformkit_farm import chunk as chunk_mod  # noqa: E402
+from deformkit_farm import jobfiles  # noqa: E402
+from deformkit_farm.loopback import Loopback, absolute_pythonpath  # noqa: E402
+from deformkit_farm.plan import make_plan  # noqa: E402
 FARM = os.path.join(ROOT, "scripts", "farm_bake.py")
 BATCH = os.path.join(ROOT, "scripts", "batch_bake.py")
 DEMO = os.path.join(ROOT, "scripts", "demo_blender.py")
 PY = sys.executable
 ARAP, JIGGLE = "arm-lift ARAP", "arm-lift Jiggle"
 TIMEOUT = 300
-# the subprocesses run in the test's folder: a relative PYTHONPATH (build/python) made absolute
-os.environ["PYTHONPATH"] = os.pathsep.join(
-    os.path.abspath(p) for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p)
+absolute_pythonpath()       # the subprocesses run in the test's folder
 
 
 def run(cmd, cwd, **kw):
@@ -96,34 +102,11 @@ def failing_blend(work, blend):
 def cluster(work):
     """A scheduler and two single-thread workers (each with its nanny), loopback only:
     (address, client)."""
-    dask = os.path.join(os.path.dirname(PY), "dask")
-    sfile = str(work / "scheduler.json")
-    logs = open(work / "cluster.log", "wb")
-    procs = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", "0",
-                               "--no-dashboard", "--scheduler-file", sfile],
-                              stdout=logs, stderr=logs, cwd=work)]
+    c = Loopback(work, workers=2).start()
     try:
-        t0 = time.time()
-        while not os.path.isfile(sfile) and time.time() - t0 < 60:
-            time.sleep(0.1)
-        for i in range(2):
-            procs.append(subprocess.Popen(
-                [dask, "worker", "--scheduler-file", sfile, "--nthreads", "1", "--host",
-                 "127.0.0.1", "--no-dashboard", "--name", "worker-%d" % i],
-                stdout=logs, stderr=logs, cwd=work))
-        client = Client(scheduler_file=sfile, timeout="60s")
-        client.wait_for_workers(2, timeout=120)
-        yield client.scheduler.address, client
-        client.close()
+        yield c.address, c.client
     finally:
-        for p in procs[::-1]:
-            p.terminate()
-        for p in procs[::-1]:
-            try:
-                p.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                p.kill()
-        logs.close()
+        c.stop()
 
 
 def single_bake(work, blend, obj, name):
@@ -159,6 +142,37 @@ def test_chunks_join_to_the_single_bake(work, blend, cluster):
     assert "24/24 frames" in r.stderr and "slowest worker" in r.stderr, r.stderr
     # the chunks' folders are gone
     assert not [n for n in os.listdir(work) if n.startswith(".farm-")]
+
+
+def test_local_cluster_shares_the_cpus(work, blend):
+    """Without --scheduler: a local cluster of one worker per CPU (at most 2 here), each
+    chunk's Blender bound to its worker's share of the CPUs (disjoint shares), and the
+    same bytes as the single bake."""
+    ref = single_bake(work, blend, ARAP, "arap_single.pc2")
+    out = str(work / "arap_local.pc2")
+    summary = str(work / "arap_local.json")
+    workers = min(2, len(os.sched_getaffinity(0)))
+    r = run([PY, FARM, "--blend", blend, "--object", ARAP, "--out", out, "--chunk", "6",
+             "--workers", str(workers), "--summary", summary], cwd=work)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert same_bytes(out, ref)
+    runs = json.load(open(summary))["chunk_runs"]
+    shares = {}
+    for c in runs:
+        assert c["cpus"], runs
+        shares.setdefault(c["worker"], set()).add(tuple(c["cpus"]))
+    assert all(len(v) == 1 for v in shares.values()), shares      # one share per worker
+    seen = [set(next(iter(v))) for v in shares.values()]
+    assert all(not (a & b) for i, a in enumerate(seen) for b in seen[i + 1:]), shares
+
+
+def test_cpu_share():
+    cpus = sorted(os.sched_getaffinity(0))
+    assert chunk_mod.cpu_share(0, 1) == cpus
+    if len(cpus) >= 2:
+        assert chunk_mod.cpu_share(0, 2) + chunk_mod.cpu_share(1, 2) == cpus[:len(cpus) // 2 * 2]
+    assert chunk_mod.cpu_share(0, len(cpus) + 1) is None     # fewer CPUs than workers
+    assert chunk_mod.cpu_share(5, 2) is None
 
 
 def test_simulation_chunks_continue_from_checkpoints(work, blend, cluster):
@@ -240,3 +254,118 @@ def test_refusals_before_any_chunk(work, blend, cluster):
              "--frames", "9-3"], cwd=work)
     assert r.returncode == 1 and "empty frame range 9-3" in r.stderr, r.stderr
     assert not os.path.exists(work / "x.pc2")
+
+
+# ------------------------------------------------------------------ job files for farms ---
+
+OPENJD = os.path.join(os.path.dirname(PY), "openjd")
+
+
+def write_jobs(work, blend, obj, name, chunk):
+    folder = work / ("jobs_" + name)
+    out = str(work / ("%s.pc2" % name))
+    r = run([PY, FARM, "--blend", blend, "--object", obj, "--out", out, "--chunk", str(chunk),
+             "--jobs", "openjd,flamenco,slurm", "--jobs-dir", str(folder)], cwd=work)
+    assert r.returncode == 0, r.stderr[-3000:]
+    return folder, out
+
+
+@pytest.mark.parametrize("obj,name", [(ARAP, "arap"), (JIGGLE, "jiggle")])
+def test_openjd_template_checked_and_run(work, blend, obj, name):
+    """`openjd check` accepts the template; `openjd run` of its Join step with its
+    dependencies (the chunks: a simulation's chained step by step) writes the single bake."""
+    ref = single_bake(work, blend, obj, "%s_single.pc2" % name)
+    folder, out = write_jobs(work, blend, obj, "openjd_" + name, 10)
+    template = str(folder / "deformkit_bake.openjd.json")
+    r = run([OPENJD, "check", template], cwd=work)
+    assert r.returncode == 0, r.stdout + r.stderr
+    t = json.load(open(template))
+    steps = [s["name"] for s in t["steps"]]
+    if name == "jiggle":
+        assert steps == ["Bake 1-10", "Bake 11-20", "Bake 21-24", "Join"], steps
+        assert t["steps"][2]["dependencies"] == [{"dependsOn": "Bake 11-20"}]
+    else:
+        assert steps == ["Bake", "Join"], steps
+        space = t["steps"][0]["parameterSpace"]["taskParameterDefinitions"]
+        assert [d["range"] for d in space] == [[1, 11, 21], [10, 20, 24]]
+    values = "file://%s" % (folder / "deformkit_bake.openjd_values.json")
+    r = run([OPENJD, "run", template, "-p", values, "--step", "Join", "--run-dependencies"],
+            cwd=work)
+    assert r.returncode == 0, (r.stdout + r.stderr)[-4000:]
+    assert same_bytes(out, ref), "openjd run's joined cache differs from the single bake"
+
+
+def flamenco_tasks(folder):
+    r = run(["node", os.path.join(ROOT, "tests", "farm", "flamenco_harness.js"),
+             str(folder / "deformkit_bake.js"), str(folder / "flamenco_job.json")], cwd=folder)
+    assert r.returncode == 0, r.stderr
+    return json.loads(r.stdout)
+
+
+@pytest.mark.parametrize("obj,name,sim", [(ARAP, "arap", False), (JIGGLE, "jiggle", True)])
+def test_flamenco_job_type_compiles_the_same_plan(work, blend, obj, name, sim):
+    """The job type's compileJob (Node, the Manager's API stood in for) makes one task per
+    chunk of the Python plan, with the command line BakeSpec.command gives the blender
+    program, a simulation's tasks chained, and a join after all of them."""
+    folder, out = write_jobs(work, blend, obj, "flamenco_" + name, 7)
+    got = flamenco_tasks(folder)
+    job = json.load(open(folder / "flamenco_job.json"))
+    s = job["settings"]
+    assert job["type"] == "deformkit-bake" and set(s) <= set(got["settings"]), (s, got)
+    plan = make_plan(1, 24, 7, sim)
+    spec = chunk_mod.BakeSpec(blend=s["blendfile"], object=obj, deformer=s["deformer"],
+                              scene=s["scene"], blender="{blender}",
+                              batch_script=s["batch_script"], simulation=sim)
+    tasks = got["tasks"]
+    assert [t["name"] for t in tasks] == ["bake-%s" % c.label for c in plan] + ["join"]
+    for c, t in zip(plan, tasks):
+        cmd = spec.command(jobfiles.chunk_args(s["chunk_folder"], c.first, c.last, sim))
+        p = t["commands"][0]["parameters"]
+        assert t["commands"][0]["name"] == "blender-render" and p["exe"] == "{blender}"
+        assert cmd[1:3] == ["-b", p["blendfile"]], cmd
+        assert p["args"] == cmd[3:], (p["args"], cmd)
+        assert t["dependencies"] == (["bake-%s" % plan[c.after].label] if c.after >= 0 else [])
+    join = tasks[-1]
+    caches = [jobfiles.chunk_cache(s["chunk_folder"], c.first, c.last) for c in plan]
+    assert join["commands"][0]["parameters"]["args"] == \
+        jobfiles.join_command(spec, caches, s["output_cache"])[2:]
+    assert join["dependencies"] == ["bake-%s" % c.label for c in plan]
+
+
+def test_slurm_scripts(work, blend):
+    """Each array element's script (run by bash with its index, as Slurm would) and the join
+    script write the single bake; slurm_submit.sh, with an sbatch that records its calls,
+    submits the array and the join after it (afterok), a simulation as a chain."""
+    ref = single_bake(work, blend, ARAP, "arap_single.pc2")
+    folder, out = write_jobs(work, blend, ARAP, "slurm_arap", 10)
+    for i in range(3):
+        r = run(["bash", str(folder / "slurm_chunk.sh")], cwd=work,
+                env={**os.environ, "SLURM_ARRAY_TASK_ID": str(i)})
+        assert r.returncode == 0, r.stderr[-3000:]
+    r = run(["bash", str(folder / "slurm_chunk.sh"), "3"], cwd=work)
+    assert r.returncode == 2 and "no chunk 3 (0-2)" in r.stderr, r.stderr
+    r = run(["bash", str(folder / "slurm_join.sh")], cwd=work)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert same_bytes(out, ref), "the Slurm scripts' cache differs from the single bake"
+    # submission, with a stand-in sbatch on PATH
+    bin_dir = work / "fake_bin"
+    bin_dir.mkdir(exist_ok=True)
+    log = work / "sbatch.log"
+    (bin_dir / "sbatch").write_text(
+        '#!/bin/bash\necho "$*" >> %s\nn=$(wc -l < %s)\necho "$((100 + n))"\n' % (log, log))
+    os.chmod(bin_dir / "sbatch", 0o755)
+    env = {**os.environ, "PATH": "%s:%s" % (bin_dir, os.environ["PATH"])}
+    r = run(["bash", str(folder / "slurm_submit.sh")], cwd=work, env=env)
+    assert r.returncode == 0, r.stderr
+    calls = log.read_text().splitlines()
+    assert calls == ["--parsable --array=0-2 %s" % (folder / "slurm_chunk.sh"),
+                     "--parsable --dependency=afterok:101 %s" % (folder / "slurm_join.sh")], calls
+    log.unlink()
+    sim_folder, _ = write_jobs(work, blend, JIGGLE, "slurm_jiggle", 10)
+    r = run(["bash", str(sim_folder / "slurm_submit.sh")], cwd=work, env=env)
+    assert r.returncode == 0, r.stderr
+    chunk = sim_folder / "slurm_chunk.sh"
+    assert log.read_text().splitlines() == [
+        "--parsable %s 0" % chunk, "--parsable --dependency=afterok:101 %s 1" % chunk,
+        "--parsable --dependency=afterok:102 %s 2" % chunk,
+        "--parsable --dependency=afterok:103 %s" % (sim_folder / "slurm_join.sh")]
