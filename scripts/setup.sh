@@ -12,7 +12,10 @@
 #
 # python3-venv lets Debian's own CPython make virtual environments (scripts/venvs.sh finds
 # Debian 13's /usr/bin/python3.13 for the Blenders from 5.1; tests/wheel/test_wheel.sh).
-# nodejs runs the Flamenco job type's compileJob in tests/farm (the farm bakes' job files).
+# nodejs runs the Flamenco job type's compileJob in tests/farm (the farm bakes' job files);
+# slurmctld, slurmd, slurm-client and munge let tests/farm run the Slurm scripts on a
+# single-node Slurm of its own (tests/farm/slurm_node.py: its own key, socket, ports and
+# folder; the system's services are neither configured nor started by the tests).
 # patchelf is for scripts/package.sh (it bundles the native libraries into the add-on zips).
 # python3-hypothesis is for the property suite (tests/python/test_properties.py), which runs
 # under Debian's python3 like the other Python tests (hypothesis is also pinned in
@@ -45,7 +48,8 @@ done
 
 packages=(cmake make gcc g++ pkg-config libsuitesparse-dev libarpack2-dev liblapacke-dev
           libopenblas-dev python3-dev python3-numpy python3-scipy python3-pytest blender xvfb
-          xauth zip patchelf python3-hypothesis python3-venv nodejs)
+          xauth zip patchelf python3-hypothesis python3-venv nodejs slurmctld slurmd
+          slurm-client munge)
 if [ "$bench" = 1 ]; then packages+=(libcgal-dev libeigen3-dev); fi
 # installed when the distribution has them (libclang-rt-dev is in Debian 12's llvm-defaults;
 # without it clang's Recommends bring the versioned runtime)

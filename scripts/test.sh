@@ -13,7 +13,8 @@
 #   3b. farm bakes (tests/farm, in the [farm] environment): scripts/farm_bake.py on a Dask
 #      scheduler and two workers started on loopback (chunks joined byte-identical to one
 #      bake, a worker killed mid-chunk, a chunk failing for good) and the generated job files
-#      for Open Job Description (openjd check / run), Flamenco (Node) and Slurm,
+#      for Open Job Description (openjd check / run), Flamenco (Node) and Slurm (a
+#      single-node Slurm started by the test),
 #   4. the add-on in every Blender (tests/blender/run_all.sh): Debian's `blender` program,
 #      with the window suites under Xvfb, and each bpy-* environment of scripts/pins.txt
 #      (the official releases as Python modules: 4.5 LTS, 5.2 LTS, 5.3), each also installing

@@ -13,7 +13,9 @@ processes started here, scripts/farm_bake.py submitting the demo's arm-lift scen
 - farm_bake.py's own local cluster binds each chunk's Blender to its worker's CPUs;
 - the job files: `openjd check` and `openjd run` of the template (the cache equals one bake),
   the Flamenco job type's compileJob under Node against the Python plan, the Slurm scripts
-  run under bash with their array index and submitted through a stand-in sbatch.
+  run under bash with their array index, submitted through a stand-in sbatch, and submitted
+  to a real single-node Slurm (slurm_node.py; skipped where slurmctld, slurmd, munge or root
+  are missing).
 
 Run with the farm environment's Python (scripts/pins.txt [farm]; scripts/test.sh does):
   PYTHONPATH=build/python build/venvs/farm/bin/python -m pytest -q tests/farm
@@ -35,6 +37,8 @@ from deformkit_farm import chunk as chunk_mod  # noqa: E402
 from deformkit_farm import jobfiles  # noqa: E402
 from deformkit_farm.loopback import Loopback, absolute_pythonpath  # noqa: E402
 from deformkit_farm.plan import make_plan  # noqa: E402
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import slurm_node  # noqa: E402
 FARM = os.path.join(ROOT, "scripts", "farm_bake.py")
 BATCH = os.path.join(ROOT, "scripts", "batch_bake.py")
 DEMO = os.path.join(ROOT, "scripts", "demo_blender.py")
@@ -369,3 +373,24 @@ def test_slurm_scripts(work, blend):
         "--parsable %s 0" % chunk, "--parsable --dependency=afterok:101 %s 1" % chunk,
         "--parsable --dependency=afterok:102 %s 2" % chunk,
         "--parsable --dependency=afterok:103 %s" % (sim_folder / "slurm_join.sh")]
+
+
+@pytest.mark.skipif(bool(slurm_node.missing_tools()),
+                    reason="no single-node Slurm here: %s" % ", ".join(slurm_node.missing_tools()))
+@pytest.mark.parametrize("obj,name", [(ARAP, "arap"), (JIGGLE, "jiggle")])
+def test_slurm_single_node(work, blend, obj, name):
+    """slurm_submit.sh on a real Slurm (slurmctld and slurmd on this machine, a MUNGE of
+    their own): the chunks (an array; a simulation: a chain) and the join run as Slurm
+    jobs, and the cache equals one bake."""
+    ref = single_bake(work, blend, obj, "%s_single.pc2" % name)
+    folder, out = write_jobs(work, blend, obj, "slurm_real_" + name, 10)
+    with slurm_node.SlurmNode(work / ("slurm_" + name)) as node:
+        r = run(["bash", str(folder / "slurm_submit.sh")], cwd=folder, env=node.env)
+        assert r.returncode == 0, r.stdout + r.stderr
+        assert node.wait_idle(TIMEOUT), "the Slurm jobs did not finish"
+    job_logs = [f for f in sorted(os.listdir(folder))
+                if f.startswith("slurm-") and f.endswith(".out")]
+    logs = "".join(open(folder / f).read() for f in job_logs)
+    assert os.path.isfile(out), "no joined cache; the jobs said:\n" + logs[-4000:]
+    assert len(job_logs) == 4, job_logs        # three chunks and the join ran as jobs
+    assert same_bytes(out, ref), "the Slurm bake's cache differs from the single bake"
