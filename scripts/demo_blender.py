@@ -549,10 +549,28 @@ def measure(scene, r, fixed, handles, translates, rest, edges, diag):
 
 
 def replay(scene):
-    """First frame, then last: every deformer solves cold for the last frame's pose."""
+    """First frame, then last: every deformer solves cold for the last frame's pose. A
+    simulation (Jiggle: each frame follows from the one before) is played frame by frame
+    in between, as playback shows it, while the other objects are disabled in the viewport
+    (not evaluated, so not solved on every frame)."""
+    def dynamic(o):
+        return any(addon.solver.simulation.is_dynamic(addon.methods.get(d.method))
+                   for d in o.deformkit.deformers)
+    meshes = [o for o in scene.objects if o.type == "MESH" and len(o.deformkit.deformers)]
+    played = [o for o in meshes if dynamic(o)]
     addon.solver.runtime.clear()
     scene.frame_set(scene.frame_start)
     addon.solver.runtime.clear()
+    if played:
+        others = [o for o in meshes if o not in played and not o.hide_viewport]
+        for o in others:
+            o.hide_viewport = True
+        try:
+            for f in range(scene.frame_start + 1, scene.frame_end):
+                scene.frame_set(f)
+        finally:
+            for o in others:
+                o.hide_viewport = False
     scene.frame_set(scene.frame_end)
 
 
