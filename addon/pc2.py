@@ -229,9 +229,10 @@ def write(path, frames, n_points, start=0.0, rate=1.0, protect=()):
             w.add(fr)
 
 
-def join(paths, out):
+def join(paths, out, protect=()):
     """Concatenates caches of consecutive frame ranges (given in any order) into `out`.
-    They must have the same point count and rate, and no gap or overlap."""
+    They must have the same point count and rate, and no gap or overlap. `out` is never one
+    of `paths`, nor any of `protect` (as in check_target)."""
     if not paths:
         raise PC2Error("nothing to join")
     heads = sorted(((read_header(p), p) for p in paths), key=lambda x: x[0]["start"])
@@ -249,7 +250,7 @@ def join(paths, out):
                            % (p, h["start"], expect, what))
         expect = h["start"] + h["samples"] * h["rate"]
     total = sum(h["samples"] for h, _ in heads)
-    protect = tuple((p, "one of the caches being joined") for p in paths)
+    protect = tuple((p, "one of the caches being joined") for p in paths) + tuple(protect)
     w = Writer(out, h0["points"], h0["start"], h0["rate"], protect)
     try:
         for h, p in heads:

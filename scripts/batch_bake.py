@@ -74,7 +74,8 @@ def parse(argv):
     p.add_argument("--scene", help="with --blend: the scene to bake in (default: the file's)")
     p.add_argument("--object", help="name of the deformed mesh object")
     p.add_argument("--deformer", help="deformer name (default: the object's active deformer)")
-    p.add_argument("--frames", help="frame range A-B (inclusive); default: the scene's range")
+    p.add_argument("--frames", help="frame range A-B (inclusive); default: the scene's range "
+                                    "(from below zero: --frames=-5-10)")
     p.add_argument("--out",
                    help="output .pc2 file (a path starting with // is relative to the .blend, "
                         "as in Blender); its folder must exist, and an existing file there is "
@@ -155,8 +156,9 @@ def ensure_addon():
 def parse_frames(text, scene):
     if not text:
         return scene.frame_start, scene.frame_end
-    try:
-        a, b = text.split("-") if "-" in text[1:] else (text, text)
+    try:   # the "-" after the first character: "-5-10" is frames -5 to 10
+        cut = text.index("-", 1) if "-" in text[1:] else -1
+        a, b = (text[:cut], text[cut + 1:]) if cut > 0 else (text, text)
         a, b = int(a), int(b)
     except ValueError:
         fail("--frames must look like A-B, got %r" % text)

@@ -7,8 +7,8 @@ scripts/farm_bake.py on a loopback Dask cluster of separate processes:
   one2   one worker, both CPUs                   (DeformKit's own two threads)
   two2   two workers, both CPUs each             (one 2-core machine split in two, unbound)
   batch  no farm: one batch_bake.py process over the whole range, both CPUs
-  local  farm_bake.py's own local cluster (no --scheduler): one worker per CPU, each chunk's
-         Blender bound to its worker's CPU (what a user of this machine gets by default)
+  local  farm_bake.py's own local cluster (no --scheduler): one worker per two CPUs, each
+         chunk's Blender bound to its worker's CPUs (what a user of this machine gets)
 
 and the per-chunk overhead: a one-frame chunk at rest (Blender start, the file's load, the
 bind) against the frames' solve time. Ratios are within this one run.

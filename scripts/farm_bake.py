@@ -79,7 +79,8 @@ def parse(argv):
     p.add_argument("--scene", help="the scene to bake in (default: the file's)")
     p.add_argument("--object", required=True, help="name of the deformed mesh object")
     p.add_argument("--deformer", help="deformer name (default: the object's active one)")
-    p.add_argument("--frames", help="frame range A-B (inclusive; default: the scene's)")
+    p.add_argument("--frames", help="frame range A-B (inclusive; default: the scene's; from "
+                                    "below zero: --frames=-5-10)")
     p.add_argument("--out", required=True,
                    help="the joined .pc2 cache (its folder must exist; an existing file is "
                         "only replaced if it is a point cache)")
@@ -147,35 +148,62 @@ def load_pc2():
     return mod
 
 
+def program(path):
+    """A program given as a path (it has a folder in it) made absolute: the chunks' Blenders
+    start in folders of their own. A bare name is looked up on the worker's PATH."""
+    return os.path.abspath(path) if path and os.sep in path else path
+
+
 def make_spec(args):
     return chunk_mod.BakeSpec(blend=os.path.abspath(args.blend), object=args.object,
-                              deformer=args.deformer, scene=args.scene, blender=args.blender,
-                              python=args.python, batch_script=os.path.abspath(args.batch_script))
+                              deformer=args.deformer, scene=args.scene,
+                              blender=program(args.blender), python=program(args.python),
+                              batch_script=os.path.abspath(args.batch_script))
+
+
+def check_folder(path, what):
+    """Fails unless the folder `path` would be written into exists and is writable."""
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise Fail("%s: the folder %s does not exist: create it first" % (what, folder))
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise Fail("%s: cannot write in the folder %s (permission denied)" % (what, folder))
 
 
 def check_out(pc2, out, described):
     """The real path of --out, or fail: as a bake checks it (the .blend, its libraries and
     the caches other objects play are never replaced; an existing file only if a cache)."""
-    protect = [(described["blend"], "the .blend being baked")] \
-        + [tuple(p) for p in described.get("protected", [])]
     try:
-        return pc2.check_target(out, protect)
+        return pc2.check_target(out, protected(described))
     except pc2.PC2Error as e:
         raise Fail("--out: %s" % e)
 
 
+def protected(described):
+    """(path, why) of the files the joined cache must never replace."""
+    return [(described["blend"], "the .blend being baked")] \
+        + [tuple(p) for p in described.get("protected", [])]
+
+
 def write_jobs(args, spec):
     from deformkit_farm import jobfiles
-    try:
-        described = chunk_mod.describe(spec, args.frames)
+    check_folder(args.out, "--out")
+    try:   # --out checked by the Blender as a bake checks it (the .blend, other caches)
+        described = chunk_mod.describe(spec, args.frames, os.path.abspath(args.out))
     except chunk_mod.ChunkFailed as e:
         raise Fail(str(e))
     plan = plan_mod.make_plan(described["frame_start"], described["frame_end"], args.chunk,
                               described["simulation"])
-    os.makedirs(args.jobs_dir, exist_ok=True)
+    try:
+        os.makedirs(args.jobs_dir, exist_ok=True)
+    except OSError as e:
+        raise Fail("--jobs-dir %s: %s" % (args.jobs_dir, e.strerror or e)) from None
     for kind in args.jobs:
-        for path in jobfiles.write(kind, args, spec, described, plan, args.jobs_dir):
-            log("wrote %s" % path)
+        try:
+            for path in jobfiles.write(kind, args, spec, described, plan, args.jobs_dir):
+                log("wrote %s" % path)
+        except (OSError, ValueError) as e:
+            raise Fail("--jobs %s: %s" % (kind, e)) from None
 
 
 def start_client(args):
@@ -183,7 +211,10 @@ def start_client(args):
     from distributed import Client, LocalCluster
     if args.scheduler:
         log("connecting to the scheduler at %s" % args.scheduler)
-        return Client(args.scheduler, timeout="30s"), None
+        try:
+            return Client(args.scheduler, timeout="30s"), None
+        except (OSError, TimeoutError, ValueError) as e:
+            raise Fail("cannot reach the scheduler %s: %s" % (args.scheduler, e))
     cluster = LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
                            host="127.0.0.1", dashboard_address=None,
                            silence_logs=logging.CRITICAL)   # failures are reported here
@@ -196,12 +227,10 @@ def farm(args, spec):
     from deformkit_farm import dask_bake
     pc2 = load_pc2()
     out_folder = os.path.dirname(os.path.abspath(args.out))
-    if not os.path.isdir(out_folder):
-        raise Fail("--out: the folder %s does not exist: create it first" % out_folder)
-    try:
-        client, cluster = start_client(args)
-    except (OSError, TimeoutError) as e:
-        raise Fail("cannot reach the scheduler %s: %s" % (args.scheduler, e))
+    check_folder(args.out, "--out")
+    if args.summary:
+        check_folder(args.summary, "--summary")
+    client, cluster = start_client(args)
     work = None
     try:
         dask_bake.upload_package(client)
@@ -225,26 +254,33 @@ def farm(args, spec):
 
         def on_chunk(c, result):
             path = os.path.join(work, "chunk-%05d.pc2" % c.index)
-            with open(path, "wb") as f:
-                f.write(result["pc2"])
+            try:
+                with open(path, "wb") as f:
+                    f.write(result["pc2"])
+            except OSError as e:
+                raise Fail("keeping chunk %d (frames %s) in %s: %s"
+                           % (c.index, c.label, work, e.strerror or e)) from None
             paths[c.index] = path
 
         try:
             summary = dask_bake.bake(client, spec, plan, on_chunk, args.retries, say=log)
         except dask_bake.FarmError as e:
             raise Fail(str(e))
-        try:
-            info = pc2.join([paths[c.index] for c in plan], out)
+        if args.summary:      # before the join: a failure here leaves --out as it was
+            summary.update(chunks=len(plan), chunk=args.chunk,
+                           workers_started=None if args.scheduler else args.workers)
+            try:
+                with open(args.summary, "w") as f:
+                    json.dump(summary, f, indent=1)
+            except OSError as e:
+                raise Fail("--summary %s: %s" % (args.summary, e.strerror or e)) from None
+        try:   # protected again: the bake may have taken hours, and files move
+            info = pc2.join([paths[c.index] for c in plan], out, protected(described))
         except (pc2.PC2Error, OSError) as e:
             raise Fail("joining the chunks into %s: %s" % (out, e))
         log("wrote %s: %d frames x %d points from %d chunks in %.1f s (%.2f frames/s)"
             % (out, info["samples"], info["points"], len(plan), summary["seconds"],
                summary["frames_per_second"]))
-        if args.summary:
-            summary.update(chunks=len(plan), chunk=args.chunk,
-                           workers_started=None if args.scheduler else args.workers)
-            with open(args.summary, "w") as f:
-                json.dump(summary, f, indent=1)
     finally:
         if work:
             shutil.rmtree(work, ignore_errors=True)
@@ -253,7 +289,15 @@ def farm(args, spec):
             cluster.close()
 
 
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
 def main():
+    import signal
+    # a farm's job control stops a submission with SIGTERM (or SIGHUP): clean up as for ^C
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, _interrupt)
     args = parse(sys.argv[1:])
     spec = make_spec(args)
     if not os.path.isfile(spec.blend):

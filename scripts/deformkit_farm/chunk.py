@@ -71,13 +71,17 @@ class BakeSpec:
 def _child_setup(cpus):
     """What the Blender's process does before exec: die with the thread that started it
     (SIGKILL when the worker is killed: no orphaned Blender goes on baking; Linux
-    PR_SET_PDEATHSIG), and keep to `cpus` when given (a share of this machine's CPUs)."""
+    PR_SET_PDEATHSIG), and keep to `cpus` when given (a share of this machine's CPUs).
+    prctl is looked up here, in the parent: the child, forked from a process with threads,
+    only calls it."""
+    try:
+        prctl = ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):          # not Linux: the orphan finishes on its own
+        prctl = None
+
     def setup():
-        try:
-            libc = ctypes.CDLL(None, use_errno=True)
-            libc.prctl(1, signal.SIGKILL)      # PR_SET_PDEATHSIG
-        except (OSError, AttributeError):      # not Linux: the orphan finishes on its own
-            pass
+        if prctl is not None:
+            prctl(1, signal.SIGKILL)           # PR_SET_PDEATHSIG
         if cpus and hasattr(os, "sched_setaffinity"):
             try:
                 os.sched_setaffinity(0, cpus)
@@ -158,7 +162,7 @@ def describe(spec, frames=None, out=None):
     folder = tempfile.mkdtemp(prefix="deformkit-farm-")
     try:
         path = os.path.join(folder, "describe.json")
-        args = ["--describe", path] + (["--frames", frames] if frames else []) \
+        args = ["--describe", path] + (["--frames=" + frames] if frames else []) \
             + (["--out", out] if out else [])
         _run(spec, args, folder, "reading %s in Blender" % spec.blend)
         with open(path) as f:
@@ -167,17 +171,17 @@ def describe(spec, frames=None, out=None):
         shutil.rmtree(folder, ignore_errors=True)
 
 
-def bake_chunk(spec, chunk, checkpoint=None, cpus=None):
+def bake_chunk(spec, chunk, checkpoint=None, cpus=None, scratch=None):
     """Bakes `chunk` (scripts/deformkit_farm/plan.Chunk). `checkpoint`: (file name, bytes) the chunk
     before it left, for a simulation. Returns a dict: index, first, last, pc2 (the cache's
     bytes), checkpoint ((name, bytes) of the last frame's, or None), seconds, host,
     cpus (those the Blender was bound to: `cpus`, None for all),
     continued (True when it started from `checkpoint` rather than playing the frames before
-    it)."""
-    folder = tempfile.mkdtemp(prefix="deformkit-farm-")
+    it). `scratch`: the folder to work in (default: the system's temporary folder)."""
+    folder = tempfile.mkdtemp(prefix="deformkit-farm-", dir=scratch)
     try:
         out = os.path.join(folder, "chunk.pc2")
-        args = ["--frames", chunk.label, "--out", out]
+        args = ["--frames=" + chunk.label, "--out", out]   # one word: "-5-6" is no option
         states = os.path.join(folder, "checkpoints")
         os.mkdir(states)
         if spec.simulation:

@@ -1,13 +1,15 @@
 """A farm bake's chunks as tasks on a Dask distributed scheduler.
 
-Each chunk is one task (scripts/deformkit_farm/chunk.bake_chunk: a headless Blender); a simulation's
-chunk takes the checkpoint of the chunk before it as an argument, so Dask runs them in order
-and ships the checkpoint from worker to worker. Retries: a worker that dies (killed, out of
+Each chunk is one task (scripts/deformkit_farm/chunk.bake_chunk: a headless Blender). A
+simulation's chunk k is submitted once chunk k - 1's result is here, with its checkpoint's
+bytes as an argument: the chunks run in order anyway, and a worker lost later costs only its
+own chunk (were the checkpoint a result left on a worker, losing that worker would have the
+scheduler recompute the whole chain before it). Retries: a worker that dies (killed, out of
 memory, its machine lost) is Dask's to handle: the scheduler reruns its task elsewhere up to
 its `distributed.scheduler.allowed-failures` (3 by default), then gives up with KilledWorker;
 a chunk whose Blender fails is retried `retries` times. The code of this package travels to
-the scheduler and the workers as an uploaded zip (upload_package), so a worker needs Dask and a
-Blender, not this checkout.
+the scheduler and the workers as an uploaded zip (upload_package), so a worker needs Dask and
+a Blender with the add-on, not this checkout.
 """
 
 import os
@@ -23,12 +25,17 @@ if os.path.dirname(HERE) not in sys.path:
 from deformkit_farm import chunk as chunk_mod  # noqa: E402
 from deformkit_farm import plan as plan_mod  # noqa: E402, F401  (the chunks' class)
 
+UPLOAD_NAME = "deformkit-farm-package"
+
 
 def upload_package(client):
     """Sends this package (deformkit_farm) to the scheduler and every worker, those that join
-    later included (Client.upload_file: a plugin), so that the tasks' functions and
+    later included (Dask's upload plugins, registered under one name, so that a run replaces
+    the previous run's plugin instead of adding one), so that the tasks' functions and
     arguments unpickle there, with scripts/batch_bake.py inside: the scheduler and workers
-    need Dask and a Blender with the add-on installed, not this checkout. A package of the same name uploaded earlier to the cluster is replaced."""
+    need Dask and a Blender with the add-on installed, not this checkout. Dask reloads only
+    the package's top module on a worker that imported an earlier upload: after updating
+    DeformKit, restart long-lived workers (docs/farm.md)."""
     import tempfile
     import zipfile
     folder = tempfile.mkdtemp(prefix="deformkit-farm-upload-")
@@ -39,7 +46,9 @@ def upload_package(client):
                 z.write(os.path.join(HERE, name), "deformkit_farm/" + name)
         z.write(chunk_mod.BATCH_SCRIPT, "deformkit_farm/" + chunk_mod.SHIPPED_SCRIPT)
     try:
-        client.upload_file(path, load=True)
+        from distributed.diagnostics.plugin import SchedulerUploadFile, UploadFile
+        client.register_plugin(SchedulerUploadFile(path, load=True), name=UPLOAD_NAME)
+        client.register_plugin(UploadFile(path, load=True), name=UPLOAD_NAME)
     finally:
         import shutil
         shutil.rmtree(folder, ignore_errors=True)
@@ -63,13 +72,13 @@ def _bake_task(spec, chunk, checkpoint):
             cpus = chunk_mod.cpu_share(int(get_worker().name), spec.local_workers)
         except (ValueError, TypeError):
             cpus = None
-    result = chunk_mod.bake_chunk(spec, chunk, checkpoint, cpus)
+    try:    # the worker's own folder: a worker that is killed has it cleaned after it
+        scratch = get_worker().local_directory
+    except (ValueError, AttributeError):
+        scratch = None
+    result = chunk_mod.bake_chunk(spec, chunk, checkpoint, cpus, scratch)
     result["worker"] = _worker_address()
     return result
-
-
-def _checkpoint_of(result):
-    return result["checkpoint"]
 
 
 def _describe_task(spec, frames):
@@ -84,12 +93,13 @@ def describe(client, spec, frames=None):
     except Exception as e:
         if _is_chunk_failure(e):
             raise FarmError(str(e)) from None
-        raise
+        raise FarmError("reading %s on a worker failed: %s: %s"
+                        % (spec.blend, type(e).__name__, e)) from None
 
 
 def _is_chunk_failure(exc):
-    """A ChunkFailed raised on a worker: it arrives as a copy of the class (its code travels
-    by value), so it is recognised by name."""
+    """A ChunkFailed raised on a worker (recognised by name: a worker that imported an older
+    upload of this package raises its own copy of the class)."""
     return type(exc).__name__ == chunk_mod.ChunkFailed.__name__
 
 
@@ -135,29 +145,44 @@ class Progress:
 def bake(client, spec, plan, on_chunk, retries=1, say=print):
     """Runs every chunk of `plan` on `client`'s cluster. on_chunk(chunk, result) is called in
     the caller's thread as each chunk finishes (in any order; result["pc2"] holds the cache's
-    bytes). Returns Progress.summary(). FarmError when a chunk fails for good (the other
-    chunks are cancelled)."""
+    bytes). Returns Progress.summary(). FarmError when a chunk fails for good: the chunks not
+    started are cancelled (those running finish their chunk, their results dropped)."""
     progress = Progress(plan, say)
     futures, by_key = [], {}
-    checkpoint = None
-    for c in plan:
-        fut = client.submit(_bake_task, spec, c, checkpoint if c.after >= 0 else None,
-                            retries=retries, pure=False,
-                            key="deformkit-chunk-%d-%s-%s" % (c.index, c.label, os.urandom(4).hex()))
-        if spec.simulation:
-            checkpoint = client.submit(_checkpoint_of, fut, pure=False)
+
+    def submit(c, checkpoint):
+        fut = client.submit(_bake_task, spec, c, checkpoint, retries=retries, pure=False,
+                            key="deformkit-chunk-%d-%s-%s" % (c.index, c.label,
+                                                              os.urandom(4).hex()))
         futures.append(fut)
         by_key[fut.key] = c
+        return fut
+
+    def finished(fut):
+        c = by_key[fut.key]
+        if fut.status == "cancelled":
+            raise FarmError("chunk %d (frames %s) was cancelled by the cluster (its scheduler "
+                            "restarted, or lost this run)" % (c.index, c.label))
+        if fut.status != "finished":
+            raise FarmError(_failure(c, fut.exception(), retries))
+        result = fut.result()
+        fut.release()
+        on_chunk(c, result)
+        progress.chunk_done(c, result)
+        return result
+
     try:
-        for fut in as_completed(futures):
-            c = by_key[fut.key]
-            if fut.status != "finished":
-                exc = fut.exception()
-                raise FarmError(_failure(c, exc, retries))
-            result = fut.result()
-            fut.release()
-            on_chunk(c, result)
-            progress.chunk_done(c, result)
+        if spec.simulation:     # in order, each from the checkpoint the one before left
+            checkpoint = None
+            for c in plan:
+                fut = submit(c, checkpoint if c.after >= 0 else None)
+                for done in as_completed([fut]):
+                    checkpoint = finished(done)["checkpoint"]
+        else:
+            for c in plan:
+                submit(c, None)
+            for fut in as_completed(list(futures)):
+                finished(fut)
     except BaseException:
         client.cancel(futures)
         raise

@@ -59,7 +59,8 @@ function compileJob(job) {
                     "--", "--object", s.object, "--deformer", s.deformer];
     const tasks = [];
     for (const c of plan) {
-        const args = target.concat(["--frames", `${c.first}-${c.last}`,
+        // --frames=A-B in one word: a range starting below zero ("-5-6") is not an option
+        const args = target.concat([`--frames=${c.first}-${c.last}`,
                                     "--out", deformkitChunkCache(s.chunk_folder, c)]);
         if (s.simulation) args.push("--checkpoints", s.chunk_folder);
         const task = author.Task(`bake-${c.first}-${c.last}`, "blender");

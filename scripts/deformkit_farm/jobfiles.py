@@ -24,6 +24,7 @@ from deformkit_farm.plan import make_plan
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 FLAMENCO_JS = os.path.join(HERE, "deformkit_bake.js")
+OPENJD_MAX_TASKS = 1024     # the values of a task parameter's list (openjd-model's limit)
 
 
 def chunk_cache(folder, first, last):
@@ -33,7 +34,8 @@ def chunk_cache(folder, first, last):
 
 def chunk_args(folder, first, last, simulation):
     """batch_bake.py's arguments for one chunk (after the target's)."""
-    args = ["--frames", "%s-%s" % (first, last), "--out", chunk_cache(folder, first, last)]
+    # --frames=A-B in one word: a range starting below zero ("-5-6") is not an option
+    args = ["--frames=%s-%s" % (first, last), "--out", chunk_cache(folder, first, last)]
     return args + (["--checkpoints", folder] if simulation else [])
 
 
@@ -52,6 +54,28 @@ def _target(spec, described):
     return BakeSpec(**{**spec.__dict__, "scene": described["scene"],
                        "deformer": described["deformer"],
                        "simulation": described["simulation"]})
+
+
+# the shell variables a Slurm chunk script fills in: each stands in an argument as a marker
+# (no argument can hold a NUL) and becomes "${name}" once the rest is quoted
+_VAR = "\0%s\0"
+
+
+def _shell_word(arg):
+    """`arg` as one bash word: single-quoted (nothing in it expands: paths and names with
+    spaces, quotes, $ or backquotes stay as they are), but for the _VAR markers, which
+    become double-quoted variables."""
+    word = shlex.quote(arg)
+    if "\0" not in arg:
+        return word
+    parts = arg.split("\0")     # text, name, text, name, ..., text
+    return "".join(shlex.quote(t) if i % 2 == 0 else '"${%s}"' % t
+                   for i, t in enumerate(parts) if t or i % 2)
+
+
+def _comment(text):
+    """`text` on one comment line (no line breaks or other control characters)."""
+    return "".join(ch if ch.isprintable() else "?" for ch in str(text))
 
 
 # ------------------------------------------------------------------ Open Job Description ---
@@ -93,6 +117,9 @@ def openjd_template(spec, described, plan, out, folder):
         cmd = tspec.command(chunk_args(p["folder"], first, last, described["simulation"]))
         return {"command": "{{Task.File.MakeFolder}}", "args": [p["folder"]] + cmd}
 
+    if len(plan) > OPENJD_MAX_TASKS:
+        raise ValueError("%d chunks: an Open Job Description step lists at most %d task "
+                         "values; give a larger --chunk" % (len(plan), OPENJD_MAX_TASKS))
     steps = []
     if described["simulation"]:
         for c in plan:      # one step per chunk, each after the one before
@@ -159,9 +186,9 @@ def slurm_files(spec, described, plan, out, folder):
     tspec = _target(spec, described)
     q = shlex.quote
     cases = "\n".join("  %d) first=%d; last=%d ;;" % (c.index, c.first, c.last) for c in plan)
-    cmd = tspec.command(chunk_args("${folder}", "${first}", "${last}", described["simulation"]))
-    # the frames and the folder are shell variables: quoted so that they expand
-    cmd_text = " ".join('"%s"' % a if "$" in a else q(a) for a in cmd)
+    cmd = tspec.command(chunk_args(_VAR % "folder", _VAR % "first", _VAR % "last",
+                                   described["simulation"]))
+    cmd_text = " ".join(_shell_word(a) for a in cmd)
     chunk = """#!/bin/bash
 #SBATCH --job-name=deformkit-bake
 #SBATCH --cpus-per-task=2
@@ -169,7 +196,7 @@ def slurm_files(spec, described, plan, out, folder):
 # index is $SLURM_ARRAY_TASK_ID (an array job) or the first argument.
 set -euo pipefail
 folder=%s
-index="${SLURM_ARRAY_TASK_ID:-${1:?give the chunk index}}"
+index="${1:-${SLURM_ARRAY_TASK_ID:?give the chunk index}}"
 case "$index" in
 %s
   *) echo "no chunk $index (0-%d)" >&2; exit 2 ;;
@@ -188,7 +215,8 @@ exec %s
         submit_chunks = """# a simulation: each chunk starts from the checkpoint of the one before: a chain
 dep=""
 for i in $(seq 0 %d); do
-  id="$(sbatch --parsable ${dep:+--dependency=afterok:$dep} "$here/slurm_chunk.sh" "$i")"
+  id="$(sbatch --parsable ${dep:+--dependency=afterok:$dep --kill-on-invalid-dep=yes} \
+        "$here/slurm_chunk.sh" "$i")"
   dep="$id"
 done
 chunks="$dep"
@@ -200,9 +228,11 @@ chunks="$dep"
 # Submits the DeformKit bake of %s, frames %d-%d in %d chunks, to Slurm, then the join.
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
-%sjoin="$(sbatch --parsable --dependency=afterok:"${chunks%%%%;*}" "$here/slurm_join.sh")"
-echo "chunks: job $chunks; join: job $join (writes %s)"
-""" % (described["object"], plan[0].first, plan[-1].last, len(plan), submit_chunks, out)
+%sjoin="$(sbatch --parsable --dependency=afterok:"${chunks%%%%;*}" --kill-on-invalid-dep=yes \
+      "$here/slurm_join.sh")"
+echo "chunks: job $chunks; join: job $join (writes "%s")"
+""" % (_comment(described["object"]), plan[0].first, plan[-1].last, len(plan), submit_chunks,
+       q(out))
     return {"slurm_chunk.sh": chunk, "slurm_join.sh": join, "slurm_submit.sh": submit}
 
 
@@ -212,12 +242,13 @@ def write(kind, args, spec, described, plan, folder_out):
     """Writes the job files of `kind` into folder_out; returns their paths."""
     out = os.path.abspath(args.out)
     chunks = out + ".chunks"
-    os.makedirs(chunks, exist_ok=True)     # the chunks' bakes need it (shared storage)
+    if not os.path.isdir(chunks):          # the chunks' bakes need it (shared storage); its
+        os.mkdir(chunks)                   # parent, --out's folder, was checked to exist
     written = []
 
     def put(name, text, mode=0o644):
         path = os.path.join(folder_out, name)
-        with open(path, "w") as f:
+        with open(path, "w", encoding="utf-8") as f:
             f.write(text)
         os.chmod(path, mode)
         written.append(path)

@@ -41,15 +41,19 @@ class Loopback:
                 self.stop()
                 raise RuntimeError("the scheduler did not start (see %s)" % self.log.name)
             time.sleep(0.1)
-        for i in range(self.workers):
-            cmd = [self.dask, "worker", "--scheduler-file", sfile, "--nthreads", "1",
-                   "--host", "127.0.0.1", "--no-dashboard", "--name", "worker-%d" % i]
-            if self.cpus:
-                cmd = ["taskset", "-c", self.cpus[i]] + cmd
-            self._spawn(cmd)
-        self.client = Client(scheduler_file=sfile, timeout="60s")
-        self.client.wait_for_workers(self.workers, timeout=timeout)
-        self.address = self.client.scheduler.address
+        try:
+            for i in range(self.workers):
+                cmd = [self.dask, "worker", "--scheduler-file", sfile, "--nthreads", "1",
+                       "--host", "127.0.0.1", "--no-dashboard", "--name", "worker-%d" % i]
+                if self.cpus:
+                    cmd = ["taskset", "-c", self.cpus[i]] + cmd
+                self._spawn(cmd)
+            self.client = Client(scheduler_file=sfile, timeout="60s")
+            self.client.wait_for_workers(self.workers, timeout=timeout)
+            self.address = self.client.scheduler.address
+        except BaseException:
+            self.stop()
+            raise
         return self
 
     def _spawn(self, cmd):

@@ -363,16 +363,18 @@ def test_slurm_scripts(work, blend):
     assert r.returncode == 0, r.stderr
     calls = log.read_text().splitlines()
     assert calls == ["--parsable --array=0-2 %s" % (folder / "slurm_chunk.sh"),
-                     "--parsable --dependency=afterok:101 %s" % (folder / "slurm_join.sh")], calls
+                     "--parsable --dependency=afterok:101 --kill-on-invalid-dep=yes %s"
+                     % (folder / "slurm_join.sh")], calls
     log.unlink()
     sim_folder, _ = write_jobs(work, blend, JIGGLE, "slurm_jiggle", 10)
     r = run(["bash", str(sim_folder / "slurm_submit.sh")], cwd=work, env=env)
     assert r.returncode == 0, r.stderr
     chunk = sim_folder / "slurm_chunk.sh"
+    after = "--kill-on-invalid-dep=yes"
     assert log.read_text().splitlines() == [
-        "--parsable %s 0" % chunk, "--parsable --dependency=afterok:101 %s 1" % chunk,
-        "--parsable --dependency=afterok:102 %s 2" % chunk,
-        "--parsable --dependency=afterok:103 %s" % (sim_folder / "slurm_join.sh")]
+        "--parsable %s 0" % chunk, "--parsable --dependency=afterok:101 %s %s 1" % (after, chunk),
+        "--parsable --dependency=afterok:102 %s %s 2" % (after, chunk),
+        "--parsable --dependency=afterok:103 %s %s" % (after, sim_folder / "slurm_join.sh")]
 
 
 @pytest.mark.skipif(bool(slurm_node.missing_tools()),
@@ -394,3 +396,70 @@ def test_slurm_single_node(work, blend, obj, name):
     assert os.path.isfile(out), "no joined cache; the jobs said:\n" + logs[-4000:]
     assert len(job_logs) == 4, job_logs        # three chunks and the join ran as jobs
     assert same_bytes(out, ref), "the Slurm bake's cache differs from the single bake"
+
+
+ECHO_ARGS = r'''#!/usr/bin/env python3
+import json, sys
+with open(sys.argv[0] + ".calls", "a") as f:
+    f.write(json.dumps(sys.argv[1:]) + "\n")
+'''
+
+
+def test_slurm_quoting_of_hostile_names(work):
+    """Paths and names with spaces, quotes, $, backquotes and a negative frame range reach
+    the program exactly as BakeSpec.command gives them: nothing expands, nothing breaks."""
+    folder = work / "it's $HOME `id` \"q\""
+    folder.mkdir(exist_ok=True)
+    fake = folder / "py $x"
+    fake.write_text(ECHO_ARGS)
+    os.chmod(fake, 0o755)
+    spec = chunk_mod.BakeSpec(blend=str(folder / "a $b.blend"), object='Bo"dy $x `id`',
+                              python=str(fake), batch_script=str(folder / "bb's.py"))
+    described = {"scene": "Sc'ene", "object": spec.object, "deformer": "De $(id)",
+                 "simulation": True, "method": "SHAPE_MATCHING"}
+    plan = make_plan(-5, 3, 4, True)
+    out = str(folder / "out $(id).pc2")
+    files = jobfiles.slurm_files(spec, described, plan, out, str(folder / "chunks"))
+    for name, text in files.items():
+        (folder / name).write_text(text)
+        assert run(["bash", "-n", str(folder / name)], cwd=work).returncode == 0, name
+    for c in plan:
+        r = run(["bash", str(folder / "slurm_chunk.sh"), str(c.index)], cwd=work)
+        assert r.returncode == 0, r.stderr
+    r = run(["bash", str(folder / "slurm_join.sh")], cwd=work)
+    assert r.returncode == 0, r.stderr
+    calls = [json.loads(ln) for ln in open(str(fake) + ".calls")]
+    tspec = chunk_mod.BakeSpec(**{**spec.__dict__, "scene": "Sc'ene", "deformer": "De $(id)",
+                                  "simulation": True})
+    want = [tspec.command(jobfiles.chunk_args(str(folder / "chunks"), c.first, c.last, True))[1:]
+            for c in plan]
+    caches = [jobfiles.chunk_cache(str(folder / "chunks"), c.first, c.last) for c in plan]
+    want.append(jobfiles.join_command(tspec, caches, out)[1:])
+    assert calls == want, (calls, want)
+    assert [c.label for c in plan] == ["-5--2", "-1-2", "3-3"]
+    assert "--frames=-5--2" in calls[0]
+
+
+def test_negative_frame_ranges_parse():
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("batch_bake_for_test", BATCH)
+    bb = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bb)
+    assert bb.parse_frames("-5-10", None) == (-5, 10)
+    assert bb.parse_frames("-5--2", None) == (-5, -2)
+    assert bb.parse_frames("7", None) == (7, 7)
+    args = bb.parse(["x", "--object", "o", "--frames=-5-10", "--out", "a.pc2"])
+    assert args.frames == "-5-10"
+
+
+def test_jobs_refuse_a_protected_out(work, blend):
+    folder = work / "jobs_refused"
+    r = run([PY, FARM, "--blend", blend, "--object", ARAP, "--out", blend, "--jobs", "slurm",
+             "--jobs-dir", str(folder)], cwd=work)
+    assert r.returncode == 1 and "the open .blend file" in r.stderr, r.stderr[-2000:]
+    assert not folder.exists()
+    r = run([PY, FARM, "--blend", blend, "--object", ARAP, "--out",
+             str(work / "no_such_folder" / "x.pc2"), "--jobs", "slurm", "--jobs-dir",
+             str(folder)], cwd=work)
+    assert r.returncode == 1 and "does not exist" in r.stderr, r.stderr[-2000:]
+    assert not (work / "no_such_folder").exists()
