@@ -139,13 +139,9 @@ def parse(argv):
 
 
 def load_pc2():
-    """addon/pc2.py without the add-on package (no bpy here)."""
-    import importlib.util
-    spec = importlib.util.spec_from_file_location("deformkit_pc2",
-                                                  os.path.join(ROOT, "addon", "pc2.py"))
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    """addon/pc2.py without the add-on package (no bpy here), as batch_bake.py loads it."""
+    import batch_bake
+    return batch_bake.load_pc2_module()
 
 
 def program(path):

@@ -10,6 +10,18 @@ import sys
 import time
 
 
+def stop_processes(procs, timeout=30):
+    """Terminates `procs` (subprocess.Popen), waits for each, kills the ones that linger."""
+    for p in procs:
+        p.terminate()
+    for p in procs:
+        try:
+            p.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+
+
 def absolute_pythonpath():
     """Makes $PYTHONPATH's entries absolute (build/python as given on a command line), so
     that processes started in other folders find the same modules."""
@@ -64,14 +76,7 @@ class Loopback:
         if self.client is not None:
             self.client.close()
             self.client = None
-        for p in self.procs[::-1]:
-            p.terminate()
-        for p in self.procs[::-1]:
-            try:
-                p.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
+        stop_processes(self.procs[::-1])
         self.procs = []
         if self.log:
             self.log.close()

@@ -15,6 +15,8 @@ import socket
 import subprocess
 import time
 
+from deformkit_farm.loopback import stop_processes  # test_farm.py puts scripts/ on the path
+
 TOOLS = ("munged", "slurmctld", "slurmd", "sbatch", "squeue", "sinfo")
 
 
@@ -126,13 +128,6 @@ class SlurmNode:
     def __exit__(self, *exc):
         if self.env is not None and shutil.which("scancel"):
             subprocess.run(["scancel", "--user", "root"], env=self.env, capture_output=True)
-        for p in self.procs[::-1]:
-            p.terminate()
-        for p in self.procs[::-1]:
-            try:
-                p.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
+        stop_processes(self.procs[::-1], timeout=20)
         self.procs = []
         return False
