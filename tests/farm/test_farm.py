@@ -23,6 +23,7 @@ Run with the farm environment's Python (scripts/pins.txt [farm]; scripts/test.sh
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -463,3 +464,24 @@ def test_jobs_refuse_a_protected_out(work, blend):
              str(folder)], cwd=work)
     assert r.returncode == 1 and "does not exist" in r.stderr, r.stderr[-2000:]
     assert not (work / "no_such_folder").exists()
+
+
+@pytest.mark.skipif(shutil.which("blender") is None, reason="no blender program on PATH")
+def test_chunks_in_the_blender_program(work, cluster):
+    """--blender PROGRAM: each chunk runs in the `blender` program (Debian's) instead of the
+    bpy module, on a scene that program saved; the join equals its own single bake."""
+    demo = work / "demo_program"
+    r = run(["blender", "-b", "--factory-startup", "--python-exit-code", "1", "--python", DEMO,
+             "--", "--scenarios", "arm-lift", "--methods", "ARAP", "--no-render",
+             "--out", str(demo)], cwd=work)
+    assert r.returncode == 0, r.stderr[-3000:]
+    blend = str(demo / "deformkit_demo.blend")
+    ref = str(work / "program_single.pc2")
+    r = run(["blender", "-b", blend, "--python-exit-code", "1", "--python", BATCH, "--",
+             "--object", ARAP, "--out", ref], cwd=work)
+    assert r.returncode == 0, r.stderr[-3000:]
+    out = str(work / "program_farm.pc2")
+    r, s = farm(work, cluster[0], blend, ARAP, out, "--chunk", "8", "--blender", "blender")
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert len(s["chunk_runs"]) == 3
+    assert same_bytes(out, ref), "the blender program's chunks differ from its single bake"
