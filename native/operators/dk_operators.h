@@ -191,6 +191,19 @@ void dk_winding_free(dk_winding *w);
 dk_status dk_delaunay_tetrahedra(const double *points, dk_index n_points, dk_index **tets,
                                  dk_index *n_tets, dk_error *err);
 
+/** How many of a surface's triangles clearly cross another of its triangles: *n_crossing
+ *  (0 when none is found). positions: n_vertices x 3, finite; triangles: n_triangles x 3
+ *  indices into them (refused when out of range). Conservative: a pair counts only when each
+ *  triangle has a corner clearly on either side of the other's plane and their segments on
+ *  the planes' common line overlap, both by more than 1e-9 of the positions' bounding-box
+ *  diagonal; pairs that share a corner, touch, or are coplanar or nearly so are not counted.
+ *  So a count above 0 means the surface certainly intersects itself; 0 does not prove that
+ *  it does not. A sweep over the boxes along the longest axis: O(n log n) on scanned
+ *  surfaces (0.1-0.3 s at 50k-60k vertices). */
+dk_status dk_surface_crossings(const double *positions, dk_index n_vertices,
+                               const dk_index *triangles, dk_index n_triangles,
+                               dk_index *n_crossing, dk_error *err);
+
 /** The interior of a closed surface tetrahedralized by TetGen (its -p with -Y: the surface is
  *  the boundary and gets no point of its own, so the first n_vertices points are the surface's
  *  vertices, bit for bit; -q and -a bound the interior tetrahedra's quality and size).
@@ -201,9 +214,10 @@ dk_status dk_delaunay_tetrahedra(const double *points, dk_index n_points, dk_ind
  *  (none) or the largest tetrahedron volume (TetGen's a). Out (malloc'ed, the caller frees):
  *  *points (*n_points x 3) and *tets (*n_tets x 4 point indices); the interior may get
  *  points of its own even without bounds (a region that cannot be split otherwise). A
- *  self-intersecting surface is DK_ERR_DEGENERATE, found by TetGen's own check (-d) before
- *  meshing; TetGen's other failures DK_ERR_NUMERIC or DK_ERR_OUT_OF_MEMORY. Nothing is
- *  written on failure. */
+ *  self-intersecting surface is DK_ERR_DEGENERATE: found at once when its triangles clearly
+ *  cross (dk_surface_crossings), otherwise by TetGen's own check (-d) before meshing;
+ *  TetGen's other failures DK_ERR_NUMERIC or DK_ERR_OUT_OF_MEMORY. Nothing is written on
+ *  failure. */
 dk_status dk_tetrahedralize_surface(const double *positions, dk_index n_vertices,
                                     const dk_index *triangles, dk_index n_triangles,
                                     double quality, double max_volume, double **points,

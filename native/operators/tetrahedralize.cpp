@@ -227,6 +227,15 @@ extern "C" dk_status dk_tetrahedralize_surface(const double *positions, dk_index
     if (!spans_space(positions, n_vertices))
         return dk_error_set(err, DK_ERR_DEGENERATE, "%s: the surface is flat: it bounds no "
                             "volume", who);
+    // clear crossings found in a fraction of a second; the rest is TetGen's exact check
+    dk_index crossing = 0;
+    st = dk_surface_crossings(positions, n_vertices, triangles, n_triangles, &crossing, err);
+    if (st != DK_OK)
+        return st;
+    if (crossing > 0)
+        return dk_error_set(err, DK_ERR_DEGENERATE, "%s: the surface intersects itself (%ld "
+                            "triangles cross others): it does not bound one volume", who,
+                            (long)crossing);
     try {
         tetgenio in, out;
         in.numberofpoints = (int)n_vertices;

@@ -3,7 +3,8 @@
  * enclosed volume (their volumes sum to the divergence theorem's); the faces used by one
  * tetrahedron only are the surface's triangles; quality and size bounds add interior points
  * and keep every tetrahedron under the size; open, non-manifold, degenerate, flat and
- * self-intersecting surfaces are refused by name, nothing written. */
+ * self-intersecting surfaces are refused by name, nothing written; the quick crossing check
+ * (dk_surface_crossings) counts only clear crossings. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -190,4 +191,71 @@ static void test_refusals(void)
     dk_test_mesh_free(&sphere);
 }
 
-DK_TEST_MAIN(test_closed_surfaces, test_refusals)
+/* dk_surface_crossings, the quick self-intersection check: two triangles that clearly cross
+ * count (both), a corner exactly on the other's plane, coplanar overlap, a shared corner and
+ * separate triangles do not (left to TetGen's exact check); the same at any scale and
+ * placement; a closed sphere has none, two overlapping spheres have some. */
+static dk_index crossings(const double *x, dk_index n, const dk_index *f, dk_index m)
+{
+    dk_index c = -1;
+    dk_error err = {0};
+    CHECK_MSG(dk_surface_crossings(x, n, f, m, &c, &err) == DK_OK, "%s", err.message);
+    return c;
+}
+
+static void test_surface_crossings(void)
+{
+    /* a triangle in z = 0, and one standing through it (corners at z = -1 and z = 1) */
+    double x[18] = {-1, -1, 0, 2, -1, 0, -1, 2, 0,   0.2, 0.3, -1, 0.2, 0.3, 1, 0.9, 0.3, 1};
+    const dk_index f[6] = {0, 1, 2, 3, 4, 5};
+    CHECK(crossings(x, 6, f, 2) == 2);
+    for (int scale = 0; scale < 2; scale++) { /* the same far away and 1e6 times larger */
+        double y[18];
+        for (int i = 0; i < 18; i++)
+            y[i] = (scale ? 1e6 : 1.0) * x[i] + (i % 3 == 0 ? 3e7 : -2e5);
+        CHECK(crossings(y, 6, f, 2) == 2);
+    }
+    double touch[18];
+    memcpy(touch, x, sizeof touch);
+    touch[11] = 0.0; /* the standing triangle's lower corner on the plane: not clear */
+    CHECK(crossings(touch, 6, f, 2) == 0);
+    double flat[18];
+    memcpy(flat, x, sizeof flat);
+    flat[11] = flat[14] = flat[17] = 0.0; /* coplanar and overlapping: left to TetGen */
+    CHECK(crossings(flat, 6, f, 2) == 0);
+    double apart[18];
+    memcpy(apart, x, sizeof apart);
+    for (int k = 9; k < 18; k += 3)
+        apart[k] += 5.0; /* beside the first one: no crossing */
+    CHECK(crossings(apart, 6, f, 2) == 0);
+    const dk_index sharing[6] = {0, 1, 2, 0, 4, 5}; /* the same pair sharing corner 0 */
+    CHECK(crossings(x, 6, sharing, 2) == 0);
+    dk_index bad[6] = {0, 1, 2, 3, 4, 6}, c = 0;
+    dk_error err = {0};
+    CHECK(dk_surface_crossings(x, 6, bad, 2, &c, &err) == DK_ERR_INVALID_ARGUMENT);
+    CHECK(strstr(err.message, "out of [0, 6)") != NULL);
+
+    dk_test_mesh sphere = {0};
+    CHECK(dk_test_icosphere(3, 1.0, &sphere) == 0);
+    const dk_index n = sphere.n_vertices, m = sphere.n_faces;
+    CHECK(crossings(sphere.positions, n, sphere.faces, m) == 0);
+    double *x2 = malloc(sizeof(double) * 6 * (size_t)n);
+    dk_index *f2 = malloc(sizeof(dk_index) * 6 * (size_t)m);
+    if (!x2 || !f2)
+        abort();
+    for (int overlap = 0; overlap < 2; overlap++) {
+        for (dk_index v = 0; v < 2 * n; v++)
+            for (int k = 0; k < 3; k++)
+                x2[3 * v + k] = sphere.positions[3 * (v % n) + k] +
+                                (v >= n && k == 0 ? (overlap ? 0.7 : 2.5) : 0.0);
+        for (dk_index i = 0; i < 6 * m; i++)
+            f2[i] = sphere.faces[i % (3 * m)] + (i >= 3 * m ? n : 0);
+        const dk_index got = crossings(x2, 2 * n, f2, 2 * m);
+        CHECK_MSG(overlap ? got > 0 : got == 0, "overlap %d: %ld triangles", overlap, (long)got);
+    }
+    free(x2);
+    free(f2);
+    dk_test_mesh_free(&sphere);
+}
+
+DK_TEST_MAIN(test_closed_surfaces, test_refusals, test_surface_crossings)
