@@ -1,16 +1,18 @@
-/* DeformKit: triangles of a surface that clearly cross each other (dk_surface_crossings in
+/* DeformKit: triangles of a surface that certainly cross each other (dk_surface_crossings in
  * dk_operators.h).
  *
  * A quick refusal before TetGen's own intersection check, which takes seconds on a scanned
  * surface (13 s at 62k vertices, 3 s at 48k: it builds the points' Delaunay tetrahedralization
- * first). Conservative: a pair is reported only when each triangle has a corner clearly on
- * either side of the other's plane and their segments on the planes' common line overlap by
- * more than a tolerance, so a surface reported here certainly crosses itself; pairs sharing a
- * corner, touching, coplanar or nearly so are left to TetGen's exact check.
+ * first). Conservative: a pair of triangles without a common corner is reported only when an
+ * edge of one certainly passes through the other's interior, every orientation it rests on
+ * certified by floating-point error bounds; touching, coplanar and undecidable pairs are left
+ * to TetGen's exact check, so a surface reported here certainly intersects itself.
  *
  * Pairs come from a sweep along the axis of largest extent: triangles sorted by the low end
  * of their extent there, each compared with the following ones until their low end passes its
- * high end, and only when the boxes overlap in the other two axes. */
+ * high end, and only when the boxes overlap in the other two axes. Long triangles across that
+ * axis make the sweep quadratic: past a budget of box tests it gives up (reports none found),
+ * and TetGen's check decides. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -30,84 +32,54 @@ static int by_lo(const void *a, const void *b)
     return (x->t > y->t) - (x->t < y->t); /* deterministic order */
 }
 
-static void sub3(const double *a, const double *b, double *o)
+/* The sign of the orientation det[b - a; c - a; d - a] (positive when d is on the side of
+ * plane abc that (b - a) x (c - a) points to), or 0 when floating point cannot certify it:
+ * the determinant computed from differences, and trusted only beyond the static error bound
+ * of Shewchuk's orient3d (1997), (7 + 56 eps) eps times the permanent of the absolute
+ * products, eps = 2^-53, plus an absolute slack for products that underflow (coordinates
+ * within DK_COORD_MAX, checked by the caller). NaN gives 0. */
+static int orient(const double *a, const double *b, const double *c, const double *d)
 {
-    o[0] = a[0] - b[0], o[1] = a[1] - b[1], o[2] = a[2] - b[2];
+    const double bx = b[0] - a[0], by = b[1] - a[1], bz = b[2] - a[2];
+    const double cx = c[0] - a[0], cy = c[1] - a[1], cz = c[2] - a[2];
+    const double dx = d[0] - a[0], dy = d[1] - a[1], dz = d[2] - a[2];
+    const double cy_dz = cy * dz, cz_dy = cz * dy, cz_dx = cz * dx, cx_dz = cx * dz,
+                 cx_dy = cx * dy, cy_dx = cy * dx;
+    const double det = bx * (cy_dz - cz_dy) + by * (cz_dx - cx_dz) + bz * (cx_dy - cy_dx);
+    const double perm = fabs(bx) * (fabs(cy_dz) + fabs(cz_dy)) +
+                        fabs(by) * (fabs(cz_dx) + fabs(cx_dz)) +
+                        fabs(bz) * (fabs(cx_dy) + fabs(cy_dx));
+    const double eps = 0x1p-53;
+    const double bound = (7.0 + 56.0 * eps) * eps * perm + 1e-240;
+    return det > bound ? 1 : -det > bound ? -1 : 0;
 }
 
-static void cross3(const double *a, const double *b, double *o)
+/* Whether the segment uv certainly passes through the interior of triangle abc: u and v
+ * certainly on opposite sides of its plane, and the line uv certainly on the same side of
+ * each of its three edges (the three orientations of u, v with an edge share one certified
+ * sign). Touching, grazing and anything floating point cannot decide: 0. */
+static int pierces(const double *u, const double *v, const double *a, const double *b,
+                   const double *c)
 {
-    o[0] = a[1] * b[2] - a[2] * b[1];
-    o[1] = a[2] * b[0] - a[0] * b[2];
-    o[2] = a[0] * b[1] - a[1] * b[0];
-}
-
-static double dot3(const double *a, const double *b)
-{
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-}
-
-/* The segment where triangle p meets the plane (normal n, through q) projected on the
- * direction d: [*lo, *hi]. 0 when a corner is within tol (times |n|) of the plane, or all
- * corners are on one side: no clear crossing. */
-static int segment(const double *const p[3], const double *n, const double *q, const double *d,
-                   double tol, double *lo, double *hi)
-{
-    double s[3];
-    const double nn = sqrt(dot3(n, n));
-    if (!(nn > 0.0))
+    const int su = orient(a, b, c, u), sv = orient(a, b, c, v);
+    if (su == 0 || sv == 0 || su == sv)
         return 0;
-    for (int k = 0; k < 3; k++) {
-        double r[3];
-        sub3(p[k], q, r);
-        s[k] = dot3(n, r) / nn;
-        if (!(fabs(s[k]) > tol))
-            return 0;
-    }
-    int iso = -1; /* the corner alone on its side */
-    if ((s[0] > 0) == (s[1] > 0) && (s[0] > 0) == (s[2] > 0))
-        return 0;
-    if ((s[1] > 0) == (s[2] > 0))
-        iso = 0;
-    else if ((s[0] > 0) == (s[2] > 0))
-        iso = 1;
-    else
-        iso = 2;
-    double t[2];
-    for (int e = 0, k = 0; k < 3; k++) {
-        if (k == iso)
-            continue;
-        const double w = s[iso] / (s[iso] - s[k]); /* in (0, 1): the signs differ */
-        double x[3];
-        for (int c = 0; c < 3; c++)
-            x[c] = p[iso][c] + w * (p[k][c] - p[iso][c]);
-        t[e++] = dot3(x, d);
-    }
-    *lo = fmin(t[0], t[1]);
-    *hi = fmax(t[0], t[1]);
-    return 1;
+    const int e0 = orient(u, v, a, b);
+    return e0 != 0 && orient(u, v, b, c) == e0 && orient(u, v, c, a) == e0;
 }
 
-/* Whether triangles a and b (corners pa, pb) clearly cross (see the file's comment). */
-static int clearly_cross(const double *const pa[3], const double *const pb[3], double tol)
+/* Whether triangles a and b (corners pa, pb; no corner in common) certainly cross: one edge
+ * of either certainly passes through the other's interior. Two triangles whose interiors
+ * cross in general position always have such an edge (each end of their common segment is
+ * where an edge of one meets the other); the cases without one (touching, coplanar, edges
+ * through edges) are left to TetGen's exact check. */
+static int clearly_cross(const double *const pa[3], const double *const pb[3])
 {
-    double u[3], v[3], na[3], nb[3], d[3];
-    sub3(pa[1], pa[0], u);
-    sub3(pa[2], pa[0], v);
-    cross3(u, v, na);
-    sub3(pb[1], pb[0], u);
-    sub3(pb[2], pb[0], v);
-    cross3(u, v, nb);
-    cross3(na, nb, d);
-    const double dn = sqrt(dot3(d, d));
-    if (!(dn > 0.0))
-        return 0; /* parallel planes */
-    for (int c = 0; c < 3; c++)
-        d[c] /= dn;
-    double alo, ahi, blo, bhi;
-    if (!segment(pa, nb, pb[0], d, tol, &alo, &ahi) || !segment(pb, na, pa[0], d, tol, &blo, &bhi))
-        return 0;
-    return fmin(ahi, bhi) - fmax(alo, blo) > tol;
+    for (int k = 0; k < 3; k++)
+        if (pierces(pa[k], pa[(k + 1) % 3], pb[0], pb[1], pb[2]) ||
+            pierces(pb[k], pb[(k + 1) % 3], pa[0], pa[1], pa[2]))
+            return 1;
+    return 0;
 }
 
 dk_status dk_surface_crossings(const double *positions, dk_index n_vertices,
@@ -117,7 +89,10 @@ dk_status dk_surface_crossings(const double *positions, dk_index n_vertices,
     if (!n_crossing)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "surface crossings: out is NULL");
     *n_crossing = 0;
-    if (n_triangles <= 0)
+    if (n_triangles < 0)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "surface crossings: %ld triangles",
+                            (long)n_triangles);
+    if (n_triangles == 0)
         return DK_OK;
     if (!positions || !triangles || n_vertices <= 0)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "surface crossings: no positions "
@@ -127,6 +102,9 @@ dk_status dk_surface_crossings(const double *positions, dk_index n_vertices,
             return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "surface crossings: triangle %ld "
                                 "has corner %ld, out of [0, %ld)", (long)(i / 3),
                                 (long)triangles[i], (long)n_vertices);
+    dk_status st = dk_check_positions(positions, n_vertices, err); /* finite, bounded */
+    if (st != DK_OK)
+        return st;
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (dk_index v = 0; v < n_vertices; v++)
         for (int c = 0; c < 3; c++) {
@@ -137,11 +115,9 @@ dk_status dk_surface_crossings(const double *positions, dk_index n_vertices,
     for (int c = 1; c < 3; c++)
         if (hi[c] - lo[c] > hi[axis] - lo[axis])
             axis = c;
-    const double diag = sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
-                             (hi[2] - lo[2]) * (hi[2] - lo[2]));
-    if (!isfinite(diag))
-        return dk_error_set(err, DK_ERR_NONFINITE, "surface crossings: non-finite positions");
-    const double tol = 1e-9 * diag;
+    /* the sweep's budget of box tests: scans need a few hundred per triangle */
+    const double budget = 1024.0 * (double)n_triangles + 1e6;
+    double tests = 0.0;
     span *sp = malloc(sizeof *sp * (size_t)n_triangles + 1);
     double *box = malloc(sizeof *box * 6 * (size_t)n_triangles + 1); /* lo xyz, hi xyz */
     unsigned char *hit = calloc((size_t)n_triangles + 1, 1);
@@ -178,6 +154,10 @@ dk_status dk_surface_crossings(const double *positions, dk_index n_vertices,
         const double *pa[3] = {positions + 3 * (size_t)fa[0], positions + 3 * (size_t)fa[1],
                                positions + 3 * (size_t)fa[2]};
         for (dk_index j = i + 1; j < n_triangles && sp[j].lo <= sp[i].hi; j++) {
+            if (++tests > budget) { /* quadratic here: none found, TetGen decides */
+                count = 0;
+                goto out;
+            }
             const dk_index b = sp[j].t;
             const double *bb = box + 6 * (size_t)b;
             if (bb[o1] > ba[3 + o1] || ba[o1] > bb[3 + o1] || bb[o2] > ba[3 + o2] ||
@@ -192,12 +172,13 @@ dk_status dk_surface_crossings(const double *positions, dk_index n_vertices,
                 continue;
             const double *pb[3] = {positions + 3 * (size_t)fb[0], positions + 3 * (size_t)fb[1],
                                    positions + 3 * (size_t)fb[2]};
-            if (clearly_cross(pa, pb, tol)) {
+            if (clearly_cross(pa, pb)) {
                 count += !hit[a] + !hit[b];
                 hit[a] = hit[b] = 1;
             }
         }
     }
+out:
     free(sp);
     free(box);
     free(hit);

@@ -191,10 +191,13 @@ static void test_refusals(void)
     dk_test_mesh_free(&sphere);
 }
 
-/* dk_surface_crossings, the quick self-intersection check: two triangles that clearly cross
+/* dk_surface_crossings, the quick self-intersection check: two triangles that certainly cross
  * count (both), a corner exactly on the other's plane, coplanar overlap, a shared corner and
  * separate triangles do not (left to TetGen's exact check); the same at any scale and
- * placement; a closed sphere has none, two overlapping spheres have some. */
+ * placement; a closed sphere has none, two overlapping spheres have some (shifted off the
+ * axis too: a sphere moved along x alone meets its copy only in exactly degenerate pairs,
+ * which the certified predicates leave to TetGen); a pair that only rounding makes cross
+ * (the second review's sliver, two separate tetrahedra) is not reported. */
 static dk_index crossings(const double *x, dk_index n, const dk_index *f, dk_index m)
 {
     dk_index c = -1;
@@ -235,6 +238,36 @@ static void test_surface_crossings(void)
     CHECK(dk_surface_crossings(x, 6, bad, 2, &c, &err) == DK_ERR_INVALID_ARGUMENT);
     CHECK(strstr(err.message, "out of [0, 6)") != NULL);
 
+    /* rounding-only crossings (found by random search, checked with exact rationals): a pair
+     * of nearly coplanar triangles 2e-9 apart, and two separate tetrahedra, one with a
+     * sliver face; neither meets, and a tolerance-based test reported both */
+    const double near_coplanar[18] = {
+        -0.08433041013792048, -0.32599471057263346, 1.2798269522035677,
+        0.5834255048546597, 1.1114120448058056, -0.4205955920176543,
+        1.6655522090035815, 0.5669753706600789, -1.1214380807402653,
+        1.8418360290402884, 0.5036919240532753, -1.2537754295102317,
+        0.6539555241436579, 0.11042754964294144, 0.22405309367331472,
+        1.7789488350944958, 0.11714992921066703, -0.914048441542058};
+    CHECK(crossings(near_coplanar, 6, f, 2) == 0);
+    const double two_tets[24] = {
+        0x1.69fa30fd93f00p-1, 0x1.44c24e94077f4p+0, -0x1.f2d53b3b846ebp-1,
+        -0x1.d42e8692d8820p-2, 0x1.17a37b61a0c44p-1, -0x1.f41034e59da70p-3,
+        -0x1.a6f960cf47090p-5, 0x1.987ec0e8ae35ep-1, -0x1.fe7d01b0f99c6p-2,
+        0x1.1dce2eb76c81fp-2, 0x1.1b9adc63b3e9cp+0, 0x1.4fbf6090a3564p-4,
+        0x1.e8d1878a6d39ep+0, 0x1.4d8ae456f5203p-1, -0x1.10a56dabb2373p-1,
+        -0x1.9fa6adf7387e0p-3, 0x1.0bfd3a942abcep+0, -0x1.68a7c32cd72a7p-1,
+        0x1.30665984b2d5ap+1, 0x1.3ccee300e6f11p+0, -0x1.2174c82b8b8a8p+0,
+        0x1.6743aa49a3eb1p+0, 0x1.acb6e33b4f3dfp-1, -0x1.f6d6e505cfa61p-1};
+    const dk_index tet_faces[24] = {0, 1, 2, 0, 1, 3, 1, 2, 3, 2, 0, 3, 4, 5, 6, 4, 5, 7, 5, 6, 7, 6, 4, 7};
+    CHECK(crossings(two_tets, 8, tet_faces, 8) == 0);
+    dk_index *tets = NULL, nt = 0, np = 0;
+    double *pts = NULL;
+    dk_error terr = {0};
+    CHECK_MSG(dk_tetrahedralize_surface(two_tets, 8, tet_faces, 8, 0.0, 0.0, &pts, &np, &tets,
+                                        &nt, &terr) == DK_OK && nt >= 2, "%s", terr.message);
+    free(pts);
+    free(tets);
+
     dk_test_mesh sphere = {0};
     CHECK(dk_test_icosphere(3, 1.0, &sphere) == 0);
     const dk_index n = sphere.n_vertices, m = sphere.n_faces;
@@ -247,7 +280,7 @@ static void test_surface_crossings(void)
         for (dk_index v = 0; v < 2 * n; v++)
             for (int k = 0; k < 3; k++)
                 x2[3 * v + k] = sphere.positions[3 * (v % n) + k] +
-                                (v >= n && k == 0 ? (overlap ? 0.7 : 2.5) : 0.0);
+                                (v < n ? 0.0 : k == 0 ? (overlap ? 0.7 : 2.5) : 0.013 * k);
         for (dk_index i = 0; i < 6 * m; i++)
             f2[i] = sphere.faces[i % (3 * m)] + (i >= 3 * m ? n : 0);
         const dk_index got = crossings(x2, 2 * n, f2, 2 * m);
