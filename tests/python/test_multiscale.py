@@ -261,6 +261,7 @@ def test_decimate_keeps_nonmanifold_vertices_and_last_triangles():
     assert any(set(t) == {d["kept"].tolist().index(v) for v in (15, 16, 17)} for t in T.tolist())
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("name", ["beast.obj", "camelhead.off", "elephant.obj"])
 def test_real_meshes_reach_the_single_level_minimum(name):
     """Scans with a non-manifold edge (beast), holes (camelhead) and many parts' details
