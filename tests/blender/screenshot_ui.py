@@ -186,6 +186,22 @@ def in_blender():
         area.type = "PROPERTIES"
         yield None
 
+    def bent_tube(method, n_len, status_words, **options):
+        """A fresh scene's tube with a `method` deformer (S.tube_deformer), Advanced open,
+        bound, its handle turned and moved, its modifier collapsed; checks that the status
+        says `status_words`."""
+        yield from fresh_properties()
+        with bpy.context.temp_override(**S.ui_context()):
+            obj, d, e, _, _ = S.tube_deformer(method, n_len=n_len, **options)
+            d.show_advanced = True
+            bpy.ops.deformkit.bind()
+            e.location = (0.6, 0.7, 0.0)
+            e.rotation_euler = (0.0, 0.0, 1.2)
+        S.geonodes.find_modifier(obj, d).show_expanded = False
+        R.check("%s bound on a tube, the status saying %r" % (method, status_words),
+                d.bound and not d.status_is_error and status_words in S.solver.status_text(d),
+                S.solver.status_text(d))
+
     def states():
         """A generator: puts the scene in each of STATES, yields (the shot is taken 0.8 s
         later, when the timer resumes it)."""
@@ -420,29 +436,11 @@ def in_blender():
         yield "shape_blend"
         # the Volume ARAP deformer on a tube bent by its handle: bound, its status counting the
         # tetrahedra, its options (Advanced open)
-        yield from fresh_properties()
-        with bpy.context.temp_override(**S.ui_context()):
-            obj, d, e, _, _ = S.tube_deformer("VOLUME_ARAP", n_len=41)
-            d.show_advanced = True
-            bpy.ops.deformkit.bind()
-            e.location = (0.6, 0.7, 0.0)
-            e.rotation_euler = (0.0, 0.0, 1.2)
-        S.geonodes.find_modifier(obj, d).show_expanded = False
-        R.check("the volume ARAP deformer bound", d.bound and not d.status_is_error and
-                "tetrahedra inside" in S.solver.status_text(d), S.solver.status_text(d))
+        yield from bent_tube("VOLUME_ARAP", 41, "tetrahedra inside")
         yield "volume_arap"
         # ARAP with a coarse level (Coarse Levels 2 on a tube): bound, its status naming the
         # level, its options (Advanced open, Coarse Levels among them)
-        yield from fresh_properties()
-        with bpy.context.temp_override(**S.ui_context()):
-            obj, d, e, _, _ = S.tube_deformer("ARAP", n_len=61, levels=2)
-            d.show_advanced = True
-            bpy.ops.deformkit.bind()
-            e.location = (0.6, 0.7, 0.0)
-            e.rotation_euler = (0.0, 0.0, 1.2)
-        S.geonodes.find_modifier(obj, d).show_expanded = False
-        R.check("ARAP bound with a coarse level", d.bound and not d.status_is_error and
-                "coarse level of" in S.solver.status_text(d), S.solver.status_text(d))
+        yield from bent_tube("ARAP", 61, "coarse level of", levels=2)
         yield "arap_levels"
 
     sidebar_drawn = []
