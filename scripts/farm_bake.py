@@ -188,8 +188,7 @@ def write_jobs(args, spec):
         described = chunk_mod.describe(spec, args.frames, os.path.abspath(args.out))
     except chunk_mod.ChunkFailed as e:
         raise Fail(str(e))
-    plan = plan_mod.make_plan(described["frame_start"], described["frame_end"], args.chunk,
-                              described["simulation"])
+    plan = plan_mod.plan_of(described, args.chunk)
     try:
         os.makedirs(args.jobs_dir, exist_ok=True)
     except OSError as e:
@@ -237,8 +236,7 @@ def farm(args, spec):
         out = check_out(pc2, args.out, described)
         spec = chunk_mod.BakeSpec(**{**spec.__dict__, "simulation": described["simulation"],
                                      "local_workers": 0 if args.scheduler else args.workers})
-        plan = plan_mod.make_plan(described["frame_start"], described["frame_end"],
-                                  args.chunk, described["simulation"])
+        plan = plan_mod.plan_of(described, args.chunk)
         log("%s of %r (%s, %d vertices): frames %d-%d in %d chunk%s of up to %d%s"
             % (described["deformer"], described["object"], described["method"],
                described["vertices"], plan[0].first, plan[-1].last, len(plan),

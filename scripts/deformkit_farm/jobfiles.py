@@ -20,7 +20,6 @@ import shutil
 import sys
 
 from deformkit_farm.chunk import BakeSpec
-from deformkit_farm.plan import make_plan
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 FLAMENCO_JS = os.path.join(HERE, "deformkit_bake.js")
@@ -270,8 +269,3 @@ def write(kind, args, spec, described, plan, folder_out):
     else:
         raise ValueError("no job files of kind %r" % kind)
     return written
-
-
-def plan_of(described, chunk_frames):
-    return make_plan(described["frame_start"], described["frame_end"], chunk_frames,
-                     described["simulation"])

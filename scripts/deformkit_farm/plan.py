@@ -59,3 +59,10 @@ def make_plan(first, last, chunk_frames, simulation=False):
         chunks.append(Chunk(i, a, min(a + chunk_frames - 1, last),
                             i - 1 if simulation and i > 0 else -1))
     return chunks
+
+
+def plan_of(described, chunk_frames):
+    """The plan of a bake batch_bake.py --describe described (its frame range, simulation or
+    not) in chunks of chunk_frames."""
+    return make_plan(described["frame_start"], described["frame_end"], chunk_frames,
+                     described["simulation"])
