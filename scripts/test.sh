@@ -6,7 +6,8 @@
 #   2. Python module tests (pytest under Debian's /usr/bin/python3; the property suite
 #      tests/python/test_properties.py with its bounded, derandomized "ci" profile), and
 #      again with the module of the ASan+UBSan build (the sanitizer runtimes preloaded;
-#      leaving out the tests marked heavy: whole scanned meshes solved to convergence),
+#      leaving out the tests marked heavy: whole scanned meshes solved to convergence; this
+#      one runs in the background beside steps 2-4, its output printed when it ends),
 #   3. the packages: scripts/package.sh builds the wheel and the two add-on zips into dist/
 #      (and validates the extension in every Blender 4.2+ here); the wheel is installed into
 #      a clean virtual environment and smoke-tested there,
@@ -57,6 +58,35 @@ run_suite() {  # run_suite NAME COMMAND...
   fi
 }
 
+# A suite run beside the others (in the background, its output kept and printed when it is
+# collected): the sanitized Python suite, about six minutes alone, overlaps the suites after
+# it, whose CPUs are partly idle (Blender's start-up, subprocesses, waits).
+bg_name=""; bg_pid=""; bg_log=""; bg_start=0
+start_background_suite() {  # start_background_suite NAME COMMAND...
+  bg_name="$1"; shift
+  bg_log="$(mktemp)"; bg_start=$SECONDS
+  echo
+  echo "=== $bg_name: $* (started beside the suites below; its output follows when it ends)"
+  "$@" >"$bg_log" 2>&1 &
+  bg_pid=$!
+}
+finish_background_suite() {
+  [ -n "$bg_pid" ] || return 0
+  local rc=0
+  wait "$bg_pid" || rc=$?
+  echo
+  echo "=== $bg_name (started earlier):"
+  cat "$bg_log"; rm -f "$bg_log"
+  if [ "$rc" = 0 ]; then
+    passed=$((passed + 1)); echo "=== $bg_name: ok ($((SECONDS - bg_start)) s beside the others)"
+  else
+    failed=$((failed + 1)); failed_names+=("$bg_name")
+    echo "=== $bg_name: FAILED ($((SECONDS - bg_start)) s beside the others)"
+  fi
+  bg_pid=""
+}
+trap '[ -n "$bg_pid" ] && kill "$bg_pid" 2>/dev/null' EXIT
+
 # the C tests two at a time (each is its own process; the machines have two cores)
 jobs="$(nproc 2>/dev/null || echo 2)"
 run_suite "C tests" ctest --test-dir build --output-on-failure -j"$jobs"
@@ -64,15 +94,15 @@ if [ "$quick" = 0 ]; then
   run_suite "C tests (ASan+UBSan)" ctest --test-dir build-asan --output-on-failure -j"$jobs"
   run_suite "fuzzers (40 s)" scripts/fuzz.sh --no-setup --seconds 40
 fi
-run_suite "Python tests" "$PY" -m pytest -q tests/python
 if [ "$quick" = 0 ]; then
   # detect_leaks=0: the interpreter keeps memory at exit that LeakSanitizer would report (the
   # C tests run with leak detection on)
-  run_suite "Python tests (ASan+UBSan)" env \
+  start_background_suite "Python tests (ASan+UBSan)" env \
     LD_PRELOAD="$(gcc -print-file-name=libasan.so) $(gcc -print-file-name=libubsan.so)" \
     ASAN_OPTIONS=detect_leaks=0 PYTHONPATH="$here/build-asan/python" \
     "$PY" -m pytest -q -p no:cacheprovider -m "not heavy" tests/python
 fi
+run_suite "Python tests" "$PY" -m pytest -q tests/python
 run_suite "package" scripts/package.sh --no-setup
 run_suite "wheel in a clean venv" tests/wheel/test_wheel.sh
 # farm bakes on a Dask scheduler and two workers started on loopback, and the job files for
@@ -82,7 +112,8 @@ run_suite "farm" build/venvs/farm/bin/python -m pytest -q -p no:cacheprovider te
 # ---- the add-on in each Blender: run_all.sh prints "ok NAME" / "FAILED NAME" per suite
 blenders=(debian $(scripts/venvs.sh --blenders))
 rm -rf tests/blender/output/cross
-matrix="$(mktemp)"; log="$(mktemp)"; trap 'rm -f "$matrix" "$log"' EXIT
+matrix="$(mktemp)"; log="$(mktemp)"
+trap 'rm -f "$matrix" "$log"; [ -n "$bg_pid" ] && kill "$bg_pid" 2>/dev/null' EXIT
 for b in "${blenders[@]}"; do
   echo
   echo "=== add-on in Blender ($b): tests/blender/run_all.sh --blender $b"
@@ -100,6 +131,7 @@ for b in "${blenders[@]}"; do
 done
 labels=()
 for b in "${blenders[@]}"; do labels+=("$b"); done
+finish_background_suite
 run_suite "same results in every Blender" "$PY" tests/blender/compare_blenders.py "${labels[@]}"
 
 echo
