@@ -7,7 +7,7 @@
 #      tests/python/test_properties.py with its bounded, derandomized "ci" profile), and
 #      again with the module of the ASan+UBSan build (the sanitizer runtimes preloaded;
 #      leaving out the tests marked heavy: whole scanned meshes solved to convergence; this
-#      one runs in the background beside steps 2-4, its output printed when it ends),
+#      one runs in the background beside steps 3b-4, its output printed when it ends),
 #   3. the packages: scripts/package.sh builds the wheel and the two add-on zips into dist/
 #      (and validates the extension in every Blender 4.2+ here); the wheel is installed into
 #      a clean virtual environment and smoke-tested there,
@@ -59,8 +59,8 @@ run_suite() {  # run_suite NAME COMMAND...
 }
 
 # A suite run beside the others (in the background, its output kept and printed when it is
-# collected): the sanitized Python suite, about six minutes alone, overlaps the suites after
-# it, whose CPUs are partly idle (Blender's start-up, subprocesses, waits).
+# collected): the sanitized Python suite, about six minutes alone, overlaps the farm and
+# Blender suites, whose CPUs are partly idle (Blender's start-up, subprocesses, waits).
 bg_name=""; bg_pid=""; bg_log=""; bg_start=0
 start_background_suite() {  # start_background_suite NAME COMMAND...
   bg_name="$1"; shift
@@ -94,6 +94,9 @@ if [ "$quick" = 0 ]; then
   run_suite "C tests (ASan+UBSan)" ctest --test-dir build-asan --output-on-failure -j"$jobs"
   run_suite "fuzzers (40 s)" scripts/fuzz.sh --no-setup --seconds 40
 fi
+run_suite "Python tests" "$PY" -m pytest -q tests/python
+run_suite "package" scripts/package.sh --no-setup
+run_suite "wheel in a clean venv" tests/wheel/test_wheel.sh
 if [ "$quick" = 0 ]; then
   # detect_leaks=0: the interpreter keeps memory at exit that LeakSanitizer would report (the
   # C tests run with leak detection on)
@@ -102,9 +105,6 @@ if [ "$quick" = 0 ]; then
     ASAN_OPTIONS=detect_leaks=0 PYTHONPATH="$here/build-asan/python" \
     "$PY" -m pytest -q -p no:cacheprovider -m "not heavy" tests/python
 fi
-run_suite "Python tests" "$PY" -m pytest -q tests/python
-run_suite "package" scripts/package.sh --no-setup
-run_suite "wheel in a clean venv" tests/wheel/test_wheel.sh
 # farm bakes on a Dask scheduler and two workers started on loopback, and the job files for
 # other farms (the [farm] environment of scripts/pins.txt: Dask, openjd-cli, Blender 5.2)
 run_suite "farm" build/venvs/farm/bin/python -m pytest -q -p no:cacheprovider tests/farm
