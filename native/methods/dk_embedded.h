@@ -102,7 +102,7 @@ typedef struct dk_embedded_options {
     dk_index n_cut_a, n_cut_b;
     double w_rot, w_reg, w_con; /**< > 0; defaults 1, 10, 2000. The paper's w_con is 100,
                                      in units it does not give; in ours (lengths over L,
-                                     see embedded.c's evaluate) it left the armadillo's
+                                     see embedded/energy.c's ed_evaluate) it left the armadillo's
                                      hand 3% of the drag off its target, 2000 0.8%        */
     double tolerance;         /**< eps of the stopping tests, > 0; default 1e-6            */
     int max_iterations;       /**< Gauss-Newton iterations per solve, >= 1; default 100    */
