@@ -24,6 +24,11 @@
  * weights on the coarse level */
 #define MIN_COMPACTNESS 0.05
 
+typedef struct heap_entry {
+    double cost;
+    dk_index v;
+} heap_entry;
+
 typedef struct work {
     const double *p; /* the mesh's positions */
     dk_index n, nf;
@@ -38,52 +43,53 @@ typedef struct work {
     double *x;       /* n x 3: normalised coordinates for the quadrics */
     dk_index *best;  /* n: best collapse target, -1 none */
     double *best_cost; /* n: its cost */
-    dk_index *heap;  /* the vertices with a collapse, a binary heap on (best_cost, vertex) */
+    heap_entry *heap; /* the vertices with a collapse, a binary heap on (best_cost, vertex);
+                        each entry holds its cost, so that a sift reads the heap alone */
     dk_index *pos;   /* n: a vertex's place in heap, -1 when not there */
     dk_index heap_n;
     dk_index alive_count;
 } work;
 
-static int vertex_less(const work *w, dk_index a, dk_index b)
+static int entry_less(heap_entry a, heap_entry b)
 {
-    const double ca = w->best_cost[a], cb = w->best_cost[b];
-    return ca < cb || (ca == cb && a < b);
+    return a.cost < b.cost || (a.cost == b.cost && a.v < b.v);
 }
 
-static void heap_place(work *w, dk_index i, dk_index v)
+static void heap_place(work *w, dk_index i, heap_entry e)
 {
-    w->heap[i] = v;
-    w->pos[v] = i;
+    w->heap[i] = e;
+    w->pos[e.v] = i;
 }
 
 static void sift_up(work *w, dk_index i)
 {
-    const dk_index v = w->heap[i];
+    const heap_entry e = w->heap[i];
     while (i > 0) {
         const dk_index parent = (i - 1) / 2;
-        if (!vertex_less(w, v, w->heap[parent]))
+        if (!entry_less(e, w->heap[parent]))
             break;
         heap_place(w, i, w->heap[parent]);
         i = parent;
     }
-    heap_place(w, i, v);
+    heap_place(w, i, e);
 }
 
 static void sift_down(work *w, dk_index i)
 {
-    const dk_index v = w->heap[i], n = w->heap_n;
+    const heap_entry e = w->heap[i];
+    const dk_index n = w->heap_n;
     for (;;) {
         dk_index c = 2 * i + 1;
         if (c >= n)
             break;
-        if (c + 1 < n && vertex_less(w, w->heap[c + 1], w->heap[c]))
+        if (c + 1 < n && entry_less(w->heap[c + 1], w->heap[c]))
             c++;
-        if (!vertex_less(w, w->heap[c], v))
+        if (!entry_less(w->heap[c], e))
             break;
         heap_place(w, i, w->heap[c]);
         i = c;
     }
-    heap_place(w, i, v);
+    heap_place(w, i, e);
 }
 
 /* v's entry after its best collapse changed (best[v] < 0: none, taken out) */
@@ -94,18 +100,17 @@ static void heap_update(work *w, dk_index v)
         if (i < 0)
             return;
         w->pos[v] = -1;
-        const dk_index last = w->heap[--w->heap_n];
+        const heap_entry last = w->heap[--w->heap_n];
         if (i == w->heap_n)
             return;
         heap_place(w, i, last);
         sift_up(w, i);
-        sift_down(w, w->pos[last]);
+        sift_down(w, w->pos[last.v]);
         return;
     }
-    if (i < 0) {
+    if (i < 0)
         i = w->heap_n++;
-        heap_place(w, i, v);
-    }
+    heap_place(w, i, (heap_entry){w->best_cost[v], v});
     sift_up(w, i);
     sift_down(w, w->pos[v]);
 }
@@ -779,7 +784,7 @@ dk_status dk_decimate_progress(const dk_mesh *mesh, const int *vertex_class,
                 w.best[v] = x, w.best_cost[v] = c;
         }
         if (w.best[v] >= 0)
-            heap_place(&w, w.heap_n++, v);
+            heap_place(&w, w.heap_n++, (heap_entry){w.best_cost[v], v});
     }
     for (dk_index i = w.heap_n / 2 - 1; i >= 0; i--)
         sift_down(&w, i);
@@ -789,7 +794,7 @@ dk_status dk_decimate_progress(const dk_mesh *mesh, const int *vertex_class,
             cancelled = 1;
             break;
         }
-        const dk_index u = w.heap[0], v = w.best[u];
+        const dk_index u = w.heap[0].v, v = w.best[u];
         dk_index ring[MAX_RING];
         int kr = 0;
         if (!w.alive[v] || !collapse_ok(&w, u, v, ring, &kr)) { /* its cheapest valid one */
