@@ -28,12 +28,18 @@ static void *run_half(void *arg)
 /* 1 when the calling thread may run on one CPU only (taskset, a cpuset, a farm's binding of
  * one core per task): a helper thread would only take turns with it there, its spinning
  * taking the caller's time. 0 when it may run on more, or when the mask cannot be read. */
-static int one_cpu(void)
+static int cpus(void)
 {
     cpu_set_t set;
     if (sched_getaffinity(0, sizeof set, &set) != 0)
         return 0;
-    return CPU_COUNT(&set) < 2;
+    return CPU_COUNT(&set);
+}
+
+static int one_cpu(void)
+{
+    const int k = cpus();
+    return k > 0 && k < 2;
 }
 
 void dk_run_halves(dk_range_fn fn, void *ctx, dk_index n, dk_index min_parallel)
@@ -245,21 +251,87 @@ void dk_team_free(dk_team *t)
     free(t);
 }
 
-void dk_openmp_after_fork_child(void)
+/* The runtime is looked up, not linked: it is whatever the process's CHOLMOD was built with
+ * (libgomp on Linux); RTLD_NOLOAD finds it only when it is already loaded. Calls `use` with
+ * each loaded runtime's handle. */
+static void each_openmp_runtime(void (*use)(void *handle, void *ctx), void *ctx)
 {
-    /* The runtime is looked up, not linked: it is whatever the process's CHOLMOD was built
-     * with (libgomp on Linux); RTLD_NOLOAD finds it only when it is already loaded. */
     static const char *const runtimes[] = {"libgomp.so.1", "libomp.so", "libiomp5.so"};
     for (size_t k = 0; k < sizeof runtimes / sizeof runtimes[0]; k++) {
         void *h = dlopen(runtimes[k], RTLD_LAZY | RTLD_NOLOAD);
         if (!h)
             continue;
-        void *sym = dlsym(h, "omp_set_max_active_levels");
-        if (sym) {
-            void (*set_levels)(int);
-            memcpy(&set_levels, &sym, sizeof set_levels); /* object to function pointer */
-            set_levels(0);
-        }
+        use(h, ctx);
         dlclose(h);
     }
+}
+
+/* A function of the runtime `h` by name, or NULL (object to function pointer by memcpy). */
+static void (*set_fn(void *h, const char *name))(int)
+{
+    void *sym = dlsym(h, name);
+    void (*f)(int) = NULL;
+    if (sym)
+        memcpy(&f, &sym, sizeof f);
+    return f;
+}
+
+static int (*get_fn(void *h, const char *name))(void)
+{
+    void *sym = dlsym(h, name);
+    int (*f)(void) = NULL;
+    if (sym)
+        memcpy(&f, &sym, sizeof f);
+    return f;
+}
+
+static void levels_to_zero(void *h, void *ctx)
+{
+    (void)ctx;
+    void (*set_levels)(int) = set_fn(h, "omp_set_max_active_levels");
+    if (set_levels)
+        set_levels(0);
+}
+
+void dk_openmp_after_fork_child(void)
+{
+    each_openmp_runtime(levels_to_zero, NULL);
+}
+
+static void serial_begin(void *h, void *ctx)
+{
+    dk_openmp_serial *s = ctx;
+    void (*set_levels)(int) = set_fn(h, "omp_set_max_active_levels");
+    int (*get_levels)(void) = get_fn(h, "omp_get_max_active_levels");
+    if (!set_levels || !get_levels || s->active)
+        return;
+    s->saved_levels = get_levels();
+    if (s->saved_levels == 0)
+        return; /* already serial (a forked child, or the caller's choice) */
+    set_levels(0);
+    s->active = 1;
+}
+
+static void serial_end(void *h, void *ctx)
+{
+    const dk_openmp_serial *s = ctx;
+    void (*set_levels)(int) = set_fn(h, "omp_set_max_active_levels");
+    if (set_levels)
+        set_levels(s->saved_levels);
+}
+
+void dk_openmp_serial_begin(dk_openmp_serial *s)
+{
+    s->active = 0;
+    s->saved_levels = 0;
+    const int k = cpus();
+    if (k <= 0 || k >= DK_OPENMP_SERIAL_BELOW_CPUS)
+        return;
+    each_openmp_runtime(serial_begin, s);
+}
+
+void dk_openmp_serial_end(const dk_openmp_serial *s)
+{
+    if (s->active)
+        each_openmp_runtime(serial_end, (void *)s);
 }

@@ -256,7 +256,10 @@ dk_status dk_cholesky_factorize(dk_cholesky *chol, const dk_sparse *a, dk_error 
     cholmod_sparse view = sparse_view(a);
     dk_trisolve_free(chol->plan); /* it points into the factor's arrays */
     chol->plan = NULL;
+    dk_openmp_serial omp;
+    dk_openmp_serial_begin(&omp); /* CHOLMOD's small OpenMP regions, on few CPUs */
     const int ok = cholmod_factorize(&view, chol->factor, c);
+    dk_openmp_serial_end(&omp);
     chol->n_factorizations++;
     if (!ok || c->status < CHOLMOD_OK) return cholmod_failure(c, "Cholesky factorize", err);
     if (c->status == CHOLMOD_NOT_POSDEF || chol->factor->minor < (size_t)n) {

@@ -3,8 +3,11 @@
  * without the helper thread; the two parts really run at the same time when the helper is
  * used; a team survives many passes back to back, passes after parking (the helper asleep),
  * nested passes (which must not deadlock) and a fork (the child has no helper); a thread
- * bound to one CPU gets no helper at all (every part on the caller). */
-#define _GNU_SOURCE /* sched_setaffinity; includes POSIX 2008 */
+ * bound to one CPU gets no helper at all (every part on the caller); a serial OpenMP scope
+ * (dk_openmp_serial_begin/end) serialises the calling thread's regions on few CPUs only,
+ * restores the thread's setting and leaves other threads' alone. */
+#define _GNU_SOURCE /* sched_setaffinity, RTLD_NOLOAD; includes POSIX 2008 */
+#include <dlfcn.h>
 #include <pthread.h>
 #include <sched.h>
 #include <stdatomic.h>
@@ -285,6 +288,96 @@ static void test_one_cpu_no_helper(void)
     }
 }
 
+/* libgomp's per-thread max-active-levels. This program does not link CHOLMOD, so it loads
+ * the runtime itself (as CHOLMOD's users have it loaded); the handle stays open. */
+typedef struct omp_fns {
+    int (*get)(void);
+    void (*set)(int);
+} omp_fns;
+
+static int omp_lookup(omp_fns *f)
+{
+    void *h = dlopen("libgomp.so.1", RTLD_NOW);
+    if (!h)
+        return 0;
+    void *g = dlsym(h, "omp_get_max_active_levels"), *s = dlsym(h, "omp_set_max_active_levels");
+    if (!g || !s)
+        return 0;
+    memcpy(&f->get, &g, sizeof f->get);
+    memcpy(&f->set, &s, sizeof f->set);
+    return 1;
+}
+
+typedef struct levels_job {
+    omp_fns f;
+    atomic_int stage; /* 1: the other thread is in its scope; 2: it may end it */
+    int inside, after;
+} levels_job;
+
+static void *scope_on_other_thread(void *arg)
+{
+    levels_job *j = arg;
+    j->f.set(3);
+    dk_openmp_serial s;
+    dk_openmp_serial_begin(&s);
+    j->inside = j->f.get();
+    atomic_store(&j->stage, 1);
+    while (atomic_load(&j->stage) != 2)
+        sched_yield();
+    dk_openmp_serial_end(&s);
+    j->after = j->f.get();
+    return NULL;
+}
+
+static void test_openmp_serial_scope(void)
+{
+    omp_fns f;
+    const int have = omp_lookup(&f);
+    CHECK_MSG(have, "libgomp.so.1 (CHOLMOD's OpenMP runtime) cannot be loaded: %s", dlerror());
+    if (!have)
+        return;
+    /* on one CPU (a forked child bound to one): serial inside, restored after */
+    const pid_t pid = fork();
+    if (pid == 0) {
+        cpu_set_t one;
+        CPU_ZERO(&one);
+        CPU_SET(0, &one);
+        if (sched_setaffinity(0, sizeof one, &one) != 0)
+            _exit(4);
+        f.set(5);
+        dk_openmp_serial s;
+        dk_openmp_serial_begin(&s);
+        int ok = s.active && f.get() == 0;
+        dk_openmp_serial_end(&s);
+        ok = ok && f.get() == 5;
+        f.set(0); /* already serial: left so, and not changed by the end */
+        dk_openmp_serial_begin(&s);
+        ok = ok && !s.active && f.get() == 0;
+        dk_openmp_serial_end(&s);
+        _exit(ok && f.get() == 0 ? 0 : 3);
+    }
+    int status = 0;
+    CHECK(pid > 0 && waitpid(pid, &status, 0) == pid);
+    CHECK_MSG(WIFEXITED(status) && WEXITSTATUS(status) == 0, "child status %d", status);
+    /* here: another thread's scope leaves this thread's setting alone */
+    cpu_set_t mine;
+    const int few = sched_getaffinity(0, sizeof mine, &mine) == 0 &&
+                    CPU_COUNT(&mine) < DK_OPENMP_SERIAL_BELOW_CPUS;
+    const int before = f.get();
+    f.set(4);
+    levels_job j = {f, 0, -1, -1};
+    pthread_t th;
+    CHECK(pthread_create(&th, NULL, scope_on_other_thread, &j) == 0);
+    while (atomic_load(&j.stage) != 1)
+        sched_yield();
+    CHECK_MSG(f.get() == 4, "this thread's levels %d during the other's scope", f.get());
+    atomic_store(&j.stage, 2);
+    CHECK(pthread_join(th, NULL) == 0);
+    CHECK_MSG(j.inside == (few ? 0 : 3), "levels %d inside the scope", j.inside);
+    CHECK_MSG(j.after == 3, "levels %d after the scope", j.after);
+    f.set(before);
+}
+
 DK_TEST_MAIN(test_every_item_once, test_parts_run_concurrently, test_team_every_item_once,
              test_team_parts_run_concurrently, test_team_many_passes, test_team_nested,
-             test_team_after_fork, test_one_cpu_no_helper)
+             test_team_after_fork, test_one_cpu_no_helper, test_openmp_serial_scope)
