@@ -67,7 +67,8 @@ start_background_suite() {  # start_background_suite NAME COMMAND...
   bg_log="$(mktemp)"; bg_start=$SECONDS
   echo
   echo "=== $bg_name: $* (started beside the suites below; its output follows when it ends)"
-  "$@" >"$bg_log" 2>&1 &
+  # in a session of its own, so that an early end can stop it with all its subprocesses
+  setsid "$@" >"$bg_log" 2>&1 &
   bg_pid=$!
 }
 finish_background_suite() {
@@ -85,7 +86,17 @@ finish_background_suite() {
   fi
   bg_pid=""
 }
-trap '[ -n "$bg_pid" ] && kill "$bg_pid" 2>/dev/null' EXIT
+matrix=""; log=""
+on_exit() {  # an interrupted or failed run: the background suite stopped, what it printed kept
+  rm -f "$matrix" "$log"
+  if [ -n "$bg_pid" ]; then
+    kill -- -"$bg_pid" 2>/dev/null
+    wait "$bg_pid" 2>/dev/null
+    echo "=== $bg_name: stopped before its end (the run ended); what it printed:"
+    cat "$bg_log"; rm -f "$bg_log"
+  fi
+}
+trap on_exit EXIT
 
 # the C tests two at a time (each is its own process; the machines have two cores)
 jobs="$(nproc 2>/dev/null || echo 2)"
@@ -113,7 +124,6 @@ run_suite "farm" build/venvs/farm/bin/python -m pytest -q -p no:cacheprovider te
 blenders=(debian $(scripts/venvs.sh --blenders))
 rm -rf tests/blender/output/cross
 matrix="$(mktemp)"; log="$(mktemp)"
-trap 'rm -f "$matrix" "$log"; [ -n "$bg_pid" ] && kill "$bg_pid" 2>/dev/null' EXIT
 for b in "${blenders[@]}"; do
   echo
   echo "=== add-on in Blender ($b): tests/blender/run_all.sh --blender $b"

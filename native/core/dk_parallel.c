@@ -3,6 +3,7 @@
 #include "dk_parallel.h"
 
 #include <dlfcn.h>
+#include <link.h>
 #include <pthread.h>
 #include <sched.h>
 #include <signal.h>
@@ -251,87 +252,111 @@ void dk_team_free(dk_team *t)
     free(t);
 }
 
-/* The runtime is looked up, not linked: it is whatever the process's CHOLMOD was built with
- * (libgomp on Linux); RTLD_NOLOAD finds it only when it is already loaded. Calls `use` with
- * each loaded runtime's handle. */
-static void each_openmp_runtime(void (*use)(void *handle, void *ctx), void *ctx)
+/* The OpenMP runtimes loaded in the process. They are looked up, not linked: whatever the
+ * process's CHOLMOD was built with (libgomp on Linux), under its own name or under the one
+ * auditwheel gives the copy it bundles into a wheel (libgomp-<hash>.so.1.0.0), and any other
+ * a host application loaded. The names are collected first and opened after the walk (no
+ * dlopen while dl_iterate_phdr holds the loader's lock). */
+typedef struct runtime_names {
+    int n;
+    char name[DK_OPENMP_MAX_RUNTIMES][512];
+} runtime_names;
+
+static int is_runtime(const char *path)
 {
-    static const char *const runtimes[] = {"libgomp.so.1", "libomp.so", "libiomp5.so"};
-    for (size_t k = 0; k < sizeof runtimes / sizeof runtimes[0]; k++) {
-        void *h = dlopen(runtimes[k], RTLD_LAZY | RTLD_NOLOAD);
-        if (!h)
-            continue;
-        use(h, ctx);
-        dlclose(h);
+    static const char *const prefixes[] = {"libgomp.", "libgomp-", "libomp.", "libomp-",
+                                           "libiomp5.", "libiomp5-"};
+    const char *base = strrchr(path, '/');
+    base = base ? base + 1 : path;
+    for (size_t k = 0; k < sizeof prefixes / sizeof prefixes[0]; k++)
+        if (strncmp(base, prefixes[k], strlen(prefixes[k])) == 0)
+            return 1;
+    return 0;
+}
+
+static int collect_runtime(struct dl_phdr_info *info, size_t size, void *ctx)
+{
+    (void)size;
+    runtime_names *r = ctx;
+    if (info->dlpi_name && info->dlpi_name[0] && is_runtime(info->dlpi_name) &&
+        r->n < DK_OPENMP_MAX_RUNTIMES && strlen(info->dlpi_name) < sizeof r->name[0])
+        strcpy(r->name[r->n++], info->dlpi_name);
+    return 0;
+}
+
+/* Handles of the loaded runtimes (up to DK_OPENMP_MAX_RUNTIMES; dlclose each). */
+static int open_runtimes(void *handle[DK_OPENMP_MAX_RUNTIMES])
+{
+    runtime_names r;
+    r.n = 0;
+    dl_iterate_phdr(collect_runtime, &r);
+    int n = 0;
+    for (int k = 0; k < r.n; k++) {
+        void *h = dlopen(r.name[k], RTLD_LAZY | RTLD_NOLOAD);
+        if (h)
+            handle[n++] = h;
     }
+    return n;
 }
 
 /* A function of the runtime `h` by name, or NULL (object to function pointer by memcpy). */
-static void (*set_fn(void *h, const char *name))(int)
+static void (*set_fn(void *h))(int)
 {
-    void *sym = dlsym(h, name);
+    void *sym = dlsym(h, "omp_set_max_active_levels");
     void (*f)(int) = NULL;
     if (sym)
         memcpy(&f, &sym, sizeof f);
     return f;
 }
 
-static int (*get_fn(void *h, const char *name))(void)
+static int (*get_fn(void *h))(void)
 {
-    void *sym = dlsym(h, name);
+    void *sym = dlsym(h, "omp_get_max_active_levels");
     int (*f)(void) = NULL;
     if (sym)
         memcpy(&f, &sym, sizeof f);
     return f;
 }
 
-static void levels_to_zero(void *h, void *ctx)
-{
-    (void)ctx;
-    void (*set_levels)(int) = set_fn(h, "omp_set_max_active_levels");
-    if (set_levels)
-        set_levels(0);
-}
-
 void dk_openmp_after_fork_child(void)
 {
-    each_openmp_runtime(levels_to_zero, NULL);
-}
-
-static void serial_begin(void *h, void *ctx)
-{
-    dk_openmp_serial *s = ctx;
-    void (*set_levels)(int) = set_fn(h, "omp_set_max_active_levels");
-    int (*get_levels)(void) = get_fn(h, "omp_get_max_active_levels");
-    if (!set_levels || !get_levels || s->active)
-        return;
-    s->saved_levels = get_levels();
-    if (s->saved_levels == 0)
-        return; /* already serial (a forked child, or the caller's choice) */
-    set_levels(0);
-    s->active = 1;
-}
-
-static void serial_end(void *h, void *ctx)
-{
-    const dk_openmp_serial *s = ctx;
-    void (*set_levels)(int) = set_fn(h, "omp_set_max_active_levels");
-    if (set_levels)
-        set_levels(s->saved_levels);
+    void *h[DK_OPENMP_MAX_RUNTIMES];
+    const int n = open_runtimes(h);
+    for (int k = 0; k < n; k++) {
+        void (*set_levels)(int) = set_fn(h[k]);
+        if (set_levels)
+            set_levels(0);
+        dlclose(h[k]);
+    }
 }
 
 void dk_openmp_serial_begin(dk_openmp_serial *s)
 {
-    s->active = 0;
-    s->saved_levels = 0;
+    s->n = 0;
     const int k = cpus();
     if (k <= 0 || k >= DK_OPENMP_SERIAL_BELOW_CPUS)
         return;
-    each_openmp_runtime(serial_begin, s);
+    void *h[DK_OPENMP_MAX_RUNTIMES];
+    const int n = open_runtimes(h);
+    for (int r = 0; r < n; r++) {
+        void (*set_levels)(int) = set_fn(h[r]);
+        int (*get_levels)(void) = get_fn(h[r]);
+        const int saved = set_levels && get_levels ? get_levels() : 0;
+        if (saved <= 0) { /* already serial (a forked child, the caller's choice), or no
+                             such functions: left as it is */
+            dlclose(h[r]);
+            continue;
+        }
+        set_levels(0);
+        s->handle[s->n] = h[r]; /* kept open until the end restores it */
+        s->saved_levels[s->n++] = saved;
+    }
 }
 
 void dk_openmp_serial_end(const dk_openmp_serial *s)
 {
-    if (s->active)
-        each_openmp_runtime(serial_end, (void *)s);
+    for (int r = 0; r < s->n; r++) {
+        set_fn(s->handle[r])(s->saved_levels[r]);
+        dlclose(s->handle[r]);
+    }
 }

@@ -63,10 +63,14 @@ void dk_team_free(dk_team *team);
  *  OpenMP runtime is loaded in the process. Never fails. */
 void dk_openmp_after_fork_child(void);
 
+/** The most OpenMP runtimes a scope handles (CHOLMOD's, and others a host loaded). */
+#define DK_OPENMP_MAX_RUNTIMES 4
+
 /** A scope in which the OpenMP parallel regions the calling thread starts run on it alone. */
 typedef struct dk_openmp_serial {
-    int active;        /**< whether begin changed the thread's setting (end restores it) */
-    int saved_levels;  /**< the thread's max-active-levels before                       */
+    int n;                                        /**< runtimes whose setting begin changed */
+    void *handle[DK_OPENMP_MAX_RUNTIMES];         /**< each one's handle, open until end    */
+    int saved_levels[DK_OPENMP_MAX_RUNTIMES];     /**< and its max-active-levels before     */
 } dk_openmp_serial;
 
 /** Below this many CPUs for the calling thread, dk_openmp_serial_begin serialises. Debian's
@@ -75,19 +79,23 @@ typedef struct dk_openmp_serial {
  *  waits 100 spins instead of 300,000 and then sleeps on a futex, so each of the many small
  *  regions costs wake-ups (perf: 45% of a 2,640-unknown factorization in the kernel's
  *  scheduler). Measured on the 2-core VM (docs/benchmarks.md, "CHOLMOD's OpenMP regions"):
- *  serial regions are faster at every size tried, 43k to 692k vertices, and halve an
- *  EmbeddedDeformation iteration. With 4 or more CPUs the regions are left as they are. */
+ *  serial regions are faster at every size tried, 43k to 692k vertices, and cut an
+ *  EmbeddedDeformation iteration by a third. With 4 or more CPUs the regions are left as
+ *  they are (not measured). */
 #define DK_OPENMP_SERIAL_BELOW_CPUS 4
 
 /** Begins such a scope when the calling thread may run on fewer than
- *  DK_OPENMP_SERIAL_BELOW_CPUS CPUs and an OpenMP runtime is loaded: sets the calling
- *  thread's max-active-levels (a per-thread OpenMP setting, not a process-wide one) to 0,
- *  saving it in `s`. BLAS threads are not affected (OpenBLAS's pool is its own). Never
- *  fails. */
+ *  DK_OPENMP_SERIAL_BELOW_CPUS CPUs: in each OpenMP runtime loaded in the process (found by
+ *  file name, so also the copy a wheel bundles under another name) whose max-active-levels
+ *  for this thread is above 0, sets it to 0, saving it in `s`. In libgomp from GCC 11 on (and
+ *  in the copies DeformKit ships, Debian 12's GCC 12) that setting is the calling thread's
+ *  own; older ones keep it process-wide, so there the scope serialises other threads'
+ *  regions too while it lasts. BLAS threads are not affected (OpenBLAS's pool is its own).
+ *  Never fails. */
 void dk_openmp_serial_begin(dk_openmp_serial *s);
 
-/** Ends the scope begun by dk_openmp_serial_begin(s) on the same thread: restores the
- *  thread's setting. */
+/** Ends the scope begun by dk_openmp_serial_begin(s) on the same thread: restores each
+ *  changed runtime's setting (and only those). */
 void dk_openmp_serial_end(const dk_openmp_serial *s);
 
 #endif

@@ -2,6 +2,7 @@
  * definite detection, refactorization reuse, several right-hand sides, big-matrix residuals,
  * LDL' inertia, argument checking. */
 #define _POSIX_C_SOURCE 199309L /* clock_gettime */
+#include <dlfcn.h>
 #include <lapacke.h>
 #include <math.h>
 #include <stdint.h>
@@ -258,14 +259,38 @@ static void test_not_positive_definite_supernodal(void)
         dk_sparse *a = grid_laplacian(m, m, m, diag);
         dk_error err = {0};
         dk_cholesky *ch = NULL;
+        /* the factorization's serial OpenMP scope (dk_openmp_serial_begin) restores the
+         * thread's setting on every path, the failing one too */
+        int (*get_levels)(void) = NULL;
+        void (*set_levels)(int) = NULL;
+        void *gomp = dlopen("libgomp.so.1", RTLD_NOW);
+        void *gs = gomp ? dlsym(gomp, "omp_get_max_active_levels") : NULL;
+        void *ss = gomp ? dlsym(gomp, "omp_set_max_active_levels") : NULL;
+        CHECK_MSG(gs && ss, "libgomp.so.1 (CHOLMOD's OpenMP runtime) not found");
+        int levels_before = 0;
+        if (gs && ss) {
+            memcpy(&get_levels, &gs, sizeof get_levels);
+            memcpy(&set_levels, &ss, sizeof set_levels);
+            levels_before = get_levels();
+            set_levels(3);
+        }
         CHECK(dk_cholesky_analyze(a, &ch, &err) == DK_OK);
+        CHECK(dk_cholesky_is_supernodal(ch));
         CHECK(dk_cholesky_factorize(ch, a, &err) == DK_ERR_NOT_POSITIVE_DEFINITE);
+        if (get_levels)
+            CHECK_MSG(get_levels() == 3, "levels %d after a failed factorization", get_levels());
         CHECK_MSG(strstr(err.message, "not positive definite") != NULL, "%s", err.message);
         CHECK(dk_cholesky_solve(ch, b, 1, x, &err) == DK_ERR_INVALID_ARGUMENT);
         for (dk_index j = 0; j < n; j++)
             for (dk_index p = a->col_start[j]; p < a->col_start[j + 1]; p++)
                 if (a->row_index[p] == j) a->values[p] += 0.75;
         CHECK_MSG(dk_cholesky_factorize(ch, a, &err) == DK_OK, "%s", err.message);
+        if (get_levels) {
+            CHECK_MSG(get_levels() == 3, "levels %d after a factorization", get_levels());
+            set_levels(levels_before);
+        }
+        if (gomp)
+            dlclose(gomp);
         CHECK(dk_cholesky_solve(ch, b, 1, x, &err) == DK_OK);
         CHECK(rel_residual(a, x, b) < 1e-12);
         dk_cholesky_free(ch);

@@ -84,8 +84,8 @@ struct dk_embedded {
     dk_index *edges;            /* n_edges x 2, i < j                                       */
     dk_index *adj_start, *adj;  /* directed adjacency (both directions), sorted              */
     double *x;                  /* m x 12: the current transformations                      */
-    double L;                   /* the unit of length of F: ed_unit_length() of the bind mesh;
-                                   see ed_evaluate()                                            */
+    double L;                   /* the unit of length of F: ed_unit_length() of the bind
+                                   mesh; see ed_evaluate()                                  */
     double energy;              /* F of x for the last solve's targets                      */
     ed_system sys;
     int analysis_count, factorization_count;

@@ -182,7 +182,7 @@ double ed_evaluate(const dk_embedded *ed, ed_system *s, const ed_system *sys,
         }
     }
     if (s) /* the blocks into the CSC values: block (u, v) entry (a, c) = row 12v+c, col 12u+a;
-            * between different nodes only the entries of one coordinate exist (matrix()) */
+            * between different nodes only the entries of one coordinate exist (system.c's matrix()) */
         for (dk_index u = 0; u < s->n_free; u++)
             for (int a = 0; a < 12; a++) {
                 const int d = slot_coord(a);
