@@ -299,7 +299,8 @@ static int open_runtimes(void *handle[DK_OPENMP_MAX_RUNTIMES])
     return n;
 }
 
-/* A function of the runtime `h` by name, or NULL (object to function pointer by memcpy). */
+/* The runtime `h`'s setter and getter of max-active-levels, or NULL (object to function
+ * pointer by memcpy). */
 static void (*set_fn(void *h))(int)
 {
     void *sym = dlsym(h, "omp_set_max_active_levels");

@@ -296,17 +296,20 @@ typedef struct omp_fns {
     void (*set)(int);
 } omp_fns;
 
-static int omp_lookup(omp_fns *f)
+static int omp_fns_of(void *h, omp_fns *f)
 {
-    void *h = dlopen("libgomp.so.1", RTLD_NOW);
-    if (!h)
-        return 0;
-    void *g = dlsym(h, "omp_get_max_active_levels"), *s = dlsym(h, "omp_set_max_active_levels");
+    void *g = h ? dlsym(h, "omp_get_max_active_levels") : NULL;
+    void *s = h ? dlsym(h, "omp_set_max_active_levels") : NULL;
     if (!g || !s)
         return 0;
-    memcpy(&f->get, &g, sizeof f->get);
+    memcpy(&f->get, &g, sizeof f->get); /* object to function pointers */
     memcpy(&f->set, &s, sizeof f->set);
     return 1;
+}
+
+static int omp_lookup(omp_fns *f)
+{
+    return omp_fns_of(dlopen("libgomp.so.1", RTLD_NOW), f);
 }
 
 /* a copy of the runtime `f` came from, saved as `path` and loaded (a wheel's bundled copy) */
@@ -329,14 +332,7 @@ static int omp_copy(const omp_fns *f, omp_fns *g, const char *path)
         ok = 0;
     void *h = ok ? dlopen(path, RTLD_NOW | RTLD_LOCAL) : NULL;
     unlink(path);
-    if (!h)
-        return 0;
-    void *gs = dlsym(h, "omp_get_max_active_levels"), *ss = dlsym(h, "omp_set_max_active_levels");
-    if (!gs || !ss)
-        return 0;
-    memcpy(&g->get, &gs, sizeof g->get);
-    memcpy(&g->set, &ss, sizeof g->set);
-    return 1;
+    return omp_fns_of(h, g);
 }
 
 typedef struct levels_job {
