@@ -137,7 +137,9 @@ typedef struct dk_arap_options {
                                             restricted gradient, prolonged, line-searched);
                                             warm solves take none. The answer is still the
                                             mesh's minimum. Not used by
-                                            dk_arap_bind_tetrahedra (a volume's cells). 0..8 */
+                                            dk_arap_bind_tetrahedra (a volume's cells: its
+                                            caller attaches a level of its own,
+                                            dk_arap_attach_coarse_level). 0..8 */
     dk_arap_iteration_fn on_iteration; /**< optional, NULL by default                     */
     void *user;                        /**< passed to on_iteration                        */
     dk_phase_progress_fn progress;     /**< bind progress (dk_progress.h), NULL by default:
@@ -244,6 +246,30 @@ dk_status dk_arap_solve(dk_arap *arap, const dk_solve_request *request, double *
  *  a loose one while dragging and a tight one when the user lets go; the warm start is kept. */
 dk_status dk_arap_set_tolerance(dk_arap *arap, double tolerance, dk_error *err);
 
+/** Attaches a coarse level its caller built (VolumetricARAP's coarse tetrahedra, see
+ *  docs/methods/volumetric_arap.md "Multi-scale"), used as options.levels' own are: a cold
+ *  start solves it first and starts from its result prolonged (the move from the pose
+ *  restricted: x = pose + P (y - R pose)), and, when `correct` is non-zero, cold and given
+ *  Newton solves follow each Newton step near the minimum by its correction (the gradient
+ *  restricted by P^T, the coarse Newton direction, prolonged by P, line-searched); the
+ *  answer is still this object's minimum. coarse: an ARAP object bound on the coarse points (n_c of them) with
+ *  this object's constraints restricted; borrowed (it must outlive the attachment, which
+ *  lasts until the next rebind or free; no other object may use it meanwhile; rebound
+ *  meanwhile, the level is skipped; one that has this object as its own level is refused).
+ *  handle_vertex (n_handle_vertices, the coarse object's handle vertices in its handle
+ *  groups' order): the vertex of this object each stands for (same handle; its target is
+ *  that vertex's). P: n_vertices rows (p_start n_vertices + 1, p_col and p_weight
+ *  p_start[n_vertices]) over the coarse points; R, the restriction of positions: n_c rows
+ *  (r_start, r_col, r_weight) over this object's vertices. All in caller numbering, copied.
+ *  Refuses (nothing changed) counts that differ, a vertex that is not a handle vertex, rows
+ *  out of range or weights not finite. Replaces a level options.levels built. */
+dk_status dk_arap_attach_coarse_level(dk_arap *arap, dk_arap *coarse,
+                                      const dk_index *handle_vertex,
+                                      dk_index n_handle_vertices, const dk_index *p_start,
+                                      const dk_index *p_col, const double *p_weight,
+                                      const dk_index *r_start, const dk_index *r_col,
+                                      const double *r_weight, int correct, dk_error *err);
+
 /** The stopping tolerance the next solve uses (NaN for NULL). */
 double dk_arap_tolerance(const dk_arap *arap);
 
@@ -286,6 +312,7 @@ typedef struct dk_arap_counters {
     int levels;        /**< levels of the multi-scale solve: 1 (the mesh alone) or more    */
     dk_index coarse_vertices[7]; /**< vertices of each coarse level, finest first (levels-1) */
     int coarse_starts; /**< cold starts from the coarse level since the last bind/rebind  */
+    int coarse_corrections; /**< coarse corrections taken since the last bind/rebind     */
 } dk_arap_counters;
 
 /** Fills `counters` (zeros for NULL). */

@@ -112,6 +112,33 @@ void dk_constraints_hold(const dk_constraints *c, const double *rest_positions,
 void dk_constraints_constrained_motion(const dk_constraints *c, const double *rest_positions,
                                        const double *targets, double *positions);
 
+/* ---------------------------------------------------------------- a simplified mesh's --- */
+
+struct dk_decimation; /* dk_operators.h */
+
+/** Each vertex's class for dk_decimate, so that a simplification keeps every role and never
+ *  joins two (cls, n_vertices): 0 free, 1 fixed (held and outside the region of interest
+ *  included), 2 + 2h + s for handle h, s = 1 on a soft vertex (weight < 1), so that a handle
+ *  keeps hard vertices where it has any (the multi-scale solves' coarse levels). */
+void dk_constraints_classes(const dk_constraints *c, int *cls);
+
+/** The constraints restricted to a simplification's kept vertices (its coarse mesh's
+ *  numbering): each handle's kept vertices in order with their weights, the kept fixed ones,
+ *  their stiffness; no region of interest (the vertices outside it are fixed). */
+typedef struct dk_coarse_constraints {
+    dk_constraint_desc desc;  /**< for binding the coarse mesh; arrays owned below          */
+    dk_index *fine_vertex;    /**< per coarse handle vertex (desc's order): its mesh vertex */
+    dk_index n_handle_vertices;
+    dk_index *sizes, *handle_vertices, *fixed;
+    double *weights, *stiffness;
+} dk_coarse_constraints;
+
+/** Fills `out` (zeroed first; free it with dk_coarse_constraints_free, also after a
+ *  failure). Only DK_ERR_OUT_OF_MEMORY. */
+dk_status dk_coarse_constraints_create(const dk_constraints *c, const struct dk_decimation *d,
+                                       dk_coarse_constraints *out, dk_error *err);
+void dk_coarse_constraints_free(dk_coarse_constraints *cc);
+
 #ifdef __cplusplus
 }
 #endif

@@ -60,9 +60,23 @@ typedef struct dk_volumetric_arap_options {
     double tolerance;    /**< >= 0, default 1e-6 (dk_arap_options)                        */
     dk_arap_acceleration acceleration; /**< default DK_ARAP_ACCEL_NEWTON                  */
     int cg_iterations;   /**< NEWTON: 1..100, default 12 (dk_arap_options)                */
+    int levels;          /**< the multi-scale solve (docs/methods/volumetric_arap.md,
+                              "Multi-scale"): 1 the volume alone; 2 a coarse level: the
+                              surface simplified to 1/16 of its vertices (each vertex's role
+                              kept), tetrahedralized and bound as a VolumetricARAP of its
+                              own, attached to the solver (dk_arap_attach_coarse_level: cold
+                              starts solved there first and prolonged; no corrections of
+                              the Newton steps, which did not pay on volumes); 0 (the
+                              default): automatic, the level from 10,000 points on. No
+                              level where a part bounds no volume, or TetGen refuses the
+                              coarse surface (a mesh with no volume at all is ARAP's, its
+                              own levels automatic unless this is 1). The answer is a
+                              minimum of the volume's energy by the same test; a big edit
+                              with several (a half turn) can end in another one. 0..2   */
     dk_phase_progress_fn progress; /**< bind progress: the phases tetrahedralize, interior
                                         (the harmonic extension's factor), then ARAP's
-                                        (dk_arap_options.progress), "done" at 1; non-zero
+                                        (dk_arap_options.progress), coarse (the level),
+                                        "done" at 1; non-zero
                                         cancels. TetGen's meshing cannot be interrupted  */
     void *progress_user;
 } dk_volumetric_arap_options;

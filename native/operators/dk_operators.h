@@ -225,6 +225,44 @@ dk_status dk_tetrahedralize_surface(const double *positions, dk_index n_vertices
                                     dk_index *n_points, dk_index **tets, dk_index *n_tets,
                                     dk_error *err);
 
+/** A tetrahedron's frame for barycentric coordinates: grad (12 doubles) = the gradients of
+ *  the barycentric coordinates of corners 0..3 (3 each), so that the coordinate of corner
+ *  k >= 1 at q is grad_k . (q - x0). Returns 6 times the signed volume; 0 for a degenerate
+ *  one (grad then unspecified). Allocation-free. */
+double dk_tetrahedron_frame(const double *x0, const double *x1, const double *x2,
+                            const double *x3, double grad[12]);
+
+/** What dk_locate_in_tetrahedra does with a point outside every tetrahedron. */
+typedef enum dk_locate_mode {
+    /** the best tetrahedron's coordinates clamped to >= 0 and renormalised (a point on the
+     *  domain's hull: weights in [0, 1]); beyond -0.5 the nearest point */
+    DK_LOCATE_CLAMP = 0,
+    /** the best tetrahedron's coordinates as they are (some negative): an affine map of the
+     *  points moves the located point by the same map exactly, wherever it is */
+    DK_LOCATE_EXTRAPOLATE = 1
+} dk_locate_mode;
+
+/** Where each of `n_queries` points (queries, n_queries x 3) lies in a tetrahedral mesh:
+ *  its tetrahedron's corners (corners, n_queries x 4) and barycentric coordinates there
+ *  (weights, n_queries x 4, summing to 1). points: n_points x 3; tets: n_tets x 4 indices
+ *  into points; frames: n_tets x 12, per tetrahedron its corner 0 (3 doubles) then the
+ *  gradients of the coordinates of corners 1..3 (9: dk_tetrahedron_frame's grad + 3).
+ *  cell: the search grid's cell size (0: the tetrahedra's mean size). A point
+ *  inside some tetrahedron gets it (the one with the largest smallest coordinate among those
+ *  registered in its cell); outside every one, the tetrahedron with the largest smallest
+ *  coordinate in the neighbouring cells (one ring; when extrapolating, a second while that
+ *  coordinate is below -0.5), by `mode`; with
+ *  none there (clamped: none nearer than a coordinate of -0.5), the nearest point alone
+ *  (corners 1..3 -1, weight 1 on corner 0). Refuses (DK_ERR_INVALID_ARGUMENT) no point or
+ *  tetrahedron, NULL arrays, corners out of range, points not finite, and a `cell` so small
+ *  that the grid would pass 2^28 cells. Not
+ *  interruptible; O(n_tets + n_queries) for a mesh of even size. */
+dk_status dk_locate_in_tetrahedra(const double *points, dk_index n_points,
+                                  const dk_index *tets, const double *frames, dk_index n_tets,
+                                  double cell, dk_locate_mode mode, const double *queries,
+                                  dk_index n_queries, dk_index *corners, double *weights,
+                                  dk_error *err);
+
 /** A tetrahedron's linear finite-element stiffness per edge: w_ab = -vol grad(phi_a) .
  *  grad(phi_b) for its edges (0,1), (0,2), (0,3), (1,2), (1,3), (2,3) into w (in the cotangent
  *  form |e_cd| cot(the dihedral angle at the opposite edge cd) / 6; negative at an obtuse

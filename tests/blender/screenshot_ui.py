@@ -434,9 +434,9 @@ def in_blender():
                 d.bound and not d.status_is_error and obj.modifiers[0].type == "NODES",
                 (d.status, [m.type for m in obj.modifiers]))
         yield "shape_blend"
-        # the Volume ARAP deformer on a tube bent by its handle: bound, its status counting the
-        # tetrahedra, its options (Advanced open)
-        yield from bent_tube("VOLUME_ARAP", 41, "tetrahedra inside")
+        # the Volume ARAP deformer on a tube bent by its handle, Coarse Level 2: bound, its
+        # status counting the tetrahedra and naming the level, its options (Advanced open)
+        yield from bent_tube("VOLUME_ARAP", 41, "coarse level of", levels=2)
         yield "volume_arap"
         # ARAP with a coarse level (Coarse Levels 2 on a tube): bound, its status naming the
         # level, its options (Advanced open, Coarse Levels among them)

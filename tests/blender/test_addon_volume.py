@@ -4,7 +4,9 @@ status counts the tetrahedra; the handle moved as a 90-degree bend moves the tub
 (warm, from the bind pose), keeping its volume where ARAP's loses it. On an open grid it
 binds too and says that it deforms as a surface. After an Armature bending the tube (keyed),
 each frame is the API's edit of the Armature's pose, its handle at the pose's place; a bake
-writes what played; the settings survive saving and reopening."""
+writes what played; the settings survive saving and reopening. With Coarse Level 2 (the
+multi-scale solve): the status names the level, the bend is the API's with levels=2, the
+setting survives saving, and after the Armature each frame is the API's edit of the pose."""
 import os
 import sys
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -27,8 +29,9 @@ def api(obj, d, fixed, tip, cls="VolumetricARAP"):
     rest = S.rest_positions(obj)
     mesh = S.dk.Mesh(rest, S.solver.triangles(obj.data))
     o = d.options_volume_arap
+    kw = {"levels": o.levels} if cls == "VolumetricARAP" else {}
     return getattr(S.dk, cls)(mesh, handles=[tip], fixed=fixed, tolerance=o.tolerance,
-                              max_iterations=o.max_iterations), rest
+                              max_iterations=o.max_iterations, **kw), rest
 
 
 def test_still_mesh():
@@ -89,6 +92,34 @@ def test_open_mesh_deforms_as_a_surface():
     R.check("its handle follows", abs(got[handle, 2].mean() - 0.3) < 0.02, got[handle, 2].mean())
 
 
+def test_coarse_level():
+    S.reset_scene()
+    obj, d, e, fixed, tip = S.tube_deformer("VOLUME_ARAP", levels=2)
+    bind_world = e.matrix_world.copy()
+    bpy.ops.deformkit.bind()
+    text = S.solver.status_text(d)
+    R.check("the status names the coarse level", d.bound and "coarse level of" in text, text)
+    e.matrix_world = S.bend_end(np.pi / 2) @ bind_world
+    bpy.context.view_layer.update()
+    got = S.evaluated_positions(obj)
+    T = np.array(e.matrix_world @ bind_world.inverted())
+    va, rest = api(obj, d, fixed, tip)
+    R.check("the API builds the level too", va.stats["levels"] == 2, va.stats)
+    va.solve(transforms=[np.eye(4)], warm_start=False)
+    want = np.asarray(va.solve(transforms=[T], warm_start=True).positions)
+    diff = float(np.abs(got - want).max())
+    R.check("the bend is the API's with the level (max %.2e)" % diff, diff < TOL, diff)
+    path = os.path.join(S.OUTPUT, "volume_arap_levels.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    d = bpy.data.objects["Tube"].deformkit.deformers[0]
+    R.check("the setting survives saving", d.options_volume_arap.levels == 2,
+            d.options_volume_arap.levels)
+    S.reset_scene()
+    obj, d, e, fixed, tip = S.tube_deformer("VOLUME_ARAP", rig=S.lower_bone_rig, levels=2)
+    S.check_edit_after_armature(R, obj, d, e, fixed, tip, TOL, "volume_arap_levels.pc2")
+
+
 def test_after_an_armature():
     obj, d, e, fixed, tip = tube_setup(S.lower_bone_rig)
     got, inp = S.check_edit_after_armature(R, obj, d, e, fixed, tip, TOL, "volume_arap.pc2")
@@ -100,6 +131,7 @@ def test_after_an_armature():
             v_out / v_in)
 
 
-for t in (test_still_mesh, test_open_mesh_deforms_as_a_surface, test_after_an_armature):
+for t in (test_still_mesh, test_open_mesh_deforms_as_a_surface, test_coarse_level,
+          test_after_an_armature):
     R.run(t)
 R.finish()

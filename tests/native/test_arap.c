@@ -1794,7 +1794,128 @@ static void test_big_mesh_threaded_local_step(void)
     dk_test_mesh_free(&tm);
 }
 
+/* dk_arap_attach_coarse_level: a level that is the same problem (the same mesh and
+ * constraints, identity maps) gives a cold start at the minimum, so the solve ends where a
+ * plain one does in at most two steps; bad maps, counts and vertices are refused with
+ * nothing changed; a rebind drops the level. */
+static void test_attach_coarse_level(void)
+{
+    plane_setup s;
+    if (plane_make(&s, 12) != 0) {
+        CHECK(0);
+        return;
+    }
+    const dk_index n = s.mesh->n_vertices;
+    dk_index sizes[1] = {s.n_handle};
+    dk_constraint_desc d = {1, sizes, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL, NULL};
+    dk_arap_options o;
+    dk_arap_default_options(&o);
+    o.levels = 1;
+    o.tolerance = 1e-10;
+    dk_arap *a = NULL, *b = NULL, *c = NULL;
+    dk_error e = {0};
+    double t[3 * 64];
+    double *x = malloc(sizeof(double) * 3 * n), *y = malloc(sizeof(double) * 3 * n);
+    dk_index *start = malloc(sizeof(dk_index) * ((size_t)n + 1));
+    dk_index *col = malloc(sizeof(dk_index) * (size_t)n);
+    double *w = malloc(sizeof(double) * (size_t)n);
+    if (!x || !y || !start || !col || !w || dk_arap_bind(s.mesh, &d, &o, &a, &e) != DK_OK ||
+        dk_arap_bind(s.mesh, &d, &o, &b, &e) != DK_OK ||
+        dk_arap_bind(s.mesh, &d, &o, &c, &e) != DK_OK) {
+        CHECK_MSG(0, "%s", e.message);
+        goto done;
+    }
+    for (dk_index i = 0; i <= n; i++)
+        start[i] = i;
+    for (dk_index i = 0; i < n; i++)
+        col[i] = i, w[i] = 1.0;
+    dk_arap_counters k;
+    /* refused, nothing changed */
+    CHECK(dk_arap_attach_coarse_level(a, a, s.handle, s.n_handle, start, col, w, start, col, w,
+                                      1, &e) == DK_ERR_INVALID_ARGUMENT);
+    CHECK(dk_arap_attach_coarse_level(a, c, s.handle, s.n_handle - 1, start, col, w, start,
+                                      col, w, 1, &e) == DK_ERR_INVALID_ARGUMENT);
+    CHECK(strstr(e.message, "handle vertices") != NULL);
+    CHECK(dk_arap_attach_coarse_level(a, c, s.fixed, s.n_handle, start, col, w, start, col, w,
+                                      1, &e) == DK_ERR_INVALID_ARGUMENT);
+    CHECK(strstr(e.message, "not a handle vertex") != NULL);
+    col[5] = n;
+    CHECK(dk_arap_attach_coarse_level(a, c, s.handle, s.n_handle, start, col, w, start, col, w,
+                                      1, &e) == DK_ERR_INVALID_ARGUMENT);
+    col[5] = 5;
+    w[7] = NAN;
+    CHECK(dk_arap_attach_coarse_level(a, c, s.handle, s.n_handle, start, col, w, start, col, w,
+                                      1, &e) == DK_ERR_INVALID_ARGUMENT);
+    CHECK(strstr(e.message, "prolongation") != NULL);
+    w[7] = 1.0;
+    dk_arap_get_counters(a, &k);
+    CHECK(k.levels == 1);
+    /* the same problem as a level */
+    CHECK(dk_arap_attach_coarse_level(a, c, s.handle, s.n_handle, start, col, w, start, col, w,
+                                      1, &e) == DK_OK);
+    dk_arap_get_counters(a, &k);
+    CHECK(k.levels == 2 && k.coarse_vertices[0] == n);
+    bend_targets(&s, 1.0, t);
+    dk_solve_info ia, ib;
+    dk_solve_request rq = {.targets = t, .start = DK_START_COLD};
+    CHECK(dk_arap_solve(a, &rq, x, &ia, &e) == DK_OK && ia.converged);
+    CHECK(dk_arap_solve(b, &rq, y, &ib, &e) == DK_OK && ib.converged);
+    dk_arap_get_counters(a, &k);
+    CHECK(k.coarse_starts == 1);
+    double worst = 0.0;
+    for (dk_index i = 0; i < 3 * n; i++)
+        worst = fmax(worst, fabs(x[i] - y[i]));
+    CHECK_MSG(ia.iterations <= 2 && ib.iterations > 2 && worst < 1e-6,
+              "with the level %d steps, without %d, %.3g apart", ia.iterations, ib.iterations,
+              worst);
+    /* a given start: its Newton steps corrected by the level (the same problem's Newton
+     * direction through the maps) end at the same minimum, in no more steps */
+    double *given = malloc(sizeof(double) * 3 * n);
+    CHECK(given != NULL);
+    if (given) {
+        for (dk_index i = 0; i < 3 * n; i++)
+            given[i] = s.mesh->positions[i] + 0.05 * sin(7.0 * (double)i);
+        rq = (dk_solve_request){.targets = t, .start = DK_START_GIVEN, .start_positions = given};
+        CHECK(dk_arap_solve(a, &rq, x, &ia, &e) == DK_OK && ia.converged);
+        CHECK(dk_arap_solve(b, &rq, y, &ib, &e) == DK_OK && ib.converged);
+        worst = 0.0;
+        for (dk_index i = 0; i < 3 * n; i++)
+            worst = fmax(worst, fabs(x[i] - y[i]));
+        dk_arap_get_counters(a, &k);
+        CHECK_MSG(ia.iterations <= ib.iterations && worst < 1e-6 && k.coarse_corrections > 0,
+                  "given start: with the level %d steps (%d corrections), without %d, %.3g "
+                  "apart", ia.iterations, k.coarse_corrections, ib.iterations, worst);
+        printf("attached level, given start: %d Newton steps with %d corrections, %d "
+               "without\n", ia.iterations, k.coarse_corrections, ib.iterations);
+        free(given);
+    }
+    /* a cycle is refused; the coarse object rebound under the level: the level is skipped */
+    CHECK(dk_arap_attach_coarse_level(c, a, s.handle, s.n_handle, start, col, w, start, col, w,
+                                      1, &e) == DK_ERR_INVALID_ARGUMENT);
+    CHECK(strstr(e.message, "level of its own") != NULL);
+    dk_index one[1] = {1};
+    dk_constraint_desc d1 = {1, one, s.handle, NULL, s.n_fixed, s.fixed, 0, NULL, NULL, NULL};
+    CHECK(dk_arap_rebind(c, &d1, &e) == DK_OK);
+    rq = (dk_solve_request){.targets = t, .start = DK_START_COLD};
+    CHECK(dk_arap_solve(a, &rq, x, &ia, &e) == DK_OK && ia.converged);
+    dk_arap_get_counters(a, &k);
+    CHECK(k.levels == 2 && k.coarse_starts == 1); /* not started from it again */
+    CHECK(dk_arap_rebind(a, &d, &e) == DK_OK);
+    dk_arap_get_counters(a, &k);
+    CHECK(k.levels == 1);
+done:
+    dk_arap_free(a);
+    dk_arap_free(b);
+    dk_arap_free(c);
+    free(x);
+    free(y);
+    free(start);
+    free(col);
+    free(w);
+    plane_free(&s);
+}
+
 DK_TEST_MAIN(test_newton_quadratic, test_newton_soft_stiffness, test_resume, test_cg_override, test_cg_schedule, test_stopping_gap, test_stopping_indefinite, test_given_start, test_predictor, test_response_basis, test_zero_drag, test_rigid_motion, test_bend, test_twist, test_clamping,
              test_stiffness_soft_warm_rebind, test_warm_rotations_and_cold_reproducibility,
-             test_errors,
+             test_errors, test_attach_coarse_level,
              test_big_mesh_threaded_local_step)

@@ -574,9 +574,11 @@ void dk_arap_get_counters(const dk_arap *ar, dk_arap_counters *counters)
     counters->basis_columns = ar->sys.zcols;
     counters->basis_starts = ar->basis_starts;
     for (const dk_arap *a = ar; a->sys.coarse; a = a->sys.coarse->arap) {
-        counters->coarse_vertices[counters->levels] = a->sys.coarse->dec->n_kept;
-        if (counters->levels++ == 0)
+        counters->coarse_vertices[counters->levels] = a->sys.coarse->arap->n;
+        if (counters->levels++ == 0) {
             counters->coarse_starts = a->sys.coarse->starts;
+            counters->coarse_corrections = a->sys.coarse->corrections;
+        }
         if (counters->levels == 7)
             break;
     }

@@ -86,6 +86,23 @@ typedef struct arap_coarse {
      * x 3), its unknowns' blocks (3 of its nu), and the fine direction and product (3 nu) */
     double *cr, *cb, *cd, *fd, *fq;
     int corrections;      /* corrections taken since it was built                        */
+    /* A level its owner attached (dk_arap_attach_coarse_level: a volume's coarse
+     * tetrahedra) has no decimation (dec and mesh NULL) and borrows its object; its linear
+     * maps instead, fine vertices in the internal numbering, coarse points in the coarse
+     * object's caller numbering. Prolongation: fine vertex i = sum over q in
+     * ps[i] .. ps[i+1]-1 of pw[q] times coarse point pc[q]; restriction of an iterate: coarse
+     * point j = sum over q in rs[j] .. rs[j+1]-1 of rw[q] times fine vertex rc[q]. */
+    int borrowed;
+    int no_corrections;   /* its owner asked for the cold start only                      */
+    dk_index cnu;         /* the coarse object's unknowns when attached: a rebind of it since
+                             (its owner's misuse) makes the level unusable, not unsafe      */
+    dk_index n_fine;      /* the mesh's vertices (rows of the prolongation)              */
+    dk_index *ps, *pc, *rs, *rc;
+    double *pw, *rw;
+    double *cacc;         /* a coarse vector (n_coarse x 3): the restricted residual, then
+                             the coarse direction                                         */
+    double *cpose;        /* the rest or the input pose restricted (n_coarse x 3): attached
+                             levels prolong the coarse result's move from it              */
 } arap_coarse;
 
 typedef struct arap_system {

@@ -19,6 +19,7 @@ void dk_volumetric_arap_default_options(dk_volumetric_arap_options *o)
     o->tolerance = a.tolerance;
     o->acceleration = a.acceleration;
     o->cg_iterations = a.cg_iterations;
+    o->levels = 0;
     o->progress = NULL;
     o->progress_user = NULL;
 }
@@ -27,7 +28,9 @@ void dk_volumetric_arap_default_options(dk_volumetric_arap_options *o)
 static const dk_progress_phase bind_phases[] = {
     {"tetrahedralize", 6.0}, /* TetGen (uninterruptible) and the volume mesh               */
     {"interior", 0.6},       /* the harmonic extension's factor                            */
-    {"arap", 3.0}};          /* ARAP's bind on the tetrahedra, its own phases inside        */
+    {"arap", 3.0},           /* ARAP's bind on the tetrahedra, its own phases inside        */
+    {"coarse", 0.7}};        /* the multi-scale solve's coarse level (none below 10k points
+                                by default; uninterruptible)                                */
 
 static void arap_options(const dk_volumetric_arap_options *o, dk_arap_options *a);
 
@@ -51,6 +54,10 @@ static dk_status check_options(const dk_mesh *mesh, const dk_volumetric_arap_opt
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "VolumetricARAP: quality is %g, must be 0 (none) or in [1.1, 10] "
                             "(the tetrahedra's largest radius-edge ratio)", o->quality);
+    if (o->levels < 0 || o->levels > 2)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "VolumetricARAP: levels is %d, must be 1 or 2 (0: automatic)",
+                            o->levels);
     if (!(o->max_volume >= 0.0 && o->max_volume <= 1e300))
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "VolumetricARAP: max_volume is %g, must be 0 (none) or > 0",
@@ -75,13 +82,17 @@ static void arap_options(const dk_volumetric_arap_options *o, dk_arap_options *a
     a->tolerance = o->tolerance;
     a->acceleration = o->acceleration;
     a->cg_iterations = o->cg_iterations;
+    /* ARAP's own levels serve a mesh that bounds no volume at all (on the tetrahedra it
+     * builds none): none when none is asked for */
+    a->levels = o->levels == 1 ? 1 : 0;
 }
 
 void dk_volumetric_arap_free(dk_volumetric_arap *va)
 {
     if (!va)
         return;
-    dk_arap_free(va->arap);
+    dk_arap_free(va->arap); /* first: it borrows the level's object */
+    volumetric_level_free(va->level);
     volumetric_extension_free(va);
     dk_constraints_free(va->con);
     dk_mesh_free(va->volume);
@@ -134,6 +145,16 @@ static dk_status bind_solver(dk_volumetric_arap *va, const dk_constraint_desc *c
     }
     dk_constraints_free(va->con);
     va->con = con;
+    /* the coarse level for these constraints (the rebind dropped the old one's attachment);
+     * an accelerator: when it cannot be built (out of memory included), solves run without
+     * it */
+    volumetric_level_free(va->level);
+    va->level = NULL;
+    if (prog && dk_progress_begin(prog, 3, err) != DK_OK)
+        return DK_ERR_CANCELLED;
+    dk_error ignored = {0};
+    if (volumetric_level_build(va, &va->level, &ignored) != DK_OK)
+        va->level = NULL;
     return DK_OK;
 }
 
@@ -459,6 +480,9 @@ dk_status dk_volumetric_arap_estimate_memory(const dk_mesh *mesh,
     double n = 1.35 * (double)mesh->n_vertices;
     if (options && options->max_volume > 0.0)
         n += box_volume(mesh) / options->max_volume / 6.0;
+    /* the coarse level (levels 0 or 2): a volume of its own for a sixteenth of the surface */
+    if (!options || options->levels != 1)
+        n += 1.35 * (double)mesh->n_vertices / 16.0;
     const double lg = n > 2.0 ? log2(n) : 1.0;
     /* TetGen's mesh and the tetrahedra's ARAP per point (docs/methods/volumetric_arap.md) */
     *bytes = dk_memory_model(6000.0 + 150.0 * lg, n, 0.0);
@@ -480,6 +504,8 @@ static const dk_option_desc volumetric_fields[] = {
      2, 2, 2, 0},
     {"cg_iterations", DK_OPTION_INT, offsetof(dk_volumetric_arap_options, cg_iterations), 0, 1,
      100, 12, 100, 0},
+    {"levels", DK_OPTION_INT, offsetof(dk_volumetric_arap_options, levels), 0, 1, 2, 2, 2,
+     DK_OPTION_ZERO_AUTO},
 };
 
 DK_METHOD_OPS_STATEFUL(dk_volumetric_arap_ops, "VolumetricARAP",

@@ -7,6 +7,8 @@
  *                      volume (region of interest, stiffness spread inwards)
  *   extension.c        the interior's harmonic extension: the linear elements' Laplacian on
  *                      the interior points, factored, moving the interior with the surface
+ *   multiscale.c       the coarse level: the surface simplified, its own tetrahedra and
+ *                      VolumetricARAP, the maps between the two volumes, attached to ARAP
  *   volumetric_arap.c  the public verbs (a driver naming its steps) and the method's table
  */
 #ifndef DK_VOLUMETRIC_INTERNAL_H
@@ -19,7 +21,17 @@
 #include <string.h>
 
 #include "dk_cholesky.h"
+#include "dk_operators.h"
 #include "dk_sparse.h"
+
+/* The multi-scale solve's coarse level (multiscale.c): the surface simplified (each vertex's
+ * role kept), its mesh, and the VolumetricARAP bound on it whose ARAP object the fine one
+ * borrows (dk_arap_attach_coarse_level). */
+typedef struct volumetric_level {
+    dk_decimation *dec;
+    dk_mesh *mesh;
+    dk_volumetric_arap *coarse;
+} volumetric_level;
 
 struct dk_volumetric_arap {
     const dk_mesh *mesh;       /* the caller's surface                                      */
@@ -51,6 +63,7 @@ struct dk_volumetric_arap {
     double *last;              /* the last solve's volume (energy's interior); the rest
                                   points before any solve                                   */
     double *scratch;           /* np x 3: energy's and the extension's scratch             */
+    volumetric_level *level;   /* the coarse level for the current constraints, or NULL     */
 };
 
 /* The points at rest: the volume's, or the mesh's without tetrahedra. */
@@ -79,5 +92,11 @@ void volumetric_extension_free(dk_volumetric_arap *va);
  * scratch. out may be `from`. */
 dk_status volumetric_extend(const dk_volumetric_arap *va, const double *from,
                             const double *surface, double *out, double *rhs, dk_error *err);
+
+/* multiscale.c: the coarse level for va's constraints (va->con) attached to va->arap (*out
+ * NULL: none, by the levels option, the size, or a step that failed for the mesh's reasons:
+ * it is an accelerator); frees one. */
+dk_status volumetric_level_build(dk_volumetric_arap *va, volumetric_level **out, dk_error *err);
+void volumetric_level_free(volumetric_level *level);
 
 #endif

@@ -45,25 +45,6 @@ static void grid_insert(cell_grid *g, dk_index *next, const double *p, dk_index 
     g->head[c] = i;
 }
 
-/* The tetrahedron's barycentric gradients (rows 1..3 of `grad`, row 0 their negated sum)
- * and volume; returns the signed 6 x volume. */
-static double tet_frame(const double *x0, const double *x1, const double *x2, const double *x3,
-                        double grad[12])
-{
-    double e[9], c[9];
-    for (int k = 0; k < 3; k++) {
-        e[k] = x1[k] - x0[k];
-        e[3 + k] = x2[k] - x0[k];
-        e[6 + k] = x3[k] - x0[k];
-    }
-    double det = dk_mat3_cofactor(e, c);
-    if (det == 0.0) return 0.0;
-    for (int r = 0; r < 3; r++)
-        for (int k = 0; k < 3; k++) grad[3 * (r + 1) + k] = c[3 * r + k] / det;
-    for (int k = 0; k < 3; k++) grad[k] = -(grad[3 + k] + grad[6 + k] + grad[9 + k]);
-    return det;
-}
-
 dk_status bbw_volume_domain(const dk_mesh *mesh, const dk_bbw_handles *h, int resolution,
                             bbw_domain *d, int *has_volume, dk_error *err)
 {
@@ -214,7 +195,7 @@ dk_status bbw_volume_domain(const dk_mesh *mesh, const dk_bbw_handles *h, int re
     for (dk_index t = 0; t < n_tets; t++) {
         const dk_index *tv = tets + 4 * (size_t)t;
         double grad[12];
-        double vol6 = tet_frame(pts + 3 * (size_t)tv[0], pts + 3 * (size_t)tv[1],
+        double vol6 = dk_tetrahedron_frame(pts + 3 * (size_t)tv[0], pts + 3 * (size_t)tv[1],
                                 pts + 3 * (size_t)tv[2], pts + 3 * (size_t)tv[3], grad);
         if (wn[t] < 0.5 || !(fabs(vol6) > min_vol6)) continue;
         keep[n_keep++] = t;
@@ -232,7 +213,7 @@ dk_status bbw_volume_domain(const dk_mesh *mesh, const dk_bbw_handles *h, int re
                 if (v < n_handle_points && vmap[v] < 0 && (join[v] < 0 || wn[t] > wn[join[v]])) {
                     double grad[12];
                     const dk_index *tv = tets + 4 * (size_t)t;
-                    if (fabs(tet_frame(pts + 3 * (size_t)tv[0], pts + 3 * (size_t)tv[1],
+                    if (fabs(dk_tetrahedron_frame(pts + 3 * (size_t)tv[0], pts + 3 * (size_t)tv[1],
                                        pts + 3 * (size_t)tv[2], pts + 3 * (size_t)tv[3], grad)) > min_vol6)
                         join[v] = t;
                 }
@@ -277,7 +258,7 @@ dk_status bbw_volume_domain(const dk_mesh *mesh, const dk_bbw_handles *h, int re
     for (dk_index k = 0; k < n_keep; k++) {
         const dk_index *tv = tets + 4 * (size_t)keep[k];
         double grad[12];
-        double vol = fabs(tet_frame(pts + 3 * (size_t)tv[0], pts + 3 * (size_t)tv[1],
+        double vol = fabs(dk_tetrahedron_frame(pts + 3 * (size_t)tv[0], pts + 3 * (size_t)tv[1],
                                     pts + 3 * (size_t)tv[2], pts + 3 * (size_t)tv[3], grad)) / 6.0;
         for (int a = 0; a < 4; a++) {
             d->mass[vmap[tv[a]]] += 0.25 * vol;
