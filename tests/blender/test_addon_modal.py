@@ -277,8 +277,10 @@ def refine_tests():
             and (first.get("iterations", 0), first.get("inner")) == want
             and want[0] < d.options.max_iterations, (first, want))
     R.check("the panel's flag says refining", S.solver.refining(obj, d))
+    # a liveness bound, not a speed test: alone it finishes in ~10 s; in CI, beside the
+    # sanitized suite, one run needed more than 60 s (49 slices, 51 steps)
     t0 = time.time()
-    while S.solver.pending() and time.time() - t0 < 60:
+    while S.solver.pending() and time.time() - t0 < 300:
         yield 0.05
     last = S.solver.runtime.get(key, {})
     R.check("refine timer finishes the solve", not S.solver.pending() and last.get("converged"),
