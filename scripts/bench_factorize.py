@@ -1,6 +1,6 @@
 #!/usr/bin/python3
 """Sparse factorizations as the methods use them: binds that factor once, and
-EmbeddedDeformation's Gauss-Newton iterations, which factor J^T J every time.
+EmbeddedDeformation's Gauss-Newton iterations, which factor a matrix every time.
 
     PYTHONPATH=build/python /usr/bin/python3 scripts/bench_factorize.py [--subdivide 0,1,2]
 

@@ -390,6 +390,13 @@ size_t dk_cholesky_memory(const dk_cholesky *chol)
     return bytes;
 }
 
+double dk_cholesky_rcond(dk_cholesky *chol)
+{
+    if (!chol || !chol->factored) return 0.0;
+    const double r = cholmod_rcond(chol->factor, &chol->common);
+    return r > 0.0 ? r : 0.0;
+}
+
 dk_status dk_cholesky_negative_pivots(const dk_cholesky *chol, dk_index *count, dk_error *err)
 {
     if (!chol || !count)

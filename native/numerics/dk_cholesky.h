@@ -81,6 +81,12 @@ int dk_cholesky_analysis_count(const dk_cholesky *chol);
 /** Bytes held by the factor (for memory reports). */
 size_t dk_cholesky_memory(const dk_cholesky *chol);
 
+/** CHOLMOD's cheap estimate of the last factorization's reciprocal condition number,
+ *  (min / max of L's diagonal)^2: near DBL_EPSILON when the matrix is singular but for
+ *  rounding, which lets a factorization "succeed" with a pivot of rounding's size and sign;
+ *  0 when not factored. */
+double dk_cholesky_rcond(dk_cholesky *chol);
+
 /** Like dk_cholesky_analyze, for symmetric INDEFINITE nonsingular matrices (the shifted
  *  operators L - sigma M of the band-by-band eigensolver): simplicial LDL' without pivoting
  *  (CHOLMOD has no pivoting), so it is only as stable as the matrix allows. Factorize then

@@ -194,6 +194,7 @@ dk_status dk_embedded_update_source(dk_embedded *ed, const double *positions, dk
     if (st != DK_OK)
         return dk_error_prefix(err, "EmbeddedDeformation update_source");
     memcpy(ed->p, positions, 3 * (size_t)ed->n * sizeof *ed->p);
+    ed->sys.k_stale = 1; /* K's coefficients come from p and g */
     for (dk_index j = 0; j < ed->m; j++) {
         double *g = ed->g + 3 * (size_t)j;
         if (ed->node_vertex) { /* section 5: a node on a vertex rides along with it */
@@ -265,8 +266,10 @@ dk_status dk_embedded_restore_state(dk_embedded *ed, const void *state, size_t s
     ed_state_shape(ed, shape);
     const int k = ed_state_spans(ed, sp);
     const dk_status st = dk_state_check("EmbeddedDeformation", shape, sp, k, state, size, err);
-    if (st == DK_OK)
+    if (st == DK_OK) {
         dk_state_restore_spans(sp, k, state);
+        ed->sys.k_stale = 1; /* the source (p, g) came back with it */
+    }
     return st;
 }
 
@@ -419,7 +422,7 @@ dk_status dk_embedded_energy(const dk_embedded *ed, const double *positions, dou
     /* the graph terms: F of x without the positional terms */
     ed_system graph_only = *s;
     graph_only.n_pos = 0;
-    double F = ed_evaluate(ed, NULL, &graph_only, ed->x);
+    double F = ed_evaluate(ed, NULL, &graph_only, ed->x, 0);
     for (dk_index l = 0; l < s->n_pos; l++) {
         const dk_index v = s->pos_vertex[l];
         const double *tg = s->pos_target_row[l] >= 0 ? s->targets + 3 * s->pos_target_row[l]
@@ -528,12 +531,15 @@ dk_status dk_embedded_estimate_memory(const dk_mesh *mesh, const dk_embedded_opt
         m = n;
     if (m < 1.0)
         m = 1.0;
-    /* per vertex its k nodes and weights: measured 430 B at 43k; per node J^T J's 12 x 12
-     * blocks and their factor, whose edges grow with k: measured 41-112 KB at k = 4 (200 to
-     * 20,000 nodes on the arm and the armadillo, nodes on every vertex included) and 193-244
-     * KB at k = 8 (2.2x); 16 MiB at any size: the factor's first BLAS buffers */
+    /* per vertex its k nodes and weights: measured 430 B at 43k; per node K's 4 x 4 blocks,
+     * the reduced system over the graph's two rings and its factor (schur.c), growing with
+     * k: measured 20-30 KB at k = 4 (2,000 nodes to nodes on every vertex of the arm and
+     * the armadillo, two iterations) and 86 KB at k = 8; 16 MiB at any size: the factor's
+     * first BLAS buffers. Handles spread over the whole graph keep every node's R in the
+     * reduced system (up to 115 KB per node): the first factorization's own check, from its
+     * symbolic analysis, refuses what this misses. */
     const double per_vertex = 500.0 + (k > 4 ? 24.0 * (k - 4) : 0.0);
-    const double per_node = 115000.0 * pow(k / 4.0, 1.25);
+    const double per_node = 36000.0 * pow(k / 4.0, 1.5);
     *bytes = dk_memory_model(per_vertex, n, per_node * m + 16.0 * 1048576.0);
     return DK_OK;
 }

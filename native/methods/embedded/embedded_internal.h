@@ -7,18 +7,21 @@
  *   weights.c   each vertex's k nodes and their weights (eq. 4), Euclidean or along the
  *               surface, and the cut between two vertex groups
  *   graph.c     the graph's edges (nodes that influence a common vertex) and adjacency
- *   system.c    the fixed nodes, J^T J's block pattern, its CSC matrix and analysis
- *   energy.c    F (eq. 9) with J^T f and J^T J
+ *   system.c    the fixed nodes, J^T J's block pattern
+ *   energy.c    F (eq. 9) with J^T f and J^T J's parts
+ *   schur.c     each step through the system reduced to the translations: the rotation
+ *               parts eliminated node by node, the rest factorized
  *   solve.c     Gauss-Newton with Levenberg-Marquardt damping and eq. 12's tests; eq. 2
  *   embedded.c  options, bind, rebind, source updates, state, normals, points, the table
  *
  * Layout of the unknowns: free node u owns columns 12 u + a, a = 3 d + e for R[d][e] (row
- * major) and a = 9 + d for t[d]. J^T J is stored as dense 12 x 12 blocks, one per ordered
- * pair of free nodes that share a residual (an edge, or a constrained vertex both
- * influence); block (u, v) sits at position rank_u(v) among u's sorted block list, so the
- * CSC matrix handed to CHOLMOD has, in column 12 u + a, the rows 12 v + b of every v in u's
- * list: value index col_start[12 u + a] + 12 rank + b. Its pattern depends on the graph and
- * the constrained vertices only, so it is analysed once per bind or rebind.
+ * major) and a = 9 + d for t[d]. J^T J = I_3 (x) K + D(x): K, the regularization's and
+ * the positional terms' part for one coordinate, is kept as 4 x 4 blocks (slots R[d][0..2],
+ * t[d]), one per ordered pair of free nodes that share a residual (an edge, or a
+ * constrained vertex both influence), block (u, v) at position rank_u(v) among u's sorted
+ * block list; D, E_rot's part, as one 9 x 9 block per free node. The reduced system's
+ * pattern (schur.c) depends on the graph and the constrained vertices only, so it is
+ * analysed once per bind or rebind.
  */
 #ifndef DK_EMBEDDED_INTERNAL_H
 #define DK_EMBEDDED_INTERNAL_H
@@ -46,24 +49,45 @@ typedef struct ed_system {
     dk_index *free_nodes;       /* n_free: the nodes                                        */
     /* the positional terms: handle vertices (targets from the request) and held fixed
      * vertices (target: rest) */
-    dk_index n_pos;
+    dk_index n_pos, n_pos_moving; /* the first n_pos_moving involve a free node           */
     dk_index *pos_vertex;       /* n_pos                                                    */
     dk_index *pos_target_row;   /* n_pos: row in the expanded handle targets, or -1 (rest)  */
     double *targets;            /* n_handle_vertices x 3                                    */
+    double f_constant;          /* F's terms of constant nodes only, for the solve's targets */
     /* J^T J blocks: per free node u, blk_start[u] .. blk_start[u+1]-1 into blk_node (sorted
      * free indices v) */
     dk_index *blk_start, *blk_node;
     int64_t n_blocks;
-    double *blocks;             /* n_blocks x 144, block b's entry (a, c) at 144 b + 12 a + c */
+    double *kblk;               /* n_blocks x 16: K, block b's entry (a, c) at 16 b + 4 a + c
+                                   (a, c: 0..2 R[d][.], 3 t[d]), for the source at hand      */
+    int k_stale;                /* the source moved since kblk was made                      */
+    double *rot;                /* n_free x 81: E_rot's J^T J over each node's R (row major) */
+    unsigned char *kept;        /* n_free: a positional term couples its R with another free
+                                   node's, so R stays in the reduced system                 */
     /* per ordered edge (j -> k, both free or not): the block indices (j,j), (j,k), (k,j),
      * (k,k), -1 where a node is constant */
     int64_t *edge_blk;          /* 4 per directed edge                                       */
     /* per positional term, per pair (p, q) of its nodes: the block index, -1 if constant  */
     int64_t *pos_blk;           /* n_pos x k x k                                             */
-    dk_sparse *a;               /* the CSC matrix, 12 n_free square                          */
-    int64_t *diag_pos;          /* 12 n_free: where each diagonal entry is                   */
+    /* the reduced system (schur.c) */
+    dk_index n_red;             /* its unknowns                                             */
+    dk_index *base;             /* n_free: each node's first reduced unknown                */
+    dk_index *red;              /* 12 n_free: each unknown's reduced index, -1 eliminated   */
+    dk_index *nl_start, *nl_node, *nl_off; /* per node w, the nodes v <= w its columns meet
+                                   (sorted) and the rows before v in each of them           */
+    dk_sparse *S;               /* the matrix, upper triangle                               */
+    double *S_base;             /* its part that does not change with x or mu               */
+    double *S_part;             /* the second half of the nodes' part (ed_reduced_factorize) */
+    int64_t *S_diag;            /* n_red: where each diagonal entry is                      */
+    int64_t *cl_start;          /* n_free + 1: each eliminated node's clique entries        */
+    dk_index *cl_pos;           /* where each sits in S                                     */
+    int64_t *w_start;           /* n_free + 1: each eliminated node's W = L^-1 C (9 x 3 nc) */
+    double *W;
+    double *lfac;               /* n_free x 81: each eliminated node's 9 x 9 factor         */
+    double *rhs;                /* n_red                                                    */
     dk_cholesky *chol;
     double *grad, *step, *x_try; /* 12 n_free each; x_try: 12 m                             */
+    double *grad_spare, *rot_spare; /* J^T f and rot at a trial point (solve.c)            */
 } ed_system;
 
 struct dk_embedded {
@@ -164,9 +188,32 @@ int64_t ed_block_of(const ed_system *s, dk_index u, dk_index v);
 /* energy.c: the unit of length of F for the n points p (n x 3). */
 double ed_unit_length(const double *p, dk_index n);
 
+/* what ed_evaluate() also computes into `s`, and which terms it sums: ED_MOVING those some
+ * free node enters, ED_CONSTANT the others (neither: all) */
+enum { ED_GRADIENT = 1, ED_QUADRATIC = 2, ED_MOVING = 4, ED_CONSTANT = 8 };
+
 /* energy.c: F(x) (eq. 9) for the transformations x (m x 12); with `s`, also J^T f and
- * J^T J into s. */
-double ed_evaluate(const dk_embedded *ed, ed_system *s, const ed_system *sys, const double *x);
+ * E_rot's part of J^T J (ED_GRADIENT) or K (ED_QUADRATIC) into s. */
+double ed_evaluate(const dk_embedded *ed, ed_system *s, const ed_system *sys, const double *x,
+                   unsigned what);
+
+/* schur.c: the reduced system's pattern, its analysis and K (after system.c's pattern). */
+dk_status ed_reduced_build(dk_embedded *ed, ed_system *s, dk_error *err);
+
+/* schur.c: K and the reduced system's constant part for the source at hand. */
+void ed_reduced_refresh(const dk_embedded *ed, ed_system *s);
+
+/* schur.c: factorizes J^T J + mu I reduced (s->grad's point: s->rot and K), the nodes'
+ * eliminations split over `team` (may be NULL);
+ * DK_ERR_NOT_POSITIVE_DEFINITE when it is not. */
+dk_status ed_reduced_factorize(ed_system *s, double mu, dk_team *team, dk_error *err);
+
+/* schur.c: the step (s->step, 12 n_free) solving (J^T J + mu I) step = -J^T f with the
+ * last factorization. */
+dk_status ed_reduced_solve(ed_system *s, dk_error *err);
+
+/* schur.c: J^T J's trace. */
+double ed_reduced_trace(const ed_system *s);
 
 /* solve.c: every node the identity (x: m x 12). */
 void ed_identity(double *x, dk_index m);

@@ -13,9 +13,16 @@ typedef struct jrow {
     double coef[2 * K_MAX][6];
 } jrow;
 
-/* Adds r^2 to *F, and, when `s` is given, the row's part of J^T f (into grad) and J^T J
- * (into the blocks). */
-static void add_row(ed_system *s, const jrow *j, double r, double *F)
+/* a slot's place among one coordinate's four (R[d][0..2], t[d]) */
+static int slot4(int a)
+{
+    return a < 9 ? a % 3 : 3;
+}
+
+/* Adds r^2 to *F, and, when `s` is given, the row's part of J^T f (into grad, for
+ * ED_GRADIENT) or of K (into kblk, for ED_QUADRATIC: rows of the regularization and
+ * positional terms of one coordinate). */
+static void add_row(ed_system *s, unsigned what, const jrow *j, double r, double *F)
 {
     *F += r * r;
     if (!s)
@@ -23,16 +30,20 @@ static void add_row(ed_system *s, const jrow *j, double r, double *F)
     for (int p = 0; p < j->n; p++) {
         if (j->u[p] < 0)
             continue;
-        for (int i = 0; i < j->ns; i++)
-            s->grad[12 * j->u[p] + j->slot[p][i]] += j->coef[p][i] * r;
+        if (what & ED_GRADIENT)
+            for (int i = 0; i < j->ns; i++)
+                s->grad[12 * j->u[p] + j->slot[p][i]] += j->coef[p][i] * r;
+        if (!(what & ED_QUADRATIC))
+            continue;
         for (int q = 0; q < j->n; q++) {
             const int64_t b = j->blk[p][q];
             if (b < 0)
                 continue;
-            double *B = s->blocks + 144 * (size_t)b;
+            double *B = s->kblk + 16 * (size_t)b;
             for (int i = 0; i < j->ns; i++)
                 for (int c = 0; c < j->ns; c++)
-                    B[12 * j->slot[p][i] + j->slot[q][c]] += j->coef[p][i] * j->coef[q][c];
+                    B[4 * slot4(j->slot[p][i]) + slot4(j->slot[q][c])] +=
+                        j->coef[p][i] * j->coef[q][c];
         }
     }
 }
@@ -56,7 +67,9 @@ double ed_unit_length(const double *p, dk_index n)
     return L > 0.0 && isfinite(L) ? L : 1.0;
 }
 
-/* F(x) (eq. 9); with `s`, also J^T f (s->grad) and J^T J (s->blocks, then s->a).
+/* F(x) (eq. 9); with `s`, also what `what` asks for: J^T f (s->grad) and E_rot's part of
+ * J^T J (s->rot) for ED_GRADIENT, or the constant part K (s->kblk) for ED_QUADRATIC, whose
+ * returned F is then that of the first coordinate's regularization and positional terms.
  *
  * Lengths are measured in units of ed->L (ed_unit_length() of the bind mesh): E_reg and E_con are
  * divided by L^2, and the unknowns are R and t / L. The paper gives fixed weights (w_rot 1,
@@ -69,20 +82,26 @@ double ed_unit_length(const double *p, dk_index n)
  * gn_step moves t by L times its step, and the step and iterate norms read t / L. ed->x
  * itself stays in the model's units. */
 double ed_evaluate(const dk_embedded *ed, ed_system *s, const ed_system *sys,
-                       const double *x)
+                   const double *x, unsigned what)
 {
     const dk_index k = ed->k, m = ed->m;
     const double wr = sqrt(ed->opt.w_rot), wg = sqrt(ed->opt.w_reg), wc = sqrt(ed->opt.w_con);
     const double wgL = wg / ed->L, wcL = wc / ed->L; /* per unit of length */
     double F = 0.0;
     jrow jr;
-    if (s) {
+    if (!s)
+        what &= ED_MOVING | ED_CONSTANT;
+    const int moving_only = (what & ED_MOVING) != 0, constant_only = (what & ED_CONSTANT) != 0;
+    if (what & ED_GRADIENT) {
         memset(s->grad, 0, 12 * (size_t)s->n_free * sizeof(double));
-        memset(s->blocks, 0, 144 * (size_t)s->n_blocks * sizeof(double));
+        memset(s->rot, 0, 81 * (size_t)s->n_free * sizeof(double));
     }
+    if (what & ED_QUADRATIC)
+        memset(s->kblk, 0, 16 * (size_t)s->n_blocks * sizeof(double));
+    const int n_coord = what == ED_QUADRATIC ? 1 : 3; /* K is the same for each coordinate */
     /* rotation (eqs. 5-6): six residuals per free node over its 9 R entries */
     static const int pairs[6][2] = {{0, 1}, {0, 2}, {1, 2}, {0, 0}, {1, 1}, {2, 2}};
-    for (dk_index j = 0; j < m; j++) {
+    for (dk_index j = 0; j < m && !(what & ED_QUADRATIC) && !constant_only; j++) {
         const dk_index u = sys->node_unknown[j];
         if (u < 0)
             continue; /* R = I: Rot = 0 */
@@ -96,7 +115,6 @@ double ed_evaluate(const dk_embedded *ed, ed_system *s, const ed_system *sys,
                 dot -= 1.0;
             jr.n = 1;
             jr.u[0] = u;
-            jr.blk[0][0] = s ? ed_block_of(sys, u, u) : -1;
             jr.ns = 6;
             for (int d = 0; d < 3; d++) { /* d(c_a . c_b)/dR[d][a] = R[d][b] and vice versa */
                 jr.slot[0][2 * d] = 3 * d + a;
@@ -104,18 +122,27 @@ double ed_evaluate(const dk_embedded *ed, ed_system *s, const ed_system *sys,
                 jr.coef[0][2 * d] = wr * (a == b ? R[3 * d + a] : R[3 * d + b]);
                 jr.coef[0][2 * d + 1] = wr * (a == b ? R[3 * d + a] : R[3 * d + a]);
             }
-            add_row(s, &jr, wr * dot, &F);
+            add_row(s, what, &jr, wr * dot, &F);
+            if (what & ED_GRADIENT) { /* J^T J's rotation block */
+                double *B = s->rot + 81 * (size_t)u;
+                for (int i = 0; i < 6; i++)
+                    for (int c = 0; c < 6; c++)
+                        B[9 * jr.slot[0][i] + jr.slot[0][c]] += jr.coef[0][i] * jr.coef[0][c];
+            }
         }
     }
     /* regularization (eq. 7), both directions of each edge, one residual per coordinate */
     for (dk_index e = 0; e < ed->n_edges; e++)
         for (int dir = 0; dir < 2; dir++) {
             const dk_index j = ed->edges[2 * e + dir], q = ed->edges[2 * e + 1 - dir];
+            const int moves = sys->node_unknown[j] >= 0 || sys->node_unknown[q] >= 0;
+            if ((moving_only && !moves) || (constant_only && moves))
+                continue;
             const double *Rj = x + 12 * (size_t)j, *tj = Rj + 9, *tq = x + 12 * (size_t)q + 9;
             const double *gj = ed->g + 3 * j, *gq = ed->g + 3 * q;
             const double dg[3] = {gq[0] - gj[0], gq[1] - gj[1], gq[2] - gj[2]};
             const int64_t *b = sys->edge_blk + 8 * (size_t)e + 4 * dir;
-            for (int d = 0; d < 3; d++) {
+            for (int d = 0; d < n_coord; d++) {
                 const double r = Rj[3 * d] * dg[0] + Rj[3 * d + 1] * dg[1] +
                                  Rj[3 * d + 2] * dg[2] + gj[d] + tj[d] - gq[d] - tq[d];
                 jr.n = 2;
@@ -136,18 +163,20 @@ double ed_evaluate(const dk_embedded *ed, ed_system *s, const ed_system *sys,
                 jr.coef[0][3] = wg;
                 jr.slot[1][3] = 9 + d;
                 jr.coef[1][3] = -wg;
-                add_row(s, &jr, wgL * r, &F);
+                add_row(s, what, &jr, wgL * r, &F);
             }
         }
     /* positional terms (eq. 8): handles to their targets, held fixed vertices to rest */
-    for (dk_index l = 0; l < sys->n_pos; l++) {
+    const dk_index l0 = constant_only ? sys->n_pos_moving : 0;
+    const dk_index l1 = moving_only ? sys->n_pos_moving : sys->n_pos;
+    for (dk_index l = l0; l < l1; l++) {
         const dk_index v = sys->pos_vertex[l];
         const double *p = ed->p + 3 * v;
         const dk_index *nb = ed->nb + (size_t)v * k;
         const double *wv = ed->w + (size_t)v * k;
         const double *tg = sys->pos_target_row[l] >= 0 ? sys->targets + 3 * sys->pos_target_row[l]
                                                        : p;
-        for (int d = 0; d < 3; d++) {
+        for (int d = 0; d < n_coord; d++) {
             double r = -tg[d];
             jr.n = 0;
             jr.ns = 4;
@@ -168,7 +197,7 @@ double ed_evaluate(const dk_embedded *ed, ed_system *s, const ed_system *sys,
                 jr.slot[c][3] = 9 + d;
                 jr.coef[c][3] = wc * wv[q];
             }
-            if (s) { /* the blocks of this vertex's node pairs (valid entries only) */
+            if (what & ED_QUADRATIC) { /* the blocks of this vertex's node pairs */
                 int c = 0;
                 int idx[K_MAX];
                 for (dk_index q = 0; q < k; q++)
@@ -178,24 +207,8 @@ double ed_evaluate(const dk_embedded *ed, ed_system *s, const ed_system *sys,
                     for (int b2 = 0; b2 < jr.n; b2++)
                         jr.blk[a][b2] = sys->pos_blk[((size_t)l * k + idx[a]) * k + idx[b2]];
             }
-            add_row(s, &jr, wcL * r, &F);
+            add_row(s, what, &jr, wcL * r, &F);
         }
     }
-    if (s) /* the blocks into the CSC values: block (u, v) entry (a, c) = row 12v+c, col 12u+a;
-            * between different nodes only the entries of one coordinate exist (system.c's matrix()) */
-        for (dk_index u = 0; u < s->n_free; u++)
-            for (int a = 0; a < 12; a++) {
-                const int d = slot_coord(a);
-                int64_t at = s->a->col_start[12 * u + a];
-                for (dk_index b = s->blk_start[u]; b < s->blk_start[u + 1]; b++) {
-                    const double *B = s->blocks + 144 * (size_t)b + 12 * a;
-                    if (s->blk_node[b] == u)
-                        for (int c = 0; c < 12; c++)
-                            s->a->values[at++] = B[c];
-                    else
-                        for (int c = 0; c < 4; c++)
-                            s->a->values[at++] = B[coord_slot(d, c)];
-                }
-            }
     return F;
 }

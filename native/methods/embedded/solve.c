@@ -62,6 +62,16 @@ static double x_norm(const dk_embedded *ed, const double *x)
     return m;
 }
 
+/* J^T f and E_rot's blocks with their spares */
+static void swap_buffers(ed_system *s)
+{
+    double *g = s->grad, *r = s->rot;
+    s->grad = s->grad_spare;
+    s->rot = s->rot_spare;
+    s->grad_spare = g;
+    s->rot_spare = r;
+}
+
 /* One damped Gauss-Newton step (Levenberg-Marquardt with Nielsen's damping update, Madsen,
  * Nielsen & Tingleff 2004, the reference the paper gives): solves (J^T J + mu I) d = -J^T f
  * and compares the decrease of F with the one the linear model predicts,
@@ -74,21 +84,13 @@ static dk_status gn_step(dk_embedded *ed, double F, double *mu, double *nu, doub
 {
     ed_system *s = &ed->sys;
     const size_t N = 12 * (size_t)s->n_free;
-    double trace = 0.0;
-    for (size_t i = 0; i < N; i++)
-        trace += s->a->values[s->diag_pos[i]];
+    const double trace = ed_reduced_trace(s);
     *accepted = 0;
     for (int attempt = 0; attempt < 30 && !*accepted; attempt++) {
-        for (size_t i = 0; i < N; i++)
-            s->a->values[s->diag_pos[i]] += *mu;
-        dk_status st = dk_cholesky_factorize(s->chol, s->a, err);
-        for (size_t i = 0; i < N; i++)
-            s->a->values[s->diag_pos[i]] -= *mu;
+        dk_status st = ed_reduced_factorize(s, *mu, ed->team, err);
         if (st == DK_OK) {
             ed->factorization_count++;
-            for (size_t i = 0; i < N; i++)
-                s->step[i] = -s->grad[i];
-            st = dk_cholesky_solve(s->chol, s->step, 1, s->step, err);
+            st = ed_reduced_solve(s, err);
             if (st != DK_OK)
                 return dk_error_prefix(err, "EmbeddedDeformation solve");
             memcpy(s->x_try, ed->x, 12 * (size_t)ed->m * sizeof(double));
@@ -99,10 +101,16 @@ static dk_status gn_step(dk_embedded *ed, double F, double *mu, double *nu, doub
                     s->x_try[12 * (size_t)s->free_nodes[u] + a] += a >= 9 ? ed->L * d : d;
                     pred += d * (*mu * d - s->grad[12 * u + a]);
                 }
-            const double Ft = ed_evaluate(ed, NULL, s, s->x_try);
+            /* F, J^T f and E_rot's blocks at the trial point, into the spare buffers: the
+             * next step's if this one is taken */
+            swap_buffers(s);
+            const double Ft =
+                ed_evaluate(ed, s, s, s->x_try, ED_GRADIENT | ED_MOVING) + s->f_constant;
+            swap_buffers(s);
             const double rho = pred > 0.0 ? (F - Ft) / pred : (Ft < F ? 1.0 : -1.0);
             if (rho > 0.0 || (Ft == F && inf_norm(s->step, N) == 0.0)) {
                 memcpy(ed->x, s->x_try, 12 * (size_t)ed->m * sizeof(double));
+                swap_buffers(s);
                 *F_new = Ft;
                 *dnorm = inf_norm(s->step, N);
                 *accepted = 1;
@@ -149,10 +157,15 @@ dk_status dk_embedded_solve(dk_embedded *ed, const dk_solve_request *rq, double 
         return dk_error_prefix(err, "EmbeddedDeformation solve");
     if (rq->start == DK_START_COLD)
         ed_identity(ed->x, ed->m);
+    if (s->k_stale) /* the source moved: K with it */
+        ed_reduced_refresh(ed, s);
     const int maxit = rq->max_iterations > 0 ? rq->max_iterations : ed->opt.max_iterations;
     const double eps = ed->opt.tolerance;
     const size_t N = 12 * (size_t)s->n_free;
-    double F = ed_evaluate(ed, s, s, ed->x), mu = 0.0, nu = 2.0;
+    /* the terms no free node enters do not change during the solve */
+    s->f_constant = ed_evaluate(ed, NULL, s, ed->x, ED_CONSTANT);
+    double F = ed_evaluate(ed, s, s, ed->x, ED_GRADIENT | ED_MOVING) + s->f_constant;
+    double mu = 0.0, nu = 2.0;
     int it = 0;
     /* Eq. 12 as Gill, Murray & Wright give it (the paper's reference): converged when the
      * change of F, the gradient (grad F = 2 J^T f) and the step are all small, each against
@@ -171,7 +184,7 @@ dk_status dk_embedded_solve(dk_embedded *ed, const dk_solve_request *rq, double 
             break; /* no descent even with heavy damping: a stationary point for all we see */
         it++;
         const double change = fabs(F - F_new);
-        F = ed_evaluate(ed, s, s, ed->x);
+        F = F_new; /* gn_step left J^T f and E_rot's blocks at the new point */
         /* Gauss-Newton converges linearly here (a non-zero residual), often slowly where
          * the constraints conflict: a step and a decrease below the tests can leave many
          * more of about the same size to come (1.5e-3 of the model's size on the contract

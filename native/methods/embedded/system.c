@@ -1,4 +1,4 @@
-/* DeformKit embedded deformation: the fixed nodes and J^T J's pattern
+/* DeformKit embedded deformation: the fixed nodes and J^T J's block pattern
  * (embedded_internal.h). */
 #include "embedded_internal.h"
 
@@ -12,11 +12,28 @@ void ed_system_free(ed_system *s)
     free(s->targets);
     free(s->blk_start);
     free(s->blk_node);
-    free(s->blocks);
+    free(s->kblk);
+    free(s->rot);
+    free(s->rot_spare);
+    free(s->grad_spare);
+    free(s->kept);
     free(s->edge_blk);
     free(s->pos_blk);
-    dk_sparse_free(s->a);
-    free(s->diag_pos);
+    free(s->base);
+    free(s->red);
+    free(s->nl_start);
+    free(s->nl_node);
+    free(s->nl_off);
+    dk_sparse_free(s->S);
+    free(s->S_base);
+    free(s->S_part);
+    free(s->S_diag);
+    free(s->cl_start);
+    free(s->cl_pos);
+    free(s->w_start);
+    free(s->W);
+    free(s->lfac);
+    free(s->rhs);
     dk_cholesky_free(s->chol);
     free(s->grad);
     free(s->step);
@@ -59,7 +76,7 @@ static dk_status classify(const dk_embedded *ed, ed_system *s, dk_error *err)
     s->free_nodes = malloc(((size_t)m + 1) * sizeof *s->free_nodes);
     s->pos_vertex = malloc(((size_t)n + 1) * sizeof *s->pos_vertex);
     s->pos_target_row = malloc(((size_t)n + 1) * sizeof *s->pos_target_row);
-    s->targets = malloc((3 * (size_t)c->n_handle_vertices + 1) * sizeof *s->targets);
+    s->targets = calloc(3 * (size_t)c->n_handle_vertices + 1, sizeof *s->targets);
     dk_status st = DK_OK;
     if (!moves || !target_of || !s->node_unknown || !s->free_nodes || !s->pos_vertex ||
         !s->pos_target_row || !s->targets) {
@@ -93,13 +110,26 @@ static dk_status classify(const dk_embedded *ed, ed_system *s, dk_error *err)
         target_of[v] = -1;
     for (dk_index i = 0; i < c->n_handle_vertices; i++)
         target_of[c->handle_vertices[i]] = i;
+    /* the terms some free node moves first, then those of constant nodes only (a fixed
+     * vertex's: their residuals do not depend on the unknowns, ed_evaluate()) */
     s->n_pos = 0;
-    for (dk_index v = 0; v < n; v++) {
-        if (c->role[v] >= 0) {
+    for (int moving = 1; moving >= 0; moving--) {
+        for (dk_index v = 0; v < n; v++) {
+            if (c->role[v] < 0)
+                continue;
+            int any = 0;
+            for (dk_index q = 0; q < k; q++) {
+                const dk_index j = ed->nb[(size_t)v * k + q];
+                any |= j >= 0 && s->node_unknown[j] >= 0;
+            }
+            if (any != moving)
+                continue;
             s->pos_vertex[s->n_pos] = v;
             s->pos_target_row[s->n_pos] = target_of[v];
             s->n_pos++;
         }
+        if (moving)
+            s->n_pos_moving = s->n_pos;
     }
 done:
     free(moves);
@@ -108,14 +138,17 @@ done:
 }
 
 /* The blocks of J^T J: every free node with itself, its free graph neighbours, and the free
- * nodes it shares a positional term with. */
+ * nodes it shares a positional term with (which makes both "kept", schur.c). */
 static dk_status block_pattern(const dk_embedded *ed, ed_system *s, dk_error *err)
 {
     const dk_index k = ed->k, nf = s->n_free;
     int64_t cap = nf + 2 * (int64_t)ed->n_edges + (int64_t)s->n_pos * k * k + 1;
     int64_t *pairs = malloc((size_t)cap * sizeof *pairs), np = 0;
-    if (!pairs)
+    s->kept = calloc((size_t)nf + 1, 1);
+    if (!pairs || !s->kept) {
+        free(pairs);
         return ed_oom(err, "matrix pattern");
+    }
     for (dk_index u = 0; u < nf; u++)
         pairs[np++] = (int64_t)u * nf + u;
     for (dk_index e = 0; e < ed->n_edges; e++) {
@@ -132,8 +165,11 @@ static dk_status block_pattern(const dk_embedded *ed, ed_system *s, dk_error *er
             for (dk_index q = 0; q < k; q++) {
                 const dk_index a = nb[p] >= 0 ? s->node_unknown[nb[p]] : -1;
                 const dk_index b = nb[q] >= 0 ? s->node_unknown[nb[q]] : -1;
-                if (a >= 0 && b >= 0)
+                if (a >= 0 && b >= 0) {
                     pairs[np++] = (int64_t)a * nf + b;
+                    if (a != b)
+                        s->kept[a] = s->kept[b] = 1;
+                }
             }
     }
     qsort(pairs, (size_t)np, sizeof *pairs, cmp_i64);
@@ -144,8 +180,9 @@ static dk_status block_pattern(const dk_embedded *ed, ed_system *s, dk_error *er
     s->n_blocks = nb;
     s->blk_start = calloc((size_t)nf + 1, sizeof *s->blk_start);
     s->blk_node = malloc(((size_t)nb + 1) * sizeof *s->blk_node);
-    s->blocks = malloc(((size_t)nb * 144 + 1) * sizeof *s->blocks);
-    if (!s->blk_start || !s->blk_node || !s->blocks) {
+    s->kblk = malloc(((size_t)nb * 16 + 1) * sizeof *s->kblk);
+    s->rot = calloc(81 * (size_t)nf + 1, sizeof *s->rot);
+    if (!s->blk_start || !s->blk_node || !s->kblk || !s->rot) {
         free(pairs);
         return ed_oom(err, "matrix pattern");
     }
@@ -159,46 +196,20 @@ static dk_status block_pattern(const dk_embedded *ed, ed_system *s, dk_error *er
     return DK_OK;
 }
 
-/* The CSC matrix over the blocks (rows of each column: the blocks' rows in order), the
- * diagonal positions, the per-residual block indices, and the analysis. */
+/* The per-residual block indices, the step's buffers, and the reduced system. */
 static dk_status matrix(dk_embedded *ed, ed_system *s, dk_error *err)
 {
-    const dk_index nf = s->n_free, N = 12 * nf, k = ed->k;
-    /* entries: a dense block per node, 3 x 16 for each pair of different nodes */
-    const int64_t nnz = 144 * (int64_t)nf + 48 * (s->n_blocks - nf);
-    dk_status st = dk_sparse_alloc(N, N, nnz, &s->a, err);
-    if (st != DK_OK)
-        return st;
-    s->diag_pos = malloc(((size_t)N + 1) * sizeof *s->diag_pos);
+    const dk_index nf = s->n_free, k = ed->k;
     s->edge_blk = malloc((4 * 2 * (size_t)ed->n_edges + 1) * sizeof *s->edge_blk);
     s->pos_blk = malloc(((size_t)s->n_pos * k * k + 1) * sizeof *s->pos_blk);
-    s->grad = malloc(((size_t)N + 1) * sizeof *s->grad);
-    s->step = malloc(((size_t)N + 1) * sizeof *s->step);
+    s->grad = malloc((12 * (size_t)nf + 1) * sizeof *s->grad);
+    s->grad_spare = malloc((12 * (size_t)nf + 1) * sizeof *s->grad_spare);
+    s->rot_spare = malloc((81 * (size_t)nf + 1) * sizeof *s->rot_spare);
+    s->step = malloc((12 * (size_t)nf + 1) * sizeof *s->step);
     s->x_try = malloc((12 * (size_t)ed->m + 1) * sizeof *s->x_try);
-    if (!s->diag_pos || !s->edge_blk || !s->pos_blk || !s->grad || !s->step || !s->x_try)
+    if (!s->edge_blk || !s->pos_blk || !s->grad || !s->grad_spare || !s->rot_spare ||
+        !s->step || !s->x_try)
         return ed_oom(err, "matrix");
-    int64_t at = 0;
-    for (dk_index u = 0; u < nf; u++)
-        for (int a = 0; a < 12; a++) {
-            const int d = slot_coord(a);
-            s->a->col_start[12 * u + a] = (dk_index)at;
-            for (dk_index b = s->blk_start[u]; b < s->blk_start[u + 1]; b++) {
-                const dk_index v = s->blk_node[b];
-                if (v == u) { /* the node's own block: dense (the rotation term) */
-                    s->diag_pos[12 * u + a] = at + a;
-                    for (int c = 0; c < 12; c++)
-                        s->a->row_index[at++] = 12 * v + c;
-                } else { /* between nodes: the same coordinate only (R[d][.], t[d]) */
-                    for (int c = 0; c < 4; c++)
-                        s->a->row_index[at++] = 12 * v + coord_slot(d, c);
-                }
-            }
-        }
-    s->a->col_start[N] = (dk_index)at;
-    memset(s->a->values, 0, (size_t)at * sizeof(double));
-    for (dk_index u = 0; u < nf; u++) /* a definite placeholder for the analysis */
-        for (int a = 0; a < 12; a++)
-            s->a->values[s->diag_pos[12 * u + a]] = 1.0;
     for (dk_index e = 0; e < ed->n_edges; e++)
         for (int dir = 0; dir < 2; dir++) {
             const dk_index j = s->node_unknown[ed->edges[2 * e + dir]];
@@ -217,12 +228,7 @@ static dk_status matrix(dk_embedded *ed, ed_system *s, dk_error *err)
                     ed_block_of(s, nb[p] >= 0 ? s->node_unknown[nb[p]] : -1,
                              nb[q] >= 0 ? s->node_unknown[nb[q]] : -1);
     }
-    st = dk_cholesky_analyze(s->a, &s->chol, err);
-    if (st != DK_OK)
-        return dk_error_prefix(err, "EmbeddedDeformation: analysis");
-    dk_cholesky_set_team(s->chol, ed->team);
-    ed->analysis_count++;
-    return DK_OK;
+    return ed_reduced_build(ed, s, err);
 }
 
 /* `phase`: the index of "constraints" in the running bind's or rebind's phase table (the
