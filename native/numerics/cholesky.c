@@ -390,11 +390,48 @@ size_t dk_cholesky_memory(const dk_cholesky *chol)
     return bytes;
 }
 
-double dk_cholesky_rcond(dk_cholesky *chol)
+/* a's diagonal entry (i, i), 0 when not stored */
+static double diagonal_entry(const dk_sparse *a, dk_index i)
 {
-    if (!chol || !chol->factored) return 0.0;
-    const double r = cholmod_rcond(chol->factor, &chol->common);
-    return r > 0.0 ? r : 0.0;
+    dk_index lo = a->col_start[i], hi = a->col_start[i + 1] - 1;
+    while (lo <= hi) {
+        const dk_index mid = lo + (hi - lo) / 2;
+        if (a->row_index[mid] == i) return a->values[mid];
+        if (a->row_index[mid] < i) lo = mid + 1;
+        else hi = mid - 1;
+    }
+    return 0.0;
+}
+
+double dk_cholesky_min_pivot_ratio(const dk_cholesky *chol, const dk_sparse *a)
+{
+    if (!chol || !chol->factored || !a || a->n_cols != chol->n) return 0.0;
+    const cholmod_factor *L = chol->factor;
+    const int *perm = L->Perm;
+    const double *x = L->x;
+    double worst = INFINITY;
+    for (dk_index j = 0; j < chol->n; j++) {
+        double pivot;
+        if (L->is_super) { /* column j of its supernode s: the diagonal of the dense block */
+            const int *super = L->super, *pi = L->pi, *px = L->px;
+            size_t lo = 0, hi = L->nsuper - 1;
+            while (lo < hi) { /* the supernode holding column j */
+                const size_t mid = (lo + hi + 1) / 2;
+                if (super[mid] <= j) lo = mid;
+                else hi = mid - 1;
+            }
+            const int k = j - super[lo];
+            pivot = x[px[lo] + (size_t)k * (size_t)(pi[lo + 1] - pi[lo]) + k];
+            pivot *= pivot; /* supernodal factors are LL' */
+        } else {
+            pivot = x[((const int *)L->p)[j]];
+            if (L->is_ll) pivot *= pivot;
+        }
+        const double d = diagonal_entry(a, perm ? (dk_index)perm[j] : j);
+        if (!(d > 0.0)) return 0.0;
+        worst = fmin(worst, pivot / d);
+    }
+    return worst == INFINITY ? 0.0 : worst;
 }
 
 dk_status dk_cholesky_negative_pivots(const dk_cholesky *chol, dk_index *count, dk_error *err)

@@ -81,11 +81,13 @@ int dk_cholesky_analysis_count(const dk_cholesky *chol);
 /** Bytes held by the factor (for memory reports). */
 size_t dk_cholesky_memory(const dk_cholesky *chol);
 
-/** CHOLMOD's cheap estimate of the last factorization's reciprocal condition number,
- *  (min / max of L's diagonal)^2: near DBL_EPSILON when the matrix is singular but for
- *  rounding, which lets a factorization "succeed" with a pivot of rounding's size and sign;
- *  0 when not factored. */
-double dk_cholesky_rcond(dk_cholesky *chol);
+/** The smallest pivot of the last factorization against its own diagonal entry:
+ *  min_j L_jj^2 / A_pp (LDL': D_jj / A_pp), p the row pivot j eliminated, for the matrix `a`
+ *  (n x n, the one factored). Near DBL_EPSILON when `a` is singular but for rounding, which
+ *  lets a factorization "succeed" with a pivot of rounding's size and sign; unlike a
+ *  condition number it does not fall with the scale of some rows against others. 0 when
+ *  not factored or a diagonal entry is not positive. */
+double dk_cholesky_min_pivot_ratio(const dk_cholesky *chol, const dk_sparse *a);
 
 /** Like dk_cholesky_analyze, for symmetric INDEFINITE nonsingular matrices (the shifted
  *  operators L - sigma M of the band-by-band eigensolver): simplicial LDL' without pivoting

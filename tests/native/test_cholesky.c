@@ -961,7 +961,46 @@ static void test_compact_upper(void)
     free(diag); free(b); free(x1); free(x2);
 }
 
-DK_TEST_MAIN(test_small_against_lapack, test_compact_upper, test_parallel_solve, test_parallel_schedule_shapes, test_not_positive_definite,
+/* dk_cholesky_min_pivot_ratio on a grid Laplacian shifted by s (every diagonal entry
+ * degree + s, degree 3..6): every pivot L_jj^2 lies between the matrix's smallest
+ * eigenvalue s and its own diagonal entry, so the ratio is in [s / (6 + s), 1]; and the last
+ * pivot is at most n s (the constant vector's Rayleigh quotient bounds 1 / (A^-1)_nn), so
+ * near singularity the ratio is at most n s / 3. Supernodal and simplicial factors. */
+static void test_min_pivot_ratio(void)
+{
+    const int m = SANITIZED ? 14 : 24;
+    const dk_index n = m * m * m;
+    double *shift = malloc(sizeof(double) * n);
+    CHECK(shift != NULL);
+    if (!shift) return;
+    for (int simplicial = 0; simplicial < 2; simplicial++)
+        for (int k = 0; k < 2; k++) {
+            const double s = k == 0 ? 1.0 : 1e-9;
+            for (dk_index i = 0; i < n; i++) shift[i] = s;
+            dk_sparse *a = grid_laplacian(m, m, m, shift);
+            dk_error err = {0};
+            dk_cholesky *ch = NULL;
+            CHECK(a != NULL);
+            if (!a) continue;
+            CHECK((simplicial ? dk_cholesky_analyze_simplicial(a, &ch, &err)
+                              : dk_cholesky_analyze(a, &ch, &err)) == DK_OK);
+            CHECK(dk_cholesky_min_pivot_ratio(ch, a) == 0.0); /* not factored yet */
+            CHECK(dk_cholesky_is_supernodal(ch) == !simplicial);
+            CHECK_MSG(dk_cholesky_factorize(ch, a, &err) == DK_OK, "%s", err.message);
+            const double r = dk_cholesky_min_pivot_ratio(ch, a);
+            if (k == 0)
+                CHECK_MSG(r >= s / (6.0 + s) * (1.0 - 1e-12) && r <= 1.0 + 1e-12,
+                          "ratio %g outside [%g, 1]", r, s / (6.0 + s));
+            else
+                CHECK_MSG(r > 0.0 && r <= (double)n * s / 3.0, "ratio %g above %g", r,
+                          (double)n * s / 3.0);
+            dk_cholesky_free(ch);
+            csc_free(a);
+        }
+    free(shift);
+}
+
+DK_TEST_MAIN(test_small_against_lapack, test_min_pivot_ratio, test_compact_upper, test_parallel_solve, test_parallel_schedule_shapes, test_not_positive_definite,
              test_not_positive_definite_supernodal,
              test_refactorize_and_multi_rhs, test_bad_arguments, test_indefinite_inertia,
              test_big_grid, test_armadillo)
