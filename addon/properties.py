@@ -206,6 +206,10 @@ _deformer_ann = {
     # names the original and gets a uid, attribute and cache of its own
     "owner": StringProperty(name="Owner", description="The object this deformer's id "
                                                       "belongs to"),
+    # a simulation's frame key (solver.simulation.frame_key, hex) whose result the offset
+    # attribute holds, or "": that frame shows it again after a reload, when the frames
+    # played before it are no longer kept
+    "sim_frame_key": StringProperty(name="Simulated Frame", default=""),
     "status": StringProperty(name="Status"),
     "status_is_error": BoolProperty(default=False),
     "status_overlap": StringProperty(name="Overlapping Groups",

@@ -731,6 +731,16 @@ def main():
         if not addon.native.has_class(m.native_class):
             log("skipping %s: this build has no deformkit.%s" % (m.label, m.native_class))
             continue
+        c = addon.solver.controls.collector(m)
+        if not c.uses_handles:
+            # the scenarios move a handle; a lattice, cage or bones would need edits of
+            # their own, which they do not describe
+            if wanted is not None:
+                raise DemoError("%s is driven by its %s, which the demo's scenarios (a "
+                                "handle moved) do not describe" % (m.label, c.LABEL))
+            log("skipping %s: driven by its %s, not by the scenarios' handle"
+                % (m.label, c.LABEL))
+            continue
         method_list.append((i, m))
     if wanted is not None:
         unknown = set(wanted) - {m.id for m in reg}

@@ -198,6 +198,7 @@ def bind_end(obj, d, job, mats, depsgraph=None):
     d.bind_n_vertices = e.n_vertices
     d.bind_n_faces = e.n_faces
     d.bound = True
+    d.sim_frame_key = ""   # the attribute holds no simulated frame of this binding yet
     cache.runtime.pop((obj.name, d.uid), None)
     geonodes.ensure_modifier(obj, d)
     geonodes.ensure_attribute(obj.data, d.attribute_name)
@@ -232,6 +233,7 @@ def bind_warnings(obj, d):
 def unbind(obj, d):
     cache.drop(obj.name, d.uid)
     d.bound = False
+    d.sim_frame_key = ""
     for h in d.handles:
         h.is_bound = False
     a = obj.data.attributes.get(d.attribute_name)

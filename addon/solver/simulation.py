@@ -15,7 +15,10 @@ keyed settings). On a frame:
 - a frame with no kept frame before it (a jump ahead of the cache, or a frame before it
   whose checkpoint was dropped for memory) cannot be simulated: it shows the input, the
   kept frames after the last checkpoint before it are dropped, and the panel says from
-  which frame to play (a bake plays the frames before its range itself).
+  which frame to play (a bake plays the frames before its range itself). The exception:
+  the frame whose result the deformer's offset attribute holds, with the same key (saved
+  with the file, the kept frames are not: a reopened file, or another scene shown after
+  a load), shows that result instead of the input until playback simulates it again.
 A bake therefore writes what playback showed, bit for bit, and a bake split into chunks
 starts each chunk from the checkpoint of the frame before it (export_checkpoint /
 import_checkpoint, scripts/batch_bake.py --checkpoints)."""
@@ -47,6 +50,7 @@ class Frames:
                             #           chain: the history's hash, chain(previous, key)]
         self.at = None      # the frame whose state the native object holds now, or None
         self.gap_from = None  # the frame playback must start from to reach the shown one
+        self.shown = None     # the key of the frame shown (None: the input, no frame)
 
     def drop_after(self, frame):
         for f in [f for f in self.items if f > frame]:
@@ -101,11 +105,12 @@ class _Result:
         self.energy = float("nan")
 
 
-def solve(e, plan, call, frame, start):
+def solve(e, plan, call, frame, start, stored=None):
     """The positions of `frame` (scene frame) for the solve `plan` (solving._plan_solve) of
     the cache entry `e`: a kept frame, or one simulated from the frame before it, or a reset
-    at the start. `call(label, fn, **kw)` runs a native call (solver.calls). Returns a
-    SolveResult-like object."""
+    at the start. `call(label, fn, **kw)` runs a native call (solver.calls); `stored(key)`
+    gives the positions the deformer's attribute holds when they are the frame of `key`,
+    else None. Returns a SolveResult-like object; e.sim.shown says which frame it is."""
     sim = getattr(e, "sim", None)
     if sim is None or sim.start != start:
         sim = e.sim = Frames()
@@ -117,8 +122,10 @@ def solve(e, plan, call, frame, start):
     kw.pop("max_iterations", None)
     label = plan["label"]
     rec = sim.items.get(frame)
+    sim.shown = None
     if frame >= start and rec is not None and rec[0] == key:   # kept: no solve
         sim.gap_from = None
+        sim.shown = key
         return _Result(rec[2])
     if frame <= start:
         # the start (kept for the frames after it), or a frame before it: a reset there,
@@ -141,6 +148,10 @@ def solve(e, plan, call, frame, start):
                 sim.drop_after(c)
             sim.gap_from = c + 1 if c is not None else start
             sim.at = None
+            kept = stored(key) if stored is not None else None
+            if kept is not None:   # this very frame, as saved: shown until played again
+                sim.shown = key
+                return _Result(kept)
             return call(label + " solve", e.native.solve, warm_start=False, **plan["goal"],
                         **kw)
         if sim.at != frame - 1:
@@ -155,6 +166,7 @@ def solve(e, plan, call, frame, start):
                         history]
     sim.at = frame
     sim.gap_from = None
+    sim.shown = key
     sim._trim()
     return res
 

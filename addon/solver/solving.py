@@ -91,9 +91,14 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
     if dynamic:  # this frame from the one before it, or kept (milliseconds: no worker)
         t0 = time.perf_counter()
         res = simulation.solve(e, plan, calls._native_call, scene.frame_current,
-                               scene.frame_start)
+                               scene.frame_start, lambda k: _stored_frame(obj, d, e, k))
         ms = (time.perf_counter() - t0) * 1000.0
-        return _finish_solve(obj, d, e, key, plan, res, ms)
+        pos = _finish_solve(obj, d, e, key, plan, res, ms)
+        if plan["write"]:
+            shown = e.sim.shown.hex() if e.sim.shown is not None else ""
+            if d.sim_frame_key != shown:
+                d.sim_frame_key = shown
+        return pos
     if workers._async_wanted(e, interactive, cold, write):
         previews._fetch_basis(e, methods.get(d.method))  # the object is idle now
         e.worker = workers._Worker(e, plan)
@@ -108,6 +113,21 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
     res = calls._native_call(plan["label"] + " solve", e.native.solve, **plan["goal"], **plan["kw"])
     ms = (time.perf_counter() - t0) * 1000.0
     return _finish_solve(obj, d, e, key, plan, res, ms)
+
+
+def _stored_frame(obj, d, e, frame_key):
+    """The positions the deformer's offset attribute holds when they are a simulation's
+    frame `frame_key` (simulation.frame_key; d.sim_frame_key says which frame the attribute
+    holds), else None."""
+    if not d.sim_frame_key or d.sim_frame_key != frame_key.hex():
+        return None
+    me = obj.data
+    a = me.attributes.get(d.attribute_name)
+    if a is None or len(a.data) != len(me.vertices) or e.source is None:
+        return None
+    off = np.empty(len(me.vertices) * 3, dtype=np.float32)
+    a.data.foreach_get("vector", off)
+    return e.source + off.reshape(-1, 3).astype(np.float64)
 
 
 def _frame_inputs(m, d, obj, scene):

@@ -139,11 +139,17 @@ def simulation_text(obj, d):
         return None
     e = cache._cache.get((obj.name, d.uid))
     s = simulation.summary(e) if e is not None else None
+    sim = getattr(e, "sim", None) if e is not None else None
+    # a frame ahead of the kept ones shows the input, or its result as saved with the file
+    saved = sim is not None and sim.gap_from is not None and sim.shown is not None
     if s is None or s[0] is None:
+        if saved:
+            return ("simulation: this frame shows its result as saved; play from frame %d "
+                    "to simulate on" % sim.gap_from)
         return "simulation: plays from the scene's first frame"
     first, last, gap = s
     text = "simulated frames %d-%d" % (first, last)
     if gap is not None:
-        text += ("; this frame is ahead of them and shows the input: play from frame %d"
-                 % gap)
+        text += ("; this frame is ahead of them and shows %s: play from frame %d"
+                 % ("its result as saved" if saved else "the input", gap))
     return text

@@ -209,6 +209,43 @@ def test_a_frame_ahead_of_the_simulation():
     R.check("the panel says to play from frame 6", "play from frame 6" in text, text)
 
 
+def test_a_reopened_file_shows_the_frame_it_saved():
+    """The frames played are kept in memory, not in the file: on a reopened file the frame
+    saved is ahead of what can be simulated. It shows what was saved (not the input), also
+    after an update re-solves the deformer, with the panel saying where to play from; an
+    edit of that frame, or another frame, shows the input as before."""
+    obj, d, ao = jiggle_arm()
+    got = play(obj, range(1, 13))
+    blend = os.path.join(S.OUTPUT, "jiggle_saved.blend")
+    name = obj.name
+    bpy.ops.wm.save_as_mainfile(filepath=blend)
+    bpy.ops.wm.open_mainfile(filepath=blend)
+    obj = bpy.data.objects[name]
+    d = obj.deformkit.deformers[0]
+    R.check("the file opens at the frame it saved", bpy.context.scene.frame_current == 12,
+            bpy.context.scene.frame_current)
+    obj.update_tag()                       # an update: the add-on solves the deformer again
+    bpy.context.view_layer.update()
+    key = (obj.name, d.uid)
+    R.check("the add-on solved it after the load", key in S.solver.cache._cache)
+    shown = S.evaluated_positions(obj)
+    R.check("the saved frame shows as saved (%.1e)" % np.abs(shown - got[12]).max(),
+            np.abs(shown - got[12]).max() < TOL, np.abs(shown - got[12]).max())
+    R.check("and differs from the input", np.abs(shown - S.armature_input(obj, d)).max() > 0.01)
+    text = S.solver.status.simulation_text(obj, d)
+    R.check("the panel says it is the saved result, and to play from frame 1",
+            "as saved" in text and "play from frame 1" in text, text)
+    d.options_shape_matching.alpha = 0.5 * d.options_shape_matching.alpha   # an edit here
+    bpy.context.view_layer.update()
+    inp = S.armature_input(obj, d)
+    R.check("an edit of the frame shows the input",
+            np.abs(S.evaluated_positions(obj) - inp).max() < TOL)
+    bpy.context.scene.frame_set(13)
+    inp = S.armature_input(obj, d)
+    R.check("another frame ahead shows the input",
+            np.abs(S.evaluated_positions(obj) - inp).max() < TOL)
+
+
 def test_a_keyed_stiffness_reaches_each_frame():
     obj, d, ao = jiggle_arm()
     d.options_shape_matching.alpha = 0.1
@@ -326,7 +363,7 @@ def test_a_dropped_checkpoint_sends_playback_back():
 for t in (test_playback_is_the_simulation, test_an_edit_resimulates_from_the_frame_it_changes,
           test_the_hold_paint_reaches_each_vertex,
           test_painted_stiffness_damping_and_squash_reach_each_vertex,
-          test_a_frame_ahead_of_the_simulation,
+          test_a_frame_ahead_of_the_simulation, test_a_reopened_file_shows_the_frame_it_saved,
           test_a_keyed_stiffness_reaches_each_frame,
           test_bakes_write_what_played, test_a_dropped_checkpoint_sends_playback_back):
     R.run(t)
