@@ -731,7 +731,11 @@ def main():
         if not addon.native.has_class(m.native_class):
             log("skipping %s: this build has no deformkit.%s" % (m.label, m.native_class))
             continue
-        c = addon.solver.controls.collector(m)
+        try:
+            c = addon.solver.controls.collector(m)
+        except addon.errors.DeformKitError as exc:   # controls this add-on cannot read
+            log("skipping %s: %s" % (m.label, exc))
+            continue
         if not c.uses_handles:
             # the scenarios move a handle; a lattice, cage or bones would need edits of
             # their own, which they do not describe

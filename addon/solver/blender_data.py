@@ -100,10 +100,14 @@ def check_editable(obj):
                              "Local > Object and Data)" % (obj.data.name, obj.name, lib.name))
 
 
-def write_offset(obj, d, offset, retime=False):
+def write_offset(obj, d, offset, retime=False, sim_key=""):
+    """The deformer's result (offset from its input, n x 3) into its attribute; `sim_key`:
+    the simulated frame it is (solving._sim_key), "" for anything else."""
     me = obj.data
     a = geonodes.ensure_attribute(me, d.attribute_name)
     a.data.foreach_set("vector", np.ascontiguousarray(offset, dtype=np.float32).ravel())
+    if d.sim_frame_key != sim_key:
+        d.sim_frame_key = sim_key
     me.update_tag()
     if retime:
         # Frame change: a depsgraph re-evaluated after this tag (a render's, see handlers.py)
@@ -115,6 +119,8 @@ def write_offset(obj, d, offset, retime=False):
 def zero_offset(obj, d):
     me = obj.data
     a = me.attributes.get(d.attribute_name)
+    if d.sim_frame_key:
+        d.sim_frame_key = ""
     if a is not None and len(a.data) == len(me.vertices):
         a.data.foreach_set("vector", np.zeros(len(me.vertices) * 3, dtype=np.float32))
         me.update_tag()

@@ -115,6 +115,7 @@ def ensure_own_uid(obj, d):
     cache.drop(obj.name, old_uid)
     d.uid = new_uid()
     d.owner = obj.name
+    d.sim_frame_key = ""   # the copy's attribute is a new one: no simulated frame yet
     if not any(o.data == me for o in others):  # its own mesh (Shift+D): the old data goes
         geonodes.remove_attribute(me, old_attr)
         old = me.color_attributes.get(old_mat) if hasattr(me, "color_attributes") else None

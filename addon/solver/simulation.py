@@ -51,6 +51,8 @@ class Frames:
         self.at = None      # the frame whose state the native object holds now, or None
         self.gap_from = None  # the frame playback must start from to reach the shown one
         self.shown = None     # the key of the frame shown (None: the input, no frame)
+        self.rest_of = None   # the rest shape whose digest rest_digest is (solving._sim_key)
+        self.rest_digest = b""
 
     def drop_after(self, frame):
         for f in [f for f in self.items if f > frame]:

@@ -1,6 +1,7 @@
 """Solving a bound deformer for the targets' current placement on this frame: what to ask the
 native object (the handles' transforms, the animated input), and what reaches the modifier."""
 
+import hashlib
 import math
 import struct
 import time
@@ -93,12 +94,8 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
         res = simulation.solve(e, plan, calls._native_call, scene.frame_current,
                                scene.frame_start, lambda k: _stored_frame(obj, d, e, k))
         ms = (time.perf_counter() - t0) * 1000.0
-        pos = _finish_solve(obj, d, e, key, plan, res, ms)
-        if plan["write"]:
-            shown = e.sim.shown.hex() if e.sim.shown is not None else ""
-            if d.sim_frame_key != shown:
-                d.sim_frame_key = shown
-        return pos
+        plan["sim_key"] = _sim_key(e, e.sim.shown) if e.sim.shown is not None else ""
+        return _finish_solve(obj, d, e, key, plan, res, ms)
     if workers._async_wanted(e, interactive, cold, write):
         previews._fetch_basis(e, methods.get(d.method))  # the object is idle now
         e.worker = workers._Worker(e, plan)
@@ -115,11 +112,29 @@ def solve(obj, d, depsgraph=None, cold=False, write=True, force=False, check_gro
     return _finish_solve(obj, d, e, key, plan, res, ms)
 
 
+def _sim_key(e, frame_key):
+    """What d.sim_frame_key holds for a simulated frame: its frame key (simulation.frame_key:
+    the frame, its input, handles and solve settings) and the binding's own (the method, the
+    bind settings, the groups and paints, the rest shape): a re-bind with other settings is
+    another simulation. Hex; the same after a reload."""
+    sim = e.sim
+    if sim.rest_of is not e.rest:   # the rest shape's digest, once per binding
+        sim.rest_of = e.rest
+        sim.rest_digest = hashlib.blake2b(np.ascontiguousarray(e.rest).tobytes(),
+                                          digest_size=20).digest()
+    h = hashlib.blake2b(frame_key, digest_size=20)
+    h.update(str(e.method_id).encode())
+    h.update(repr(e.settings).encode())
+    h.update(e.groups if isinstance(e.groups, bytes) else repr(e.groups).encode())
+    h.update(sim.rest_digest)
+    return h.hexdigest()
+
+
 def _stored_frame(obj, d, e, frame_key):
     """The positions the deformer's offset attribute holds when they are a simulation's
-    frame `frame_key` (simulation.frame_key; d.sim_frame_key says which frame the attribute
-    holds), else None."""
-    if not d.sim_frame_key or d.sim_frame_key != frame_key.hex():
+    frame `frame_key` of this binding (d.sim_frame_key says which frame the attribute holds:
+    _sim_key), else None."""
+    if not d.sim_frame_key or d.sim_frame_key != _sim_key(e, frame_key):
         return None
     me = obj.data
     a = me.attributes.get(d.attribute_name)
@@ -293,7 +308,8 @@ def _finish_solve(obj, d, e, key, plan, res, ms):
         # the offset computed in float64 and rounded once, straight into float32 (one pass)
         off = np.empty(pos.shape, dtype=np.float32)
         np.subtract(pos, e.source, out=off, casting="unsafe")
-        blender_data.write_offset(obj, d, off, retime=plan["cold"])
+        blender_data.write_offset(obj, d, off, retime=plan["cold"],
+                                  sim_key=plan.get("sim_key", ""))
         e.last_inputs = plan["inputs"]
         e.last_cold = plan["cold"]
         e.last_T = plan["T"]

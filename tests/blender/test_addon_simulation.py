@@ -235,9 +235,22 @@ def test_a_reopened_file_shows_the_frame_it_saved():
     text = S.solver.status.simulation_text(obj, d)
     R.check("the panel says it is the saved result, and to play from frame 1",
             "as saved" in text and "play from frame 1" in text, text)
-    d.options_shape_matching.alpha = 0.5 * d.options_shape_matching.alpha   # an edit here
+    # a bind setting changed: another simulation, whose frame this is not (the key names the
+    # binding too)
+    m = S.methods.get(d.method)
+    o = next(o for o in m.options if o.bind_time and o.type == "INT")
+    before = getattr(d.options_shape_matching, o.name)
+    setattr(d.options_shape_matching, o.name, before + 1)
     bpy.context.view_layer.update()
     inp = S.armature_input(obj, d)
+    R.check("a changed bind setting (%s) shows the input" % o.name,
+            np.abs(S.evaluated_positions(obj) - inp).max() < TOL)
+    setattr(d.options_shape_matching, o.name, before)   # back: the saved frame's binding
+    bpy.context.view_layer.update()
+    R.check("the input still (the attribute holds it now, not the saved frame)",
+            np.abs(S.evaluated_positions(obj) - inp).max() < TOL)
+    d.options_shape_matching.alpha = 0.5 * d.options_shape_matching.alpha   # an edit here
+    bpy.context.view_layer.update()
     R.check("an edit of the frame shows the input",
             np.abs(S.evaluated_positions(obj) - inp).max() < TOL)
     bpy.context.scene.frame_set(13)
