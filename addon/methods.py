@@ -754,8 +754,9 @@ METHODS.append(Method(
                "has none)", kw=None, advanced=True),
         Option("falloff", "FLOAT", 0.0, "Blend Distance",
                "How far from what follows the rig (the Fixed group, outside the Region, the "
-               "handles) the jiggle fades in (0: half the depth of the region): no crease "
-               "where the two meet. Paint the Hold group to hold more", min=0.0, max=1e9,
+               "handles) the jiggle fades in (0: half the depth of the region, and with Local "
+               "clusters at most half the Cluster Size): no crease where the two meet. Paint "
+               "the Hold group to hold more", min=0.0, max=1e9,
                subtype="DISTANCE", advanced=True),
         Option("substeps", "INT", 2, "Substeps",
                "Integration steps per frame: more make the same Stiffness stiffer and the "

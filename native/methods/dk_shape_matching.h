@@ -4,9 +4,12 @@
  * from frame to frame (dk_method_ops.state_size), and each warm solve advances one frame.
  *
  * The points are the mesh's vertices (faces are not needed: meshless). Each vertex has a mass
- * m_i (1, or `masses`). The vertices are grouped into overlapping clusters; vertex i lies in
- * n_i of them and counts with the mass m_i / n_i in each, so that the clusters' forces add up
- * to no net force and no net torque. For a cluster C with rest offsets q_i (its vertices in
+ * m_i (1, or `masses`). The vertices are grouped into overlapping clusters; vertex i has the
+ * share phi_iC of cluster C (its shares sum to 1) and counts with the mass m_i phi_iC in it,
+ * so that the clusters' forces add up to no net force and no net torque. The paper's share
+ * is 1 / n_i (n_i the clusters of i); that of the automatic cubes is the cube's trilinear hat
+ * (1 at its centre, 0 on its faces), so that goals vary continuously across the cubes' faces
+ * instead of jumping there (given clusters and whole parts: 1 / n_i). For a cluster C with rest offsets q_i (its vertices in
  * the goal shape, less their mass centre) and current offsets p_i = x_i - x_cm:
  *   RIGID      A_pq = sum m p q^T, R its closest rotation (polar decomposition; for a flat
  *              or straight cluster the rotation that keeps orientation, det R = +1: the
@@ -22,7 +25,7 @@
  * assumes volumetric clusters): A = argmin sum m |A q - p|^2 + lambda |A - R|^2 with lambda =
  * 1e-4 of the mean squared extent per mode (rotation-invariant, scale-free), so that a flat
  * cluster of a surface keeps R across its normal instead of dividing by zero; elsewhere it
- * changes the fit by about 1e-4. A vertex's goal g_i is the mean of its clusters' goals.
+ * changes the fit by about 1e-4. A vertex's goal g_i is sum_C phi_iC g_iC.
  *
  * Dynamics, per vertex (k_i = alpha_i / h^2 with h = time_step / substeps the integration
  * step: alpha is the paper's stiffness per step, so that alpha = 1 reaches the goals in one
@@ -46,7 +49,9 @@
  * Attachment (for secondary motion; not in the paper): a free vertex i with attachment a_i
  * in [0, 1] (the falloff near the kinematic vertices, and a painted map) is also pulled
  * towards y_i(t), where the input puts it at that time (interpolated over the frame), moved
- * as its nearest kinematic vertex (at the rest) is moved off the input (by a handle), with
+ * as the kinematic vertices near it (at the rest) are moved off the input (by a handle): of
+ * each group (a handle, or what follows the input) its nearest vertex, the groups blended by
+ * their own falloff weights, so that the place varies continuously; with
  * the stiffness a_i / h^2: its goal becomes (k g + k_a y) / (k + k_a), its stiffness k + k_a,
  * so every integrator treats it alike. A region that follows the rig at its border and
  * jiggles inside then has no crease where the two meet.
@@ -121,7 +126,8 @@ typedef struct dk_shape_matching_options {
                                kinematic vertex, 0 from falloff on), so that a jiggling region
                                blends into what follows the rig instead of tearing from it;
                                mesh units, 0 (default): half the simulated region's depth
-                               (its farthest vertex from the kinematic ones)              */
+                               (its farthest vertex from the kinematic ones), at most half
+                               the automatic cubes' edge                                  */
     double plastic_yield; /**< |S - I|_F above which a cluster creeps; default 0.1          */
     double plastic_creep; /**< creep rate per second, >= 0; 0 (default): elastic only      */
     double plastic_max;   /**< the largest |S_p - I|_F; default 1                           */
@@ -211,9 +217,10 @@ dk_status dk_shape_matching_set_velocities(dk_shape_matching *s, const double *v
 int64_t dk_shape_matching_frame(const dk_shape_matching *s);
 
 /** The clusters: their count, and for cluster c its vertices cluster_vertices[start[c] ..
- *  start[c+1]-1] (arrays owned by the object). */
+ *  start[c+1]-1] (arrays owned by the object) and each one's share of it (`shares`, the
+ *  same shape, or NULL: a vertex's shares sum to 1; the automatic cubes' trilinear hats). */
 dk_index dk_shape_matching_clusters(const dk_shape_matching *s, const dk_index **start,
-                                    const dk_index **vertices);
+                                    const dk_index **vertices, const double **shares);
 
 /** Sets the keyable parameters (checked: alpha, beta in [0, 1], damping, creep, yield, max
  *  >= 0, gravity finite, time_step in [1e-6, 3600]); on failure nothing changes. */

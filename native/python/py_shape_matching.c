@@ -378,34 +378,58 @@ static PyObject *get_frame(PyObject *obj, void *c)
     return PyLong_FromLongLong((long long)dk_shape_matching_frame(self->native));
 }
 
-PyDoc_STRVAR(clusters_doc, "clusters() -> list of vertex index arrays: the clusters, as bound");
-
-static PyObject *sm_clusters(PyObject *obj, PyObject *unused)
+/* One array per cluster: its vertices (shares 0) or their shares (shares 1). */
+static PyObject *cluster_lists(PyObject *obj, int shares)
 {
     dk_py_method *self = (dk_py_method *)obj;
-    (void)unused;
     if (!dk_py_method_readable(self))
         return NULL;
     const dk_index *start, *verts;
-    const dk_index nc = dk_shape_matching_clusters(self->native, &start, &verts);
+    const double *share;
+    const dk_index nc = dk_shape_matching_clusters(self->native, &start, &verts, &share);
     PyObject *list = PyList_New(nc);
     for (dk_index k = 0; list && k < nc; k++) {
         const dk_index n = start[k + 1] - start[k];
-        dk_index *dst;
-        PyObject *a = dk_py_new_indices(1, n, 0, &dst);
+        dk_index *di = NULL;
+        double *dd = NULL;
+        PyObject *a = shares ? dk_py_new_doubles(1, n, 0, &dd) : dk_py_new_indices(1, n, 0, &di);
         if (!a) {
             Py_CLEAR(list);
             break;
         }
-        memcpy(dst, verts + start[k], sizeof(dk_index) * (size_t)n);
+        if (shares)
+            memcpy(dd, share + start[k], sizeof(double) * (size_t)n);
+        else
+            memcpy(di, verts + start[k], sizeof(dk_index) * (size_t)n);
         PyList_SetItem(list, k, a); /* steals */
     }
     return list;
 }
 
+PyDoc_STRVAR(clusters_doc, "clusters() -> list of vertex index arrays: the clusters, as bound");
+
+static PyObject *sm_clusters(PyObject *obj, PyObject *unused)
+{
+    (void)unused;
+    return cluster_lists(obj, 0);
+}
+
+PyDoc_STRVAR(cluster_shares_doc,
+             "cluster_shares() -> list of float arrays, one per cluster of clusters(): each\n"
+             "member's share phi of the cluster (its mass there is m phi, and its goal blends\n"
+             "its clusters' goals by phi; a vertex's shares sum to 1). The automatic cubes\n"
+             "give each member the cube's trilinear hat (1 at the centre, 0 on the faces),\n"
+             "normalised; whole parts and given clusters 1 / (the vertex's clusters).");
+
+static PyObject *sm_cluster_shares(PyObject *obj, PyObject *unused)
+{
+    (void)unused;
+    return cluster_lists(obj, 1);
+}
+
 PyDoc_STRVAR(goals_doc,
              "goals(positions) -> n x 3 array\n\n"
-             "Each vertex's goal g_i (the mean over its clusters of R q_i + x_cm, or the\n"
+             "Each vertex's goal g_i (its clusters' R q_i + x_cm blended by its shares, or the\n"
              "linear / quadratic blend with beta) for the configuration `positions`\n"
              "(n x 3), against the last solve's goal shape and the current plastic states:\n"
              "what the clusters pull each vertex towards (the attachment's blend with the\n"
@@ -464,11 +488,13 @@ PyDoc_STRVAR(
     "paper's scheme; 'explicit_euler' as the slides' code, 'implicit_euler', 'rk4').\n"
     "Handles follow their targets, fixed vertices and those outside roi the input; they\n"
     "drive the rest, and the free vertices within falloff of them (0: half the depth of\n"
-    "what is simulated) are also pulled to where the input puts them, fading with the\n"
-    "distance (attach_map adds a painted attachment in [0, 1]). Clusters: 'cubes'\n"
-    "(overlapping cubes of edge cluster_size, 0 = a quarter of the bounding box's\n"
-    "diagonal, split where the mesh is not connected), 'parts' (one per connected part),\n"
-    "or a list of index arrays.\n"
+    "what is simulated, at most half a cube) are also pulled to where the input puts\n"
+    "them, moved with the handles near them, fading with the distance (attach_map adds a\n"
+    "painted attachment in [0, 1]). Clusters: 'cubes' (overlapping cubes of edge\n"
+    "cluster_size, 0 = a quarter of the bounding box's diagonal, split where the mesh is\n"
+    "not connected; each vertex's share of a cube its trilinear hat, so that its goal\n"
+    "blends the cubes' continuously), 'parts' (one per connected part), or a list of\n"
+    "index arrays.\n"
     "Plasticity (plastic_creep > 0): a cluster deformed beyond plastic_yield creeps into\n"
     "its new rest shape, at most plastic_max from the original. alpha_map, beta_map,\n"
     "damping_map: per-vertex factors (painted). alpha, beta, damping, gravity and the\n"
@@ -480,6 +506,7 @@ static PyMethodDef shape_matching_methods[] = {
     DK_PY_METHOD_METHODS(solve_doc),
     {"goals", sm_goals, METH_O, goals_doc},
     {"clusters", sm_clusters, METH_NOARGS, clusters_doc},
+    {"cluster_shares", sm_cluster_shares, METH_NOARGS, cluster_shares_doc},
     {NULL, NULL, 0, NULL},
 };
 

@@ -8,6 +8,7 @@ fall and damping; linear and quadratic modes reproduce a shear and a bend the ri
 cannot; secondary motion on an animated input overshoots and settles on it; kinematic
 vertices exact; plasticity; determinism and checkpoints bit for bit; units and placement;
 refusals."""
+import itertools
 import sys
 from pathlib import Path
 
@@ -42,18 +43,15 @@ def procrustes(X, Y):
 
 # --------------------------------------------------------------- the goals in numpy -----
 
-def numpy_goals(clusters, Y, X, masses, beta, mode):
+def numpy_goals(clusters, shares, Y, X, masses, beta, mode):
     """The header's formulas (dk_shape_matching.h), written again: per cluster the mass
-    m_i / n_i, R from an SVD, the fits regularised towards R with 1e-4 of the mean squared
-    extent per mode, the linear fit normalised to det 1, the quadratic terms centred."""
+    m_i phi_i (phi the member's share), R from an SVD, the fits regularised towards R with
+    1e-4 of the mean squared extent per mode, the linear fit normalised to det 1, the
+    quadratic terms centred; a vertex's goal blends its clusters' by its shares."""
     n = len(Y)
-    count = np.zeros(n)
-    for c in clusters:
-        count[c] += 1
-    mt = masses / np.maximum(count, 1)
     G = np.zeros((n, 3))
-    for c in clusters:
-        m = mt[c]
+    for c, phi in zip(clusters, shares):
+        m = masses[c] * phi
         M = m.sum()
         q = Y[c] - (m[:, None] * Y[c]).sum(0) / M
         cm = (m[:, None] * X[c]).sum(0) / M
@@ -86,8 +84,8 @@ def numpy_goals(clusters, Y, X, masses, beta, mode):
                 if mode == "linear":
                     A = A / np.cbrt(det)
                 g = rq + beta[c, None] * (qt @ A.T - rq)
-        G[c] += g + cm
-    return G / count[:, None]
+        G[c] += phi[:, None] * (g + cm)
+    return G
 
 
 @pytest.mark.parametrize("mode", ["rigid", "linear", "quadratic"])
@@ -105,9 +103,92 @@ def test_goals_match_numpy(tube, mode, clusters):
     X = V @ np.array([[1.1, 0.2, 0], [0, 0.9, 0.1], [0.05, 0, 1.0]]).T + 0.05 * rng.normal(
         size=V.shape) + [0.3, -0.1, 0.2]
     got = np.asarray(sm.goals(X))
-    want = numpy_goals(sm.clusters(), V, X, masses, 0.7 * beta_map, mode)
+    want = numpy_goals(sm.clusters(), sm.cluster_shares(), V, X, masses, 0.7 * beta_map,
+                       mode)
     assert np.abs(got - want).max() < 1e-10
     assert sum(len(c) for c in sm.clusters()) >= len(V)
+
+
+def shares_by_vertex(sm, n):
+    total = np.zeros(n)
+    for c, phi in zip(sm.clusters(), sm.cluster_shares()):
+        np.add.at(total, c, phi)
+    return total
+
+
+def cubes_of(cluster, u, nbr):
+    """The automatic cubes (centres K in half-cube cells u) a cluster is a piece of: the
+    cubes holding its vertices whose piece (what the edges join within the cube, less the
+    vertices on its faces) is the cluster, in the order of their keys (x, then y, then z).
+    Near a corner two cubes may hold the same piece: each gives a cluster."""
+    uc = u[cluster]
+    axes = [range(int(np.floor(uc[:, d].max() - 1)) + 1, int(np.floor(uc[:, d].min() + 1)) + 1)
+            for d in range(3)]
+    found = []
+    for K in itertools.product(*axes):
+        K = np.array(K)
+        inside = np.all((u >= K - 1) & (u < K + 1), axis=1)
+        seen, todo = {int(cluster[0])}, [int(cluster[0])]
+        while todo:
+            for w in nbr[todo.pop()]:
+                if inside[w] and w not in seen:
+                    seen.add(w)
+                    todo.append(w)
+        piece = np.array(sorted(seen))
+        piece = piece[np.prod(1 - np.abs(u[piece] - K), axis=1) >= 1e-9]
+        if np.array_equal(piece, np.sort(cluster)):
+            found.append(K)
+    return found
+
+
+def test_cube_shares_are_the_cubes_trilinear_hats(tube):
+    """Each member's share of an automatic cube is the cube's hat prod(1 - |u - K|) (u the
+    position in half-cube cells from the bounding box's corner, K the cube's centre there),
+    over the sum of the vertex's hats; given clusters share equally (the paper's 1 / n_i).
+    A vertex's shares sum to 1."""
+    V, F, mesh = tube
+    nbr = [set() for _ in V]
+    for a, b in edges_of(F):
+        nbr[a].add(b)
+        nbr[b].add(a)
+    for size in (0.6, 0.3):
+        sm = dk.ShapeMatching(mesh, cluster_size=size)
+        assert np.allclose(shares_by_vertex(sm, len(V)), 1.0, atol=1e-14)
+        u = (V - V.min(0)) / (0.5 * size)
+        hats, seen = [], {}
+        for c in sm.clusters():
+            found = cubes_of(c, u, nbr)
+            k = seen[tuple(c)] = seen.get(tuple(c), -1) + 1
+            assert sum(np.array_equal(c, d) for d in sm.clusters()) == len(found) > k
+            hats.append(np.prod(1 - np.abs(u[c] - found[k]), axis=1))
+        raw = np.zeros(len(V))
+        for c, h in zip(sm.clusters(), hats):
+            np.add.at(raw, c, h)
+        for c, phi, h in zip(sm.clusters(), sm.cluster_shares(), hats):
+            assert np.abs(phi - h / raw[c]).max() < 1e-12
+    given = dk.ShapeMatching(mesh, clusters=[np.arange(len(V)), np.where(V[:, 0] > 0)[0]])
+    count = np.where(V[:, 0] > 0, 2, 1)
+    for c, phi in zip(given.clusters(), given.cluster_shares()):
+        assert np.allclose(phi, 1.0 / count[c], atol=0, rtol=1e-15)
+
+
+def test_goals_vary_continuously_across_the_cubes_faces():
+    """A tube bent by 120 degrees: the pull g - x of neighbouring vertices differs by at most
+    0.3 of their distance (measured 0.13-0.14). With equal shares (1 / n_i) four of a
+    vertex's eight cubes change where it crosses a cube's face and the pull jumps: 1.4-1.5
+    of the edge on this mesh, growing as the mesh is refined; under a large drag the mesh
+    tore along the faces."""
+    V, F = capped_tube(n_ring=24, n_len=65)
+    E = edges_of(F)
+    th = (V[:, 0] + 1) / 2 * (2 * np.pi / 3)
+    r = 2 / (2 * np.pi / 3)
+    X = np.c_[(r - V[:, 1]) * np.sin(th), r - (r - V[:, 1]) * np.cos(th), V[:, 2]]
+    for mode in ("rigid", "linear"):
+        sm = dk.ShapeMatching(dk.Mesh(V, F), mode=mode, cluster_size=0.5)
+        D = np.asarray(sm.goals(X)) - X
+        jump = np.linalg.norm(D[E[:, 0]] - D[E[:, 1]], axis=1) / np.linalg.norm(
+            V[E[:, 0]] - V[E[:, 1]], axis=1)
+        assert jump.max() < 0.3, (mode, jump.max())
 
 
 def test_clusters_cover_the_mesh_and_split_what_edges_do_not_join():
@@ -184,12 +265,14 @@ def test_a_released_shape_returns_to_rest_the_faster_the_higher_alpha(tube):
     assert 0 < first[1] < first[0], first
 
 
-def energies(mesh, V, integrator, frames=300, clusters="cubes"):
+def energies(mesh, V, integrator, frames=300, clusters="cubes", mode="rigid", damping=0.0,
+             cluster_size=0.0):
     """Released from a stretch with alpha = 1 and a step of a whole second, no damping: per
     frame the kinetic energy plus the shape-matching potential (k / 2) sum m |g - x|^2,
     k = alpha / h^2 = 1; and the potential at the release."""
-    sm = dk.ShapeMatching(mesh, alpha=1.0, damping=0.0, time_step=1.0, substeps=1,
-                          integrator=integrator, clusters=clusters)
+    sm = dk.ShapeMatching(mesh, alpha=1.0, damping=damping, time_step=1.0, substeps=1,
+                          integrator=integrator, clusters=clusters, mode=mode,
+                          cluster_size=cluster_size)
     start = V * [1.3, 0.8, 1.1]
     sm.solve(start_positions=start)
     e0 = 0.5 * sm.energy(start)
@@ -200,21 +283,37 @@ def energies(mesh, V, integrator, frames=300, clusters="cubes"):
     return e0, np.array(E)
 
 
+@pytest.mark.parametrize("mode", ["rigid", "quadratic"])
 @pytest.mark.parametrize("clusters", ["cubes", "parts"])
-def test_no_energy_gain_at_alpha_one_and_a_step_of_a_second(tube, clusters):
+def test_no_energy_gain_at_alpha_one_and_a_step_of_a_second(tube, clusters, mode):
     """The paper's scheme (semi-implicit Euler) keeps a bounded energy: it oscillates about
     the release's, the same in the last 100 frames as in the first; implicit Euler and RK4
-    lose it; the slides' explicit Euler gains it without bound."""
+    lose it (the quadratic mode's softer bends more slowly: 6e-3 of it left after 300
+    steps); the slides' explicit Euler gains it without bound. (The rigid mode is the
+    gradient flow of the potential; the quadratic mode's goals are projections too.)"""
     V, F, mesh = tube
-    e0, semi = energies(mesh, V, "semi_implicit_euler", clusters=clusters)
+    e0, semi = energies(mesh, V, "semi_implicit_euler", clusters=clusters, mode=mode)
     assert np.isfinite(semi).all() and semi[200:].max() <= 1.01 * semi[:100].max()
     assert semi.max() < 3 * e0
-    e0, imp = energies(mesh, V, "implicit_euler", clusters=clusters)
-    assert imp.max() <= e0 and imp[-1] < 1e-3 * e0
-    e0, rk = energies(mesh, V, "rk4", clusters=clusters)
+    e0, imp = energies(mesh, V, "implicit_euler", clusters=clusters, mode=mode)
+    assert imp.max() <= e0 and imp[-1] < (1e-3 if mode == "rigid" else 1e-2) * e0
+    e0, rk = energies(mesh, V, "rk4", clusters=clusters, mode=mode)
     assert rk[200:].max() <= rk[:100].max() and rk.max() < 1.5 * e0
-    e0, ex = energies(mesh, V, "explicit_euler", frames=60, clusters=clusters)
+    e0, ex = energies(mesh, V, "explicit_euler", frames=60, clusters=clusters, mode=mode)
     assert ex[-1] > 1e6 * e0
+
+
+@pytest.mark.parametrize("size", [0.25, 0.35, 0.0])
+def test_the_linear_mode_loses_its_energy_with_a_little_damping(tube, size):
+    """The linear mode's volume normalisation (A / det(A)^(1/3), the paper's 4.2) is not a
+    projection: undamped at alpha = 1 it gains energy (measured 27-96x over 300 steps with
+    these cubes), which 0.05 of damping a step (h d; the add-on's default is 0.083) takes out
+    again: after 300 steps less than a tenth of the release's is left."""
+    V, F, mesh = tube
+    e0, semi = energies(mesh, V, "semi_implicit_euler", mode="linear", damping=0.05,
+                        cluster_size=size)
+    assert np.isfinite(semi).all() and semi[:100].max() < 1.2 * e0
+    assert semi[200:].max() < 0.1 * e0
 
 
 @pytest.mark.parametrize("integrator,sign", [("explicit_euler", -1), ("semi_implicit_euler", 1),
@@ -298,12 +397,13 @@ def test_handles_follow_their_targets_and_carry_the_rest(tube):
     sm = dk.ShapeMatching(mesh, [left], alpha=0.5, damping=1.0)
     T = np.eye(4)
     sm.solve(warm_start=False, transforms=[T])
-    for f in range(300):
+    for f in range(600):
         T[:3, 3] = [0, 0, 0.4 * min(f, 10) / 10]
         X = np.asarray(sm.solve(transforms=[T]).positions)
         assert np.array_equal(X[left], V[left] + T[:3, 3])
     # held by a small ring, the tube swings after it and settles (the pull of the handle is
-    # its share of the clusters' mass)
+    # its share of the clusters' mass, and its attachment's over half a cube): 0.069 off
+    # after 300 frames, 0.005 after 600
     assert np.abs(X - (V + T[:3, 3])).max() < 0.02
 
 
@@ -458,6 +558,24 @@ def test_the_attachment_blends_a_jiggling_region_into_what_follows(tube):
     assert blended < 0.5 * loose, (blended, loose)
     assert swing > 0.05, swing
     assert held_swing < 0.2 * swing, (held_swing, swing)
+
+
+def test_attachments_blend_the_handles_moves_without_a_tear():
+    """A tube held at one end and lifted at the other, its attachments reaching across the
+    middle (falloff 1.5; one cluster, so that only the attachments differ): each vertex's
+    attached place blends the two groups' moves by their falloff weights, and no edge is
+    stretched by more than its length (measured 0.36). Following the nearest kinematic
+    vertex of all, the place jumped at the middle and the tube tore there (4.4-fold)."""
+    V, F = capped_tube(n_ring=12, n_len=33)
+    E = edges_of(F)
+    rest = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
+    left, right = np.where(V[:, 0] < -0.9)[0], np.where(V[:, 0] > 0.9)[0]
+    sm = dk.ShapeMatching(dk.Mesh(V, F), [right], fixed=left, falloff=1.5, clusters="parts")
+    sm.solve(warm_start=False, targets=V[right])
+    for f in range(200):
+        X = np.asarray(sm.solve(targets=V[right] + [0, 0, 0.6 * min(f, 10) / 10]).positions)
+    strain = np.abs(np.linalg.norm(X[E[:, 0]] - X[E[:, 1]], axis=1) / rest - 1)
+    assert strain.max() < 1.0, strain.max()
 
 
 def test_a_solve_that_fails_changes_nothing(tube):

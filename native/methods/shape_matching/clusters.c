@@ -4,7 +4,15 @@
  * each cube's points are split into the pieces the mesh's edges connect (a point set, with no
  * edges, keeps the paper's cubes). A piece of fewer than 4 points has no well-defined fit and
  * is dropped; a vertex left in no cluster gets the cluster of the 8 vertices nearest to it
- * along the edges (or in space, for a point set), so that every vertex is matched. */
+ * along the edges (or in space, for a point set), so that every vertex is matched.
+ *
+ * Each membership has a weight: in a cube, the trilinear hat of the cube (1 at its centre, 0
+ * on its faces); elsewhere 1. A vertex's share of a cluster is its weight there over the sum
+ * of its weights (the cubes' hats already sum to 1 where no piece was dropped). Equal shares,
+ * the paper's m_i / n_i, make a vertex's goal jump where it crosses a cube's face (4 of its 8
+ * cubes change at once): under a large drag the clusters' goals differ and the mesh tears
+ * along the cubes' faces. With the hats the goals vary continuously. Memberships of weight
+ * below HAT_MIN (a vertex on a cube's face) are left out. */
 #include "sm_internal.h"
 
 #include <math.h>
@@ -15,6 +23,7 @@
 #include "dk_operators.h"
 
 enum { MIN_PIECE = 4, FALLBACK_SIZE = 8 };
+static const double HAT_MIN = 1e-9;
 
 void sm_clusters_free(sm_clusters *c)
 {
@@ -23,6 +32,7 @@ void sm_clusters_free(sm_clusters *c)
     free(c->start);
     free(c->member_vertex);
     free(c->member_mass);
+    free(c->member_share);
     free(c->vm_start);
     free(c->vm_index);
     memset(c, 0, sizeof *c);
@@ -38,6 +48,7 @@ typedef struct builder {
     dk_index n_clusters, cap_clusters;
     int64_t n_members, cap_members;
     dk_index *start, *members;
+    double *weights; /* per member                                                           */
 } builder;
 
 static int reserve(builder *b, dk_index more_clusters, int64_t more_members)
@@ -56,19 +67,25 @@ static int reserve(builder *b, dk_index more_clusters, int64_t more_members)
         if (!p)
             return 0;
         b->members = p;
+        double *w = realloc(b->weights, (size_t)cap * sizeof *w);
+        if (!w)
+            return 0;
+        b->weights = w;
         b->cap_members = cap;
     }
     return 1;
 }
 
-/* Appends a cluster of `count` vertices. */
-static int add_cluster(builder *b, const dk_index *verts, dk_index count)
+/* Appends a cluster of `count` vertices with their weights (NULL: 1 each). */
+static int add_cluster(builder *b, const dk_index *verts, const double *weights, dk_index count)
 {
     if (b->n_members + count > INT32_MAX || !reserve(b, 1, count))
         return 0;
     if (b->n_clusters == 0)
         b->start[0] = 0;
     memcpy(b->members + b->n_members, verts, (size_t)count * sizeof *verts);
+    for (dk_index k = 0; k < count; k++)
+        b->weights[b->n_members + k] = weights ? weights[k] : 1.0;
     b->n_members += count;
     b->start[++b->n_clusters] = (dk_index)b->n_members;
     return 1;
@@ -98,7 +115,9 @@ static dk_index find(dk_index *parent, dk_index i)
 }
 
 /* The automatic cubes: cells of edge cluster_size / 2, a cube of 2 x 2 x 2 cells at every
- * cell, so that each vertex lies in 8 cubes. */
+ * cell, so that each vertex lies in 8 cubes. In cell units u = (p - bbox_min) / h, cube
+ * (X, Y, Z) spans [X - 1, X + 1) along x (and so on): its hat is the product over the axes
+ * of 1 - |u - X|, and a point's 8 hats sum to 1. */
 static dk_status cubes(const dk_mesh *m, double size, builder *b, dk_error *err)
 {
     const dk_index n = m->n_vertices;
@@ -113,8 +132,10 @@ static dk_status cubes(const dk_mesh *m, double size, builder *b, dk_error *err)
     dk_index *parent = malloc(((size_t)n + 1) * sizeof *parent);
     dk_index *piece = malloc(((size_t)n + 1) * sizeof *piece);
     dk_index *count = malloc(((size_t)n + 1) * sizeof *count);
-    if (!pairs || !stamp || !local || !parent || !piece || !count) {
-        free(pairs), free(stamp), free(local), free(parent), free(piece), free(count);
+    double *hat = malloc(((size_t)n + 1) * sizeof *hat);
+    if (!pairs || !stamp || !local || !parent || !piece || !count || !hat) {
+        free(pairs), free(stamp), free(local), free(parent), free(piece), free(count),
+            free(hat);
         return oom(err, "cluster cubes");
     }
     for (dk_index v = 0; v < n; v++) {
@@ -165,20 +186,34 @@ static dk_status cubes(const dk_mesh *m, double size, builder *b, dk_error *err)
             count[a] = 0;
         for (dk_index a = 0; a < size_c; a++)
             count[find(parent, a)]++;
+        const uint64_t key = pairs[i].key, mask = (UINT64_C(1) << 21) - 1;
+        const double centre[3] = {(double)(key >> 42), (double)((key >> 21) & mask),
+                                  (double)(key & mask)};
         for (dk_index a = 0; a < size_c && st == DK_OK; a++) {
             if (find(parent, a) != a || count[a] < MIN_PIECE)
                 continue;
             dk_index np = 0;
-            for (dk_index q = a; q < size_c; q++)
-                if (find(parent, q) == a)
-                    piece[np++] = pairs[i + (size_t)q].v;
-            if (!add_cluster(b, piece, np))
+            for (dk_index q = a; q < size_c; q++) {
+                if (find(parent, q) != a)
+                    continue;
+                const dk_index v = pairs[i + (size_t)q].v;
+                double w = 1.0;
+                for (int d = 0; d < 3; d++) {
+                    const double u = (m->positions[3 * (size_t)v + d] - m->bbox_min[d]) / h;
+                    w *= fmax(0.0, 1.0 - fabs(u - centre[d]));
+                }
+                if (w >= HAT_MIN) {
+                    hat[np] = w;
+                    piece[np++] = v;
+                }
+            }
+            if (np >= MIN_PIECE && !add_cluster(b, piece, hat, np))
                 st = oom(err, "clusters");
         }
         cube++;
         i = j;
     }
-    free(pairs), free(stamp), free(local), free(parent), free(piece), free(count);
+    free(pairs), free(stamp), free(local), free(parent), free(piece), free(count), free(hat);
     return st;
 }
 
@@ -207,7 +242,7 @@ static dk_status parts(const dk_mesh *m, builder *b, dk_error *err)
         order[fill[nc > 1 ? m->component[v] : 0]++] = v;
     dk_status st = DK_OK;
     for (dk_index k = 0; k < nc && st == DK_OK; k++)
-        if (!add_cluster(b, order + at[k], at[k + 1] - at[k]))
+        if (!add_cluster(b, order + at[k], NULL, at[k + 1] - at[k]))
             st = oom(err, "clusters");
     free(order), free(at), free(fill);
     return st;
@@ -234,7 +269,7 @@ static dk_status given(const dk_mesh *m, const dk_shape_matching_options *o, bui
                                     "ShapeMatching: cluster %d lists vertex %d, outside [0, %d)",
                                     (int)c, (int)v, (int)m->n_vertices);
         }
-        if (!add_cluster(b, o->cluster_vertices + at, size))
+        if (!add_cluster(b, o->cluster_vertices + at, NULL, size))
             return oom(err, "clusters");
         at += size;
     }
@@ -307,12 +342,24 @@ static dk_status cover(const dk_mesh *m, const unsigned char *kinematic, int mus
                 }
             }
         }
-        if (st == DK_OK && !add_cluster(b, list, got))
+        if (st == DK_OK && !add_cluster(b, list, NULL, got))
             st = oom(err, "clusters");
     }
     dk_kdtree_free(tree);
     free(mark), free(queue), free(in);
     return st;
+}
+
+/* The automatic cubes' edge. */
+static double cube_edge(const dk_mesh *mesh, const dk_shape_matching_options *o)
+{
+    return o->cluster_size > 0.0 ? o->cluster_size : 0.25 * mesh->bbox_diagonal;
+}
+
+double sm_attach_cap(const dk_mesh *mesh, const dk_shape_matching_options *o)
+{
+    const int cubes = o->n_clusters == 0 && o->clusters != DK_CLUSTERS_PARTS;
+    return cubes && cube_edge(mesh, o) > 0.0 ? 0.5 * cube_edge(mesh, o) : INFINITY;
 }
 
 dk_status sm_clusters_build(const dk_mesh *mesh, const dk_shape_matching_options *o,
@@ -327,7 +374,7 @@ dk_status sm_clusters_build(const dk_mesh *mesh, const dk_shape_matching_options
     else if (o->clusters == DK_CLUSTERS_PARTS)
         st = parts(mesh, &b, err);
     else {
-        const double size = o->cluster_size > 0.0 ? o->cluster_size : 0.25 * mesh->bbox_diagonal;
+        const double size = cube_edge(mesh, o);
         st = size > 0.0 ? cubes(mesh, size, &b, err) : parts(mesh, &b, err); /* one point */
     }
     if (st == DK_OK)
@@ -335,7 +382,7 @@ dk_status sm_clusters_build(const dk_mesh *mesh, const dk_shape_matching_options
     if (st == DK_OK && !reserve(&b, 1, 1))
         st = oom(err, "clusters");
     if (st != DK_OK) {
-        free(b.start), free(b.members);
+        free(b.start), free(b.members), free(b.weights);
         return st;
     }
     if (b.n_clusters == 0)
@@ -344,10 +391,11 @@ dk_status sm_clusters_build(const dk_mesh *mesh, const dk_shape_matching_options
     out->n_clusters = b.n_clusters;
     out->start = b.start;
     out->member_vertex = b.members;
+    out->member_share = b.weights; /* the weights, made shares below */
     out->member_mass = malloc(((size_t)nm + 1) * sizeof *out->member_mass);
     out->vm_start = calloc((size_t)n + 2, sizeof *out->vm_start);
     out->vm_index = malloc(((size_t)nm + 1) * sizeof *out->vm_index);
-    if (!out->member_mass || !out->vm_start || !out->vm_index) {
+    if (!out->member_share || !out->member_mass || !out->vm_start || !out->vm_index) {
         sm_clusters_free(out);
         return oom(err, "cluster memberships");
     }
@@ -364,10 +412,16 @@ dk_status sm_clusters_build(const dk_mesh *mesh, const dk_shape_matching_options
     for (dk_index k = 0; k < nm; k++)
         out->vm_index[fill[out->member_vertex[k]]++] = k;
     free(fill);
-    for (dk_index k = 0; k < nm; k++) {
-        const dk_index v = out->member_vertex[k];
+    for (dk_index v = 0; v < n; v++) {
+        double sum = 0.0;
+        for (dk_index t = out->vm_start[v]; t < out->vm_start[v + 1]; t++)
+            sum += out->member_share[out->vm_index[t]];
         const double mv = masses ? masses[v] : 1.0;
-        out->member_mass[k] = mv / (double)(out->vm_start[v + 1] - out->vm_start[v]);
+        for (dk_index t = out->vm_start[v]; t < out->vm_start[v + 1]; t++) {
+            const dk_index k = out->vm_index[t];
+            out->member_share[k] /= sum;
+            out->member_mass[k] = mv * out->member_share[k];
+        }
     }
     return DK_OK;
 }

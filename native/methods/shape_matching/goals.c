@@ -1,5 +1,5 @@
 /* Shape matching's goals (sm_internal.h): per cluster the rotation and the fit of the rest
- * offsets onto the current ones, each member's goal, and each vertex's mean goal; and the
+ * offsets onto the current ones, each member's goal, and each vertex's blended goal; and the
  * clusters' plasticity. The formulas are the header's (dk_shape_matching.h). */
 #include "sm_internal.h"
 
@@ -80,14 +80,15 @@ static void fit(int dim, const double *apq, const double R[9], const double *lam
         }
 }
 
-/* Where a member's goal goes: its own row of member_goal, or added to its vertex's row of
- * acc (the sum over the vertex's clusters). */
+/* Where a member's goal goes: its own row of member_goal, or added, times the member's
+ * share, to its vertex's row of acc (the blend over the vertex's clusters). */
 static inline double *goal_row(const sm_clusters *c, double *member_goal, double *acc,
                                dk_index k, double g[3])
 {
     double *row = acc ? acc + 3 * (size_t)c->member_vertex[k] : member_goal + 3 * (size_t)k;
     if (acc) {
-        row[0] += g[0], row[1] += g[1], row[2] += g[2];
+        const double phi = c->member_share[k];
+        row[0] += phi * g[0], row[1] += phi * g[1], row[2] += phi * g[2];
     } else {
         row[0] = g[0], row[1] = g[1], row[2] = g[2];
     }
@@ -183,11 +184,11 @@ void sm_goals_vertices(const sm_clusters *c, const double *member_goal, const do
         }
         double s[3] = {0, 0, 0};
         for (dk_index t = a; t < b; t++) {
-            const double *mg = member_goal + 3 * (size_t)c->vm_index[t];
-            s[0] += mg[0], s[1] += mg[1], s[2] += mg[2];
+            const dk_index k = c->vm_index[t];
+            const double *mg = member_goal + 3 * (size_t)k, phi = c->member_share[k];
+            s[0] += phi * mg[0], s[1] += phi * mg[1], s[2] += phi * mg[2];
         }
-        const double inv = 1.0 / (double)(b - a);
-        g[0] = s[0] * inv, g[1] = s[1] * inv, g[2] = s[2] * inv;
+        g[0] = s[0], g[1] = s[1], g[2] = s[2];
     }
 }
 
@@ -201,9 +202,8 @@ void sm_goals_from_sums(const sm_clusters *c, const double *acc0, const double *
             memcpy(goals + j, x + j, 3 * sizeof(double));
             continue;
         }
-        const double inv = 1.0 / (double)n;
         for (int d = 0; d < 3; d++)
-            goals[j + (size_t)d] = (acc0[j + (size_t)d] + acc1[j + (size_t)d]) * inv;
+            goals[j + (size_t)d] = acc0[j + (size_t)d] + acc1[j + (size_t)d];
     }
 }
 

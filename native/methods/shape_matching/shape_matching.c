@@ -22,8 +22,7 @@ struct dk_shape_matching {
     unsigned char *kinematic;      /* n: 1 = follows its target or the input               */
     double *masses, *alpha_map, *beta_map, *damping_map; /* n each                         */
     double *attach_map;            /* n, or NULL: the painted attachments                  */
-    double *attach;                /* n: the attachments (falloff and map), 0 if kinematic  */
-    dk_index *near;                /* n: the nearest kinematic vertex at the rest, or -1    */
+    sm_attach att;                 /* the attachments (attachments.c)                      */
     double *k, *d, *beta;          /* n: alpha_i / h^2 (h a substep), damping, beta        */
     double *ka, *ktot;             /* n: a_i / h^2, and k + ka (what the integrators use)   */
     int attached;                  /* some free vertex has an attachment                   */
@@ -179,87 +178,10 @@ static void coefficients(dk_shape_matching *s)
         s->k[v] = kf * s->alpha_map[v];
         s->d[v] = s->dyn.damping * s->damping_map[v];
         s->beta[v] = s->dyn.beta * s->beta_map[v];
-        s->ka[v] = s->attach[v] / (h * h);
+        s->ka[v] = s->att.a[v] / (h * h);
         s->ktot[v] = s->k[v] + s->ka[v];
-        s->attached |= s->attach[v] > 0.0;
+        s->attached |= s->att.a[v] > 0.0;
     }
-}
-
-/* The attachments of the free vertices for the kinematic set `kin` (0 for kinematic ones):
- * the falloff from the nearest kinematic vertex at the rest, combined with the map. */
-static dk_status attachments(const dk_shape_matching *s, const unsigned char *kin, double *out,
-                             dk_index *near_out, dk_error *err)
-{
-    const dk_mesh *m = s->mesh;
-    const dk_index n = m->n_vertices;
-    dk_index nk = 0;
-    for (dk_index v = 0; v < n; v++)
-        nk += kin[v] != 0;
-    for (dk_index v = 0; v < n; v++) {
-        out[v] = 0.0;
-        near_out[v] = -1;
-    }
-    if (nk > 0 && nk < n) {
-        double *pts = malloc(3 * (size_t)nk * sizeof *pts + 1);
-        dk_index *ids = malloc(((size_t)nk + 1) * sizeof *ids);
-        dk_kdtree *tree = NULL;
-        if (!pts || !ids) {
-            free(pts), free(ids);
-            return dk_error_set(err, DK_ERR_OUT_OF_MEMORY,
-                                "ShapeMatching: out of memory (attachments)");
-        }
-        for (dk_index v = 0, j = 0; v < n; v++)
-            if (kin[v]) {
-                memcpy(pts + 3 * (size_t)j, m->positions + 3 * (size_t)v, 3 * sizeof *pts);
-                ids[j++] = v;
-            }
-        dk_status st = dk_kdtree_create(pts, nk, &tree, err);
-        free(pts);
-        /* the free vertices' nearest kinematic one, in one query */
-        const dk_index nf = n - nk;
-        double *q = malloc(3 * (size_t)nf * sizeof *q + 1);
-        dk_index *hit = malloc(((size_t)nf + 1) * sizeof *hit);
-        double *d2 = malloc(((size_t)nf + 1) * sizeof *d2);
-        if (st == DK_OK && (!q || !hit || !d2))
-            st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY,
-                              "ShapeMatching: out of memory (attachments)");
-        if (st == DK_OK) {
-            for (dk_index v = 0, j = 0; v < n; v++)
-                if (!kin[v])
-                    memcpy(q + 3 * (size_t)j++, m->positions + 3 * (size_t)v, 3 * sizeof *q);
-            st = dk_kdtree_knn(tree, q, nf, 1, hit, d2, err);
-        }
-        if (st == DK_OK)
-            for (dk_index v = 0, j = 0; v < n; v++)
-                if (!kin[v]) {
-                    out[v] = sqrt(d2[j]); /* the distance, for now */
-                    near_out[v] = ids[hit[j++]];
-                }
-        free(q), free(hit), free(d2);
-        dk_kdtree_free(tree);
-        free(ids);
-        if (st != DK_OK)
-            return st;
-        /* 0: half the depth of the simulated region (its farthest vertex from the kinematic
-         * ones), so that its core swings freely whatever its size */
-        double F = s->opt.falloff, depth = 0.0;
-        for (dk_index v = 0; v < n; v++)
-            if (!kin[v])
-                depth = fmax(depth, out[v]);
-        if (F == 0.0)
-            F = 0.5 * depth;
-        for (dk_index v = 0; v < n; v++) {
-            const double t = F > 0.0 && !kin[v] ? 1.0 - out[v] / F : 0.0;
-            out[v] = t > 0.0 ? t * t * (3.0 - 2.0 * t) : 0.0;
-        }
-    }
-    for (dk_index v = 0; v < n; v++) {
-        if (kin[v])
-            out[v] = 0.0;
-        else if (s->attach_map)
-            out[v] = 1.0 - (1.0 - out[v]) * (1.0 - s->attach_map[v]);
-    }
-    return DK_OK;
 }
 
 /* ------------------------------------------------------------ passes over clusters ----- */
@@ -327,20 +249,20 @@ static void goals_of(void *ctx, const double *x, double *goals)
     if (!s->attached)
         return;
     /* y(t) = y - u T (1 - f): the frame's input less what is left of its motion; a vertex
-     * is attached to y(t) moved as its nearest kinematic vertex is moved off its own y(t)
+     * is attached to y(t) moved as its sources (attachments.c) are moved off their own y(t)
      * (by a handle; a fixed vertex follows the input: no move) */
     const double back = s->dyn.time_step * (1.0 - ((double)s->substep + s->tau) / s->n_sub);
     for (dk_index v = 0; v < s->mesh->n_vertices; v++) {
         if (!(s->ka[v] > 0.0))
             continue;
         const double inv = 1.0 / s->ktot[v];
-        const dk_index w = s->near[v];
+        const dk_index t0 = s->att.start[v], t1 = s->att.start[v + 1];
         for (int c = 0; c < 3; c++) {
             const size_t j = 3 * (size_t)v + (size_t)c;
             double y = s->shape[j] - s->u[j] * back;
-            if (w >= 0) {
-                const size_t i = 3 * (size_t)w + (size_t)c;
-                y += x[i] - (s->shape[i] - s->u[i] * back);
+            for (dk_index t = t0; t < t1; t++) {
+                const size_t i = 3 * (size_t)s->att.vertex[t] + (size_t)c;
+                y += s->att.share[t] * (x[i] - (s->shape[i] - s->u[i] * back));
             }
             goals[j] = (s->k[v] * goals[j] + s->ka[v] * y) * inv;
         }
@@ -379,8 +301,8 @@ void dk_shape_matching_free(dk_shape_matching *s)
     free(s->kinematic);
     free(s->masses), free(s->alpha_map), free(s->beta_map), free(s->damping_map);
     free(s->attach_map);
-    free(s->k), free(s->d), free(s->beta), free(s->ka), free(s->ktot), free(s->attach);
-    free(s->near);
+    free(s->k), free(s->d), free(s->beta), free(s->ka), free(s->ktot);
+    sm_attach_free(&s->att);
     free(s->backup);
     free(s->x), free(s->v), free(s->shape), free(s->sp);
     free(s->goals), free(s->member_goal), free(s->work), free(s->k0), free(s->k1), free(s->u);
@@ -476,8 +398,6 @@ dk_status dk_shape_matching_bind(const dk_mesh *mesh, const dk_constraint_desc *
     s->beta_map = copy_or_fill(o.beta_map, n, 1.0);
     s->damping_map = copy_or_fill(o.damping_map, n, 1.0);
     s->attach_map = o.attach_map ? copy_or_fill(o.attach_map, n, 0.0) : NULL;
-    s->attach = malloc(((size_t)n + 1) * sizeof *s->attach);
-    s->near = malloc(((size_t)n + 1) * sizeof *s->near);
     s->ka = malloc(((size_t)n + 1) * sizeof *s->ka);
     s->ktot = malloc(((size_t)n + 1) * sizeof *s->ktot);
     s->k = malloc(((size_t)n + 1) * sizeof *s->k);
@@ -492,7 +412,7 @@ dk_status dk_shape_matching_bind(const dk_mesh *mesh, const dk_constraint_desc *
     s->k1 = malloc((N + 1) * sizeof *s->k1);
     s->u = malloc((N + 1) * sizeof *s->u);
     s->acc = malloc((2 * N + 1) * sizeof *s->acc);
-    if (!s->u || !s->acc || !s->attach || !s->near || !s->ka || !s->ktot || (o.attach_map && !s->attach_map) ||
+    if (!s->u || !s->acc || !s->ka || !s->ktot || (o.attach_map && !s->attach_map) ||
         !s->kinematic || !s->masses || !s->alpha_map || !s->beta_map || !s->damping_map ||
         !s->k || !s->d || !s->beta || !s->x || !s->v || !s->shape || !s->goals || !s->work ||
         !s->k0 || !s->k1) {
@@ -502,7 +422,9 @@ dk_status dk_shape_matching_bind(const dk_mesh *mesh, const dk_constraint_desc *
     mark_kinematic(s->con, s->kinematic);
     st = size_targets(s, s->con, err);
     if (st == DK_OK)
-        st = attachments(s, s->kinematic, s->attach, s->near, err);
+        st = sm_attach_build(mesh, s->con, s->kinematic, s->opt.falloff,
+                             sm_attach_cap(mesh, &s->opt), s->attach_map,
+                             &s->att, err);
     if (st == DK_OK)
         st = sm_clusters_build(mesh, &o, s->masses, s->kinematic, &s->cl, err);
     if (st == DK_OK)
@@ -542,8 +464,7 @@ typedef struct sm_rebuilt {
     size_t backup_size;
     dk_constraints *con;
     unsigned char *kinematic;
-    double *attach;
-    dk_index *near;
+    sm_attach att;
     double *targets;
     int has_clusters; /* automatic clusters were rebuilt (given ones are kept)             */
     sm_clusters cl;
@@ -556,7 +477,8 @@ typedef struct sm_rebuilt {
 static void rebuilt_free(sm_rebuilt *r)
 {
     dk_constraints_free(r->con);
-    free(r->kinematic), free(r->targets), free(r->attach), free(r->near), free(r->backup);
+    free(r->kinematic), free(r->targets), free(r->backup);
+    sm_attach_free(&r->att);
     if (r->has_clusters) {
         sm_clusters_free(&r->cl);
         sm_rest_free(&r->rest);
@@ -601,14 +523,14 @@ static dk_status rebuild(const dk_shape_matching *s, const dk_constraint_desc *d
         return st;
     r->kinematic = malloc((size_t)n + 1);
     r->targets = malloc((3 * (size_t)r->con->n_handle_vertices + 1) * sizeof *r->targets);
-    r->attach = malloc(((size_t)n + 1) * sizeof *r->attach);
-    r->near = malloc(((size_t)n + 1) * sizeof *r->near);
-    if (!r->kinematic || !r->targets || !r->attach || !r->near) {
+    if (!r->kinematic || !r->targets) {
         rebuilt_free(r);
         return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeMatching: out of memory (rebind)");
     }
     mark_kinematic(r->con, r->kinematic);
-    st = attachments(s, r->kinematic, r->attach, r->near, err);
+    st = sm_attach_build(s->mesh, r->con, r->kinematic, s->opt.falloff,
+                         sm_attach_cap(s->mesh, &s->opt), s->attach_map,
+                         &r->att, err);
     if (st != DK_OK) {
         rebuilt_free(r);
         return st;
@@ -663,11 +585,10 @@ dk_status dk_shape_matching_rebind(dk_shape_matching *s, const dk_constraint_des
     /* install: swap the new parts in, free the old ones through r */
     dk_constraints *oc = s->con;
     unsigned char *ok = s->kinematic;
-    double *ot = s->targets, *oa = s->attach;
-    dk_index *on = s->near;
-    s->con = r.con, s->kinematic = r.kinematic, s->targets = r.targets, s->attach = r.attach;
-    s->near = r.near;
-    r.con = oc, r.kinematic = ok, r.targets = ot, r.attach = oa, r.near = on;
+    double *ot = s->targets;
+    const sm_attach oa = s->att;
+    s->con = r.con, s->kinematic = r.kinematic, s->targets = r.targets, s->att = r.att;
+    r.con = oc, r.kinematic = ok, r.targets = ot, r.att = oa;
     unsigned char *ob = s->backup;
     const size_t obs = s->backup_size;
     s->backup = r.backup, s->backup_size = r.backup_size;
@@ -898,8 +819,10 @@ int64_t dk_shape_matching_frame(const dk_shape_matching *s)
 }
 
 dk_index dk_shape_matching_clusters(const dk_shape_matching *s, const dk_index **start,
-                                    const dk_index **vertices)
+                                    const dk_index **vertices, const double **shares)
 {
+    if (shares)
+        *shares = s->cl.member_share;
     if (start)
         *start = s->cl.start;
     if (vertices)

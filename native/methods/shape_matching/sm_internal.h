@@ -4,6 +4,7 @@
 #ifndef DK_SM_INTERNAL_H
 #define DK_SM_INTERNAL_H
 
+#include "dk_constraints.h"
 #include "dk_parallel.h"
 #include "dk_shape_matching.h"
 
@@ -13,7 +14,9 @@ typedef struct sm_clusters {
     dk_index n_clusters;
     dk_index *start;         /* n_clusters + 1                                            */
     dk_index *member_vertex; /* start[n_clusters]                                         */
-    double *member_mass;     /* m_i / n_i                                                 */
+    double *member_share;    /* phi: the vertex's share of the cluster (clusters.c: a cube's
+                                trilinear hat, normalised; a vertex's shares sum to 1)     */
+    double *member_mass;     /* m_i phi                                                    */
     dk_index *vm_start;      /* n_vertices + 1: vertex v's memberships are               */
     dk_index *vm_index;      /* vm_index[vm_start[v] .. vm_start[v+1]-1]                 */
 } sm_clusters;
@@ -69,12 +72,12 @@ void sm_goals_clusters(const sm_clusters *c, const sm_rest *r, dk_shape_matching
                        const double *beta, const double *x, double *member_goal, double *acc,
                        sm_fit *fits, dk_index begin, dk_index end);
 
-/* The mean goal of each vertex in [begin, end) from the two halves' sums acc0 + acc1 (the
+/* The blended goal (sum of share x goal) of each vertex in [begin, end) from the two halves' sums acc0 + acc1 (the
  * clusters split in two passes); a vertex in no cluster gets its own position. */
 void sm_goals_from_sums(const sm_clusters *c, const double *acc0, const double *acc1,
                         const double *x, double *goals, dk_index begin, dk_index end);
 
-/* The mean goal of each vertex in [begin, end) from member_goal; a vertex in no cluster gets
+/* The blended goal of each vertex in [begin, end) from member_goal; a vertex in no cluster gets
  * its own position. */
 void sm_goals_vertices(const sm_clusters *c, const double *member_goal, const double *x,
                        double *goals, dk_index begin, dk_index end);
@@ -91,6 +94,30 @@ void sm_rest_to_goal(const sm_clusters *c, const sm_rest *r, const double *y,
 dk_index sm_plastic_update(const sm_clusters *c, const sm_rest *r, const sm_fit *fits, double h,
                            const dk_shape_matching_dynamics *dyn, const double *y,
                            const double *rest, double *sp, unsigned char *changed);
+
+/* The attachments of the free vertices (attachments.c): a (n; 0 for kinematic vertices) the
+ * strength, and the kinematic vertices whose move off the input moves each one's attached
+ * place: vertex[start[v] .. start[v+1]-1] with shares summing to 1 (none for a vertex with
+ * no attachment). */
+typedef struct sm_attach {
+    double *a;
+    dk_index *start; /* n + 1                                                               */
+    dk_index *vertex;
+    double *share;
+} sm_attach;
+
+/* Builds the attachments for the kinematic set `kin` (n; 1 = kinematic) of the constraints
+ * `con` (its roles name each kinematic vertex's group: a handle, or the input), the falloff
+ * (0: half the depth of the simulated region, at most `cap`; sm_attach_cap) and the painted
+ * map (n, or NULL). */
+dk_status sm_attach_build(const dk_mesh *mesh, const dk_constraints *con,
+                          const unsigned char *kin, double falloff, double cap,
+                          const double *attach_map, sm_attach *out, dk_error *err);
+
+/* The automatic falloff's cap for these options: half the automatic cubes' edge, or no cap
+ * (INFINITY) for whole parts and given clusters. */
+double sm_attach_cap(const dk_mesh *mesh, const dk_shape_matching_options *options);
+void sm_attach_free(sm_attach *a);
 
 /* What one substep needs (integrators.c). */
 typedef struct sm_step {
