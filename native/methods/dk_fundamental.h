@@ -31,13 +31,13 @@
  * Degenerate triangles (dk_triangle_degenerate, dk_operators.h) have no frame: they
  * take no part in either energy. Boundary edges have one triangle's E_x term and no E_f.
  * A non-manifold edge joins each of its faces to the next in their order about it by a
- * frame equation with the rest frames' relative rotation (fundamental.c, fin_pairs), so it
+ * frame equation with the rest frames' relative rotation (fundamental/forms.c, fr_fin_pairs), so it
  * keeps its bending stiffness. A component without any constraint is held at rest
  * (dk_constraints.h). Faces that meet at a vertex only (a part pinched onto the surface at
  * its corners) or across a degenerate triangle are joined by no frame equation: at each
  * such vertex a weak "bridge" ties their frames to the rest frames' relative rotation, so
  * the part turns with its neighbours instead of leaving the system singular (zero at rest
- * and for affine motions of the whole; see fundamental.c, pieces_and_bridges). A part that
+ * and for affine motions of the whole; see fundamental/forms.c, fr_pieces_and_bridges). A part that
  * only degenerate triangles join to the rest needs a constraint of its own: the error names
  * a vertex of it and the triangle. A part held by fewer than four vertices spanning space
  * and no prescribed frame has its free shear regularized (see the docs).
