@@ -9,14 +9,17 @@
  * so that the clusters' forces add up to no net force and no net torque. The paper's share
  * is 1 / n_i (n_i the clusters of i); that of the automatic cubes is the cube's trilinear hat
  * (1 at its centre, 0 on its faces), so that goals vary continuously across the cubes' faces
- * instead of jumping there (given clusters and whole parts: 1 / n_i). For a cluster C with rest offsets q_i (its vertices in
- * the goal shape, less their mass centre) and current offsets p_i = x_i - x_cm:
+ * instead of jumping there (given clusters and whole parts: 1 / n_i). For a cluster C with
+ * rest offsets q_i (its vertices in the goal shape, less their mass centre) and current
+ * offsets p_i = x_i - x_cm:
  *   RIGID      A_pq = sum m p q^T, R its closest rotation (polar decomposition; for a flat
  *              or straight cluster the rotation that keeps orientation, det R = +1: the
  *              paper's A_pq S^-1 would reflect or be undefined there), goal g_i = R q_i + x_cm;
- *   LINEAR     A = A_pq A_qq^-1 (the best linear map), divided by det(A)^(1/3) so that it
- *              keeps the volume (where det A <= 0 the cluster is inverted and R is used),
- *              goal (beta A + (1 - beta) R) q_i + x_cm;
+ *   LINEAR     A the best linear map of det 1 (it keeps the volume): argmin over det A = 1
+ *              of sum m |A q - p|^2 (+ the regulariser below); the paper's A_pq A_qq^-1
+ *              divided by det^(1/3) keeps it too but is not a minimiser, and its goals
+ *              gained energy (volume_fit.c); where the best linear map has det <= 0 the
+ *              cluster is inverted and R is used; goal (beta A + (1 - beta) R) q_i + x_cm;
  *   QUADRATIC  q~ = [q, qx^2, qy^2, qz^2, qx qy, qy qz, qz qx] (9; the quadratic terms
  *              less their mass-weighted mean, so that the goals keep x_cm), A~ = A~_pq A~_qq^-1
  *              (3 x 9), R~ = [R 0 0], goal (beta A~ + (1 - beta) R~) q~_i + x_cm: bends and
@@ -43,8 +46,8 @@
  *     gravity - d (v - u)): gains energy; kept to compare;
  *   IMPLICIT_EULER (backward): v' = v + h (k (g(x') - x') + gravity - d v'), x' = x + h v',
  *     solved by v' (1 + h d + h^2 k) = v + h k (g(x + h v'_old) - x) + h (gravity + d u),
- *     iterated to its fixed point (each pass contracts by at most alpha / (1 + alpha) <= 1/2): damps
- *     vibrations, keeps rigid motions, stable for any alpha;
+ *     iterated to its fixed point (each pass contracts by at most alpha / (1 + alpha) <=
+ *     1/2): damps vibrations, keeps rigid motions, stable for any alpha;
  *   RK4: the classical Runge-Kutta of order 4, the goals evaluated at each stage.
  * Attachment (for secondary motion; not in the paper): a free vertex i with attachment a_i
  * in [0, 1] (the falloff near the kinematic vertices, and a painted map) is also pulled
@@ -70,7 +73,7 @@
  * vertices still where the request puts them). WARM and RESUME advance one frame (time_step,
  * in `substeps` steps) towards this request's input (the goal shape of the frame: secondary
  * motion on an animation) and targets. Energy: the shape-matching residual
- * sum_C sum_i (m_i / n_i) |g_iC - x_i|^2 of the positions against the last solve's goal shape.
+ * sum_C sum_i m_i phi_iC |g_iC - x_i|^2 of the positions against the last solve's goal shape.
  */
 #ifndef DK_SHAPE_MATCHING_H
 #define DK_SHAPE_MATCHING_H
@@ -197,7 +200,7 @@ dk_status dk_shape_matching_solve(dk_shape_matching *s, const dk_solve_request *
 dk_status dk_shape_matching_energy(const dk_shape_matching *s, const double *positions,
                                    double *energy, dk_error *err);
 
-/** The mean goal g_i of every vertex (n_vertices x 3) for `positions` (n_vertices x 3)
+/** The blended goal g_i of every vertex (n_vertices x 3) for `positions` (n_vertices x 3)
  *  against the last solve's goal shape and the current plastic states: what the clusters
  *  pull each vertex towards (kinematic vertices included; the attachment's blend with the
  *  input, which the integrators add, is not). */

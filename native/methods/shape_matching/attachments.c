@@ -19,10 +19,15 @@
  * nearest kinematic vertex of all would make the place jump where the nearest group changes
  * (half-way between a dragged hand and the held feet) and tear the mesh there; the blend
  * varies continuously. A vertex beyond F of every group (attached by the map alone) follows
- * its nearest kinematic vertex. */
+ * its nearest kinematic vertex.
+ *
+ * Cost: a k-d tree and a pass over the free vertices per group (each handle, and the
+ * input's), so a bind with thousands of handles pays for them (measured by the review: 0.6 s
+ * at 4,000 handles on 40k vertices, 0.06 s with one). */
 #include "sm_internal.h"
 
 #include <math.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -168,11 +173,10 @@ dk_status sm_attach_build(const dk_mesh *m, const dk_constraints *con, const uns
     dk_index *near = malloc(((size_t)n + 1) * sizeof *near);
     dk_index *freev = malloc(((size_t)n + 1) * sizeof *freev);
     dk_index *kinv = malloc(((size_t)n + 1) * sizeof *kinv);
-    double *dmin = malloc(((size_t)n + 1) * sizeof *dmin);
     source *list = NULL;
     size_t count = 0;
     dk_status st = DK_OK;
-    if (!out->a || !out->start || !near || !freev || !kinv || !dmin)
+    if (!out->a || !out->start || !near || !freev || !kinv)
         st = oom(err);
     dk_index nf = 0, nk = 0;
     if (st == DK_OK)
@@ -193,7 +197,6 @@ dk_status sm_attach_build(const dk_mesh *m, const dk_constraints *con, const uns
             double depth = 0.0;
             for (dk_index j = 0; j < nf; j++) {
                 near[freev[j]] = hit[j];
-                dmin[freev[j]] = dist[j];
                 depth = fmax(depth, dist[j]);
             }
             if (F == 0.0)
@@ -218,8 +221,15 @@ dk_status sm_attach_build(const dk_mesh *m, const dk_constraints *con, const uns
         for (dk_index v = 0; v < n; v++)
             if (out->a[v] > 0.0 && out->start[v + 1] == 0 && near[v] >= 0)
                 out->start[v + 1] = 1;
-        for (dk_index v = 0; v < n; v++)
-            out->start[v + 1] += out->start[v];
+        int64_t total = 0; /* at most a source per group and vertex: checked for dk_index */
+        for (dk_index v = 0; v < n && total <= INT32_MAX; v++) {
+            total += out->start[v + 1];
+            out->start[v + 1] = (dk_index)(total <= INT32_MAX ? total : 0);
+        }
+        if (total > INT32_MAX)
+            st = oom(err);
+    }
+    if (st == DK_OK) {
         const size_t total = (size_t)out->start[n];
         out->vertex = malloc((total + 1) * sizeof *out->vertex);
         out->share = malloc((total + 1) * sizeof *out->share);
@@ -248,7 +258,7 @@ dk_status sm_attach_build(const dk_mesh *m, const dk_constraints *con, const uns
         }
         free(fill);
     }
-    free(near), free(freev), free(kinv), free(dmin), free(list);
+    free(near), free(freev), free(kinv), free(list);
     if (st != DK_OK)
         sm_attach_free(out);
     return st;

@@ -277,7 +277,10 @@ static dk_status given(const dk_mesh *m, const dk_shape_matching_options *o, bui
 }
 
 /* For every vertex that must be covered and is in no cluster: the cluster of the nearest
- * FALLBACK_SIZE vertices (by edge hops, breadth first; a point set: in space). */
+ * FALLBACK_SIZE vertices (by edge hops, breadth first; a point set: in space), the vertex's
+ * weight 1 and its neighbours' 1 / FALLBACK_SIZE, so that a neighbour already in its cubes
+ * (hats summing to about 1) gives this small cluster about the share it had with equal
+ * shares, not half of its goal. */
 static dk_status cover(const dk_mesh *m, const unsigned char *kinematic, int must_all,
                        builder *b, dk_error *err)
 {
@@ -342,7 +345,10 @@ static dk_status cover(const dk_mesh *m, const unsigned char *kinematic, int mus
                 }
             }
         }
-        if (st == DK_OK && !add_cluster(b, list, NULL, got))
+        double weights[FALLBACK_SIZE];
+        for (dk_index k = 0; k < got; k++)
+            weights[k] = list[k] == v ? 1.0 : 1.0 / FALLBACK_SIZE;
+        if (st == DK_OK && !add_cluster(b, list, weights, got))
             st = oom(err, "clusters");
     }
     dk_kdtree_free(tree);

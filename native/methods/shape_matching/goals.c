@@ -124,14 +124,17 @@ void sm_goals_clusters(const sm_clusters *c, const sm_rest *r, dk_shape_matching
             else
                 memcpy(fits[cl].A, R, sizeof R);
         }
-        if (mode == DK_SHAPE_MATCHING_LINEAR) { /* volume kept: A / det(A)^(1/3) */
+        if (mode == DK_SHAPE_MATCHING_LINEAR) { /* the best fit with det 1 (volume_fit.c) */
             const double det = A[0] * (A[4] * A[8] - A[5] * A[7]) -
                                A[1] * (A[3] * A[8] - A[5] * A[6]) +
                                A[2] * (A[3] * A[7] - A[4] * A[6]);
             if (det > 0.0 && isfinite(det)) {
-                const double s = 1.0 / cbrt(det);
-                for (int i = 0; i < 9; i++)
-                    A[i] *= s;
+                if (!sm_volume_fit(A, r->half + 9 * (size_t)cl, r->ihalf + 9 * (size_t)cl,
+                                   r->log_det[cl])) {
+                    const double s = 1.0 / cbrt(det);
+                    for (int i = 0; i < 9; i++)
+                        A[i] *= s;
+                }
             } else {
                 use_fit = 0; /* inverted: the rotation */
             }

@@ -33,7 +33,13 @@ dk_status sm_rest_alloc(const sm_clusters *c, int dim, sm_rest *r, dk_error *err
     r->mass = malloc((nc + 1) * sizeof *r->mass);
     r->cm = malloc((3 * nc + 1) * sizeof *r->cm);
     r->plastic = malloc(nc + 1);
-    if (!r->q || !r->inv || !r->lambda || !r->mass || !r->cm || !r->plastic) {
+    if (dim == 3) {
+        r->half = malloc((9 * nc + 1) * sizeof *r->half);
+        r->ihalf = malloc((9 * nc + 1) * sizeof *r->ihalf);
+        r->log_det = malloc((nc + 1) * sizeof *r->log_det);
+    }
+    if (!r->q || !r->inv || !r->lambda || !r->mass || !r->cm || !r->plastic ||
+        (dim == 3 && (!r->half || !r->ihalf || !r->log_det))) {
         sm_rest_free(r);
         return dk_error_set(err, DK_ERR_OUT_OF_MEMORY,
                             "ShapeMatching: out of memory (rest offsets)");
@@ -51,6 +57,9 @@ void sm_rest_free(sm_rest *r)
     free(r->mass);
     free(r->cm);
     free(r->plastic);
+    free(r->half);
+    free(r->ihalf);
+    free(r->log_det);
     memset(r, 0, sizeof *r);
 }
 
@@ -191,5 +200,8 @@ void sm_rest_compute(const sm_clusters *c, const double *y, const double *rest,
             aqq[i * dim + i] += lam[i];
         }
         spd_inverse(dim, aqq, r->inv + (size_t)(dim * dim) * (size_t)cl);
+        if (dim == 3)
+            sm_volume_metric(aqq, r->half + 9 * (size_t)cl, r->ihalf + 9 * (size_t)cl,
+                             r->log_det + cl);
     }
 }

@@ -237,7 +237,7 @@ static void vertex_part(void *ctx, dk_index begin, dk_index end, int part)
     sm_goals_from_sums(&p->s->cl, p->s->acc, p->s->acc + N, p->x, p->goals, begin, end);
 }
 
-/* sm_goals_fn: the mean goals of configuration x, each blended with where the input puts
+/* sm_goals_fn: the blended goals of configuration x, each blended with where the input puts
  * its vertex at this time by its attachment: (k g + k_a y(t)) / (k + k_a). */
 static void goals_of(void *ctx, const double *x, double *goals)
 {
@@ -925,11 +925,13 @@ dk_status dk_shape_matching_estimate_memory(const dk_mesh *mesh,
     if (st != DK_OK)
         return st;
     const int quad = options && options->mode == DK_SHAPE_MATCHING_QUADRATIC;
-    /* 8 memberships a vertex: offsets (3 or 9), goals (3), mass, two indices; the bind's
-     * sort of 8 (key, vertex) pairs; the vertex arrays (x, v, shape, goals, 6 of RK4's
-     * stages, two kinematic ends: 14 x 3 doubles; 7 per-vertex doubles) */
-    const double per_vertex = 8.0 * (8.0 * (quad ? 9 : 3) + 24.0 + 8.0 + 8.0) + 8.0 * 16.0 +
-                              14.0 * 24.0 + 7.0 * 8.0;
+    /* 8 memberships a vertex: offsets (3 or 9), goals (3), mass, share, two indices; the
+     * bind's sort of 8 (key, vertex) pairs; the vertex arrays (x, v, shape, goals, 6 of
+     * RK4's stages, two kinematic ends: 14 x 3 doubles; 7 per-vertex doubles); the
+     * attachments (strength, row start, about two sources of index and share, and the
+     * build's nearest-vertex queries: ~80 B) */
+    const double per_vertex = 8.0 * (8.0 * (quad ? 9 : 3) + 24.0 + 8.0 + 8.0 + 8.0) +
+                              8.0 * 16.0 + 14.0 * 24.0 + 7.0 * 8.0 + 80.0;
     *bytes = dk_memory_model(per_vertex, (double)mesh->n_vertices, 0.0);
     return DK_OK;
 }

@@ -40,6 +40,9 @@ typedef struct sm_rest {
     double *inv;      /* dim x dim per cluster                                            */
     double *lambda;   /* dim per cluster                                                  */
     double *mass;     /* per cluster: sum of its members' masses                          */
+    double *half;     /* dim 3: 9 per cluster, (A_qq + L)^(1/2)                           */
+    double *ihalf;    /* dim 3: 9 per cluster, (A_qq + L)^(-1/2)                          */
+    double *log_det;  /* dim 3: per cluster, log det (A_qq + L)^(1/2)                     */
     double *cm;       /* 3 per cluster: the goal shape's mass centre                      */
     unsigned char *plastic; /* per cluster: 1 when q is S_p (y - cm), not y - cm           */
     const double *shape; /* the goal shape (n_vertices x 3) the data were computed from:
@@ -72,8 +75,9 @@ void sm_goals_clusters(const sm_clusters *c, const sm_rest *r, dk_shape_matching
                        const double *beta, const double *x, double *member_goal, double *acc,
                        sm_fit *fits, dk_index begin, dk_index end);
 
-/* The blended goal (sum of share x goal) of each vertex in [begin, end) from the two halves' sums acc0 + acc1 (the
- * clusters split in two passes); a vertex in no cluster gets its own position. */
+/* The blended goal (sum of share x goal) of each vertex in [begin, end) from the two
+ * halves' sums acc0 + acc1 (the clusters split in two passes); a vertex in no cluster gets
+ * its own position. */
 void sm_goals_from_sums(const sm_clusters *c, const double *acc0, const double *acc1,
                         const double *x, double *goals, dk_index begin, dk_index end);
 
@@ -118,6 +122,14 @@ dk_status sm_attach_build(const dk_mesh *mesh, const dk_constraints *con,
  * (INFINITY) for whole parts and given clusters. */
 double sm_attach_cap(const dk_mesh *mesh, const dk_shape_matching_options *options);
 void sm_attach_free(sm_attach *a);
+
+/* The linear mode's volume-preserving fit (volume_fit.c). sm_volume_metric: of the
+ * symmetric positive definite m = A_qq + L (3 x 3), m^(1/2), m^(-1/2) and log det m^(1/2).
+ * sm_volume_fit: A (3 x 3, the best linear fit A*, det > 0) replaced by the best fit with
+ * det 1 in m's metric, argmin_{det A = 1} |(A - A*) m^(1/2)|_F; 0 (A unchanged) where m
+ * is singular or A* M^(1/2) is not positive definite in its stretch (det A* <= 0). */
+void sm_volume_metric(const double m[9], double half[9], double ihalf[9], double *log_det);
+int sm_volume_fit(double A[9], const double half[9], const double ihalf[9], double log_det);
 
 /* What one substep needs (integrators.c). */
 typedef struct sm_step {
