@@ -45,30 +45,46 @@ def procrustes(X, Y):
 
 def det_one_fit(A, M):
     """argmin over det B = 1 of |(B - A) M^(1/2)|_F (volume_fit.c), by the singular values
-    of A M^(1/2): each s_i = (sigma_i + sqrt(sigma_i^2 + 4 mu)) / 2, mu by bisection; the
-    smallest with the minus sign where even sigma_i / 2 keeps too much volume."""
+    sigma of A M^(1/2): the stationary points s_i (s_i - sigma_i) = mu, each s_i on its larger
+    root, or the smallest on its smaller one; every root found (the larger roots' gap rises,
+    the other is sampled finely), the cheapest kept."""
     w, Q = np.linalg.eigh(M)
     half = Q @ np.diag(np.sqrt(w)) @ Q.T
     U, sig, Vt = np.linalg.svd(A @ half)  # descending: the smallest is last
     target = np.sum(np.log(np.sqrt(w)))
-    sign = np.ones(3)
 
-    def gap(mu):
-        return np.log((sig + sign * np.sqrt(np.maximum(sig ** 2 + 4 * mu, 0))) / 2).sum() - target
-    lo = -sig.min() ** 2 / 4
-    if gap(lo) > 0:
-        sign[2], hi = -1.0, 0.0  # the gap falls from lo to 0 on that root
+    def stretches(mu, minus):
+        r = np.sqrt(np.maximum(sig ** 2 + 4 * mu, 0))
+        s = (sig + r) / 2
+        if minus:
+            s[2] = -2 * mu / (sig[2] + r[2])
+        return s
+
+    def gap(mu, minus):
+        return np.log(stretches(mu, minus)).sum() - target
+
+    def root(a, b, minus):
+        ga = gap(a, minus) > 0
         for _ in range(200):
-            mid = (lo + hi) / 2
-            lo, hi = (mid, hi) if gap(mid) > 0 else (lo, mid)
-    else:
+            mid = (a + b) / 2
+            if (gap(mid, minus) > 0) == ga:
+                a = mid
+            else:
+                b = mid
+        return (a + b) / 2
+    lo, found = -sig.min() ** 2 / 4, []
+    if gap(lo, False) <= 0:
         hi = max(1.0, sig.max() ** 2)
-        while gap(hi) < 0:
+        while gap(hi, False) < 0:
             hi *= 2
-        for _ in range(200):
-            mid = (lo + hi) / 2
-            lo, hi = (mid, hi) if gap(mid) < 0 else (lo, mid)
-    s = (sig + sign * np.sqrt(np.maximum(sig ** 2 + 4 * (lo + hi) / 2, 0))) / 2
+        found.append(stretches(root(lo, hi, False), False))
+    # a smaller root costs at least (sigma_min / 2)^2: tried only where that can win
+    if not found or ((found[0] - sig) ** 2).sum() > sig.min() ** 2 / 4:
+        mus = np.r_[lo * (1 - np.linspace(0, 1, 4001)[:-1]), -1e-300]
+        g = np.array([gap(m, True) for m in mus])
+        for k in np.flatnonzero((g[:-1] > 0) != (g[1:] > 0)):
+            found.append(stretches(root(mus[k], mus[k + 1], True), True))
+    s = min(found, key=lambda s: ((s - sig) ** 2).sum())
     return U @ np.diag(s) @ Vt @ np.linalg.inv(half)
 
 
@@ -136,6 +152,62 @@ def test_goals_match_numpy(tube, mode, clusters):
                        mode)
     assert np.abs(got - want).max() < 1e-10
     assert sum(len(c) for c in sm.clusters()) >= len(V)
+
+
+def test_the_linear_fit_is_the_cheapest_map_of_det_one():
+    """One cluster (a sphere: its A_qq nearly isotropic) grown to about 7.5 times its volume
+    at beta = 1: the goal map is the cheapest det-1 map in the fit's metric, against a
+    brute-force search over the stretches (two free log stretches, many starts). Near
+    isotropy the cheapest squashes one axis (the smaller root) although every stretch can
+    shrink alike (the larger roots), which costs more; a generic stretch too."""
+    from scipy.optimize import minimize
+    from conftest import make_icosphere
+    V, F = make_icosphere(2)
+    for scale in ([1.9504, 1.9502, 1.95], [1.953, 1.9515, 1.95], [1.2, 1.0, 0.9]):
+        sm = dk.ShapeMatching(dk.Mesh(V, F), clusters=[np.arange(len(V))], mode="linear",
+                              beta=1.0)
+        X = V * scale + [0.1, 0.2, 0.3]
+        got = np.asarray(sm.goals(X))
+        q, cm = V - V.mean(0), X.mean(0)
+        p = X - cm
+        qq = (q ** 2).sum(1)
+        lam = 1e-4 * qq.sum() / 3
+        Aqq = q.T @ q + lam * np.eye(3)
+        U, _, Vt = np.linalg.svd(p.T @ q)
+        R = U @ np.diag([1, 1, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+        Astar = (p.T @ q + lam * R) @ np.linalg.inv(Aqq)
+        w, Q = np.linalg.eigh(Aqq)
+        half = Q @ np.diag(np.sqrt(w)) @ Q.T
+        Ub, sig, Vbt = np.linalg.svd(Astar @ half)
+        logk = np.log(np.sqrt(w)).sum()
+
+        def cost(z):
+            s = np.exp(np.r_[z, logk - z.sum()])
+            return ((s - sig) ** 2).sum()
+        best = min((minimize(cost, z0, method="Nelder-Mead",
+                             options={"xatol": 1e-12, "fatol": 1e-16, "maxiter": 4000})
+                    for z0 in np.log(sig[:2]) + np.random.default_rng(0).normal(0, 1, (12, 2))),
+                   key=lambda r: r.fun)
+        s = np.exp(np.r_[best.x, logk - best.x.sum()])
+        A = Ub @ np.diag(s) @ Vbt @ np.linalg.inv(half)
+        want = q @ A.T + cm
+        assert np.abs(got - want).max() < 1e-6 * np.abs(want).max(), scale
+
+
+def test_a_vertex_in_no_cube_borrows_its_neighbours_little():
+    """A point cloud and one far outlier (alone in its cubes: no piece of 4): the outlier's
+    cluster is it and its 7 nearest points, it weighted 1 and they 1/8, so each of them,
+    whose cube hats sum to 1, gives that cluster a ninth of its goal (weight 1 each took
+    half)."""
+    rng = np.random.default_rng(1)
+    P = np.r_[rng.uniform(0, 1, (3000, 3)), [[3.0, 3.0, 3.0]]]
+    sm = dk.ShapeMatching(dk.Mesh(P, np.zeros((0, 3), int)), cluster_size=0.5)
+    out = len(P) - 1
+    (c, phi), = [(c, phi) for c, phi in zip(sm.clusters(), sm.cluster_shares())
+                 if out in c]
+    assert len(c) == 8 and phi[list(c).index(out)] == 1.0
+    others = phi[np.asarray(c) != out]
+    np.testing.assert_allclose(others, 1.0 / 9.0, rtol=1e-12)
 
 
 def shares_by_vertex(sm, n):

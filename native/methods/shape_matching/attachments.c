@@ -227,7 +227,8 @@ dk_status sm_attach_build(const dk_mesh *m, const dk_constraints *con, const uns
             out->start[v + 1] = (dk_index)(total <= INT32_MAX ? total : 0);
         }
         if (total > INT32_MAX)
-            st = oom(err);
+            st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY,
+                              "ShapeMatching: more attachment sources than an index holds");
     }
     if (st == DK_OK) {
         const size_t total = (size_t)out->start[n];

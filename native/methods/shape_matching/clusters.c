@@ -345,10 +345,12 @@ static dk_status cover(const dk_mesh *m, const unsigned char *kinematic, int mus
                 }
             }
         }
+        if (st != DK_OK)
+            break;
         double weights[FALLBACK_SIZE];
         for (dk_index k = 0; k < got; k++)
             weights[k] = list[k] == v ? 1.0 : 1.0 / FALLBACK_SIZE;
-        if (st == DK_OK && !add_cluster(b, list, weights, got))
+        if (!add_cluster(b, list, weights, got))
             st = oom(err, "clusters");
     }
     dk_kdtree_free(tree);

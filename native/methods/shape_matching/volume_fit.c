@@ -13,11 +13,25 @@
  * rotation and the eigenvectors of its stretch S*, and each eigenvalue sigma_i becomes
  * s_i = (sigma_i + sqrt(sigma_i^2 + 4 mu)) / 2 (from s_i (s_i - sigma_i) = mu, the Lagrange
  * condition), mu the root of sum log s_i = log det M^(1/2), found by safeguarded Newton.
- * Where the fit's volume is too large for that (s_i >= sigma_i / 2 on this branch: a thin
- * cluster, whose smallest sigma is small, can lose little volume so), the smallest takes the
- * other root, s_0 = (sigma_0 - sqrt(sigma_0^2 + 4 mu)) / 2 for mu in (-sigma_0^2 / 4, 0):
- * the fit gives up volume across the cluster, where its points say least, and mu is found by
- * bisection. (Nearest matrices of a given determinant take at most that one root so.) */
+ * That root need not exist, nor be the cheapest, where the fit's volume is much too large
+ * (s_i >= sigma_i / 2 on it: a thin cluster, whose smallest sigma is small, can lose little
+ * volume so; or a nearly isotropic one shrunk to about 1/8): there the smallest stretch may
+ * take the other root, s_0 = (sigma_0 - sqrt(sigma_0^2 + 4 mu)) / 2 for mu in
+ * (-sigma_0^2 / 4, 0), and the fit gives up volume across the cluster, where its points say
+ * least. Every stationary point found on both branches is compared by its cost, the
+ * cheapest kept. (Nearest matrices of a given determinant take at most the smallest stretch
+ * on its other root.)
+ *
+ * Thin clusters: the metric M weighs the directions by the cluster's extent, so a flat
+ * cluster of a surface keeps its volume mostly by its normal, where it has no points: it
+ * then resists a stretch in its own plane little beyond its rigid part (1 - beta), where the
+ * paper's division shrinks the plane back (measured by a review: a flat patch stretched by
+ * 1.05-1.5 at beta = 1 pulls back 1e-4 of the stretch here, 0.7 there; closed models still
+ * come back to their volume). A careful reading of "keep the volume": a flat cluster has
+ * none to keep.
+ *
+ * Where sm_volume_fit returns 0 (a singular metric, no stretch with det > 0) the caller
+ * divides by det^(1/3), the paper's map. */
 #include "sm_internal.h"
 
 #include <math.h>
@@ -114,11 +128,12 @@ void sm_volume_metric(const double m[9], double half[9], double ihalf[9], double
     from_eigen(v, id, ihalf);
 }
 
-/* s_i(mu): the larger root of s (s - sigma) = mu, or for i = 0 with `minus` the smaller. */
+/* s_i(mu): the larger root of s (s - sigma) = mu, or for i = 0 with `minus` the smaller
+ * (written -2 mu / (sigma + r), which keeps its digits where |mu| << sigma^2). */
 static double root_of(double sigma, double mu, int minus)
 {
     const double r = sqrt(fmax(sigma * sigma + 4.0 * mu, 0.0));
-    return 0.5 * (minus ? sigma - r : sigma + r);
+    return minus ? -2.0 * mu / (sigma + r) : 0.5 * (sigma + r);
 }
 
 /* sum log s_i(mu) - target and, on the larger roots, its derivative. */
@@ -136,6 +151,38 @@ static double volume_gap(const double sigma[3], double mu, double target, int mi
     return f;
 }
 
+/* The cost sum (s_i - sigma_i)^2 of the stretches at mu. */
+static double cost_at(const double sigma[3], double mu, int minus, double s[3])
+{
+    double c = 0.0;
+    for (int i = 0; i < 3; i++) {
+        s[i] = root_of(sigma[i], mu, minus && i == 0);
+        c += (s[i] - sigma[i]) * (s[i] - sigma[i]);
+    }
+    return c;
+}
+
+/* Bisection of the gap on (lo, hi), its sign at lo `at_lo`, until the interval stops
+ * shrinking in doubles. */
+static double bisect(const double sigma[3], double lo, double hi, double target, int minus,
+                     int at_lo)
+{
+    double slope;
+    for (int it = 0; it < 200; it++) {
+        const double mid = 0.5 * (lo + hi);
+        if (mid <= lo || mid >= hi)
+            break;
+        if ((volume_gap(sigma, mid, target, minus, &slope) > 0.0) == (at_lo > 0))
+            lo = mid;
+        else
+            hi = mid;
+    }
+    return 0.5 * (lo + hi);
+}
+
+/* samples of the smaller root's branch, where its gap may turn more than once */
+#define MINUS_SAMPLES 48
+
 int sm_volume_fit(double A[9], const double half[9], const double ihalf[9], double log_det)
 {
     if (!isfinite(log_det))
@@ -151,41 +198,58 @@ int sm_volume_fit(double A[9], const double half[9], const double ihalf[9], doub
     sym3_eigen(S, sigma, v);
     if (!(sigma[0] > 0.0))
         return 0;
-    /* mu in (lo, hi): s_i real for mu >= -sigma_min^2 / 4, and sum log s_i increasing */
-    double lo = -0.25 * sigma[0] * sigma[0], hi = fmax(1.0, sigma[2] * sigma[2]), slope;
-    const int minus = volume_gap(sigma, lo, log_det, 0, &slope) > 0.0;
-    double mu;
-    if (minus) { /* the smallest on its smaller root: sum log s_i falls from lo to 0 */
-        hi = 0.0;
-        for (int it = 0; it < 200 && hi - lo > 1e-17 * fabs(lo); it++) {
-            mu = 0.5 * (lo + hi);
-            if (volume_gap(sigma, mu, log_det, 1, &slope) > 0.0)
-                lo = mu;
-            else
-                hi = mu;
-        }
-        mu = 0.5 * (lo + hi);
-    } else {
-        for (int k = 0; k < 200 && volume_gap(sigma, hi, log_det, 0, &slope) < 0.0; k++)
-            hi *= 2.0;
-        mu = 0.0;
-        for (int it = 0; it < 100; it++) {
+    /* The stationary points: s_i (s_i - sigma_i) = mu for one mu. On the larger roots,
+     * mu in [lo, inf) with lo = -sigma_min^2 / 4, sum log s_i rises: one root when the gap
+     * at lo is <= 0. On the smallest's smaller root, mu in (lo, 0), the gap falls to -inf
+     * at 0 but near isotropy may turn (up to three roots): sampled, each sign change
+     * bisected. The cheapest stationary point is the fit; the smaller root is only tried
+     * where the larger's cost passes sigma_min^2 / 4, which any smaller root costs. */
+    const double lo = -0.25 * sigma[0] * sigma[0];
+    double slope, best = INFINITY, s[3], t[3];
+    if (volume_gap(sigma, lo, log_det, 0, &slope) <= 0.0) {
+        double a = lo, b = fmax(1.0, sigma[2] * sigma[2]);
+        for (int k = 0; k < 200 && volume_gap(sigma, b, log_det, 0, &slope) < 0.0; k++)
+            b *= 2.0;
+        double mu = 0.0;
+        if (!(mu > a && mu < b))
+            mu = 0.5 * (a + b);
+        for (int it = 0; it < 100; it++) { /* safeguarded Newton */
             const double f = volume_gap(sigma, mu, log_det, 0, &slope);
             if (f > 0.0)
-                hi = mu;
+                b = mu;
             else
-                lo = mu;
-            if (fabs(f) < 1e-14 || hi - lo <= 1e-15 * fmax(fabs(lo), fabs(hi)))
+                a = mu;
+            if (fabs(f) < 1e-14)
                 break;
             double next = mu - f / slope;
-            if (!(next > lo && next < hi))
-                next = 0.5 * (lo + hi);
+            if (!(next > a && next < b))
+                next = 0.5 * (a + b);
+            if (next == mu)
+                break;
             mu = next;
         }
+        best = cost_at(sigma, mu, 0, s);
     }
-    double s[3];
-    for (int i = 0; i < 3; i++)
-        s[i] = root_of(sigma[i], mu, minus && i == 0);
+    if (best > 0.25 * sigma[0] * sigma[0]) {
+        double prev_mu = lo, prev = volume_gap(sigma, lo, log_det, 1, &slope);
+        for (int k = 1; k <= MINUS_SAMPLES; k++) {
+            const double mu = k < MINUS_SAMPLES ? lo * (1.0 - (double)k / MINUS_SAMPLES)
+                                                : -1e-300;
+            const double g = volume_gap(sigma, mu, log_det, 1, &slope);
+            if ((prev > 0.0) != (g > 0.0)) {
+                const double root = bisect(sigma, prev_mu, mu, log_det, 1, prev > 0.0 ? 1 : -1);
+                const double c = cost_at(sigma, root, 1, t);
+                if (c < best) {
+                    best = c;
+                    memcpy(s, t, sizeof t);
+                }
+            }
+            prev_mu = mu;
+            prev = g;
+        }
+    }
+    if (!isfinite(best))
+        return 0;
     from_eigen(v, s, S);
     mul3(Rb, S, B);
     mul3(B, ihalf, A);
