@@ -865,8 +865,11 @@ def _volume_summary(native):
                else "it is not closed (a hole, or an edge shared by more than two faces)"
                if "no closed part" in note else note.replace("no volume: ", ""))
         return "no volume: deformed as a surface (%s)" % why
-    text = "%d tetrahedra inside" % n
     stats = getattr(native, "stats", None)
+    if isinstance(stats, dict) and stats.get("embedded"):
+        return "carried by a coarse solid: %d tetrahedra, %d points" % (
+            n, stats.get("n_points", 0))
+    text = "%d tetrahedra inside" % n
     coarse = stats.get("coarse_points", 0) if isinstance(stats, dict) else 0
     if coarse:
         text += ", coarse level of {:,} points".format(coarse)
@@ -897,6 +900,15 @@ METHODS.append(Method(
                "always adds the level. The result is the same for usual edits (a half turn "
                "can settle into another twist) and arrives several times faster, at a "
                "slightly longer bind", min=0, max=2, advanced=True),
+        # 0 = the native default (automatic: a coarse solid from 250,000 closed vertices on)
+        Option("embed", "INT", 0, "Coarse Solid",
+               "What carries the surface: 1 tetrahedralizes the mesh itself, 2 a coarse copy "
+               "of its solid (a sixteenth of the surface, its own tetrahedra) that the mesh "
+               "rides on, each vertex at its place in the coarse tetrahedra, handles and fixed "
+               "parts exact: far faster and smaller binds and solves, the bend of the coarse "
+               "solid with the mesh's details on it. 0 picks 2 from 250,000 vertices when "
+               "every part of the mesh is closed (the mesh's own solid would need over 3 GB)",
+               min=0, max=2, advanced=True),
         Option("stiffness_scale", "FLOAT", 10.0, "Painted Stiffness",
                "How stiff the Stiffness group's vertices painted 1 are, against 1 for the "
                "rest (the inside takes the stiffness of the surface around it)",

@@ -2,7 +2,7 @@
 """Issue 44: VolumetricARAP against surface ARAP (docs/methods/volumetric_arap.md).
 
   PYTHONPATH=build/python /usr/bin/python3 scripts/bench_volumetric_arap.py [--meshes ...]
-      [--subdivide S] [--levels 1,2] [--quality Q] [--no-surface]
+      [--subdivide S] [--levels 1,2] [--embed 0,1,2] [--quality Q] [--no-surface]
 
 For each mesh (its longest axis its length): the far tenth a handle, the near tenth fixed,
 the handle turned by 90 degrees about the middle's centre (a bend) and, separately, by 180
@@ -14,7 +14,9 @@ against the rest's, for both methods. --subdivide S subdivides each mesh S times
 (midpoints); --levels lists VolumetricARAP's `levels` to run (1: the volume alone, 2: with
 its coarse level; the coarse points and the cold starts it gave are printed), and the
 largest difference of each cold result from the first's (in units of the length) with its
-energy's; --no-surface skips surface ARAP. A script, not a test: compare within one run (the machines' speed swings by
+energy's; --embed lists `embed` values to run with each (0 automatic: a coarse volume carries
+the surface from 250,000 closed vertices on; 1 the surface is the volume's boundary; 2 the
+coarse volume carries it; the default 1); --no-surface skips surface ARAP. A script, not a test: compare within one run (the machines' speed swings by
 tens of percent)."""
 import argparse
 import os
@@ -43,7 +45,7 @@ def turn(angle, axis, centre):
     return T
 
 
-def run(name, V, F, quality, levels, surface):
+def run(name, V, F, quality, levels, surface, embeds=(1,)):
     mesh = dk.Mesh(V, F)
     axis = int(np.argmax(np.ptp(V, axis=0)))
     t = (V[:, axis] - V[:, axis].min()) / np.ptp(V[:, axis])
@@ -54,7 +56,8 @@ def run(name, V, F, quality, levels, surface):
              "twist 180": turn(np.pi, axis, V[hand].mean(axis=0))}
     v0 = shapes.volume(V, F)
     print("%s: %d vertices, %d triangles" % (name, len(V), len(F)))
-    runs = [(dk.VolumetricARAP, {"quality": quality, "levels": L}) for L in levels]
+    runs = [(dk.VolumetricARAP, {"quality": quality, "levels": L, "embed": E})
+            for L in levels for E in embeds]
     runs += [(dk.ARAP, {})] if surface else []
     first = {}
     length = np.ptp(V[:, axis])
@@ -64,8 +67,10 @@ def run(name, V, F, quality, levels, surface):
         bind = time.perf_counter() - t0
         extra = ""
         if cls is dk.VolumetricARAP:
-            extra = ", levels=%d: %d points (%d inside), %d tetrahedra%s%s" % (
-                kw["levels"], m.n_points, m.n_interior_points, m.n_tetrahedra,
+            extra = ", levels=%d, embed=%d%s: %d points (%d inside), %d tetrahedra%s%s" % (
+                kw["levels"], kw["embed"],
+                " (a coarse volume carries the surface)" if m.stats["embedded"] else "",
+                m.n_points, m.n_interior_points, m.n_tetrahedra,
                 ", coarse level of %d points" % m.stats["coarse_points"]
                 if m.stats["levels"] > 1 else "",
                 ", " + m.volume_note if m.volume_note else "")
@@ -104,6 +109,7 @@ def main():
     ap.add_argument("--meshes", nargs="*", default=["arm.obj", "armadillo.obj"])
     ap.add_argument("--subdivide", type=int, default=0)
     ap.add_argument("--levels", default="1")
+    ap.add_argument("--embed", default="1")
     ap.add_argument("--quality", type=float, default=1.5)
     ap.add_argument("--no-surface", action="store_true")
     a = ap.parse_args()
@@ -112,7 +118,8 @@ def main():
         V, F = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
         for _ in range(a.subdivide):
             V, F = midpoint_subdivide(V, F)
-        run(name, V, F, a.quality, [int(x) for x in a.levels.split(",")], not a.no_surface)
+        run(name, V, F, a.quality, [int(x) for x in a.levels.split(",")], not a.no_surface,
+            [int(x) for x in a.embed.split(",")])
 
 
 if __name__ == "__main__":

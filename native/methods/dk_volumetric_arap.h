@@ -73,6 +73,20 @@ typedef struct dk_volumetric_arap_options {
                               own levels automatic unless this is 1). The answer is a
                               minimum of the volume's energy by the same test; a big edit
                               with several (a half turn) can end in another one. 0..2   */
+    int embed;           /**< how the volume carries the surface (docs/methods/
+                              volumetric_arap.md, "Big meshes"): 1 the surface is the
+                              tetrahedra's boundary (its vertices their first points);
+                              2 a coarse volume carries it: the surface simplified to
+                              1/16 of its vertices (each vertex's role kept), that
+                              tetrahedralized and bound as a VolumetricARAP of its own
+                              (`levels` passed on), and every vertex moved by the coarse
+                              volume's move at its barycentric coordinates in the coarse
+                              tetrahedra (extrapolated outside them), handles and fixed
+                              vertices then exactly where they must be: the minimum of the
+                              coarse volume's energy, not the surface's own volume's;
+                              every part must bound a volume; 0 (the default):
+                              automatic, 2 from 250,000 vertices on where every part
+                              bounds a volume (the full volume would pass 3 GB). 0..2   */
     dk_phase_progress_fn progress; /**< bind progress: the phases tetrahedralize, interior
                                         (the harmonic extension's factor), then ARAP's
                                         (dk_arap_options.progress), coarse (the level),
@@ -146,6 +160,10 @@ void dk_volumetric_arap_get_counters(const dk_volumetric_arap *va,
  *  positively oriented at rest); either may be NULL. */
 void dk_volumetric_arap_tetrahedra(const dk_volumetric_arap *va, double *points,
                                    dk_index *tetrahedra);
+
+/** 1 when a coarse volume carries the surface (the option embed, chosen or automatic),
+ *  else 0 (also for NULL). */
+int dk_volumetric_arap_embedded(const dk_volumetric_arap *va);
 
 /** Frees; NULL allowed. */
 void dk_volumetric_arap_free(dk_volumetric_arap *va);

@@ -22,7 +22,8 @@ static int parse_options(PyObject *kw, void *o, const char *context)
         dk_py_opt_double(kw, "tolerance", &opt->tolerance) < 0 ||
         dk_py_opt_choice(kw, "acceleration", accel_names, &accel, context) < 0 ||
         dk_py_opt_int(kw, "cg_iterations", &opt->cg_iterations) < 0 ||
-        dk_py_opt_int(kw, "levels", &opt->levels) < 0)
+        dk_py_opt_int(kw, "levels", &opt->levels) < 0 ||
+        dk_py_opt_int(kw, "embed", &opt->embed) < 0)
         return -1;
     opt->acceleration = (dk_arap_acceleration)accel;
     return 0;
@@ -42,13 +43,14 @@ static PyObject *stats(dk_py_method *self)
     dk_volumetric_arap_stats(self->native, &ms);
     dk_volumetric_arap_get_counters(self->native, &c);
     dk_arap_get_counters(dk_volumetric_arap_solver(self->native), &ac);
-    return Py_BuildValue("{s:i,s:i,s:i,s:i,s:i,s:i,s:i,s:i,s:i}", "n_unknowns",
+    return Py_BuildValue("{s:i,s:i,s:i,s:i,s:i,s:i,s:i,s:i,s:i,s:i}", "n_unknowns",
                          (int)ms.n_unknowns, "n_points", (int)c.n_points, "n_interior_points",
                          (int)c.n_interior_points, "n_tetrahedra", (int)c.n_tetrahedra,
                          "analysis_count", ms.analysis_count, "factorization_count",
                          ms.factorization_count, "levels", ac.levels, "coarse_points",
                          ac.levels > 1 ? (int)ac.coarse_vertices[0] : 0, "coarse_starts",
-                         ac.coarse_starts);
+                         ac.coarse_starts, "embedded",
+                         dk_volumetric_arap_embedded(self->native));
 }
 
 /* n_points, n_interior_points, n_tetrahedra: closure 0, 1, 2 */
@@ -134,7 +136,7 @@ PyDoc_STRVAR(volumetric_doc,
              "VolumetricARAP(mesh, handles=None, fixed=None, roi=None, handle_weights=None,\n"
              "               stiffness=None, quality=1.5, max_volume=0.0,\n"
              "               max_iterations=1000, tolerance=1e-6, acceleration='newton',\n"
-             "               cg_iterations=12, levels=0, progress=None)\n\n"
+             "               cg_iterations=12, levels=0, embed=0, progress=None)\n\n"
              "As-rigid-as-possible deformation of the solid a closed surface bounds (the\n"
              "slides' volume-based deformation): the interior tetrahedralized by TetGen (the\n"
              "mesh's vertices are its boundary), each tetrahedron's deformation gradient\n"
@@ -150,7 +152,13 @@ PyDoc_STRVAR(volumetric_doc,
              "surface simplified to 1/16, its own tetrahedra: cold solves start from its\n"
              "result prolonged, then converge on the volume as without it), 0 automatic\n"
              "(the level from 10,000 points on); stats reports levels,\n"
-             "coarse_points, coarse_starts. See docs/methods/volumetric_arap.md.");
+             "coarse_points, coarse_starts. embed: 1 the surface is the tetrahedra's\n"
+             "boundary, 2 a coarse volume carries it (the surface simplified to 1/16, its own\n"
+             "tetrahedra and VolumetricARAP; each vertex moved by the coarse volume's move at\n"
+             "its barycentric coordinates, handles and fixed vertices exactly placed; every\n"
+             "part must be closed), 0 automatic (2 from 250,000 vertices on when every part\n"
+             "is closed: the full volume would pass 3 GB); then tetrahedra() and the counts\n"
+             "are the coarse volume's. See docs/methods/volumetric_arap.md.");
 
 static PyMethodDef vol_methods[] = {
     DK_PY_METHOD_METHODS(solve_doc),

@@ -6,7 +6,10 @@ binds too and says that it deforms as a surface. After an Armature bending the t
 each frame is the API's edit of the Armature's pose, its handle at the pose's place; a bake
 writes what played; the settings survive saving and reopening. With Coarse Level 2 (the
 multi-scale solve): the status names the level, the bend is the API's with levels=2, the
-setting survives saving, and after the Armature each frame is the API's edit of the pose."""
+setting survives saving, and after the Armature each frame is the API's edit of the pose.
+With Coarse Solid 2 (a coarse volume carries the mesh) likewise: the status says so, the bend
+is the API's with embed=2, the setting survives saving, the Armature's pose is edited as the
+API edits it."""
 import os
 import sys
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -29,7 +32,7 @@ def api(obj, d, fixed, tip, cls="VolumetricARAP"):
     rest = S.rest_positions(obj)
     mesh = S.dk.Mesh(rest, S.solver.triangles(obj.data))
     o = d.options_volume_arap
-    kw = {"levels": o.levels} if cls == "VolumetricARAP" else {}
+    kw = {"levels": o.levels, "embed": o.embed} if cls == "VolumetricARAP" else {}
     return getattr(S.dk, cls)(mesh, handles=[tip], fixed=fixed, tolerance=o.tolerance,
                               max_iterations=o.max_iterations, **kw), rest
 
@@ -120,6 +123,36 @@ def test_coarse_level():
     S.check_edit_after_armature(R, obj, d, e, fixed, tip, TOL, "volume_arap_levels.pc2")
 
 
+def test_coarse_solid():
+    S.reset_scene()
+    obj, d, e, fixed, tip = S.tube_deformer("VOLUME_ARAP", embed=2)
+    bind_world = e.matrix_world.copy()
+    bpy.ops.deformkit.bind()
+    text = S.solver.status_text(d)
+    R.check("the status names the coarse solid", d.bound and "coarse solid" in text, text)
+    e.matrix_world = S.bend_end(np.pi / 2) @ bind_world
+    bpy.context.view_layer.update()
+    got = S.evaluated_positions(obj)
+    T = np.array(e.matrix_world @ bind_world.inverted())
+    va, rest = api(obj, d, fixed, tip)
+    R.check("the API carries it too", va.stats["embedded"] == 1, va.stats)
+    va.solve(transforms=[np.eye(4)], warm_start=False)
+    want = np.asarray(va.solve(transforms=[T], warm_start=True).positions)
+    diff = float(np.abs(got - want).max())
+    R.check("the bend is the API's on the coarse solid (max %.2e)" % diff, diff < TOL, diff)
+    R.check("the handle is where it was moved",
+            float(np.abs(got[tip] - (rest[tip] @ T[:3, :3].T + T[:3, 3])).max()) < 1e-5)
+    path = os.path.join(S.OUTPUT, "volume_arap_embed.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    d = bpy.data.objects["Tube"].deformkit.deformers[0]
+    R.check("the setting survives saving", d.options_volume_arap.embed == 2,
+            d.options_volume_arap.embed)
+    S.reset_scene()
+    obj, d, e, fixed, tip = S.tube_deformer("VOLUME_ARAP", rig=S.lower_bone_rig, embed=2)
+    S.check_edit_after_armature(R, obj, d, e, fixed, tip, TOL, "volume_arap_embed.pc2")
+
+
 def test_after_an_armature():
     obj, d, e, fixed, tip = tube_setup(S.lower_bone_rig)
     got, inp = S.check_edit_after_armature(R, obj, d, e, fixed, tip, TOL, "volume_arap.pc2")
@@ -131,7 +164,7 @@ def test_after_an_armature():
             v_out / v_in)
 
 
-for t in (test_still_mesh, test_open_mesh_deforms_as_a_surface, test_coarse_level,
+for t in (test_still_mesh, test_open_mesh_deforms_as_a_surface, test_coarse_level, test_coarse_solid,
           test_after_an_armature):
     R.run(t)
 R.finish()

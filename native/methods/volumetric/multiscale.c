@@ -73,10 +73,7 @@ static void tet_frames(const double *p, const dk_index *tets, dk_index nt, dk_in
     *n_kept = m;
 }
 
-/* Sparse rows of a linear map onto the points of a tetrahedral mesh (points p, tets, nt):
- * row i is point same[i] with weight 1 when same[i] >= 0, else the query q_i located in the
- * tetrahedra, extrapolated. rows x 4 entries at most: start (rows + 1), col, w (4 rows). */
-static dk_status map_rows(const double *p, dk_index np, const dk_index *tets, dk_index nt,
+dk_status volumetric_map_rows(const double *p, dk_index np, const dk_index *tets, dk_index nt,
                           const double *queries, const dk_index *same, dk_index rows,
                           dk_index *start, dk_index *col, double *w, dk_error *err)
 {
@@ -129,8 +126,10 @@ done:
 
 /* Steps 1 and 2 for a coarse surface of at most m vertices: the simplified surface and its
  * VolumetricARAP (*out NULL: none, *refused set when TetGen refused the coarse surface). */
-static dk_status coarse_object(const dk_volumetric_arap *va, dk_index m, volumetric_level **out,
-                               dk_index **hv_fine, int *refused, dk_error *err)
+static dk_status coarse_object(const dk_volumetric_arap *va, dk_index m, dk_index most,
+                               int levels, dk_phase_progress_fn progress, void *user,
+                               volumetric_level **out, dk_index **hv_fine, int *refused,
+                               dk_error *err)
 {
     *out = NULL;
     *refused = 0;
@@ -148,7 +147,7 @@ static dk_status coarse_object(const dk_volumetric_arap *va, dk_index m, volumet
     dk_error ignored = {0};
     dk_status st = dk_decimate(va->mesh, cls, m, &l->dec, &ignored);
     free(cls);
-    if (st != DK_OK || l->dec->n_kept > n / 4 || l->dec->n_faces == 0)
+    if (st != DK_OK || l->dec->n_kept > most || l->dec->n_faces == 0)
         goto none; /* blocked collapses: a level would not pay its solve */
     const dk_decimation *d = l->dec;
     double *cp = malloc((3 * (size_t)d->n_kept + 1) * sizeof *cp);
@@ -167,11 +166,15 @@ static dk_status coarse_object(const dk_volumetric_arap *va, dk_index m, volumet
     st = dk_coarse_constraints_create(con, d, &cc, err);
     if (st == DK_OK) {
         dk_volumetric_arap_options o = va->opt;
-        o.levels = 1;
+        o.levels = levels;
+        o.embed = 1;
         o.max_volume = 0.0; /* a size bound is the mesh's: the coarse level grows its own */
-        o.progress = NULL;
-        o.progress_user = NULL;
-        st = dk_volumetric_arap_bind(l->mesh, &cc.desc, &o, &l->coarse, &ignored);
+        o.progress = progress;
+        o.progress_user = user;
+        dk_error inner = {0};
+        st = dk_volumetric_arap_bind(l->mesh, &cc.desc, &o, &l->coarse, &inner);
+        if (st == DK_ERR_CANCELLED)
+            dk_error_set(err, st, "%s", inner.message);
     }
     *hv_fine = cc.fine_vertex; /* the attachment's handle vertices: kept from cc */
     cc.fine_vertex = NULL;
@@ -188,9 +191,38 @@ none:
     volumetric_level_free(l);
     free(*hv_fine);
     *hv_fine = NULL;
+    if (st == DK_ERR_CANCELLED)
+        return st;
     return st == DK_ERR_OUT_OF_MEMORY ? dk_error_set(err, st, "VolumetricARAP: out of memory "
                                                      "(coarse level)")
                                       : DK_OK;
+}
+
+dk_status volumetric_coarse_build(const dk_volumetric_arap *va, dk_index most, int levels,
+                                  dk_phase_progress_fn progress, void *user,
+                                  volumetric_level **out, dk_index **hv_fine, dk_error *err)
+{
+    *out = NULL;
+    *hv_fine = NULL;
+    dk_status st = DK_OK;
+    /* a simplified surface can cross itself where the mesh is thin (a tube of 40 around
+     * decimated to 10); TetGen refuses it, and a less simplified one is tried, up to `most`
+     * vertices */
+    dk_index m = va->n / COARSE_RATIO > MIN_COARSE_VERTICES ? va->n / COARSE_RATIO
+                                                            : MIN_COARSE_VERTICES;
+    if (m > most)
+        m = most;
+    for (int last = 0; m >= 1 && !last && !*out && st == DK_OK; m *= 2) {
+        if (m >= most) {
+            m = most;
+            last = 1;
+        }
+        int refused = 0;
+        st = coarse_object(va, m, most, levels, progress, user, out, hv_fine, &refused, err);
+        if (!refused)
+            break;
+    }
+    return st;
 }
 
 dk_status volumetric_level_build(dk_volumetric_arap *va, volumetric_level **out, dk_error *err)
@@ -198,25 +230,11 @@ dk_status volumetric_level_build(dk_volumetric_arap *va, volumetric_level **out,
     *out = NULL;
     const int levels = va->opt.levels;
     if (levels == 1 || va->nt == 0 || va->note[0] ||
-        (levels == 0 && va->np < AUTO_MIN_POINTS))
+        (levels == 0 && va->np < AUTO_MIN_POINTS) || va->n / 4 < 16)
         return DK_OK;
     dk_index *hv_fine = NULL;
     volumetric_level *l = NULL;
-    dk_status st = DK_OK;
-    /* a simplified surface can cross itself where the mesh is thin (a tube of 40 around
-     * decimated to 10); TetGen refuses it, and a less simplified one is tried, up to a
-     * quarter of the mesh */
-    const dk_index most = va->n / 4;
-    dk_index m = va->n / COARSE_RATIO > MIN_COARSE_VERTICES ? va->n / COARSE_RATIO
-                                                            : MIN_COARSE_VERTICES;
-    if (m > most)
-        m = most;
-    for (; m >= 16 && m <= most && !l && st == DK_OK; m *= 2) {
-        int refused = 0;
-        st = coarse_object(va, m, &l, &hv_fine, &refused, err);
-        if (!refused)
-            break;
-    }
+    dk_status st = volumetric_coarse_build(va, va->n / 4, 1, NULL, NULL, &l, &hv_fine, err);
     if (st != DK_OK || !l)
         return st;
     /* 3. the maps: P over the coarse points (np rows), R over the fine ones (cnp rows) */
@@ -234,14 +252,14 @@ dk_status volumetric_level_build(dk_volumetric_arap *va, volumetric_level **out,
     }
     for (dk_index i = 0; i < np; i++)
         same[i] = i < va->n ? d->coarse_of[i] : -1;
-    st = map_rows(volume_points(cva), cnp, cva->tets, cva->nt, volume_points(va), same, np,
-                  ps, pc, pw, err);
+    st = volumetric_map_rows(volume_points(cva), cnp, cva->tets, cva->nt, volume_points(va),
+                             same, np, ps, pc, pw, err);
     if (st != DK_OK)
         goto done;
     for (dk_index j = 0; j < cnp; j++)
         same[j] = j < mk ? d->kept[j] : -1;
-    st = map_rows(volume_points(va), np, va->tets, va->nt, volume_points(cva), same, cnp, rs,
-                  rc, rw, err);
+    st = volumetric_map_rows(volume_points(va), np, va->tets, va->nt, volume_points(cva), same,
+                             cnp, rs, rc, rw, err);
     if (st != DK_OK)
         goto done;
     /* 4. attached */

@@ -20,6 +20,7 @@ void dk_volumetric_arap_default_options(dk_volumetric_arap_options *o)
     o->acceleration = a.acceleration;
     o->cg_iterations = a.cg_iterations;
     o->levels = 0;
+    o->embed = 0;
     o->progress = NULL;
     o->progress_user = NULL;
 }
@@ -31,6 +32,9 @@ static const dk_progress_phase bind_phases[] = {
     {"arap", 3.0},           /* ARAP's bind on the tetrahedra, its own phases inside        */
     {"coarse", 0.7}};        /* the multi-scale solve's coarse level (none below 10k points
                                 by default; uninterruptible)                                */
+
+/* The embedded domain's bind (embed 2): the coarse volume, its own phases inside. */
+static const dk_progress_phase embed_phases[] = {{"coarse volume", 1.0}};
 
 static void arap_options(const dk_volumetric_arap_options *o, dk_arap_options *a);
 
@@ -58,6 +62,11 @@ static dk_status check_options(const dk_mesh *mesh, const dk_volumetric_arap_opt
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "VolumetricARAP: levels is %d, must be 1 or 2 (0: automatic)",
                             o->levels);
+    if (o->embed < 0 || o->embed > 2)
+        return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
+                            "VolumetricARAP: embed is %d, must be 1 (the surface is the "
+                            "volume's boundary) or 2 (a coarse volume carries it); 0: "
+                            "automatic", o->embed);
     if (!(o->max_volume >= 0.0 && o->max_volume <= 1e300))
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "VolumetricARAP: max_volume is %g, must be 0 (none) or > 0",
@@ -93,6 +102,7 @@ void dk_volumetric_arap_free(dk_volumetric_arap *va)
         return;
     dk_arap_free(va->arap); /* first: it borrows the level's object */
     volumetric_level_free(va->level);
+    volumetric_embedding_free(va->emb);
     volumetric_extension_free(va);
     dk_constraints_free(va->con);
     dk_mesh_free(va->volume);
@@ -188,6 +198,26 @@ dk_status dk_volumetric_arap_bind(const dk_mesh *mesh, const dk_constraint_desc 
     va->opt = opt;
     va->opt.progress = NULL; /* the caller's callback is for this bind only */
     va->opt.progress_user = NULL;
+    va->n = mesh->n_vertices;
+    if (volumetric_embed_wanted(mesh, &opt)) { /* a coarse volume carries the surface */
+        dk_progress prog;
+        dk_progress_init(&prog, opt.progress, opt.progress_user, embed_phases, 1,
+                         "VolumetricARAP bind");
+        st = dk_constraints_create(mesh, constraints, &va->con, err);
+        if (st != DK_OK)
+            st = dk_error_prefix(err, "VolumetricARAP");
+        if (st == DK_OK)
+            st = dk_progress_begin(&prog, 0, err);
+        if (st == DK_OK)
+            st = volumetric_embedding_build(va, &prog, &va->emb, err);
+        if (st != DK_OK) {
+            dk_volumetric_arap_free(va);
+            return st;
+        }
+        dk_progress_done(&prog);
+        *out = va;
+        return DK_OK;
+    }
     dk_progress prog;
     dk_progress_init(&prog, opt.progress, opt.progress_user, bind_phases,
                      (int)(sizeof bind_phases / sizeof bind_phases[0]), "VolumetricARAP bind");
@@ -235,13 +265,42 @@ dk_status dk_volumetric_arap_rebind(dk_volumetric_arap *va,
     if (!va || !constraints)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "VolumetricARAP rebind: object and constraints must not be NULL");
-    return bind_solver(va, constraints, NULL, err);
+    if (!va->emb)
+        return bind_solver(va, constraints, NULL, err);
+    /* the embedded domain: the simplification keeps the roles, so new constraints need a
+     * new coarse volume; on failure the old one stays */
+    dk_volumetric_arap tmp = *va;
+    tmp.con = NULL;
+    tmp.emb = NULL;
+    dk_status st = dk_constraints_create(va->mesh, constraints, &tmp.con, err);
+    if (st != DK_OK)
+        return dk_error_prefix(err, "VolumetricARAP rebind");
+    dk_progress prog;
+    dk_progress_init(&prog, va->rebind_progress, va->rebind_user, embed_phases, 1,
+                     "VolumetricARAP rebind");
+    st = dk_progress_begin(&prog, 0, err);
+    if (st == DK_OK)
+        st = volumetric_embedding_build(&tmp, &prog, &tmp.emb, err);
+    if (st != DK_OK) {
+        dk_constraints_free(tmp.con);
+        return st;
+    }
+    dk_progress_done(&prog);
+    dk_constraints_free(va->con);
+    volumetric_embedding_free(va->emb);
+    va->con = tmp.con;
+    va->emb = tmp.emb;
+    return DK_OK;
 }
 
 void dk_volumetric_arap_set_progress(dk_volumetric_arap *va, dk_phase_progress_fn progress,
                                      void *user)
 {
-    if (va)
+    if (!va)
+        return;
+    va->rebind_progress = progress;
+    va->rebind_user = user;
+    if (va->arap)
         dk_arap_set_progress(va->arap, progress, user);
 }
 
@@ -280,6 +339,8 @@ dk_status dk_volumetric_arap_solve(dk_volumetric_arap *va, const dk_solve_reques
         st = dk_start_positions_check(rq->start_positions, va->n, "VolumetricARAP solve", err);
     if (st != DK_OK)
         return st;
+    if (va->emb)
+        return volumetric_embedding_solve(va, rq, positions, info, err);
     /* 1. the pose edited, and a given start, extended into the volume */
     const double *input = NULL;
     if ((st = take_input(va, rq, &input, err)) != DK_OK)
@@ -312,6 +373,8 @@ dk_status dk_volumetric_arap_energy(const dk_volumetric_arap *va, const double *
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "VolumetricARAP energy: object, positions and energy must not be "
                             "NULL");
+    if (va->emb)
+        return volumetric_embedding_energy(va, positions, energy, err);
     dk_status st = dk_check_positions(positions, va->n, err);
     if (st == DK_OK)
         st = volumetric_extend(va, va->last, positions, va->scratch, va->rhs, err);
@@ -328,7 +391,7 @@ void dk_volumetric_arap_stats(const dk_volumetric_arap *va, dk_method_stats *sta
     if (!va)
         return;
     dk_method_stats inner;
-    dk_arap_stats(va->arap, &inner);
+    dk_arap_stats(dk_volumetric_arap_solver((dk_volumetric_arap *)va), &inner);
     stats->n_vertices = va->n;
     stats->n_handles = va->con->n_handles;
     stats->n_handle_vertices = va->con->n_handle_vertices;
@@ -340,6 +403,8 @@ void dk_volumetric_arap_stats(const dk_volumetric_arap *va, dk_method_stats *sta
 
 dk_arap *dk_volumetric_arap_solver(dk_volumetric_arap *va)
 {
+    if (va && va->emb)
+        return dk_volumetric_arap_solver(volumetric_embedding_inner(va->emb));
     return va ? va->arap : NULL;
 }
 
@@ -349,6 +414,8 @@ dk_status dk_volumetric_arap_response_basis(const dk_volumetric_arap *va, double
     if (!va || !out)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT,
                             "VolumetricARAP response basis: object and out must not be NULL");
+    if (va->emb)
+        return volumetric_embedding_response_basis(va, out, err);
     dk_arap_counters c;
     dk_arap_get_counters(va->arap, &c);
     if (va->np == va->n || c.basis_columns == 0) /* no interior: the rows are the mesh's */
@@ -365,6 +432,11 @@ dk_status dk_volumetric_arap_response_basis(const dk_volumetric_arap *va, double
     return st;
 }
 
+int dk_volumetric_arap_embedded(const dk_volumetric_arap *va)
+{
+    return va && va->emb ? 1 : 0;
+}
+
 const char *dk_volumetric_arap_note(const dk_volumetric_arap *va)
 {
     return va ? va->note : "";
@@ -378,6 +450,10 @@ void dk_volumetric_arap_get_counters(const dk_volumetric_arap *va,
     memset(c, 0, sizeof *c);
     if (!va)
         return;
+    if (va->emb) { /* the coarse volume's */
+        dk_volumetric_arap_get_counters(volumetric_embedding_inner(va->emb), c);
+        return;
+    }
     c->n_points = va->np;
     c->n_interior_points = va->np - va->n;
     c->n_tetrahedra = va->nt;
@@ -388,6 +464,10 @@ void dk_volumetric_arap_tetrahedra(const dk_volumetric_arap *va, double *points,
 {
     if (!va)
         return;
+    if (va->emb) {
+        dk_volumetric_arap_tetrahedra(volumetric_embedding_inner(va->emb), points, tetrahedra);
+        return;
+    }
     if (points)
         memcpy(points, va->last, 3 * (size_t)va->np * sizeof(double));
     if (tetrahedra && va->nt > 0)
@@ -414,6 +494,8 @@ size_t dk_volumetric_arap_state_size(const dk_volumetric_arap *va)
 {
     if (!va)
         return 0;
+    if (va->emb) /* the coarse volume's: the surface follows from it */
+        return dk_volumetric_arap_state_size(volumetric_embedding_inner(va->emb));
     dk_state_span sp[1];
     own_spans(va, sp);
     return dk_state_size(sp, 1) + dk_arap_state_size(va->arap);
@@ -424,6 +506,9 @@ dk_status dk_volumetric_arap_save_state(const dk_volumetric_arap *va, void *stat
 {
     if (!va)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "VolumetricARAP save_state: NULL");
+    if (va->emb)
+        return dk_volumetric_arap_save_state(volumetric_embedding_inner(va->emb), state, size,
+                                             err);
     dk_state_span sp[1];
     uint64_t shape[4];
     own_spans(va, sp);
@@ -444,6 +529,9 @@ dk_status dk_volumetric_arap_restore_state(dk_volumetric_arap *va, const void *s
 {
     if (!va)
         return dk_error_set(err, DK_ERR_INVALID_ARGUMENT, "VolumetricARAP restore_state: NULL");
+    if (va->emb)
+        return dk_volumetric_arap_restore_state(volumetric_embedding_inner(va->emb), state,
+                                                size, err);
     dk_state_span sp[1];
     uint64_t shape[4];
     own_spans(va, sp);
@@ -464,6 +552,24 @@ dk_status dk_volumetric_arap_restore_state(dk_volumetric_arap *va, const void *s
 
 /* ---------------------------------------------------------------- memory ---------------- */
 
+/* A bind's bytes for a surface of nv vertices (the mesh's, or its coarse volume's). */
+static uint64_t volume_bytes(const dk_mesh *mesh, const dk_volumetric_arap_options *o,
+                             double nv)
+{
+    /* the points: the vertices, and the interior's (about a third as many at quality 1.5
+     * without a size bound, measured on the shared meshes; a size bound adds about one per
+     * six tetrahedra of that volume) */
+    double n = 1.35 * nv;
+    if (o->max_volume > 0.0)
+        n += box_volume(mesh) / o->max_volume / 6.0;
+    /* the coarse level (levels 0 or 2): a volume of its own for a sixteenth of the surface */
+    if (o->levels != 1)
+        n += 1.35 * nv / 16.0;
+    const double lg = n > 2.0 ? log2(n) : 1.0;
+    /* TetGen's mesh and the tetrahedra's ARAP per point (docs/methods/volumetric_arap.md) */
+    return dk_memory_model(6000.0 + 150.0 * lg, n, 0.0);
+}
+
 dk_status dk_volumetric_arap_estimate_memory(const dk_mesh *mesh,
                                              const dk_volumetric_arap_options *options,
                                              uint64_t *bytes, dk_error *err)
@@ -474,18 +580,15 @@ dk_status dk_volumetric_arap_estimate_memory(const dk_mesh *mesh,
     dk_status st = options ? check_options(mesh, options, err) : DK_OK;
     if (st != DK_OK)
         return st;
-    /* the points: the vertices, and the interior's (about a third as many at quality 1.5
-     * without a size bound, measured on the shared meshes; a size bound adds about one per
-     * six tetrahedra of that volume) */
-    double n = 1.35 * (double)mesh->n_vertices;
-    if (options && options->max_volume > 0.0)
-        n += box_volume(mesh) / options->max_volume / 6.0;
-    /* the coarse level (levels 0 or 2): a volume of its own for a sixteenth of the surface */
-    if (!options || options->levels != 1)
-        n += 1.35 * (double)mesh->n_vertices / 16.0;
-    const double lg = n > 2.0 ? log2(n) : 1.0;
-    /* TetGen's mesh and the tetrahedra's ARAP per point (docs/methods/volumetric_arap.md) */
-    *bytes = dk_memory_model(6000.0 + 150.0 * lg, n, 0.0);
+    dk_volumetric_arap_options o;
+    if (options)
+        o = *options;
+    else
+        dk_volumetric_arap_default_options(&o);
+    const double nv = (double)mesh->n_vertices;
+    *bytes = volumetric_embed_wanted(mesh, &o)
+                 ? volumetric_embedding_bytes(nv, volume_bytes(mesh, &o, floor(nv / 16.0)))
+                 : volume_bytes(mesh, &o, nv);
     return DK_OK;
 }
 
@@ -505,6 +608,8 @@ static const dk_option_desc volumetric_fields[] = {
     {"cg_iterations", DK_OPTION_INT, offsetof(dk_volumetric_arap_options, cg_iterations), 0, 1,
      100, 12, 100, 0},
     {"levels", DK_OPTION_INT, offsetof(dk_volumetric_arap_options, levels), 0, 1, 2, 2, 2,
+     DK_OPTION_ZERO_AUTO},
+    {"embed", DK_OPTION_INT, offsetof(dk_volumetric_arap_options, embed), 0, 1, 2, 2, 2,
      DK_OPTION_ZERO_AUTO},
 };
 

@@ -9,6 +9,8 @@
  *                      the interior points, factored, moving the interior with the surface
  *   multiscale.c       the coarse level: the surface simplified, its own tetrahedra and
  *                      VolumetricARAP, the maps between the two volumes, attached to ARAP
+ *   embedded.c         the embedded domain (option embed): a coarse volume that carries the
+ *                      surface, for meshes whose own volume would not fit
  *   volumetric_arap.c  the public verbs (a driver naming its steps) and the method's table
  */
 #ifndef DK_VOLUMETRIC_INTERNAL_H
@@ -32,6 +34,9 @@ typedef struct volumetric_level {
     dk_mesh *mesh;
     dk_volumetric_arap *coarse;
 } volumetric_level;
+
+/* The embedded domain (embedded.c). */
+typedef struct volumetric_embedding volumetric_embedding;
 
 struct dk_volumetric_arap {
     const dk_mesh *mesh;       /* the caller's surface                                      */
@@ -64,6 +69,11 @@ struct dk_volumetric_arap {
                                   points before any solve                                   */
     double *scratch;           /* np x 3: energy's and the extension's scratch             */
     volumetric_level *level;   /* the coarse level for the current constraints, or NULL     */
+    volumetric_embedding *emb; /* the embedded domain (embed 2): then the verbs are its, and
+                                  volume, tets, arap, the extension, the poses, np and nt
+                                  are unset; n and con are the surface's                   */
+    dk_phase_progress_fn rebind_progress; /* dk_volumetric_arap_set_progress's             */
+    void *rebind_user;
 };
 
 /* The points at rest: the volume's, or the mesh's without tetrahedra. */
@@ -98,5 +108,48 @@ dk_status volumetric_extend(const dk_volumetric_arap *va, const double *from,
  * it is an accelerator); frees one. */
 dk_status volumetric_level_build(dk_volumetric_arap *va, volumetric_level **out, dk_error *err);
 void volumetric_level_free(volumetric_level *level);
+
+/* multiscale.c: the surface of va (mesh, con, n, opt) simplified to a sixteenth of its
+ * vertices (at least 256, at most `most`; twice as many, up to `most`, where TetGen refuses
+ * the simplified surface) and bound as a VolumetricARAP of its own (embed 1, `levels` its
+ * levels, the bind's progress to `progress`), with per coarse handle vertex its mesh vertex
+ * (*hv_fine, owned by the caller). *out NULL when no coarse volume could be made for the
+ * mesh's reasons (a simplification blocked above `most`, TetGen refusing every simplified
+ * surface, a part bounding no volume); errors: out of memory, cancelled. */
+dk_status volumetric_coarse_build(const dk_volumetric_arap *va, dk_index most, int levels,
+                                  dk_phase_progress_fn progress, void *user,
+                                  volumetric_level **out, dk_index **hv_fine, dk_error *err);
+
+/* multiscale.c: sparse rows of a linear map onto the points of a tetrahedral mesh (points p,
+ * np of them; tets, nt): row i is point same[i] with weight 1 when same[i] >= 0, else the
+ * query i (queries, rows x 3) located in the tetrahedra, its barycentric coordinates
+ * extrapolated outside them. At most 4 entries a row: start (rows + 1), col, w (4 rows). */
+dk_status volumetric_map_rows(const double *p, dk_index np, const dk_index *tets, dk_index nt,
+                              const double *queries, const dk_index *same, dk_index rows,
+                              dk_index *start, dk_index *col, double *w, dk_error *err);
+
+/* embedded.c: whether options ask for the embedded domain on this mesh (embed 2, or 0 from
+ * EMBED_AUTO_VERTICES on where every part is closed). */
+int volumetric_embed_wanted(const dk_mesh *mesh, const dk_volumetric_arap_options *o);
+
+/* embedded.c: the embedded domain for va's surface and constraints (va->mesh, va->con,
+ * va->opt), into *out; the bind's progress to `progress` (may be NULL). Refuses, by name, a
+ * surface that no coarse volume can carry. */
+dk_status volumetric_embedding_build(const dk_volumetric_arap *va, dk_progress *progress,
+                                     volumetric_embedding **out, dk_error *err);
+void volumetric_embedding_free(volumetric_embedding *e);
+
+/* embedded.c: the verbs on the embedded domain (dk_volumetric_arap.h's, va->emb set). */
+dk_status volumetric_embedding_solve(dk_volumetric_arap *va, const dk_solve_request *rq,
+                                     double *positions, dk_solve_info *info, dk_error *err);
+dk_status volumetric_embedding_energy(const dk_volumetric_arap *va, const double *positions,
+                                      double *energy, dk_error *err);
+dk_status volumetric_embedding_response_basis(const dk_volumetric_arap *va, double *out,
+                                              dk_error *err);
+/* embedded.c: the VolumetricARAP on the coarse volume. */
+dk_volumetric_arap *volumetric_embedding_inner(const volumetric_embedding *e);
+/* embedded.c: the bytes of an embedded bind of a surface of n vertices (the coarse volume's
+ * model `coarse_bytes` for n / 16 vertices given by the caller). */
+uint64_t volumetric_embedding_bytes(double n, uint64_t coarse_bytes);
 
 #endif
