@@ -25,7 +25,8 @@
  * (ARAP's spoke cells, in the same solve), and when TetGen refuses the closed parts
  * (crossing or degenerate triangles) the whole mesh does: dk_volumetric_arap_note says which,
  * stats count the tetrahedra. (Ours: the issue's embedding lattice for scans with holes is
- * not built; docs/methods/volumetric_arap.md.)
+ * not built; docs/methods/volumetric_arap.md.) With embed (below) a coarse volume carries a
+ * closed surface instead, and open parts are refused.
  *
  * Solve: the surface's positions (n_vertices x 3); the interior is the object's (stats
  * n_interior_points). request.input_positions: the pose to edit, the interior moved with it
@@ -90,7 +91,8 @@ typedef struct dk_volumetric_arap_options {
     dk_phase_progress_fn progress; /**< bind progress: the phases tetrahedralize, interior
                                         (the harmonic extension's factor), then ARAP's
                                         (dk_arap_options.progress), coarse (the level),
-                                        "done" at 1; non-zero
+                                        "done" at 1 (embedded: "coarse volume", the
+                                        coarse volume's bind inside it); non-zero
                                         cancels. TetGen's meshing cannot be interrupted  */
     void *progress_user;
 } dk_volumetric_arap_options;
@@ -107,7 +109,9 @@ dk_status dk_volumetric_arap_bind(const dk_mesh *mesh, const dk_constraint_desc 
                                   const dk_volumetric_arap_options *options,
                                   dk_volumetric_arap **out, dk_error *err);
 
-/** New constraints; the tetrahedra and the extension are kept (dk_arap_rebind). */
+/** New constraints; the tetrahedra and the extension are kept (dk_arap_rebind). With a
+ *  coarse volume carrying the surface (embed) the coarse volume is made again for them (the
+ *  simplification keeps the groups' roles); on failure the old binding stays. */
 dk_status dk_volumetric_arap_rebind(dk_volumetric_arap *va,
                                     const dk_constraint_desc *constraints, dk_error *err);
 

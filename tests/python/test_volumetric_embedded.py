@@ -97,6 +97,64 @@ def test_state_rebind_and_warm_solves():
     np.testing.assert_allclose(r.positions[handles[0]], v[handles[0]], atol=0)
 
 
+def test_parts_close_together_ride_on_their_own_volumes():
+    """Two closed tubes 0.01 apart, one's end lifted, the other fixed: each vertex rides on
+    the coarse tetrahedra near its own place on the surface. Located among all of them, the
+    vertices facing the other tube followed it and the lifted tube tore (edges 11.8-fold;
+    1.17 with its own volume)."""
+    v, f = capped_tube(n_ring=40, n_len=81, radius=0.2, length=2.0)
+    n = len(v)
+    V, F = np.vstack([v, v + [0, 0.41, 0]]), np.vstack([f, f + n])
+    hand, left = np.flatnonzero(v[:, 0] >= 0.9), np.flatnonzero(v[:, 0] <= -0.9)
+    m = dk.VolumetricARAP(dk.Mesh(V, F), handles=[hand], fixed=np.r_[left, n + np.arange(n)],
+                          embed=2)
+    T = np.eye(4)
+    T[2, 3] = 0.3
+    X = np.asarray(m.solve(transforms=[T], warm_start=False).positions)
+    E = np.vstack([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    stretch = np.linalg.norm(X[E[:, 0]] - X[E[:, 1]], axis=1) / np.linalg.norm(
+        V[E[:, 0]] - V[E[:, 1]], axis=1)
+    assert stretch.max() < 1.5, stretch.max()
+    np.testing.assert_allclose(X[n:], V[n:], atol=0)
+
+
+def test_the_response_basis_and_the_pose():
+    """The response basis's rows are the solve's: a fixed vertex's are 0, a hard handle
+    vertex's its rest position and 1 in its handle's columns, so a preview through them puts
+    the handle on its transform and leaves the fixed part; and with an input pose the fixed
+    vertices stay where the pose puts them."""
+    v, f, handles = tube()
+    m = dk.VolumetricARAP(dk.Mesh(v, f), handles=[handles[1]], fixed=handles[0], embed=2)
+    B = np.asarray(m.response_basis())
+    assert B.shape == (len(v), 4)
+    assert np.abs(B[handles[0]]).max() == 0.0
+    np.testing.assert_array_equal(B[handles[1]], np.c_[v[handles[1]], np.ones(len(handles[1]))])
+    T = np.eye(4)
+    T[:3, 3] = [0.1, 0.3, -0.2]
+    np.testing.assert_allclose(B[handles[1]] @ T[:3].T, v[handles[1]] + T[:3, 3], atol=1e-12)
+    pose = bend(v, 0.6, -0.5, 1.0)
+    r = m.solve(transforms=[np.eye(4)], input_positions=pose, warm_start=False)
+    np.testing.assert_array_equal(r.positions[handles[0]], pose[handles[0]])
+    np.testing.assert_allclose(r.positions[handles[1]], pose[handles[1]], atol=1e-12)
+
+
+def test_the_automatic_choice_by_size():
+    """From 250,000 vertices of a closed mesh a coarse volume carries it: the estimate (the
+    coarse volume at its largest retry, an eighth of the surface) fits 3 GB where the mesh's
+    own volume would need about 5 times as much."""
+    v, f = capped_tube(n_ring=500, n_len=500)
+    mesh = dk.Mesh(v, f)
+    assert len(v) > 250000
+    auto, own = (dk.VolumetricARAP.estimate_memory(mesh),
+                 dk.VolumetricARAP.estimate_memory(mesh, embed=1))
+    assert auto == dk.VolumetricARAP.estimate_memory(mesh, embed=2)
+    assert auto < 3 * 2 ** 30 and own > 3 * auto, (auto, own)
+    small_v, small_f = capped_tube(n_ring=40, n_len=81)
+    small = dk.Mesh(small_v, small_f)
+    assert dk.VolumetricARAP.estimate_memory(small) == dk.VolumetricARAP.estimate_memory(
+        small, embed=1)
+
+
 def test_refusals():
     g_v, g_f = make_grid(8, 8)
     with pytest.raises(ValueError, match="every part is closed"):

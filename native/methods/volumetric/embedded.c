@@ -5,10 +5,14 @@
  *      free role kept, tetrahedralized and bound as a VolumetricARAP of its own with the
  *      constraints restricted (multiscale.c's coarse volume, volumetric_coarse_build: its
  *      TetGen run retried with more vertices where the simplified surface crosses itself);
- *   2. each vertex of the surface located in the coarse tetrahedra at rest (a kept vertex is
- *      its coarse point), its barycentric coordinates extrapolated outside them (between
- *      kept vertices the surface bulges past the coarse one): the map P moves every vertex
- *      by an affine map of the coarse points exactly;
+ *   2. each vertex of the surface located in the coarse tetrahedra at rest near its own
+ *      place on the surface (a kept vertex is its coarse point; any other is located among
+ *      the tetrahedra around the kept vertex its simplification's carriers lead to, one
+ *      ring of them, two where it lies outside those): its barycentric coordinates there,
+ *      extrapolated outside them (between kept vertices the surface bulges past the coarse
+ *      one), so that P moves every vertex by an affine map of the coarse points exactly. A
+ *      search among all the tetrahedra put vertices facing a nearby part or fold into that
+ *      part's tetrahedra (two tubes 0.01 apart: edges stretched 12-fold, found by a review);
  *   3. a solve edits the coarse volume (the input pose and a given start restricted to the
  *      kept vertices, position targets to the kept handle vertices, transforms as they are)
  *      and moves each vertex from the pose it edits by the coarse volume's move at its
@@ -26,6 +30,9 @@
 /* from this many vertices on, embed 0 (automatic) carries a closed surface by a coarse
  * volume: the full volume's estimate passes 3 GB there (docs/methods/volumetric_arap.md) */
 #define EMBED_AUTO_VERTICES 250000
+/* the coarse surface's most vertices: an eighth of the mesh, or up to this many (a small mesh
+ * may keep most of its vertices and costs little) */
+#define EMBED_SMALL 8192
 
 struct volumetric_embedding {
     volumetric_level *level; /* the simplification, its mesh and the coarse VolumetricARAP  */
@@ -39,6 +46,12 @@ struct volumetric_embedding {
     double *targets;         /* the surface's handle vertices x 3, expanded                */
     double *scratch_c;       /* n_c x 3: energy's restriction                              */
 };
+
+dk_index volumetric_embed_most(dk_index n)
+{
+    const dk_index small = n < EMBED_SMALL ? n : EMBED_SMALL;
+    return n / 8 > small ? n / 8 : small;
+}
 
 int volumetric_embed_wanted(const dk_mesh *mesh, const dk_volumetric_arap_options *o)
 {
@@ -82,6 +95,139 @@ uint64_t volumetric_embedding_bytes(double n, uint64_t coarse_bytes)
     return coarse_bytes + dk_memory_model(300.0 + 52.0 + 24.0 + 100.0, n, 0.0);
 }
 
+/* The kept vertex (its coarse point) each vertex is carried from: itself when kept, else
+ * the anchor of its heaviest carrier, those removed after it first (reverse order). */
+static void anchors(const dk_decimation *d, dk_index *anchor)
+{
+    for (dk_index v = 0; v < d->n_vertices; v++)
+        anchor[v] = d->coarse_of[v];
+    for (dk_index k = d->n_removed - 1; k >= 0; k--) {
+        const dk_index *c = d->carrier + 3 * (size_t)k;
+        const double *w = d->weight + 3 * (size_t)k;
+        const int j = w[1] > w[0] ? (w[2] > w[1] ? 2 : 1) : (w[2] > w[0] ? 2 : 0);
+        anchor[d->removed[k]] = anchor[c[j]];
+    }
+}
+
+/* The smallest barycentric coordinate of q in tetrahedron t (its frame f: corner 0 and the
+ * gradients of corners 1..3), the coordinates into l. */
+static double coordinates(const double *f, const double *q, double l[4])
+{
+    const double dx[3] = {q[0] - f[0], q[1] - f[1], q[2] - f[2]};
+    l[0] = 1.0;
+    for (int k = 1; k < 4; k++) {
+        const double *g = f + 3 * (size_t)k;
+        l[k] = g[0] * dx[0] + g[1] * dx[1] + g[2] * dx[2];
+        l[0] -= l[k];
+    }
+    return fmin(fmin(l[0], l[1]), fmin(l[2], l[3]));
+}
+
+/* P: per vertex its coarse point (kept) or the best tetrahedron among those around its
+ * anchor (one ring, two where it lies outside them all). */
+static dk_status carrier_map(const dk_mesh *m, const dk_decimation *d,
+                             const dk_volumetric_arap *in, volumetric_embedding *e,
+                             dk_error *err)
+{
+    const dk_index n = m->n_vertices, np = in->np, nt = in->nt;
+    const double *p = volume_points(in);
+    dk_index *anchor = malloc(((size_t)n + 1) * sizeof *anchor);
+    dk_index *ps = calloc((size_t)np + 2, sizeof *ps);
+    dk_index *pt = malloc((4 * (size_t)nt + 1) * sizeof *pt);
+    double *frames = malloc((12 * (size_t)nt + 1) * sizeof *frames);
+    unsigned char *flat = calloc((size_t)nt + 1, 1);
+    dk_index *seen = malloc(((size_t)nt + 1) * sizeof *seen);
+    dk_index *cand = malloc(((size_t)nt + 1) * sizeof *cand);
+    dk_status st = DK_OK;
+    if (!anchor || !ps || !pt || !frames || !flat || !seen || !cand) {
+        st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "VolumetricARAP embed: out of memory");
+        goto done;
+    }
+    anchors(d, anchor);
+    for (dk_index t = 0; t < nt; t++) { /* the tetrahedra around each point, and frames */
+        const dk_index *q = in->tets + 4 * (size_t)t;
+        for (int k = 0; k < 4; k++)
+            ps[q[k] + 1]++;
+        double g[12];
+        flat[t] = dk_tetrahedron_frame(p + 3 * (size_t)q[0], p + 3 * (size_t)q[1],
+                                       p + 3 * (size_t)q[2], p + 3 * (size_t)q[3], g) == 0.0;
+        memcpy(frames + 12 * (size_t)t, p + 3 * (size_t)q[0], 3 * sizeof *frames);
+        memcpy(frames + 12 * (size_t)t + 3, g + 3, 9 * sizeof *frames);
+        seen[t] = -1;
+    }
+    for (dk_index i = 0; i < np; i++)
+        ps[i + 1] += ps[i];
+    {
+        dk_index *fill = malloc(((size_t)np + 1) * sizeof *fill);
+        if (!fill) {
+            st = dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "VolumetricARAP embed: out of memory");
+            goto done;
+        }
+        memcpy(fill, ps, (size_t)np * sizeof *fill);
+        for (dk_index t = 0; t < nt; t++)
+            for (int k = 0; k < 4; k++)
+                pt[fill[in->tets[4 * (size_t)t + (size_t)k]]++] = t;
+        free(fill);
+    }
+    e->p_start[0] = 0;
+    for (dk_index v = 0; v < n; v++) {
+        dk_index at = e->p_start[v];
+        if (d->coarse_of[v] >= 0) {
+            e->p_col[at] = d->coarse_of[v];
+            e->p_w[at++] = 1.0;
+            e->p_start[v + 1] = at;
+            continue;
+        }
+        const double *q = m->positions + 3 * (size_t)v;
+        const dk_index a = anchor[v];
+        dk_index nc = 0, best = -1;
+        double best_min = -INFINITY, l[4], bl[4] = {1, 0, 0, 0};
+        for (int ring = 0; ring < 2 && !(best_min >= -1e-12); ring++) {
+            const dk_index from = nc;
+            if (ring == 0) {
+                for (dk_index r = ps[a]; r < ps[a + 1]; r++)
+                    if (seen[pt[r]] != v) {
+                        seen[pt[r]] = v;
+                        cand[nc++] = pt[r];
+                    }
+            } else {
+                for (dk_index c = 0; c < from; c++)
+                    for (int k = 0; k < 4; k++) {
+                        const dk_index u = in->tets[4 * (size_t)cand[c] + (size_t)k];
+                        for (dk_index r = ps[u]; r < ps[u + 1]; r++)
+                            if (seen[pt[r]] != v) {
+                                seen[pt[r]] = v;
+                                cand[nc++] = pt[r];
+                            }
+                    }
+            }
+            for (dk_index c = ring == 0 ? 0 : from; c < nc; c++) {
+                if (flat[cand[c]])
+                    continue;
+                const double mn = coordinates(frames + 12 * (size_t)cand[c], q, l);
+                if (mn > best_min) {
+                    best_min = mn;
+                    best = cand[c];
+                    memcpy(bl, l, sizeof l);
+                }
+            }
+        }
+        if (best < 0) { /* no tetrahedron around it with a volume: its anchor */
+            e->p_col[at] = a;
+            e->p_w[at++] = 1.0;
+        } else {
+            for (int k = 0; k < 4; k++) {
+                e->p_col[at] = in->tets[4 * (size_t)best + (size_t)k];
+                e->p_w[at++] = bl[k];
+            }
+        }
+        e->p_start[v + 1] = at;
+    }
+done:
+    free(anchor), free(ps), free(pt), free(frames), free(flat), free(seen), free(cand);
+    return st;
+}
+
 /* Forwards the coarse bind's progress as the part done of the running phase. */
 static int forward(void *user, const char *phase, double fraction)
 {
@@ -108,16 +254,18 @@ dk_status volumetric_embedding_build(const dk_volumetric_arap *va, dk_progress *
     if (!e)
         return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "VolumetricARAP embed: out of memory");
     dk_index *hv_fine = NULL;
-    /* any simplification will do (a small mesh may keep most of its vertices), and where
-     * TetGen refuses the simplified surfaces, the mesh's own */
-    dk_status st = volumetric_coarse_build(va, va->n, va->opt.levels,
+    /* the simplification, twice as fine where TetGen refuses it, up to an eighth of the
+     * mesh (what estimate_memory charges; a small mesh, up to all of it) */
+    dk_status st = volumetric_coarse_build(va, volumetric_embed_most(va->n), va->opt.levels,
                                            progress ? forward : NULL, progress, &e->level,
                                            &hv_fine, err);
     if (st == DK_OK && !e->level)
         st = dk_error_set(err, DK_ERR_TOPOLOGY,
-                          "VolumetricARAP embed: no volume carries this surface: TetGen "
-                          "refused it and its simplifications (its triangles cross, or its "
-                          "closed parts cross each other); embed=1 deforms it as a surface");
+                          "VolumetricARAP embed: no coarse volume carries this surface: its "
+                          "simplification stopped above an eighth of it, or TetGen refused "
+                          "the simplified surfaces (their triangles cross: the mesh's closed "
+                          "parts may cross each other); embed=1 deforms such a mesh as a "
+                          "surface");
     const dk_index n = va->n;
     const dk_constraints *con = va->con;
     if (st == DK_OK) {
@@ -144,12 +292,7 @@ dk_status volumetric_embedding_build(const dk_volumetric_arap *va, dk_progress *
                 order[con->handle_vertices[k]] = k;
             for (dk_index j = 0; j < nhc; j++)
                 e->hv[j] = order[hv_fine[j]];
-            /* P: a kept vertex is its coarse point, the others located in the tetrahedra */
-            for (dk_index v = 0; v < n; v++)
-                order[v] = e->level->dec->coarse_of[v];
-            st = volumetric_map_rows(volume_points(in), in->np, in->tets, in->nt,
-                                     m->positions, order, n, e->p_start, e->p_col, e->p_w,
-                                     err);
+            st = carrier_map(m, e->level->dec, in, e, err);
         }
         free(order);
     }
@@ -252,16 +395,33 @@ dk_status volumetric_embedding_response_basis(const dk_volumetric_arap *va, doub
         return dk_error_set(err, DK_ERR_OUT_OF_MEMORY,
                             "VolumetricARAP response basis: out of memory");
     dk_status st = dk_arap_response_basis(in->arap, all, err);
-    if (st == DK_OK) /* rows of the coarse points, carried to the surface by P */
+    const dk_constraints *con = va->con;
+    if (st == DK_OK) { /* rows of the coarse points, carried to the surface by P */
         for (dk_index v = 0; v < va->n; v++) {
             double *row = out + cols * (size_t)v;
             memset(row, 0, cols * sizeof *row);
+            if (con->role[v] == DK_VERTEX_FIXED) /* where the pose puts it, as the solve */
+                continue;
             for (dk_index t = e->p_start[v]; t < e->p_start[v + 1]; t++) {
                 const double *src = all + cols * (size_t)e->p_col[t];
                 for (size_t j = 0; j < cols; j++)
                     row[j] += e->p_w[t] * src[j];
             }
         }
+        /* a hard handle vertex moves with its handle's transform, exactly: its rest
+         * position and 1 in the handle's four columns (ARAP's rows for it) */
+        for (dk_index h = 0; h < con->n_handles && 4 * (size_t)h + 3 < cols; h++)
+            for (dk_index k = con->handle_start[h]; k < con->handle_start[h + 1]; k++) {
+                if (con->handle_weights[k] != 1.0)
+                    continue;
+                const dk_index v = con->handle_vertices[k];
+                double *row = out + cols * (size_t)v;
+                memset(row, 0, cols * sizeof *row);
+                memcpy(row + 4 * (size_t)h, va->mesh->positions + 3 * (size_t)v,
+                       3 * sizeof *row);
+                row[4 * (size_t)h + 3] = 1.0;
+            }
+    }
     free(all);
     return st;
 }

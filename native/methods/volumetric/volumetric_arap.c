@@ -6,6 +6,7 @@
 #include <float.h>
 #include <limits.h>
 #include <math.h>
+#include <stdio.h>
 
 void dk_volumetric_arap_default_options(dk_volumetric_arap_options *o)
 {
@@ -199,6 +200,7 @@ dk_status dk_volumetric_arap_bind(const dk_mesh *mesh, const dk_constraint_desc 
     va->opt.progress = NULL; /* the caller's callback is for this bind only */
     va->opt.progress_user = NULL;
     va->n = mesh->n_vertices;
+    int surface_only = 0;
     if (volumetric_embed_wanted(mesh, &opt)) { /* a coarse volume carries the surface */
         dk_progress prog;
         dk_progress_init(&prog, opt.progress, opt.progress_user, embed_phases, 1,
@@ -210,21 +212,39 @@ dk_status dk_volumetric_arap_bind(const dk_mesh *mesh, const dk_constraint_desc 
             st = dk_progress_begin(&prog, 0, err);
         if (st == DK_OK)
             st = volumetric_embedding_build(va, &prog, &va->emb, err);
-        if (st != DK_OK) {
+        if (st == DK_OK) {
+            dk_progress_done(&prog);
+            *out = va;
+            return DK_OK;
+        }
+        if (!(st == DK_ERR_TOPOLOGY && opt.embed == 0)) {
             dk_volumetric_arap_free(va);
             return st;
         }
-        dk_progress_done(&prog);
-        *out = va;
-        return DK_OK;
+        /* automatic: no coarse volume carries it (its closed parts cross), and its own would
+         * not fit: it deforms as a surface, as embed=1 would after TetGen's refusal, without
+         * TetGen's minutes on the whole mesh */
+        dk_constraints_free(va->con);
+        va->con = NULL;
+        surface_only = 1;
+        st = DK_OK;
+        if (err)
+            memset(err, 0, sizeof *err);
+        snprintf(va->note, sizeof va->note,
+                 "no volume: no coarse volume carries it (TetGen refused the simplified "
+                 "surfaces: its closed parts may cross each other)");
     }
     dk_progress prog;
     dk_progress_init(&prog, opt.progress, opt.progress_user, bind_phases,
                      (int)(sizeof bind_phases / sizeof bind_phases[0]), "VolumetricARAP bind");
     /* 1. the tetrahedra */
     st = dk_progress_begin(&prog, 0, err);
-    if (st == DK_OK)
+    if (st == DK_OK && !surface_only)
         st = volumetric_domain(va, &prog, err);
+    else if (st == DK_OK) { /* no tetrahedra: ARAP on the surface */
+        va->np = va->n;
+        va->nt = 0;
+    }
     /* 2. the interior's harmonic extension */
     if (st == DK_OK)
         st = dk_progress_begin(&prog, 1, err);
@@ -586,9 +606,14 @@ dk_status dk_volumetric_arap_estimate_memory(const dk_mesh *mesh,
     else
         dk_volumetric_arap_default_options(&o);
     const double nv = (double)mesh->n_vertices;
-    *bytes = volumetric_embed_wanted(mesh, &o)
-                 ? volumetric_embedding_bytes(nv, volume_bytes(mesh, &o, floor(nv / 16.0)))
-                 : volume_bytes(mesh, &o, nv);
+    if (volumetric_embed_wanted(mesh, &o)) { /* the coarse volume at its largest retry; it
+                                                grows its own tetrahedra (no size bound) */
+        o.max_volume = 0.0;
+        *bytes = volumetric_embedding_bytes(
+            nv, volume_bytes(mesh, &o, (double)volumetric_embed_most(mesh->n_vertices)));
+    } else {
+        *bytes = volume_bytes(mesh, &o, nv);
+    }
     return DK_OK;
 }
 

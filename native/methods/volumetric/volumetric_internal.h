@@ -128,6 +128,10 @@ dk_status volumetric_map_rows(const double *p, dk_index np, const dk_index *tets
                               const double *queries, const dk_index *same, dk_index rows,
                               dk_index *start, dk_index *col, double *w, dk_error *err);
 
+/* embedded.c: the most vertices the coarse surface of a mesh of n vertices may keep (an
+ * eighth, or up to 8,192). */
+dk_index volumetric_embed_most(dk_index n);
+
 /* embedded.c: whether options ask for the embedded domain on this mesh (embed 2, or 0 from
  * EMBED_AUTO_VERTICES on where every part is closed). */
 int volumetric_embed_wanted(const dk_mesh *mesh, const dk_volumetric_arap_options *o);
