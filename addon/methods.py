@@ -867,8 +867,8 @@ def _volume_summary(native):
         return "no volume: deformed as a surface (%s)" % why
     stats = getattr(native, "stats", None)
     if isinstance(stats, dict) and stats.get("embedded"):
-        return "carried by a coarse solid: %d tetrahedra, %d points" % (
-            n, stats.get("n_points", 0))
+        return "carried by a coarse solid of {:,} points, {:,} tetrahedra".format(
+            stats.get("n_points", 0), n)
     text = "%d tetrahedra inside" % n
     coarse = stats.get("coarse_points", 0) if isinstance(stats, dict) else 0
     if coarse:
