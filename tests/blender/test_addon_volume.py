@@ -95,62 +95,47 @@ def test_open_mesh_deforms_as_a_surface():
     R.check("its handle follows", abs(got[handle, 2].mean() - 0.3) < 0.02, got[handle, 2].mean())
 
 
-def test_coarse_level():
+def check_option(option, status_words, stats_key, stats_value, name):
+    """Volume ARAP with `option` = 2 on the still tube: the status says `status_words`, the
+    API's stats[stats_key] is stats_value, the bend is the API's with the option and the
+    handle where it was moved, the setting survives saving, and after the Armature each
+    frame is the API's edit of the pose."""
     S.reset_scene()
-    obj, d, e, fixed, tip = S.tube_deformer("VOLUME_ARAP", levels=2)
+    obj, d, e, fixed, tip = S.tube_deformer("VOLUME_ARAP", **{option: 2})
     bind_world = e.matrix_world.copy()
     bpy.ops.deformkit.bind()
     text = S.solver.status_text(d)
-    R.check("the status names the coarse level", d.bound and "coarse level of" in text, text)
+    R.check("the status names the %s" % name, d.bound and status_words in text, text)
     e.matrix_world = S.bend_end(np.pi / 2) @ bind_world
     bpy.context.view_layer.update()
     got = S.evaluated_positions(obj)
     T = np.array(e.matrix_world @ bind_world.inverted())
     va, rest = api(obj, d, fixed, tip)
-    R.check("the API builds the level too", va.stats["levels"] == 2, va.stats)
+    R.check("the API has the %s too" % name, va.stats[stats_key] == stats_value, va.stats)
     va.solve(transforms=[np.eye(4)], warm_start=False)
     want = np.asarray(va.solve(transforms=[T], warm_start=True).positions)
     diff = float(np.abs(got - want).max())
-    R.check("the bend is the API's with the level (max %.2e)" % diff, diff < TOL, diff)
-    path = os.path.join(S.OUTPUT, "volume_arap_levels.blend")
+    R.check("the bend is the API's with the %s (max %.2e)" % (name, diff), diff < TOL, diff)
+    R.check("the handle is where it was moved",
+            float(np.abs(got[tip] - (rest[tip] @ T[:3, :3].T + T[:3, 3])).max()) < 1e-5)
+    path = os.path.join(S.OUTPUT, "volume_arap_%s.blend" % option)
     bpy.ops.wm.save_as_mainfile(filepath=path)
     bpy.ops.wm.open_mainfile(filepath=path)
     d = bpy.data.objects["Tube"].deformkit.deformers[0]
-    R.check("the setting survives saving", d.options_volume_arap.levels == 2,
-            d.options_volume_arap.levels)
+    value = getattr(d.options_volume_arap, option)
+    R.check("the setting survives saving", value == 2, value)
     S.reset_scene()
-    obj, d, e, fixed, tip = S.tube_deformer("VOLUME_ARAP", rig=S.lower_bone_rig, levels=2)
-    S.check_edit_after_armature(R, obj, d, e, fixed, tip, TOL, "volume_arap_levels.pc2")
+    obj, d, e, fixed, tip = S.tube_deformer("VOLUME_ARAP", rig=S.lower_bone_rig,
+                                            **{option: 2})
+    S.check_edit_after_armature(R, obj, d, e, fixed, tip, TOL, "volume_arap_%s.pc2" % option)
+
+
+def test_coarse_level():
+    check_option("levels", "coarse level of", "levels", 2, "coarse level")
 
 
 def test_coarse_solid():
-    S.reset_scene()
-    obj, d, e, fixed, tip = S.tube_deformer("VOLUME_ARAP", embed=2)
-    bind_world = e.matrix_world.copy()
-    bpy.ops.deformkit.bind()
-    text = S.solver.status_text(d)
-    R.check("the status names the coarse solid", d.bound and "coarse solid" in text, text)
-    e.matrix_world = S.bend_end(np.pi / 2) @ bind_world
-    bpy.context.view_layer.update()
-    got = S.evaluated_positions(obj)
-    T = np.array(e.matrix_world @ bind_world.inverted())
-    va, rest = api(obj, d, fixed, tip)
-    R.check("the API carries it too", va.stats["embedded"] == 1, va.stats)
-    va.solve(transforms=[np.eye(4)], warm_start=False)
-    want = np.asarray(va.solve(transforms=[T], warm_start=True).positions)
-    diff = float(np.abs(got - want).max())
-    R.check("the bend is the API's on the coarse solid (max %.2e)" % diff, diff < TOL, diff)
-    R.check("the handle is where it was moved",
-            float(np.abs(got[tip] - (rest[tip] @ T[:3, :3].T + T[:3, 3])).max()) < 1e-5)
-    path = os.path.join(S.OUTPUT, "volume_arap_embed.blend")
-    bpy.ops.wm.save_as_mainfile(filepath=path)
-    bpy.ops.wm.open_mainfile(filepath=path)
-    d = bpy.data.objects["Tube"].deformkit.deformers[0]
-    R.check("the setting survives saving", d.options_volume_arap.embed == 2,
-            d.options_volume_arap.embed)
-    S.reset_scene()
-    obj, d, e, fixed, tip = S.tube_deformer("VOLUME_ARAP", rig=S.lower_bone_rig, embed=2)
-    S.check_edit_after_armature(R, obj, d, e, fixed, tip, TOL, "volume_arap_embed.pc2")
+    check_option("embed", "coarse solid", "embedded", 1, "coarse solid")
 
 
 def test_after_an_armature():
