@@ -84,7 +84,8 @@ class FrameSolve:
         self.result_, self.error, self.ms = None, None, 0.0
         native_solve, label = e.native.solve, plan["label"]
         goal, kw = plan["goal"], dict(plan["kw"])
-        cap = int(kw.get("max_iterations") or 0)
+        # the solve's own cap, else the method's option (the native default it solves with)
+        cap = int(kw.get("max_iterations") or plan.get("cap") or 0)
 
         def run():
             if not iterative or cap <= 0:

@@ -586,20 +586,41 @@ def test_modal_bake_frames_solve_in_a_worker_thread():
     slice_ms, quick = solver.workers.BAKE_SLICE_MS, bake.QUICK_FRAME_S
     solver.workers.BAKE_SLICE_MS = 1e-6  # one iteration a slice: the most resumed slices
     bake.QUICK_FRAME_S = 0.0  # a tick does not wait for the frame it starts
+    # each frame's first slice waits until the main thread has ticked once while it is
+    # pending (a busy machine may otherwise let the worker finish between two ticks): the
+    # ticks between are then certain, and the slices' threads and resumptions are counted
+    import threading
+    calls, native_call = solver.workers.calls, solver.workers.calls._native_call
+    ticked, slices = threading.Event(), []
+
+    def gated(what, fn, *a, **kw):
+        worker = threading.current_thread() is not threading.main_thread()
+        slices.append((worker, bool(kw.get("resume"))))
+        if worker and not kw.get("resume"):
+            ticked.wait(60)
+            ticked.clear()
+        return native_call(what, fn, *a, **kw)
+    calls._native_call = gated
     try:
         job = bake.PC2Bake(bpy.context, obj, d, 1, 6, async_path)
-        ticks, busy_seen = 0, False
+        ticks, busy_ticks = 0, 0
         while not job.done:
             f = job.step_async()
-            busy_seen |= f is None and job.fb.solving() is not None
+            if f is None and job.fb.solving() is not None:
+                busy_ticks += 1
+                ticked.set()
             ticks += 1
         job.finish(True)
     finally:
+        calls._native_call = native_call
         solver.workers.BAKE_SLICE_MS, bake.QUICK_FRAME_S = slice_ms, quick
     a = np.array([np.asarray(x) for x in pc2.read(sync_path)[1]])
     b = np.array([np.asarray(x) for x in pc2.read(async_path)[1]])
     R.check("the modal bake's frames were solved in a worker (ticks between)",
-            busy_seen and ticks >= 12, ticks)
+            busy_ticks >= 6 and ticks >= 12 and slices and all(w for w, _ in slices),
+            (ticks, busy_ticks, len(slices)))
+    R.check("in resumed slices", sum(r for _, r in slices) >= 6,
+            sum(r for _, r in slices))
     R.check("its cache equals the synchronous bake's", a.shape == b.shape and
             np.abs(np.asarray(a) - np.asarray(b)).max() < 1e-6,
             (a.shape, b.shape, np.abs(np.asarray(a) - np.asarray(b)).max()))
