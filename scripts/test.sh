@@ -7,7 +7,8 @@
 #      tests/python/test_properties.py with its bounded, derandomized "ci" profile), and
 #      again with the module of the ASan+UBSan build (the sanitizer runtimes preloaded;
 #      leaving out the tests marked heavy: whole scanned meshes solved to convergence; this
-#      one runs in the background beside steps 3b-4, its output printed when it ends),
+#      one starts after the sanitized C tests and runs in the background beside everything
+#      up to step 4, its output printed when it ends),
 #   3. the packages: scripts/package.sh builds the wheel and the two add-on zips into dist/
 #      (and validates the extension in every Blender 4.2+ here); the wheel is installed into
 #      a clean virtual environment and smoke-tested there,
@@ -59,8 +60,9 @@ run_suite() {  # run_suite NAME COMMAND...
 }
 
 # A suite run beside the others (in the background, its output kept and printed when it is
-# collected): the sanitized Python suite, about six minutes alone, overlaps the farm and
-# Blender suites, whose CPUs are partly idle (Blender's start-up, subprocesses, waits).
+# collected): the sanitized Python suite, about six minutes alone, overlaps the fuzzers,
+# the Python tests, the packages, the farm and the Blender suites, which leave a core
+# partly idle (single-threaded fuzzers and tests, Blender's start-up, subprocesses, waits).
 bg_name=""; bg_pid=""; bg_log=""; bg_start=0
 start_background_suite() {  # start_background_suite NAME COMMAND...
   bg_name="$1"; shift
@@ -103,19 +105,17 @@ jobs="$(nproc 2>/dev/null || echo 2)"
 run_suite "C tests" ctest --test-dir build --output-on-failure -j"$jobs"
 if [ "$quick" = 0 ]; then
   run_suite "C tests (ASan+UBSan)" ctest --test-dir build-asan --output-on-failure -j"$jobs"
-  run_suite "fuzzers (40 s)" scripts/fuzz.sh --no-setup --seconds 40
-fi
-run_suite "Python tests" "$PY" -m pytest -q tests/python
-run_suite "package" scripts/package.sh --no-setup
-run_suite "wheel in a clean venv" tests/wheel/test_wheel.sh
-if [ "$quick" = 0 ]; then
   # detect_leaks=0: the interpreter keeps memory at exit that LeakSanitizer would report (the
   # C tests run with leak detection on)
   start_background_suite "Python tests (ASan+UBSan)" env \
     LD_PRELOAD="$(gcc -print-file-name=libasan.so) $(gcc -print-file-name=libubsan.so)" \
     ASAN_OPTIONS=detect_leaks=0 PYTHONPATH="$here/build-asan/python" \
     "$PY" -m pytest -q -p no:cacheprovider -m "not heavy" tests/python
+  run_suite "fuzzers (40 s)" scripts/fuzz.sh --no-setup --seconds 40
 fi
+run_suite "Python tests" "$PY" -m pytest -q tests/python
+run_suite "package" scripts/package.sh --no-setup
+run_suite "wheel in a clean venv" tests/wheel/test_wheel.sh
 # farm bakes on a Dask scheduler and two workers started on loopback, and the job files for
 # other farms (the [farm] environment of scripts/pins.txt: Dask, openjd-cli, Blender 5.2)
 run_suite "farm" build/venvs/farm/bin/python -m pytest -q -p no:cacheprovider tests/farm

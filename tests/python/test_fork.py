@@ -30,7 +30,11 @@ from conftest import GROUP_METHODS, SHARED_MESHES
 MESH = SHARED_MESHES / "arm.obj"
 CHILD_TIMEOUT = 180.0   # s; a child binds all six methods on these 8k vertices in ~5 s
 
-pytestmark = pytest.mark.skipif(not MESH.exists(), reason="shared meshes not available")
+# heavy: every method bound and solved on a real mesh, in the parent and in each child (the
+# sanitized run leaves them out: four times slower there, over a minute, on paths the
+# other tests take)
+pytestmark = [pytest.mark.skipif(not MESH.exists(), reason="shared meshes not available"),
+              pytest.mark.heavy]
 
 
 def _iterative(name):
