@@ -70,7 +70,8 @@ start_background_suite() {  # start_background_suite NAME COMMAND...
   echo
   echo "=== $bg_name: $* (started beside the suites below; its output follows when it ends)"
   # in a session of its own, so that an early end can stop it with all its subprocesses
-  setsid "$@" >"$bg_log" 2>&1 &
+  setsid bash -c 's=$SECONDS; "$@"; rc=$?; echo "(ended $((SECONDS - s)) s after its start)"
+                 exit $rc' background "$@" >"$bg_log" 2>&1 &
   bg_pid=$!
 }
 finish_background_suite() {
