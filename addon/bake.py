@@ -103,6 +103,7 @@ class FrameBaker:
     # (solver.FrameSolve), so that the window stays live and Esc answers while a big mesh's
     # frame solves (ARAP at 692k vertices: tens of seconds a frame)
     pending = None  # (frame, solver.FrameSolve, start time) of the frame being solved
+    prerolled = None  # a simulation's last frame played before the range (modal bake)
 
     def step_begin(self):
         """Starts solving the next frame in a worker thread."""
@@ -121,6 +122,10 @@ class FrameBaker:
         if not job.done():
             return None
         self.pending = None
+        # the window stayed live while the frame solved: had the user changed the frame,
+        # what reached the modifier (read for the shown result) would be another frame's
+        if self.scene.frame_current != f:
+            self.scene.frame_set(f)
         obj, d = self._objects()
         pos = job.result(obj, d)
         self.i += 1
@@ -137,6 +142,14 @@ class FrameBaker:
         """One tick of a modal bake: starts the next frame's solve, or returns (frame,
         positions) when it is done (None meanwhile)."""
         if self.dynamic:  # each frame follows from the last: in order, milliseconds each
+            if self.preroll:  # the frames before the range one a tick, so that Esc answers
+                f = self.preroll.pop(0)
+                self.scene.frame_set(f)
+                obj, d = self._objects()
+                solver.deformed_positions(obj, d, self.context.evaluated_depsgraph_get(),
+                                          cold=True, check_groups=False)
+                self.prerolled = f
+                return None
             return self.step()
         if self.pending is None:
             self.step_begin()
@@ -432,13 +445,77 @@ def hidden_reason(obj, d):
     return None
 
 
-def prepare(obj, d, kind):
-    """Before a bake to `kind`: frees an earlier bake of `d` that would be in the way (shape
-    keys shape the deformer's input; a Mesh Cache would hide new shape keys). A point cache
-    baked again to a point cache keeps its modifier, which the new file then replaces."""
-    st = state(obj, d)
-    if st is not None and not (st["kind"] == "PC2" and kind == "PC2" and not st["broken"]):
-        free(obj, d)
+class SetAside:
+    """An earlier bake of `d`, set aside while a new bake runs (after its checks): the
+    deformer's own modifier shown (the bake reads its input there: a rig's pose), and when
+    the new bake replaces it by another kind (or it is broken), its shape keys muted (they
+    would shape the deformer's input) and its Mesh Cache hidden (it would hide new shape
+    keys). commit() frees such a bake for good once the new one is written (a point cache
+    baked again to a point cache keeps its modifier, which the new file then replaces, and
+    its hidden modifier); restore() puts everything back when the bake is cancelled or
+    fails, so that neither loses the earlier bake."""
+
+    def __init__(self, obj, d, kind):
+        self.obj_name, self.uid, self.saved = obj.name, d.uid, []
+        st = state(obj, d)
+        self.frees = st is not None and not (st["kind"] == "PC2" and kind == "PC2"
+                                             and not st["broken"])
+        if st is None:
+            return
+        if self.frees:
+            target = d.bake_target or ("%s Cache" % d.name if st["kind"] == "PC2" else d.name)
+            keys = obj.data.shape_keys
+            if st["kind"] == "SHAPE_KEYS" and keys is not None:
+                for kb in keys.key_blocks:
+                    if kb.name.startswith(target + " f"):
+                        self._set(("key", kb.name), "mute", True)
+            if st["kind"] == "PC2":
+                mc = obj.modifiers.get(target)
+                if mc is not None and mc.type == "MESH_CACHE":
+                    self._set(("modifier", mc.name), "show_viewport", False)
+                    self._set(("modifier", mc.name), "show_render", False)
+        gn = geonodes.find_modifier(obj, d)
+        if gn is not None:
+            self._set(("modifier", gn.name), "show_viewport", True)
+            self._set(("modifier", gn.name), "show_render", True)
+
+    def _lookup(self, obj, where):
+        kind, name = where
+        if kind == "key":
+            keys = obj.data.shape_keys
+            return None if keys is None else keys.key_blocks.get(name)
+        return obj.modifiers.get(name)
+
+    def _set(self, where, attr, value):
+        obj = bpy.data.objects[self.obj_name]
+        item = self._lookup(obj, where)
+        self.saved.append((where, attr, getattr(item, attr)))
+        setattr(item, attr, value)
+
+    def _objects(self):
+        obj = bpy.data.objects.get(self.obj_name)
+        for d in (obj.deformkit.deformers if obj is not None else ()):
+            if d.uid == self.uid:
+                return obj, d
+        return obj, None
+
+    def commit(self):
+        """The new bake is written: frees the earlier one (its keys, its Mesh Cache), or
+        puts back what a point cache baked again keeps."""
+        obj, d = self._objects()
+        if self.frees and d is not None:
+            free(obj, d)
+            self.saved = []
+        self.restore()
+
+    def restore(self):
+        """The new bake was cancelled or failed: the earlier bake as it was."""
+        obj, _ = self._objects()
+        for where, attr, value in reversed(self.saved if obj is not None else []):
+            item = self._lookup(obj, where)
+            if item is not None:
+                setattr(item, attr, value)
+        self.frees, self.saved = False, []
 
 
 def protected_files(obj, d):
@@ -484,7 +561,6 @@ class PC2Bake:
     def __init__(self, context, obj, d, frame_start, frame_end, path, add_cache=True):
         protect = protected_files(obj, d)
         check_cache_path(obj, d, path)
-        prepare(obj, d, "PC2")
         self.add_cache = add_cache
         self.path, self.protect = path, protect
         self.start, self.end = frame_start, frame_end
@@ -498,6 +574,7 @@ class PC2Bake:
         except BaseException:
             self.fb.finish()
             raise
+        self.aside = SetAside(obj, d, "PC2")
 
     @property
     def done(self):
@@ -526,11 +603,14 @@ class PC2Bake:
         self.fb.finish()
         if not ok:
             self.w.abort()
+            self.aside.restore()
             return None
         try:
             self.w.close()
         except pc2.PC2Error as e:
+            self.aside.restore()
             raise solver.DeformKitError(str(e)) from None
+        self.aside.commit()
         if self.add_cache:
             obj, d = self.fb._objects()
             add_mesh_cache(obj, d, self.path, self.start, self.end)
@@ -544,19 +624,39 @@ class ShapeKeyBake:
 
     def __init__(self, context, obj, d, frame_start, frame_end):
         solver.check_single_user(obj, "bake %s to shape keys" % d.name)
-        prepare(obj, d, "SHAPE_KEYS")
-        animated_input.check_input_is_rest(obj, d, "bake to shape keys", every_method=True)
+        above = animated_input.modifiers_above(obj, d)
+        if above:
+            raise solver.DeformKitError(
+                "cannot bake %s to shape keys: its input is moved by %s above it, which "
+                "would move the baked shapes again; bake to Point Cache instead"
+                % (d.name, ", ".join("'%s'" % m.name for m in above)))
         self.context, self.start, self.end = context, frame_start, frame_end
         self.fb = FrameBaker(context, obj, d, frame_start, frame_end)
         self.results = []
+        self.aside = SetAside(obj, d, "SHAPE_KEYS")
 
     @property
     def done(self):
         return self.fb.done
 
+    def _keep(self, f, pos):
+        """Keeps frame f's key: what the modifier showed less what reached it, on the Basis.
+        Other shape keys above the deformer add up with the baked one on playback, so the
+        key holds the deformer's offset alone (shown - input), not their mix again."""
+        obj, d = self.fb._objects()
+        inp = animated_input.moved_input(obj, d)
+        pos = np.asarray(pos, dtype=np.float64)
+        if inp is not None:
+            basis = np.empty(3 * len(obj.data.vertices), dtype=np.float32)
+            keys = obj.data.shape_keys
+            (keys.reference_key.data if keys is not None else obj.data.vertices).foreach_get(
+                "co", basis)
+            pos = basis.reshape(-1, 3) + (pos - inp)
+        self.results.append((f, pos.astype(np.float32)))
+
     def step(self):
         f, pos = self.fb.step()
-        self.results.append((f, np.asarray(pos, dtype=np.float32)))
+        self._keep(f, pos)
         return f
 
     def step_async(self):
@@ -564,13 +664,15 @@ class ShapeKeyBake:
         r = self.fb.step_async()
         if r is None:
             return None
-        self.results.append((r[0], np.asarray(r[1], dtype=np.float32)))
+        self._keep(*r)
         return r[0]
 
     def finish(self, ok):
         self.fb.finish()
         if not ok:
+            self.aside.restore()
             return None
+        self.aside.commit()
         obj, d = self.fb._objects()
         prefix = d.name
         if obj.data.shape_keys is None:

@@ -597,7 +597,13 @@ class DEFORMKIT_OT_bake(_Base, bpy.types.Operator):
             return self._end(context, False, str(ex))
         fb = self._job.fb
         if f is None:  # still solving: the window stays live, Esc answers
-            f, secs = fb.solving()
+            busy = fb.solving()
+            if busy is None:  # a simulation playing the frames before the range, one a tick
+                context.workspace.status_text_set(
+                    "DeformKit bake: playing frame %d before the range, Esc to cancel"
+                    % fb.prerolled)
+                return {"RUNNING_MODAL"}
+            f, secs = busy
             context.workspace.status_text_set(
                 "DeformKit bake: frame %d (%d/%d), solving %.1f s, Esc to cancel"
                 % (f, fb.i + 1, len(fb.frames), secs))

@@ -246,6 +246,10 @@ def do_bake(args):
     try:
         out = bake.resolve_path(args.out, obj, d)   # "//" as in Blender: next to the .blend
         bake.check_cache_path(obj, d, out)         # before binding or solving anything
+        # a deformer baked in the file: its own modifier shown for this run (its frames read
+        # what reaches it there: a rig's pose), the earlier bake set aside; the file on disk
+        # is unchanged unless --save, which replaces that bake by this one
+        bake.SetAside(obj, d, "PC2")
         if not d.bound:
             rest = solver.rest_frame(scene, d)
             log("'%s' is not bound: binding with the rest of frame %d" % (d.name, rest))

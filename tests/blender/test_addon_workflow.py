@@ -302,6 +302,101 @@ def test_shape_key_bake_shows_at_once_and_frees():
             S.geonodes.find_modifier(obj, d).show_viewport and bake.state(obj, d) is None)
 
 
+def shown_by_the_bake(obj):
+    """What the mesh shows with DeformKit's handlers off (the bake alone)."""
+    S.handlers.enabled[0] = False
+    try:
+        return S.evaluated_positions(obj)
+    finally:
+        S.handlers.enabled[0] = True
+
+
+def test_an_unwritten_bake_keeps_the_earlier_one():
+    """A bake cancelled (Esc), failing or refused leaves the earlier bake as it was: its
+    shape keys (set aside, muted, while the new bake ran), or its Mesh Cache; a written one
+    replaces it."""
+    from addon import bake
+    obj, d, e, handle = scene()
+    lift(e, 6, 4)
+    bake.bake_shape_keys(bpy.context, obj, d, 1, 6)
+    names = [k.name for k in obj.data.shape_keys.key_blocks]
+    shown = shown_by_the_bake(obj)
+
+    def keys_kept(what):
+        keys = obj.data.shape_keys
+        now = [] if keys is None else [k.name for k in keys.key_blocks]
+        R.check("%s: the earlier shape keys stay, unmuted, and show" % what,
+                now == names and not any(k.mute for k in keys.key_blocks) and
+                bake.state(obj, d)["kind"] == "SHAPE_KEYS" and
+                not S.geonodes.find_modifier(obj, d).show_viewport and
+                np.abs(shown_by_the_bake(obj) - shown).max() < 1e-6, now)
+    job = bake.ShapeKeyBake(bpy.context, obj, d, 1, 6)
+    R.check("a bake under way mutes the earlier keys (they would move its input)",
+            all(k.mute for k in obj.data.shape_keys.key_blocks if k.name != "Basis"))
+    job.step()
+    job.finish(False)
+    keys_kept("a shape-key bake cancelled")
+    path = os.path.join(S.OUTPUT, "workflow_aside.pc2")
+    job = bake.PC2Bake(bpy.context, obj, d, 1, 6, path)
+    job.step()
+    job.finish(False)
+    keys_kept("a point-cache bake cancelled")
+    R.check("... and adds no Mesh Cache", obj.modifiers.get("%s Cache" % d.name) is None)
+    for what, args in (("an empty range", (6, 1, path)), ("a folder", (1, 6, S.OUTPUT))):
+        try:
+            bake.bake_pc2(bpy.context, obj, d, *args, add_cache=True)
+            refused = False
+        except S.solver.DeformKitError:
+            refused = True
+        R.check("a point-cache bake refused for %s" % what, refused)
+        keys_kept("a point-cache bake refused for %s" % what)
+    bake.bake_pc2(bpy.context, obj, d, 1, 6, path, add_cache=True)
+    mc = obj.modifiers.get("%s Cache" % d.name)
+    R.check("a written point cache replaces the shape keys", obj.data.shape_keys is None and
+            mc is not None and bake.state(obj, d)["kind"] == "PC2")
+    cached = shown_by_the_bake(obj)
+    job = bake.ShapeKeyBake(bpy.context, obj, d, 1, 6)
+    job.step()
+    job.finish(False)
+    mc = obj.modifiers.get("%s Cache" % d.name)
+    R.check("a shape-key bake cancelled keeps the point cache showing",
+            mc is not None and mc.show_viewport and mc.show_render and
+            not S.geonodes.find_modifier(obj, d).show_viewport and
+            bake.state(obj, d)["kind"] == "PC2" and obj.data.shape_keys is None and
+            np.abs(shown_by_the_bake(obj) - cached).max() < 1e-6)
+
+
+def test_shape_key_bake_over_other_shape_keys():
+    """Shape keys of the artist's above the deformer add up with the baked ones on
+    playback: each baked key holds the deformer's offset on the Basis, and the keys together
+    show what the modifier showed (a key holding the shown mix counted the others twice)."""
+    from addon import bake
+    for method in ("ARAP", "LINEAR_RECONSTRUCTION"):
+        obj, d, e, handle = scene(method)
+        obj.shape_key_add(name="Basis", from_mix=False)
+        bulge = obj.shape_key_add(name="Bulge", from_mix=False)
+        co = np.empty(3 * len(obj.data.vertices))
+        bulge.data.foreach_get("co", co)
+        co = co.reshape(-1, 3)
+        co[:, 2] += 0.05 * np.sin(3.0 * co[:, 0])
+        bulge.data.foreach_set("co", co.ravel())
+        for f, v in ((1, 0.0), (6, 1.0)):
+            bulge.value = v
+            bulge.keyframe_insert("value", frame=f)
+        lift(e, 6, 1)
+        want = {}
+        for f in (3, 5):
+            bpy.context.scene.frame_set(f)
+            want[f] = S.evaluated_positions(obj)
+        bake.bake_shape_keys(bpy.context, obj, d, 1, 6)
+        for f in (3, 5):
+            bpy.context.scene.frame_set(f)
+            err = np.abs(shown_by_the_bake(obj) - want[f]).max()
+            R.check("%s: the baked keys with the artist's show frame %d as played"
+                    % (method, f), err < 1e-4 and np.abs(want[f] - want[3 if f == 5 else 5])
+                    .max() > 1e-2, err)
+
+
 def test_sidebar_and_handle_target():
     obj, d, e, handle = scene()
     out = draw(ui.DEFORMKIT_PT_sidebar, obj)
@@ -640,7 +735,7 @@ def test_modal_bake_frames_solve_in_a_worker_thread():
             np.abs(got.ravel() - a[-1]).max())
 
 
-for t in (test_the_panel_says_when_a_method_cannot_do_the_edit, test_groups_edited_by_a_script_are_seen_before_apply, test_a_bake_never_overwrites_what_it_was_not_asked_to, test_factor_writes_and_edits_re_evaluate, test_option_change_rebinds_in_a_thread, test_modal_bake_frames_solve_in_a_worker_thread, test_group_change_rebinds_in_place_in_a_thread, test_falloff_reach_scales_with_the_model, test_point_cache_bake_shows_and_frees, test_shape_key_bake_shows_at_once_and_frees,
+for t in (test_an_unwritten_bake_keeps_the_earlier_one, test_shape_key_bake_over_other_shape_keys, test_the_panel_says_when_a_method_cannot_do_the_edit, test_groups_edited_by_a_script_are_seen_before_apply, test_a_bake_never_overwrites_what_it_was_not_asked_to, test_factor_writes_and_edits_re_evaluate, test_option_change_rebinds_in_a_thread, test_modal_bake_frames_solve_in_a_worker_thread, test_group_change_rebinds_in_place_in_a_thread, test_falloff_reach_scales_with_the_model, test_point_cache_bake_shows_and_frees, test_shape_key_bake_shows_at_once_and_frees,
           test_sidebar_and_handle_target, test_errors_with_a_way_out, test_keyed_factor_warns):
     R.run(t)
 R.finish()
