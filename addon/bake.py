@@ -5,6 +5,7 @@ baked on different machines and joined give the same cache as one bake.
 """
 
 import os
+import weakref
 
 import bpy
 import numpy as np
@@ -445,6 +446,21 @@ def hidden_reason(obj, d):
     return None
 
 
+# The bakes under way, by deformer uid (their SetAside; weak: a bake Blender dropped, with
+# its modal operator, at a file load, does not hold its deformer).
+_under_way = weakref.WeakValueDictionary()
+
+
+def check_not_baking(d):
+    """Refuses a bake of `d` while another bake of it runs (the window stays live during a
+    modal bake): the second would set aside what the first set aside, and put it back over
+    the first one's result."""
+    a = _under_way.get(d.uid)
+    if a is not None and not a.done:
+        raise solver.DeformKitError("'%s' is being baked: wait for that bake, or press Esc "
+                                    "to cancel it" % d.name)
+
+
 class SetAside:
     """An earlier bake of `d`, set aside while a new bake runs (after its checks): the
     deformer's own modifier shown (the bake reads its input there: a rig's pose), and when
@@ -455,8 +471,10 @@ class SetAside:
     its hidden modifier); restore() puts everything back when the bake is cancelled or
     fails, so that neither loses the earlier bake."""
 
-    def __init__(self, obj, d, kind):
-        self.obj_name, self.uid, self.saved = obj.name, d.uid, []
+    def __init__(self, obj, d, kind, register=True):
+        self.obj_name, self.uid, self.saved, self.done = obj.name, d.uid, [], False
+        if register:  # what check_not_baking looks for
+            _under_way[d.uid] = self
         st = state(obj, d)
         self.frees = st is not None and not (st["kind"] == "PC2" and kind == "PC2"
                                              and not st["broken"])
@@ -487,17 +505,20 @@ class SetAside:
         return obj.modifiers.get(name)
 
     def _set(self, where, attr, value):
-        obj = bpy.data.objects[self.obj_name]
-        item = self._lookup(obj, where)
+        item = self._lookup(self._objects()[0], where)
         self.saved.append((where, attr, getattr(item, attr)))
         setattr(item, attr, value)
 
     def _objects(self):
-        obj = bpy.data.objects.get(self.obj_name)
-        for d in (obj.deformkit.deformers if obj is not None else ()):
-            if d.uid == self.uid:
-                return obj, d
-        return obj, None
+        """The object and deformer, by name, else by the deformer's uid (renamed meanwhile:
+        the modal bake then stops, and this restores it all the same)."""
+        named = bpy.data.objects.get(self.obj_name)
+        for obj in [named] + [o for o in bpy.data.objects if o != named]:
+            for d in (getattr(obj, "deformkit", None).deformers
+                      if obj is not None and obj.type == "MESH" else ()):
+                if d.uid == self.uid:
+                    return obj, d
+        return named, None
 
     def commit(self):
         """The new bake is written: frees the earlier one (its keys, its Mesh Cache), or
@@ -515,7 +536,7 @@ class SetAside:
             item = self._lookup(obj, where)
             if item is not None:
                 setattr(item, attr, value)
-        self.frees, self.saved = False, []
+        self.frees, self.saved, self.done = False, [], True
 
 
 def protected_files(obj, d):
@@ -559,6 +580,7 @@ class PC2Bake:
     kind = "PC2"
 
     def __init__(self, context, obj, d, frame_start, frame_end, path, add_cache=True):
+        check_not_baking(d)
         protect = protected_files(obj, d)
         check_cache_path(obj, d, path)
         self.add_cache = add_cache
@@ -624,6 +646,13 @@ class ShapeKeyBake:
 
     def __init__(self, context, obj, d, frame_start, frame_end):
         solver.check_single_user(obj, "bake %s to shape keys" % d.name)
+        check_not_baking(d)
+        keys = obj.data.shape_keys
+        if keys is not None and not keys.use_relative:
+            raise solver.DeformKitError(
+                "cannot bake %s to shape keys: the mesh's shape keys are absolute (Relative "
+                "is off), which would play the baked keys as a sequence, not by frame; bake "
+                "to Point Cache instead" % d.name)
         above = animated_input.modifiers_above(obj, d)
         if above:
             raise solver.DeformKitError(

@@ -578,7 +578,7 @@ class DEFORMKIT_OT_bake(_Base, bpy.types.Operator):
         context.workspace.status_text_set(None)
         try:
             done = self._job.finish(ok)
-        except solver.DeformKitError as ex:
+        except Exception as ex:  # said in the report bar; the earlier bake is put back
             ok, msg = False, str(ex)
         if ok:
             self.report({"INFO"}, done)
@@ -593,7 +593,8 @@ class DEFORMKIT_OT_bake(_Base, bpy.types.Operator):
             return {"PASS_THROUGH"}
         try:
             f = self._job.step_async()  # the frame's solve runs in a worker thread
-        except solver.DeformKitError as ex:
+        except Exception as ex:  # any error ends the bake through finish(False): the
+            # partial file dropped, the earlier bake put back, the handlers on again
             return self._end(context, False, str(ex))
         fb = self._job.fb
         if f is None:  # still solving: the window stays live, Esc answers

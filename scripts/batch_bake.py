@@ -249,7 +249,7 @@ def do_bake(args):
         # a deformer baked in the file: its own modifier shown for this run (its frames read
         # what reaches it there: a rig's pose), the earlier bake set aside; the file on disk
         # is unchanged unless --save, which replaces that bake by this one
-        bake.SetAside(obj, d, "PC2")
+        bake.SetAside(obj, d, "PC2", register=False)
         if not d.bound:
             rest = solver.rest_frame(scene, d)
             log("'%s' is not bound: binding with the rest of frame %d" % (d.name, rest))

@@ -334,8 +334,27 @@ def test_an_unwritten_bake_keeps_the_earlier_one():
     R.check("a bake under way mutes the earlier keys (they would move its input)",
             all(k.mute for k in obj.data.shape_keys.key_blocks if k.name != "Basis"))
     job.step()
+    try:
+        bake.PC2Bake(bpy.context, obj, d, 1, 6, os.path.join(S.OUTPUT, "workflow_two.pc2"))
+        second = ""
+    except S.solver.DeformKitError as ex:
+        second = str(ex)
+    R.check("a second bake of the deformer meanwhile is refused", "is being baked" in second,
+            second)
     job.finish(False)
     keys_kept("a shape-key bake cancelled")
+    job = bake.ShapeKeyBake(bpy.context, obj, d, 1, 6)
+    name = obj.name
+    obj.name = "Renamed meanwhile"
+    try:
+        job.step()
+        stopped = False
+    except S.solver.DeformKitError:
+        stopped = True
+    job.finish(False)
+    obj.name = name
+    R.check("the object renamed during a bake: the bake stops", stopped)
+    keys_kept("the object renamed during a bake")
     path = os.path.join(S.OUTPUT, "workflow_aside.pc2")
     job = bake.PC2Bake(bpy.context, obj, d, 1, 6, path)
     job.step()
@@ -364,6 +383,17 @@ def test_an_unwritten_bake_keeps_the_earlier_one():
             not S.geonodes.find_modifier(obj, d).show_viewport and
             bake.state(obj, d)["kind"] == "PC2" and obj.data.shape_keys is None and
             np.abs(shown_by_the_bake(obj) - cached).max() < 1e-6)
+    obj.shape_key_add(name="Basis", from_mix=False)
+    obj.shape_key_add(name="Key 1", from_mix=False)
+    obj.data.shape_keys.use_relative = False
+    try:
+        bake.ShapeKeyBake(bpy.context, obj, d, 1, 6)
+        msg = ""
+    except S.solver.DeformKitError as ex:
+        msg = str(ex)
+    R.check("Bake to Shape Keys refused over absolute shape keys", "absolute" in msg and
+            [k.name for k in obj.data.shape_keys.key_blocks] == ["Basis", "Key 1"], msg)
+    obj.shape_key_clear()
 
 
 def test_shape_key_bake_over_other_shape_keys():
