@@ -225,6 +225,10 @@ def farm(args, spec):
     check_folder(args.out, "--out")
     if args.summary:
         check_folder(args.summary, "--summary")
+        mine = os.path.realpath(args.summary)   # a typo must not put it over these
+        for path, why in ((args.out, "--out"), (args.blend, "the .blend being baked")):
+            if mine == os.path.realpath(path):
+                raise Fail("--summary %s is %s: choose another file" % (args.summary, why))
     client, cluster = start_client(args)
     work = None
     try:
@@ -234,6 +238,11 @@ def farm(args, spec):
         except dask_bake.FarmError as e:
             raise Fail(str(e))
         out = check_out(pc2, args.out, described)
+        if args.summary:   # nor over a library or a cache another object plays
+            mine = os.path.realpath(args.summary)
+            for path, why in protected(described):
+                if mine == os.path.realpath(path):
+                    raise Fail("--summary %s is %s: choose another file" % (args.summary, why))
         spec = chunk_mod.BakeSpec(**{**spec.__dict__, "simulation": described["simulation"],
                                      "local_workers": 0 if args.scheduler else args.workers})
         plan = plan_mod.plan_of(described, args.chunk)
@@ -293,6 +302,17 @@ def main():
     for sig in (signal.SIGTERM, signal.SIGHUP):
         signal.signal(sig, _interrupt)
     args = parse(sys.argv[1:])
+    # each chunk's Blender (and the --describe run) starts in a folder of its own: a
+    # relative PYTHONPATH (build/python, as the docs' examples give it) would name nothing
+    # there
+    from deformkit_farm import loopback
+    loopback.absolute_pythonpath()
+    # "//" as in Blender (and batch_bake.py): next to the .blend
+    for name in ("out", "summary"):
+        value = getattr(args, name, None)
+        if value and value.startswith("//"):
+            setattr(args, name, os.path.join(os.path.dirname(os.path.abspath(args.blend)),
+                                             value[2:]))
     spec = make_spec(args)
     if not os.path.isfile(spec.blend):
         fail("no such .blend file: %s" % args.blend)

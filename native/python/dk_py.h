@@ -44,6 +44,14 @@ typedef struct dk_py_doubles {
  *  a caller that treats the two differently reads the input once and then looks at ndim. */
 #define DK_PY_COLS_1D_OR_2D (-2)
 
+/** `obj` (an array with a shape and reshape(), NumPy's) as rows of r*c values for
+ *  dk_py_read_doubles(..., r * c, ...): shape ... x r x c (3 or more dimensions) is
+ *  reshaped to k x (r*c), shape r x c to 1 x (r*c); a shape of 3 or more dimensions whose
+ *  last two are not r x c raises ValueError naming `name` (reshaping it would read its
+ *  values in another order: a b x 3 x 2 array of bones is not b x 2 x 3). Anything else
+ *  (lists, k x (r*c) arrays, buffers) is returned as it is. New reference, or NULL. */
+PyObject *dk_py_as_blocks(PyObject *obj, int r, int c, const char *name);
+
 /** Reads `obj` exactly once, as a float32/float64 array (any buffer of another element type is
  *  a TypeError naming `name` and the format found: integer and byte buffers are not
  *  coordinates, and complex data would lose its imaginary part) or a (nested) sequence of

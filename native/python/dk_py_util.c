@@ -959,3 +959,35 @@ fail:
     Py_DECREF(result);
     return NULL;
 }
+
+PyObject *dk_py_as_blocks(PyObject *obj, int r, int c, const char *name)
+{
+    if (!PyObject_HasAttrString(obj, "reshape"))
+        return Py_NewRef(obj);
+    PyObject *shape = PyObject_GetAttrString(obj, "shape");
+    if (!shape || !PyTuple_Check(shape)) {
+        Py_XDECREF(shape);
+        PyErr_Clear();
+        return Py_NewRef(obj);
+    }
+    const Py_ssize_t nd = PyTuple_Size(shape);
+    long last[2] = {-1, -1};
+    for (Py_ssize_t k = 0; k < 2 && nd >= 2; k++)
+        last[k] = PyLong_AsLong(PyTuple_GetItem(shape, nd - 2 + k));
+    Py_DECREF(shape);
+    if (PyErr_Occurred())
+        return NULL;
+    if (nd >= 3) {
+        if (last[0] != r || last[1] != c) {
+            PyErr_Format(PyExc_ValueError,
+                         "%s: expected k x %d x %d (or k x %d) values, got an array whose last "
+                         "two dimensions are %ld x %ld",
+                         name, r, c, r * c, last[0], last[1]);
+            return NULL;
+        }
+        return PyObject_CallMethod(obj, "reshape", "(ii)", -1, r * c);
+    }
+    if (nd == 2 && last[0] == r && last[1] == c)
+        return PyObject_CallMethod(obj, "reshape", "(ii)", 1, r * c);
+    return Py_NewRef(obj);
+}

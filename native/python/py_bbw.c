@@ -13,8 +13,8 @@ static int read_handles(PyObject *obj, Py_ssize_t cols, const char *name, dk_py_
     memset(out, 0, sizeof *out);
     if (!obj || obj == Py_None)
         return 0;
-    if (cols == 6 && PyObject_HasAttrString(obj, "reshape")) {
-        PyObject *flat = PyObject_CallMethod(obj, "reshape", "(ii)", -1, 6);
+    if (cols == 6) {
+        PyObject *flat = dk_py_as_blocks(obj, 2, 3, name);
         if (!flat) return -1;
         int r = dk_py_read_doubles(flat, -1, 6, name, out);
         Py_DECREF(flat);

@@ -283,10 +283,14 @@ static PyObject *get_stats(PyObject *obj, void *c)
 {
     CholeskyObject *self = (CholeskyObject *)obj;
     (void)c;
-    return Py_BuildValue("{s:i,s:i,s:n}", "analysis_count",
-                         dk_cholesky_analysis_count(self->chol), "factorization_count",
-                         dk_cholesky_factorization_count(self->chol), "factor_bytes",
-                         (Py_ssize_t)dk_cholesky_memory(self->chol));
+    if (enter(self) < 0) /* not while a refactorization in another thread replaces it */
+        return NULL;
+    PyObject *r = Py_BuildValue("{s:i,s:i,s:n}", "analysis_count",
+                                dk_cholesky_analysis_count(self->chol), "factorization_count",
+                                dk_cholesky_factorization_count(self->chol), "factor_bytes",
+                                (Py_ssize_t)dk_cholesky_memory(self->chol));
+    self->busy = 0;
+    return r;
 }
 
 static PyGetSetDef cholesky_getset[] = {

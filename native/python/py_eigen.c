@@ -185,6 +185,8 @@ PyDoc_STRVAR(eigenvectors_doc,
 static PyObject *eig_eigenvectors(PyObject *obj, PyObject *unused)
 {
     dk_py_method *self = (dk_py_method *)obj;
+    if (!dk_py_method_readable(self)) /* not while a rebind in another thread frees it */
+        return NULL;
     const dk_index n = self->mesh->n_vertices;
     const int k = dk_eigen_k(self->native);
     const double *U = dk_eigen_eigenvectors(self->native);

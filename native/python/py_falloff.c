@@ -36,6 +36,8 @@ PyDoc_STRVAR(weights_doc,
 static PyObject *falloff_weights(PyObject *obj, PyObject *arg)
 {
     dk_py_method *self = (dk_py_method *)obj;
+    if (!dk_py_method_readable(self)) /* not while a rebind in another thread frees it */
+        return NULL;
     PyObject *d, *w;
     double *dp, *wp;
     dk_method_stats ms;

@@ -8,12 +8,9 @@
 /* Reads frames (k x 4 x 4 or k*16 flat) as rows of 16. */
 static int read_frames(PyObject *obj, Py_ssize_t rows, const char *name, dk_py_doubles *out)
 {
-    PyObject *flat = PyObject_HasAttrString(obj, "reshape")
-                         ? PyObject_CallMethod(obj, "reshape", "(ii)", -1, 16) : Py_NewRef(obj);
-    if (!flat) {
-        PyErr_Clear();
-        flat = Py_NewRef(obj);
-    }
+    PyObject *flat = dk_py_as_blocks(obj, 4, 4, name);
+    if (!flat)
+        return -1;
     int r = dk_py_read_doubles(flat, rows, 16, name, out);
     Py_DECREF(flat);
     return r;

@@ -318,11 +318,9 @@ int dk_py_lap_read_solve_input(PyObject *targets, PyObject *transforms, dk_index
         PyObject *flat = NULL;
         int r;
         if (PyObject_HasAttrString(transforms, "reshape")) {
-            flat = PyObject_CallMethod(transforms, "reshape", "(ii)", -1, 16);
-            if (!flat) {
-                PyErr_Clear();
-                flat = Py_NewRef(transforms);
-            }
+            flat = dk_py_as_blocks(transforms, 4, 4, "transforms");
+            if (!flat)
+                return -1;
         } else if (PyList_Check(transforms) || PyTuple_Check(transforms)) {
             flat = flatten_transforms(transforms);
             if (!flat)

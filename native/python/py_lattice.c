@@ -168,7 +168,7 @@ static PyMethodDef lattice_methods[] = {
 
 PyDoc_STRVAR(lattice_doc,
              "Lattice(mesh, resolution=(3, 3, 3), frame=None, interpolation='bspline',\n"
-             "        outside='extend', progress=None)\n\n"
+             "        outside='extend')\n\n"
              "Lattice free-form deformation (the lecture's FFD): l x m x n points over a box\n"
              "(frame: the 4 x 4 affine map of the unit cube onto it; None: the mesh's\n"
              "bounding box grown by 5%); every vertex moves by the weighted motion of the\n"

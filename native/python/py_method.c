@@ -259,14 +259,33 @@ static int read_all(const dk_py_method_spec *spec, PyObject *handles, PyObject *
     return 0;
 }
 
+/* Keeps an argument for rebind's defaults in `slot`: a deep copy, so that the caller
+ * changing its array in place afterwards changes nothing here (rebind reads what was
+ * bound); the object itself when it cannot be copied (a memoryview: read again by a later
+ * rebind that leaves it out) or is the one kept already. */
+static void keep(PyObject **slot, PyObject *value)
+{
+    if (!value || value == Py_None || value == *slot) {
+        replace_ref(slot, value);
+        return;
+    }
+    PyObject *copy = PyImport_ImportModule("copy");
+    PyObject *mine = copy ? PyObject_CallMethod(copy, "deepcopy", "O", value) : NULL;
+    Py_XDECREF(copy);
+    if (!mine)
+        PyErr_Clear();
+    replace_ref(slot, mine ? mine : value);
+    Py_XDECREF(mine);
+}
+
 static void remember(dk_py_method *self, PyObject *handles, PyObject *fixed, PyObject *roi,
                      PyObject *hw, PyObject *stiffness)
 {
-    replace_ref(&self->handles, handles);
-    replace_ref(&self->fixed, fixed);
-    replace_ref(&self->roi, roi);
-    replace_ref(&self->handle_weights, hw);
-    replace_ref(&self->stiffness, stiffness);
+    keep(&self->handles, handles);
+    keep(&self->fixed, fixed);
+    keep(&self->roi, roi);
+    keep(&self->handle_weights, hw);
+    keep(&self->stiffness, stiffness);
 }
 
 PyObject *dk_py_method_new(PyTypeObject *type, PyObject *args, PyObject *kwargs,

@@ -67,26 +67,16 @@ static int parse_control(PyObject *kw, const dk_mesh *mesh, const void *bound, v
                          "head and tail, to compute the weights from)", context);
         return -1;
     }
-    PyObject *flat = PyObject_HasAttrString(f, "reshape")
-                         ? PyObject_CallMethod(f, "reshape", "(ii)", -1, 16) : Py_NewRef(f);
-    if (!flat) {
-        PyErr_Clear();
-        flat = Py_NewRef(f);
-    }
-    int bad = dk_py_read_doubles(flat, -1, 16, "bone_frames", &s->frames) < 0;
-    Py_DECREF(flat);
+    PyObject *flat = dk_py_as_blocks(f, 4, 4, "bone_frames");
+    int bad = !flat || dk_py_read_doubles(flat, -1, 16, "bone_frames", &s->frames) < 0;
+    Py_XDECREF(flat);
     Py_DECREF(f);
     if (!bad && w)
         bad = dk_py_read_doubles(w, mesh->n_vertices, s->frames.rows, "weights", &s->weights) < 0;
     if (!bad && g) {
-        PyObject *gf = PyObject_HasAttrString(g, "reshape")
-                           ? PyObject_CallMethod(g, "reshape", "(ii)", -1, 6) : Py_NewRef(g);
-        if (!gf) {
-            PyErr_Clear();
-            gf = Py_NewRef(g);
-        }
-        bad = dk_py_read_doubles(gf, s->frames.rows, 6, "bones", &s->segments) < 0;
-        Py_DECREF(gf);
+        PyObject *gf = dk_py_as_blocks(g, 2, 3, "bones");
+        bad = !gf || dk_py_read_doubles(gf, s->frames.rows, 6, "bones", &s->segments) < 0;
+        Py_XDECREF(gf);
     }
     Py_XDECREF(w);
     Py_XDECREF(g);

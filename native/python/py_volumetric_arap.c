@@ -133,7 +133,7 @@ PyDoc_STRVAR(solve_doc,
              "extension. energy: the tetrahedra's ARAP energy, sum vol |F - R|^2.");
 
 PyDoc_STRVAR(volumetric_doc,
-             "VolumetricARAP(mesh, handles=None, fixed=None, roi=None, handle_weights=None,\n"
+             "VolumetricARAP(mesh, handles, fixed=None, roi=None, handle_weights=None,\n"
              "               stiffness=None, quality=1.5, max_volume=0.0,\n"
              "               max_iterations=1000, tolerance=1e-6, acceleration='newton',\n"
              "               cg_iterations=12, levels=0, embed=0, progress=None)\n\n"

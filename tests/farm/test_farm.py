@@ -259,6 +259,26 @@ def test_refusals_before_any_chunk(work, blend, cluster):
              "--frames", "9-3"], cwd=work)
     assert r.returncode == 1 and "empty frame range 9-3" in r.stderr, r.stderr
     assert not os.path.exists(work / "x.pc2")
+    for summary, why in ((work / "x.pc2", "is --out"), (blend, "the .blend being baked")):
+        r = run([PY, FARM, "--scheduler", address, "--blend", blend, "--object", ARAP,
+                 "--out", str(work / "x.pc2"), "--summary", str(summary)], cwd=work)
+        assert r.returncode == 1 and why in r.stderr, r.stderr[-2000:]
+    assert not os.path.exists(work / "x.pc2")
+
+
+def test_relative_pythonpath_and_an_out_next_to_the_blend(work, blend):
+    """The docs' `export PYTHONPATH=build/python`, relative: each chunk's Blender and the
+    describe run start in folders of their own, where it named nothing. And `--out //x.pc2`
+    is next to the .blend, as in Blender and batch_bake.py (it was the filesystem's root)."""
+    folder = work / "jobs_relative"
+    env = {**os.environ, "PYTHONPATH": os.path.relpath(os.path.join(ROOT, "build", "python"),
+                                                       ROOT)}
+    r = run([PY, FARM, "--blend", blend, "--object", ARAP, "--out", "//relative.pc2",
+             "--chunk", "10", "--jobs", "slurm", "--jobs-dir", str(folder)], cwd=ROOT,
+            env=env)
+    assert r.returncode == 0, r.stderr[-3000:]
+    want = os.path.join(os.path.dirname(os.path.abspath(blend)), "relative.pc2")
+    assert want in (folder / "slurm_join.sh").read_text()
 
 
 # ------------------------------------------------------------------ job files for farms ---

@@ -249,3 +249,24 @@ def test_reach_fixed_fades_out_where_the_fixed_part_begins():
                - 0.25 * mesh.bbox_diagonal) < 1e-12
     with pytest.raises(ValueError):
         deformkit.Falloff(mesh, handles=[hand], reach="nowhere")
+
+
+def test_weights_are_not_read_while_a_rebind_runs():
+    """weights() reads the native object a rebind replaces: from the rebind's progress
+    callback (and from another thread meanwhile) it says the object is in use instead of
+    reading freed memory."""
+    v, f = grid(12, 12)
+    fo = deformkit.Falloff(deformkit.Mesh(v, f), [[60]], range=5)
+    seen = []
+
+    def progress(fraction):
+        try:
+            fo.weights(0)
+            seen.append("read")
+        except RuntimeError as e:
+            seen.append(str(e))
+        return False
+    fo.rebind(handles=[[61]], progress=progress)
+    assert seen and all("in use by a call on this same thread" in m for m in seen), seen
+    d, s = fo.weights(0)
+    assert d[61] == 0.0

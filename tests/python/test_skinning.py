@@ -202,3 +202,16 @@ def test_refusals():
         s.solve(transforms=T)
     with pytest.raises(TypeError, match="frames"):
         s.solve(np.zeros((2, 3)))
+    # arrays of blocks in another layout are refused by name, not read in another order
+    bones = np.array([[[-1.0, 0, 0], [0.0, 0, 0]], [[0.0, 0, 0], [1.0, 0, 0]]])
+    a = dk.Skinning(mesh, bone_frames=B, bones=bones)
+    b = dk.Skinning(mesh, bone_frames=B.reshape(2, 16), bones=bones.reshape(2, 6))
+    np.testing.assert_array_equal(a.solve(transforms=B).positions, b.solve(transforms=B).positions)
+    with pytest.raises(ValueError, match=r"bones: expected k x 2 x 3.* 3 x 2"):
+        dk.Skinning(mesh, bone_frames=B, bones=bones.transpose(0, 2, 1))
+    with pytest.raises(ValueError, match=r"bone_frames: expected k x 4 x 4"):
+        dk.Skinning(mesh, bone_frames=B[:, :, :2], weights=W)
+    with pytest.raises(ValueError, match=r"bones: expected k x 2 x 3"):
+        dk.bounded_biharmonic_weights(mesh, bones=bones.transpose(0, 2, 1))
+    with pytest.raises(ValueError, match=r"transforms: expected k x 4 x 4"):
+        s.solve(transforms=np.zeros((4, 2, 8)))
