@@ -48,6 +48,7 @@
  * start vector, so results are reproducible.
  */
 #include "dk_eigs.h"
+#include "dk_lapack.h"
 
 #include <arpack.h>
 #include <cblas.h>
@@ -296,7 +297,7 @@ static dk_status ritz_vectors(eig_ctx *c, int ncv, int want, const a_int *ipntr,
     for (int i = 0; i < ncv; i++) theta[i] = h[ncv + i];
     for (int i = 0; i + 1 < ncv; i++) e[i] = h[1 + i];
     e[ncv - 1] = 0.0;
-    const lapack_int info = LAPACKE_dstev(LAPACK_COL_MAJOR, 'V', ncv, theta, e, s, ncv);
+    const int info = dk_lapack_dstev('V', ncv, theta, e, s, ncv);
     if (info != 0)
         return dk_error_set(err, DK_ERR_NUMERIC, "eigs: tridiagonal eigensolver failed "
                             "(info %d, ncv %d)", (int)info, ncv);
@@ -496,7 +497,7 @@ static dk_status merge_band(eig_ctx *c, store *s, const store *bd, double zeta,
             for (int b = 0; b <= a; b++)
                 g[(size_t)a * q + b] = g[(size_t)b * q + a] =
                     m_dot(c->mass, zz + (size_t)a * n, zz + (size_t)b * n, n);
-        if (LAPACKE_dsyev(LAPACK_COL_MAJOR, 'V', 'U', q, g, q, gw) != 0) {
+        if (dk_lapack_dsyev('V', q, g, gw) != 0) {
             st = dk_error_set(err, DK_ERR_NUMERIC, "eigs: LAPACK dsyev failed (band merge)");
             goto done;
         }
@@ -554,7 +555,7 @@ static dk_status merge_band(eig_ctx *c, store *s, const store *bd, double zeta,
                 h[(size_t)a * w + b] = h[(size_t)b * w + a] = t;
             }
         }
-        if (LAPACKE_dsyev(LAPACK_COL_MAJOR, 'V', 'U', w, h, w, hw) != 0) {
+        if (dk_lapack_dsyev('V', w, h, hw) != 0) {
             st = dk_error_set(err, DK_ERR_NUMERIC, "eigs: LAPACK dsyev failed (Rayleigh-Ritz)");
             goto done;
         }
@@ -1074,8 +1075,7 @@ static dk_status component_dense_solve(const component *cp, double *val, double 
             const dk_index i = cp->l.row_index[p];
             a[(size_t)j * n + i] = cp->l.values[p] / sqrt(cp->mass[i] * cp->mass[j]);
         }
-    const lapack_int info = LAPACKE_dsyevd(LAPACK_COL_MAJOR, vec ? 'V' : 'N', 'U', n, a, n,
-                                           val);
+    const int info = dk_lapack_dsyevd(vec ? 'V' : 'N', n, a, val);
     if (info != 0) {
         free(a);
         return dk_error_set(err, DK_ERR_NUMERIC, "eigs: dense eigensolver failed on a "

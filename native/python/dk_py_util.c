@@ -878,7 +878,14 @@ int dk_py_arpack_check(dk_py_state *st, const char *context)
 
 void dk_py_arpack_acquire(dk_py_state *st)
 {
-    PyThread_acquire_lock(st->arpack_lock, WAIT_LOCK);
+    if (!PyThread_acquire_lock(st->arpack_lock, NOWAIT_LOCK)) {
+        /* another thread's eigensolve holds it, perhaps standing at its progress callback
+         * (outside the gate) where it may fork: wait for it outside the gate, or the fork
+         * would wait for this thread, this thread for the lock, the holder for the fork */
+        dk_py_native_end(st);
+        PyThread_acquire_lock(st->arpack_lock, WAIT_LOCK);
+        dk_py_native_begin(st);
+    }
     st->arpack_owner = PyThread_get_thread_ident();
 }
 

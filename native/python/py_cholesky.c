@@ -265,6 +265,15 @@ static PyObject *cholesky_solve(PyObject *obj, PyObject *arg)
         Py_DECREF(x);
         return dk_py_raise(&err, "SparseCholesky.solve");
     }
+    for (Py_ssize_t i = 0; i < n * k; i++) /* a factor that is fine can overflow */
+        if (!isfinite(xdata[i])) {
+            Py_DECREF(x);
+            PyErr_Format(PyExc_RuntimeError,
+                         "SparseCholesky.solve: x[%zd, %zd] is not finite: the matrix is too "
+                         "ill-conditioned (or b too large) for this solve",
+                         i / k, i % k);
+            return NULL;
+        }
     return x;
 
 fail:

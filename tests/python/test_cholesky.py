@@ -121,6 +121,11 @@ def test_refusals(grid):
         chol.solve(np.zeros(n + 1))
     with pytest.raises(ValueError, match="not finite"):
         chol.solve(np.full(n, np.inf))
+    # a factor that is fine, a solution that overflows: an error, not inf
+    tiny = deformkit.SparseCholesky([0], [0], [1e-300], 1)
+    with pytest.raises(RuntimeError, match=r"x\[0, 0\] is not finite"):
+        tiny.solve([1e300])
+    assert tiny.solve([1e-10])[0] == pytest.approx(1e290)
     with pytest.raises(ValueError, match="values must have"):
         chol.refactorize(w[:-1])
     # a refused call leaves the factor usable

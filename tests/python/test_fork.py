@@ -428,3 +428,39 @@ print(json.dumps(result))
 """)
     assert out.get("child") == 0, out
     assert out.get("parent_rebind") == "done" and out["parent_err"] < 1e-9, out
+
+
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")
+def test_fork_from_a_callback_while_another_eigensolve_waits():
+    """An EigenDeformation bind holds the ARPACK lock while its progress callback runs
+    (outside the fork gate); another thread's eigensolve waits for that lock. A fork from
+    the callback then waited for the waiting thread to leave the gate, which waited for the
+    lock, which waited for the fork: the process hung. The waiting thread now waits outside
+    the gate."""
+    from conftest import make_icosphere
+    mesh = dk.Mesh(*make_icosphere(3))
+    in_callback, forked, out = threading.Event(), [], {}
+
+    def progress(fraction):
+        if not in_callback.is_set():
+            in_callback.set()
+            time.sleep(0.5)           # the other thread is now waiting for the lock
+            pid = os.fork()
+            if pid == 0:
+                os._exit(0)
+            forked.append(os.waitpid(pid, 0)[1])
+        return False
+
+    def other():
+        in_callback.wait(30)
+        out["pairs"] = dk.laplacian_eigenpairs(mesh, 5)
+
+    faulthandler.dump_traceback_later(120, exit=True)
+    try:
+        t = threading.Thread(target=other)
+        t.start()
+        dk.EigenDeformation(mesh, [[0, 1, 2]], n_eigenvectors=10, progress=progress)
+        t.join(60)
+    finally:
+        faulthandler.cancel_dump_traceback_later()
+    assert forked == [0] and not t.is_alive() and len(out["pairs"][0]) == 5

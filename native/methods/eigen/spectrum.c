@@ -1,6 +1,7 @@
 /* DeformKit EigenDeformation: the eigenpairs of the mesh Laplacian and Phi's factor
  * (eigen_internal.h). */
 #include "eigen_internal.h"
+#include "dk_lapack.h"
 
 #include <cblas.h>
 #include <lapacke.h>
@@ -31,7 +32,7 @@ static dk_status dense_eigenpairs(const dk_sparse *l, const double *mass, dk_ind
             const dk_index i = l->row_index[q];
             c[(size_t)j * n + i] = l->values[q] / sqrt(mass[i] * mass[j]);
         }
-    const lapack_int info = LAPACKE_dsyevd(LAPACK_COL_MAJOR, 'V', 'U', n, c, n, ev);
+    const int info = dk_lapack_dsyevd('V', n, c, ev);
     dk_status st = DK_OK;
     if (info != 0) {
         st = dk_error_set(err, DK_ERR_NUMERIC, "EigenDeformation: dense eigensolver failed "

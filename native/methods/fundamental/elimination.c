@@ -1,13 +1,13 @@
 /* Linear reconstruction's elimination of the constraints (fundamental_internal.h): the
  * unknowns' numbering, the pieces' check, the factorization and the transform basis. */
 #include "fundamental_internal.h"
+#include "dk_lapack.h"
 
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include <cblas.h>
-#include <lapacke.h>
 
 void fr_elim_free(elim *s)
 {
@@ -120,8 +120,8 @@ static dk_status check_components(const dk_fundamental *f, const elim *s, unsign
             break;
         }
         double ev[3];
-        const lapack_int info = LAPACKE_dsyev(LAPACK_ROW_MAJOR, 'N', 'U', 3, mom + 9 * (size_t)c,
-                                              3, ev);
+        /* symmetric, filled whole: its column-major reading is the same matrix */
+        const int info = dk_lapack_dsyev('N', 3, mom + 9 * (size_t)c, ev);
         /* spanning space: the smallest spread at least 1e-3 of the largest */
         const int flat = info != 0 || !(ev[0] > 1e-6 * ev[2]);
         thin[c] = cf[c] == 0 && (cv[c] < 4 || flat);

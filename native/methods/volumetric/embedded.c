@@ -368,7 +368,9 @@ dk_status volumetric_embedding_solve(dk_volumetric_arap *va, const dk_solve_requ
         if (con->handle_weights[k] == 1.0)
             memcpy(positions + 3 * (size_t)con->handle_vertices[k], e->targets + 3 * (size_t)k,
                    3 * sizeof(double));
-    return DK_OK;
+    /* the coarse solve checked its own result; the carried one is checked here (the
+     * energy is the coarse solve's, checked there) */
+    return dk_solve_result_check(positions, va->n, 0.0, 0, "VolumetricARAP solve", err);
 }
 
 dk_status volumetric_embedding_energy(const dk_volumetric_arap *va, const double *positions,
