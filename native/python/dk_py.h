@@ -46,7 +46,8 @@ typedef struct dk_py_doubles {
 
 /** `obj` (an array with a shape and reshape(), NumPy's) as rows of r*c values for
  *  dk_py_read_doubles(..., r * c, ...): shape ... x r x c (3 or more dimensions) is
- *  reshaped to k x (r*c), shape r x c to 1 x (r*c); a shape of 3 or more dimensions whose
+ *  reshaped to k x (r*c), and so is shape (k r) x c (the blocks stacked: one r x c block
+ *  is 1 x (r*c)); a shape of 3 or more dimensions whose
  *  last two are not r x c raises ValueError naming `name` (reshaping it would read its
  *  values in another order: a b x 3 x 2 array of bones is not b x 2 x 3). Anything else
  *  (lists, k x (r*c) arrays, buffers) is returned as it is. New reference, or NULL. */

@@ -979,7 +979,7 @@ PyObject *dk_py_as_blocks(PyObject *obj, int r, int c, const char *name)
     }
     const Py_ssize_t nd = PyTuple_Size(shape);
     long last[2] = {-1, -1};
-    for (Py_ssize_t k = 0; k < 2 && nd >= 2; k++)
+    for (Py_ssize_t k = 0; k < 2 && nd >= 2 && !PyErr_Occurred(); k++)
         last[k] = PyLong_AsLong(PyTuple_GetItem(shape, nd - 2 + k));
     Py_DECREF(shape);
     if (PyErr_Occurred())
@@ -994,7 +994,7 @@ PyObject *dk_py_as_blocks(PyObject *obj, int r, int c, const char *name)
         }
         return PyObject_CallMethod(obj, "reshape", "(ii)", -1, r * c);
     }
-    if (nd == 2 && last[0] == r && last[1] == c)
-        return PyObject_CallMethod(obj, "reshape", "(ii)", 1, r * c);
+    if (nd == 2 && last[1] == c && last[0] % r == 0 && c != r * c) /* blocks stacked */
+        return PyObject_CallMethod(obj, "reshape", "(ii)", -1, r * c);
     return Py_NewRef(obj);
 }

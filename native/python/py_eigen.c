@@ -185,18 +185,22 @@ PyDoc_STRVAR(eigenvectors_doc,
 static PyObject *eig_eigenvectors(PyObject *obj, PyObject *unused)
 {
     dk_py_method *self = (dk_py_method *)obj;
-    if (!dk_py_method_readable(self)) /* not while a rebind in another thread frees it */
+    (void)unused;
+    /* held busy while it reads: the allocation may run Python, and a rebind in another
+     * thread frees the basis */
+    if (dk_py_method_enter(self) < 0)
         return NULL;
     const dk_index n = self->mesh->n_vertices;
     const int k = dk_eigen_k(self->native);
-    const double *U = dk_eigen_eigenvectors(self->native);
     double *out;
-    (void)unused;
     PyObject *a = dk_py_new_doubles(2, n, k, &out);
-    if (a)
+    if (a) {
+        const double *U = dk_eigen_eigenvectors(self->native);
         for (dk_index i = 0; i < n; i++)
             for (int j = 0; j < k; j++)
                 out[(size_t)i * k + j] = U[(size_t)j * n + i];
+    }
+    self->busy = 0;
     return a;
 }
 

@@ -36,30 +36,34 @@ PyDoc_STRVAR(weights_doc,
 static PyObject *falloff_weights(PyObject *obj, PyObject *arg)
 {
     dk_py_method *self = (dk_py_method *)obj;
-    if (!dk_py_method_readable(self)) /* not while a rebind in another thread frees it */
-        return NULL;
-    PyObject *d, *w;
+    PyObject *d, *w = NULL;
     double *dp, *wp;
     dk_method_stats ms;
     long g = PyLong_AsLong(arg);
     if (g == -1 && PyErr_Occurred())
         return NULL;
+    /* held busy while it reads: the allocations below may run Python, and a rebind in
+     * another thread (or from a progress callback) frees what it reads */
+    if (dk_py_method_enter(self) < 0)
+        return NULL;
     dk_falloff_stats(self->native, &ms);
     if (g < 0 || g >= ms.n_handles) {
         PyErr_Format(PyExc_IndexError, "Falloff.weights: group %ld out of range [0, %d)", g,
                      (int)ms.n_handles);
+        self->busy = 0;
         return NULL;
     }
     d = dk_py_new_doubles(1, self->mesh->n_vertices, 0, &dp);
-    if (!d)
-        return NULL;
-    w = dk_py_new_doubles(1, self->mesh->n_vertices, 0, &wp);
+    if (d)
+        w = dk_py_new_doubles(1, self->mesh->n_vertices, 0, &wp);
+    if (w)
+        for (dk_index v = 0; v < self->mesh->n_vertices; v++)
+            dk_falloff_vertex_weight(self->native, (dk_index)g, v, dp + v, wp + v);
+    self->busy = 0;
     if (!w) {
-        Py_DECREF(d);
+        Py_XDECREF(d);
         return NULL;
     }
-    for (dk_index v = 0; v < self->mesh->n_vertices; v++)
-        dk_falloff_vertex_weight(self->native, (dk_index)g, v, dp + v, wp + v);
     return Py_BuildValue("(NN)", d, w);
 }
 

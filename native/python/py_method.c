@@ -954,12 +954,15 @@ PyObject *dk_py_method_rebind(PyObject *obj, PyObject *args, PyObject *kwargs)
         self->spec->rebind_progress(self->native, NULL);
     dk_py_lap_constraints_release(&con);
     dk_py_doubles_release(&stiff);
+    /* kept while still busy: the copies run Python, and some of these arguments are
+     * borrowed from the kept ones, which no other call may replace meanwhile */
+    if (st == DK_OK)
+        remember(self, handles, fixed, roi, hw, stiffness);
     self->busy = 0;
     if (st != DK_OK) {
         result = dk_py_progress_raise(&prog, &err, ctx);
         goto out;
     }
-    remember(self, handles, fixed, roi, hw, stiffness);
     /* raised at "done": the rebind is complete (its new constraints stay), the error goes up */
     result = dk_py_progress_raised(&prog) ? NULL : Py_NewRef(Py_None);
 out:
