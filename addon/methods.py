@@ -748,7 +748,7 @@ METHODS.append(Method(
                "none): paint softer flesh low", kw=None, advanced=True),
         Option("damping_group", "GROUP", "", "Damping Paint",
                "A vertex group whose weights scale the Damping per vertex (1 where it has "
-               "none): paint parts that should settle sooner high", kw=None, advanced=True),
+               "none): paint parts that should swing longer low", kw=None, advanced=True),
         Option("squash_group", "GROUP", "", "Squash Paint",
                "A vertex group whose weights scale the Squash Amount per vertex (1 where it "
                "has none)", kw=None, advanced=True),

@@ -178,6 +178,32 @@ def test_green_option_refusals():
         dk.Cage(mesh, cage_vertices=P, cage_triangles=bad, coordinates="green")
 
 
+def cube_cage():
+    P = np.array([[x, y, z] for z in (-1.0, 1.0) for y in (-1.0, 1.0) for x in (-1.0, 1.0)])
+    quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    return P, np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))])
+
+
+@pytest.mark.parametrize("coordinates", ["mean_value", "green"])
+def test_points_the_coordinates_cannot_rebuild_are_refused(coordinates):
+    """Coordinates rebuild their point (linear precision) or the bind is refused: a vertex
+    at a cage corner had Green coordinates summing to 1/8 (a translated cage moved it by an
+    eighth), and a flat cage gave finite noise; both now name the vertex."""
+    P, T = cube_cage()
+    inside = np.array([[0.1, -0.2, 0.3], [0.5, 0.5, -0.5]])
+    kw = dict(cage_triangles=T, coordinates=coordinates)
+    moved = dk.Cage(dk.Mesh(inside, np.zeros((0, 3), int)), cage_vertices=P, **kw)
+    np.testing.assert_allclose(moved.solve(P + [0.3, 0.0, 0.0]).positions, inside + [0.3, 0, 0],
+                               atol=1e-9)
+    if coordinates == "green":
+        corner = dk.Mesh(np.vstack([inside, P[7]]), np.zeros((0, 3), int))
+        with pytest.raises(ValueError, match="vertex 2 has no Green coordinates"):
+            dk.Cage(corner, cage_vertices=P, **kw)
+    flat = P * [1.0, 1.0, 0.0]   # the cube squashed into its middle plane
+    with pytest.raises(ValueError, match="no (Green|mean value) coordinates|has none"):
+        dk.Cage(dk.Mesh(inside, np.zeros((0, 3), int)), cage_vertices=flat, **kw)
+
+
 @pytest.mark.skipif(not MESH_FILES, reason="../shared/meshes not present")
 @pytest.mark.parametrize("coordinates", ["mean_value", "green"])
 def test_grid_evaluation_on_a_real_mesh(coordinates):

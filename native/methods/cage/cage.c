@@ -177,7 +177,29 @@ typedef struct rows_job {
     float *Wf, *Psif;
     double *scratch; /* 2 parts x rows_scratch() doubles */
     dk_index first_bad[2];
+    double reach; /* the cage's bounding-box diagonal: the scale of the precision check */
 } rows_job;
+
+/* Linear precision (the coordinates' defining property): the weights sum to 1 and rebuild
+ * the point, sum_j lambda_j v_j (+ sum_t psi_t n_t for Green) = x. A point on the cage where
+ * a formula has no case for it (Green at a cage vertex: weights summing to 1/8), or a cage
+ * flat or folded there, gives finite weights that fail it: refused, not bound. */
+static int reproduces(const double *x, const double *cage, dk_index nc, const double *lambda,
+                      const double *nrm, dk_index nt, const double *psi, double reach)
+{
+    double sum = 0.0, p[3] = {0.0, 0.0, 0.0};
+    for (dk_index j = 0; j < nc; j++) {
+        sum += lambda[j];
+        for (int k = 0; k < 3; k++)
+            p[k] += lambda[j] * cage[3 * (size_t)j + (size_t)k];
+    }
+    for (dk_index t = 0; nrm && t < nt; t++)
+        for (int k = 0; k < 3; k++)
+            p[k] += psi[t] * nrm[3 * (size_t)t + (size_t)k];
+    const double tol = 1e-6;
+    return fabs(sum - 1.0) <= tol && fabs(p[0] - x[0]) <= tol * reach &&
+           fabs(p[1] - x[1]) <= tol * reach && fabs(p[2] - x[2]) <= tol * reach;
+}
 
 /* Doubles of one part's scratch: the coordinates and the kernel's scratch. */
 static size_t rows_scratch(size_t nc, size_t nt, size_t ne)
@@ -209,7 +231,9 @@ static void rows_range(void *ctx, dk_index v0, dk_index v1, int part)
                             job->n_edges, job->opposite, lambda, psi, k)
             : dk_cage_mean_value(x, job->c->rest, nc, job->c->triangles, nt, job->edges,
                                  job->n_edges, job->opposite, lambda, k);
-        if (bad != 0 && job->first_bad[part] < 0)
+        if ((bad != 0 || !reproduces(x, job->c->rest, nc, lambda, job->tris ? job->nrm : NULL,
+                                     nt, psi, job->reach)) &&
+            job->first_bad[part] < 0)
             job->first_bad[part] = v;
         store_row(job->W, job->Wf, (size_t)v, (size_t)nc, lambda);
         if (job->tris)
@@ -315,7 +339,20 @@ static dk_status build(dk_cage *cg, const dk_control_desc *c, dk_progress *prog,
         return st;
     rows_job job = {pts, c, edges, opposite, ne, cg->tris, cg->nrm, cg->W, cg->Psi, cg->Wf,
                     cg->Psif, malloc(2 * rows_scratch(nc, (size_t)c->n_triangles, (size_t)ne) *
-                                     sizeof(double)), {-1, -1}};
+                                     sizeof(double)), {-1, -1}, 0.0};
+    {
+        double lo[3], hi[3];
+        for (int k = 0; k < 3; k++)
+            lo[k] = hi[k] = c->rest[k];
+        for (size_t j = 1; j < nc; j++)
+            for (int k = 0; k < 3; k++) {
+                const double q = c->rest[3 * j + (size_t)k];
+                lo[k] = q < lo[k] ? q : lo[k];
+                hi[k] = q > hi[k] ? q : hi[k];
+            }
+        job.reach = sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
+                         (hi[2] - lo[2]) * (hi[2] - lo[2]));
+    }
     if (!job.scratch) {
         free(edges);
         free(opposite);
