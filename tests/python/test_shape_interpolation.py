@@ -274,6 +274,9 @@ def test_an_input_pose_is_edited_with_its_turn(tube):
     Y = si.solve(weights=[0.7]).positions
     rms, Rf = rigid_fit(Y, X)  # the in-between, turned with the input
     assert rms < 1e-9 and np.abs(Rf - R).max() < 1e-9
+    # and placed with it: the tube is a part of its own (no handle), placed by the pose's
+    # mean shift, which the input turns too (it was taken in the rest's directions)
+    assert np.abs(X - (Y @ R.T + [1.0, 0.0, 0.0])).max() < 1e-9 * np.ptp(V, axis=0).max()
 
 
 # ------------------------------------------------------------------ units and placement -----

@@ -38,6 +38,8 @@ struct dk_shape_interpolation {
     double *rhs;                /* nu x 3, column-major                                   */
     double *tgt;                /* n_handle_vertices x 3                                  */
     double *part_sum;           /* n_components x 4: a part's sum of positions, count      */
+    double *part_turn;          /* n_components x 15: a part's sums of input and rest, and
+                                 * their covariance: the input's turn of the part          */
     dk_team *team;
     dk_phase_progress_fn rebind_progress;
     void *rebind_progress_user;
@@ -235,7 +237,9 @@ dk_status dk_shape_interpolation_bind(const dk_mesh *mesh, const dk_constraint_d
     s->Pt = malloc(6 * F * sizeof(double));
     s->d = malloc(3 * E * sizeof(double) + 1);
     s->part_sum = malloc(4 * nc * sizeof(double) + 1);
-    if (!s->vinv || !s->degenerate || !s->ew || !s->edge_faces || !s->J || !s->Pt || !s->d || !s->part_sum) {
+    s->part_turn = malloc(15 * nc * sizeof(double) + 1);
+    if (!s->vinv || !s->degenerate || !s->ew || !s->edge_faces || !s->J || !s->Pt || !s->d || !s->part_sum ||
+        !s->part_turn) {
         dk_shape_interpolation_free(s);
         return dk_error_set(err, DK_ERR_OUT_OF_MEMORY, "ShapeInterpolation: out of memory "
                             "(%d triangles)", (int)F);
@@ -540,7 +544,54 @@ static double energy_of(dk_shape_interpolation *s, const double *x)
     return p.part_energy[0] + p.part_energy[1];
 }
 
-/* The parts without a constrained vertex, moved so that their means are the linear blend's. */
+/* The input's turn of each free part (rows of R, row-major, into part_turn + 15 c + 6): the
+ * rotation of the best rigid fit of the part's rest onto the input (identity without an
+ * input). */
+static void free_part_turns(dk_shape_interpolation *s, const double *base)
+{
+    const dk_mesh *m = s->mesh;
+    const dk_index nc = m->report.n_components;
+    double *pt = s->part_turn;
+    memset(pt, 0, 15 * (size_t)nc * sizeof(double));
+    for (dk_index c = 0; c < nc; c++)
+        if (base == m->positions)
+            pt[15 * (size_t)c + 6] = pt[15 * (size_t)c + 10] = pt[15 * (size_t)c + 14] = 1.0;
+    if (base == m->positions)
+        return;
+    for (dk_index v = 0; v < m->n_vertices; v++) {
+        const dk_index c = m->component[v];
+        if (!s->sys.free_part[c])
+            continue;
+        for (int k = 0; k < 3; k++) {
+            pt[15 * (size_t)c + (size_t)k] += base[3 * (size_t)v + k];
+            pt[15 * (size_t)c + 3 + (size_t)k] += m->positions[3 * (size_t)v + k];
+        }
+    }
+    for (dk_index c = 0; c < nc; c++) { /* the sums become means (count in part_sum) */
+        const double n = s->part_sum[4 * (size_t)c + 3];
+        for (int k = 0; k < 6; k++)
+            pt[15 * (size_t)c + (size_t)k] /= n > 0.0 ? n : 1.0;
+    }
+    for (dk_index v = 0; v < m->n_vertices; v++) {
+        const dk_index c = m->component[v];
+        if (!s->sys.free_part[c])
+            continue;
+        double *q = pt + 15 * (size_t)c;
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                q[6 + 3 * i + j] += (base[3 * (size_t)v + i] - q[i]) *
+                                    (m->positions[3 * (size_t)v + j] - q[3 + j]);
+    }
+    for (dk_index c = 0; c < nc; c++)
+        if (s->sys.free_part[c]) {
+            double *q = pt + 15 * (size_t)c, r[9];
+            dk_closest_rotation(q + 6, r); /* argmax trace(R^T sum (b - b0)(r - r0)^T) */
+            memcpy(q + 6, r, sizeof r);
+        }
+}
+
+/* The parts without a constrained vertex, moved so that their means are the linear blend's,
+ * the poses' shifts (in the rest's directions) turned as the input turns the part. */
 static void place_free_parts(dk_shape_interpolation *s, const double *base, const double *w,
                              double *x)
 {
@@ -561,16 +612,17 @@ static void place_free_parts(dk_shape_interpolation *s, const double *base, cons
             ps[4 * (size_t)c + k] += base[3 * (size_t)v + k] - x[3 * (size_t)v + k];
         ps[4 * (size_t)c + 3] += 1.0;
     }
+    free_part_turns(s, base);
     for (dk_index c = 0; c < nc; c++) {
         if (!s->sys.free_part[c])
             continue;
-        double *q = ps + 4 * (size_t)c;
-        for (int k = 0; k < 3; k++) {
-            double shift = q[k] / q[3];
+        double *q = ps + 4 * (size_t)c, blend[3] = {0.0, 0.0, 0.0};
+        const double *R = s->part_turn + 15 * (size_t)c + 6;
+        for (int k = 0; k < 3; k++)
             for (dk_index i = 0; i < P; i++)
-                shift += w[i] * s->poses.shift[3 * ((size_t)i * (size_t)nc + (size_t)c) + (size_t)k];
-            q[k] = shift;
-        }
+                blend[k] += w[i] * s->poses.shift[3 * ((size_t)i * (size_t)nc + (size_t)c) + (size_t)k];
+        for (int k = 0; k < 3; k++)
+            q[k] = q[k] / q[3] + R[3 * k] * blend[0] + R[3 * k + 1] * blend[1] + R[3 * k + 2] * blend[2];
     }
     for (dk_index v = 0; v < m->n_vertices; v++) {
         const dk_index c = m->component[v];
@@ -729,6 +781,7 @@ void dk_shape_interpolation_free(dk_shape_interpolation *s)
     free(s->rhs);
     free(s->tgt);
     free(s->part_sum);
+    free(s->part_turn);
     free(s);
 }
 
