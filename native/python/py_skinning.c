@@ -122,7 +122,8 @@ PyDoc_STRVAR(solve_doc,
              "positions are refused). Bone j moves the mesh by T_j B_j^-1 (B_j its rest\n"
              "frame): blended linearly per vertex by its weights (linear blend skinning), or\n"
              "as dual quaternions (blend='dual_quaternion'); the rest frames give the mesh\n"
-             "back exactly. input_positions: a pose (n x 3) skinned instead of the rest. A\n"
+             "back exactly (linear blend; dual quaternions to the weights' rounding, 1e-6 of\n"
+             "|p|). input_positions: a pose (n x 3) skinned instead of the rest. A\n"
              "direct method; energy is the sum of squared displacements, iterations 1.");
 
 static PyMethodDef skinning_methods[] = {
