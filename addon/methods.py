@@ -319,7 +319,7 @@ METHODS = [
             # Straight Line by default, as Blender's proportional editing: with the automatic
             # range it stretched least on both demo scenes (arm-lift 11.5% RMS edge change
             # against 59% with Edge Steps and 53% Along Surface; armadillo-wave 15.7% against
-            # 24% and 19%: docs/methods/falloff.md). The Python API's default stays 'hops'.
+            # 24% and 19%: docs/methods/falloff.md); the Python API's default too.
             Option("distance", "ENUM", "euclidean", "Distance",
                    "How the distance from a handle is measured",
                    items=(("hops", "Edge Steps",

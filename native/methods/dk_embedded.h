@@ -45,10 +45,11 @@
  * rule it is.) Nodes that influence no vertex at all are dropped.
  * The solve: Gauss-Newton (eqs. 10-11) on the normal equations J^T J d = -J^T f, the pattern
  * of J^T J analysed once per bind (CHOLMOD) and refactored per iteration, with
- * Levenberg-Marquardt damping (mu I added, raised tenfold until F decreases, lowered after
- * each accepted step) so that big drags never diverge. Stopping (eq. 12, after Gill et al.):
- *     |F_k - F_{k-1}| < eps (1 + F_k) and |d_k|_inf < sqrt(eps) (1 + |x_k|_inf), or
- *     |grad F_k|_inf < cbrt(eps) (1 + F_k)
+ * Levenberg-Marquardt damping (mu I added, Nielsen's update: raised by a doubling factor
+ * until F decreases, lowered by the gain ratio after an accepted step) so that big drags
+ * never diverge. Stopping (eq. 12, after Gill et al.), after two accepted steps, all of:
+ *     |F_k - F_{k-1}| / (1 - r) < eps (1 + F_k), 2 |grad F_k|_inf < cbrt(eps) (1 + F_k),
+ *     |d_k|_inf / (1 - r) < sqrt(eps) (1 + |x_k|_inf)   (r: the last rate of each)
  * (the paper prints the last factor of the step test as 1 + |d_k|; Gill et al.'s is the
  * iterate's norm, which we use). A warm start begins from the previous solution, a cold one
  * from the identity.
@@ -215,8 +216,10 @@ size_t dk_embedded_state_size(const dk_embedded *ed);
 /** Writes the state into `state` (exactly dk_embedded_state_size bytes). */
 dk_status dk_embedded_save_state(const dk_embedded *ed, void *state, size_t size, dk_error *err);
 
-/** Puts back a state dk_embedded_save_state wrote; another method's, mesh size's,
- *  constraints' or graph's is DK_ERR_INVALID_ARGUMENT and changes nothing. */
+/** Puts back a state dk_embedded_save_state wrote; another method's, or one of another
+ *  shape (vertices, handle vertices, nodes, k) is DK_ERR_INVALID_ARGUMENT and changes
+ *  nothing. A state of another object of the same shape (other fixed vertices, another
+ *  seed) is not told apart: restore a state into the object that saved it, or its twin. */
 dk_status dk_embedded_restore_state(dk_embedded *ed, const void *state, size_t size,
                                     dk_error *err);
 

@@ -141,7 +141,7 @@ void dk_laplacian_edit_default_options(dk_laplacian_edit_options *options);
 /** Builds the operator, the rest deltas (and frames), validates the constraints
  *  (dk_constraints_create) and factors the system. Refuses (naming the problem): a mesh
  *  without triangles or with a zero bounding box (DK_ERR_DEGENERATE), invalid options
- *  (DK_ERR_INVALID_ARGUMENT), no unknown vertex left (DK_ERR_INVALID_ARGUMENT), a connected
+ *  (DK_ERR_INVALID_ARGUMENT), a connected
  *  component of unknowns that touches no constraint while tikhonov = 0 (the system would be
  *  singular; DK_ERR_DEGENERATE naming a vertex of it). `mesh` is borrowed and must outlive
  *  the object. `options` may be NULL (defaults). */

@@ -153,9 +153,12 @@ static double group_reach(const dk_falloff *f, const falloff_state *s, const dou
 {
     if (f->opt.reach != DK_FALLOFF_REACH_FIXED)
         return f->opt.range;
+    /* the fixed vertices the caller gave (and the region's outside), not loose geometry the
+     * constraints hold at rest: an eyeball near the handle must not become its range */
     double r = INFINITY;
+    const unsigned char *held = s->con->held;
     for (dk_index v = 0; v < f->mesh->n_vertices; v++)
-        if (s->con->role[v] == DK_VERTEX_FIXED && dist[v] < r)
+        if (s->con->role[v] == DK_VERTEX_FIXED && !(held && held[v]) && dist[v] < r)
             r = dist[v];
     return isfinite(r) && r > 0.0 ? r : f->opt.range;
 }

@@ -686,7 +686,10 @@ static int le_classify(const void *ctx, dk_index i, double *w2)
         return unknown;
     }
     if (role == DK_VERTEX_FIXED) {
-        const int unknown = c->soft && c->in_roi[i];
+        /* soft: the caller's fixed vertices get soft rows; loose geometry the constraints
+         * hold stays exactly at rest (a soft row alone shrank it under detail='membrane') */
+        const unsigned char *held = c->s->con->held;
+        const int unknown = c->soft && c->in_roi[i] && !(held && held[i]);
         if (unknown)
             *w2 = c->lambda * c->lambda;
         return unknown;

@@ -458,3 +458,21 @@ def test_a_graph_denser_than_its_mesh_is_warned_of():
     assert len(dense.nodes) > len(v) and lag > 1e-3 * np.linalg.norm(t)  # the floppiness
     (w,) = dense.warnings
     assert "has %d nodes for %d vertices" % (len(dense.nodes), len(v)) in w and "fewer" in w
+
+
+def test_rebind_resets_the_nodes_that_become_constant():
+    """After rebind(fixed=larger), the nodes the new fixed set makes constant are the
+    identity: a warm solve blended the last solve's transforms of them into the vertices
+    near the new fixed part."""
+    v, f = make_grid(20, 10, bump=0.1, jitter=0.2)
+    mesh = dk.Mesh(v, f)
+    left = np.where(v[:, 0] <= 0.05)[0]
+    wider = np.where(v[:, 0] <= 0.5)[0]
+    right = np.where(v[:, 0] >= 0.95)[0]
+    target = v[right] + [0.0, 0.3, 0.4]
+    ed = dk.EmbeddedDeformation(mesh, [right], fixed=left)
+    ed.solve(target)
+    ed.rebind(fixed=wider)
+    got = np.asarray(ed.solve(target).positions)
+    fresh = np.asarray(dk.EmbeddedDeformation(mesh, [right], fixed=wider).solve(target).positions)
+    assert np.abs(got - fresh).max() < 1e-3 * np.ptp(v, axis=0).max()

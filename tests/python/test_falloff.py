@@ -270,3 +270,20 @@ def test_weights_are_not_read_while_a_rebind_runs():
     assert seen and all("in use by a call on this same thread" in m for m in seen), seen
     d, s = fo.weights(0)
     assert d[61] == 0.0
+
+
+def test_loose_geometry_does_not_set_the_automatic_range():
+    """The automatic range is the distance to the nearest fixed vertex the caller gave; loose
+    geometry the constraints hold at rest (an eyeball near the handle) is not one: with the
+    default euclidean distance it became the handle's range."""
+    v, f = grid(12, 12)
+    n = len(v)
+    island = np.array([[0.55, 0.55, 0.02], [0.6, 0.55, 0.02], [0.55, 0.6, 0.02]])
+    mesh = deformkit.Mesh(np.vstack([v, island]), np.vstack([f, [[n, n + 1, n + 2]]]))
+    fo = deformkit.Falloff(mesh, [[84]])
+    quarter = 0.25 * np.linalg.norm(np.ptp(np.asarray(mesh.vertices), axis=0))
+    assert fo.ranges[0] == pytest.approx(quarter)   # no fixed group: a quarter diagonal
+    T = np.eye(4)
+    T[2, 3] = 0.1
+    p = np.asarray(fo.solve(transforms=[T]).positions)
+    assert np.array_equal(p[n:], island)   # the island held at rest

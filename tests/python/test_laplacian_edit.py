@@ -723,3 +723,20 @@ def test_a_basis_built_on_a_pose_serves_that_pose_only():
     np.testing.assert_allclose(got, want, atol=1e-9)
     np.testing.assert_allclose(le.solve(transforms=[T]).positions,
                                fresh.solve(transforms=[T]).positions, atol=1e-9)
+
+
+def test_soft_constraints_hold_loose_geometry_exactly():
+    """Soft constraints with detail='membrane' (delta = 0): loose geometry the constraints
+    hold at rest stays there exactly; as a soft row alone it solved to half its coordinates
+    (lambda^2 / (1 + lambda^2) of them) and shrank."""
+    v = np.array([(i / 8, j / 8, 0.0) for j in range(9) for i in range(9)])
+    f = np.array([t for j in range(8) for i in range(8)
+                  for t in (((j * 9 + i), (j * 9 + i + 1), (j * 9 + i + 10)),
+                            ((j * 9 + i), (j * 9 + i + 10), (j * 9 + i + 9)))])
+    n = len(v)
+    island = np.array([[2.0, 2.0, 1.0], [2.5, 2.0, 1.0], [2.0, 2.5, 1.0]])
+    mesh = deformkit.Mesh(np.vstack([v, island]), np.vstack([f, [[n, n + 1, n + 2]]]))
+    le = deformkit.LaplacianEdit(mesh, [[80]], fixed=list(range(9)), detail="membrane",
+                                 constraints="soft")
+    p = np.asarray(le.solve(targets=[[1.0, 1.0, 0.3]]).positions)
+    assert np.array_equal(p[n:], island)

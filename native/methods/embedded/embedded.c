@@ -171,6 +171,11 @@ dk_status dk_embedded_rebind(dk_embedded *ed, const dk_constraint_desc *constrai
     dk_progress_done(&prog);
     ed_system_free(&ed->sys);
     ed->sys = s;
+    /* nodes constant under the new constraints are the identity (the solver never moves
+     * them): a warm solve must not blend the last solve's transforms of them */
+    for (dk_index j = 0; j < ed->m; j++)
+        if (ed->sys.node_unknown[j] < 0)
+            ed_identity(ed->x + 12 * (size_t)j, 1);
     return DK_OK;
 }
 
