@@ -25,6 +25,8 @@ def _basis_preview(obj, d, e, T, inputs):
     or None (no basis, no result yet, or nothing moved since the last preview)."""
     if not _has_basis(e) or e.result_pos is None or inputs == e.preview_inputs:
         return None
+    if e.source is not e.rest:  # a posed input (a rig): the basis is the rest's response,
+        return None             # and would put the handles off their targets on the pose
     T0 = e.result_T
     if T0 is None or T0.shape != T.shape or e.basis.shape[1] != 4 * len(T):
         return None

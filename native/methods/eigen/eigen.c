@@ -149,6 +149,11 @@ dk_status dk_eigen_bind(const dk_mesh *mesh, const dk_constraint_desc *desc,
         if (e->opt.n_eigenvectors == 0 && K < 300 + extra_constants(e))
             K = 300 + extra_constants(e); /* the automatic rule may ask for 300 */
         e->K = K < n ? K : (int)n;
+        /* n' (section 4.3) is refine itself: the K computed for the automatic rule's sake
+         * (a rebind may ask for up to 300) must not make Detail Shapes 100 fit 300 */
+        const int64_t np = (int64_t)e->opt.refine +
+                           (e->opt.n_eigenvectors == 0 ? extra_constants(e) : 0);
+        e->n_prime = np < e->K ? (int)np : e->K;
         e->b = malloc(3 * (size_t)e->K * sizeof *e->b);
         st = e->b ? eigen_eigenvectors(e, err) : eigen_oom(err, "buffers");
         if (st == DK_OK)

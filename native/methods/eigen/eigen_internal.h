@@ -57,6 +57,8 @@ struct dk_eigen {
     dk_progress prog;        /* the bind's reporter (eigen_phases)                         */
     dk_index n;
     int K, m, n_levels;      /* n_levels 1 (one iteration) or 2 (section 4.3)              */
+    int n_prime;             /* section 4.3's n': refine (plus the components' constants
+                              * when m is automatic), at most K                          */
     double *evals, *U;       /* K; n x K column-major                                      */
     double *chol;            /* K x K column-major, upper: Phi_K = R^T R                   */
     level lv[2];

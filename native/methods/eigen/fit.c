@@ -87,13 +87,14 @@ dk_status eigen_skeletons(dk_eigen *e, int m, dk_error *err)
 {
     const dk_index n = e->n;
     m = eigen_whole_count(e, m);
-    const int two = e->opt.refine > m && e->K > m;
+    const int n2 = eigen_whole_count(e, e->n_prime); /* n', its eigenspace whole too */
+    const int two = e->opt.refine > m && n2 > m;
     eigen_level_free(&e->lv[0]);
     eigen_level_free(&e->lv[1]);
     e->m = m;
     e->n_levels = two ? 2 : 1;
     for (int k = 0; k < e->n_levels; k++)
-        if (level_alloc(&e->lv[k], k == 0 ? m : e->K, n) != DK_OK)
+        if (level_alloc(&e->lv[k], k == 0 ? m : n2, n) != DK_OK)
             return eigen_oom(err, "skeletons");
     for (int k = 0; k < e->n_levels; k++) { /* eq. 1 fitted to the mesh: K_m */
         level *L = &e->lv[k];
