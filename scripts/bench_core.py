@@ -17,7 +17,7 @@ Jobs, each timed on DeformKit and, where scipy has the same job, on scipy in the
                       1e-10) vs scipy eigsh(L, k, M, sigma=-1e-8, which='LM') at its default
                       tol (machine precision) and at tol=1e-10, each in a subprocess capped
                       by --scipy-timeout
---big: the ogre (62k vertices) midpoint-subdivided twice, 994,956 vertices; no eigenpairs; the
+--big: the ogre (62k vertices) midpoint-subdivided twice, 992,608 vertices; no eigenpairs; the
 peak memory of the factorization alone is measured in a fresh process.
 """
 import argparse
@@ -165,7 +165,7 @@ def main():
     bench(V, F, "armadillo", timeout=a.scipy_timeout)
     if a.big:
         V, F = bc.load_obj(os.path.join(bc.SHARED, "meshes", "ogre.obj"))
-        for _ in range(2):  # 62k -> 249k -> 995k vertices
+        for _ in range(2):  # 62k -> 248k -> 993k vertices
             V, F = bc.midpoint_subdivide(V, F)
         bench(V, F, "ogre subdivided twice", eig=False, timeout=a.scipy_timeout, reps=1)
         # a fresh process, so the peak is the factorization's (spawn: no fork after threads)

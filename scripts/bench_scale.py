@@ -7,7 +7,7 @@
 
 The armadillo (the armadillo-wave scenario) and the ogre (the lowest 10% fixed, the
 vertices within 10% of the diagonal of the highest point a handle lifted by 5% of the
-diagonal) are midpoint-subdivided --levels times (2: 692k and 995k vertices); the fixed set
+diagonal) are midpoint-subdivided --levels times (2: 692k and 993k vertices); the fixed set
 and the handle follow the subdivision (a new vertex belongs to a set when both ends of its
 edge do). Each method runs in a fresh process (spawn), so that its peak memory is its own:
   bind            the constructor, and the peak RSS after it
