@@ -661,7 +661,7 @@ class ShapeKeyBake:
                 % (d.name, ", ".join("'%s'" % m.name for m in above)))
         self.context, self.start, self.end = context, frame_start, frame_end
         self.fb = FrameBaker(context, obj, d, frame_start, frame_end)
-        self.results = []
+        self.results, self.basis = [], None
         self.aside = SetAside(obj, d, "SHAPE_KEYS")
 
     @property
@@ -676,11 +676,13 @@ class ShapeKeyBake:
         inp = animated_input.moved_input(obj, d)
         pos = np.asarray(pos, dtype=np.float64)
         if inp is not None:
-            basis = np.empty(3 * len(obj.data.vertices), dtype=np.float32)
-            keys = obj.data.shape_keys
-            (keys.reference_key.data if keys is not None else obj.data.vertices).foreach_get(
-                "co", basis)
-            pos = basis.reshape(-1, 3) + (pos - inp)
+            if self.basis is None:  # read once: no frame of the bake changes it
+                basis = np.empty(3 * len(obj.data.vertices), dtype=np.float32)
+                keys = obj.data.shape_keys
+                (keys.reference_key.data if keys is not None else obj.data.vertices).foreach_get(
+                    "co", basis)
+                self.basis = basis.reshape(-1, 3)
+            pos = self.basis + (pos - inp)
         self.results.append((f, pos.astype(np.float32)))
 
     def step(self):
